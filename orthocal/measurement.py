@@ -1,0 +1,85 @@
+"""Exact measurement model: what a dial indicator on leg i, measuring along j,
+shows (model.md, "Measurement").
+
+The indicator is fixed to the base in the plane x_i = M (the middle of leg i
+at Π0, nominally L/2) and reads the j-coordinate of the leg's axis where the
+leg crosses that plane. The deviation Δ^s_{i,j} is the reading at Π_i^s minus
+the reading at Π0; the simulator and the nonlinear identification both use
+these functions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from orthocal.geometry import AXIS_INDEX, Geometry, split_params
+from orthocal.kinematics import forward
+from orthocal.postures import posture
+
+Key = tuple[str, str, str]  # (posture sign, leg i, direction j)
+
+
+def check_key(key: Key) -> Key:
+    """Validate a deviation key ``(sign, leg, direction)``; raises ValueError."""
+    if not (isinstance(key, tuple) and len(key) == 3):
+        raise ValueError(f"a deviation key is (sign, leg, direction), got {key!r}")
+    sign, leg, direction = key
+    if sign not in ("+", "-"):
+        raise ValueError(f"posture sign must be '+' or '-', got {sign!r} in {key!r}")
+    if leg not in AXIS_INDEX or direction not in AXIS_INDEX:
+        raise ValueError(f"leg and direction must be x, y or z, got {key!r}")
+    if leg == direction:
+        raise ValueError(f"direction must differ from the leg, got {key!r}")
+    return key
+
+
+def leg_reading(
+    rho,
+    leg: str,
+    direction: str,
+    geometry: Geometry,
+    drho=None,
+    dL=None,
+    mount: float | None = None,
+) -> np.ndarray:
+    """Coordinate along ``direction`` of leg ``leg``'s axis in the plane x_leg = M.
+
+    The leg runs from the actuator joint A = q_i·e_i (q = ρ + Δρ) to P; it crosses
+    x_i = M at the fraction t = (q_i − M)/(q_i − p_i) from A, where its
+    j-coordinate is t·p_j (A_j = 0). ``rho`` has shape (..., 3).
+    """
+    i, j = AXIS_INDEX[leg], AXIS_INDEX[direction]
+    rho = np.asarray(rho, dtype=float)
+    drho_v = np.zeros(3) if drho is None else np.asarray(drho, dtype=float)
+    p = forward(rho, geometry, drho_v, dL)
+    q_i = rho[..., i] + drho_v[i]
+    m = geometry.mount_plane if mount is None else mount
+    t = (q_i - m) / (q_i - p[..., i])
+    return t * p[..., j]
+
+
+def deviation(key: Key, geometry: Geometry, params=None) -> float:
+    """Exact Δ^s_{i,j} = reading at Π_i^s − reading at Π0 for the parameter
+    6-vector ``params`` (PARAM_NAMES order)."""
+    sign, leg, direction = check_key(key)
+    drho, dL = split_params(params)
+    both = np.stack([posture(sign, leg, geometry), posture("0", None, geometry)])
+    r = leg_reading(both, leg, direction, geometry, drho, dL)
+    return float(r[0] - r[1])
+
+
+def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarray:
+    """Exact deviations for many keys at once (vectorised over the keys)."""
+    drho, dL = split_params(params)
+    out = np.empty(len(keys))
+    rho0 = posture("0", None, geometry)
+    # Group by (leg, direction): one forward solve per distinct posture.
+    for idx, key in enumerate(keys):
+        sign, leg, direction = check_key(key)
+        r = leg_reading(
+            np.stack([posture(sign, leg, geometry), rho0]), leg, direction, geometry, drho, dL
+        )
+        out[idx] = r[0] - r[1]
+    return out

@@ -1,0 +1,131 @@
+"""The ``orthocal`` command line (also ``python -m station``).
+
+Exit status: 0 success; 1 the run failed or was aborted, with everything
+recorded so far kept; 2 bad input (config, CSV, arguments), with a message
+that names the offending field or line. No traceback reaches the operator
+unless ``--debug`` is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+
+# Each command lives in its own module, imported only when used, so that
+# `orthocal identify` does not pay for pymodbus and `orthocal --help` is instant.
+_COMMANDS = {
+    "run": "station.cmd_run:run",
+    "resume": "station.cmd_run:resume",
+    "rollback": "station.cmd_run:rollback",
+    "sim": "drivers.sim.cli:main",
+    "identify": "station.cmd_identify:main",
+}
+
+
+def _triple(text: str) -> tuple[float, float, float]:
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z in mm, got {text!r}") from None
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected three values X,Y,Z, got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", metavar="DIR", default="runs", help="where run directories go")
+    p.add_argument("--yes", action="store_true", help="answer yes to every operator prompt")
+    p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    p.add_argument("--debug", action="store_true", help="show tracebacks of failures")
+
+
+def _sim_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=int, default=None, help="seed of the virtual machine")
+    p.add_argument("--true-drho", type=_triple, metavar="X,Y,Z",
+                   help="hidden joint offsets of the virtual machine (mm; random if absent)")
+    p.add_argument("--true-dl", type=_triple, metavar="X,Y,Z",
+                   help="hidden leg-length errors of the virtual machine (mm; zero if absent)")
+    p.add_argument("--noise", type=float, default=None, metavar="MM",
+                   help="indicator noise sigma in mm")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="orthocal",
+        description="Calibration station for Orthoglide-type parallel machines.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = sub.add_parser("run", help="calibrate: measure, identify, write back, verify")
+    src = run.add_mutually_exclusive_group(required=True)
+    src.add_argument("--simulate", action="store_true",
+                     help="run against the in-process virtual station")
+    src.add_argument("--config", metavar="FILE", help="station config (TOML)")
+    run.add_argument("--plan", action="store_true", help="print the checked plan and exit")
+    _sim_options(run)
+    _common(run)
+
+    resume = sub.add_parser("resume", help="continue an interrupted run from its journal")
+    resume.add_argument("run_dir", metavar="RUN_DIR")
+    _common(resume)
+
+    rollback = sub.add_parser("rollback", help="restore the offsets saved before write-back")
+    rollback.add_argument("run_dir", metavar="RUN_DIR")
+    _common(rollback)
+
+    sim = sub.add_parser("sim", help="run the virtual station until stopped")
+    sim.add_argument("--config-out", metavar="FILE", required=True,
+                     help="write a station config pointing at the virtual station")
+    sim.add_argument("--port", type=int, default=0, help="Modbus TCP port (0: any free one)")
+    sim.add_argument("--speed", type=float, default=None, help="axis speed, mm/s")
+    sim.add_argument("--protocol", default="mitutoyo",
+                     choices=["mitutoyo", "sylvac", "mahr"], help="indicator protocol")
+    _sim_options(sim)
+    sim.add_argument("--debug", action="store_true", help="show tracebacks of failures")
+
+    ident = sub.add_parser("identify", help="identify parameters from a READINGS.csv")
+    ident.add_argument("csv", metavar="READINGS.csv")
+    ident.add_argument("--model", choices=["rho", "L", "full"], default="rho")
+    ident.add_argument("--method", choices=["linear", "nonlinear"], default="nonlinear")
+    ident.add_argument("--leg-length", type=float, default=310.25)
+    ident.add_argument("--rho-min", type=float, default=-100.0)
+    ident.add_argument("--rho-max", type=float, default=60.0)
+    ident.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    ident.add_argument("--debug", action="store_true", help="show tracebacks of failures")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)  # bad arguments: argparse exits 2 with usage
+    module_name, func_name = _COMMANDS[args.command].split(":")
+    from drivers.errors import DeviceError
+    from station.errors import BadInput, RunFailed
+
+    try:
+        handler = getattr(importlib.import_module(module_name), func_name)
+        return int(handler(args) or EXIT_OK)
+    except BadInput as exc:
+        _fail(args, f"error: {exc}")
+        return EXIT_BAD_INPUT
+    except (RunFailed, DeviceError) as exc:
+        _fail(args, f"failed: {exc}")
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        _fail(args, "aborted by the operator (Ctrl-C)")
+        return EXIT_FAILED
+    except Exception as exc:
+        _fail(args, f"internal error: {type(exc).__name__}: {exc} (rerun with --debug)")
+        return EXIT_FAILED
+
+
+def _fail(args: argparse.Namespace, line: str) -> None:
+    if getattr(args, "debug", False):
+        import traceback
+
+        traceback.print_exc()
+    print(f"orthocal: {line}", file=sys.stderr)
