@@ -1,7 +1,9 @@
 """orthocal: the mathematics of leg-parallelism calibration of Orthoglide-type
 parallel machines (Pashkevich & Gomolitsky). Pure functions, no I/O."""
 
+from orthocal.calibration import coefficients, jacobian, linear_deviations, statistical_floor
 from orthocal.geometry import AXES, MODELS, PARAM_NAMES, Geometry
+from orthocal.identification import Identification, IdentificationError, identify
 from orthocal.kinematics import forward, inverse
 from orthocal.measurement import deviation, deviations, leg_reading
 from orthocal.postures import posture, posture_point
@@ -11,11 +13,18 @@ __all__ = [
     "MODELS",
     "PARAM_NAMES",
     "Geometry",
+    "Identification",
+    "IdentificationError",
+    "coefficients",
     "deviation",
     "deviations",
     "forward",
+    "identify",
     "inverse",
+    "jacobian",
     "leg_reading",
+    "linear_deviations",
     "posture",
     "posture_point",
+    "statistical_floor",
 ]

@@ -71,15 +71,31 @@ def deviation(key: Key, geometry: Geometry, params=None) -> float:
 
 
 def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarray:
-    """Exact deviations for many keys at once (vectorised over the keys)."""
+    """Exact deviations for many keys at once (repeated keys allowed).
+
+    Vectorised: one batched forward solve for all test postures of ``keys`` and one
+    for Π0, because the nonlinear identification evaluates this hundreds of times.
+    """
     drho, dL = split_params(params)
-    out = np.empty(len(keys))
-    rho0 = posture("0", None, geometry)
-    # Group by (leg, direction): one forward solve per distinct posture.
-    for idx, key in enumerate(keys):
+    if len(keys) == 0:
+        return np.empty(0)
+    legs = np.empty(len(keys), dtype=int)
+    dirs = np.empty(len(keys), dtype=int)
+    rho_s = np.empty((len(keys), 3))
+    cache: dict[tuple[str, str], np.ndarray] = {}
+    for n, key in enumerate(keys):
         sign, leg, direction = check_key(key)
-        r = leg_reading(
-            np.stack([posture(sign, leg, geometry), rho0]), leg, direction, geometry, drho, dL
-        )
-        out[idx] = r[0] - r[1]
-    return out
+        legs[n], dirs[n] = AXIS_INDEX[leg], AXIS_INDEX[direction]
+        if (sign, leg) not in cache:
+            cache[(sign, leg)] = posture(sign, leg, geometry)
+        rho_s[n] = cache[(sign, leg)]
+    rho0 = posture("0", None, geometry)
+    p_s = forward(rho_s, geometry, drho, dL)
+    p_0 = forward(rho0, geometry, drho, dL)
+    rows = np.arange(len(keys))
+    m = geometry.mount_plane
+    q_s = rho_s[rows, legs] + drho[legs]
+    q_0 = rho0[legs] + drho[legs]
+    reading_s = (q_s - m) / (q_s - p_s[rows, legs]) * p_s[rows, dirs]
+    reading_0 = (q_0 - m) / (q_0 - p_0[legs]) * p_0[dirs]
+    return reading_s - reading_0
