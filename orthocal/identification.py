@@ -109,7 +109,7 @@ def _flatten(deviations_in) -> tuple[list[Key], np.ndarray]:
 
 def _check_identifiable(J: np.ndarray, names: Sequence[str], n_distinct: int) -> float:
     """Refuse what the data cannot determine; return the condition number of J."""
-    n, p = J.shape
+    p = J.shape[1]
     if n_distinct < p:
         raise IdentificationError(
             f"too few deviations: {n_distinct} distinct deviation(s) for {p} parameters "
@@ -137,9 +137,8 @@ def _numeric_jacobian(
     for c, col in enumerate(cols):
         step = np.zeros(6)
         step[col] = h
-        J[:, c] = (deviations(keys, geometry, full + step) - deviations(keys, geometry, full - step)) / (
-            2 * h
-        )
+        forward_diff = deviations(keys, geometry, full + step)
+        J[:, c] = (forward_diff - deviations(keys, geometry, full - step)) / (2 * h)
     return J
 
 
@@ -200,9 +199,10 @@ def identify(
     else:
         J = J0
 
-    model_values = (
-        deviations(keys, geometry, full) if method == "nonlinear" else jacobian(keys, geometry) @ full
-    )
+    if method == "nonlinear":
+        model_values = deviations(keys, geometry, full)
+    else:
+        model_values = jacobian(keys, geometry) @ full
     residuals = y - model_values
     n, p = len(y), len(cols)
     dof = n - p
