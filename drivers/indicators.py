@@ -1,0 +1,516 @@
+"""Digital dial indicators on serial lines.
+
+A gauge's protocol is data (:class:`IndicatorProtocol`), not a class per vendor,
+so a gauge nobody has met yet is a ``[[indicators]]`` entry with ``protocol =
+"generic"`` and a few overrides rather than new code. One :class:`SerialIndicator`
+drives one gauge on one line; :class:`IndicatorGroup` reads several lines in
+parallel, because the station reads every mounted gauge at each stop and the
+lines are independent.
+
+Failure model of one reading: a missing, partial, garbled or gauge-error reply
+is retried (bounded, each retry reported through ``on_event`` so the station
+can journal it); a port that fails at the OS level (unplugged USB adapter) is
+not retried and raises :class:`~drivers.errors.IndicatorPortError` at once.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from types import TracebackType
+from typing import Any, Literal, Self
+
+import serial
+from pydantic import BaseModel, ConfigDict, field_validator, model_validator
+
+from drivers.errors import (
+    IndicatorError,
+    IndicatorPortError,
+    IndicatorReplyError,
+    IndicatorTimeout,
+)
+
+try:  # termios.error is not an OSError, and pyserial lets it through from tcflush
+    import termios
+
+    _PORT_ERRORS: tuple[type[BaseException], ...] = (OSError, termios.error)
+except ImportError:  # pragma: no cover - not POSIX
+    _PORT_ERRORS = (OSError,)
+
+EventSink = Callable[[dict[str, Any]], None]
+
+UNIT_MM: dict[str, float] = {"mm": 1.0, "um": 0.001, "in": 25.4}
+
+# A reply longer than this without its terminator is a babbling line, not a slow gauge.
+MAX_REPLY_BYTES = 256
+
+
+class IndicatorProtocol(BaseModel):
+    """How one kind of gauge talks: line settings, request, reply grammar, units.
+
+    ``reply_pattern`` / ``error_pattern`` are matched (``re.fullmatch``) against
+    the ASCII reply line with its terminator removed; the reply pattern has
+    exactly one group, the value, and the error pattern at most one, the gauge's
+    error code. The value is converted to mm as ``float(group) * scale *
+    UNIT_MM[unit]``. ``reply_format`` / ``error_format`` (``str.format`` with
+    ``value`` / ``code``, without terminator) say how the gauge writes a line;
+    the simulator speaks through them, and the model checks they agree with the
+    patterns so a protocol cannot be self-contradictory.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str
+    baudrate: int = 9600
+    bytesize: Literal[5, 6, 7, 8] = 8
+    parity: Literal["N", "E", "O", "M", "S"] = "N"
+    stopbits: Literal[1, 1.5, 2] = 1
+    request: bytes
+    terminator: bytes = b"\r"
+    reply_pattern: str
+    error_pattern: str | None = None
+    unit: Literal["mm", "um", "in"] = "mm"
+    scale: float = 1.0
+    reply_format: str | None = None
+    error_format: str | None = None
+
+    @field_validator("baudrate")
+    @classmethod
+    def _positive_baud(cls, v: int) -> int:
+        if v <= 0:
+            raise ValueError("baudrate must be positive")
+        return v
+
+    @field_validator("request", "terminator")
+    @classmethod
+    def _non_empty(cls, v: bytes) -> bytes:
+        if not v:
+            raise ValueError("must not be empty")
+        return v
+
+    @field_validator("scale")
+    @classmethod
+    def _non_zero_scale(cls, v: float) -> float:
+        if v == 0:
+            raise ValueError("scale must not be zero")
+        return v
+
+    @field_validator("reply_pattern")
+    @classmethod
+    def _one_group(cls, v: str) -> str:
+        groups = _compile(v).groups
+        if groups != 1:
+            raise ValueError(f"needs exactly one group (the value), has {groups}")
+        return v
+
+    @field_validator("error_pattern")
+    @classmethod
+    def _at_most_one_group(cls, v: str | None) -> str | None:
+        if v is not None and _compile(v).groups > 1:
+            raise ValueError("may have at most one group (the gauge's error code)")
+        return v
+
+    @model_validator(mode="after")
+    def _formats_match_patterns(self) -> Self:
+        if self.reply_format is not None:
+            for sample in (-1.2345, 0.0, 12.5):
+                line = _format(self.reply_format, "reply_format", value=sample)
+                if not re.fullmatch(self.reply_pattern, line):
+                    raise ValueError(
+                        f"reply_format writes {line!r}, which reply_pattern does not match"
+                    )
+        if self.error_format is not None:
+            if self.error_pattern is None:
+                raise ValueError("error_format needs an error_pattern")
+            line = _format(self.error_format, "error_format", code=1)
+            if not re.fullmatch(self.error_pattern, line):
+                raise ValueError(
+                    f"error_format writes {line!r}, which error_pattern does not match"
+                )
+        return self
+
+    @property
+    def bits_per_char(self) -> float:
+        """Bit-times one character occupies on the line (start + data + parity + stop)."""
+        return 1 + self.bytesize + (0 if self.parity == "N" else 1) + self.stopbits
+
+    @property
+    def mm_per_unit(self) -> float:
+        return self.scale * UNIT_MM[self.unit]
+
+    def serial_settings(self) -> dict[str, Any]:
+        """Keyword arguments for ``serial.serial_for_url`` / ``serial.Serial``."""
+        return {
+            "baudrate": self.baudrate,
+            "bytesize": self.bytesize,
+            "parity": self.parity,
+            "stopbits": self.stopbits,
+        }
+
+
+def _compile(pattern: str) -> re.Pattern[str]:
+    try:
+        return re.compile(pattern)
+    except re.error as e:
+        raise ValueError(f"invalid regular expression {pattern!r}: {e}") from None
+
+
+def _format(fmt: str, field: str, **kw: Any) -> str:
+    try:
+        return fmt.format(**kw)
+    except (KeyError, IndexError, ValueError) as e:
+        raise ValueError(f"{field} {fmt!r} cannot be formatted: {e}") from None
+
+
+# Built-ins as design.md fixes them. Mitutoyo's reply pattern accepts any channel
+# number in front because multiplexers answer with their own; the value itself
+# must carry sign and point, as the gauge always sends both.
+BUILTIN_PROTOCOLS: dict[str, IndicatorProtocol] = {
+    p.name: p
+    for p in (
+        IndicatorProtocol(
+            name="mitutoyo",
+            baudrate=9600,
+            bytesize=8,
+            parity="N",
+            stopbits=1,
+            request=b"1\r",
+            terminator=b"\r",
+            reply_pattern=r"\d\dA([+-]\d+\.\d+)",
+            error_pattern=r"9(\d*).*",
+            reply_format="01A{value:+09.3f}",
+            error_format="9{code}",
+        ),
+        IndicatorProtocol(
+            name="sylvac",
+            baudrate=4800,
+            bytesize=7,
+            parity="E",
+            stopbits=2,
+            request=b"?\r",
+            terminator=b"\r",
+            reply_pattern=r"([+-]\d+\.\d+)",
+            error_pattern=r"ERR(\d+)",
+            reply_format="{value:+.4f}",
+            error_format="ERR{code}",
+        ),
+        IndicatorProtocol(
+            name="mahr",
+            baudrate=9600,
+            bytesize=7,
+            parity="E",
+            stopbits=2,
+            request=b"?\r",
+            terminator=b"\r\n",
+            reply_pattern=r"([+-]?\d+\.\d+) mm",
+            reply_format="{value:.4f} mm",
+        ),
+        # generic: a neutral starting point meant to be overridden from the config.
+        IndicatorProtocol(
+            name="generic",
+            baudrate=9600,
+            bytesize=8,
+            parity="N",
+            stopbits=1,
+            request=b"?\r",
+            terminator=b"\r",
+            reply_pattern=r"\s*([+-]?\d+(?:\.\d*)?)\s*(?:mm)?\s*",
+            reply_format="{value:+.4f}",
+        ),
+    )
+}
+
+
+def make_protocol(name: str, overrides: Mapping[str, Any] | None = None) -> IndicatorProtocol:
+    """A built-in protocol, with fields replaced from a config table.
+
+    The result is validated as a whole (unknown fields, a reply pattern without
+    its group, formats contradicting patterns are errors: pydantic's
+    ``ValidationError``, a ``ValueError``). Strings given for byte fields are
+    encoded as UTF-8, so TOML's ``request = "?\\r"`` works.
+    """
+    try:
+        base = BUILTIN_PROTOCOLS[name]
+    except KeyError:
+        known = ", ".join(sorted(BUILTIN_PROTOCOLS))
+        raise ValueError(f"unknown indicator protocol {name!r} (known: {known})") from None
+    if not overrides:
+        return base
+    return IndicatorProtocol.model_validate({**base.model_dump(), **dict(overrides)})
+
+
+class SerialIndicator:
+    """One gauge on one serial line; satisfies :class:`drivers.base.Indicator`.
+
+    ``port`` is anything ``serial_factory`` accepts (a device path or a pyserial
+    URL such as ``rfc2217://host:port``). The port is opened here, so a wrong
+    path fails at set-up rather than mid-run; after a port fault the next read
+    reopens it, which is what a replugged USB adapter needs.
+
+    ``timeout_s`` bounds the wait for the next byte of a reply, and also the
+    whole reply (checked between bytes), so one attempt lasts at most about
+    twice ``timeout_s``. A reading makes at most ``1 + retries`` attempts.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        port: str,
+        protocol: IndicatorProtocol | str,
+        *,
+        timeout_s: float = 1.0,
+        retries: int = 3,
+        on_event: EventSink | None = None,
+        serial_factory: Callable[..., Any] = serial.serial_for_url,
+    ) -> None:
+        if timeout_s <= 0:
+            raise ValueError("timeout_s must be positive")
+        if retries < 0:
+            raise ValueError("retries must be >= 0")
+        self.name = name
+        self.port = port
+        self.protocol = make_protocol(protocol) if isinstance(protocol, str) else protocol
+        self.timeout_s = timeout_s
+        self.retries = retries
+        self.on_event = on_event
+        self._factory = serial_factory
+        self._reply_re = re.compile(self.protocol.reply_pattern)
+        self._error_re = (
+            re.compile(self.protocol.error_pattern) if self.protocol.error_pattern else None
+        )
+        self._mm_per_unit = self.protocol.mm_per_unit
+        # Serial objects are not thread-safe; a group and a direct caller may share us.
+        self._lock = threading.Lock()
+        self._serial: Any = None
+        self._closed = False
+        self._open()
+
+    @property
+    def device(self) -> str:
+        return f"indicator {self.name} ({self.port})"
+
+    def _open(self) -> Any:
+        try:
+            self._serial = self._factory(
+                self.port,
+                timeout=self.timeout_s,
+                write_timeout=self.timeout_s,
+                **self.protocol.serial_settings(),
+            )
+        except _PORT_ERRORS as e:
+            raise IndicatorPortError(self.device, f"cannot open port: {e}") from e
+        return self._serial
+
+    def _drop_port(self) -> None:
+        ser, self._serial = self._serial, None
+        if ser is not None:
+            try:
+                ser.close()
+            except _PORT_ERRORS:
+                pass  # the port is already gone; nothing more to release
+
+    def read(self) -> float:
+        """One reading in mm."""
+        with self._lock:
+            return self._read_locked()
+
+    def read_n(self, n: int) -> list[float]:
+        """``n`` consecutive readings in mm (each with its own retries)."""
+        if n < 0:
+            raise ValueError("n must be >= 0")
+        with self._lock:
+            return [self._read_locked() for _ in range(n)]
+
+    def _read_locked(self) -> float:
+        if self._closed:
+            raise IndicatorPortError(self.device, "indicator is closed")
+        failures: list[IndicatorError] = []
+        attempts = 1 + self.retries
+        for attempt in range(1, attempts + 1):
+            ser = self._serial if self._serial is not None else self._open()
+            try:
+                return self._exchange(ser)
+            except serial.SerialTimeoutException as e:
+                # A write that cannot leave (flow control held) is a stuck line, not
+                # a dead port: worth a retry.
+                err: IndicatorError = IndicatorTimeout(self.device, f"write timed out: {e}")
+            except (IndicatorTimeout, IndicatorReplyError) as e:
+                err = e
+            except _PORT_ERRORS as e:
+                self._drop_port()
+                raise IndicatorPortError(self.device, f"port failed: {e}") from e
+            failures.append(err)
+            if attempt < attempts:
+                self._emit(
+                    {
+                        "event": "retry",
+                        "device": self.device,
+                        "indicator": self.name,
+                        "port": self.port,
+                        "attempt": attempt,
+                        "error": err.message,
+                    }
+                )
+        last = failures[-1]
+        raise type(last)(
+            self.device, f"no valid reply after {attempts} attempt(s); last: {last.message}"
+        ) from last
+
+    def _emit(self, event: dict[str, Any]) -> None:
+        if self.on_event is not None:
+            self.on_event(event)
+
+    def _exchange(self, ser: Any) -> float:
+        term = self.protocol.terminator
+        # Whatever arrived unasked (a late reply to an earlier attempt, line noise)
+        # would otherwise be taken for the answer to this request.
+        ser.reset_input_buffer()
+        ser.write(self.protocol.request)
+        deadline = time.monotonic() + self.timeout_s
+        buf = b""
+        while True:
+            # read_until() would fetch one byte per call; asking for what is already
+            # buffered (at least one byte, which blocks up to the port timeout) gets
+            # the reply in as few system calls as the line allows.
+            chunk = ser.read(ser.in_waiting or 1)
+            if not chunk:
+                if buf:
+                    raise IndicatorTimeout(
+                        self.device, f"partial reply {buf!r} (no terminator {term!r})"
+                    )
+                raise IndicatorTimeout(self.device, f"no reply within {self.timeout_s:g} s")
+            buf += chunk
+            end = buf.find(term)
+            if end >= 0:
+                return self._parse(buf[:end])
+            if len(buf) > MAX_REPLY_BYTES:
+                raise IndicatorReplyError(
+                    self.device, f"garbled reply {buf[:40]!r}... (no terminator)"
+                )
+            if time.monotonic() > deadline:
+                raise IndicatorTimeout(
+                    self.device,
+                    f"partial reply {buf!r} (no terminator within {self.timeout_s:g} s)",
+                )
+
+    def _parse(self, raw: bytes) -> float:
+        try:
+            line = raw.decode("ascii")
+        except UnicodeDecodeError:
+            raise IndicatorReplyError(self.device, f"garbled reply {raw!r}") from None
+        m = self._reply_re.fullmatch(line)
+        if m is not None:
+            try:
+                return float(m.group(1)) * self._mm_per_unit
+            except ValueError:
+                raise IndicatorReplyError(self.device, f"garbled reply {raw!r}") from None
+        if self._error_re is not None:
+            e = self._error_re.fullmatch(line)
+            if e is not None:
+                code = e.group(1) if e.re.groups else ""
+                raise IndicatorReplyError(self.device, f"gauge error {code or '?'} (reply {raw!r})")
+        raise IndicatorReplyError(self.device, f"garbled reply {raw!r}")
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            self._drop_port()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"SerialIndicator({self.name!r}, {self.port!r}, {self.protocol.name!r})"
+
+
+class IndicatorGroup:
+    """Several indicators read at the same time, one worker per serial line.
+
+    The lines are independent, so reading six gauges should take as long as
+    reading one; the workers are kept between reads (a thread per read would
+    cost more than a short reply). The group owns its indicators: ``close()``
+    closes them and joins every worker.
+    """
+
+    def __init__(self, indicators: Sequence[Any]) -> None:
+        self._indicators: dict[str, Any] = {}
+        for ind in indicators:
+            if ind.name in self._indicators:
+                raise ValueError(f"two indicators named {ind.name!r}")
+            self._indicators[ind.name] = ind
+        self._pool = ThreadPoolExecutor(
+            max_workers=max(1, len(self._indicators)), thread_name_prefix="indicators"
+        )
+        self._closed = False
+
+    @property
+    def names(self) -> list[str]:
+        return list(self._indicators)
+
+    def __getitem__(self, name: str) -> Any:
+        return self._indicators[name]
+
+    def __len__(self) -> int:
+        return len(self._indicators)
+
+    def read(self, n: int = 1, names: Sequence[str] | None = None) -> dict[str, list[float]]:
+        """``n`` readings from each named indicator (all by default), concurrently.
+
+        Every started read is allowed to finish (each has its own bounded
+        timeout) before anything is raised, so no worker is still talking on a
+        line when the caller moves on. Then the first failure in ``names``
+        order is raised; indicator faults already name their indicator, other
+        exceptions get a note saying which one.
+        """
+        if self._closed:
+            raise RuntimeError("indicator group is closed")
+        selected = self.names if names is None else list(names)
+        unknown = [x for x in selected if x not in self._indicators]
+        if unknown:
+            raise KeyError(f"unknown indicator(s): {', '.join(unknown)}")
+        futures: dict[str, Future[list[float]]] = {
+            x: self._pool.submit(self._indicators[x].read_n, n) for x in selected
+        }
+        results: dict[str, list[float]] = {}
+        first: BaseException | None = None
+        for x, fut in futures.items():
+            try:
+                results[x] = fut.result()
+            except Exception as e:
+                if first is None:
+                    if not isinstance(e, IndicatorError):
+                        e.add_note(f"while reading indicator {x}")
+                    first = e
+        if first is not None:
+            raise first
+        return results
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        for ind in self._indicators.values():
+            ind.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
