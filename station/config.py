@@ -1,0 +1,335 @@
+"""Station configuration: a TOML file validated by pydantic (design.md, "Station config").
+
+Every table forbids unknown keys, so a typo is an error naming its field instead
+of a silently ignored setting. ``load_config`` turns every failure into one
+``BadInput`` line: ``station.toml: indicators[1].stroke_mm: must be > 0``.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from station.errors import BadInput
+
+AxisName = Literal["x", "y", "z"]
+Direction = Literal["x", "y", "z", "-x", "-y", "-z"]
+PROTOCOLS = ("mitutoyo", "sylvac", "mahr", "generic")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+class MachineConfig(_Strict):
+    leg_length: float = Field(310.25, gt=0, allow_inf_nan=False)
+    rho_min: float = Field(-100.0, lt=0, allow_inf_nan=False)
+    rho_max: float = Field(60.0, gt=0, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _within_leg(self) -> MachineConfig:
+        if self.rho_min <= -self.leg_length:
+            raise ValueError("rho_min: must be > -leg_length")
+        if self.rho_max >= self.leg_length:
+            raise ValueError("rho_max: must be < leg_length")
+        return self
+
+    def geometry(self):  # -> orthocal.Geometry (imported lazily: config loads without numpy)
+        from orthocal import Geometry
+
+        return Geometry(leg_length=self.leg_length, rho_min=self.rho_min, rho_max=self.rho_max)
+
+
+class ControllerConfig(_Strict):
+    transport: Literal["tcp", "rtu"] = "tcp"
+    host: str = "127.0.0.1"
+    # A TCP port number, or the serial device of an RTU link.
+    port: int | str = 502
+    device_id: int = Field(1, ge=0, le=247)
+    profile: str = "orthocal-generic"
+    # Single register entries overriding the profile's map: name -> address.
+    registers: dict[str, int] = Field(default_factory=dict)
+    timeout_s: float = Field(2.0, gt=0, le=60)
+    speed_mm_s: float | None = Field(None, gt=0)
+    baudrate: int = Field(19200, gt=0)
+    # Narrow the controller's own soft limits (joint mm, x/y/z); never widen them.
+    soft_min: list[float] | None = Field(None, min_length=3, max_length=3)
+    soft_max: list[float] | None = Field(None, min_length=3, max_length=3)
+
+    @field_validator("port", mode="before")
+    @classmethod
+    def _port_kind(cls, value: Any) -> Any:
+        if isinstance(value, bool) or not isinstance(value, int | str):
+            raise ValueError("must be a TCP port number or a serial device path")
+        return value
+
+    @field_validator("registers")
+    @classmethod
+    def _addresses(cls, value: dict[str, int]) -> dict[str, int]:
+        for name, addr in value.items():
+            if not 0 <= addr <= 0xFFFF:
+                raise ValueError(f"{name}: address must be within 0..65535")
+        return value
+
+    @model_validator(mode="after")
+    def _port_matches_transport(self) -> ControllerConfig:
+        if self.transport == "tcp":
+            if not isinstance(self.port, int):
+                raise ValueError("port: must be a TCP port number for transport 'tcp'")
+            if not 1 <= self.port <= 65535:
+                raise ValueError("port: must be within 1..65535")
+        elif not isinstance(self.port, str) or not self.port:
+            raise ValueError("port: must be a serial device path for transport 'rtu'")
+        if self.soft_min is not None and self.soft_max is not None:
+            if any(lo >= hi for lo, hi in zip(self.soft_min, self.soft_max, strict=True)):
+                raise ValueError("soft_min: must be below soft_max on every axis")
+        return self
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}" if self.transport == "tcp" else str(self.port)
+
+
+class IndicatorConfig(_Strict):
+    name: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,32}$")
+    port: str = Field(min_length=1)
+    protocol: Literal["mitutoyo", "sylvac", "mahr", "generic"] = "mitutoyo"
+    stroke_mm: float = Field(12.5, gt=0, le=1000)
+    # How far the plunger is pushed in at mounting; default: half the stroke.
+    preload_mm: float | None = Field(None, ge=0)
+    resolution_mm: float = Field(0.001, gt=0)
+    timeout_s: float = Field(1.0, gt=0, le=60)
+    # Line settings: the protocol's own unless given (generic needs them).
+    baudrate: int | None = Field(None, gt=0)
+    bytesize: Literal[7, 8] | None = None
+    parity: Literal["N", "E", "O"] | None = None
+    stopbits: Literal[1, 2] | None = None
+    request: str | None = None
+    terminator: str | None = None
+    pattern: str | None = None
+
+    @field_validator("pattern")
+    @classmethod
+    def _one_group(cls, value: str | None) -> str | None:
+        if value is None:
+            return value
+        try:
+            groups = re.compile(value).groups
+        except re.error as exc:
+            raise ValueError(f"not a valid regular expression ({exc})") from None
+        if groups != 1:
+            raise ValueError("must have exactly one group (the value)")
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> IndicatorConfig:
+        if self.preload_mm is None:
+            self.preload_mm = self.stroke_mm / 2.0
+        elif self.preload_mm > self.stroke_mm:
+            raise ValueError("preload_mm: must be <= stroke_mm")
+        if self.protocol == "generic":
+            for key in ("pattern", "request", "baudrate"):
+                if getattr(self, key) is None:
+                    raise ValueError(f"{key}: required with protocol 'generic'")
+        return self
+
+    @property
+    def preload(self) -> float:
+        assert self.preload_mm is not None  # filled in by the validator
+        return self.preload_mm
+
+
+class SetupConfig(_Strict):
+    leg: AxisName
+    indicators: dict[str, Direction] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _directions(self) -> SetupConfig:
+        seen: set[str] = set()
+        for name, direction in self.indicators.items():
+            axis = direction.lstrip("-")
+            if axis == self.leg:
+                raise ValueError(f"indicators.{name}: direction must differ from the leg")
+            if axis in seen:
+                raise ValueError(f"indicators.{name}: two indicators measure along {axis}")
+            seen.add(axis)
+        return self
+
+
+class ProcedureConfig(_Strict):
+    cycles: int = Field(3, ge=1, le=100)
+    readings: int = Field(5, ge=1, le=100)
+    settle_s: float = Field(0.3, ge=0, le=60)
+    repeatability_mm: float = Field(0.02, gt=0)
+    max_repeats: int = Field(1, ge=0, le=10)
+    # Adaptive cycles: stop a setup once every deviation's standard error is below this.
+    target_std_error_mm: float | None = Field(None, gt=0)
+    # Outlier rule at a stop: |r - median| > k * 1.4826 * MAD (floored at the resolution).
+    outlier_k: float = Field(5.0, gt=0)
+    model: Literal["rho", "L", "full"] = "rho"
+    method: Literal["linear", "nonlinear"] = "nonlinear"
+    verify: bool = True
+
+
+class WritebackConfig(_Strict):
+    max_abs_offset_mm: float = Field(3.0, gt=0)
+
+
+class StationConfig(_Strict):
+    machine: MachineConfig = Field(default_factory=MachineConfig)
+    controller: ControllerConfig = Field(default_factory=ControllerConfig)
+    indicators: list[IndicatorConfig] = Field(min_length=1)
+    setups: list[SetupConfig] = Field(min_length=1)
+    procedure: ProcedureConfig = Field(default_factory=ProcedureConfig)
+    writeback: WritebackConfig = Field(default_factory=WritebackConfig)
+
+    @model_validator(mode="after")
+    def _references(self) -> StationConfig:
+        names = [ind.name for ind in self.indicators]
+        for idx, name in enumerate(names):
+            if name in names[:idx]:
+                raise ValueError(f"indicators[{idx}].name: duplicate name {name!r}")
+        for idx, setup in enumerate(self.setups):
+            for name in setup.indicators:
+                if name not in names:
+                    raise ValueError(
+                        f"setups[{idx}].indicators.{name}: no indicator of that name "
+                        f"(have {', '.join(names)})"
+                    )
+        return self
+
+    def indicator(self, name: str) -> IndicatorConfig:
+        return next(ind for ind in self.indicators if ind.name == name)
+
+
+# --- loading -------------------------------------------------------------------------
+
+
+def _loc(loc: tuple[Any, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += f".{part}" if out else str(part)
+    return out
+
+
+def _message(err: dict[str, Any]) -> str:
+    kind, ctx = err["type"], err.get("ctx") or {}
+    if kind == "extra_forbidden":
+        return "unknown key"
+    if kind == "missing":
+        return "missing (required)"
+    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        op = {"greater_than": ">", "greater_than_equal": ">=",
+              "less_than": "<", "less_than_equal": "<="}[kind]
+        bound = next(iter(ctx.values()))
+        if isinstance(bound, float) and bound.is_integer():
+            bound = int(bound)
+        return f"must be {op} {bound}"
+    if kind == "value_error":
+        return str(ctx.get("error", err["msg"]))
+    return err["msg"][0].lower() + err["msg"][1:]
+
+
+def format_validation_error(source: str, exc: ValidationError) -> str:
+    """One line for the first error, naming the field path; more are counted."""
+    errors = exc.errors()
+    first = errors[0]
+    loc = _loc(tuple(first["loc"]))
+    msg = _message(first)
+    # A model validator reports "field: problem" itself; fold it into the path.
+    if first["type"] == "value_error" and re.match(r"^[\w\[\].]+: ", msg):
+        sub, _, msg = msg.partition(": ")
+        loc = f"{loc}.{sub}" if loc else sub
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    where = f"{loc}: " if loc else ""
+    return f"{source}: {where}{msg}{more}"
+
+
+def parse_config(data: dict[str, Any], source: str = "config") -> StationConfig:
+    try:
+        return StationConfig.model_validate(data)
+    except ValidationError as exc:
+        raise BadInput(format_validation_error(source, exc)) from None
+
+
+def load_config(path: str | Path) -> StationConfig:
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise BadInput(f"{source}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise BadInput(f"{source}: cannot read ({exc})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        # tomllib's message carries "(at line N, column M)".
+        raise BadInput(f"{source}: not valid TOML: {exc}") from None
+    return parse_config(data, source)
+
+
+# --- writing (the run directory keeps the config it ran with) --------------------------
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') \
+            .replace("\n", "\\n").replace("\r", "\\r") + '"'
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{_key(k)} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def _key(key: str) -> str:
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_value(key)
+
+
+def dump_toml(config: StationConfig) -> str:
+    """The config as TOML that ``load_config`` reads back to an equal config."""
+    data = config.model_dump(exclude_none=True)
+    lines: list[str] = []
+
+    def table(header: str, values: dict[str, Any]) -> None:
+        lines.append(header)
+        subtables = {}
+        for k, v in values.items():
+            if isinstance(v, dict) and header.strip("[]") == "controller":
+                subtables[k] = v
+                continue
+            lines.append(f"{_key(k)} = {_toml_value(v)}")
+        for k, v in subtables.items():
+            lines.append("")
+            lines.append(f"[controller.{k}]")
+            lines.extend(f"{_key(a)} = {_toml_value(b)}" for a, b in v.items())
+        lines.append("")
+
+    for section in ("machine", "controller"):
+        table(f"[{section}]", data[section])
+    for ind in data["indicators"]:
+        table("[[indicators]]", ind)
+    for setup in data["setups"]:
+        table("[[setups]]", setup)
+    for section in ("procedure", "writeback"):
+        table(f"[{section}]", data[section])
+    return "\n".join(lines)

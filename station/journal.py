@@ -1,0 +1,176 @@
+"""The run journal: append-only JSONL, every record flushed and fsynced before
+the station moves on, so that a run killed at any instant resumes.
+
+Record types (field ``type``): ``header`` (config, plan, version, simulation),
+``resumed``, ``setup`` (mounted), ``reading`` (stop, indicator, values),
+``outlier``, ``event`` (driver retries and faults), ``cycle``, ``setup_done``,
+``identification``, ``writeback`` (stage backup|intent|done|refused|declined|
+failed-restored), ``verification``, ``fault``, ``aborted``, ``finished``,
+``rollback``.
+
+A torn last line (killed mid-write) is tolerated when reading; reopening
+appends a newline and a ``resumed`` record after it, so the journal before the
+kill stays a byte prefix of the final one and the torn fragment is recognisably
+followed by a resume.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from station.errors import BadInput
+
+JOURNAL_NAME = "journal.jsonl"
+
+
+def fsync_dir(path: Path) -> None:
+    """Make a new directory entry (file creation/rename) itself durable."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_durable(path: Path, text: str) -> None:
+    """Write a whole file atomically and durably (temp file, fsync, rename)."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    fsync_dir(path.parent)
+
+
+class Journal:
+    """Appends records; thread-safe (driver events may arrive from reader threads)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._lock = threading.Lock()
+        new = not self.path.exists()
+        self._fh = open(self.path, "ab")  # held open for the whole run
+        self.torn = False
+        if not new and self.path.stat().st_size > 0:
+            with open(self.path, "rb") as fh:
+                fh.seek(-1, os.SEEK_END)
+                self.torn = fh.read(1) != b"\n"
+        if new:
+            fsync_dir(self.path.parent)
+
+    def append(self, record: dict[str, Any]) -> None:
+        record = {"t": round(time.time(), 6), **record}
+        line = (json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n").encode()
+        with self._lock:
+            if self._fh.closed:
+                raise RuntimeError("journal is closed")
+            if self.torn:
+                # Terminate the fragment a kill left behind; readers skip it.
+                self._fh.write(b"\n")
+                self.torn = False
+            self._fh.write(line)
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+
+    def flush(self) -> None:
+        with self._lock:
+            if not self._fh.closed:
+                self._fh.flush()
+                os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        with self._lock:
+            if not self._fh.closed:
+                self._fh.flush()
+                os.fsync(self._fh.fileno())
+                self._fh.close()
+
+    def __enter__(self) -> Journal:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def read_journal(path: str | Path) -> list[dict[str, Any]]:
+    """All intact records. A line that does not parse is tolerated only if it is
+    the last one (torn by a kill) or is followed by a ``resumed`` record."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise BadInput(f"{path}: no journal here") from None
+    lines = raw.split(b"\n")
+    records: list[dict[str, Any]] = []
+    pending_bad: int | None = None
+    for number, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+            if not isinstance(record, dict) or "type" not in record:
+                raise ValueError("not a record")
+        except (ValueError, UnicodeDecodeError):
+            if pending_bad is not None:
+                raise BadInput(f"{path}: line {pending_bad} is corrupt") from None
+            pending_bad = number
+            continue
+        if pending_bad is not None and record["type"] != "resumed":
+            raise BadInput(f"{path}: line {pending_bad} is corrupt") from None
+        pending_bad = None
+        records.append(record)
+    return records
+
+
+@dataclass
+class JournalState:
+    """What a journal says happened, rebuilt by replaying its records."""
+
+    header: dict[str, Any] | None = None
+    readings: dict[tuple[str, str], list[float]] = field(default_factory=dict)
+    mounted: list[tuple[str, int]] = field(default_factory=list)  # (phase, setup)
+    identification: dict[str, Any] | None = None
+    writeback: dict[str, dict[str, Any]] = field(default_factory=dict)  # stage -> record
+    verification: dict[str, Any] | None = None
+    finished: dict[str, Any] | None = None
+    events: int = 0
+    retries: int = 0
+    resumes: int = 0
+
+    @property
+    def started(self) -> float | None:
+        return None if self.header is None else self.header.get("t")
+
+
+def replay(records: list[dict[str, Any]]) -> JournalState:
+    state = JournalState()
+    for rec in records:
+        kind = rec["type"]
+        if kind == "header":
+            state.header = rec
+        elif kind == "resumed":
+            state.resumes += 1
+        elif kind == "reading":
+            state.readings[(rec["stop"], rec["indicator"])] = [float(v) for v in rec["values"]]
+        elif kind == "setup":
+            state.mounted.append((rec["phase"], int(rec["setup"])))
+        elif kind == "identification":
+            state.identification = rec
+        elif kind == "writeback":
+            state.writeback[rec["stage"]] = rec
+        elif kind == "verification":
+            state.verification = rec
+        elif kind == "finished":
+            state.finished = rec
+        elif kind == "event":
+            state.events += 1
+            if rec.get("event", {}).get("kind") == "retry":
+                state.retries += 1
+    return state

@@ -1,0 +1,303 @@
+"""The procedure as a list of small typed steps (bluesky-style plan), checked
+before anything moves.
+
+A setup is: move to Π0, prompt the operator to mount the setup's indicators
+(at Π0, the middle of the leg), read Π0, then cycles Π_i^+ → Π_i^− → Π0, each
+stop settled and read. Consecutive cycles share their Π0 stop, and Π_i^+ goes
+straight to Π_i^−, so no axis travels further than the postures require.
+
+Stop ids are ``"{phase}:{setup}:{cycle}:{posture}"`` (phase ``m`` measurement,
+``v`` verification; cycle 0 holds only the first Π0). The sequencer generates
+the same steps with the same functions, so the listing and the check cover
+exactly what runs, repeats and verification included (they revisit the same
+postures).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+import orthocal
+from station.config import StationConfig
+from station.errors import BadInput
+
+AXES = ("x", "y", "z")
+# Points checked along each joint-interpolated move (ends included); the leg's
+# sideways excursion is smooth, ~5 mm at most, so 64 points resolve it to µm.
+PATH_SAMPLES = 64
+PHASES = {"m": "measurement", "v": "verification"}
+
+
+def posture_label(sign: str, leg: str | None) -> str:
+    return "Π0" if sign == "0" else f"Π_{leg}^{sign}"
+
+
+def stop_id(phase: str, setup: int, cycle: int, sign: str) -> str:
+    return f"{phase}:{setup}:{cycle}:{sign}"
+
+
+@dataclass(frozen=True)
+class Prompt:
+    setup: int
+    leg: str
+    indicators: tuple[tuple[str, str], ...]  # (name, direction) as mounted
+    kind: str = "prompt"
+
+
+@dataclass(frozen=True)
+class Move:
+    targets: tuple[float, float, float]
+    label: str
+    kind: str = "move"
+
+
+@dataclass(frozen=True)
+class Settle:
+    seconds: float
+    kind: str = "settle"
+
+
+@dataclass(frozen=True)
+class Read:
+    stop: str
+    setup: int
+    cycle: int
+    sign: str  # "0", "+" or "-"
+    indicators: tuple[str, ...]
+    n: int
+    kind: str = "read"
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    setup: int
+    cycle: int
+    label: str = "cycle complete"
+    kind: str = "checkpoint"
+
+
+Step = Prompt | Move | Settle | Read | Checkpoint
+
+
+@dataclass
+class SetupPlan:
+    index: int
+    leg: str
+    indicators: dict[str, str]  # name -> "y" or "-y"
+    postures: dict[str, tuple[float, float, float]]  # "0", "+", "-" -> joint targets
+
+    def move(self, sign: str) -> Move:
+        return Move(self.postures[sign], posture_label(sign, self.leg))
+
+    def start_steps(self, phase: str, settle_s: float, n: int) -> list[Step]:
+        names = tuple(self.indicators)
+        return [
+            self.move("0"),
+            Prompt(self.index, self.leg, tuple(self.indicators.items())),
+            Settle(settle_s),
+            Read(stop_id(phase, self.index, 0, "0"), self.index, 0, "0", names, n),
+        ]
+
+    def cycle_steps(self, phase: str, cycle: int, settle_s: float, n: int) -> list[Step]:
+        names = tuple(self.indicators)
+        steps: list[Step] = []
+        for sign in ("+", "-", "0"):
+            steps += [
+                self.move(sign),
+                Settle(settle_s),
+                Read(stop_id(phase, self.index, cycle, sign), self.index, cycle, sign, names, n),
+            ]
+        steps.append(Checkpoint(self.index, cycle))
+        return steps
+
+
+@dataclass
+class Plan:
+    setups: list[SetupPlan]
+    cycles: int
+    readings: int
+    settle_s: float
+    limits: tuple[list[float], list[float]] | None = None
+    # Per indicator and setup: (min, max) plunger travel found by the check, mm.
+    travel: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    def steps(self, phase: str = "m") -> Iterator[Step]:
+        """Every step of one phase at the configured number of cycles."""
+        for sp in self.setups:
+            yield from sp.start_steps(phase, self.settle_s, self.readings)
+            for cycle in range(1, self.cycles + 1):
+                yield from sp.cycle_steps(phase, cycle, self.settle_s, self.readings)
+
+    def to_json(self) -> dict:
+        return {
+            "cycles": self.cycles,
+            "readings": self.readings,
+            "settle_s": self.settle_s,
+            "soft_limits": None if self.limits is None else
+            {"lower": self.limits[0], "upper": self.limits[1]},
+            "setups": [
+                {"index": sp.index, "leg": sp.leg, "indicators": sp.indicators,
+                 "postures": {k: list(v) for k, v in sp.postures.items()}}
+                for sp in self.setups
+            ],
+            "travel_mm": {k: list(v) for k, v in self.travel.items()},
+            "steps": [asdict(s) for s in self.steps("m")],
+        }
+
+    def format(self) -> str:
+        lines = [
+            f"plan: {len(self.setups)} setup(s) × up to {self.cycles} cycle(s) "
+            f"(Π0 → Π+ → Π− → Π0) × {self.readings} reading(s) per stop, "
+            f"settle {self.settle_s:g} s"
+        ]
+        if self.limits is not None:
+            lo, hi = self.limits
+            lines.append("soft limits (mm): " + ", ".join(
+                f"ρ_{a} ∈ [{lo[i]:.3f}, {hi[i]:.3f}]" for i, a in enumerate(AXES)))
+        number = 0
+        for step in self.steps("m"):
+            number += 1
+            if isinstance(step, Move):
+                text = f"move {step.label:<7} ρ = (" + ", ".join(
+                    f"{t:.3f}" for t in step.targets) + ")"
+            elif isinstance(step, Prompt):
+                lines.append(f"setup {step.setup + 1}: leg {step.leg}")
+                text = ("prompt: mount " + ", ".join(f"{n} ({d})" for n, d in step.indicators)
+                        + f" at the middle of leg {step.leg} at Π0; remove the others")
+            elif isinstance(step, Settle):
+                text = f"settle {step.seconds:g} s"
+            elif isinstance(step, Read):
+                text = f"read {step.stop:<10} {', '.join(step.indicators)} × {step.n}"
+            else:
+                text = f"checkpoint: setup {step.setup + 1} cycle {step.cycle} complete"
+            lines.append(f"  {number:4d}  {text}")
+        if self.travel:
+            lines.append("plunger travel along every move (nominal model):")
+            for key, (lo_t, hi_t) in self.travel.items():
+                lines.append(f"  {key}: {lo_t:+.3f} .. {hi_t:+.3f} mm")
+        lines.append("plan checked: every target inside the soft limits and the workspace, "
+                     "every plunger within its stroke")
+        return "\n".join(lines)
+
+
+def build_plan(config: StationConfig) -> Plan:
+    geometry = config.machine.geometry()
+    proc = config.procedure
+    setups = []
+    for idx, setup in enumerate(config.setups):
+        postures = {
+            s: tuple(float(v) for v in orthocal.posture(s, setup.leg, geometry))
+            for s in ("0", "+", "-")
+        }
+        setups.append(SetupPlan(idx, setup.leg, dict(setup.indicators), postures))  # type: ignore[arg-type]
+    return Plan(setups, proc.cycles, proc.readings, proc.settle_s)
+
+
+def effective_limits(
+    config: StationConfig, controller_limits: tuple[Sequence[float], Sequence[float]]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The controller's soft limits, narrowed (never widened) by the config."""
+    lo = np.asarray(controller_limits[0], dtype=float).copy()
+    hi = np.asarray(controller_limits[1], dtype=float).copy()
+    if config.controller.soft_min is not None:
+        lo = np.maximum(lo, config.controller.soft_min)
+    if config.controller.soft_max is not None:
+        hi = np.minimum(hi, config.controller.soft_max)
+    return lo, hi
+
+
+def _path(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, PATH_SAMPLES)[:, None]
+    return np.asarray(a, dtype=float) + (np.asarray(b, dtype=float) - np.asarray(a)) * t
+
+
+def check_plan(
+    plan: Plan,
+    config: StationConfig,
+    controller_limits: tuple[Sequence[float], Sequence[float]],
+    start: Sequence[float] | None = None,
+) -> Plan:
+    """Refuse (BadInput) a plan that leaves the soft limits or the workspace, or
+    that would push a plunger past its stroke or lift it off the leg, anywhere
+    along any move; name the posture, setup and indicator. Fills plan.limits and
+    plan.travel. ``start``: the current joint positions, to check the first move."""
+    geometry = config.machine.geometry()
+    lo, hi = effective_limits(config, controller_limits)
+    plan.limits = (lo.tolist(), hi.tolist())
+    plan.travel = {}
+    mount = geometry.mount_plane
+
+    def check_targets(label: str, points: np.ndarray, where: str) -> None:
+        for i, axis in enumerate(AXES):
+            excess = np.maximum(lo[i] - points[:, i], points[:, i] - hi[i])
+            if np.any(excess > 1e-9):
+                value = float(points[np.argmax(excess), i])
+                raise BadInput(
+                    f"plan: {where}{label}: ρ_{axis} = {value:.3f} mm is outside the soft "
+                    f"limits [{lo[i]:.3f}, {hi[i]:.3f}]; nothing has moved")
+        try:
+            orthocal.forward(points, geometry)
+        except ValueError:
+            raise BadInput(f"plan: {where}{label}: outside the machine's workspace; "
+                           "nothing has moved") from None
+
+    position = None if start is None else np.asarray(start, dtype=float)
+    for sp in plan.setups:
+        where = f"setup {sp.index + 1} (leg {sp.leg}), "
+        rho0 = np.asarray(sp.postures["0"])
+        mounted: dict[str, str] = {}
+        # The listing's order plus one extra Π+ move, which follows a cycle's
+        # final Π0 when the next cycle (or a repeat) starts: all moves of a setup.
+        moves: list[tuple[Move, bool]] = []
+        for step in sp.start_steps("m", 0.0, 1) + sp.cycle_steps("m", 1, 0.0, 1) \
+                + sp.cycle_steps("m", 2, 0.0, 1)[:1]:
+            if isinstance(step, Move):
+                moves.append((step, bool(mounted)))
+            elif isinstance(step, Prompt):
+                mounted = dict(step.indicators)
+        for move, with_indicators in moves:
+            target = np.asarray(move.targets)
+            path = target[None, :] if position is None else _path(position, target)
+            label = move.label if position is None else f"move to {move.label}"
+            check_targets(label, path, where)
+            if with_indicators:
+                _check_travel(plan, config, sp, mounted, path, rho0, mount, geometry,
+                              f"{where}{label}")
+            position = target
+    return plan
+
+
+def _check_travel(plan: Plan, config: StationConfig, sp: SetupPlan, mounted: dict[str, str],
+                  path: np.ndarray, rho0: np.ndarray, mount: float,
+                  geometry: orthocal.Geometry, where: str) -> None:
+    i = AXES.index(sp.leg)
+    p = orthocal.forward(path, geometry)
+    # The indicator touches the leg only while the leg crosses its plane x_i = M.
+    spans = (np.minimum(p[:, i], path[:, i]) <= mount) & (mount <= np.maximum(p[:, i], path[:, i]))
+    for name, direction in mounted.items():
+        ind = config.indicator(name)
+        if not np.all(spans):
+            raise BadInput(f"plan: {where}: leg {sp.leg} no longer crosses the plane of "
+                           f"indicator {name}; nothing has moved")
+        sign = -1.0 if direction.startswith("-") else 1.0
+        axis = direction.lstrip("-")
+        zero = float(orthocal.leg_reading(rho0, sp.leg, axis, geometry))
+        travel = sign * (orthocal.leg_reading(path, sp.leg, axis, geometry) - zero)
+        low, high = -ind.preload, ind.stroke_mm - ind.preload
+        t_min, t_max = float(travel.min()), float(travel.max())
+        key = f"{name} on leg {sp.leg} (setup {sp.index + 1})"
+        old = plan.travel.get(key, (0.0, 0.0))
+        plan.travel[key] = (min(old[0], t_min), max(old[1], t_max))
+        if t_max > high + 1e-9:
+            raise BadInput(
+                f"plan: {where}: indicator {name} ({direction}) would be pushed "
+                f"{t_max:.3f} mm past its mounting point, beyond its stroke "
+                f"({ind.stroke_mm:g} mm, preload {ind.preload:g} mm); nothing has moved")
+        if t_min < low - 1e-9:
+            raise BadInput(
+                f"plan: {where}: the leg would lift off indicator {name} ({direction}) "
+                f"by {-t_min - ind.preload:.3f} mm (travel {t_min:.3f} mm, preload "
+                f"{ind.preload:g} mm); nothing has moved")
