@@ -46,12 +46,21 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def _sim_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="seed of the virtual machine")
-    p.add_argument("--true-drho", type=_triple, metavar="X,Y,Z",
-                   help="hidden joint offsets of the virtual machine (mm; random if absent)")
-    p.add_argument("--true-dl", type=_triple, metavar="X,Y,Z",
-                   help="hidden leg-length errors of the virtual machine (mm; zero if absent)")
-    p.add_argument("--noise", type=float, default=None, metavar="MM",
-                   help="indicator noise sigma in mm")
+    p.add_argument(
+        "--true-drho",
+        type=_triple,
+        metavar="X,Y,Z",
+        help="hidden joint offsets of the virtual machine (mm; random if absent)",
+    )
+    p.add_argument(
+        "--true-dl",
+        type=_triple,
+        metavar="X,Y,Z",
+        help="hidden leg-length errors of the virtual machine (mm; zero if absent)",
+    )
+    p.add_argument(
+        "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -63,8 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="calibrate: measure, identify, write back, verify")
     src = run.add_mutually_exclusive_group(required=True)
-    src.add_argument("--simulate", action="store_true",
-                     help="run against the in-process virtual station")
+    src.add_argument(
+        "--simulate", action="store_true", help="run against the in-process virtual station"
+    )
     src.add_argument("--config", metavar="FILE", help="station config (TOML)")
     run.add_argument("--plan", action="store_true", help="print the checked plan and exit")
     _sim_options(run)
@@ -79,12 +89,20 @@ def build_parser() -> argparse.ArgumentParser:
     _common(rollback)
 
     sim = sub.add_parser("sim", help="run the virtual station until stopped")
-    sim.add_argument("--config-out", metavar="FILE", required=True,
-                     help="write a station config pointing at the virtual station")
+    sim.add_argument(
+        "--config-out",
+        metavar="FILE",
+        required=True,
+        help="write a station config pointing at the virtual station",
+    )
     sim.add_argument("--port", type=int, default=0, help="Modbus TCP port (0: any free one)")
     sim.add_argument("--speed", type=float, default=None, help="axis speed, mm/s")
-    sim.add_argument("--protocol", default="mitutoyo",
-                     choices=["mitutoyo", "sylvac", "mahr"], help="indicator protocol")
+    sim.add_argument(
+        "--protocol",
+        default="mitutoyo",
+        choices=["mitutoyo", "sylvac", "mahr"],
+        help="indicator protocol",
+    )
     _sim_options(sim)
     sim.add_argument("--debug", action="store_true", help="show tracebacks of failures")
 

@@ -1,0 +1,129 @@
+"""``orthocal identify READINGS.csv``: identification alone, from a CSV of deviations.
+
+READINGS.csv (design.md): header ``posture,leg,direction,deviation_mm``, one row
+per deviation, posture ``+``/``-``, leg and direction ``x``/``y``/``z``
+(direction ≠ leg). An optional ``cycle`` column lets a deviation appear once per
+cycle (repeats); without it a repeated (posture, leg, direction) is an error,
+because it is far more often a copy-paste slip than a deliberate repeat.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+from pathlib import Path
+
+from orthocal import Geometry, Identification, IdentificationError, identify
+from station.errors import BadInput
+
+REQUIRED = ("posture", "leg", "direction", "deviation_mm")
+OPTIONAL = ("cycle",)
+Key = tuple[str, str, str]
+
+
+def read_deviations(path: Path) -> dict[Key, list[float]]:
+    """Parse READINGS.csv; every problem is a BadInput naming the file and line."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise BadInput(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise BadInput(f"{path}: cannot read: {exc}") from None
+    rows = csv.reader(text.splitlines())
+    header = next(rows, None)
+    if not header or not any(h.strip() for h in header):
+        raise BadInput(f"{path}: line 1: empty file, expected header {','.join(REQUIRED)}")
+    columns = [h.strip().lower() for h in header]
+    missing = [c for c in REQUIRED if c not in columns]
+    if missing:
+        raise BadInput(f"{path}: line 1: missing column(s) {', '.join(missing)}")
+    unknown = [c for c in columns if c not in REQUIRED + OPTIONAL]
+    if unknown:
+        raise BadInput(f"{path}: line 1: unknown column(s) {', '.join(unknown)}")
+    if len(set(columns)) != len(columns):
+        raise BadInput(f"{path}: line 1: a column appears twice")
+    col = {c: columns.index(c) for c in columns}
+
+    data: dict[Key, list[float]] = {}
+    seen: dict[tuple, int] = {}
+    for lineno, row in enumerate(rows, start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        if len(row) != len(columns):
+            raise BadInput(f"{path}: line {lineno}: {len(row)} fields, expected {len(columns)}")
+        cell = {c: row[i].strip() for c, i in col.items()}
+        sign, leg, direction = cell["posture"], cell["leg"].lower(), cell["direction"].lower()
+        if sign not in ("+", "-"):
+            raise BadInput(f"{path}: line {lineno}: posture must be + or -, got {sign!r}")
+        for field, value in (("leg", leg), ("direction", direction)):
+            if value not in ("x", "y", "z"):
+                raise BadInput(f"{path}: line {lineno}: {field} must be x, y or z, got {value!r}")
+        if leg == direction:
+            raise BadInput(f"{path}: line {lineno}: direction must differ from leg ({leg!r})")
+        try:
+            value_mm = float(cell["deviation_mm"])
+        except ValueError:
+            raise BadInput(
+                f"{path}: line {lineno}: deviation_mm is not a number: {cell['deviation_mm']!r}"
+            ) from None
+        if not math.isfinite(value_mm):
+            raise BadInput(f"{path}: line {lineno}: deviation_mm must be finite, got {value_mm}")
+        ident = (sign, leg, direction, cell.get("cycle", ""))
+        if ident in seen:
+            what = f"cycle {ident[3]!r} of " if ident[3] else ""
+            raise BadInput(
+                f"{path}: line {lineno}: duplicate row: {what}posture {sign} leg {leg} "
+                f"direction {direction} already on line {seen[ident]}"
+                + ("" if ident[3] else " (add a 'cycle' column for repeats)")
+            )
+        seen[ident] = lineno
+        data.setdefault((sign, leg, direction), []).append(value_mm)
+    if not data:
+        raise BadInput(f"{path}: no data rows after the header")
+    return data
+
+
+def format_table(result: Identification, geometry: Geometry) -> str:
+    """Human-readable result: parameters ± standard errors, fit, per-deviation table."""
+    lines = [
+        f"Identification: model {result.model}, method {result.method}, "
+        f"{len(result.keys)} deviations (L = {geometry.leg_length:g}, "
+        f"ρmin = {geometry.rho_min:g}, ρmax = {geometry.rho_max:g} mm)",
+        "",
+        f"  {'parameter':<10} {'value mm':>10} {'std err':>10}",
+    ]
+    for name in result.names:
+        se = result.std_errors[name]
+        se_text = f"{se:10.4f}" if math.isfinite(se) else f"{'n/a':>10}"
+        lines.append(f"  {name:<10} {result.parameters[name]:10.4f} {se_text}")
+    sigma = f"{result.sigma:.4f} mm" if math.isfinite(result.sigma) else "n/a (no redundancy)"
+    lines += [
+        "",
+        f"  residual RMS {result.residual_rms:.4f} mm, σ̂ {sigma}, "
+        f"condition number {result.condition_number:.2f}",
+        "",
+        f"  {'deviation':<10} {'measured':>10} {'model':>10} {'residual':>10}",
+    ]
+    for key, value, res in zip(result.keys, result.values, result.residuals, strict=True):
+        label = f"Π_{key[1]}^{key[0]} {key[2]}"
+        lines.append(f"  {label:<10} {value:10.4f} {value - res:10.4f} {res:10.4f}")
+    return "\n".join(lines)
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        geometry = Geometry(leg_length=args.leg_length, rho_min=args.rho_min, rho_max=args.rho_max)
+    except ValueError as exc:
+        raise BadInput(f"geometry: {exc}") from None
+    data = read_deviations(Path(args.csv))
+    try:
+        result = identify(data, geometry, model=args.model, method=args.method)
+    except IdentificationError as exc:
+        raise BadInput(f"{args.csv}: {exc}") from None
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=2))
+    else:
+        print(format_table(result, geometry))
+    return 0

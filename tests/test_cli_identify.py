@@ -1,0 +1,137 @@
+"""``orthocal identify READINGS.csv``: output contract and bad-CSV errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from station.cli import main
+
+PAPER_ROWS = """\
+posture,leg,direction,deviation_mm
++,y,x,-0.19
++,x,y,0.08
+-,y,x,0.22
+-,x,y,-0.34
++,z,x,-0.29
++,x,z,-0.52
+-,z,x,0.08
+-,x,z,0.62
++,z,y,0.02
++,y,z,-0.24
+-,z,y,0.20
+-,y,z,0.45
+"""
+
+
+@pytest.fixture
+def paper_csv(tmp_path):
+    path = tmp_path / "readings.csv"
+    path.write_text(PAPER_ROWS)
+    return path
+
+
+def run_cli(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_json_output_has_the_contract_fields(paper_csv, capsys):
+    code, out, err = run_cli(capsys, "identify", str(paper_csv), "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["model"] == "rho" and doc["method"] == "nonlinear"
+    assert set(doc["parameters"]) == {"drho_x", "drho_y", "drho_z"}
+    assert doc["parameters"]["drho_z"] == pytest.approx(-1.67, abs=0.01)
+    assert set(doc["std_errors"]) == set(doc["parameters"])
+    assert doc["residual_rms_mm"] == pytest.approx(0.14, abs=0.005)
+    assert doc["condition_number"] == pytest.approx(1.47, abs=0.01)
+
+
+def test_full_linear_model_and_geometry_options(paper_csv, capsys):
+    code, out, _ = run_cli(capsys, "identify", str(paper_csv), "--model", "full",
+                           "--method", "linear", "--json")  # fmt: skip
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["condition_number"] == pytest.approx(61.87, abs=0.01)
+    # another machine gives another answer from the same numbers
+    code, out2, _ = run_cli(capsys, "identify", str(paper_csv), "--leg-length", "250",
+                            "--rho-min", "-80", "--rho-max", "50", "--json")  # fmt: skip
+    assert code == 0
+    assert json.loads(out2)["parameters"] != json.loads(out)["parameters"]
+
+
+def test_human_table(paper_csv, capsys):
+    code, out, _ = run_cli(capsys, "identify", str(paper_csv), "--model", "L")
+    assert code == 0
+    assert "dL_z" in out and "residual RMS" in out and "Π_x^+ y" in out
+
+
+def test_repeats_with_cycle_column(tmp_path, capsys):
+    rows = ["posture,leg,direction,deviation_mm,cycle"]
+    for cycle in (1, 2):
+        for line in PAPER_ROWS.splitlines()[1:]:
+            rows.append(f"{line},{cycle}")
+    path = tmp_path / "repeats.csv"
+    path.write_text("\n".join(rows) + "\n")
+    code, out, _ = run_cli(capsys, "identify", str(path), "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["n_deviations"] == 24 and doc["dof"] == 21
+
+
+@pytest.mark.parametrize(
+    ("content", "expected"),
+    [
+        ("", "line 1: empty file"),
+        ("posture,leg,deviation_mm\n+,x,0.1\n", "line 1: missing column(s) direction"),
+        ("posture,leg,direction,deviation_mm,note\n", "line 1: unknown column(s) note"),
+        ("posture,leg,direction,deviation_mm\n", "no data rows"),
+        ("posture,leg,direction,deviation_mm\n+,x,y,0.1\n+,w,y,0.1\n",
+         "line 3: leg must be x, y or z, got 'w'"),
+        ("posture,leg,direction,deviation_mm\n0,x,y,0.1\n", "line 2: posture must be + or -"),
+        ("posture,leg,direction,deviation_mm\n+,x,x,0.1\n", "line 2: direction must differ"),
+        ("posture,leg,direction,deviation_mm\n+,x,y,nan\n", "line 2: deviation_mm must be finite"),
+        ("posture,leg,direction,deviation_mm\n+,x,y,0.1mm\n",
+         "line 2: deviation_mm is not a number"),
+        ("posture,leg,direction,deviation_mm\n+,x,y\n", "line 2: 3 fields, expected 4"),
+        ("posture,leg,direction,deviation_mm\n+,x,y,0.1\n-,x,y,0.2\n+,x,y,0.3\n",
+         "line 4: duplicate row: posture + leg x direction y already on line 2"),
+        ("posture,leg,direction,deviation_mm\n+,x,y,0.1\n-,x,y,0.2\n",
+         "too few deviations: 2 distinct"),
+        ("posture,leg,direction,deviation_mm\n+,x,y,0.1\n-,x,y,0.2\n+,y,x,0.3\n",
+         "not identifiable from these deviations: drho_z"),
+    ],
+)  # fmt: skip
+def test_bad_csv_exits_2_naming_the_line(tmp_path, capsys, content, expected):
+    path = tmp_path / "bad.csv"
+    path.write_text(content)
+    code, out, err = run_cli(capsys, "identify", str(path))
+    assert code == 2
+    assert expected in err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert out == ""
+
+
+def test_missing_file_and_bad_geometry(tmp_path, paper_csv, capsys):
+    code, _, err = run_cli(capsys, "identify", str(tmp_path / "nope.csv"))
+    assert code == 2 and "no such file" in err
+    code, _, err = run_cli(capsys, "identify", str(paper_csv), "--rho-min", "5")
+    assert code == 2 and "geometry: rho_min" in err
+
+
+def test_console_script_in_a_subprocess(paper_csv):
+    """The installed entry point and ``python -m station`` behave the same; bad
+    arguments are argparse's exit 2, never a traceback."""
+    ok = subprocess.run([sys.executable, "-m", "station", "identify", str(paper_csv), "--json"],
+                        capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert ok.returncode == 0, ok.stderr
+    assert json.loads(ok.stdout)["model"] == "rho"
+    argv = [sys.executable, "-m", "station", "identify", str(paper_csv), "--model", "nope"]
+    bad = subprocess.run(argv, capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "invalid choice" in bad.stderr
+    assert "Traceback" not in bad.stderr
