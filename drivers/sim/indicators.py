@@ -1,0 +1,367 @@
+"""Simulated dial indicators behind pseudo-terminals.
+
+Each :class:`SimIndicator` owns a pty pair: the simulator keeps the master and
+``.port`` is the slave's path, which the real driver opens with pyserial like
+any other serial device. So tests and dry runs exercise the driver's real byte
+handling; only the gauge is virtual.
+
+What a pty does not do, the simulator emulates:
+
+* line time: a pty delivers at memory speed whatever the baud rate, so with
+  ``baud`` set a request counts as arrived only once its characters would
+  have crossed the line, and the reply leaves one character per character
+  time (10 or 11 bit-times each, from the protocol's framing);
+* faults (:class:`IndicatorFaults`, changeable while running, drawn from a
+  seeded RNG so a failing run can be replayed).
+
+Unplugging (``faults.unplugged = True`` or :meth:`SimIndicator.unplug`) closes
+both pty ends: the path disappears, the driver's open port fails with EIO and a
+reopen finds no device, as with a pulled USB adapter. It cannot be undone (a
+new pty would get a new path); make a new simulator to "replug". Beware that
+the kernel may reuse the path for a pty created later.
+
+An unmounted indicator (``unmount()``) answers as a gauge lying on the bench
+does: a constant reading (``unmounted_mm``) plus noise.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import random
+import select
+import threading
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Literal, Self
+
+from drivers.indicators import IndicatorProtocol, make_protocol
+
+Source = Callable[[], float]
+
+# Bytes a corrupted reply may contain: none of them fits any built-in reply
+# grammar, so a corruption is always detectable (a real line would flag it by
+# parity or framing; a digit turned into another digit would not be a fault
+# but a wrong measurement, which is not what this knob models).
+_JUNK = b"#%&*@~!$"
+
+
+@dataclass
+class IndicatorFaults:
+    """Fault knobs of one simulated gauge; change fields at any time.
+
+    ``*_rate`` is a probability per request, ``*_next`` a count of the next
+    requests that get the fault for sure (consumed as they happen). Per
+    request, in this order: drop (no reply at all), gauge error reply (the
+    protocol's ``error_format`` with ``error_code``; a protocol without one
+    makes the gauge stay silent), garble (``garble_mode``: "corrupt" replaces
+    one or two characters with junk, "truncate" sends part of the line without
+    its terminator, "any" picks one at random). ``late`` delays whatever reply
+    there is by ``late_s`` and combines with the others.
+    """
+
+    drop_rate: float = 0.0
+    drop_next: int = 0
+    error_rate: float = 0.0
+    error_next: int = 0
+    error_code: int = 1
+    garble_rate: float = 0.0
+    garble_next: int = 0
+    garble_mode: Literal["any", "corrupt", "truncate"] = "any"
+    late_rate: float = 0.0
+    late_next: int = 0
+    late_s: float = 0.5
+    unplugged: bool = False
+
+
+class SimIndicator:
+    """A virtual dial indicator on a pseudo-terminal.
+
+    Reading = ``sign * (source() - zero) + noise``, quantised to
+    ``resolution_mm`` and written in the protocol's ``reply_format``. ``zero``
+    is ``zero_mm`` if given, else ``source()`` at construction / :meth:`mount`
+    / :meth:`zero` (the gauge's ZERO button). ``source`` is called from the
+    simulator's thread.
+    """
+
+    def __init__(
+        self,
+        protocol: IndicatorProtocol | str,
+        source: Source,
+        *,
+        noise_mm: float = 0.0,
+        resolution_mm: float = 0.001,
+        zero_mm: float | None = None,
+        sign: int = +1,
+        baud: int | None = None,
+        faults: IndicatorFaults | None = None,
+        seed: int | None = None,
+        name: str = "A",
+        unmounted_mm: float = 0.0,
+    ) -> None:
+        self.protocol = make_protocol(protocol) if isinstance(protocol, str) else protocol
+        if self.protocol.reply_format is None:
+            raise ValueError(f"protocol {self.protocol.name!r} has no reply_format to answer in")
+        if sign not in (1, -1):
+            raise ValueError("sign must be +1 or -1")
+        if resolution_mm <= 0 or noise_mm < 0:
+            raise ValueError("resolution_mm must be > 0 and noise_mm >= 0")
+        if baud is not None and baud <= 0:
+            raise ValueError("baud must be positive")
+        self.name = name
+        self.noise_mm = noise_mm
+        self.resolution_mm = resolution_mm
+        self.sign = sign
+        self.baud = baud
+        self.faults = faults if faults is not None else IndicatorFaults()
+        self.unmounted_mm = unmounted_mm
+        self._char_s = self.protocol.bits_per_char / baud if baud else 0.0
+        self._rng = random.Random(seed)
+        self._lock = threading.Lock()  # source/zero against the simulator thread
+        self._source: Source | None = source
+        self._zero = float(source()) if zero_mm is None else float(zero_mm)
+        # Counters for tests and the benchmark: requests seen, replies fully sent.
+        self.requests = 0
+        self.replies = 0
+
+        master, slave = os.openpty()
+        # Raw on both ends: otherwise the line discipline turns CR into LF and
+        # echoes requests back to the driver.
+        tty.setraw(master)
+        tty.setraw(slave)
+        # A full slave buffer (nobody reading) must drop bytes, as a UART
+        # overrun does, never block the simulator thread.
+        os.set_blocking(master, False)
+        self._master = master
+        # Keep the slave open: with no slave opener the master reads EIO, which
+        # would make select() spin while the driver has the port closed.
+        self._slave = slave
+        self.port: str = os.ttyname(slave)
+        self._wake_r, self._wake_w = os.pipe()
+        self._stop = threading.Event()
+        self._pulled = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._closed = False
+
+    # --- what the gauge shows ------------------------------------------------------
+
+    def zero(self) -> None:
+        """Take the current source position as zero (the gauge's ZERO button)."""
+        with self._lock:
+            if self._source is not None:
+                self._zero = float(self._source())
+
+    def mount(self, source: Source, zero_mm: float | None = None) -> None:
+        """Put the plunger against ``source`` and zero there (or at ``zero_mm``)."""
+        with self._lock:
+            self._source = source
+            self._zero = float(source()) if zero_mm is None else float(zero_mm)
+
+    def unmount(self) -> None:
+        """Take the gauge off: it then reads ``unmounted_mm`` (plus noise)."""
+        with self._lock:
+            self._source = None
+
+    @property
+    def mounted(self) -> bool:
+        return self._source is not None
+
+    def _value_mm(self) -> float:
+        with self._lock:
+            source, zero = self._source, self._zero
+        raw = self.unmounted_mm if source is None else self.sign * (float(source()) - zero)
+        if self.noise_mm > 0:
+            raw += self._rng.gauss(0.0, self.noise_mm)
+        # + 0.0 turns -0.0 into 0.0: a gauge shows +0.000, not -0.000.
+        return round(raw / self.resolution_mm) * self.resolution_mm + 0.0
+
+    def _line(self, value_mm: float) -> bytes:
+        fmt = self.protocol.reply_format
+        assert fmt is not None  # checked in __init__
+        value = value_mm / self.protocol.mm_per_unit
+        return fmt.format(value=value).encode("ascii") + self.protocol.terminator
+
+    # --- faults --------------------------------------------------------------------
+
+    def _take(self, rate: float, next_field: str) -> bool:
+        """Whether this request gets a fault: a pending forced one, else by rate."""
+        f = self.faults
+        pending = getattr(f, next_field)
+        if pending > 0:
+            setattr(f, next_field, pending - 1)
+            return True
+        return rate > 0 and self._rng.random() < rate
+
+    def _garble(self, line: bytes) -> bytes:
+        body = line[: -len(self.protocol.terminator)]
+        mode = self.faults.garble_mode
+        if mode == "any":
+            mode = self._rng.choice(("corrupt", "truncate"))
+        if mode == "truncate" or not body:
+            return body[: self._rng.randrange(0, max(1, len(body)))]
+        out = bytearray(body)
+        for _ in range(self._rng.randint(1, min(2, len(out)))):
+            out[self._rng.randrange(len(out))] = self._rng.choice(_JUNK)
+        return bytes(out) + self.protocol.terminator
+
+    def _reply_for_request(self) -> tuple[bytes | None, float]:
+        """(bytes to send or None, extra delay in s) for one request."""
+        f = self.faults
+        late = self._take(f.late_rate, "late_next")
+        delay = f.late_s if late else 0.0
+        if self._take(f.drop_rate, "drop_next"):
+            return None, 0.0
+        if self._take(f.error_rate, "error_next"):
+            if self.protocol.error_format is None:
+                return None, 0.0
+            text = self.protocol.error_format.format(code=f.error_code)
+            return text.encode("ascii") + self.protocol.terminator, delay
+        line = self._line(self._value_mm())
+        if self._take(f.garble_rate, "garble_next"):
+            line = self._garble(line)
+        return line, delay
+
+    # --- thread --------------------------------------------------------------------
+
+    def start(self) -> Self:
+        if self._closed:
+            raise RuntimeError("simulator is closed")
+        if self._thread is None:
+            self._thread = threading.Thread(
+                target=self._run, name=f"sim-indicator-{self.name}", daemon=True
+            )
+            self._thread.start()
+        return self
+
+    def unplug(self, timeout_s: float = 2.0) -> None:
+        """Pull the plug now (see the module docstring); returns once the pty is gone."""
+        self.faults.unplugged = True
+        if self._thread is None or not self._thread.is_alive():
+            self._pull_plug()
+            return
+        self._wake()
+        if not self._pulled.wait(timeout_s):
+            raise TimeoutError(f"simulated indicator {self.name} did not unplug in {timeout_s} s")
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        if self._closed:
+            return
+        self._stop.set()
+        self._wake()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            if self._thread.is_alive():
+                raise RuntimeError(f"simulated indicator {self.name} thread did not stop")
+        self._closed = True
+        self._pull_plug()
+        for fd in (self._wake_r, self._wake_w):
+            os.close(fd)
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def _wake(self) -> None:
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"x")
+
+    def _pull_plug(self) -> None:
+        for attr in ("_master", "_slave"):
+            fd = getattr(self, attr)
+            if fd >= 0:
+                setattr(self, attr, -1)
+                os.close(fd)
+        self._pulled.set()
+
+    def _sleep_until(self, t: float) -> bool:
+        """Wait until monotonic time ``t``; False if closing or unplugged meanwhile."""
+        remaining = t - time.monotonic()
+        if remaining > 0.005:
+            # Long waits (late replies) must end promptly on close().
+            self._stop.wait(remaining)
+        elif remaining > 0:
+            time.sleep(remaining)
+        return not (self._stop.is_set() or self.faults.unplugged)
+
+    def _send(self, data: bytes, start: float) -> bool:
+        if not self._char_s:
+            self._write(data)
+            return True
+        # Each character is released when it would have fully arrived; absolute
+        # deadlines keep sleep overshoot from accumulating along the line.
+        for i in range(len(data)):
+            if not self._sleep_until(start + (i + 1) * self._char_s):
+                return False
+            self._write(data[i : i + 1])
+        return True
+
+    def _write(self, data: bytes) -> None:
+        try:
+            os.write(self._master, data)
+        except BlockingIOError:
+            pass  # slave buffer full: the bytes are lost, as on an overrun UART
+
+    def _run(self) -> None:
+        try:
+            self._serve()
+        finally:
+            # However the loop ended (mid-reply included), an unplug means the pty goes.
+            if self.faults.unplugged and not self._stop.is_set():
+                self._pull_plug()
+
+    def _serve(self) -> None:
+        request = self.protocol.request
+        buf = b""
+        while not self._stop.is_set():
+            if self.faults.unplugged:
+                return
+            # The timeout only bounds how late a runtime change of faults.unplugged
+            # is noticed; close() and unplug() wake the select at once.
+            ready, _, _ = select.select([self._master, self._wake_r], [], [], 0.05)
+            if self._wake_r in ready:
+                os.read(self._wake_r, 512)
+            if self._master not in ready:
+                continue
+            arrived = time.monotonic()
+            try:
+                buf += os.read(self._master, 1024)
+            except (BlockingIOError, InterruptedError):
+                continue
+            except OSError:
+                # EIO: the slave side went away; nothing can be answered any more.
+                return
+            while (i := buf.find(request)) >= 0:
+                buf = buf[i + len(request) :]
+                self.requests += 1
+                if not self._answer(arrived):
+                    return
+                arrived = time.monotonic()  # a queued request waited for this reply
+            # Keep only what could still be the start of a request.
+            buf = buf[-(len(request) - 1) :] if len(request) > 1 else b""
+
+    def _answer(self, arrived: float) -> bool:
+        # The driver wrote the whole request at once; on a real line its last
+        # character lands len(request) character times later.
+        received = arrived + len(self.protocol.request) * self._char_s
+        if not self._sleep_until(received):
+            return False
+        reply, delay = self._reply_for_request()
+        if reply is None:
+            return True
+        start = time.monotonic()
+        if delay and not self._sleep_until(start + delay):
+            return False
+        if not self._send(reply, start + delay):
+            return False
+        self.replies += 1
+        return True
