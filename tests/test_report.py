@@ -1,0 +1,342 @@
+"""The run report: result.json is strict JSON, report.html stands alone and says
+what happened, summary_text names the numbers, for complete and broken runs alike."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import random
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from station import report
+
+L, RHO_MIN, RHO_MAX = 310.25, -100.0, 60.0
+AXES = "xyz"
+PAPER_BEFORE = dict(zip(
+    ["+yx", "+xy", "-yx", "-xy", "+zx", "+xz", "-zx", "-xz", "+zy", "+yz", "-zy", "-yz"],
+    [-0.19, 0.08, 0.22, -0.34, -0.29, -0.52, 0.08, 0.62, 0.02, -0.24, 0.20, 0.45],
+    strict=True,
+))
+
+
+def _coefficients(sign: str) -> tuple[float, float, float]:
+    """a, b, c of the linearised calibration equations (model.md, system (7))."""
+    s = (RHO_MAX if sign == "+" else RHO_MIN) / L
+    alpha = math.asin(s)
+    return s, (0.5 + s) * math.tan(alpha), (0.5 + s) / math.cos(alpha) - 0.5
+
+
+def _jacobian(names: list[str]) -> np.ndarray:
+    rows = []
+    for key in report.DEVIATION_KEYS:
+        sign, i, j = key
+        a, b, c = _coefficients(sign)
+        coef = {f"drho_{i}": b, f"drho_{j}": a, f"dL_{i}": -b, f"dL_{j}": -c}
+        rows.append([coef.get(n, 0.0) for n in names])
+    return np.array(rows)
+
+
+def _fit(measured: dict[str, float], names: list[str]) -> dict:
+    J = _jacobian(names)
+    y = np.array([measured[k] for k in report.DEVIATION_KEYS])
+    x, *_ = np.linalg.lstsq(J, y, rcond=None)
+    model = J @ x
+    n, p = J.shape
+    sigma = math.sqrt(float(np.sum((y - model) ** 2)) / (n - p))
+    cov = sigma**2 * np.linalg.inv(J.T @ J)
+    se = np.sqrt(np.diag(cov))
+    return {
+        "identified": dict(zip(names, x.tolist(), strict=True)),
+        "std_errors": dict(zip(names, se.tolist(), strict=True)),
+        "correlation": {"names": names, "matrix": (cov / np.outer(se, se)).tolist()},
+        "model": dict(zip(report.DEVIATION_KEYS, model.tolist(), strict=True)),
+        "residual_rms_mm": float(np.sqrt(np.mean((y - model) ** 2))),
+        "sigma_mm": sigma,
+        "condition_number": float(np.linalg.cond(J)),
+        "rms": float(np.sqrt(np.mean(y**2))),
+    }
+
+
+def _measure(truth: dict[str, float], rng: random.Random, noise: float, cycles: int) -> dict:
+    J = _jacobian(list(truth))
+    exact = J @ np.array(list(truth.values()))
+    out = {}
+    for key, value in zip(report.DEVIATION_KEYS, exact, strict=True):
+        samples = [value + rng.gauss(0.0, noise) for _ in range(cycles)]
+        out[key] = {"mean": sum(samples) / cycles, "std": float(np.std(samples, ddof=1)),
+                    "n": cycles}
+    return out
+
+
+def make_result(
+    *, model: str = "rho", seed: int = 7, noise: float = 0.004, verify: bool = True,
+    measured: dict[str, float] | None = None, run_dir: str = "runs/2024-05-02T10-15-00",
+) -> dict:
+    """A result dict as cmd_run would produce it: simulated machine with hidden offsets,
+    readings with noise, a least-squares fit, write-back and a verification run."""
+    rng = random.Random(seed)
+    true_drho = {"x": -0.48, "y": 0.49, "z": -1.67}
+    true_dl = {"x": 0.0, "y": 0.0, "z": 0.0}
+    truth = {f"drho_{a}": v for a, v in true_drho.items()} | {
+        f"dL_{a}": v for a, v in true_dl.items()}
+    names = {"rho": [f"drho_{a}" for a in AXES], "L": [f"dL_{a}" for a in AXES],
+             "full": [f"drho_{a}" for a in AXES] + [f"dL_{a}" for a in AXES]}[model]
+    devs = _measure(truth, rng, noise, 3)
+    if measured is not None:
+        for k, v in measured.items():
+            devs[k]["mean"] = v
+    fit = _fit({k: d["mean"] for k, d in devs.items()}, names)
+    for k, d in devs.items():
+        d["model"] = fit["model"][k]
+    before = {"x": 0.125, "y": -0.040, "z": 0.310}
+    written = {a: before[a] - fit["identified"].get(f"drho_{a}", 0.0) for a in AXES}
+    result = {
+        "run_dir": run_dir, "status": "ok", "message": None,
+        "started": "2024-05-02T10:15:00+02:00", "finished": "2024-05-02T10:21:42+02:00",
+        "duration_s": 402.3, "simulated": True,
+        "simulation": {"seed": seed, "true_drho": true_drho, "true_dl": true_dl,
+                       "noise_mm": noise},
+        "machine": {"leg_length": L, "rho_min": RHO_MIN, "rho_max": RHO_MAX},
+        "model": model, "method": "nonlinear",
+        "identified": fit["identified"], "std_errors": fit["std_errors"],
+        "correlation": fit["correlation"],
+        "residual_rms_mm": fit["residual_rms_mm"], "sigma_mm": fit["sigma_mm"],
+        "condition_number": fit["condition_number"], "noise_mm": noise,
+        "fit_ok": fit["residual_rms_mm"] < 3 * noise,
+        "fit_note": "residual at the indicator noise level"
+        if fit["residual_rms_mm"] < 3 * noise else "residual well above the indicator noise",
+        "deviations": devs, "deviations_rms_mm": fit["rms"],
+        "setups": [{"leg": a, "indicators": {"A": b, "B": c}, "cycles_used": 3,
+                    "cycles_max": 5, "repeats": 0, "flagged": False, "spread_mm": 0.006}
+                   for a, b, c in (("x", "y", "z"), ("y", "x", "z"), ("z", "x", "y"))],
+        "offsets_before": before, "offsets_written": written,
+        "writeback": {"status": "written", "reason": None},
+        "verification": None,
+        "timing": {"wall_s": 402.3, "moves": 74, "readings": 370, "retries": 1},
+    }
+    if verify:
+        left = {n: truth[n] - fit["identified"].get(n, 0.0) for n in truth}
+        vdevs = _measure(left, rng, noise, 3)
+        vfit = _fit({k: d["mean"] for k, d in vdevs.items()}, names)
+        for k, d in vdevs.items():
+            d["model"] = vfit["model"][k]
+        result["verification"] = {
+            "identified": vfit["identified"], "std_errors": vfit["std_errors"],
+            "residual_rms_mm": vfit["residual_rms_mm"], "deviations_rms_mm": vfit["rms"],
+            "deviations": vdevs,
+        }
+    return result
+
+
+def failed_result() -> dict:
+    """Died on a device fault in the second setup: no fit, no write-back."""
+    return {
+        "run_dir": "runs/failed", "status": "failed",
+        "message": "axis y alarm 17 (following error) at posture Π_y^+",
+        "started": "2024-05-02T11:00:00+02:00", "finished": "2024-05-02T11:01:10+02:00",
+        "duration_s": 70.0, "simulated": False, "simulation": None,
+        "machine": {"leg_length": L, "rho_min": RHO_MIN, "rho_max": RHO_MAX},
+        "model": "rho", "method": "nonlinear",
+        "setups": [{"leg": "x", "indicators": {"A": "y", "B": "z"}, "cycles_used": 3,
+                    "cycles_max": 5, "repeats": 0, "flagged": False, "spread_mm": 0.004}],
+        "offsets_before": {"x": 0.0, "y": 0.0, "z": 0.0}, "offsets_written": None,
+        "writeback": None, "verification": None,
+        "timing": {"wall_s": 70.0, "moves": 13, "readings": 60, "retries": 0},
+    }
+
+
+def refused_result() -> dict:
+    r = make_result(verify=False)
+    r["status"] = "refused"
+    r["message"] = "correction of axis z exceeds max_abs_offset_mm = 1.0"
+    r["offsets_written"] = None
+    r["writeback"] = {"status": "refused", "reason": r["message"]}
+    return r
+
+
+ALL_CASES = {
+    "full-run": lambda: make_result(),
+    "failed": failed_result,
+    "refused": refused_result,
+    "full-model": lambda: make_result(model="full"),
+    "L-model": lambda: make_result(model="L"),
+    "no-verification": lambda: make_result(verify=False),
+    "paper-data": lambda: make_result(measured=PAPER_BEFORE, verify=False),
+}
+
+
+# ------------------------------------------------------------------ result.json
+
+
+@pytest.mark.parametrize("case", sorted(ALL_CASES))
+def test_result_json_round_trips(tmp_path: Path, case: str) -> None:
+    result = ALL_CASES[case]()
+    path = report.write_result(result, tmp_path)
+    assert path == tmp_path / "result.json"
+    text = path.read_text(encoding="utf-8")
+    loaded = json.loads(text)
+    assert loaded["status"] == result["status"]
+    assert loaded.get("identified") == result.get("identified")
+    assert loaded["offsets_written"] == result["offsets_written"]
+    assert list(tmp_path.iterdir()) == [path], "temporary file left behind"
+
+
+def test_result_json_has_no_nan_tokens_and_keeps_schema_order(tmp_path: Path) -> None:
+    result = make_result()
+    result["sigma_mm"] = float("nan")
+    result["deviations"]["+xy"]["std"] = float("inf")
+    result["identified"] = {k: np.float64(v) for k, v in result["identified"].items()}
+    result["extra_field"] = np.array([1.0, float("nan")])
+    text = report.write_result(result, tmp_path).read_text(encoding="utf-8")
+    assert not re.search(r"\b(NaN|Infinity)\b", text)
+
+    def strict(token: str) -> None:
+        raise ValueError(f"non-standard JSON token {token}")
+
+    loaded = json.loads(text, parse_constant=strict)
+    assert loaded["sigma_mm"] is None
+    assert loaded["deviations"]["+xy"]["std"] is None
+    assert loaded["extra_field"] == [1.0, None]
+    assert loaded["identified"]["drho_z"] == pytest.approx(float(result["identified"]["drho_z"]))
+    keys = list(loaded)
+    assert keys[:2] == ["run_dir", "status"]
+    assert keys.index("identified") < keys.index("verification") < keys.index("extra_field")
+    assert list(loaded["deviations"]) == list(report.DEVIATION_KEYS)
+
+
+def test_result_json_replaces_old_file_whole(tmp_path: Path) -> None:
+    (tmp_path / "result.json").write_text("{ half a file")
+    report.write_result(make_result(), tmp_path)
+    assert json.loads((tmp_path / "result.json").read_text())["status"] == "ok"
+
+
+def test_write_result_does_not_alter_the_callers_dict(tmp_path: Path) -> None:
+    result = make_result()
+    result["sigma_mm"] = float("nan")
+    snapshot = copy.deepcopy(result)
+    report.write_result(result, tmp_path)
+    assert math.isnan(result["sigma_mm"])
+    result["sigma_mm"] = snapshot["sigma_mm"] = 0.0
+    assert result == snapshot
+
+
+# ------------------------------------------------------------------ report.html
+
+
+def _assert_self_contained(page: str) -> None:
+    assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:)?//""", page, re.I)
+    assert not re.search(r"<script\b", page, re.I)
+    assert not re.search(r"<link\b", page, re.I)
+    assert not re.search(r"@import|url\(\s*['\"]?(?!#)", page, re.I)  # url(#id) is in-page
+    assert "<!DOCTYPE svg" not in page and "<?xml" not in page
+
+
+@pytest.mark.parametrize("case", sorted(ALL_CASES))
+def test_html_is_self_contained_for_every_kind_of_run(tmp_path: Path, case: str) -> None:
+    result = ALL_CASES[case]()
+    path = report.write_html(result, tmp_path)
+    page = path.read_text(encoding="utf-8")
+    _assert_self_contained(page)
+    assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
+    assert report._STATUS_TEXT[result["status"]] in page
+    if result.get("identified"):
+        assert page.count("<svg") == 2
+    if result.get("message"):
+        assert report.html.escape(result["message"]) in page
+
+
+def test_html_contains_the_numbers(tmp_path: Path) -> None:
+    result = make_result()
+    page = report.write_html(result, tmp_path).read_text(encoding="utf-8")
+    for name, value in result["identified"].items():
+        assert report._fmt(value, signed=True) in page, name
+        assert report._fmt(result["std_errors"][name]) in page, name
+    for key, dev in result["deviations"].items():
+        assert report._fmt(dev["mean"], signed=True) in page, key
+        assert report._fmt(dev["mean"] - dev["model"], signed=True) in page, key
+    for axis, value in result["offsets_written"].items():
+        assert report._fmt(value, signed=True) in page, axis
+    assert report._fmt(result["verification"]["deviations_rms_mm"]) in page
+    assert report._fmt(result["residual_rms_mm"]) in page
+    assert result["fit_note"] in page
+    assert "Π<sub>x</sub><sup>+</sup> along y" in page
+    assert "hidden truth" in page
+
+
+def test_html_full_model_shows_leg_lengths_and_correlation(tmp_path: Path) -> None:
+    result = make_result(model="full")
+    page = report.render_html(result)
+    assert "ΔL<sub>z</sub>" in page
+    corr = result["correlation"]["matrix"]
+    strongest = max(abs(corr[i][j]) for i in range(6) for j in range(6) if i != j)
+    assert strongest > 0.9  # Δρ_i and ΔL_i act almost alike: the table must show it
+    assert report._fmt(strongest, 2) in page.replace("−", "")
+
+
+def test_html_explains_refused_and_missing_sections() -> None:
+    refused = report.render_html(refused_result())
+    assert "NOT written" in refused
+    assert "max_abs_offset_mm = 1.0" in refused
+    assert "not written" in refused  # offsets table column
+    failed = report.render_html(failed_result())
+    assert "did not complete" in failed
+    assert "No parameters were identified" in failed
+    assert "real hardware" in failed
+    no_ver = report.render_html(make_result(verify=False))
+    assert "No verification measurement was made" in no_ver
+    assert no_ver.count("<svg") == 2
+
+
+def test_html_escapes_hostile_text(tmp_path: Path) -> None:
+    evil = '<script>alert("x")</script>'
+    result = make_result(run_dir=f"runs/{evil}")
+    result["message"] = f"odd {evil}"
+    result["fit_note"] = evil
+    result["writeback"]["reason"] = evil
+    result["setups"][0]["indicators"] = {evil: "y"}
+    page = report.write_html(result, tmp_path).read_text(encoding="utf-8")
+    assert "<script" not in page
+    assert "&lt;script&gt;" in page
+
+
+def test_html_survives_nan_and_missing_fields() -> None:
+    result = make_result()
+    result["std_errors"]["drho_y"] = float("nan")
+    result["deviations"]["+yx"]["std"] = None
+    del result["correlation"], result["timing"], result["machine"]
+    page = report.render_html(result)
+    assert "nan" not in page.lower().replace("nanometre", "")
+    assert page.count("<svg") == 2
+    assert report.render_html({"status": "aborted"}).count("Aborted") >= 1
+
+
+# ------------------------------------------------------------------ summary
+
+
+def test_summary_names_status_values_and_report() -> None:
+    result = make_result()
+    text = report.summary_text(result)
+    assert text.splitlines()[0].startswith("orthocal run: COMPLETED")
+    for name, value in result["identified"].items():
+        assert f"{report._param_plain(name)} = {report._fmt(value, signed=True)}" in text
+    assert report._fmt(result["residual_rms_mm"]) in text
+    for axis in AXES:
+        assert report._fmt(result["offsets_written"][axis]) in text
+    before, after = result["deviations_rms_mm"], result["verification"]["deviations_rms_mm"]
+    assert f"{report._fmt(before)} → {report._fmt(after)}" in text
+    assert str(Path(result["run_dir"]) / "report.html") in text
+    assert len(text.splitlines()) <= 8
+
+
+def test_summary_of_failed_and_refused_runs() -> None:
+    failed = report.summary_text(failed_result())
+    assert failed.startswith("orthocal run: FAILED — axis y alarm 17")
+    assert "identified" not in failed
+    refused = report.summary_text(refused_result())
+    assert "not written (refused: correction of axis z" in refused
+    assert "verification" not in refused
