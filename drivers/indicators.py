@@ -230,7 +230,9 @@ def make_protocol(name: str, overrides: Mapping[str, Any] | None = None) -> Indi
     The result is validated as a whole (unknown fields, a reply pattern without
     its group, formats contradicting patterns are errors: pydantic's
     ``ValidationError``, a ``ValueError``). Strings given for byte fields are
-    encoded as UTF-8, so TOML's ``request = "?\\r"`` works.
+    encoded as UTF-8, so TOML's ``request = "?\\r"`` works. Overriding a pattern
+    without its format drops the built-in's format (the simulator then needs
+    one restated to impersonate that gauge).
     """
     try:
         base = BUILTIN_PROTOCOLS[name]
@@ -239,7 +241,13 @@ def make_protocol(name: str, overrides: Mapping[str, Any] | None = None) -> Indi
         raise ValueError(f"unknown indicator protocol {name!r} (known: {known})") from None
     if not overrides:
         return base
-    return IndicatorProtocol.model_validate({**base.model_dump(), **dict(overrides)})
+    fields = {**base.model_dump(), **dict(overrides)}
+    # A built-in's formats describe the built-in's grammar; once the config
+    # replaces a pattern they would contradict it, so they go unless restated.
+    for pattern, fmt in (("reply_pattern", "reply_format"), ("error_pattern", "error_format")):
+        if pattern in overrides and fmt not in overrides:
+            fields[fmt] = None
+    return IndicatorProtocol.model_validate(fields)
 
 
 class SerialIndicator:
