@@ -378,20 +378,20 @@ def _plot_deviations(result: Mapping[str, Any]) -> str | None:
         handles.append(ax.errorbar(
             [p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts],
             fmt="o", color=_C_BEFORE, ms=6, capsize=3, lw=1.2,
-            label="before calibration: measured (mean ± std over cycles)",
+            label="before: measured (mean ± std)",
         ))
     pts = series(before, "model", 0.0)
     if pts:
         handles.append(ax.plot(
             [p[0] for p in pts], [p[1] for p in pts], "D", color=_C_MODEL, ms=6, mfc="none",
-            mew=1.6, label="before calibration: model fit",
+            mew=1.6, label="before: model fit",
         )[0])
     pts = errs(after, 0.22)
     if pts:
         handles.append(ax.errorbar(
             [p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts],
             fmt="s", color=_C_AFTER, ms=6, capsize=3, lw=1.2,
-            label="after calibration: verification (mean ± std)",
+            label="after: verification (mean ± std)",
         ))
     ax.axhline(0.0, color="#555", lw=0.8)
     ax.set_xticks(xs, [_dev_tex(k) for k in keys], fontsize=9)
@@ -407,8 +407,8 @@ def _plot_deviations(result: Mapping[str, Any]) -> str | None:
     ax.grid(axis="y", color="#ddd", lw=0.6)
     ax.set_axisbelow(True)
     if handles:
-        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2,
-                  frameon=False, fontsize=9)
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.17),
+                  ncol=len(handles), frameon=False, fontsize=9, columnspacing=1.2)
     return _svg(fig)
 
 
@@ -424,8 +424,12 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
     fig, ax = plt.subplots(figsize=(10, 3.8))
     xs = list(range(len(names)))
     handles = []
+    # With six parameters the labels no longer fit between the bars and cover each
+    # other; the full model's σ is large enough to read from the bars, and the table
+    # below has the numbers.
+    annotate = len(names) <= 3
 
-    def draw(values, sigmas, offset, color, marker, label):
+    def draw(values, sigmas, offset, color, marker, label, above=True):
         drawn = False
         for x, n in zip(xs, names, strict=True):
             v, s = _num(values.get(n)), _num(sigmas.get(n))
@@ -437,8 +441,23 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
                         solid_capstyle="butt")
                 ax.plot([x + offset] * 2, [v - s, v + s], color=color, lw=5, alpha=0.55,
                         solid_capstyle="butt")
-            ax.plot([x + offset], [v], marker, color=color, ms=7, mec="white", mew=0.8)
+            ax.plot([x + offset], [v], marker, color=color, ms=7, mec="white", mew=0.8,
+                    zorder=3)
+            # σ is often far smaller than the axis range and the bars vanish into the
+            # marker; the number next to it still tells the reader how sure we are.
             drawn = True
+            if not annotate:
+                continue
+            label_text = _fmt(v, signed=True) + (f" ± {_fmt(s)}" if s is not None else "")
+            # Beyond the end of the ±3σ bar on a white ground: beside the marker the
+            # text would cross the truth bar, the zero line and the neighbouring series.
+            # "before" goes above and "after" below, so the two never collide.
+            reach = 3 * s if s is not None else 0.0
+            ax.annotate(label_text, (x + offset, v + reach if above else v - reach),
+                        xytext=(0, 5 if above else -5), textcoords="offset points",
+                        va="bottom" if above else "top", ha="center", fontsize=8,
+                        color=color, zorder=4,
+                        bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 0.8})
         if drawn:
             handles.append(ax.plot([], [], marker, color=color, ms=7, label=label)[0])
 
@@ -446,19 +465,21 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
          "identified before calibration")
     if v_ident:
         draw(v_ident, v_errs, 0.12, _C_AFTER, "s",
-             "re-identified after calibration (should be ≈ 0)")
+             "re-identified after calibration (should be ≈ 0)", above=False)
     truth = [(x, _truth(result, n)) for x, n in zip(xs, names, strict=True)]
     truth = [t for t in truth if t[1] is not None]
     if truth:
         handles.append(ax.plot(
             [t[0] - (0.12 if v_ident else 0.0) for t in truth], [t[1] for t in truth], "_",
-            color=_C_TRUTH, ms=22, mew=2.2, label="hidden truth of the simulated machine",
+            color=_C_TRUTH, ms=22, mew=2.2, zorder=2,
+            label="hidden truth of the simulated machine",
         )[0])
     handles.append(ax.plot([], [], color="#777", lw=5, alpha=0.55, label="±1σ")[0])
     handles.append(ax.plot([], [], color="#777", lw=1.2, label="±3σ")[0])
     ax.axhline(0.0, color="#555", lw=0.8)
     ax.set_xticks(xs, [_param_tex(n) for n in names], fontsize=11)
     ax.set_xlim(-0.6, len(names) - 0.4)
+    ax.margins(y=0.2)  # room for the value labels beyond the outermost bars
     ax.set_ylabel("value (mm)")
     ax.grid(axis="y", color="#ddd", lw=0.6)
     ax.set_axisbelow(True)
@@ -534,7 +555,14 @@ def _what_was_done(result: Mapping[str, Any]) -> str:
     method = {"linear": "the linearised calibration equations",
               "nonlinear": "the exact kinematic model (iterative least squares)"}.get(
         str(result.get("method")), str(result.get("method", "—")))
-    return (
+    stopped = ""
+    if result.get("status") in ("failed", "aborted"):
+        # The paragraph below describes the whole procedure; say plainly that this
+        # run did not get through it, or a reader takes it for a completed calibration.
+        done = len(setups)
+        stopped = (f"<p><b>This run stopped early</b>, after measuring {done} of the "
+                   "3 legs; see the result below.</p>")
+    return stopped + (
         "<p>Two dial indicators were mounted against each leg of the machine in turn. "
         "For each leg the station moved the machine from the <i>mechanical zero</i> "
         "posture Π<sub>0</sub> to the two test postures Π<sub>i</sub><sup>+</sup> and "
@@ -624,7 +652,8 @@ def _fit_box(result: Mapping[str, Any]) -> str:
                "noise." if ok else "Warning: the residual is larger than the indicator noise "
                "explains; the machine may have errors this model does not include."
                if ok is False else "")
-    note = f"<p><b>{_e(result['fit_note'])}</b></p>" if result.get("fit_note") else ""
+    note = (f"<p><b>Fit quality:</b> {_e(result['fit_note'])}</p>"
+            if result.get("fit_note") else "")
     return f'<div class="{cls}">{note}<p>{_e(verdict)}</p><dl class="kv">{dl}</dl></div>'
 
 
@@ -672,7 +701,10 @@ def _correlation_table(result: Mapping[str, Any]) -> str:
             # measurement cannot tell apart, and should jump out at the reader.
             shade = "" if r is None or i == j else (
                 f' style="background:rgba(192,57,43,{min(abs(r), 1.0) * 0.55:.2f})"')
-            cells.append(f'<td class="num"{shade}>{_fmt(r, 2)}</td>')
+            # 0.9997 would print as "1.00", which reads as "identical" rather than
+            # "almost inseparable"; give such values their digits.
+            digits = 4 if r is not None and i != j and abs(r) >= 0.995 else 2
+            cells.append(f'<td class="num"{shade}>{_fmt(r, digits)}</td>')
         label = _param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)
         rows.append(f'<tr><th class="l">{label}</th>{"".join(cells)}</tr>')
     return (f'<h3>Correlation of the estimates</h3><table><thead><tr><th></th>{head}</tr>'
@@ -785,7 +817,7 @@ def _info_list(result: Mapping[str, Any]) -> str:
     if timing:
         rows.append(("timing", _e(
             f"wall {_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "
-            f"{timing.get('readings', '—')} readings, {timing.get('retries', '—')} retries")))
+            f"{timing.get('readings', '—')} readings, retries: {timing.get('retries', '—')}")))
     return '<dl class="kv">' + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
 
 
@@ -823,10 +855,12 @@ def render_html(result: dict) -> str:
     figures = []
     if plot_dev:
         figures.append(
-            f"<figure>{plot_dev}<figcaption>Figure 1. The 12 leg deviations. Before "
-            "calibration: measured (blue, error bar = std over cycles) and as the fitted "
-            "model explains them (orange). After calibration: the verification measurement "
-            "(green), which should be close to zero.</figcaption></figure>")
+            f"<figure>{plot_dev}<figcaption>Figure 1. The 12 leg deviations: how far each "
+            "indicator's reading in a test posture differs from its reading in "
+            "Π<sub>0</sub>. Before calibration: measured (blue; error bar = std over the "
+            "cycles, often smaller than the marker) and as the fitted model explains them "
+            "(orange). After calibration: the verification measurement (green), which "
+            "should be close to zero.</figcaption></figure>")
     if plot_par:
         figures.append(
             f"<figure>{plot_par}<figcaption>Figure 2. Identified parameters with ±1σ (thick) "
