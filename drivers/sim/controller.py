@@ -1,0 +1,485 @@
+"""A simulated axis controller: a real pymodbus server serving the register map
+"orthocal-generic" (design.md) for a :class:`~drivers.sim.machine.VirtualOrthoglide`.
+
+Transports: Modbus TCP on 127.0.0.1 (port 0 picks a free port, reported by
+:attr:`SimController.port`) or Modbus RTU on a pseudo-terminal null-modem
+(:class:`~drivers.sim.ptypair.PtyPair`; the client opens
+:attr:`SimController.serial_port`). The server runs in a background thread with
+its own asyncio loop; ``start()``/``close()`` (or ``with``) leave no thread,
+task, socket or pty behind.
+
+It behaves like a drive: COMMAND 1/2/3/4 is taken at once and reads back 0;
+moves take time; STATUS follows the machine; a target outside the soft limits
+(default [L+ρmin−10, L+ρmax+10] on every axis) is refused with exception 3, as
+are an unknown command, a zero speed or an offset beyond ``max_offset_mm``;
+writing OFFSET acts on the legs through the machine. Requests for another
+device id get no reply on RTU and exception 0x0B (gateway: no response) on TCP.
+
+Fault injection: :class:`Faults`, a dataclass whose fields may be changed while
+the server runs (``sim.faults.drop_next = 2``); random faults draw from an RNG
+seeded with ``seed`` so a run is reproducible. The datastore is pymodbus 3.16's
+``SimDevice`` with an ``action`` hook (called before a write is applied, it can
+veto it with an exception code); faults that a datastore cannot express (lost,
+late, garbled replies, silence, busy) live in a thin subclass of pymodbus's
+request handler.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import random
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from pymodbus.constants import ExcCodes
+from pymodbus.framer import FramerType
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.server.requesthandler import ServerRequestHandler
+from pymodbus.simulator import DataType, SimData, SimDevice
+
+from drivers.registers import AXES, GENERIC, Register, decode_int
+from drivers.sim.machine import VirtualOrthoglide
+from drivers.sim.ptypair import PtyPair
+
+_pymodbus_log = logging.getLogger("pymodbus")
+if _pymodbus_log.level == logging.NOTSET:
+    # pymodbus logs every dropped frame as an error; the operator console is ours.
+    _pymodbus_log.setLevel(logging.CRITICAL)
+
+_READ_CODES = {3, 4, 23}  # function codes whose reads consume a taken COMMAND
+
+
+@dataclass
+class Faults:
+    """Fault-injection knobs; change them at run time. ``*_next`` counters are
+    consumed one per reply (or request), ``*_rate`` are probabilities per reply."""
+
+    #: lose the next N replies (the request is executed; the client times out)
+    drop_next: int = 0
+    drop_rate: float = 0.0
+    #: corrupt the next N replies (RTU: bad CRC; TCP: malformed MBAP header)
+    garble_next: int = 0
+    garble_rate: float = 0.0
+    #: TCP: close the connection instead of replying, N times
+    disconnect_next: int = 0
+    #: every reply this late (s)
+    delay_s: float = 0.0
+    #: answer the next N requests (or a fraction) with exception 6, unexecuted
+    busy_next: int = 0
+    busy_rate: float = 0.0
+    #: no replies at all, requests ignored (cable pulled, drive off)
+    silent: bool = False
+    #: after N more completed moves, the next move faults halfway with alarm_code
+    alarm_after_moves: int | None = None
+    alarm_code: int = 17
+    #: the emergency stop input (takes effect at the controller's next request)
+    estop: bool = False
+
+
+@dataclass
+class SimStats:
+    """What the simulator did, for tests and the console."""
+
+    requests: int = 0
+    replies: int = 0
+    dropped: int = 0
+    garbled: int = 0
+    delayed: int = 0
+    busy: int = 0
+    ignored: int = 0
+    disconnects: int = 0
+    refused: int = 0
+    commands: dict[int, int] = field(default_factory=dict)
+
+
+def default_soft_limits(machine: VirtualOrthoglide, margin_mm: float = 10.0
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """[L + ρmin − margin, L + ρmax + margin] on each axis: room for every test
+    posture of design.md with a margin (paper's machine: [200.25, 380.25] mm)."""
+    g = machine.geometry
+    return (np.full(3, g.leg_length + g.rho_min - margin_mm),
+            np.full(3, g.leg_length + g.rho_max + margin_mm))
+
+
+class _Handler(ServerRequestHandler):
+    """pymodbus's per-connection handler with the faults a datastore cannot express."""
+
+    sim: SimController
+
+    async def handle_request(self) -> None:
+        pdu = self.last_pdu
+        if pdu is None:
+            return
+        verdict = self.sim._admit(pdu)
+        if verdict == "ignore":
+            return
+        if verdict in ("busy", "gateway"):
+            code = ExcCodes.DEVICE_BUSY if verdict == "busy" else ExcCodes.GATEWAY_NO_RESPONSE
+            response = ExceptionResponse(pdu.function_code, code)
+            response.transaction_id = pdu.transaction_id
+            response.dev_id = pdu.dev_id
+            self.server_send(response, self.last_addr)
+            return
+        await super().handle_request()
+
+    def server_send(self, pdu: ModbusPDU | None, addr: tuple | None) -> None:
+        if not pdu:
+            return
+        fate, delay = self.sim._reply_fate()
+        if fate == "drop":
+            return
+        if fate == "disconnect":
+            self.close()
+            return
+        packet = self.framer.buildFrame(pdu)
+        if fate == "garble":
+            if self.sim.transport == "rtu":
+                packet = packet[:-1] + bytes([packet[-1] ^ 0xFF])  # CRC no longer matches
+            else:
+                packet = packet[:2] + b"\xde\xad" + packet[4:]  # protocol id must be 0
+        if delay > 0:
+            self.loop.call_later(delay, self._deliver, packet, addr)
+        else:
+            self._deliver(packet, addr)
+
+    def _deliver(self, packet: bytes, addr: tuple | None) -> None:
+        if self.transport:
+            self.send(packet, addr)
+
+
+class _SimTcpServer(ModbusTcpServer):
+    sim: SimController
+
+    def callback_new_connection(self) -> _Handler:
+        handler = _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+        handler.sim = self.sim
+        return handler
+
+
+class _SimSerialServer(ModbusSerialServer):
+    sim: SimController
+
+    def callback_new_connection(self) -> _Handler:
+        handler = _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+        handler.sim = self.sim
+        return handler
+
+
+class SimController:
+    """A Modbus server for a virtual Orthoglide.
+
+    ``SimController(machine, transport="tcp")`` then ``start()``; connect a client
+    to ``("127.0.0.1", sim.port)`` (TCP) or ``sim.serial_port`` (RTU), or pass
+    ``**sim.client_kwargs()`` to :class:`drivers.axes.ModbusAxisController`.
+    """
+
+    def __init__(
+        self,
+        machine: VirtualOrthoglide | None = None,
+        *,
+        transport: str = "tcp",
+        host: str = "127.0.0.1",
+        port: int = 0,
+        device_id: int = 1,
+        faults: Faults | None = None,
+        seed: int | None = 0,
+        soft_limits: tuple[Sequence[float], Sequence[float]] | None = None,
+        max_offset_mm: float = 50.0,
+        baudrate: int = 115200,
+    ) -> None:
+        if transport not in ("tcp", "rtu"):
+            raise ValueError(f"transport must be 'tcp' or 'rtu', got {transport!r}")
+        self.machine = machine or VirtualOrthoglide()
+        self.transport = transport
+        self.host = host
+        self.device_id = device_id
+        self.faults = faults or Faults()
+        self.stats = SimStats()
+        self.max_offset_mm = float(max_offset_mm)
+        self.baudrate = baudrate
+        lo, hi = soft_limits if soft_limits is not None else default_soft_limits(self.machine)
+        self.soft_min = np.asarray(lo, dtype=float).reshape(3)
+        self.soft_max = np.asarray(hi, dtype=float).reshape(3)
+        if np.any(self.soft_min >= self.soft_max):
+            raise ValueError("soft limits: every lower limit must be below the upper one")
+        self.map = GENERIC
+        self._rng = random.Random(seed)
+        self._lock = threading.Lock()
+        self._requested_port = port
+        self._port: int | None = None
+        self._pty: PtyPair | None = None
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._moves_done = 0
+        self._estop_seen = False
+        self._inited = False
+        self._regs = {r.name: r for r in self.map.registers}
+
+    # --- lifecycle --------------------------------------------------------------------------
+
+    def start(self) -> SimController:
+        if self._thread is not None:
+            return self
+        if self.transport == "rtu":
+            self._pty = PtyPair(name="orthocal-sim-pty").open()
+        self._ready.clear()
+        self._thread = threading.Thread(target=self._run, name=f"orthocal-sim-{self.transport}",
+                                        daemon=True)
+        self._thread.start()
+        if not self._ready.wait(10.0):
+            self.close()
+            raise RuntimeError("simulated controller did not start within 10 s")
+        if self._error is not None:
+            error = self._error
+            self.close()
+            raise RuntimeError(f"simulated controller failed to start: {error}") from error
+        return self
+
+    def close(self) -> None:
+        loop, stop = self._loop, self._stop
+        if loop is not None and stop is not None:
+            with contextlib.suppress(RuntimeError):  # loop already gone
+                loop.call_soon_threadsafe(stop.set)
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+            self._thread = None
+        self._loop = self._stop = None
+        if self._pty is not None:
+            self._pty.close()
+            self._pty = None
+
+    def __enter__(self) -> SimController:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def port(self) -> int:
+        """The bound TCP port (after start())."""
+        if self.transport != "tcp" or self._port is None:
+            raise RuntimeError("no TCP port: not started or not a TCP simulator")
+        return self._port
+
+    @property
+    def serial_port(self) -> str:
+        """The serial device a client opens (RTU, after start())."""
+        if self._pty is None:
+            raise RuntimeError("no serial port: not started or not an RTU simulator")
+        return self._pty.path_b
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}" if self.transport == "tcp" else self.serial_port
+
+    def client_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of ModbusAxisController / the [controller] config table."""
+        port: int | str = self.port if self.transport == "tcp" else self.serial_port
+        kw: dict[str, Any] = {"transport": self.transport, "host": self.host, "port": port,
+                              "device_id": self.device_id, "profile": self.map.name}
+        if self.transport == "rtu":
+            kw["baudrate"] = self.baudrate
+        return kw
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._serve())
+        except BaseException as exc:  # report to start(); the thread must not die silently
+            self._error = exc
+        finally:
+            self._ready.set()
+
+    async def _serve(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        device = SimDevice(id=self.device_id, simdata=self._simdata(), action=self._action)
+        server: _SimTcpServer | _SimSerialServer
+        if self.transport == "tcp":
+            server = _SimTcpServer(device, address=(self.host, self._requested_port))
+        else:
+            assert self._pty is not None
+            server = _SimSerialServer(device, framer=FramerType.RTU, port=self._pty.path_a,
+                                      baudrate=self.baudrate, timeout=1.0, reconnect_delay=0.0)
+        server.sim = self
+        try:
+            await server.serve_forever(background=True)
+            if self.transport == "tcp":
+                self._port = server.transport.sockets[0].getsockname()[1]
+            self._ready.set()
+            await self._stop.wait()
+        finally:
+            await server.shutdown()
+            # Let the loop run the transports' connection_lost callbacks (socket close).
+            for _ in range(3):
+                await asyncio.sleep(0)
+
+    # --- datastore ----------------------------------------------------------------------------
+
+    def _simdata(self) -> list[SimData]:
+        data = []
+        for reg in self.map.registers:
+            data.append(SimData(reg.address, count=reg.words, values=0,
+                                datatype=DataType.REGISTERS, readonly=reg.access == "R"))
+        return data
+
+    def _init_registers(self, registers: list[int], start: int) -> None:
+        for ax, lo, hi in zip(AXES, self.soft_min, self.soft_max, strict=True):
+            self._put(registers, start, self._regs[f"SOFT_MIN_{ax}"], lo)
+            self._put(registers, start, self._regs[f"SOFT_MAX_{ax}"], hi)
+
+    @staticmethod
+    def _put(registers: list[int], start: int, reg: Register, value: float) -> None:
+        i = reg.address - start
+        registers[i:i + reg.words] = reg.encode(value)
+
+    @staticmethod
+    def _get(registers: list[int], start: int, reg: Register) -> float:
+        i = reg.address - start
+        return reg.decode(registers[i:i + reg.words])
+
+    def _refresh(self, registers: list[int], start: int) -> None:
+        """Mirror the machine into the read-only registers."""
+        m = self.machine
+        st = m.status()
+        bits = (st.homed << 0 | st.moving << 1 | st.in_position << 2 | st.alarm << 3
+                | st.estop << 4)
+        registers[self._regs["STATUS"].address - start] = bits
+        registers[self._regs["ALARM_CODE"].address - start] = st.alarm_code & 0xFFFF
+        for ax, rho in zip(AXES, m.actual(), strict=True):
+            self._put(registers, start, self._regs[f"ACTUAL_{ax}"], rho)
+        for ax, o in zip(AXES, m.offsets, strict=True):
+            self._put(registers, start, self._regs[f"OFFSET_{ax}"], o)
+
+    async def _action(self, function_code: int, start: int, address: int, count: int,
+                      registers: list[int], set_values: list[int] | list[bool] | None
+                      ) -> ExcCodes | None:
+        """pymodbus SimDevice hook: runs before the datastore answers or is written."""
+        if not self._inited:
+            self._init_registers(registers, start)
+            self._inited = True
+        self._refresh(registers, start)
+        if set_values is None:
+            if function_code in _READ_CODES:
+                registers[self._regs["COMMAND"].address - start] = 0  # taken: reads 0
+            return None
+        result = self._write(start, address, [int(v) for v in set_values], registers)
+        if result is not None:
+            with self._lock:
+                self.stats.refused += 1
+        return result
+
+    def _write(self, start: int, address: int, values: list[int], registers: list[int]
+               ) -> ExcCodes | None:
+        new = list(registers)
+        new[address - start:address - start + len(values)] = values
+        touched = set(range(address, address + len(values)))
+
+        def hit(reg: Register) -> bool:
+            return bool(touched & set(range(reg.address, reg.address + reg.words)))
+
+        for ax, lo, hi in zip(AXES, self.soft_min, self.soft_max, strict=True):
+            reg = self._regs[f"TARGET_{ax}"]
+            if hit(reg):
+                value = self._get(new, start, reg)
+                if not lo - 1e-9 <= value <= hi + 1e-9:
+                    return ExcCodes.ILLEGAL_VALUE
+        speed_reg = self._regs["SPEED"]
+        if hit(speed_reg) and self._get(new, start, speed_reg) <= 0:
+            return ExcCodes.ILLEGAL_VALUE
+        offset_regs = [self._regs[f"OFFSET_{ax}"] for ax in AXES]
+        offsets_hit = any(hit(r) for r in offset_regs)
+        offsets = np.array([self._get(new, start, r) for r in offset_regs])
+        if offsets_hit and np.any(np.abs(offsets) > self.max_offset_mm):
+            return ExcCodes.ILLEGAL_VALUE
+        command_reg = self._regs["COMMAND"]
+        command = decode_int(new[command_reg.address - start:command_reg.address - start + 1],
+                             "u16") if hit(command_reg) else 0
+        codes = {self.map.command_code(c): c for c in self.map.commands}
+        if command and command not in codes:
+            return ExcCodes.ILLEGAL_VALUE
+        # Validated: apply in the order a drive would (parameters, then the command).
+        if hit(speed_reg):
+            self.machine.speed_mm_s = self._get(new, start, speed_reg)
+        if offsets_hit:
+            self.machine.set_offsets(offsets)
+        if command:
+            with self._lock:
+                self.stats.commands[command] = self.stats.commands.get(command, 0) + 1
+            self._command(codes[command], new, start)
+        return None
+
+    def _command(self, name: str, new: list[int], start: int) -> None:
+        m = self.machine
+        if name == "move":
+            targets = [self._get(new, start, self._regs[f"TARGET_{ax}"]) for ax in AXES]
+            duration = m.move_to(targets)
+            with self._lock:
+                n = self.faults.alarm_after_moves
+                if n is not None:
+                    if self._moves_done >= n:
+                        self.faults.alarm_after_moves = None
+                        m.raise_alarm(self.faults.alarm_code, delay_s=duration / 2)
+                    else:
+                        self._moves_done += 1
+        elif name == "stop":
+            m.stop()
+        elif name == "home":
+            m.home()
+        elif name == "reset_alarm":
+            m.reset_alarm()
+
+    # --- faults ---------------------------------------------------------------------------------
+
+    def _admit(self, pdu: ModbusPDU) -> str:
+        """What to do with a request: 'ignore', 'busy', 'gateway' or 'serve'."""
+        with self._lock:
+            self.stats.requests += 1
+            f = self.faults
+            if f.estop != self._estop_seen:
+                self._estop_seen = f.estop
+                self.machine.set_estop(f.estop)
+            if f.silent:
+                self.stats.ignored += 1
+                return "ignore"
+            if pdu.dev_id != self.device_id:
+                self.stats.ignored += 1
+                return "ignore" if self.transport == "rtu" else "gateway"
+            if f.busy_next > 0 or (f.busy_rate > 0 and self._rng.random() < f.busy_rate):
+                f.busy_next = max(0, f.busy_next - 1)
+                self.stats.busy += 1
+                return "busy"
+            return "serve"
+
+    def _reply_fate(self) -> tuple[str, float]:
+        """What happens to a reply: ('ok' | 'drop' | 'garble' | 'disconnect', delay)."""
+        with self._lock:
+            f = self.faults
+            self.stats.replies += 1
+            if f.drop_next > 0 or (f.drop_rate > 0 and self._rng.random() < f.drop_rate):
+                f.drop_next = max(0, f.drop_next - 1)
+                self.stats.dropped += 1
+                return "drop", 0.0
+            if self.transport == "tcp" and f.disconnect_next > 0:
+                f.disconnect_next -= 1
+                self.stats.disconnects += 1
+                return "disconnect", 0.0
+            fate = "ok"
+            if f.garble_next > 0 or (f.garble_rate > 0 and self._rng.random() < f.garble_rate):
+                f.garble_next = max(0, f.garble_next - 1)
+                self.stats.garbled += 1
+                fate = "garble"
+            if f.delay_s > 0:
+                self.stats.delayed += 1
+            return fate, max(0.0, f.delay_s)
+
+
+__all__ = ["Faults", "SimController", "SimStats", "default_soft_limits"]
