@@ -1,0 +1,148 @@
+"""The operator console: live on a terminal, one line per step in a log, silent
+when disabled, no thread left running, prompts that never guess yes."""
+
+from __future__ import annotations
+
+import io
+import re
+import sys
+import threading
+
+import pytest
+
+from station import console
+from station.console import RunProgress, format_eta, print_error, prompt_yes_no
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class TtyStringIO(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_plain_mode_writes_one_line_per_update_with_eta() -> None:
+    stream, clock = io.StringIO(), FakeClock()
+    with RunProgress(12, stream=stream, clock=clock) as progress:
+        assert progress.mode == "plain"
+        progress.update("x", "Π_x^+", 1, 3, 0)
+        clock.now += 60.0
+        progress.update("x", "Π_x^-", 1, 3, 3)
+        progress.message("mount the indicators on leg y")
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "[0/12] setup x · Π_x^+ · cycle 1/3 · estimating time left"
+    # 3 steps took 60 s, so 9 steps take about 3 min
+    assert lines[1] == "[3/12] setup x · Π_x^- · cycle 1/3 · about 3 min left"
+    assert lines[2] == "mount the indicators on leg y"
+    assert "\x1b" not in stream.getvalue()  # no terminal codes in a log file
+
+
+def test_disabled_progress_is_silent() -> None:
+    stream = TtyStringIO()
+    with RunProgress(5, enabled=False, stream=stream) as progress:
+        progress.update("y", "Π0", 2, 3, 4)
+        progress.message("hello")
+        with progress.paused():
+            pass
+    assert stream.getvalue() == ""
+
+
+def test_default_stream_is_stderr_at_construction(capsys: pytest.CaptureFixture[str]) -> None:
+    with RunProgress(2) as progress:
+        progress.update("z", "Π_z^+", 1, 1, 1)
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "setup z · Π_z^+ · cycle 1/1" in captured.err
+
+
+def test_live_mode_shows_state_and_stops_its_thread() -> None:
+    stream, clock = TtyStringIO(), FakeClock()
+    before = set(threading.enumerate())
+    with RunProgress(10, stream=stream, clock=clock) as progress:
+        assert progress.mode == "live"
+        assert set(threading.enumerate()) - before, "expected rich's refresh thread"
+        clock.now += 20.0
+        progress.update("y", "Π_y^-", 2, 3, 5)
+        progress.message("note for the operator")
+        with progress.paused():
+            stream.write("QUESTION?")
+        progress.update("y", "Π0", 3, 3, 10)
+    assert not [t for t in set(threading.enumerate()) - before if t.is_alive()]
+    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", stream.getvalue())
+    assert "setup y · Π_y^- · cycle 2/3" in text
+    assert "5/10" in text and "10/10" in text
+    assert "about 20 s left" in text
+    assert "note for the operator" in text
+    assert "QUESTION?" in text
+
+
+def test_live_thread_stops_when_the_run_raises() -> None:
+    before = set(threading.enumerate())
+    with pytest.raises(KeyError), RunProgress(3, stream=TtyStringIO()):
+        raise KeyError("device fault")
+    assert not [t for t in set(threading.enumerate()) - before if t.is_alive()]
+
+
+def test_update_outside_with_block_is_an_error() -> None:
+    with pytest.raises(RuntimeError):
+        RunProgress(3, stream=io.StringIO()).update("x", "Π0", 1, 1, 1)
+
+
+@pytest.mark.parametrize(
+    ("seconds", "text"),
+    [(None, "estimating time left"), (0.0, "done"), (3.2, "a few seconds left"),
+     (42, "about 40 s left"),
+     (3600, "about 60 min left"), (3 * 3600, "about 3.0 h left")],
+)
+def test_format_eta(seconds: float | None, text: str) -> None:
+    assert format_eta(seconds) == text
+
+
+def test_prompt_assume_yes_prints_question_and_reads_nothing() -> None:
+    out = io.StringIO()
+    stdin = io.StringIO("n\n")
+    assert prompt_yes_no("Write offsets?", assume_yes=True, stream=out, input_stream=stdin)
+    assert out.getvalue() == "Write offsets? [y/n] yes (--yes)\n"
+    assert stdin.read() == "n\n"
+
+
+@pytest.mark.parametrize(("typed", "expected", "asks"), [
+    ("y\n", True, 1), ("YES\n", True, 1), ("n\n", False, 1), (" no \n", False, 1),
+    ("\nmaybe\ny\n", True, 3),  # empty and unclear answers ask again
+    ("", False, 1),  # end of input: nobody there to agree
+    ("\n", False, 2),
+])
+def test_prompt_answers(typed: str, expected: bool, asks: int) -> None:
+    out = io.StringIO()
+    assert prompt_yes_no("Go?", assume_yes=False, stream=out,
+                         input_stream=io.StringIO(typed)) is expected
+    assert out.getvalue().count("Go? [y/n]") == asks
+
+
+def test_prompt_reads_sys_stdin_by_default(monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(sys, "stdin", io.StringIO("y\n"))
+    assert prompt_yes_no("Mount indicators on leg x, ready?", assume_yes=False)
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "Mount indicators on leg x, ready? [y/n]" in captured.err
+
+
+def test_print_error_is_plain_in_a_log_and_keeps_brackets() -> None:
+    out = io.StringIO()
+    print_error("bad key [controller] port in station.toml line 7", stream=out)
+    assert out.getvalue() == "error: bad key [controller] port in station.toml line 7\n"
+
+
+def test_print_error_colours_on_a_terminal() -> None:
+    out = TtyStringIO()
+    console.print_error("axis y alarm 17", stream=out)
+    value = out.getvalue()
+    assert "\x1b[" in value
+    assert re.sub(r"\x1b\[[0-9;]*m", "", value) == "error: axis y alarm 17\n"
