@@ -82,6 +82,12 @@ def _jsonable(value: Any) -> Any:
     raise TypeError(f"result field of type {type(value).__name__} is not JSON-serialisable")
 
 
+def jsonable(result: Mapping[str, Any]) -> dict[str, Any]:
+    """The result as written to result.json (schema key order, NaN → None), for
+    callers that print it, e.g. ``--json``, so stdout and the file agree."""
+    return _jsonable(_ordered(result))
+
+
 def _ordered(result: Mapping[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key in _TOP_ORDER:
@@ -125,7 +131,7 @@ def _atomic_write(path: Path, text: str) -> None:
 def write_result(result: dict, run_dir: Path) -> Path:
     """Write ``run_dir/result.json`` atomically; NaN and infinities become null."""
     path = Path(run_dir) / "result.json"
-    data = _jsonable(_ordered(result))
+    data = jsonable(result)
     _atomic_write(path, json.dumps(data, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
     return path
 

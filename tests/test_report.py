@@ -209,6 +209,13 @@ def test_result_json_has_no_nan_tokens_and_keeps_schema_order(tmp_path: Path) ->
     assert list(loaded["deviations"]) == list(report.DEVIATION_KEYS)
 
 
+def test_jsonable_matches_the_file(tmp_path: Path) -> None:
+    result = make_result()
+    result["sigma_mm"] = float("nan")
+    printed = json.dumps(report.jsonable(result), allow_nan=False)
+    assert json.loads(printed) == json.loads(report.write_result(result, tmp_path).read_text())
+
+
 def test_result_json_replaces_old_file_whole(tmp_path: Path) -> None:
     (tmp_path / "result.json").write_text("{ half a file")
     report.write_result(make_result(), tmp_path)
