@@ -111,6 +111,9 @@ def _atomic_write(path: Path, text: str) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            # mkstemp makes the file private (0600); a report is meant to be read by
+            # whoever looks after the machine, not only by the account that ran it.
+            os.fchmod(fh.fileno(), 0o644)
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())

@@ -184,6 +184,7 @@ def test_result_json_round_trips(tmp_path: Path, case: str) -> None:
     assert loaded.get("identified") == result.get("identified")
     assert loaded["offsets_written"] == result["offsets_written"]
     assert list(tmp_path.iterdir()) == [path], "temporary file left behind"
+    assert path.stat().st_mode & 0o044 == 0o044, "report must be readable by others"
 
 
 def test_result_json_has_no_nan_tokens_and_keeps_schema_order(tmp_path: Path) -> None:
