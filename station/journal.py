@@ -171,6 +171,6 @@ def replay(records: list[dict[str, Any]]) -> JournalState:
             state.finished = rec
         elif kind == "event":
             state.events += 1
-            if rec.get("event", {}).get("kind") == "retry":
+            if rec.get("event", {}).get("event") == "retry":
                 state.retries += 1
     return state

@@ -92,13 +92,15 @@ class SetupPlan:
     def move(self, sign: str) -> Move:
         return Move(self.postures[sign], posture_label(sign, self.leg))
 
-    def start_steps(self, phase: str, settle_s: float, n: int) -> list[Step]:
+    def start_steps(self, phase: str, cycle: int, settle_s: float, n: int) -> list[Step]:
+        """Mount at Π0 and take the Π0 reading that opens cycle ``cycle + 1`` (0 in a
+        fresh run; later when a resumed run remounts mid-setup)."""
         names = tuple(self.indicators)
         return [
             self.move("0"),
             Prompt(self.index, self.leg, tuple(self.indicators.items())),
             Settle(settle_s),
-            Read(stop_id(phase, self.index, 0, "0"), self.index, 0, "0", names, n),
+            Read(stop_id(phase, self.index, cycle, "0"), self.index, cycle, "0", names, n),
         ]
 
     def cycle_steps(self, phase: str, cycle: int, settle_s: float, n: int) -> list[Step]:
@@ -127,7 +129,7 @@ class Plan:
     def steps(self, phase: str = "m") -> Iterator[Step]:
         """Every step of one phase at the configured number of cycles."""
         for sp in self.setups:
-            yield from sp.start_steps(phase, self.settle_s, self.readings)
+            yield from sp.start_steps(phase, 0, self.settle_s, self.readings)
             for cycle in range(1, self.cycles + 1):
                 yield from sp.cycle_steps(phase, cycle, self.settle_s, self.readings)
 
@@ -214,6 +216,80 @@ def _path(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
     return np.asarray(a, dtype=float) + (np.asarray(b, dtype=float) - np.asarray(a)) * t
 
 
+class MotionChecker:
+    """Checks one joint-interpolated move: soft limits, workspace, and the travel
+    of every mounted indicator, at PATH_SAMPLES points along the way. The plan
+    check runs it over every move of the plan; the sequencer runs it again before
+    every physical move, from the actual position (a resumed run starts anywhere)."""
+
+    def __init__(self, config: StationConfig,
+                 controller_limits: tuple[Sequence[float], Sequence[float]]) -> None:
+        self.config = config
+        self.geometry = config.machine.geometry()
+        self.lo, self.hi = effective_limits(config, controller_limits)
+        self.travel: dict[str, tuple[float, float]] = {}
+
+    def check(self, start: Sequence[float] | None, target: Sequence[float], label: str,
+              setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
+        target_v = np.asarray(target, dtype=float)
+        path = target_v[None, :] if start is None else _path(start, target_v)
+        where = "" if setup is None else f"setup {setup.index + 1} (leg {setup.leg}), "
+        where += label if start is None else f"move to {label}"
+        self._limits(path, where)
+        if setup is not None and mounted:
+            self._travel(setup, mounted, path, where)
+
+    def _limits(self, points: np.ndarray, where: str) -> None:
+        lo, hi = self.lo, self.hi
+        for i, axis in enumerate(AXES):
+            excess = np.maximum(lo[i] - points[:, i], points[:, i] - hi[i])
+            if np.any(excess > 1e-9):
+                value = float(points[np.argmax(excess), i])
+                raise BadInput(
+                    f"plan: {where}: ρ_{axis} = {value:.3f} mm is outside the soft "
+                    f"limits [{lo[i]:.3f}, {hi[i]:.3f}]; nothing has moved")
+        try:
+            orthocal.forward(points, self.geometry)
+        except ValueError:
+            raise BadInput(f"plan: {where}: outside the machine's workspace; "
+                           "nothing has moved") from None
+
+    def _travel(self, sp: SetupPlan, mounted: dict[str, str], path: np.ndarray,
+                where: str) -> None:
+        geometry = self.geometry
+        mount = geometry.mount_plane
+        rho0 = np.asarray(sp.postures["0"])
+        i = AXES.index(sp.leg)
+        p = orthocal.forward(path, geometry)
+        # The indicator touches the leg only while the leg crosses its plane x_i = M.
+        spans = (np.minimum(p[:, i], path[:, i]) <= mount) & \
+            (mount <= np.maximum(p[:, i], path[:, i]))
+        for name, direction in mounted.items():
+            ind = self.config.indicator(name)
+            if not np.all(spans):
+                raise BadInput(f"plan: {where}: leg {sp.leg} no longer crosses the plane of "
+                               f"indicator {name}; nothing has moved")
+            sign = -1.0 if direction.startswith("-") else 1.0
+            axis = direction.lstrip("-")
+            zero = float(orthocal.leg_reading(rho0, sp.leg, axis, geometry))
+            travel = sign * (orthocal.leg_reading(path, sp.leg, axis, geometry) - zero)
+            low, high = -ind.preload, ind.stroke_mm - ind.preload
+            t_min, t_max = float(travel.min()), float(travel.max())
+            key = f"{name} on leg {sp.leg} (setup {sp.index + 1})"
+            old = self.travel.get(key, (0.0, 0.0))
+            self.travel[key] = (min(old[0], t_min), max(old[1], t_max))
+            if t_max > high + 1e-9:
+                raise BadInput(
+                    f"plan: {where}: indicator {name} ({direction}) would be pushed "
+                    f"{t_max:.3f} mm past its mounting point, beyond its stroke "
+                    f"({ind.stroke_mm:g} mm, preload {ind.preload:g} mm); nothing has moved")
+            if t_min < low - 1e-9:
+                raise BadInput(
+                    f"plan: {where}: the leg would lift off indicator {name} ({direction}) "
+                    f"by {-t_min - ind.preload:.3f} mm (travel {t_min:.3f} mm, preload "
+                    f"{ind.preload:g} mm); nothing has moved")
+
+
 def check_plan(
     plan: Plan,
     config: StationConfig,
@@ -224,80 +300,19 @@ def check_plan(
     that would push a plunger past its stroke or lift it off the leg, anywhere
     along any move; name the posture, setup and indicator. Fills plan.limits and
     plan.travel. ``start``: the current joint positions, to check the first move."""
-    geometry = config.machine.geometry()
-    lo, hi = effective_limits(config, controller_limits)
-    plan.limits = (lo.tolist(), hi.tolist())
-    plan.travel = {}
-    mount = geometry.mount_plane
-
-    def check_targets(label: str, points: np.ndarray, where: str) -> None:
-        for i, axis in enumerate(AXES):
-            excess = np.maximum(lo[i] - points[:, i], points[:, i] - hi[i])
-            if np.any(excess > 1e-9):
-                value = float(points[np.argmax(excess), i])
-                raise BadInput(
-                    f"plan: {where}{label}: ρ_{axis} = {value:.3f} mm is outside the soft "
-                    f"limits [{lo[i]:.3f}, {hi[i]:.3f}]; nothing has moved")
-        try:
-            orthocal.forward(points, geometry)
-        except ValueError:
-            raise BadInput(f"plan: {where}{label}: outside the machine's workspace; "
-                           "nothing has moved") from None
-
+    checker = MotionChecker(config, controller_limits)
+    plan.limits = (checker.lo.tolist(), checker.hi.tolist())
     position = None if start is None else np.asarray(start, dtype=float)
     for sp in plan.setups:
-        where = f"setup {sp.index + 1} (leg {sp.leg}), "
-        rho0 = np.asarray(sp.postures["0"])
         mounted: dict[str, str] = {}
         # The listing's order plus one extra Π+ move, which follows a cycle's
         # final Π0 when the next cycle (or a repeat) starts: all moves of a setup.
-        moves: list[tuple[Move, bool]] = []
-        for step in sp.start_steps("m", 0.0, 1) + sp.cycle_steps("m", 1, 0.0, 1) \
+        for step in sp.start_steps("m", 0, 0.0, 1) + sp.cycle_steps("m", 1, 0.0, 1) \
                 + sp.cycle_steps("m", 2, 0.0, 1)[:1]:
-            if isinstance(step, Move):
-                moves.append((step, bool(mounted)))
-            elif isinstance(step, Prompt):
+            if isinstance(step, Prompt):
                 mounted = dict(step.indicators)
-        for move, with_indicators in moves:
-            target = np.asarray(move.targets)
-            path = target[None, :] if position is None else _path(position, target)
-            label = move.label if position is None else f"move to {move.label}"
-            check_targets(label, path, where)
-            if with_indicators:
-                _check_travel(plan, config, sp, mounted, path, rho0, mount, geometry,
-                              f"{where}{label}")
-            position = target
+            elif isinstance(step, Move):
+                checker.check(position, step.targets, step.label, sp, mounted)
+                position = np.asarray(step.targets)
+    plan.travel = checker.travel
     return plan
-
-
-def _check_travel(plan: Plan, config: StationConfig, sp: SetupPlan, mounted: dict[str, str],
-                  path: np.ndarray, rho0: np.ndarray, mount: float,
-                  geometry: orthocal.Geometry, where: str) -> None:
-    i = AXES.index(sp.leg)
-    p = orthocal.forward(path, geometry)
-    # The indicator touches the leg only while the leg crosses its plane x_i = M.
-    spans = (np.minimum(p[:, i], path[:, i]) <= mount) & (mount <= np.maximum(p[:, i], path[:, i]))
-    for name, direction in mounted.items():
-        ind = config.indicator(name)
-        if not np.all(spans):
-            raise BadInput(f"plan: {where}: leg {sp.leg} no longer crosses the plane of "
-                           f"indicator {name}; nothing has moved")
-        sign = -1.0 if direction.startswith("-") else 1.0
-        axis = direction.lstrip("-")
-        zero = float(orthocal.leg_reading(rho0, sp.leg, axis, geometry))
-        travel = sign * (orthocal.leg_reading(path, sp.leg, axis, geometry) - zero)
-        low, high = -ind.preload, ind.stroke_mm - ind.preload
-        t_min, t_max = float(travel.min()), float(travel.max())
-        key = f"{name} on leg {sp.leg} (setup {sp.index + 1})"
-        old = plan.travel.get(key, (0.0, 0.0))
-        plan.travel[key] = (min(old[0], t_min), max(old[1], t_max))
-        if t_max > high + 1e-9:
-            raise BadInput(
-                f"plan: {where}: indicator {name} ({direction}) would be pushed "
-                f"{t_max:.3f} mm past its mounting point, beyond its stroke "
-                f"({ind.stroke_mm:g} mm, preload {ind.preload:g} mm); nothing has moved")
-        if t_min < low - 1e-9:
-            raise BadInput(
-                f"plan: {where}: the leg would lift off indicator {name} ({direction}) "
-                f"by {-t_min - ind.preload:.3f} mm (travel {t_min:.3f} mm, preload "
-                f"{ind.preload:g} mm); nothing has moved")

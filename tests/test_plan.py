@@ -1,0 +1,144 @@
+"""The plan: listed step by step, and refused before any motion when a target
+leaves the soft limits or a plunger would leave its stroke, with the refusal
+naming the indicator, the setup and the posture."""
+
+from __future__ import annotations
+
+import copy
+import itertools
+
+import numpy as np
+import pytest
+
+import orthocal
+from station.config import StationConfig, parse_config
+from station.errors import BadInput
+from station.plan import Move, Prompt, Read, build_plan, check_plan
+
+BASE = {
+    "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],
+    "setups": [
+        {"leg": "x", "indicators": {"A": "y", "B": "z"}},
+        {"leg": "y", "indicators": {"A": "x", "B": "-z"}},
+        {"leg": "z", "indicators": {"A": "x", "B": "y"}},
+    ],
+    "procedure": {"cycles": 2, "readings": 3},
+}
+WIDE = ([0.0, 0.0, 0.0], [1000.0, 1000.0, 1000.0])
+
+
+def config(**changes) -> StationConfig:
+    data = copy.deepcopy(BASE)
+    for key, value in changes.items():
+        data[key] = value
+    return parse_config(data)
+
+
+def test_listing_has_every_stop_and_prompt() -> None:
+    cfg = config()
+    plan = check_plan(build_plan(cfg), cfg, WIDE)
+    steps = list(plan.steps())
+    prompts = [s for s in steps if isinstance(s, Prompt)]
+    reads = [s for s in steps if isinstance(s, Read)]
+    assert [p.leg for p in prompts] == ["x", "y", "z"]
+    # per setup: the opening Π0 and three stops per cycle (consecutive cycles share Π0)
+    assert len(reads) == 3 * (1 + 3 * 2)
+    assert all(r.n == 3 and r.indicators == ("A", "B") for r in reads)
+    assert len({r.stop for r in reads}) == len(reads)
+    text = plan.format()
+    assert "Π_y^+" in text and "mount A (x), B (-z)" in text and "plan checked" in text
+
+
+def test_moves_are_the_test_postures_and_prompts_come_at_pi0() -> None:
+    cfg = config()
+    plan = build_plan(cfg)
+    g = cfg.machine.geometry()
+    steps = list(plan.steps())
+    for before, step in itertools.pairwise(steps):
+        if isinstance(step, Prompt):
+            assert isinstance(before, Move) and before.label == "Π0"
+    moves = {m.label: m.targets for m in steps if isinstance(m, Move)}
+    np.testing.assert_allclose(moves["Π_x^-"], orthocal.posture("-", "x", g))
+    np.testing.assert_allclose(moves["Π_z^+"], orthocal.posture("+", "z", g))
+    # Π+ goes straight to Π−: no axis travels back through Π0 in between.
+    labels = [m.label for m in steps if isinstance(m, Move)]
+    assert labels[:5] == ["Π0", "Π_x^+", "Π_x^-", "Π0", "Π_x^+"]
+
+
+def test_soft_limit_refusal_names_posture_and_axis() -> None:
+    cfg = config()
+    hi = orthocal.posture("+", "y", cfg.machine.geometry())[1] - 1.0
+    with pytest.raises(BadInput) as info:
+        check_plan(build_plan(cfg), cfg, ([0, 0, 0], [1000, hi, 1000]))
+    msg = str(info.value)
+    assert "Π_y^+" in msg and "ρ_y" in msg and "soft limits" in msg and "setup 2" in msg
+
+
+def test_config_narrows_the_controller_limits() -> None:
+    data = copy.deepcopy(BASE)
+    data["controller"] = {"soft_max": [400.0, 400.0, 360.0]}
+    cfg = parse_config(data)
+    with pytest.raises(BadInput, match=r"Π_z\^\+.*ρ_z"):
+        check_plan(build_plan(cfg), cfg, WIDE)
+
+
+def test_first_move_from_the_actual_position_is_checked() -> None:
+    cfg = config()
+    with pytest.raises(BadInput, match=r"move to Π0.*outside the soft limits"):
+        check_plan(build_plan(cfg), cfg, ([250, 250, 250], [400, 400, 400]),
+                   start=[100.0, 310.25, 310.25])
+
+
+def test_stroke_refusal_names_indicator_setup_and_posture() -> None:
+    # Going straight from Π_x^+ to Π_x^− swings leg x sideways by ~4.9 mm on the way
+    # (it is parallel to its axis only at the stops); a short stroke cannot follow.
+    data = copy.deepcopy(BASE)
+    data["indicators"][1]["stroke_mm"] = 8.0
+    data["setups"][0]["indicators"]["B"] = "-z"  # reversed: the swing pushes it in
+    cfg = parse_config(data)
+    with pytest.raises(BadInput) as info:
+        check_plan(build_plan(cfg), cfg, WIDE)
+    msg = str(info.value)
+    assert "indicator B" in msg and "setup 1" in msg and "Π_x^-" in msg
+    assert "stroke" in msg
+
+
+def test_lift_off_refusal_depends_on_mount_sign() -> None:
+    # Same leg motion, seen from the other side: a small preload lifts off instead.
+    data = copy.deepcopy(BASE)
+    data["indicators"][0].update(stroke_mm=12.5, preload_mm=2.0)
+    cfg = parse_config(data)
+    with pytest.raises(BadInput) as info:
+        check_plan(build_plan(cfg), cfg, WIDE)
+    assert "lift off indicator A" in str(info.value)
+    # Reversed, the same gauge is pushed in by the same motion: within its stroke.
+    for setup in data["setups"]:
+        for name, d in setup["indicators"].items():
+            if name == "A":
+                setup["indicators"][name] = "-" + d
+    cfg = parse_config(data)
+    plan = check_plan(build_plan(cfg), cfg, WIDE)
+    lo, hi = plan.travel["A on leg x (setup 1)"]
+    assert lo >= -2.0 and hi > 4.0
+
+
+def test_travel_of_a_mounted_indicator_matches_the_model() -> None:
+    cfg = config()
+    plan = check_plan(build_plan(cfg), cfg, WIDE)
+    lo, hi = plan.travel["A on leg x (setup 1)"]
+    g = cfg.machine.geometry()
+    # the leg's worst excursion along y on the straight joint path Π_x^+ → Π_x^−
+    a, b = orthocal.posture("+", "x", g), orthocal.posture("-", "x", g)
+    path = a + (b - a) * np.linspace(0, 1, 400)[:, None]
+    r = orthocal.leg_reading(path, "x", "y", g) - orthocal.leg_reading(
+        orthocal.posture("0", None, g), "x", "y", g)
+    assert lo == pytest.approx(r.min(), abs=0.01)
+    assert hi == pytest.approx(max(r.max(), 0.0), abs=0.01)
+
+
+def test_plan_json_lists_steps() -> None:
+    cfg = config()
+    data = check_plan(build_plan(cfg), cfg, WIDE).to_json()
+    kinds = {s["kind"] for s in data["steps"]}
+    assert kinds == {"move", "prompt", "settle", "read", "checkpoint"}
+    assert data["soft_limits"]["upper"] == WIDE[1]
