@@ -123,7 +123,7 @@ class SimIndicator:
         self._lock = threading.Lock()  # source/zero against the simulator thread
         self._source: Source | None = source
         self._zero = float(source()) if zero_mm is None else float(zero_mm)
-        # Counters for tests and the benchmark: requests seen, replies fully sent.
+        # Counters for tests and the benchmark: requests seen, replies begun.
         self.requests = 0
         self.replies = 0
 
@@ -361,7 +361,7 @@ class SimIndicator:
         start = time.monotonic()
         if delay and not self._sleep_until(start + delay):
             return False
-        if not self._send(reply, start + delay):
-            return False
+        # Counted before sending: the driver may have the last byte (and its
+        # caller look at this counter) before this thread runs again.
         self.replies += 1
-        return True
+        return self._send(reply, start + delay)
