@@ -61,7 +61,10 @@ class ControllerConfig(_Strict):
     # Single register entries overriding the profile's map: name -> address.
     registers: dict[str, int] = Field(default_factory=dict)
     timeout_s: float = Field(2.0, gt=0, le=60)
-    speed_mm_s: float | None = Field(None, gt=0)
+    # Axis speed of the test moves (written before each move) and the acceleration
+    # the station assumes when it derives each move's deadline.
+    speed_mm_s: float = Field(50.0, gt=0, le=65535)
+    accel_mm_s2: float = Field(500.0, gt=0)
     baudrate: int = Field(19200, gt=0)
     # Narrow the controller's own soft limits (joint mm, x/y/z); never widen them.
     soft_min: list[float] | None = Field(None, min_length=3, max_length=3)

@@ -1,0 +1,195 @@
+"""The whole virtual station in-process: a simulated controller (real Modbus TCP
+server on 127.0.0.1, ephemeral port) and simulated dial indicators on ptys, all
+looking at one :class:`~drivers.sim.machine.VirtualOrthoglide` with hidden
+errors. ``config()`` describes it as a station config (a plain dict in the
+shape of station.toml, so drivers does not import station).
+
+Two setup styles: ``indicator_count=2`` (A and B moved from leg to leg; the
+operator — here :meth:`mount` — re-mounts them before each setup) and
+``indicator_count=6`` (A..F, two per leg; one of them mounted reversed to
+exercise the sign convention).
+
+The virtual controller's offsets can be persisted to a file after every write
+(``nvram_path``), like a real drive's non-volatile memory, so a resumed or
+rolled-back simulated run sees what was written before.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.indicators import make_protocol
+from drivers.sim.controller import Faults, SimController
+from drivers.sim.indicators import IndicatorFaults, SimIndicator
+from drivers.sim.machine import VirtualOrthoglide
+from orthocal import Geometry
+
+# Fast but physical: moves still take time, so in-position waits are real.
+SIM_SPEED_MM_S = 1000.0
+SIM_ACCEL_MM_S2 = 20000.0
+
+TWO_SETUPS: list[dict[str, Any]] = [
+    {"leg": "x", "indicators": {"A": "y", "B": "z"}},
+    {"leg": "y", "indicators": {"A": "x", "B": "z"}},
+    {"leg": "z", "indicators": {"A": "x", "B": "y"}},
+]
+SIX_SETUPS: list[dict[str, Any]] = [
+    {"leg": "x", "indicators": {"A": "y", "B": "z"}},
+    {"leg": "y", "indicators": {"C": "x", "D": "-z"}},
+    {"leg": "z", "indicators": {"E": "x", "F": "y"}},
+]
+DEFAULT_PROCEDURE: dict[str, Any] = {
+    "cycles": 3, "readings": 5, "settle_s": 0.02, "repeatability_mm": 0.02,
+    "max_repeats": 1, "model": "rho", "method": "nonlinear", "verify": True,
+}
+
+
+class _PersistentMachine(VirtualOrthoglide):
+    """A machine whose controller offsets survive a restart through a file."""
+
+    nvram_path: Path | None = None
+
+    def set_offsets(self, offsets: Sequence[float]) -> None:
+        super().set_offsets(offsets)
+        self.save_offsets()
+
+    def save_offsets(self) -> None:
+        if self.nvram_path is None:
+            return
+        path = self.nvram_path
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump({"offsets_mm": [float(v) for v in self.offsets]}, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+
+
+class VirtualStation:
+    def __init__(
+        self,
+        true_drho: Sequence[float] = (0.0, 0.0, 0.0),
+        true_dl: Sequence[float] = (0.0, 0.0, 0.0),
+        noise_mm: float = 0.002,
+        seed: int | None = 0,
+        *,
+        geometry: Geometry | None = None,
+        speed_mm_s: float = SIM_SPEED_MM_S,
+        accel_mm_s2: float = SIM_ACCEL_MM_S2,
+        protocol: str = "mitutoyo",
+        baud: int | None = None,
+        line_time: bool = True,
+        indicator_count: int = 2,
+        port: int = 0,
+        controller_faults: Faults | None = None,
+        indicator_faults: dict[str, IndicatorFaults] | None = None,
+        nvram_path: str | Path | None = None,
+        procedure: dict[str, Any] | None = None,
+        writeback: dict[str, Any] | None = None,
+        mount_all: bool = False,
+    ) -> None:
+        if indicator_count not in (2, 6):
+            raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
+        self.geometry = geometry or Geometry()
+        self.protocol = protocol
+        self.speed_mm_s = speed_mm_s
+        self.accel_mm_s2 = accel_mm_s2
+        self.setups = TWO_SETUPS if indicator_count == 2 else SIX_SETUPS
+        self.procedure = {**DEFAULT_PROCEDURE, **(procedure or {})}
+        self.writeback = dict(writeback or {})
+        self.machine = _PersistentMachine(
+            self.geometry, true_drho, true_dl, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
+        if nvram_path is not None:
+            path = Path(nvram_path)
+            if path.exists():
+                saved = json.loads(path.read_text())["offsets_mm"]
+                self.machine.set_offsets(saved)
+            self.machine.nvram_path = path
+        names = sorted({n for s in self.setups for n in s["indicators"]})
+        self.controller = SimController(self.machine, port=port, faults=controller_faults,
+                                        seed=seed)
+        self.indicators: dict[str, SimIndicator] = {}
+        try:
+            self.controller.start()
+            for i, name in enumerate(names):
+                faults = (indicator_faults or {}).get(name)
+                line_baud = baud if baud is not None else make_protocol(protocol).baudrate
+                sim = SimIndicator(protocol, lambda: 0.0, noise_mm=noise_mm,
+                                   baud=line_baud if line_time else None, faults=faults,
+                                   seed=None if seed is None else seed * 101 + i, name=name)
+                sim.unmount()
+                self.indicators[name] = sim
+                sim.start()
+            if mount_all:
+                # A separate process cannot be told where the operator mounted
+                # the gauges: all six stay where their setups put them.
+                for setup in self.setups:
+                    for name, direction in setup["indicators"].items():
+                        self.mount(name, setup["leg"], direction)
+        except BaseException:
+            self.close()
+            raise
+
+    # --- the virtual operator's hands ---------------------------------------------------
+
+    def source(self, leg: str, direction: str) -> Callable[[], float]:
+        sign = -1.0 if direction.startswith("-") else 1.0
+        axis = direction.lstrip("-")
+        read = self.machine.source(leg, axis)
+        return lambda: sign * read()
+
+    def mount(self, name: str, leg: str, direction: str) -> None:
+        """Put indicator ``name`` against the middle of ``leg`` along ``direction``
+        ("-y": reversed) and zero it there."""
+        self.indicators[name].mount(self.source(leg, direction))
+
+    def unmount(self, name: str) -> None:
+        self.indicators[name].unmount()
+
+    # --- description ----------------------------------------------------------------------
+
+    def ports(self) -> dict[str, Any]:
+        return {"controller": self.controller.port,
+                "indicators": {n: s.port for n, s in self.indicators.items()}}
+
+    def config(self) -> dict[str, Any]:
+        """A station config (station.toml's shape) pointing at this station."""
+        g = self.geometry
+        return {
+            "machine": {"leg_length": g.leg_length, "rho_min": g.rho_min, "rho_max": g.rho_max},
+            "controller": {"transport": "tcp", "host": "127.0.0.1",
+                           "port": self.controller.port, "device_id": 1,
+                           "profile": "orthocal-generic", "timeout_s": 1.0,
+                           "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2},
+            "indicators": [{"name": n, "port": s.port, "protocol": self.protocol}
+                           for n, s in self.indicators.items()],
+            "setups": [dict(s) for s in self.setups],
+            "procedure": dict(self.procedure),
+            "writeback": {"max_abs_offset_mm": 3.0, **self.writeback},
+        }
+
+    @property
+    def offsets(self) -> np.ndarray:
+        return self.machine.offsets
+
+    def persist_offsets(self, path: str | Path) -> None:
+        self.machine.nvram_path = Path(path)
+        self.machine.save_offsets()
+
+    def close(self) -> None:
+        for sim in self.indicators.values():
+            sim.close()
+        self.indicators = {}
+        self.controller.close()
+
+    def __enter__(self) -> VirtualStation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,98 @@
+"""The operator: mounting prompts and confirmations.
+
+``ConsoleOperator`` asks a person on the terminal (or answers yes to everything
+with ``--yes``); ``VirtualOperator`` stands in for one in ``--simulate``: it
+mounts the simulated indicators where the prompt says and answers yes.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from typing import Protocol, TextIO
+
+from station.errors import BadInput, RunFailed
+
+
+class Operator(Protocol):
+    def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
+              all_names: Sequence[str]) -> None:
+        """Mount ``indicators`` (name -> direction) at the middle of ``leg`` at Π0 and
+        remove the others. Returns once done; raises RunFailed if the operator aborts."""
+        ...
+
+    def confirm(self, question: str) -> bool: ...
+
+
+def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str, str],
+                      all_names: Sequence[str]) -> str:
+    what = "verification" if phase == "v" else "measurement"
+    mounts = ", ".join(f"{n} along {d}" for n, d in indicators.items())
+    others = [n for n in all_names if n not in indicators]
+    remove = f"; remove {', '.join(others)}" if others else ""
+    return (f"{what}, setup {setup + 1}: the machine is at Π0. Mount {mounts} against the "
+            f"middle of leg {leg} (plunger pushed in to its preload){remove}.")
+
+
+class ConsoleOperator:
+    def __init__(self, yes: bool, stream_in: TextIO | None = None,
+                 stream_out: TextIO | None = None) -> None:
+        self.yes = yes
+        self._in = stream_in if stream_in is not None else sys.stdin
+        self._out = stream_out if stream_out is not None else sys.stderr
+
+    @staticmethod
+    def require_tty_or_yes(yes: bool) -> None:
+        """Real devices need someone to mount indicators: refuse to start otherwise."""
+        if not yes and not sys.stdin.isatty():
+            raise BadInput("operator prompts need a terminal (stdin is not a TTY); "
+                           "pass --yes to answer them automatically")
+
+    def _ask(self, prompt: str) -> str:
+        print(prompt, end="", file=self._out, flush=True)
+        line = self._in.readline()
+        if not line:  # EOF: nobody is there to answer
+            raise RunFailed("operator input closed (EOF) while waiting for an answer")
+        return line.strip().lower()
+
+    def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
+              all_names: Sequence[str]) -> None:
+        print(mount_instruction(phase, setup, leg, indicators, all_names), file=self._out)
+        if self.yes:
+            return
+        answer = self._ask("Press Enter when done (or type 'abort'): ")
+        if answer in ("a", "abort", "q", "quit", "n", "no"):
+            raise RunFailed(f"aborted by the operator at setup {setup + 1}")
+
+    def confirm(self, question: str) -> bool:
+        if self.yes:
+            print(f"{question} [y/N] yes (--yes)", file=self._out)
+            return True
+        return self._ask(f"{question} [y/N] ") in ("y", "yes")
+
+
+class VirtualOperator:
+    """Mounts simulated indicators through ``mount_fn(name, leg, direction)`` and
+    ``unmount_fn(name)``; says yes to every question."""
+
+    def __init__(self, mount_fn: Callable[[str, str, str], None],
+                 unmount_fn: Callable[[str], None], log: TextIO | None = None) -> None:
+        self._mount = mount_fn
+        self._unmount = unmount_fn
+        self._log = log
+
+    def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
+              all_names: Sequence[str]) -> None:
+        for name in all_names:
+            if name not in indicators:
+                self._unmount(name)
+        for name, direction in indicators.items():
+            self._mount(name, leg, direction)
+        if self._log is not None:
+            print("[virtual operator] " + mount_instruction(
+                phase, setup, leg, indicators, all_names), file=self._log)
+
+    def confirm(self, question: str) -> bool:
+        if self._log is not None:
+            print(f"[virtual operator] {question} yes", file=self._log)
+        return True

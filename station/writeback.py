@@ -1,0 +1,149 @@
+"""Writing the identified offsets back to the controller (design.md, "Write-back").
+
+Order, each step journaled before the next: back up the controller's offsets
+to the run directory (fsynced) → refuse any |Δρ_i| > max_abs_offset_mm (nothing
+written) → ask the operator → journal the intent → write o_i ← o_i − Δρ_i and
+read back → journal done. If a write or its read-back fails, the backup is
+written back and the outcome says so. Writes are absolute values computed from
+the backup, so redoing an interrupted write-back after a resume is harmless and
+never applies Δρ twice.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.base import AxisController
+from drivers.errors import DeviceError
+from station.journal import Journal, JournalState, write_durable
+from station.operator import Operator
+
+AXES = ("x", "y", "z")
+BACKUP_NAME = "offsets_backup.json"
+
+
+@dataclass
+class WritebackOutcome:
+    status: str  # written | refused | declined | skipped | failed-restored
+    reason: str | None
+    before: dict[str, float] | None
+    written: dict[str, float] | None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"status": self.status, "reason": self.reason}
+
+
+def _axes(values: Any) -> dict[str, float]:
+    return {a: float(v) for a, v in zip(AXES, values, strict=True)}
+
+
+def save_backup(run_dir: Path, offsets: dict[str, float], controller_name: str) -> Path:
+    path = run_dir / BACKUP_NAME
+    write_durable(path, json.dumps({"controller": controller_name, "offsets_mm": offsets},
+                                   indent=2) + "\n")
+    return path
+
+
+def load_backup(run_dir: Path) -> dict[str, float] | None:
+    path = run_dir / BACKUP_NAME
+    if not path.exists():
+        return None
+    return {a: float(v) for a, v in json.loads(path.read_text())["offsets_mm"].items()}
+
+
+def write_back(
+    *,
+    controller: AxisController,
+    identified: dict[str, float],
+    max_abs_offset_mm: float,
+    run_dir: Path,
+    journal: Journal,
+    operator: Operator,
+    prior: JournalState | None = None,
+) -> WritebackOutcome:
+    stages = prior.writeback if prior is not None else {}
+    for final in ("done", "refused", "declined", "failed-restored", "skipped"):
+        if final in stages:
+            rec = stages[final]
+            return WritebackOutcome("written" if final == "done" else final, rec.get("reason"),
+                                    rec.get("before"), rec.get("written"))
+    drho = {a: identified.get(f"drho_{a}") for a in AXES}
+    if all(v is None for v in drho.values()):
+        reason = "the model identifies no joint offsets (model 'L'): nothing to write"
+        journal.append({"type": "writeback", "stage": "skipped", "reason": reason})
+        return WritebackOutcome("skipped", reason, None, None)
+    delta = np.array([drho[a] or 0.0 for a in AXES])
+
+    if "backup" in stages:
+        before = {a: float(v) for a, v in stages["backup"]["before"].items()}
+    else:
+        before = _axes(controller.read_offsets())
+        save_backup(run_dir, before, controller.name)
+        journal.append({"type": "writeback", "stage": "backup", "before": before,
+                        "file": BACKUP_NAME})
+    before_v = np.array([before[a] for a in AXES])
+
+    too_big = [f"Δρ_{a} = {d:+.4f} mm" for a, d in zip(AXES, delta, strict=True)
+               if abs(d) > max_abs_offset_mm]
+    if too_big:
+        reason = (f"refused: {', '.join(too_big)} beyond max_abs_offset_mm = "
+                  f"{max_abs_offset_mm:g}; nothing written")
+        journal.append({"type": "writeback", "stage": "refused", "reason": reason,
+                        "before": before})
+        return WritebackOutcome("refused", reason, before, None)
+
+    new = _axes(before_v - delta)
+    if "intent" not in stages:
+        question = "Write offsets " + ", ".join(
+            f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + " to the controller?"
+        if not operator.confirm(question):
+            reason = "declined by the operator; offsets unchanged"
+            journal.append({"type": "writeback", "stage": "declined", "reason": reason,
+                            "before": before})
+            return WritebackOutcome("declined", reason, before, None)
+        journal.append({"type": "writeback", "stage": "intent", "before": before,
+                        "written": new})
+    else:
+        new = {a: float(v) for a, v in stages["intent"]["written"].items()}
+
+    try:
+        readback = _axes(controller.write_offsets([new[a] for a in AXES]))
+    except DeviceError as exc:
+        try:
+            controller.write_offsets([before[a] for a in AXES])
+        except DeviceError as exc2:
+            journal.append({"type": "writeback", "stage": "failed",
+                            "reason": f"{exc}; restore failed: {exc2}", "before": before})
+            from station.errors import RunFailed
+
+            raise RunFailed(
+                f"write-back failed ({exc}) and restoring the backup failed too ({exc2}); "
+                f"the controller's offsets are uncertain: run `orthocal rollback {run_dir}`"
+            ) from exc2
+        reason = f"write-back failed ({exc}); the backed-up offsets were restored"
+        journal.append({"type": "writeback", "stage": "failed-restored", "reason": reason,
+                        "before": before})
+        return WritebackOutcome("failed-restored", reason, before, None)
+    journal.append({"type": "writeback", "stage": "done", "before": before,
+                    "written": readback})
+    return WritebackOutcome("written", None, before, readback)
+
+
+def rollback(controller: AxisController, run_dir: Path, journal: Journal) -> dict[str, float]:
+    """Write the backed-up offsets back; returns them (as read back)."""
+    from station.errors import BadInput
+
+    backup = load_backup(run_dir)
+    if backup is None:
+        raise BadInput(f"{run_dir}: no {BACKUP_NAME} (the run never reached write-back)")
+    current = _axes(controller.read_offsets())
+    journal.append({"type": "rollback", "stage": "intent", "current": current,
+                    "restore": backup})
+    readback = _axes(controller.write_offsets([backup[a] for a in AXES]))
+    journal.append({"type": "rollback", "stage": "done", "restored": readback})
+    return readback
