@@ -26,6 +26,7 @@ from typing import Any, Literal, Self
 import serial
 from pydantic import BaseModel, ConfigDict, field_validator, model_validator
 
+from drivers.base import Indicator
 from drivers.errors import (
     IndicatorError,
     IndicatorPortError,
@@ -451,8 +452,8 @@ class IndicatorGroup:
     closes them and joins every worker.
     """
 
-    def __init__(self, indicators: Sequence[Any]) -> None:
-        self._indicators: dict[str, Any] = {}
+    def __init__(self, indicators: Sequence[Indicator]) -> None:
+        self._indicators: dict[str, Indicator] = {}
         for ind in indicators:
             if ind.name in self._indicators:
                 raise ValueError(f"two indicators named {ind.name!r}")
@@ -466,7 +467,7 @@ class IndicatorGroup:
     def names(self) -> list[str]:
         return list(self._indicators)
 
-    def __getitem__(self, name: str) -> Any:
+    def __getitem__(self, name: str) -> Indicator:
         return self._indicators[name]
 
     def __len__(self) -> int:

@@ -144,6 +144,21 @@ def test_simulator_answers_only_its_request_and_keeps_cr_lf() -> None:
         assert sim.requests == 2
 
 
+def test_a_failing_source_costs_one_reply_not_the_gauge() -> None:
+    calls = {"n": 0}
+
+    def flaky() -> float:
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise RuntimeError("virtual machine not ready")
+        return 0.75
+
+    with rig("sylvac", flaky, zero_mm=0.0, timeout_s=0.1) as (sim, ind, ev):
+        assert ind.read() == 0.75
+        assert len(ev) == 1 and "no reply" in ev[0]["error"]
+        assert isinstance(sim.source_error, RuntimeError)
+
+
 # --- fault knobs ------------------------------------------------------------------
 
 

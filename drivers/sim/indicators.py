@@ -126,6 +126,7 @@ class SimIndicator:
         # Counters for tests and the benchmark: requests seen, replies begun.
         self.requests = 0
         self.replies = 0
+        self.source_error: Exception | None = None  # the last exception source() raised
 
         master, slave = os.openpty()
         # Raw on both ends: otherwise the line discipline turns CR into LF and
@@ -219,7 +220,14 @@ class SimIndicator:
                 return None, 0.0
             text = self.protocol.error_format.format(code=f.error_code)
             return text.encode("ascii") + self.protocol.terminator, delay
-        line = self._line(self._value_mm())
+        try:
+            value = self._value_mm()
+        except Exception as e:
+            # A failing source (the virtual machine) must not kill the gauge for
+            # the rest of the run: this request goes unanswered, the error is kept.
+            self.source_error = e
+            return None, 0.0
+        line = self._line(value)
         if self._take(f.garble_rate, "garble_next"):
             line = self._garble(line)
         return line, delay
