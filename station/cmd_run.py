@@ -219,6 +219,14 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
     )
 
 
+def _station_hook(args: argparse.Namespace, station: Any) -> None:
+    """Tests reach the running virtual station (to inject its faults) through
+    ``args.sim_station_hook``; the command line never sets it."""
+    hook = getattr(args, "sim_station_hook", None)
+    if hook is not None:
+        hook(station)
+
+
 def _rebind(config: StationConfig, ports: dict[str, Any]) -> StationConfig:
     """The saved config of a simulated run, pointed at the restarted station's new ports."""
     data = config.model_dump(exclude_none=True)
@@ -276,6 +284,7 @@ def run(args: argparse.Namespace) -> int:
             sim = sim_params_from_args(args)
             station = start_station(sim, None)
             stack.callback(station.close)
+            _station_hook(args, station)
             config = parse_config(station.config(), "virtual station config")
         else:
             config = load_config(args.config)
@@ -340,6 +349,7 @@ def resume(args: argparse.Namespace) -> int:
         if sim is not None:
             station = start_station(sim, run_dir / NVRAM_NAME)
             stack.callback(station.close)
+            _station_hook(args, station)
             config = _rebind(config, station.ports())
         else:
             ConsoleOperator.require_tty_or_yes(bool(args.yes))
