@@ -65,48 +65,58 @@ def _err(*parts: object) -> None:
 
 
 class Progress:
-    """Progress on stderr: through station.console when it is there, plain lines otherwise."""
+    """Run progress on stderr through station.console.RunProgress (a live bar on a
+    terminal, plain lines in a log); one step per stop read."""
 
-    def __init__(self, plan: Plan, quiet: bool = False) -> None:
+    def __init__(self, plan: Plan, verify: bool, enabled: bool = True) -> None:
+        from station.console import RunProgress
+
         self.plan = plan
-        self.quiet = quiet
-        self.t0 = time.monotonic()
-        self._console: Any = None
-        try:  # the console is another module's job; the station runs without it
-            from station import console  # type: ignore[attr-defined]
+        per_phase = sum(1 + 3 * plan.cycles for _ in plan.setups)
+        self.bar = RunProgress(per_phase * (2 if verify else 1), enabled=enabled)
+        self.steps = 0
 
-            self._console = console.make_progress(plan) if hasattr(
-                console, "make_progress") else None
-        except Exception:
-            self._console = None
+    def __enter__(self) -> Progress:
+        self.bar.__enter__()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.bar.__exit__(None, None, None)
+
+    def say(self, text: str) -> None:
+        self.bar.message(text)
 
     def __call__(self, event: str, **info: Any) -> None:
-        if self._console is not None:
-            try:
-                self._console(event, **info)
-                return
-            except Exception:
-                self._console = None  # a display glitch must never stop a run
-        if self.quiet:
-            return
-        t = time.monotonic() - self.t0
+        try:
+            self._event(event, info)
+        except Exception:
+            pass  # a display glitch must never stop a run
+
+    def _event(self, event: str, info: dict[str, Any]) -> None:
         phase = {"m": "measure", "v": "verify"}.get(info.get("phase", ""), "")
-        if event == "cycle":
+        if event == "read":
+            self.steps += 1
+            sp = self.plan.setups[info["setup"]]
+            posture = "Π0" if info["sign"] == "0" else f"Π_{sp.leg}^{info['sign']}"
+            self.bar.total_steps = max(self.bar.total_steps, self.steps)
+            self.bar.update(f"{phase} {sp.index + 1}/{len(self.plan.setups)} (leg {sp.leg})",
+                            posture, max(info["cycle"], 1), self.plan.cycles, self.steps)
+        elif event == "cycle":
             devs = " ".join(f"{k} {v:+.4f}" for k, v in info["deviations"].items())
-            _err(f"[{t:6.1f} s] {phase} setup {info['setup'] + 1} cycle {info['cycle']}: {devs}")
+            self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: {devs} mm")
         elif event == "cycle_replayed":
-            _err(f"[{t:6.1f} s] {phase} setup {info['setup'] + 1} cycle {info['cycle']}: "
-                 "from the journal")
+            # Replayed cycles count as done for the time estimate.
+            self.steps += 3 + (1 if info["cycle"] == 1 else 0)
+            self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: "
+                     "from the journal")
         elif event == "repeat":
-            _err(f"[{t:6.1f} s] {phase} setup {info['setup'] + 1}: spread "
-                 f"{info['spread']:.4f} mm above repeatability, repeating its cycles")
+            self.say(f"{phase} setup {info['setup'] + 1}: spread {info['spread']:.4f} mm "
+                     "above repeatability_mm, repeating its cycles")
         elif event == "setup_done":
             o = info["outcome"]
-            flag = " FLAGGED" if o.flagged else ""
-            _err(f"[{t:6.1f} s] {phase} setup {o.index + 1} done: {o.cycles_used} cycle(s), "
-                 f"spread {o.spread_mm:.4f} mm{flag}")
-        elif event in ("message",):
-            _err(f"[{t:6.1f} s] {info['text']}")
+            flag = " (FLAGGED: above repeatability_mm)" if o.flagged else ""
+            self.say(f"{phase} setup {o.index + 1} done: {o.cycles_used} cycle(s), "
+                     f"spread {o.spread_mm:.4f} mm{flag}")
 
 
 # --- devices -------------------------------------------------------------------------------
@@ -271,8 +281,7 @@ def _new_run_dir(out: Path) -> Path:
 
 def _operator(args: argparse.Namespace, station: Any) -> Operator:
     if station is not None:
-        log = None if getattr(args, "json", False) else sys.stderr
-        return VirtualOperator(station.mount, station.unmount, log=log)
+        return VirtualOperator(station.mount, station.unmount, say=_err)
     return ConsoleOperator(yes=bool(args.yes))
 
 
@@ -412,7 +421,17 @@ def _done_cycles(records: list[dict[str, Any]]) -> dict[tuple[str, int, int], di
 
 
 def _execute(ctx: Run) -> int:
-    progress = Progress(ctx.plan, quiet=False)
+    with Progress(ctx.plan, ctx.config.procedure.verify) as progress:
+        if isinstance(ctx.operator, VirtualOperator):
+            ctx.operator._say = progress.say
+        elif isinstance(ctx.operator, ConsoleOperator):
+            ctx.operator.pause = progress.bar.paused
+        code, result = _execute_with(ctx, progress)
+    _print_result(ctx.args, result)
+    return code
+
+
+def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
     checker = MotionChecker(ctx.config, ctx.devices.controller.soft_limits())
     seq = Sequencer(
         config=ctx.config, plan=ctx.plan, controller=ctx.devices.controller,
@@ -463,8 +482,7 @@ def _execute(ctx: Run) -> int:
         _finish(ctx, seq, result, "failed", "refused by a runtime check", final=False)
         raise
     _finish(ctx, seq, result, result["status"], result["message"], final=True)
-    _print_result(ctx.args, result)
-    return 0 if result["status"] == "ok" else 1
+    return (0 if result["status"] == "ok" else 1), result
 
 
 def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
@@ -575,8 +593,7 @@ def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
     wall = time.monotonic() - ctx.t0
     started = ctx.state.started
     result["duration_s"] = round(time.time() - started, 3) if started else round(wall, 3)
-    retries = ctx.state.retries + sum(
-        1 for _ in range(0))  # journaled events are counted below
+    retries = 0
     try:
         records = read_journal(ctx.run_dir / JOURNAL_NAME)
         retries = sum(1 for r in records if r["type"] == "event"

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Mapping, Sequence
+from contextlib import AbstractContextManager, nullcontext
 from typing import Protocol, TextIO
 
 from station.errors import BadInput, RunFailed
@@ -38,6 +39,8 @@ class ConsoleOperator:
     def __init__(self, yes: bool, stream_in: TextIO | None = None,
                  stream_out: TextIO | None = None) -> None:
         self.yes = yes
+        # Set by the run to take a live progress bar off the screen while asking.
+        self.pause: Callable[[], AbstractContextManager[None]] = nullcontext
         self._in = stream_in if stream_in is not None else sys.stdin
         self._out = stream_out if stream_out is not None else sys.stderr
 
@@ -49,8 +52,9 @@ class ConsoleOperator:
                            "pass --yes to answer them automatically")
 
     def _ask(self, prompt: str) -> str:
-        print(prompt, end="", file=self._out, flush=True)
-        line = self._in.readline()
+        with self.pause():
+            print(prompt, end="", file=self._out, flush=True)
+            line = self._in.readline()
         if not line:  # EOF: nobody is there to answer
             raise RunFailed("operator input closed (EOF) while waiting for an answer")
         return line.strip().lower()
@@ -76,10 +80,11 @@ class VirtualOperator:
     ``unmount_fn(name)``; says yes to every question."""
 
     def __init__(self, mount_fn: Callable[[str, str, str], None],
-                 unmount_fn: Callable[[str], None], log: TextIO | None = None) -> None:
+                 unmount_fn: Callable[[str], None],
+                 say: Callable[[str], None] | None = None) -> None:
         self._mount = mount_fn
         self._unmount = unmount_fn
-        self._log = log
+        self._say = say
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
               all_names: Sequence[str]) -> None:
@@ -88,11 +93,11 @@ class VirtualOperator:
                 self._unmount(name)
         for name, direction in indicators.items():
             self._mount(name, leg, direction)
-        if self._log is not None:
-            print("[virtual operator] " + mount_instruction(
-                phase, setup, leg, indicators, all_names), file=self._log)
+        if self._say is not None:
+            self._say("[virtual operator] " + mount_instruction(
+                phase, setup, leg, indicators, all_names))
 
     def confirm(self, question: str) -> bool:
-        if self._log is not None:
-            print(f"[virtual operator] {question} yes", file=self._log)
+        if self._say is not None:
+            self._say(f"[virtual operator] {question} yes")
         return True

@@ -366,4 +366,5 @@ class Sequencer:
                                    int(arr.size), rejected)
             self.counters.readings += len(vals)
         self._stops[step.stop] = stats
-        self.progress("read", stop=step.stop, values=values)
+        self.progress("read", phase=step.stop.split(":")[0], stop=step.stop, setup=step.setup,
+                      cycle=step.cycle, sign=step.sign, values=values)
