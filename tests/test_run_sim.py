@@ -113,3 +113,57 @@ def test_fault_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
                                               json=True, debug=False))
     assert again == 0
     assert (run_dir / "journal.jsonl").read_bytes() == journal_after
+
+
+def test_adaptive_cycles_stop_early_and_retries_are_journaled(tmp_path: Path, capsys) -> None:
+    def flaky(station: Any) -> None:
+        station.indicators["A"].faults.drop_next = 2  # two lost replies: retried
+
+    procedure = {"cycles": 4, "readings": 3, "settle_s": 0.0, "target_std_error_mm": 0.01}
+    code = cmd_run.run(args_for(tmp_path, true_drho=(0.3, 0.2, -0.4), sim_procedure=procedure,
+                                sim_station_hook=flaky))
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    # 0.01 mm is loose against 0.002 mm noise: two cycles (the minimum) suffice
+    assert [s["cycles_used"] for s in result["setups"]] == [2, 2, 2]
+    assert all(s["cycles_max"] == 4 for s in result["setups"])
+    records = read_journal(Path(result["run_dir"]) / "journal.jsonl")
+    retries = [r for r in records if r["type"] == "event" and r["event"]["event"] == "retry"]
+    assert len(retries) == 2 and all("indicator A" in r["event"]["device"] for r in retries)
+    assert result["timing"]["retries"] == 2
+
+
+def test_ctrl_c_stops_the_axes_and_says_how_to_resume(tmp_path: Path) -> None:
+    seen: dict[str, Any] = {}
+
+    def interrupt_second_mount(station: Any) -> None:
+        seen["station"] = station
+        mount = station.mount
+        calls = {"n": 0}
+
+        def operator_hits_ctrl_c(name: str, leg: str, direction: str) -> None:
+            calls["n"] += 1
+            if calls["n"] > 2:  # the operator presses Ctrl-C at the second setup
+                raise KeyboardInterrupt
+            mount(name, leg, direction)
+
+        station.mount = operator_hits_ctrl_c
+
+    with pytest.raises(RunFailed) as info:
+        cmd_run.run(args_for(tmp_path, sim_station_hook=interrupt_second_mount))
+    run_dir = only_run_dir(tmp_path)
+    assert f"orthocal resume {run_dir}" in str(info.value)
+    assert seen["station"].controller.stats.commands.get(2, 0) >= 1  # STOP was sent
+    records = read_journal(run_dir / "journal.jsonl")
+    assert records[-1]["type"] == "aborted"
+    assert json.loads((run_dir / "result.json").read_text())["status"] == "aborted"
+
+
+def test_outlier_rule() -> None:
+    from station.sequencer import reject_outliers
+
+    assert reject_outliers([0.100, 0.101, 0.099, 0.100, 0.350], 5.0, 0.003) == \
+        [True, True, True, True, False]
+    # identical readings have zero MAD: the resolution floor keeps a 1-count step
+    assert reject_outliers([0.100, 0.100, 0.101], 5.0, 0.003) == [True, True, True]
+    assert reject_outliers([0.1, 0.5], 5.0, 0.003) == [True, True]  # too few to judge
