@@ -114,3 +114,40 @@ def test_unreachable_controller_exit_1_names_it(tmp_path: Path, capsys) -> None:
 def test_resume_of_a_missing_run_dir_exit_2(tmp_path: Path, capsys) -> None:
     assert main(["resume", str(tmp_path / "nope")]) == 2
     assert "no such run directory" in capsys.readouterr().err
+
+
+def test_kill_9_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "runs"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station", "run", "--simulate", "--seed", "11",
+         "--true-drho", "1.1,-0.4,0.6", "--out", str(out), "--json"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        journal = None
+        while time.monotonic() < deadline:  # kill once the second setup is under way
+            found = list(out.glob("run-*/journal.jsonl"))
+            if found and found[0].read_text().count('"type":"setup"') >= 2:
+                journal = found[0]
+                break
+            time.sleep(0.05)
+        assert journal is not None, "the run did not get to its second setup"
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait(10)
+    before = journal.read_bytes()
+    run_dir = journal.parent
+    assert main(["resume", str(run_dir), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["status"] == "ok"
+    assert journal.read_bytes().startswith(before)
+    for axis, true in zip("xyz", (1.1, -0.4, 0.6), strict=True):
+        name = f"drho_{axis}"
+        assert abs(result["identified"][name] - true) <= 3 * result["std_errors"][name]
+    assert result["verification"]["deviations_rms_mm"] < 0.005
