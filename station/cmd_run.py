@@ -306,17 +306,18 @@ def run(args: argparse.Namespace) -> int:
             if journal_box:
                 journal_box[0].append({"type": "event", "event": event})
 
+        if args.plan:
+            # Listing needs the controller's soft limits, not the gauges.
+            controller = build_controller(config, None)
+            stack.callback(controller.close)
+            check_plan(plan, config, controller.soft_limits(),
+                       start=controller.read_positions())
+            print(json.dumps(plan.to_json()) if args.json else plan.format())
+            return 0
         devices = open_devices(config, on_event, station)
         stack.callback(devices.close)
-        limits = devices.controller.soft_limits()
-        start = devices.controller.read_positions()
-        check_plan(plan, config, limits, start=start)
-        if args.plan:
-            if args.json:
-                print(json.dumps(plan.to_json()))
-            else:
-                print(plan.format())
-            return 0
+        check_plan(plan, config, devices.controller.soft_limits(),
+                   start=devices.controller.read_positions())
 
         run_dir = _new_run_dir(Path(args.out))
         if station is not None:
