@@ -362,3 +362,53 @@ def test_independent_pymodbus_client_drives_the_simulator() -> None:
             assert rr.isError() and rr.exception_code == 3
         finally:
             client.close()
+
+
+def test_controller_gone_mid_session_is_a_connection_error() -> None:
+    sim = SimController(fast_machine(), transport="tcp").start()
+    events: list[dict] = []
+    try:
+        with ModbusAxisController(**sim.client_kwargs(), timeout_s=TIMEOUT_S, retries=1,
+                                  on_event=events.append) as ctl:
+            ctl.read_positions()
+            sim.close()
+            with pytest.raises(ControllerConnectionError, match="read positions"):
+                ctl.read_positions()
+            assert len(events) == 1
+    finally:
+        sim.close()
+
+
+# --- the virtual machine on its own ---------------------------------------------------------------
+
+
+def test_machine_axes_arrive_together_with_a_trapezoid() -> None:
+    clock = ManualClock()
+    m = VirtualOrthoglide(GEOMETRY, speed_mm_s=50.0, accel_mm_s2=500.0, clock=clock)
+    start = m.actual()
+    delta = np.array([40.0, -10.0, 20.0])
+    duration = m.move_to(start + delta)
+    assert duration == pytest.approx(40.0 / 50.0 + 50.0 / 500.0)  # cruise + one ramp
+    t0 = clock.t
+    previous = start
+    for k in range(1, 20):
+        clock.t = t0 + duration * k / 20
+        pos = m.actual()
+        fraction = (pos - start) / delta
+        np.testing.assert_allclose(fraction, fraction[0], atol=1e-12)  # in step
+        assert np.max(np.abs(pos - previous)) <= 50.0 * duration / 20 + 1e-9  # ≤ speed
+        previous = pos
+    clock.t = t0 + duration
+    np.testing.assert_allclose(m.actual(), start + delta, atol=1e-12)
+    assert m.status().in_position
+
+
+def test_machine_offsets_shift_the_count_not_the_carriage() -> None:
+    m = VirtualOrthoglide(GEOMETRY, true_drho=(0.4, -0.3, 0.2))
+    q_before = m.joint_values()
+    np.testing.assert_allclose(q_before, PI0 + np.array([0.4, -0.3, 0.2]), atol=1e-12)
+    m.set_offsets([-0.4, 0.3, -0.2])
+    np.testing.assert_allclose(m.joint_values(), q_before, atol=1e-12)  # nothing moved
+    np.testing.assert_allclose(m.actual(), PI0 + np.array([0.4, -0.3, 0.2]), atol=1e-12)
+    with pytest.raises(ValueError):
+        VirtualOrthoglide(GEOMETRY, true_params=[1, 2, 3], true_drho=[0, 0, 0])

@@ -104,7 +104,8 @@ class _Motion:
     def position(self, now: float) -> tuple[np.ndarray, float, bool]:
         """(position, path speed, finished) at ``now``."""
         tau = now - self.t0
-        if tau >= self.profile.duration:
+        # t0 + duration - t0 can fall a rounding error short of duration.
+        if tau >= self.profile.duration - _EPS:
             return self.end.copy(), 0.0, True
         s, v = self.profile.at(tau)
         return self.start + self.direction * s, v, False
