@@ -37,6 +37,18 @@ def _triple(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
+def _json_table(text: str) -> dict:
+    import json
+
+    try:
+        value = json.loads(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}: {exc}") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
+    return value
+
+
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", metavar="DIR", default="runs", help="where run directories go")
     p.add_argument("--yes", action="store_true", help="answer yes to every operator prompt")
@@ -78,6 +90,13 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--config", metavar="FILE", help="station config (TOML)")
     run.add_argument("--plan", action="store_true", help="print the checked plan and exit")
     _sim_options(run)
+    # Hidden: the [procedure] of the virtual station as a JSON table and its axis
+    # speed (mm/s), so that tests driving the real command line in a subprocess
+    # (Ctrl-C, kill -9 and resume) can make a simulated run short. Both are saved
+    # with the run, so resume reuses them.
+    run.add_argument("--sim-procedure", type=_json_table, default=None,
+                     help=argparse.SUPPRESS)
+    run.add_argument("--sim-speed", type=float, default=None, help=argparse.SUPPRESS)
     _common(run)
 
     resume = sub.add_parser("resume", help="continue an interrupted run from its journal")

@@ -215,17 +215,22 @@ def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "indicators": int(getattr(args, "sim_indicators", 2) or 2),
         "procedure": getattr(args, "sim_procedure", None),
         "writeback": getattr(args, "sim_writeback", None),
+        "speed_mm_s": getattr(args, "sim_speed", None),
     }
 
 
 def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
-    from drivers.sim.station import VirtualStation
+    from drivers.sim.station import SIM_ACCEL_MM_S2, SIM_SPEED_MM_S, VirtualStation
 
+    # A faster virtual machine (tests) keeps the default's speed/acceleration ratio,
+    # so its moves stay physical: trapezoids, in-position waits, derived deadlines.
+    speed = params.get("speed_mm_s") or SIM_SPEED_MM_S
     return VirtualStation(
         true_drho=params["true_drho"], true_dl=params["true_dl"],
         noise_mm=params["noise_mm"], seed=params["seed"],
         indicator_count=params["indicators"], nvram_path=nvram,
         procedure=params.get("procedure"), writeback=params.get("writeback"),
+        speed_mm_s=speed, accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
     )
 
 
