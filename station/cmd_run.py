@@ -475,13 +475,14 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
                                     "deviations_rms_mm": vfields["deviations_rms_mm"]})
         result["status"], result["message"] = status, message
     except KeyboardInterrupt:
-        message = (f"aborted by the operator (Ctrl-C); axes stopped, journal kept. "
+        message = (f"aborted by the operator (Ctrl-C); {_stopped(seq)}, journal kept. "
                    f"Continue with: orthocal resume {ctx.run_dir}")
         _finish(ctx, seq, result, "aborted", message, final=False)
         raise RunFailed(message) from None
     except (DeviceError, RunFailed) as exc:
-        message = (f"{exc}. Axes stopped, journal kept; after fixing the cause continue "
-                   f"with: orthocal resume {ctx.run_dir}")
+        stopped = _stopped(seq)
+        message = (f"{exc}. {stopped[0].upper()}{stopped[1:]}, journal kept; after fixing "
+                   f"the cause continue with: orthocal resume {ctx.run_dir}")
         _finish(ctx, seq, result, "failed", message, final=False)
         raise RunFailed(message) from exc
     except BadInput:
@@ -489,6 +490,14 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
         raise
     _finish(ctx, seq, result, result["status"], result["message"], final=True)
     return (0 if result["status"] == "ok" else 1), result
+
+
+def _stopped(seq: Sequencer) -> str:
+    if seq.stop_error is None:
+        return "axes stopped"
+    # A silent controller cannot be told to stop: say so rather than claim it stopped.
+    return ("the stop command did not reach the controller: make sure the axes are "
+            "stopped")
 
 
 def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:

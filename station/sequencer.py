@@ -154,6 +154,9 @@ class Sequencer:
         self.done_setups = set(done_setups or set())
         self.progress = progress or _no_progress
         self.counters = Counters()
+        # Why the stop after a fault did not reach the drive (None: it did, or no
+        # fault), so that the operator is never told the axes stopped when unknown.
+        self.stop_error: str | None = None
         self._position: np.ndarray | None = None
         self._mounted: dict[str, str] = {}
         self._setup: SetupPlan | None = None
@@ -175,6 +178,7 @@ class Sequencer:
         try:
             self.controller.stop()
         except Exception as stop_exc:  # the fault is what matters; note the failed stop
+            self.stop_error = str(stop_exc)
             self._journal_safe({"type": "event", "event": {
                 "event": "stop-failed", "error": str(stop_exc)}})
         kind = "aborted" if isinstance(exc, KeyboardInterrupt) else "fault"
