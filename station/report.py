@@ -822,7 +822,7 @@ def _info_list(result: Mapping[str, Any]) -> str:
                      f", indicator noise σ = {_fmt(sim.get('noise_mm'), 4)} mm")
         rows.append(("simulation", _e(desc)))
     else:
-        rows.append(("devices", "real hardware"))
+        rows.append(("devices", "as configured in the station config (config.toml)"))
     if timing:
         rows.append(("timing", _e(
             f"wall {_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "

@@ -295,7 +295,7 @@ def test_html_explains_refused_and_missing_sections() -> None:
     assert "did not complete" in failed
     assert "after measuring 1 of the 3 legs" in failed
     assert "No parameters were identified" in failed
-    assert "real hardware" in failed
+    assert "as configured in the station config" in failed
     no_ver = report.render_html(make_result(verify=False))
     assert "No verification measurement was made" in no_ver
     assert no_ver.count("<svg") == 2
