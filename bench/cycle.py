@@ -1,0 +1,289 @@
+"""Whole-calibration cycle time against the physical floor (issue 6).
+
+A virtual station with realistic timing runs in this process (100 mm/s,
+1000 mm/s², six Mitutoyo gauges at 9600 baud with line time emulated, all
+mounted, as ``orthocal sim`` stands them); the station runs as the operator
+would start it, ``orthocal run --config FILE --yes --json``, in a subprocess
+timed from spawn to exit, so process start, imports and connecting count.
+
+The floor is what the physics of the run that actually happened costs:
+
+* each move between consecutive stops, timed with the simulator's own motion
+  profile (``drivers.sim.machine._Profile.trapezoid``: the axes move together
+  on a straight line in joint space, so a move lasts as long as a rest-to-rest
+  trapezoid over its longest axis), in the machine's own scale, so the move
+  that a write-back's new offsets cause is counted;
+* the settle time at every stop;
+* at every stop, the serial line time of its readings: readings × (request +
+  reply characters) × bits per character / baud; the gauges of a stop are read
+  in parallel, so a stop costs one gauge's line time.
+
+The stops come from the run's journal, the postures from its plan.json. The
+moves the simulator actually started are timed too ("machine moves"): if they
+exceed the floor's moves, the station moved more than its stops needed.
+
+    python bench/cycle.py [--cycles 3] [--target-se MM] [--noise 0.005] [--seed 1]
+    python bench/cycle.py --compare --target-se 0.002 --cycles 6   # adaptive vs fixed
+    python bench/cycle.py --profile /tmp/run.prof                  # cProfile the station
+
+Target: wall / floor ≤ 1.05.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# Runnable from a plain checkout, without the editable install.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from drivers.indicators import make_protocol
+from drivers.sim.cli import to_toml
+from drivers.sim.machine import _Profile
+from drivers.sim.station import VirtualStation
+from station.journal import read_journal
+
+AXES = ("x", "y", "z")
+
+
+@dataclass
+class Timing:
+    speed_mm_s: float = 100.0
+    accel_mm_s2: float = 1000.0
+    baud: int = 9600
+    settle_s: float = 0.05
+    readings: int = 5
+    protocol: str = "mitutoyo"
+
+
+@dataclass
+class Outcome:
+    wall_s: float
+    floor_s: float
+    floor_moves_s: float
+    floor_settle_s: float
+    floor_line_s: float
+    machine_moves_s: float
+    machine_moves: int
+    stops: int
+    result: dict[str, Any]
+    true_drho: list[float]
+    # Seconds from spawn to the journal's header, to its first and last reading, to exit.
+    timeline: dict[str, float]
+
+    @property
+    def ratio(self) -> float:
+        return self.wall_s / self.floor_s
+
+    @property
+    def errors_um(self) -> list[float]:
+        ident = self.result["identified"]
+        return [1000 * (ident[f"drho_{a}"] - t) for a, t in zip(AXES, self.true_drho, strict=True)]
+
+    @property
+    def std_errors_um(self) -> list[float]:
+        return [1000 * self.result["std_errors"][f"drho_{a}"] for a in AXES]
+
+    def cycles_used(self, phase: str = "m") -> list[int]:
+        block = self.result if phase == "m" else (self.result.get("verification") or {})
+        return [s["cycles_used"] for s in block.get("setups", [])]
+
+
+def line_time_per_reading(protocol_name: str, baud: int) -> float:
+    """Seconds one request + reply occupies the line (the simulator's emulation)."""
+    proto = make_protocol(protocol_name)
+    assert proto.reply_format is not None
+    reply = proto.reply_format.format(value=0.0).encode() + proto.terminator
+    return (len(proto.request) + len(reply)) * proto.bits_per_char / baud
+
+
+def physical_floor(run_dir: Path, start_m: np.ndarray, timing: Timing
+                   ) -> tuple[float, float, float, int]:
+    """(moves, settle, line) seconds and the number of stops of the run in run_dir."""
+    records = read_journal(run_dir / "journal.jsonl")
+    plan = json.loads((run_dir / "plan.json").read_text())
+    result = json.loads((run_dir / "result.json").read_text())
+    before = np.array([result["offsets_before"][a] for a in AXES])
+    written = result.get("offsets_written")
+    after = before if not written else np.array([written[a] for a in AXES])
+    # Stops in the order they were read, with the most readings any gauge took there.
+    stops: dict[str, int] = {}
+    for r in records:
+        if r["type"] == "reading":
+            stops[r["stop"]] = max(stops.get(r["stop"], 0), len(r["values"]))
+    position = start_m.copy()
+    moves = 0.0
+    for stop in stops:
+        phase, setup, _cycle, sign = stop.split(":")
+        rho = np.array(plan["setups"][int(setup)]["postures"][sign], dtype=float)
+        target = rho + (before if phase == "m" else after)  # machine scale
+        distance = float(np.max(np.abs(target - position)))
+        if distance > 1e-3:  # the station skips moves within a µm, as the drive would
+            moves += _Profile.trapezoid(distance, timing.speed_mm_s, timing.accel_mm_s2).duration
+        position = target
+    per_reading = line_time_per_reading(timing.protocol, timing.baud)
+    settle = timing.settle_s * len(stops)
+    line = per_reading * sum(stops.values())
+    return moves, settle, line, len(stops)
+
+
+def station_config(station: VirtualStation, timing: Timing, cycles: int,
+                   target_se: float | None) -> dict[str, Any]:
+    config = station.config()
+    config["controller"].update(speed_mm_s=timing.speed_mm_s, accel_mm_s2=timing.accel_mm_s2)
+    config["procedure"].update(cycles=cycles, readings=timing.readings,
+                               settle_s=timing.settle_s)
+    if target_se is not None:
+        config["procedure"]["target_std_error_mm"] = target_se
+    return config
+
+
+def station_command(profile: str | None) -> list[str]:
+    if profile:
+        return [sys.executable, "-m", "cProfile", "-o", profile, "-m", "station"]
+    script = Path(sys.executable).with_name("orthocal")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "station"]
+
+
+def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None,
+             timing: Timing, out: Path, profile: str | None = None,
+             true_drho: list[float] | None = None, quiet: bool = True) -> Outcome:
+    rng = np.random.default_rng(seed)
+    drho = true_drho if true_drho is not None else \
+        [round(float(v), 4) for v in rng.uniform(-2.0, 2.0, 3)]
+    with VirtualStation(drho, (0.0, 0.0, 0.0), noise_mm, seed, speed_mm_s=timing.speed_mm_s,
+                        accel_mm_s2=timing.accel_mm_s2, protocol=timing.protocol,
+                        baud=timing.baud, line_time=True, indicator_count=6,
+                        mount_all=True) as station:
+        machine = station.machine
+        started: list[float] = []
+        move_to = machine.move_to
+
+        def recording_move_to(targets: Any) -> float:
+            duration = move_to(targets)
+            started.append(duration)
+            return duration
+
+        machine.move_to = recording_move_to  # type: ignore[method-assign]
+        start_m = machine.actual() + machine.offsets
+        cfg_path = out / f"station-{seed}.toml"
+        cfg_path.write_text(to_toml(station_config(station, timing, cycles, target_se),
+                                    "bench/cycle.py"))
+        cmd = [*station_command(profile), "run", "--config", str(cfg_path), "--yes", "--json",
+               "--out", str(out / "runs")]
+        spawned = time.time()  # the journal stamps records with time.time()
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stderr[-4000:])
+        raise SystemExit(f"station run failed (exit {proc.returncode})")
+    if not quiet:
+        sys.stderr.write(proc.stderr)
+    result = json.loads(proc.stdout)
+    run_dir = Path(result["run_dir"])
+    moves, settle, line, stops = physical_floor(run_dir, start_m, timing)
+    records = read_journal(run_dir / "journal.jsonl")
+    readings = [r["t"] for r in records if r["type"] == "reading"]
+    timeline = {"header": records[0]["t"] - spawned, "first reading": readings[0] - spawned,
+                "last reading": readings[-1] - spawned, "exit": wall}
+    return Outcome(wall, moves + settle + line, moves, settle, line, float(sum(started)),
+                   sum(1 for d in started if d > 0), stops, result, drho, timeline)
+
+
+def report(label: str, o: Outcome) -> None:
+    t = o.result.get("timing", {})
+    print(f"{label}: wall {o.wall_s:.2f} s, floor {o.floor_s:.2f} s "
+          f"(moves {o.floor_moves_s:.2f} + settle {o.floor_settle_s:.2f} + "
+          f"line {o.floor_line_s:.2f}; {o.stops} stops), ratio {o.ratio:.3f}")
+    print(f"    machine moves: {o.machine_moves} started, {o.machine_moves_s:.2f} s "
+          f"(floor's moves {o.floor_moves_s:.2f} s); station's own wall_s "
+          f"{t.get('wall_s')} s")
+    print("    timeline from spawn: " + ", ".join(f"{k} {v:.2f} s" for k, v in o.timeline.items()))
+    print(f"    cycles used: measurement {o.cycles_used('m')}, verification "
+          f"{o.cycles_used('v')}; Δρ error "
+          + ", ".join(f"{e:+.2f}" for e in o.errors_um) + " µm, reported SE "
+          + ", ".join(f"{s:.2f}" for s in o.std_errors_um) + " µm")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cycles", type=int, default=3, help="cycles per setup (the cap)")
+    parser.add_argument("--target-se", type=float, default=None, metavar="MM",
+                        help="procedure.target_std_error_mm (adaptive cycles)")
+    parser.add_argument("--noise", type=float, default=0.005, metavar="MM")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--repeat", type=int, default=1, help="runs (seeds seed, seed+1, ...)")
+    parser.add_argument("--settle", type=float, default=0.05)
+    parser.add_argument("--readings", type=int, default=5)
+    parser.add_argument("--speed", type=float, default=100.0)
+    parser.add_argument("--accel", type=float, default=1000.0)
+    parser.add_argument("--compare", action="store_true",
+                        help="adaptive (--target-se, up to --cycles) against fixed cycles "
+                             "(--fixed-cycles) on the same machines")
+    parser.add_argument("--fixed-cycles", type=int, default=3)
+    parser.add_argument("--profile", metavar="FILE", help="run the station under cProfile")
+    parser.add_argument("--verbose", action="store_true", help="show the station's stderr")
+    args = parser.parse_args()
+    timing = Timing(speed_mm_s=args.speed, accel_mm_s2=args.accel, settle_s=args.settle,
+                    readings=args.readings)
+    print(f"timing: {timing.speed_mm_s:g} mm/s, {timing.accel_mm_s2:g} mm/s², "
+          f"{timing.protocol} at {timing.baud} baud "
+          f"({1000 * line_time_per_reading(timing.protocol, timing.baud):.2f} ms per reading), "
+          f"settle {timing.settle_s:g} s, {timing.readings} readings per stop; "
+          f"noise {1000 * args.noise:g} µm")
+    with tempfile.TemporaryDirectory(prefix="orthocal-cycle-") as tmp:
+        out = Path(tmp)
+        if not args.compare:
+            ratios = []
+            for k in range(args.repeat):
+                o = run_once(seed=args.seed + k, noise_mm=args.noise, cycles=args.cycles,
+                             target_se=args.target_se, timing=timing, out=out,
+                             profile=args.profile, quiet=not args.verbose)
+                report(f"seed {args.seed + k}", o)
+                ratios.append(o.ratio)
+            if len(ratios) > 1:
+                print(f"ratio wall/floor: median {np.median(ratios):.3f}, "
+                      f"max {max(ratios):.3f} over {len(ratios)} runs")
+            return
+        if args.target_se is None:
+            parser.error("--compare needs --target-se")
+        fixed, adaptive = [], []
+        for k in range(args.repeat):
+            seed = args.seed + k
+            f = run_once(seed=seed, noise_mm=args.noise, cycles=args.fixed_cycles,
+                         target_se=None, timing=timing, out=out)
+            report(f"seed {seed} fixed {args.fixed_cycles}", f)
+            a = run_once(seed=seed, noise_mm=args.noise, cycles=args.cycles,
+                         target_se=args.target_se, timing=timing, out=out)
+            report(f"seed {seed} adaptive ≤{args.cycles}", a)
+            fixed.append(f)
+            adaptive.append(a)
+
+        def rms(xs: list[Outcome], attr: str) -> float:
+            return float(np.sqrt(np.mean([np.square(getattr(o, attr)) for o in xs])))
+
+        wf = float(np.mean([o.wall_s for o in fixed]))
+        wa = float(np.mean([o.wall_s for o in adaptive]))
+        cyc = [c for o in adaptive for c in o.cycles_used("m")]
+        print(f"fixed {args.fixed_cycles} cycles: mean wall {wf:.2f} s, Δρ error RMS "
+              f"{rms(fixed, 'errors_um'):.2f} µm, reported SE RMS "
+              f"{rms(fixed, 'std_errors_um'):.2f} µm")
+        print(f"adaptive (target {1000 * args.target_se:g} µm, ≤ {args.cycles}): mean wall "
+              f"{wa:.2f} s, cycles per setup {np.mean(cyc):.2f} (min {min(cyc)}, max {max(cyc)}),"
+              f" Δρ error RMS {rms(adaptive, 'errors_um'):.2f} µm, reported SE RMS "
+              f"{rms(adaptive, 'std_errors_um'):.2f} µm")
+        print(f"time saved: {wf - wa:.2f} s per calibration ({100 * (wf - wa) / wf:.0f} %)")
+
+
+if __name__ == "__main__":
+    main()
