@@ -1,0 +1,304 @@
+"""Ctrl-C and kill -9 of the real command line, then ``orthocal resume`` (issue 5).
+
+Every run here is a real ``python -m station`` subprocess on the in-process
+virtual station. With indicator noise 0 the simulation is deterministic per
+reading (the virtual machine and the gauges' quantisation are exact), so a
+run killed at any point and resumed must give *exactly* the result of the same
+run left alone: the same identified offsets, the same offsets in the
+controller (never a correction applied twice). A noisy run must agree within
+the reported uncertainty. The journal written before the kill must be a byte
+prefix of the final one, torn last line included.
+
+Kill points are exact where it matters: a small wrapper around ``station.cli``
+SIGKILLs its own process as the journal is about to record (or has recorded)
+a given record, so "after the write reached the drive but before the journal
+said so" is hit every time rather than by luck. One kill is from outside, on a
+plain ``python -m station run``, while it measures.
+
+The scenarios run concurrently (they are independent: own directory, own
+ephemeral ports) to keep this file fast; each test then checks its own.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from station.journal import read_journal
+
+TRUE_DRHO = "0.9,-0.45,1.3"
+PROCEDURE = json.dumps({"cycles": 2, "readings": 2, "settle_s": 0.0})
+LIMIT_S = 90.0  # no subprocess may outlive this; a healthy one takes a few seconds
+
+# Runs the command line, SIGKILLing itself at an exact journal record:
+# argv[1] = {"match": {...record fields...}, "nth": k, "when": "before|after|torn"}.
+KILLER = r"""
+import json, os, signal, sys
+import station.journal as journal
+from station.cli import main
+
+spec = json.loads(sys.argv[1])
+real_append = journal.Journal.append
+seen = [0]
+
+def append(self, record):
+    if all(record.get(k) == v for k, v in spec["match"].items()):
+        seen[0] += 1
+        if seen[0] == spec["nth"]:
+            if spec["when"] == "after":
+                real_append(self, record)
+            elif spec["when"] == "torn":  # half a record reaches the disk
+                line = json.dumps(record).encode()
+                with open(self.path, "ab") as fh:
+                    fh.write(line[: len(line) // 2])
+                    fh.flush()
+                    os.fsync(fh.fileno())
+            os.kill(os.getpid(), signal.SIGKILL)
+    return real_append(self, record)
+
+journal.Journal.append = append
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def run_argv(out: Path, noise: float, seed: int = 21) -> list[str]:
+    return ["run", "--simulate", "--seed", str(seed), "--true-drho", TRUE_DRHO,
+            "--noise", str(noise), "--sim-procedure", PROCEDURE, "--sim-speed", "20000",
+            "--yes", "--json", "--out", str(out)]
+
+
+@dataclass
+class Proc:
+    returncode: int
+    out: str
+    err: str
+
+
+def spawn(args: list[str], cwd: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(args, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+
+def finish(proc: subprocess.Popen[str], limit_s: float = LIMIT_S) -> Proc:
+    """Wait (bounded) for a subprocess; kill and reap it whatever happens."""
+    try:
+        out, err = proc.communicate(timeout=limit_s)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return Proc(proc.returncode, out, err)
+
+
+def station_cmd(*argv: str, cwd: Path) -> Proc:
+    return finish(spawn([sys.executable, "-m", "station", *argv], cwd))
+
+
+def only_run_dir(out: Path) -> Path:
+    (run_dir,) = list(out.glob("run-*"))
+    return run_dir
+
+
+def journal_of(run_dir: Path) -> Path:
+    return run_dir / "journal.jsonl"
+
+
+def count_readings(path: Path) -> int:
+    try:
+        return path.read_bytes().count(b'"type":"reading"')
+    except FileNotFoundError:
+        return 0
+
+
+@dataclass
+class Scenario:
+    name: str
+    noise: float = 0.0
+    spec: dict[str, Any] | None = None  # self-kill at a journal record (KILLER)
+    external_after_readings: int | None = None  # kill -9 from outside instead
+
+
+@dataclass
+class Outcome:
+    scenario: Scenario
+    killed: Proc
+    run_dir: Path
+    before: bytes  # the journal as the kill left it
+    resumed: Proc
+    after: bytes
+    result: dict[str, Any] = field(default_factory=dict)
+
+
+SCENARIOS = [
+    Scenario("measuring, killed from outside", external_after_readings=12),
+    Scenario("torn reading record",
+             spec={"match": {"type": "reading"}, "nth": 17, "when": "torn"}),
+    Scenario("after the backup", spec={"match": {"type": "writeback", "stage": "backup"},
+                                       "nth": 1, "when": "after"}),
+    Scenario("after the intent, before the write",
+             spec={"match": {"type": "writeback", "stage": "intent"}, "nth": 1,
+                   "when": "after"}),
+    Scenario("after the write, before it is journaled",
+             spec={"match": {"type": "writeback", "stage": "done"}, "nth": 1,
+                   "when": "before"}),
+    Scenario("verifying", spec={"match": {"type": "cycle", "phase": "v"}, "nth": 3,
+                                "when": "after"}),
+    Scenario("measuring, noisy gauges", noise=0.002,
+             spec={"match": {"type": "cycle", "phase": "m"}, "nth": 3, "when": "after"}),
+]
+
+
+def play(scenario: Scenario, base: Path) -> Outcome:
+    work = base / scenario.name.replace(" ", "_").replace(",", "")
+    work.mkdir(parents=True)
+    out = work / "runs"
+    argv = run_argv(out, scenario.noise)
+    if scenario.spec is not None:
+        killed = finish(spawn([sys.executable, "-c", KILLER, json.dumps(scenario.spec),
+                               *argv], work))
+    else:
+        assert scenario.external_after_readings is not None
+        proc = spawn([sys.executable, "-m", "station", *argv], work)
+        try:
+            deadline = time.monotonic() + LIMIT_S
+            while time.monotonic() < deadline and proc.poll() is None:
+                found = list(out.glob("run-*/journal.jsonl"))
+                if found and count_readings(found[0]) >= scenario.external_after_readings:
+                    proc.send_signal(signal.SIGKILL)
+                    break
+                time.sleep(0.005)
+        finally:
+            killed = finish(proc)
+    run_dir = only_run_dir(out)
+    before = journal_of(run_dir).read_bytes()
+    (work / "killed.jsonl").write_bytes(before)  # to parse as the kill left it
+    nvram = run_dir / "controller_nvram.json"
+    (work / "killed-nvram.json").write_bytes(nvram.read_bytes())
+    resumed = station_cmd("resume", str(run_dir), "--json", cwd=work)
+    outcome = Outcome(scenario, killed, run_dir, before, resumed,
+                      journal_of(run_dir).read_bytes())
+    if resumed.returncode == 0:
+        outcome.result = json.loads(resumed.out)
+    return outcome
+
+
+@pytest.fixture(scope="module")
+def played(tmp_path_factory) -> Iterator[dict[str, Any]]:
+    base = tmp_path_factory.mktemp("interrupt")
+
+    def reference(noise: float) -> dict[str, Any]:
+        work = base / f"reference-{noise}"
+        work.mkdir()
+        proc = station_cmd(*run_argv(work / "runs", noise), cwd=work)
+        assert proc.returncode == 0, proc.err
+        return json.loads(proc.out)
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        refs = {noise: pool.submit(reference, noise) for noise in (0.0, 0.002)}
+        plays = {s.name: pool.submit(play, s, base) for s in SCENARIOS}
+        yield {"reference": {n: f.result() for n, f in refs.items()},
+               "outcomes": {n: f.result() for n, f in plays.items()}}
+
+
+@pytest.mark.parametrize("name", [s.name for s in SCENARIOS])
+def test_kill_9_then_resume_gives_the_uninterrupted_result(played, name: str) -> None:
+    o: Outcome = played["outcomes"][name]
+    ref = played["reference"][o.scenario.noise]
+    assert o.killed.returncode == -signal.SIGKILL, o.killed.err
+    assert o.killed.out == ""  # killed before any result was printed
+    work = o.run_dir.parent.parent
+    killed = read_journal(work / "killed.jsonl")
+    assert killed[0]["type"] == "header" and "finished" not in [r["type"] for r in killed]
+    spec = o.scenario.spec
+    if spec is not None:  # the kill landed where it was aimed
+        matching = [r for r in killed
+                    if all(r.get(k) == v for k, v in spec["match"].items())]
+        # "after": the aimed record is on disk; "before"/"torn": it is not (whole)
+        assert len(matching) == spec["nth"] - (spec["when"] != "after")
+        assert o.before.endswith(b"\n") == (spec["when"] != "torn")
+    if "before it is journaled" in name:
+        # the drive already held the corrected offsets; the journal did not say so
+        at_kill = json.loads((work / "killed-nvram.json").read_text())["offsets_mm"]
+        assert at_kill == [ref["offsets_written"][a] for a in "xyz"]
+        assert killed[-1]["stage"] == "intent"
+
+    assert o.resumed.returncode == 0, o.resumed.err
+    assert "Traceback" not in o.resumed.err
+    assert o.after.startswith(o.before)  # nothing rewritten, nothing lost
+    result = o.result
+    assert result["status"] == "ok" and result["writeback"]["status"] == "written"
+
+    if o.scenario.noise == 0:
+        # deterministic per reading: exactly the result of the uninterrupted run
+        assert result["identified"] == ref["identified"]
+        assert result["offsets_before"] == ref["offsets_before"]
+        assert result["offsets_written"] == ref["offsets_written"]
+        assert result["verification"]["identified"] == ref["verification"]["identified"]
+    else:
+        for key, value in ref["identified"].items():
+            se = math.hypot(ref["std_errors"][key], result["std_errors"][key])
+            assert abs(result["identified"][key] - value) <= 4 * se, key
+    # what the controller holds is what the run reports: the correction applied once
+    nvram = json.loads((o.run_dir / "controller_nvram.json").read_text())["offsets_mm"]
+    assert nvram == [result["offsets_written"][a] for a in "xyz"]
+    for a in "xyz":
+        assert result["offsets_written"][a] == pytest.approx(
+            result["offsets_before"][a] - result["identified"][f"drho_{a}"], abs=6e-4)
+
+    records = read_journal(journal_of(o.run_dir))
+    stages = [r["stage"] for r in records if r["type"] == "writeback"]
+    assert stages.count("backup") == stages.count("intent") == stages.count("done") == 1
+    assert [r["type"] for r in records].count("resumed") == 1
+    cycles = [(r["phase"], r["setup"], r["cycle"]) for r in records if r["type"] == "cycle"]
+    assert len(cycles) == len(set(cycles))  # a journaled cycle is never measured again
+
+
+def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -> None:
+    out = tmp_path / "runs"
+    proc = spawn([sys.executable, "-m", "station", *run_argv(out, 0.0)], tmp_path)
+    try:
+        deadline = time.monotonic() + LIMIT_S
+        journal: Path | None = None
+        while time.monotonic() < deadline and proc.poll() is None:
+            found = list(out.glob("run-*/journal.jsonl"))
+            if found and count_readings(found[0]) >= 9:  # mid-measurement
+                journal = found[0]
+                proc.send_signal(signal.SIGINT)
+                break
+            time.sleep(0.005)
+    finally:
+        interrupted = finish(proc)
+    assert journal is not None, interrupted.err
+    assert interrupted.returncode == 1
+    run_dir = journal.parent
+    assert "Traceback" not in interrupted.err
+    (line,) = [ln for ln in interrupted.err.splitlines() if ln.startswith("orthocal: failed")]
+    assert "Ctrl-C" in line and "axes stopped" in line
+    assert f"orthocal resume {run_dir}" in line
+    records = read_journal(journal)  # intact: every line parses
+    assert records[-1]["type"] == "aborted"
+    assert not any(r["type"] == "event" and r["event"].get("event") == "stop-failed"
+                   for r in records)
+    assert json.loads((run_dir / "result.json").read_text())["status"] == "aborted"
+    before = journal.read_bytes()
+    assert before.endswith(b"\n")
+
+    resumed = station_cmd("resume", str(run_dir), "--json", cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.err
+    assert journal.read_bytes().startswith(before)
+    result = json.loads(resumed.out)
+    reference = station_cmd(*run_argv(tmp_path / "reference", 0.0), cwd=tmp_path)
+    assert reference.returncode == 0, reference.err
+    assert result["identified"] == json.loads(reference.out)["identified"]
