@@ -384,7 +384,8 @@ def _write_reply_lost(rig: Rig, station: VirtualStation) -> None:
     # The write reaches the drive but no reply does, through every retry: the
     # station cannot know what the drive holds.
     f = station.controller.faults
-    _on_offset_write(rig, station, lambda: setattr(f, "drop_next", 4))
+    _on_offset_write(rig, station,
+                     lambda: setattr(f, "drop_next", cmd_run.DEVICE_RETRIES + 1))
 
 
 WRITEBACK_FAULTS = {
