@@ -378,6 +378,10 @@ def resume(args: argparse.Namespace) -> int:
         plan = build_plan(config)
         journal = Journal(run_dir / JOURNAL_NAME)
         stack.callback(journal.close)
+        # First thing after reopening: a kill may have torn the last line, and the
+        # reader accepts a torn line only when a session record follows it; a driver
+        # retry journaled while the devices open must not be that record.
+        journal.append({"type": "resumed", "version": _version(), "argv": sys.argv[1:]})
 
         def on_event(event: dict) -> None:
             journal.append({"type": "event", "event": event})
@@ -385,7 +389,6 @@ def resume(args: argparse.Namespace) -> int:
         devices = open_devices(config, on_event, station)
         stack.callback(devices.close)
         check_plan(plan, config, devices.controller.soft_limits())
-        journal.append({"type": "resumed", "version": _version(), "argv": sys.argv[1:]})
         _err(f"orthocal: resuming {run_dir}")
         started = state.header.get("started") or _now_iso()
         ctx = Run(run_dir, config, plan, journal, devices, _operator(args, station), sim, args,
