@@ -101,7 +101,8 @@ class Journal:
 
 def read_journal(path: str | Path) -> list[dict[str, Any]]:
     """All intact records. A line that does not parse is tolerated only if it is
-    the last one (torn by a kill) or is followed by a ``resumed`` record."""
+    the last one (torn by a kill) or is followed by a ``resumed`` or ``rollback``
+    record (the journal reopened after the kill)."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -122,7 +123,8 @@ def read_journal(path: str | Path) -> list[dict[str, Any]]:
                 raise BadInput(f"{path}: line {pending_bad} is corrupt") from None
             pending_bad = number
             continue
-        if pending_bad is not None and record["type"] != "resumed":
+        # A rollback reopens the journal as a resume does: it may follow a torn line.
+        if pending_bad is not None and record["type"] not in ("resumed", "rollback"):
             raise BadInput(f"{path}: line {pending_bad} is corrupt") from None
         pending_bad = None
         records.append(record)
