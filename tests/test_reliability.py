@@ -546,3 +546,51 @@ def test_bad_arguments_exit_2_naming_them(tmp_path: Path, orthocal, argv: list[s
     assert o.code == 2
     assert named in o.err and "Traceback" not in o.err
     assert not (tmp_path / "runs").exists()
+
+
+# --- a torn journal, reopened ----------------------------------------------------------
+
+
+def _failed_run_with_torn_journal(tmp_path: Path, orthocal) -> tuple[Rig, Outcome, bytes]:
+    """A run stopped by an alarm, whose journal then gets half a record, as a
+    kill -9 in the middle of a write leaves it."""
+    rig = Rig()
+    failed = orthocal(*run_args(tmp_path), rig=rig,
+                      prepare=lambda r, s: _alarm(s) if len(r.stations) == 1 else None)
+    assert failed.code == 1
+    path = failed.run_dir / "journal.jsonl"
+    with open(path, "ab") as fh:
+        fh.write(b'{"t":1,"type":"reading","stop":"m:1:1:+","indica')
+    return rig, failed, path.read_bytes()
+
+
+def test_torn_journal_survives_a_retry_before_the_resume_is_journaled(
+        tmp_path: Path, orthocal) -> None:
+    rig, failed, before = _failed_run_with_torn_journal(tmp_path, orthocal)
+
+    def prepare(r: Rig, station: VirtualStation) -> None:
+        station.controller.faults.drop_next = 1  # the resume's first request is retried
+
+    o = orthocal("resume", str(failed.run_dir), "--json", rig=rig, prepare=prepare)
+    assert o.code == 0, o.err
+    assert (failed.run_dir / "journal.jsonl").read_bytes().startswith(before)
+    records = o.journal  # still readable: the fragment is followed by the resume
+    assert records[-1]["type"] == "finished" and retry_events(records)
+
+
+def test_torn_journal_survives_a_rollback(tmp_path: Path, orthocal) -> None:
+    rig = Rig()
+    # killed as it journaled the end of the run: the last record is torn
+    done = orthocal(*run_args(tmp_path, procedure={**PROCEDURE, "verify": False}), rig=rig)
+    assert done.code == 0, done.err
+    path = done.run_dir / "journal.jsonl"
+    lines = path.read_bytes().splitlines(keepends=True)
+    assert json.loads(lines[-1])["type"] == "finished"
+    path.write_bytes(b"".join(lines[:-1]) + lines[-1][:20])
+    before = path.read_bytes()
+    back = orthocal("rollback", str(done.run_dir), "--json", rig=rig)
+    assert back.code == 0, back.err
+    assert path.read_bytes().startswith(before)
+    records = read_journal(path)  # still readable: the fragment is followed by the rollback
+    assert [r.get("stage") for r in records if r["type"] == "rollback"] == ["intent", "done"]
+    np.testing.assert_allclose(rig.stations[-1].offsets, [0.0, 0.0, 0.0], atol=1e-12)
