@@ -59,9 +59,10 @@ class AxisController(Protocol):
         targets: Sequence[float],
         speed_mm_s: float | None = None,
         timeout_s: float | None = None,
+        start: Sequence[float] | None = None,
     ) -> np.ndarray:
         """move() then wait_in_position() with a timeout derived from distance and speed
-        unless one is given."""
+        unless one is given; ``start``: positions the caller has just read."""
         ...
 
     def stop(self) -> None: ...

@@ -354,9 +354,11 @@ class Sequencer:
         # (first move, resumed run), so the path actually travelled is checked too.
         self.checker.check(self._position, target, step.label, self._setup, self._mounted)
         self.progress("move", label=step.label, targets=step.targets)
+        start = self._position
         self._position = None  # unknown until the move has arrived
         actual = self.controller.move_and_wait(list(target),
-                                               speed_mm_s=self.config.controller.speed_mm_s)
+                                               speed_mm_s=self.config.controller.speed_mm_s,
+                                               start=start)
         self._position = np.asarray(actual, dtype=float)
         self.counters.moves += 1
 
