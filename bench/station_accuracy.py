@@ -1,0 +1,80 @@
+"""Is the uncertainty the station reports honest? (issue 6)
+
+Runs ``orthocal run --simulate --noise 0.005 --seed k --yes --json`` for k =
+seed .. seed+runs−1 (each a whole calibration: virtual station, measurement,
+identification, write-back, verification; random hidden Δρ within ±2 mm),
+then compares the identified Δρ with the hidden truth:
+
+    honesty = RMS(identified − true) / RMS(reported standard error)
+
+over every run and axis (1 = the reported uncertainty is what the errors
+show; target 0.8–1.2). Also printed: the RMS of the per-value ratio
+error / standard error, and the RMS error itself. With 20 runs × 3 axes the
+figure is itself uncertain by about 1/sqrt(2·60) ≈ 9 %.
+
+    python bench/station_accuracy.py [--runs 20] [--noise 0.005] [--seed 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+AXES = ("x", "y", "z")
+
+
+def station_command() -> list[str]:
+    script = Path(sys.executable).with_name("orthocal")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "station"]
+
+
+def calibrate(seed: int, noise: float, out: Path) -> dict:
+    cmd = [*station_command(), "run", "--simulate", "--seed", str(seed), "--noise", str(noise),
+           "--yes", "--json", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stderr[-4000:])
+        raise SystemExit(f"seed {seed}: station run failed (exit {proc.returncode})")
+    return json.loads(proc.stdout)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=20)
+    parser.add_argument("--noise", type=float, default=0.005, metavar="MM")
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    errors, ses = [], []
+    with tempfile.TemporaryDirectory(prefix="orthocal-honesty-") as tmp:
+        for k in range(args.runs):
+            seed = args.seed + k
+            r = calibrate(seed, args.noise, Path(tmp))
+            truth = r["simulation"]["true_drho"]
+            e = [r["identified"][f"drho_{a}"] - truth[a] for a in AXES]
+            se = [r["std_errors"][f"drho_{a}"] for a in AXES]
+            errors.append(e)
+            ses.append(se)
+            cycles = [s["cycles_used"] for s in r["setups"]]
+            print(f"seed {seed}: error " + ", ".join(f"{1000 * v:+6.2f}" for v in e)
+                  + " µm; SE " + ", ".join(f"{1000 * v:.2f}" for v in se)
+                  + f" µm; cycles {cycles}", flush=True)
+    err = np.asarray(errors)
+    se = np.asarray(ses)
+    rms_err = float(np.sqrt(np.mean(err**2)))
+    rms_se = float(np.sqrt(np.mean(se**2)))
+    per_value = float(np.sqrt(np.mean((err / se) ** 2)))
+    n = err.size
+    print(f"{args.runs} calibrations, noise {1000 * args.noise:g} µm: RMS error "
+          f"{1000 * rms_err:.2f} µm, RMS reported SE {1000 * rms_se:.2f} µm")
+    print(f"honesty RMS(error)/RMS(SE) = {rms_err / rms_se:.3f}; RMS(error/SE) = "
+          f"{per_value:.3f} (± ~{100 / np.sqrt(2 * n):.0f} % from {n} values; target 0.8–1.2)")
+
+
+if __name__ == "__main__":
+    main()
