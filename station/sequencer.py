@@ -62,15 +62,46 @@ def _no_progress(event: str, **info: Any) -> None:
     del event, info
 
 
-def reject_outliers(values: Sequence[float], k: float, floor: float) -> list[bool]:
-    """Mask of kept readings: |r − median| ≤ max(k·1.4826·MAD, floor)."""
+def reject_outliers(
+    values: Sequence[float], k: float, floor: float, scale: float | None = None
+) -> list[bool]:
+    """Mask of kept readings: |r − median| ≤ max(k·1.4826·MAD, k·scale, floor).
+
+    ``scale`` is the gauge's pooled robust scatter about its stop medians over the
+    run so far (see :class:`NoiseScale`). With five readings per stop the stop's own
+    MAD is often near zero by chance (and exactly zero on quantised data), which
+    alone would reject a few percent of perfectly normal readings; the pooled
+    scale keeps the bound at k·σ while a knock of tenths of a mm still stands out.
+    """
     v = np.asarray(values, dtype=float)
     if v.size < 3:
         return [True] * int(v.size)
     med = float(np.median(v))
     mad = float(np.median(np.abs(v - med)))
-    bound = max(k * MAD_SCALE * mad, floor)
+    bound = max(k * MAD_SCALE * mad, k * (scale or 0.0), floor)
     return [bool(abs(x - med) <= bound + 1e-12) for x in v]
+
+
+class NoiseScale:
+    """Robust σ of one gauge's readings, pooled over every stop so far:
+    1.4826 · median |r| with r the residuals about each stop's mean scaled by
+    sqrt(n/(n−1)) (unbiased for normal noise). Residuals about the stop *median*
+    would read low: one reading of every odd-sized stop is the median itself.
+    A knocked stop contributes n residuals to a pool of hundreds, so the median
+    ignores it."""
+
+    def __init__(self) -> None:
+        self._abs_dev: list[float] = []
+
+    def add(self, values: Sequence[float]) -> None:
+        v = np.asarray(values, dtype=float)
+        if v.size >= 3:
+            scale = math.sqrt(v.size / (v.size - 1))
+            self._abs_dev.extend((np.abs(v - v.mean()) * scale).tolist())
+
+    @property
+    def sigma(self) -> float | None:
+        return MAD_SCALE * float(np.median(self._abs_dev)) if self._abs_dev else None
 
 
 # Consecutive cycles share their Π0 stop: with independent noise at every stop,
@@ -189,6 +220,7 @@ class Sequencer:
         self._live_setup = False
         self._stops: dict[str, dict[str, StopStat]] = {}
         self._all_names = [ind.name for ind in config.indicators]
+        self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
 
     # --- the procedure ---------------------------------------------------------------
 
@@ -381,7 +413,9 @@ class Sequencer:
             self.journal.append({"type": "reading", "stop": step.stop, "indicator": name,
                                  "values": vals})
             ind = self.config.indicator(name)
-            keep = reject_outliers(vals, proc.outlier_k, 3.0 * ind.resolution_mm)
+            self._noise[name].add(vals)
+            keep = reject_outliers(vals, proc.outlier_k, 3.0 * ind.resolution_mm,
+                                   self._noise[name].sigma)
             kept = [v for v, k in zip(vals, keep, strict=True) if k]
             rejected = [v for v, k in zip(vals, keep, strict=True) if not k]
             if rejected:

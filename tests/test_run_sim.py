@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from station import cmd_run
@@ -167,3 +168,26 @@ def test_outlier_rule() -> None:
     # identical readings have zero MAD: the resolution floor keeps a 1-count step
     assert reject_outliers([0.100, 0.100, 0.101], 5.0, 0.003) == [True, True, True]
     assert reject_outliers([0.1, 0.5], 5.0, 0.003) == [True, True]  # too few to judge
+
+
+def test_pooled_noise_scale_keeps_normal_readings_and_still_catches_knocks() -> None:
+    """Five quantised readings per stop often have a MAD near zero: judged alone,
+    a few percent of perfectly normal readings would be thrown away. Pooled over
+    the stops, the scale is σ and nothing normal is rejected."""
+    from station.sequencer import NoiseScale, reject_outliers
+
+    rng = np.random.default_rng(2)
+    sigma, resolution = 0.005, 0.001
+    stops = np.round(rng.normal(0.0, sigma, (400, 5)) / resolution) * resolution
+    alone = pooled = 0
+    scale = NoiseScale()
+    for values in stops:
+        scale.add(values)
+        alone += 5 - sum(reject_outliers(values, 5.0, 3 * resolution))
+        pooled += 5 - sum(reject_outliers(values, 5.0, 3 * resolution, scale.sigma))
+    assert alone > 10  # the per-stop rule's false rejections this fix is about
+    assert pooled == 0
+    assert scale.sigma == pytest.approx(sigma, rel=0.1)
+    knocked = [0.001, -0.004, 0.250, 0.003, 0.000]
+    assert reject_outliers(knocked, 5.0, 3 * resolution, scale.sigma) == \
+        [True, True, False, True, True]
