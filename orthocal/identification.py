@@ -17,7 +17,6 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from orthocal.calibration import jacobian
 from orthocal.geometry import MODELS, PARAM_NAMES, Geometry
@@ -176,6 +175,9 @@ def identify(
     full[list(cols)] = x_lin
     converged = True
     if method == "nonlinear":
+        # Imported here: scipy.optimize costs ~0.3 s, which the station would
+        # otherwise spend at start-up, before its first move.
+        from scipy.optimize import least_squares
 
         def residual(x: np.ndarray) -> np.ndarray:
             trial = np.zeros(6)
