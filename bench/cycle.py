@@ -47,9 +47,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drivers.indicators import make_protocol
-from drivers.sim.cli import to_toml
 from drivers.sim.machine import _Profile
 from drivers.sim.station import VirtualStation
+from station.config import toml_text
 from station.journal import read_journal
 
 AXES = ("x", "y", "z")
@@ -176,7 +176,7 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
         machine.move_to = recording_move_to  # type: ignore[method-assign]
         start_m = machine.actual() + machine.offsets
         cfg_path = out / f"station-{seed}.toml"
-        cfg_path.write_text(to_toml(station_config(station, timing, cycles, target_se),
+        cfg_path.write_text(toml_text(station_config(station, timing, cycles, target_se),
                                     "bench/cycle.py"))
         cmd = [*station_command(profile), "run", "--config", str(cfg_path), "--yes", "--json",
                "--out", str(out / "runs")]

@@ -21,7 +21,7 @@ _COMMANDS = {
     "run": "station.cmd_run:run",
     "resume": "station.cmd_run:resume",
     "rollback": "station.cmd_run:rollback",
-    "sim": "drivers.sim.cli:main",
+    "sim": "station.cmd_sim:main",
     "identify": "station.cmd_identify:main",
 }
 

@@ -308,16 +308,21 @@ def _key(key: str) -> str:
     return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_value(key)
 
 
-def dump_toml(config: StationConfig) -> str:
-    """The config as TOML that ``load_config`` reads back to an equal config."""
-    data = config.model_dump(exclude_none=True)
-    lines: list[str] = []
+def toml_text(data: dict[str, Any], header: str = "") -> str:
+    """A config-shaped dict as TOML, with ``header`` as leading comment lines.
 
-    def table(header: str, values: dict[str, Any]) -> None:
-        lines.append(header)
+    Not validated: tests write deliberately broken configs with it. Sections
+    missing from ``data`` are left out.
+    """
+    lines: list[str] = [f"# {line}" for line in header.splitlines()]
+    if lines:
+        lines.append("")
+
+    def table(name: str, values: dict[str, Any]) -> None:
+        lines.append(name)
         subtables = {}
         for k, v in values.items():
-            if isinstance(v, dict) and header.strip("[]") == "controller":
+            if isinstance(v, dict) and name == "[controller]":
                 subtables[k] = v
                 continue
             lines.append(f"{_key(k)} = {_toml_value(v)}")
@@ -328,11 +333,17 @@ def dump_toml(config: StationConfig) -> str:
         lines.append("")
 
     for section in ("machine", "controller"):
-        table(f"[{section}]", data[section])
-    for ind in data["indicators"]:
-        table("[[indicators]]", ind)
-    for setup in data["setups"]:
-        table("[[setups]]", setup)
+        if data.get(section) is not None:
+            table(f"[{section}]", data[section])
+    for array in ("indicators", "setups"):
+        for item in data.get(array) or ():
+            table(f"[[{array}]]", item)
     for section in ("procedure", "writeback"):
-        table(f"[{section}]", data[section])
+        if data.get(section) is not None:
+            table(f"[{section}]", data[section])
     return "\n".join(lines)
+
+
+def dump_toml(config: StationConfig, header: str = "") -> str:
+    """The config as TOML that ``load_config`` reads back to an equal config."""
+    return toml_text(config.model_dump(exclude_none=True), header)

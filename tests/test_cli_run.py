@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from drivers.sim.cli import to_toml
 from drivers.sim.station import VirtualStation
 from station.cli import main
+from station.config import toml_text
 
 
 def test_simulated_run_then_rollback(tmp_path: Path, capsys) -> None:
@@ -68,7 +68,7 @@ def station_toml(tmp_path: Path):
         def write(**indicator_changes) -> Path:
             for ind in config["indicators"]:
                 ind.update(indicator_changes.get(ind["name"], {}))
-            path.write_text(to_toml(config, "test"))
+            path.write_text(toml_text(config, "test"))
             return path
 
         yield write

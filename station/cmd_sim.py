@@ -9,7 +9,6 @@ gauges, so six fixed indicators stand two per leg, all mounted at once.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import random
 import signal
@@ -19,43 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from drivers.sim.station import VirtualStation
-
-
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int | float):
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)  # a JSON string is a valid TOML basic string
-    if isinstance(value, dict):
-        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise TypeError(type(value).__name__)
-
-
-def to_toml(config: dict[str, Any], header: str) -> str:
-    lines = [f"# {line}" for line in header.splitlines()] + [""]
-    for section in ("machine", "controller"):
-        lines.append(f"[{section}]")
-        lines += [f"{k} = {_toml_value(v)}" for k, v in config[section].items()]
-        lines.append("")
-    for array in ("indicators", "setups"):
-        for item in config[array]:
-            lines.append(f"[[{array}]]")
-            lines += [f"{k} = {_toml_value(v)}" for k, v in item.items()]
-            lines.append("")
-    for section in ("procedure", "writeback"):
-        lines.append(f"[{section}]")
-        lines += [f"{k} = {_toml_value(v)}" for k, v in config[section].items()]
-        lines.append("")
-    return "\n".join(lines)
+from station.config import dump_toml, parse_config
+from station.errors import BadInput
 
 
 def main(args: argparse.Namespace) -> int:
-    from station.errors import BadInput
-
     seed = args.seed if args.seed is not None else random.randrange(2**31)
     rng = random.Random(seed)
     drho = list(args.true_drho) if args.true_drho is not None else \
@@ -88,7 +55,9 @@ def main(args: argparse.Namespace) -> int:
             header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, hidden Δρ = {drho} mm, "
                       f"ΔL = {dl} mm, noise {noise} mm\n"
                       f"Use: orthocal run --config {out}")
-            out.write_text(to_toml(station.config(), header))
+            # Validated like any operator's config: what we hand out must load.
+            config = parse_config(station.config(), "orthocal sim")
+            out.write_text(dump_toml(config, header))
             print(f"orthocal sim: Modbus TCP on 127.0.0.1:{station.controller.port}, "
                   f"{len(station.indicators)} indicators ({args.protocol}); "
                   f"config written to {out}", file=sys.stderr, flush=True)
