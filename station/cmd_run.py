@@ -351,12 +351,35 @@ def run(args: argparse.Namespace) -> int:
         return _execute(ctx)
 
 
-def resume(args: argparse.Namespace) -> int:
+def _reopen(args: argparse.Namespace) -> tuple[Path, list[dict[str, Any]], JournalState]:
+    """The run directory named on the command line, its journal and replayed state."""
     run_dir = Path(args.run_dir)
     if not run_dir.is_dir():
         raise BadInput(f"{run_dir}: no such run directory")
     records = read_journal(run_dir / JOURNAL_NAME)
-    state = replay(records)
+    return run_dir, records, replay(records)
+
+
+def _restart_station(
+    stack: ExitStack,
+    args: argparse.Namespace,
+    sim: dict[str, Any] | None,
+    run_dir: Path,
+    config: StationConfig,
+) -> tuple[Any, StationConfig]:
+    """For a simulated run (``sim`` from the journal header), the virtual station
+    again — same hidden errors, offsets from its saved memory — and the config
+    rebound to its new ports; for a real one, nothing to start."""
+    if sim is None:
+        return None, config
+    station = start_station(sim, run_dir / NVRAM_NAME)
+    stack.callback(station.close)
+    _station_hook(args, station)
+    return station, _rebind(config, station.ports())
+
+
+def resume(args: argparse.Namespace) -> int:
+    run_dir, records, state = _reopen(args)
     if state.header is None:
         raise BadInput(f"{run_dir / JOURNAL_NAME}: no run header (not a run journal)")
     if state.finished is not None:
@@ -368,13 +391,8 @@ def resume(args: argparse.Namespace) -> int:
     config = load_config(run_dir / "config.toml")
     sim = state.header.get("simulation")
     with ExitStack() as stack:
-        station = None
-        if sim is not None:
-            station = start_station(sim, run_dir / NVRAM_NAME)
-            stack.callback(station.close)
-            _station_hook(args, station)
-            config = _rebind(config, station.ports())
-        else:
+        station, config = _restart_station(stack, args, sim, run_dir, config)
+        if station is None:
             ConsoleOperator.require_tty_or_yes(bool(args.yes))
         plan = build_plan(config)
         journal = Journal(run_dir / JOURNAL_NAME)
@@ -398,19 +416,11 @@ def resume(args: argparse.Namespace) -> int:
 
 
 def rollback(args: argparse.Namespace) -> int:
-    run_dir = Path(args.run_dir)
-    if not run_dir.is_dir():
-        raise BadInput(f"{run_dir}: no such run directory")
-    records = read_journal(run_dir / JOURNAL_NAME)
-    state = replay(records)
+    run_dir, _, state = _reopen(args)
     config = load_config(run_dir / "config.toml")
     sim = state.header.get("simulation") if state.header else None
     with ExitStack() as stack:
-        station = None
-        if sim is not None:
-            station = start_station(sim, run_dir / NVRAM_NAME)
-            stack.callback(station.close)
-            config = _rebind(config, station.ports())
+        station, config = _restart_station(stack, args, sim, run_dir, config)
         journal = Journal(run_dir / JOURNAL_NAME)
         stack.callback(journal.close)
         controller = build_controller(config, None)
