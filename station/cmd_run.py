@@ -106,7 +106,7 @@ class Progress:
             sp = self.plan.setups[info["setup"]]
             posture = "Π0" if info["sign"] == "0" else f"Π_{sp.leg}^{info['sign']}"
             self.bar.total_steps = max(self.bar.total_steps, self.steps)
-            self.bar.update(f"{phase} {sp.index + 1}/{len(self.plan.setups)} (leg {sp.leg})",
+            self.bar.update(f"{sp.index + 1}/{len(self.plan.setups)} (leg {sp.leg}, {phase})",
                             posture, max(info["cycle"], 1), self.plan.cycles, self.steps)
         elif event == "cycle":
             devs = " ".join(f"{k} {v:+.4f}" for k, v in info["deviations"].items())
