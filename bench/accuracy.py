@@ -20,20 +20,13 @@ import time
 
 import numpy as np
 
-from orthocal import MODELS, PARAM_NAMES, Geometry, deviations, identify
+from orthocal import MODELS, PARAM_NAMES, Geometry, deviations, exact_jacobian, identify
 
 KEYS = [(s, i, j) for s in "+-" for i in "xyz" for j in "xyz" if i != j]
 
 
-def exact_floor(geometry: Geometry, truth: np.ndarray, cols: list[int], sigma: float):
-    h = 1e-5
-    J = np.empty((len(KEYS), len(cols)))
-    for c, col in enumerate(cols):
-        step = np.zeros(6)
-        step[col] = h
-        J[:, c] = (
-            deviations(KEYS, geometry, truth + step) - deviations(KEYS, geometry, truth - step)
-        ) / (2 * h)
+def exact_floor(geometry: Geometry, truth: np.ndarray, model: str, sigma: float) -> np.ndarray:
+    J = exact_jacobian(KEYS, geometry, truth, model)
     return sigma * np.sqrt(np.diag(np.linalg.inv(J.T @ J)))
 
 
@@ -50,7 +43,7 @@ def run(size: float, model: str, trials: int, sigma: float, rng: np.random.Gener
         for method in sq_err:
             r = identify(data, geometry, model=model, method=method)
             sq_err[method] += (r.vector[cols] - truth[cols]) ** 2
-        floor_sq += exact_floor(geometry, truth, cols, sigma) ** 2
+        floor_sq += exact_floor(geometry, truth, model, sigma) ** 2
     floor = np.sqrt(floor_sq / trials)
     ratios = {m: np.sqrt(e / trials) / floor for m, e in sq_err.items()}
     return floor, ratios

@@ -3,7 +3,12 @@ parallel machines (Pashkevich & Gomolitsky). Pure functions, no I/O."""
 
 from orthocal.calibration import coefficients, jacobian, linear_deviations, statistical_floor
 from orthocal.geometry import AXES, MODELS, PARAM_NAMES, Geometry
-from orthocal.identification import Identification, IdentificationError, identify
+from orthocal.identification import (
+    Identification,
+    IdentificationError,
+    exact_jacobian,
+    identify,
+)
 from orthocal.kinematics import forward, inverse
 from orthocal.measurement import deviation, deviations, leg_reading
 from orthocal.postures import posture, posture_point
@@ -18,6 +23,7 @@ __all__ = [
     "coefficients",
     "deviation",
     "deviations",
+    "exact_jacobian",
     "forward",
     "identify",
     "inverse",

@@ -126,18 +126,21 @@ def _check_identifiable(J: np.ndarray, names: Sequence[str], n_distinct: int) ->
     return float(s[0] / s[-1])
 
 
-def _numeric_jacobian(
-    keys: Sequence[Key], geometry: Geometry, full: np.ndarray, cols: Sequence[int]
+def exact_jacobian(
+    keys: Sequence[Key], geometry: Geometry, params=None, model: str = "full"
 ) -> np.ndarray:
-    """Central-difference Jacobian of the exact model (h = 1e-5 mm: the truncation
-    error is O(h²·curvature) ≈ 1e-12, far below any µm)."""
+    """Jacobian of the exact deviations (1) at the 6-vector ``params``, columns the
+    parameters of ``model``; central differences with h = 1e-5 mm (truncation
+    error O(h²·curvature) ≈ 1e-12, far below any µm). At zero it equals (7)."""
+    base = np.zeros(6) if params is None else np.asarray(params, dtype=float)
     h = 1e-5
+    cols = MODELS[model]
     J = np.empty((len(keys), len(cols)))
     for c, col in enumerate(cols):
         step = np.zeros(6)
         step[col] = h
-        forward_diff = deviations(keys, geometry, full + step)
-        J[:, c] = (forward_diff - deviations(keys, geometry, full - step)) / (2 * h)
+        forward_diff = deviations(keys, geometry, base + step)
+        J[:, c] = (forward_diff - deviations(keys, geometry, base - step)) / (2 * h)
     return J
 
 
@@ -187,7 +190,7 @@ def identify(
         def jac(x: np.ndarray) -> np.ndarray:
             trial = np.zeros(6)
             trial[list(cols)] = x
-            return _numeric_jacobian(keys, geometry, trial, cols)
+            return exact_jacobian(keys, geometry, trial, model)
 
         try:
             sol = least_squares(

@@ -15,6 +15,7 @@ from orthocal import (
     coefficients,
     deviation,
     deviations,
+    exact_jacobian,
     forward,
     identify,
     inverse,
@@ -177,6 +178,8 @@ def test_equation_7_is_the_derivative_of_the_exact_model(geometry):
             deviations(ALL_KEYS, geometry, step) - deviations(ALL_KEYS, geometry, -step)
         ) / (2 * h)
     assert jacobian(ALL_KEYS, geometry, "full") == pytest.approx(numeric, abs=1e-6)
+    assert exact_jacobian(ALL_KEYS, geometry) == pytest.approx(numeric, abs=1e-12)
+    assert exact_jacobian(ALL_KEYS, geometry, model="rho") == pytest.approx(numeric[:, :3])
 
 
 # --- identification ---------------------------------------------------------------------
