@@ -169,7 +169,9 @@ def build_indicators(config: StationConfig, names: list[str] | None,
             for key, target in (("baudrate", "baudrate"), ("bytesize", "bytesize"),
                                 ("parity", "parity"), ("stopbits", "stopbits"),
                                 ("request", "request"), ("terminator", "terminator"),
-                                ("pattern", "reply_pattern")):
+                                ("pattern", "reply_pattern"),
+                                ("error_pattern", "error_pattern"), ("unit", "unit"),
+                                ("scale", "scale")):
                 value = getattr(ind, key)
                 if value is not None:
                     overrides[target] = value

@@ -7,6 +7,7 @@ of a silently ignored setting. ``load_config`` turns every failure into one
 
 from __future__ import annotations
 
+import math
 import re
 import tomllib
 from pathlib import Path
@@ -104,6 +105,13 @@ class ControllerConfig(_Strict):
         return f"{self.host}:{self.port}" if self.transport == "tcp" else str(self.port)
 
 
+def _groups(pattern: str) -> int:
+    try:
+        return re.compile(pattern).groups
+    except re.error as exc:
+        raise ValueError(f"not a valid regular expression ({exc})") from None
+
+
 class IndicatorConfig(_Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,32}$")
     port: str = Field(min_length=1)
@@ -121,18 +129,35 @@ class IndicatorConfig(_Strict):
     request: str | None = None
     terminator: str | None = None
     pattern: str | None = None
+    # A gauge's error reply (at most one group: its error code), so that an error
+    # is reported as the gauge's own rather than as a garbled reply.
+    error_pattern: str | None = None
+    # What the reply's number means: value_mm = number × scale × (1, 0.001, 25.4)
+    # for unit mm, um, in. A negative scale suits a gauge that counts the other way.
+    unit: Literal["mm", "um", "in"] | None = None
+    scale: float | None = None
 
     @field_validator("pattern")
     @classmethod
     def _one_group(cls, value: str | None) -> str | None:
         if value is None:
             return value
-        try:
-            groups = re.compile(value).groups
-        except re.error as exc:
-            raise ValueError(f"not a valid regular expression ({exc})") from None
-        if groups != 1:
+        if _groups(value) != 1:
             raise ValueError("must have exactly one group (the value)")
+        return value
+
+    @field_validator("error_pattern")
+    @classmethod
+    def _at_most_one_group(cls, value: str | None) -> str | None:
+        if value is not None and _groups(value) > 1:
+            raise ValueError("must have at most one group (the error code)")
+        return value
+
+    @field_validator("scale")
+    @classmethod
+    def _non_zero(cls, value: float | None) -> float | None:
+        if value is not None and (value == 0 or not math.isfinite(value)):
+            raise ValueError("must be a finite number other than 0")
         return value
 
     @model_validator(mode="after")

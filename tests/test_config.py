@@ -129,3 +129,66 @@ def test_missing_file(tmp_path: Path) -> None:
 def test_missing_required_table(tmp_path: Path) -> None:
     text = MINIMAL.split("[[setups]]")[0]
     assert error_of(tmp_path, text).startswith("setups: missing")
+
+
+GENERIC_UM = """
+[[indicators]]
+name = "G"
+port = "{port}"
+protocol = "generic"
+baudrate = 9600
+request = "R\\r"
+terminator = "\\r"
+pattern = '([+-]\\d+) um'
+error_pattern = 'E(\\d+)'
+unit = "um"
+scale = {scale}
+
+[[setups]]
+leg = "x"
+indicators = {{ G = "y" }}
+"""
+
+
+@pytest.mark.parametrize("scale", [1.0, -1.0])
+def test_generic_gauge_units_and_errors_reach_the_driver(tmp_path: Path, scale: float) -> None:
+    """A gauge reporting whole µm (counting either way) and its own error replies,
+    configured by TOML fields alone, read through a real pty."""
+    from drivers.errors import IndicatorReplyError
+    from drivers.indicators import make_protocol
+    from drivers.sim.indicators import IndicatorFaults, SimIndicator
+    from station.cmd_run import build_indicators
+
+    wire = make_protocol("generic", {
+        "baudrate": 9600, "request": "R\r", "terminator": "\r",
+        "reply_pattern": r"([+-]\d+) um", "reply_format": "{value:+.0f} um",
+        "error_pattern": r"E(\d+)", "error_format": "E{code}", "unit": "um",
+    })  # fmt: skip
+    position = {"mm": 0.0}
+    faults = IndicatorFaults()
+    with SimIndicator(wire, lambda: position["mm"], resolution_mm=0.001, zero_mm=0.0,
+                      faults=faults, seed=1) as sim:  # fmt: skip
+        config = load_config(write(tmp_path, GENERIC_UM.format(port=sim.port, scale=scale)))
+        with build_indicators(config, None, None) as group:
+            position["mm"] = 0.123  # the simulated gauge sends "+123 um"
+            assert group.read(1)["G"] == [pytest.approx(0.123 * scale)]
+            faults.error_next = 10  # more than the retries: the gauge's own error
+            with pytest.raises(IndicatorReplyError, match="error"):
+                group.read(1)
+
+
+@pytest.mark.parametrize(
+    ("line", "expected"),
+    [
+        ("error_pattern = '(E)(\\d+)'", "at most one group"),
+        ("scale = 0.0", "other than 0"),
+        ('unit = "furlong"', "unit"),
+    ],
+)
+def test_generic_gauge_fields_are_checked(tmp_path: Path, line: str, expected: str) -> None:
+    text = GENERIC_UM.format(port="/dev/null", scale=1.0)
+    key = line.split(" = ")[0]
+    text = "\n".join(ln for ln in text.splitlines() if not ln.startswith(f"{key} ="))
+    text = text.replace('protocol = "generic"', f'protocol = "generic"\n{line}')
+    message = error_of(tmp_path, text)
+    assert "indicators[0]" in message and expected in message
