@@ -113,6 +113,20 @@ def write_back(
 
     try:
         readback = _axes(controller.write_offsets([new[a] for a in AXES]))
+    except KeyboardInterrupt:
+        # Ctrl-C may land between the writes of a map whose offset registers are
+        # not contiguous: put the backup back (milliseconds) so the controller is
+        # never left half-corrected, then stop. The intent stays journaled, so
+        # `orthocal resume` writes the whole correction again.
+        try:
+            controller.write_offsets([before[a] for a in AXES])
+            journal.append({"type": "writeback", "stage": "interrupted-restored",
+                            "before": before})
+        except DeviceError as exc2:
+            journal.append({"type": "writeback", "stage": "failed",
+                            "reason": f"interrupted; restore failed: {exc2}",
+                            "before": before})
+        raise
     except DeviceError as exc:
         try:
             controller.write_offsets([before[a] for a in AXES])

@@ -151,3 +151,36 @@ def test_rollback_restores_the_backup(tmp_path: Path, rig) -> None:
     restored = rollback(controller, tmp_path, journal)
     np.testing.assert_allclose(station.offsets, START, atol=1e-9)
     assert restored == dict(zip("xyz", START, strict=True))
+
+
+def test_ctrl_c_between_offset_writes_restores_the_backup(tmp_path: Path, rig) -> None:
+    """Ctrl-C cannot be timed between two register writes from outside, so the
+    driver's write is wrapped: it really writes OFFSET_X alone (as a map with
+    scattered offset registers would, one request each), then the interrupt
+    arrives. The controller must end with the backup, whole, and resume must
+    then write the whole correction."""
+    station, controller, journal = rig
+    real_write = controller.write_offsets
+    interrupted = {"done": False}
+
+    def write_x_then_interrupt(offsets):
+        if not interrupted["done"]:
+            interrupted["done"] = True
+            real_write([offsets[0], START[1], START[2]])  # the first register lands
+            raise KeyboardInterrupt
+        return real_write(offsets)
+
+    controller.write_offsets = write_x_then_interrupt  # type: ignore[method-assign]
+    identified = {"drho_x": 0.1, "drho_y": -0.2, "drho_z": 0.05}
+    with pytest.raises(KeyboardInterrupt):
+        write_back(controller=controller, identified=identified, max_abs_offset_mm=3.0,
+                   run_dir=tmp_path, journal=journal, operator=Operator())
+    np.testing.assert_allclose(station.offsets, START, atol=1e-9)  # not half-corrected
+    records = read_journal(tmp_path / "journal.jsonl")
+    assert [r["stage"] for r in records] == ["backup", "intent", "interrupted-restored"]
+
+    out = write_back(controller=controller, identified=identified, max_abs_offset_mm=3.0,
+                     run_dir=tmp_path, journal=journal, operator=Operator(),
+                     prior=replay(records))
+    assert out.status == "written"
+    np.testing.assert_allclose(station.offsets, [0.15, -0.3, 0.95], atol=1e-9)
