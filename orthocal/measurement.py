@@ -35,6 +35,19 @@ def check_key(key: Key) -> Key:
     return key
 
 
+def _reading(rho: np.ndarray, p: np.ndarray, i, j, drho: np.ndarray, mount: float) -> np.ndarray:
+    """The reading of leg i along j given the joints ``rho`` and the end point ``p``
+    (both (..., 3)); ``i`` and ``j`` are axis indices: scalars, or one per row
+    when ``rho`` and ``p`` are (n, 3). The forward solve stays with the caller, who may share it."""
+
+    def pick(a: np.ndarray, k) -> np.ndarray:
+        # one index for every point, or one per row of a (n, 3) array
+        return a[..., k] if np.ndim(k) == 0 else a[np.arange(a.shape[0]), k]
+
+    q_i = pick(rho, i) + drho[i]
+    return (q_i - mount) / (q_i - pick(p, i)) * pick(p, j)
+
+
 def leg_reading(
     rho,
     leg: str,
@@ -50,31 +63,25 @@ def leg_reading(
     x_i = M at the fraction t = (q_i − M)/(q_i − p_i) from A, where its
     j-coordinate is t·p_j (A_j = 0). ``rho`` has shape (..., 3).
     """
-    i, j = AXIS_INDEX[leg], AXIS_INDEX[direction]
-    rho = np.asarray(rho, dtype=float)
     drho_v = np.zeros(3) if drho is None else np.asarray(drho, dtype=float)
+    rho = np.asarray(rho, dtype=float)
     p = forward(rho, geometry, drho_v, dL)
-    q_i = rho[..., i] + drho_v[i]
     m = geometry.mount_plane if mount is None else mount
-    t = (q_i - m) / (q_i - p[..., i])
-    return t * p[..., j]
+    return _reading(rho, p, AXIS_INDEX[leg], AXIS_INDEX[direction], drho_v, m)
 
 
 def deviation(key: Key, geometry: Geometry, params=None) -> float:
     """Exact Δ^s_{i,j} = reading at Π_i^s − reading at Π0 for the parameter
     6-vector ``params`` (PARAM_NAMES order)."""
-    sign, leg, direction = check_key(key)
-    drho, dL = split_params(params)
-    both = np.stack([posture(sign, leg, geometry), posture("0", None, geometry)])
-    r = leg_reading(both, leg, direction, geometry, drho, dL)
-    return float(r[0] - r[1])
+    return float(deviations([key], geometry, params)[0])
 
 
 def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarray:
     """Exact deviations for many keys at once (repeated keys allowed).
 
-    Vectorised: one batched forward solve for all test postures of ``keys`` and one
-    for Π0, because the nonlinear identification evaluates this hundreds of times.
+    Vectorised: one batched forward solve for the test postures of all ``keys``
+    and one for Π0 (per-row leg and direction indices), because the nonlinear
+    identification evaluates this hundreds of times.
     """
     drho, dL = split_params(params)
     if len(keys) == 0:
@@ -89,13 +96,9 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarr
         if (sign, leg) not in cache:
             cache[(sign, leg)] = posture(sign, leg, geometry)
         rho_s[n] = cache[(sign, leg)]
-    rho0 = posture("0", None, geometry)
+    rho_0 = posture("0", None, geometry)
     p_s = forward(rho_s, geometry, drho, dL)
-    p_0 = forward(rho0, geometry, drho, dL)
-    rows = np.arange(len(keys))
+    p_0 = np.broadcast_to(forward(rho_0, geometry, drho, dL), p_s.shape)
     m = geometry.mount_plane
-    q_s = rho_s[rows, legs] + drho[legs]
-    q_0 = rho0[legs] + drho[legs]
-    reading_s = (q_s - m) / (q_s - p_s[rows, legs]) * p_s[rows, dirs]
-    reading_0 = (q_0 - m) / (q_0 - p_0[legs]) * p_0[dirs]
-    return reading_s - reading_0
+    reading_s = _reading(rho_s, p_s, legs, dirs, drho, m)
+    return reading_s - _reading(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m)

@@ -156,10 +156,15 @@ def test_nominal_deviations_are_zero():
     assert deviations(ALL_KEYS, G) == pytest.approx(np.zeros(12), abs=1e-12)
 
 
-def test_vectorised_deviations_equal_one_by_one():
+def test_vectorised_deviations_equal_leg_readings_one_by_one():
     x = np.random.default_rng(3).uniform(-5, 5, 6)
-    one_by_one = [deviation(k, G, x) for k in ALL_KEYS]
+    one_by_one = [
+        float(np.subtract(*leg_reading(np.stack([posture(s, i, G), posture("0", None, G)]),
+                                       i, j, G, x[:3], x[3:])))
+        for s, i, j in ALL_KEYS
+    ]  # fmt: skip
     assert deviations(ALL_KEYS, G, x) == pytest.approx(one_by_one, abs=1e-12)
+    assert [deviation(k, G, x) for k in ALL_KEYS] == pytest.approx(one_by_one, abs=1e-12)
 
 
 # --- linearised equations (7) against the exact model ----------------------------------
