@@ -153,22 +153,23 @@ class _Handler(ServerRequestHandler):
             self.send(packet, addr)
 
 
-class _SimTcpServer(ModbusTcpServer):
+class _SimConnections:
+    """Gives every new connection of a pymodbus server our fault-aware handler."""
+
     sim: SimController
 
     def callback_new_connection(self) -> _Handler:
-        handler = _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+        handler = _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)  # type: ignore[attr-defined]
         handler.sim = self.sim
         return handler
 
 
-class _SimSerialServer(ModbusSerialServer):
-    sim: SimController
+class _SimTcpServer(_SimConnections, ModbusTcpServer):
+    pass
 
-    def callback_new_connection(self) -> _Handler:
-        handler = _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
-        handler.sim = self.sim
-        return handler
+
+class _SimSerialServer(_SimConnections, ModbusSerialServer):
+    pass
 
 
 class SimController:
