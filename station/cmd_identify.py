@@ -16,7 +16,7 @@ import math
 from pathlib import Path
 
 from orthocal import Geometry, Identification, IdentificationError, identify
-from station.errors import BadInput
+from station.errors import BadInput, read_input
 
 REQUIRED = ("posture", "leg", "direction", "deviation_mm")
 OPTIONAL = ("cycle",)
@@ -25,12 +25,7 @@ Key = tuple[str, str, str]
 
 def read_deviations(path: Path) -> dict[Key, list[float]]:
     """Parse READINGS.csv; every problem is a BadInput naming the file and line."""
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise BadInput(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise BadInput(f"{path}: cannot read: {exc}") from None
+    text = read_input(path, encoding="utf-8-sig")  # a spreadsheet's BOM is not a column
     rows = csv.reader(text.splitlines())
     header = next(rows, None)
     if not header or not any(h.strip() for h in header):

@@ -22,7 +22,7 @@ from pydantic import (
     model_validator,
 )
 
-from station.errors import BadInput
+from station.errors import BadInput, read_input
 
 AxisName = Literal["x", "y", "z"]
 Direction = Literal["x", "y", "z", "-x", "-y", "-z"]
@@ -297,12 +297,7 @@ def parse_config(data: dict[str, Any], source: str = "config") -> StationConfig:
 def load_config(path: str | Path) -> StationConfig:
     path = Path(path)
     source = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise BadInput(f"{source}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise BadInput(f"{source}: cannot read ({exc})") from None
+    text = read_input(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 
 class BadInput(Exception):
     """Bad configuration, CSV or arguments: exit 2. The message names the field or line."""
@@ -9,3 +11,13 @@ class BadInput(Exception):
 
 class RunFailed(Exception):
     """The run failed or was aborted (exit 1) with everything recorded so far kept."""
+
+
+def read_input(path: Path, encoding: str = "utf-8") -> str:
+    """The text of a file the user named (config, CSV); unreadable is bad input."""
+    try:
+        return path.read_text(encoding=encoding)
+    except FileNotFoundError:
+        raise BadInput(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise BadInput(f"{path}: cannot read ({exc})") from None
