@@ -208,6 +208,10 @@ class ProcedureConfig(_Strict):
     model: Literal["rho", "L", "full"] = "rho"
     method: Literal["linear", "nonlinear"] = "nonlinear"
     verify: bool = True
+    # Closed loop (design.md): write-backs at most, each verified; 1 = one round, no loop.
+    max_iterations: int = Field(3, ge=1, le=10)
+    # A significant correction smaller than this is not worth another round (mm).
+    converge_mm: float = Field(0.002, ge=0)
 
 
 class WritebackConfig(_Strict):

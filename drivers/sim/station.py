@@ -9,6 +9,13 @@ operator — here :meth:`mount` — re-mounts them before each setup) and
 ``indicator_count=6`` (A..F, two per leg; one of them mounted reversed to
 exercise the sign convention).
 
+Stand misplacement (``mount_error_mm``): an operator sets each indicator stand
+"at the middle of the leg" by eye, so each mounting puts the indicator's plane
+x_i = M_i off the nominal L/2 by a hidden error drawn uniform in
+±``mount_error_mm`` (model.md, "Where the indicator plane is"); every mounting
+draws anew, as a real operator places the stand again. ``mount_errors`` fixes
+them instead (name -> mm), for figures that need a given misplacement.
+
 The virtual controller's offsets can be persisted to a file after every write
 (``nvram_path``), like a real drive's non-volatile memory, so a resumed or
 rolled-back simulated run sees what was written before.
@@ -33,6 +40,9 @@ from orthocal import Geometry
 # Fast but physical: moves still take time, so in-position waits are real.
 SIM_SPEED_MM_S = 1000.0
 SIM_ACCEL_MM_S2 = 20000.0
+# How far off the leg's middle an operator sets a stand by eye (model.md: 5-10 mm);
+# the command line's default, so that a default simulated run shows the closed loop.
+DEFAULT_MOUNT_ERROR_MM = 5.0
 
 TWO_SETUPS: list[dict[str, Any]] = [
     {"leg": "x", "indicators": {"A": "y", "B": "z"}},
@@ -93,6 +103,8 @@ class VirtualStation:
         procedure: dict[str, Any] | None = None,
         writeback: dict[str, Any] | None = None,
         mount_all: bool = False,
+        mount_error_mm: float = 0.0,
+        mount_errors: dict[str, float] | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
@@ -101,6 +113,14 @@ class VirtualStation:
         self.speed_mm_s = speed_mm_s
         self.accel_mm_s2 = accel_mm_s2
         self.setups = TWO_SETUPS if indicator_count == 2 else SIX_SETUPS
+        if not (np.isfinite(mount_error_mm) and mount_error_mm >= 0):
+            raise ValueError(f"mount_error_mm must be >= 0, got {mount_error_mm}")
+        self.mount_error_mm = float(mount_error_mm)
+        self._fixed_mounts = dict(mount_errors or {})
+        # Its own stream, so the misplacement does not shift the noise of any gauge.
+        self._mount_rng = np.random.default_rng(None if seed is None else [seed, 7])
+        #: Every mounting: (indicator, leg, direction, mount error in mm), in order.
+        self.mount_log: list[tuple[str, str, str, float]] = []
         self.procedure = {**DEFAULT_PROCEDURE, **(procedure or {})}
         self.writeback = dict(writeback or {})
         self.machine = _PersistentMachine(
@@ -138,16 +158,21 @@ class VirtualStation:
 
     # --- the virtual operator's hands ---------------------------------------------------
 
-    def source(self, leg: str, direction: str) -> Callable[[], float]:
+    def source(self, leg: str, direction: str, mount_error: float = 0.0) -> Callable[[], float]:
         sign = -1.0 if direction.startswith("-") else 1.0
         axis = direction.lstrip("-")
-        read = self.machine.source(leg, axis)
+        read = self.machine.source(leg, axis, self.geometry.mount_plane + mount_error)
         return lambda: sign * read()
 
     def mount(self, name: str, leg: str, direction: str) -> None:
         """Put indicator ``name`` against the middle of ``leg`` along ``direction``
-        ("-y": reversed) and zero it there."""
-        self.indicators[name].mount(self.source(leg, direction))
+        ("-y": reversed), as placed by eye (a new stand error each time), and zero it."""
+        if name in self._fixed_mounts:
+            error = float(self._fixed_mounts[name])
+        else:
+            error = float(self._mount_rng.uniform(-1.0, 1.0)) * self.mount_error_mm
+        self.mount_log.append((name, leg, direction, error))
+        self.indicators[name].mount(self.source(leg, direction, error))
 
     def unmount(self, name: str) -> None:
         self.indicators[name].unmount()
