@@ -36,7 +36,7 @@ _TOP_ORDER = (
     "simulation", "machine", "model", "method", "identified", "std_errors", "correlation",
     "residual_rms_mm", "sigma_mm", "condition_number", "noise_mm", "fit_ok", "fit_note",
     "deviations", "deviations_rms_mm", "setups", "offsets_before", "offsets_written",
-    "writeback", "verification", "timing",
+    "writeback", "verification", "iterations", "converged", "loop", "timing",
 )
 _MODEL_TEXT = {
     "rho": "joint offsets Δρ only",
@@ -311,6 +311,9 @@ def summary_text(result: dict) -> str:
                 for n, v in _dict(ver.get("identified")).items()
             )
         )
+    from station import report_loop
+
+    lines += report_loop.summary_lines(result)
     if result.get("run_dir"):
         lines.append(f"  report        {Path(str(result['run_dir'])) / 'report.html'}")
     return "\n".join(lines)
@@ -850,6 +853,16 @@ def _release_fonts() -> None:
     gc.collect()
 
 
+def _loop_section(result: Mapping[str, Any]) -> str:
+    from station import report_loop
+
+    try:
+        plot = report_loop.plot_rounds(result, _pyplot, _svg)
+    except Exception:
+        plot = None  # the table still tells the rounds
+    return report_loop.html_section(result, plot)
+
+
 def render_html(result: dict) -> str:
     """The whole report as one HTML string (no external resources)."""
     status = str(result.get("status", "unknown"))
@@ -858,6 +871,7 @@ def render_html(result: dict) -> str:
     try:
         plot_dev = _plot_deviations(result)
         plot_par = _plot_parameters(result)
+        loop_section = _loop_section(result)
     finally:
         if "matplotlib" in sys.modules:
             _release_fonts()
@@ -889,6 +903,7 @@ def render_html(result: dict) -> str:
 {_result_paragraph(result)}
 {_fit_box(result)}
 {"".join(figures)}
+{loop_section}
 <h2>Identified parameters</h2>
 {_params_table(result)}
 {_correlation_table(result)}
