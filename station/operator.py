@@ -27,7 +27,8 @@ class Operator(Protocol):
 
 def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str, str],
                       all_names: Sequence[str]) -> str:
-    what = "verification" if phase == "v" else "measurement"
+    # "v", "v2", ...: the verification after each write-back of the closed loop.
+    what = "verification" if phase.startswith("v") else "measurement"
     mounts = ", ".join(f"{n} along {d}" for n, d in indicators.items())
     others = [n for n in all_names if n not in indicators]
     remove = f"; remove {', '.join(others)}" if others else ""
@@ -76,10 +77,12 @@ class ConsoleOperator:
 
 
 class VirtualOperator:
-    """Mounts simulated indicators through ``mount_fn(name, leg, direction)`` and
-    ``unmount_fn(name)``; says yes to every question."""
+    """Mounts simulated indicators through ``mount_fn(name, leg, direction, where)``
+    (``where`` = "phase:setup", so a simulated stand placed again for the same setup
+    after a resume stands where it stood) and ``unmount_fn(name)``; says yes to every
+    question."""
 
-    def __init__(self, mount_fn: Callable[[str, str, str], None],
+    def __init__(self, mount_fn: Callable[[str, str, str, str], None],
                  unmount_fn: Callable[[str], None],
                  say: Callable[[str], None] | None = None) -> None:
         self._mount = mount_fn
@@ -92,7 +95,7 @@ class VirtualOperator:
             if name not in indicators:
                 self._unmount(name)
         for name, direction in indicators.items():
-            self._mount(name, leg, direction)
+            self._mount(name, leg, direction, f"{phase}:{setup}")
         if self._say is not None:
             self._say("[virtual operator] " + mount_instruction(
                 phase, setup, leg, indicators, all_names))

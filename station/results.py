@@ -64,7 +64,8 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
                         "matrix": [[num(x) for x in row] for row in np.asarray(corr)]},
         "residual_rms_mm": num(resid), "sigma_mm": num(ident.sigma),
         "condition_number": num(ident.condition_number),
-        "noise_mm": num(noise), "fit_ok": bool(fit_ok), "fit_note": fit_note,
+        "noise_mm": num(noise), "noise_floor_mm": num(expected), "fit_ok": bool(fit_ok),
+        "fit_note": fit_note,
         "deviations": deviations,
         "deviations_rms_mm": float(np.sqrt(np.mean(means**2))) if means.size else None,
         "setups": [{"leg": o.leg, "indicators": o.indicators, "cycles_used": o.cycles_used,
@@ -90,7 +91,9 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
         "simulation": None if sim is None else {
             "seed": sim["seed"], "true_drho": dict(zip(AXES, sim["true_drho"], strict=True)),
             "true_dl": dict(zip(AXES, sim["true_dl"], strict=True)),
-            "noise_mm": sim["noise_mm"]},
+            "noise_mm": sim["noise_mm"],
+            # Stands placed by eye: each mounting off the leg's middle by up to this.
+            "mount_error_mm": sim.get("mount_error_mm", 0.0)},
         "machine": {"leg_length": m.leg_length, "rho_min": m.rho_min, "rho_max": m.rho_max},
         "model": config.procedure.model, "method": config.procedure.method,
         "identified": {}, "std_errors": {}, "offsets_before": None, "offsets_written": None,

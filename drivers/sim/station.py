@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -117,8 +118,7 @@ class VirtualStation:
             raise ValueError(f"mount_error_mm must be >= 0, got {mount_error_mm}")
         self.mount_error_mm = float(mount_error_mm)
         self._fixed_mounts = dict(mount_errors or {})
-        # Its own stream, so the misplacement does not shift the noise of any gauge.
-        self._mount_rng = np.random.default_rng(None if seed is None else [seed, 7])
+        self._seed = seed
         #: Every mounting: (indicator, leg, direction, mount error in mm), in order.
         self.mount_log: list[tuple[str, str, str, float]] = []
         self.procedure = {**DEFAULT_PROCEDURE, **(procedure or {})}
@@ -164,15 +164,26 @@ class VirtualStation:
         read = self.machine.source(leg, axis, self.geometry.mount_plane + mount_error)
         return lambda: sign * read()
 
-    def mount(self, name: str, leg: str, direction: str) -> None:
+    def mount(self, name: str, leg: str, direction: str, where: str | None = None) -> None:
         """Put indicator ``name`` against the middle of ``leg`` along ``direction``
-        ("-y": reversed), as placed by eye (a new stand error each time), and zero it."""
+        ("-y": reversed), as placed by eye, and zero it there. Every mounting draws a
+        new stand error; ``where`` (the operator's "phase:setup") makes the draw a
+        function of the seed and the placement, so a simulated run resumed after a
+        kill places a stand exactly where the uninterrupted run would have."""
         if name in self._fixed_mounts:
             error = float(self._fixed_mounts[name])
         else:
-            error = float(self._mount_rng.uniform(-1.0, 1.0)) * self.mount_error_mm
+            error = float(self._mount_draw(name, leg, where)) * self.mount_error_mm
         self.mount_log.append((name, leg, direction, error))
         self.indicators[name].mount(self.source(leg, direction, error))
+
+    def _mount_draw(self, name: str, leg: str, where: str | None) -> float:
+        """Uniform in [-1, 1]: from (seed, placement) when both are known, else fresh."""
+        if where is None or self._seed is None:
+            return float(np.random.default_rng().uniform(-1.0, 1.0))
+        # A stream of its own (crc32 of the placement): the gauges' noise is unchanged.
+        key = zlib.crc32(f"{where}:{name}:{leg}".encode())
+        return float(np.random.default_rng([self._seed, 7, key]).uniform(-1.0, 1.0))
 
     def unmount(self, name: str) -> None:
         self.indicators[name].unmount()
