@@ -57,6 +57,8 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     if len(iterations) < 2 and not (result.get("loop") or {}).get("stopped"):
         return []
     loop = result.get("loop") or {}
+    if loop.get("stopped") in ("not-verified", "skipped"):
+        return [f"  closed loop   off: {stop_text(result)}"]
     writes = sum(1 for e in iterations if e.get("offsets_written"))
     head = f"  closed loop   {writes} write-back(s), {len(iterations)} measurement(s): "
     if result.get("converged"):
@@ -115,6 +117,8 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
     if len(iterations) < 2 and not (result.get("loop") or {}).get("stopped"):
         return ""
     e = html.escape
+    if (result.get("loop") or {}).get("stopped") in ("not-verified", "skipped"):
+        return f"<h2>Closed loop</h2><p>Off: {e(stop_text(result))}.</p>"
     verdict = ("converged" if result.get("converged") else "<b>did not converge</b>")
     parts = [f"<h2>Closed loop</h2><p>The loop {verdict}: {e(stop_text(result))}.</p>"]
     if plot:

@@ -88,3 +88,22 @@ def test_max_iterations_stops_the_loop_and_says_why(tmp_path: Path, capsys) -> N
     assert result["loop"]["stopped"] == "max_iterations"
     assert "did not converge" in result["message"]
     assert "NOT CONVERGED" in report.summary_text(result)
+
+
+def test_report_says_why_the_loop_did_not_go_on() -> None:
+    it = {"phase": "m", "identified": {"drho_x": 0.5}, "std_errors": {"drho_x": 0.001},
+          "deviations_rms_mm": 0.2, "residual_rms_mm": 0.001, "noise_floor_mm": 0.001,
+          "significant": ["drho_x"], "offsets_written": {"x": -0.5}, "writeback": "written"}
+    second = {**it, "phase": "v", "identified": {"drho_x": 0.02}, "offsets_written": None,
+              "writeback": "declined"}
+    declined = {"status": "ok", "iterations": [it, second], "converged": False,
+                "loop": {"stopped": "declined", "detail": "declined by the operator",
+                         "max_iterations": 3, "converge_mm": 0.002}}
+    text = report.summary_text(declined)
+    assert "NOT CONVERGED" in text and "the operator declined a correction" in text
+    html = report.render_html(declined)
+    assert "did not converge" in html and "declined by the operator" in html
+    off = {"status": "ok", "iterations": [it], "converged": False,
+           "loop": {"stopped": "not-verified"}}
+    assert "closed loop   off: verification is off" in report.summary_text(off)
+    assert "NOT CONVERGED" not in report.summary_text(off)
