@@ -43,7 +43,8 @@ def station_command() -> list[str]:
 
 def calibrate(seed: int, drho: np.ndarray, mount_mm: float, noise: float, out: Path) -> dict:
     cmd = [*station_command(), "run", "--simulate", "--seed", str(seed),
-           "--true-drho", ",".join(f"{v:.4f}" for v in drho), "--mount-error", str(mount_mm),
+           # "=": a value starting with "-" would read as an option
+           "--true-drho=" + ",".join(f"{v:.4f}" for v in drho), "--mount-error", str(mount_mm),
            "--noise", str(noise), "--sim-speed", "20000", "--sim-procedure", PROCEDURE,
            "--yes", "--json", "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True)
