@@ -144,3 +144,18 @@ def test_every_mounting_draws_a_new_stand_error_within_the_bound() -> None:
                         mount_errors={"A": -6.0}) as st:
         st.mount("A", "x", "y")
         assert st.mount_log == [("A", "x", "y", -6.0)]
+
+
+def test_with_tilts_the_verification_is_judged_against_the_tilts_left() -> None:
+    # Tilts cannot be written: after writing Δρ a tilted machine still deviates,
+    # exactly as the exact model with the same tilts and zero Δρ says.
+    true = {"drho_x": 1.2, "drho_y": -0.8, "drho_z": 0.6, "tilt_yx": 0.4, "tilt_zx": -0.3,
+            "tilt_zy": 0.2}
+    full = orthocal.deviations(KEYS, G, np.array([true.get(n, 0.0)
+                                                  for n in orthocal.PARAM_NAMES]))
+    ident = orthocal.identify(dict(zip(KEYS, full, strict=True)), G, model="rho+tilt")
+    pred = predicted_after_correction(KEYS, G, ident.parameters)
+    left = orthocal.deviations(KEYS, G, np.array(
+        [0.0 if n.startswith("drho") else true.get(n, 0.0) for n in orthocal.PARAM_NAMES]))
+    assert np.max(np.abs(left)) > 0.005  # far from zero: judging against zero would fail
+    assert np.allclose(pred, left, atol=1e-6)
