@@ -136,7 +136,8 @@ def test_machine_reading_follows_the_stand_plane() -> None:
 def test_every_mounting_draws_a_new_stand_error_within_the_bound() -> None:
     with VirtualStation(noise_mm=0.0, seed=3, line_time=False, mount_error_mm=8.0) as st:
         for where in ("m:0", "v:0", "v2:0", "m:0"):
-            st.mount("A", "x", "y", where)
+            st.place(where)
+            st.mount("A", "x", "y")
         errors = [e for *_, e in st.mount_log]
         assert len(set(errors)) == 3 and all(abs(e) <= 8.0 for e in errors)
         assert errors[3] == errors[0]  # the same placement, replayed after a resume

@@ -119,6 +119,8 @@ class VirtualStation:
         self.mount_error_mm = float(mount_error_mm)
         self._fixed_mounts = dict(mount_errors or {})
         self._seed = seed
+        self._placement: str | None = None  # the operator's "phase:setup", see place()
+        self._stand_error = 0.0  # of the mounting in progress, for source()
         #: Every mounting: (indicator, leg, direction, mount error in mm), in order.
         self.mount_log: list[tuple[str, str, str, float]] = []
         self.procedure = {**DEFAULT_PROCEDURE, **(procedure or {})}
@@ -158,24 +160,39 @@ class VirtualStation:
 
     # --- the virtual operator's hands ---------------------------------------------------
 
-    def source(self, leg: str, direction: str, mount_error: float = 0.0) -> Callable[[], float]:
+    def source(self, leg: str, direction: str) -> Callable[[], float]:
+        """What a gauge on ``leg`` along ``direction`` reads, its stand in the plane
+        the mounting in progress drew (``self._stand_error`` off the nominal L/2)."""
         sign = -1.0 if direction.startswith("-") else 1.0
         axis = direction.lstrip("-")
-        read = self.machine.source(leg, axis, self.geometry.mount_plane + mount_error)
+        plane = self.geometry.mount_plane + self._stand_error
+        read = self.machine.source(leg, axis, plane)
         return lambda: sign * read()
 
-    def mount(self, name: str, leg: str, direction: str, where: str | None = None) -> None:
+    def place(self, where: str | None) -> None:
+        """Name the placement of the next mountings (the operator's "phase:setup"):
+        their stand errors become a function of the seed and the placement, so a
+        simulated run resumed after a kill places a stand exactly where the
+        uninterrupted run would have. None: a fresh draw at every mounting."""
+        self._placement = where
+
+    def mount(self, name: str, leg: str, direction: str) -> None:
         """Put indicator ``name`` against the middle of ``leg`` along ``direction``
-        ("-y": reversed), as placed by eye, and zero it there. Every mounting draws a
-        new stand error; ``where`` (the operator's "phase:setup") makes the draw a
-        function of the seed and the placement, so a simulated run resumed after a
-        kill places a stand exactly where the uninterrupted run would have."""
+        ("-y": reversed), as placed by eye (a new stand error at every mounting,
+        see :meth:`place`), and zero it there."""
+        where = self._placement
         if name in self._fixed_mounts:
             error = float(self._fixed_mounts[name])
         else:
             error = float(self._mount_draw(name, leg, where)) * self.mount_error_mm
         self.mount_log.append((name, leg, direction, error))
-        self.indicators[name].mount(self.source(leg, direction, error))
+        # Through self.source(leg, direction), which tests wrap to inject knocks.
+        self._stand_error = error
+        try:
+            src = self.source(leg, direction)
+        finally:
+            self._stand_error = 0.0
+        self.indicators[name].mount(src)
 
     def _mount_draw(self, name: str, leg: str, where: str | None) -> float:
         """Uniform in [-1, 1]: from (seed, placement) when both are known, else fresh."""
