@@ -39,18 +39,40 @@ def predicted_after_correction(keys: Sequence[Key], geometry: Geometry,
 
 def significant_corrections(parameters: Mapping[str, float],
                             std_errors: Mapping[str, float | None],
-                            converge_mm: float, k: float = 3.0) -> list[str]:
+                            converge_mm: float, k: float = 3.0,
+                            previous_std_errors: Mapping[str, float | None] | None = None,
+                            ) -> list[str]:
     """Names of the writable parameters whose value is worth writing again: beyond
     ``k`` standard errors (not noise) AND beyond ``converge_mm`` (not too small to
-    matter). A missing or infinite standard error never makes a value significant."""
+    matter). A missing or infinite standard error never makes a value significant.
+
+    After a write-back the verification sees what the previous correction left,
+    which is that correction's own error even on a machine the model fully explains:
+    under "the previous round fixed it", a re-identified Δρ_i is distributed with
+    variance se_i² + se_prev,i². ``previous_std_errors`` (the identification that
+    was written) adds that term, so a correction counts only when it is more than
+    the noise of both measurements: writing less would trade one noise for another.
+    """
     out = []
     for name in WRITABLE:
         if name not in parameters:
             continue
         value = abs(float(parameters[name]))
-        se = std_errors.get(name)
-        if se is None or not math.isfinite(float(se)):
+        se = _finite(std_errors.get(name))
+        if se is None:
             continue
-        if value > k * float(se) and value > converge_mm:
+        if previous_std_errors is not None:
+            prev = _finite(previous_std_errors.get(name))
+            if prev is None:
+                continue
+            se = math.hypot(se, prev)
+        if value > k * se and value > converge_mm:
             out.append(name)
     return out
+
+
+def _finite(value: float | None) -> float | None:
+    if value is None:
+        return None
+    f = float(value)
+    return f if math.isfinite(f) else None

@@ -156,8 +156,9 @@ class Flow:
         ident = _identify(ctx, m)
         self.idents.append(ident)
         fields = measurement_fields(ctx.config, m, ident)
-        sig = significant_corrections(ident.parameters, ident.std_errors,
-                                      ctx.config.procedure.converge_mm)
+        sig = significant_corrections(
+            ident.parameters, ident.std_errors, ctx.config.procedure.converge_mm,
+            previous_std_errors=self.idents[n - 1].std_errors if n else None)
         self.iterations.append({
             "phase": phase, "identified": fields["identified"],
             "std_errors": fields["std_errors"], "offsets_written": None, "writeback": None,

@@ -73,6 +73,10 @@ def test_significance_needs_both_three_sigma_and_converge_mm() -> None:
     assert significant_corrections(params, se, converge_mm=0.002) == ["drho_y", "drho_z"]
     assert significant_corrections(params, se, converge_mm=0.003) == ["drho_y"]
     assert significant_corrections(params, {"drho_x": None}, converge_mm=0.0) == []
+    # After a write-back the previous correction's own noise counts too:
+    # 4 σ of this measurement is under 3 σ of both (4 < 3·√2).
+    prev = {"drho_x": 0.001, "drho_y": 0.001, "drho_z": 0.0001}
+    assert significant_corrections(params, se, 0.002, previous_std_errors=prev) == ["drho_z"]
 
 
 def walk(max_iterations: int, verify: bool, significant: list[bool],
