@@ -52,6 +52,9 @@ def significant_corrections(parameters: Mapping[str, float],
     variance se_i² + se_prev,i². ``previous_std_errors`` (the identification that
     was written) adds that term, so a correction counts only when it is more than
     the noise of both measurements: writing less would trade one noise for another.
+    The previous term is at most se_i: the same experiment with the same gauges has
+    the same noise, and a larger se_prev comes from misfit (misplaced stands), the
+    very bias the loop is there to remove.
     """
     out = []
     for name in WRITABLE:
@@ -65,7 +68,7 @@ def significant_corrections(parameters: Mapping[str, float],
             prev = _finite(previous_std_errors.get(name))
             if prev is None:
                 continue
-            se = math.hypot(se, prev)
+            se = math.hypot(se, min(prev, se))
         if value > k * se and value > converge_mm:
             out.append(name)
     return out

@@ -77,6 +77,11 @@ def test_significance_needs_both_three_sigma_and_converge_mm() -> None:
     # 4 σ of this measurement is under 3 σ of both (4 < 3·√2).
     prev = {"drho_x": 0.001, "drho_y": 0.001, "drho_z": 0.0001}
     assert significant_corrections(params, se, 0.002, previous_std_errors=prev) == ["drho_z"]
+    # A previous se inflated by misfit (the stands' bias) does not hide a correction.
+    big = {"drho_x": 0.01, "drho_y": 0.01, "drho_z": 0.01}
+    assert significant_corrections(params, se, 0.002, previous_std_errors=big) == ["drho_z"]
+    assert significant_corrections({"drho_x": 0.0045}, se, 0.002,
+                                   previous_std_errors=big) == ["drho_x"]
 
 
 def walk(max_iterations: int, verify: bool, significant: list[bool],
