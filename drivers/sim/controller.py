@@ -193,6 +193,7 @@ class SimController:
         soft_limits: tuple[Sequence[float], Sequence[float]] | None = None,
         max_offset_mm: float = 50.0,
         baudrate: int = 115200,
+        soft_limit_registers: bool | tuple[Sequence[float], Sequence[float]] = True,
     ) -> None:
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"transport must be 'tcp' or 'rtu', got {transport!r}")
@@ -209,6 +210,10 @@ class SimController:
         self.soft_max = np.asarray(hi, dtype=float).reshape(3)
         if np.any(self.soft_min >= self.soft_max):
             raise ValueError("soft limits: every lower limit must be below the upper one")
+        # What SOFT_MIN/SOFT_MAX show: the limits enforced (True); nothing, answering
+        # exception 2 as a drive that keeps them in parameters (False); or a given
+        # (lower, upper), such as the zeros of a drive never set up.
+        self.soft_limit_registers = soft_limit_registers
         self.map = GENERIC
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
@@ -328,12 +333,18 @@ class SimController:
     def _simdata(self) -> list[SimData]:
         data = []
         for reg in self.map.registers:
+            if reg.name.startswith("SOFT_") and self.soft_limit_registers is False:
+                continue  # not served: exception 2, like any address outside the map
             data.append(SimData(reg.address, count=reg.words, values=0,
                                 datatype=DataType.REGISTERS, readonly=reg.access == "R"))
         return data
 
     def _init_registers(self, registers: list[int], start: int) -> None:
-        for ax, lo, hi in zip(AXES, self.soft_min, self.soft_max, strict=True):
+        if self.soft_limit_registers is False:
+            return
+        shown = (self.soft_min, self.soft_max) if self.soft_limit_registers is True else \
+            tuple(np.asarray(v, dtype=float).reshape(3) for v in self.soft_limit_registers)
+        for ax, lo, hi in zip(AXES, *shown, strict=True):
             self._put(registers, start, self._regs[f"SOFT_MIN_{ax}"], lo)
             self._put(registers, start, self._regs[f"SOFT_MAX_{ax}"], hi)
 

@@ -93,6 +93,7 @@ class VirtualStation:
         procedure: dict[str, Any] | None = None,
         writeback: dict[str, Any] | None = None,
         mount_all: bool = False,
+        controller_options: dict[str, Any] | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
@@ -112,8 +113,10 @@ class VirtualStation:
                 self.machine.set_offsets(saved)
             self.machine.nvram_path = path
         names = sorted({n for s in self.setups for n in s["indicators"]})
+        # controller_options: further SimController keywords (transport,
+        # soft_limit_registers, ...) for a station that differs from the default drive.
         self.controller = SimController(self.machine, port=port, faults=controller_faults,
-                                        seed=seed)
+                                        seed=seed, **(controller_options or {}))
         self.indicators: dict[str, SimIndicator] = {}
         try:
             self.controller.start()
