@@ -9,9 +9,13 @@ its own asyncio loop; ``start()``/``close()`` (or ``with``) leave no thread,
 task, socket or pty behind.
 
 It behaves like a drive: COMMAND 1/2/3/4 is taken at once and reads back 0;
-moves take time; STATUS follows the machine; a target outside the soft limits
-(default [L+ρmin−10, L+ρmax+10] on every axis) is refused with exception 3, as
-are an unknown command, a zero speed or an offset beyond ``max_offset_mm``;
+moves take time; STATUS follows the machine; TARGET_* power up at the axes'
+positions (not 0); a target outside the soft limits (default [L+ρmin−10,
+L+ρmax+10] on every axis) is refused with exception 3, and so is a COMMAND 1
+whose stored targets are outside them (the limits may have changed since), an
+unknown command, a zero speed or an offset beyond ``max_offset_mm``; an
+address outside the map, or any table but the holding registers, answers
+exception 2 (``soft_limit_registers=False`` leaves SOFT_MIN/SOFT_MAX out too);
 writing OFFSET acts on the legs through the machine. Requests for another
 device id get no reply on RTU and exception 0x0B (gateway: no response) on TCP.
 
@@ -52,7 +56,8 @@ if _pymodbus_log.level == logging.NOTSET:
     # pymodbus logs every dropped frame as an error; the operator console is ours.
     _pymodbus_log.setLevel(logging.CRITICAL)
 
-_READ_CODES = {3, 4, 23}  # function codes whose reads consume a taken COMMAND
+_READ_CODES = {3, 23}  # function codes whose reads consume a taken COMMAND
+_REGISTER_CODES = {3, 6, 16, 22, 23}  # holding-register functions: the map's only table
 
 
 @dataclass
@@ -340,6 +345,12 @@ class SimController:
         return data
 
     def _init_registers(self, registers: list[int], start: int) -> None:
+        """Power-up values. TARGET_* start where the axes stand, as on a drive: a
+        client writing one target then COMMAND 1 moves that axis alone. They are
+        not reset per connection: an integrator's tool (mbpoll) connects once per
+        request, and a drive keeps its targets across connections."""
+        for ax, rho in zip(AXES, self.machine.targets(), strict=True):
+            self._put(registers, start, self._regs[f"TARGET_{ax}"], rho)
         if self.soft_limit_registers is False:
             return
         shown = (self.soft_min, self.soft_max) if self.soft_limit_registers is True else \
@@ -375,6 +386,10 @@ class SimController:
                       registers: list[int], set_values: list[int] | list[bool] | None
                       ) -> ExcCodes | None:
         """pymodbus SimDevice hook: runs before the datastore answers or is written."""
+        if function_code not in _REGISTER_CODES:
+            # The map is holding registers only: input registers, coils and discrete
+            # inputs are outside it, as on a drive that has none.
+            return ExcCodes.ILLEGAL_ADDRESS
         if not self._inited:
             self._init_registers(registers, start)
             self._inited = True
@@ -418,6 +433,13 @@ class SimController:
         codes = {self.map.command_code(c): c for c in self.map.commands}
         if command and command not in codes:
             return ExcCodes.ILLEGAL_VALUE
+        if command and codes[command] == "move":
+            # Stored targets are checked again when they are used: limits may have
+            # changed since they were written, and a drive never moves outside them.
+            targets = np.array([self._get(new, start, self._regs[f"TARGET_{ax}"])
+                                for ax in AXES])
+            if np.any(targets < self.soft_min - 1e-9) or np.any(targets > self.soft_max + 1e-9):
+                return ExcCodes.ILLEGAL_VALUE
         # Validated: apply in the order a drive would (parameters, then the command).
         if hit(speed_reg):
             self.machine.speed_mm_s = self._get(new, start, speed_reg)
