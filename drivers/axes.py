@@ -346,6 +346,11 @@ class ModbusAxisController:
             self.map.unsupported.get("soft_limits",
                                      f"profile {self.map.name!r} has no soft-limit registers"))
 
+    def read_raw(self, name: str) -> int:
+        """The raw integer value of one register of the map (bring-up: which
+        registers a controller answers); a read request only."""
+        return self._read_counts([self.map[name]], f"read {name}")[name]
+
     def move(self, targets: Sequence[float], speed_mm_s: float | None = None) -> None:
         """Write SPEED (if given), the three targets in one write, then the move command.
         Exception 3 on the targets → TargetRefused."""

@@ -58,6 +58,7 @@ if _pymodbus_log.level == logging.NOTSET:
 
 _READ_CODES = {3, 23}  # function codes whose reads consume a taken COMMAND
 _REGISTER_CODES = {3, 6, 16, 22, 23}  # holding-register functions: the map's only table
+_WRITE_CODES = {5, 6, 15, 16, 22, 23}  # counted in SimStats.writes
 
 
 @dataclass
@@ -93,6 +94,8 @@ class SimStats:
 
     requests: int = 0
     replies: int = 0
+    #: write requests received (function 5, 6, 15, 16, 22, 23), answered or not
+    writes: int = 0
     dropped: int = 0
     garbled: int = 0
     delayed: int = 0
@@ -477,6 +480,8 @@ class SimController:
         """What to do with a request: 'ignore', 'busy', 'gateway' or 'serve'."""
         with self._lock:
             self.stats.requests += 1
+            if pdu.function_code in _WRITE_CODES:
+                self.stats.writes += 1
             f = self.faults
             if f.estop != self._estop_seen:
                 self._estop_seen = f.estop
