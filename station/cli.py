@@ -128,6 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="write a station config pointing at the virtual station",
     )
     sim.add_argument("--port", type=int, default=0, help="Modbus TCP port (0: any free one)")
+    sim.add_argument("--transport", choices=["tcp", "rtu"], default="tcp",
+                     help="Modbus TCP on 127.0.0.1, or RTU over a pseudo-terminal pair")
     sim.add_argument("--speed", type=float, default=None, help="axis speed, mm/s")
     sim.add_argument(
         "--protocol",

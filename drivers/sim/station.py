@@ -158,7 +158,8 @@ class VirtualStation:
     # --- description ----------------------------------------------------------------------
 
     def ports(self) -> dict[str, Any]:
-        return {"controller": self.controller.port,
+        return {"controller": self.controller.port if self.controller.transport == "tcp"
+                else self.controller.serial_port,
                 "indicators": {n: s.port for n, s in self.indicators.items()}}
 
     def config(self) -> dict[str, Any]:
@@ -166,9 +167,8 @@ class VirtualStation:
         g = self.geometry
         return {
             "machine": {"leg_length": g.leg_length, "rho_min": g.rho_min, "rho_max": g.rho_max},
-            "controller": {"transport": "tcp", "host": "127.0.0.1",
-                           "port": self.controller.port, "device_id": 1,
-                           "profile": "orthocal-generic", "timeout_s": 1.0,
+            # TCP: host and port; RTU: the pty the client opens and its baud rate.
+            "controller": {**self.controller.client_kwargs(), "timeout_s": 1.0,
                            "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2},
             "indicators": [{"name": n, "port": s.port, "protocol": self.protocol}
                            for n, s in self.indicators.items()],
