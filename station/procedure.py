@@ -153,7 +153,8 @@ class Flow:
         ctx = self.ctx
         n = len(self.idents)
         m = self.seq.measure(phase)
-        ident = _identify(ctx, m)
+        # Every round with the model the first identification used (auto chose it).
+        ident = _identify(ctx, m, model=self.idents[0].model if n else None)
         self.idents.append(ident)
         fields = measurement_fields(ctx.config, m, ident)
         sig = significant_corrections(
@@ -276,15 +277,13 @@ def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
     return "failed", outcome.reason
 
 
-def _identify(ctx: Run, m: Measurement) -> Any:
-    import orthocal
+def _identify(ctx: Run, m: Measurement, model: str | None = None) -> Any:
+    from station.models import identify_measurement
 
-    proc = ctx.config.procedure
-    try:
-        return orthocal.identify(m.for_identify(), ctx.config.machine.geometry(),
-                                 model=proc.model, method=proc.method)
-    except orthocal.IdentificationError as exc:
-        raise RunFailed(f"identification failed: {exc}") from None
+    ident, selection = identify_measurement(ctx.config, m, model)
+    if selection is not None:
+        ctx.result["model_selection"] = selection
+    return ident
 
 
 def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
