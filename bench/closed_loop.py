@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 AXES = ("x", "y", "z")
-PROCEDURE = json.dumps({"settle_s": 0.0})
+# The issue's model: Δρ only (auto would take rho+tilt for the stands' misfit).
+PROCEDURE = json.dumps({"settle_s": 0.0, "model": "rho"})
 
 
 def station_command() -> list[str]:

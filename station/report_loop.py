@@ -51,8 +51,26 @@ def stop_text(result: Mapping[str, Any]) -> str:
     return text
 
 
+def judged_line(result: Mapping[str, Any]) -> str | None:
+    """With ΔL or tilts in the model the verification cannot go to zero: say what it
+    was judged against (the model's prediction after writing Δρ)."""
+    ver = result.get("verification") or {}
+    expected = _num(ver.get("expected_rms_mm"))
+    if expected is None or expected < 1e-4:
+        return None
+    return (f"verification judged against the model after correction: deviations RMS "
+            f"{_um(ver.get('deviations_rms_mm'))}, predicted {_um(expected)} (ΔL and tilts "
+            f"cannot be written), measured − predicted {_um(ver.get('vs_expected_rms_mm'))}")
+
+
 def summary_lines(result: Mapping[str, Any]) -> list[str]:
     """The rounds for the text summary: one line per measurement, then the verdict."""
+    judged = judged_line(result)
+    lines = [f"  {judged}"] if judged else []
+    return lines + _round_lines(result)
+
+
+def _round_lines(result: Mapping[str, Any]) -> list[str]:
     iterations = result.get("iterations") or []
     if len(iterations) < 2 and not (result.get("loop") or {}).get("stopped"):
         return []
@@ -123,6 +141,9 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
         return f"<h2>Closed loop</h2><p>Off: {e(stop_text(result))}.</p>"
     verdict = ("converged" if result.get("converged") else "<b>did not converge</b>")
     parts = [f"<h2>Closed loop</h2><p>The loop {verdict}: {e(stop_text(result))}.</p>"]
+    judged = judged_line(result)
+    if judged:
+        parts.append(f"<p>The {e(judged)}.</p>")
     if plot:
         parts.append(f"<figure>{plot}<figcaption>Each round: the deviations' RMS, the "
                      "largest correction the identification asks for, and the noise floor "
