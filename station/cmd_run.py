@@ -33,8 +33,8 @@ from station.config import StationConfig, dump_toml, load_config, parse_config
 from station.errors import BadInput, RunFailed
 from station.journal import JOURNAL_NAME, Journal, JournalState, read_journal, replay
 from station.operator import ConsoleOperator, Operator, VirtualOperator
-from station.plan import MotionChecker, Plan, build_plan, check_plan
-from station.sequencer import Measurement, Sequencer
+from station.plan import MotionChecker, Plan, build_plan, check_plan, posture_label
+from station.sequencer import Measurement, Sequencer, split_key
 from station.writeback import WritebackOutcome, write_back
 from station.writeback import rollback as do_rollback
 
@@ -79,7 +79,7 @@ class Progress:
         from station.console import RunProgress
 
         self.plan = plan
-        per_phase = sum(1 + 3 * plan.cycles for _ in plan.setups)
+        per_phase = sum(1 + (len(sp.order) + 1) * plan.cycles for sp in plan.setups)
         self.bar = RunProgress(per_phase * (2 if verify else 1), enabled=enabled)
         self.steps = 0
 
@@ -104,7 +104,7 @@ class Progress:
         if event == "read":
             self.steps += 1
             sp = self.plan.setups[info["setup"]]
-            posture = "Π0" if info["sign"] == "0" else f"Π_{sp.leg}^{info['sign']}"
+            posture = posture_label(info["sign"], sp.leg)
             self.bar.total_steps = max(self.bar.total_steps, self.steps)
             self.bar.update(f"{sp.index + 1}/{len(self.plan.setups)} (leg {sp.leg}, {phase})",
                             posture, max(info["cycle"], 1), self.plan.cycles, self.steps)
@@ -113,7 +113,8 @@ class Progress:
             self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: {devs} mm")
         elif event == "cycle_replayed":
             # Replayed cycles count as done for the time estimate.
-            self.steps += 3 + (1 if info["cycle"] == 1 else 0)
+            sp = self.plan.setups[info["setup"]]
+            self.steps += len(sp.order) + 1 + (1 if info["cycle"] == 1 else 0)
             self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: "
                      "from the journal")
         elif event == "repeat":
@@ -588,7 +589,7 @@ def _measurement_fields(ctx: Run, m: Measurement, ident: Any) -> dict[str, Any]:
     stats = m.stats()
     deviations = {}
     for key, st in stats.items():
-        model = ident.predicted.get((key[0], key[1], key[2]))
+        model = ident.predicted.get(split_key(key))
         deviations[key] = {**st, "model": _num(model)}
     means = np.array([st["mean"] for st in stats.values()])
     noise = m.noise_mm

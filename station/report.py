@@ -98,10 +98,7 @@ def _ordered(result: Mapping[str, Any]) -> dict[str, Any]:
     for section in (out, out.get("verification")):
         if isinstance(section, dict) and isinstance(section.get("deviations"), dict):
             devs = section["deviations"]
-            keys = [k for k in DEVIATION_KEYS if k in devs] + sorted(
-                k for k in devs if k not in DEVIATION_KEYS
-            )
-            section["deviations"] = {k: devs[k] for k in keys}
+            section["deviations"] = {k: devs[k] for k in _dev_keys(devs)}
     return out
 
 
@@ -179,9 +176,16 @@ def _param_tex(name: str) -> str:
 
 
 def _dev_parts(key: str) -> tuple[str, str, str] | None:
-    if len(key) == 3 and key[0] in "+-" and key[1] in AXES and key[2] in AXES:
-        return key[0], key[1], key[2]
+    """(posture, leg, direction) of "+xy" or of a stroke key such as "+30xy"."""
+    if re.fullmatch(r"[+-](\d+(\.\d*)?|\.\d+)?[xyz][xyz]", key):
+        return key[:-2], key[-2], key[-1]
     return None
+
+
+def _posture_html(posture: str, leg: str) -> str:
+    if posture in ("+", "-"):
+        return f"Π<sub>{leg}</sub><sup>{'+' if posture == '+' else '−'}</sup>"
+    return f"Π<sub>{leg}</sub>({posture.replace('-', '−')} mm)"
 
 
 def _dev_html(key: str) -> str:
@@ -189,7 +193,7 @@ def _dev_html(key: str) -> str:
     if parts is None:
         return html.escape(key)
     sign, leg, d = parts
-    return f"Π<sub>{leg}</sub><sup>{'+' if sign == '+' else '−'}</sup> along {d}"
+    return f"{_posture_html(sign, leg)} along {d}"
 
 
 def _dev_tex(key: str) -> str:
@@ -197,6 +201,8 @@ def _dev_tex(key: str) -> str:
     if parts is None:
         return key
     sign, leg, d = parts
+    if sign not in ("+", "-"):
+        return rf"$\Pi_{leg}({sign})$" + f"\nalong {d}"
     return rf"$\Pi_{leg}^{{{sign}}}$" + f"\nalong {d}"
 
 
@@ -225,7 +231,18 @@ def _dev_keys(*tables: Mapping[str, Any]) -> list[str]:
     present: set[str] = set()
     for t in tables:
         present.update(t)
-    return [k for k in DEVIATION_KEYS if k in present] + sorted(present - set(DEVIATION_KEYS))
+    return sorted(present, key=_dev_order)
+
+
+def _dev_order(key: str) -> tuple:
+    """Leg, then posture from ρmax down to ρmin ('+', '+30', '-50', '-'), then
+    direction: DEVIATION_KEYS' order, with intermediate strokes in their place."""
+    parts = _dev_parts(key)
+    if parts is None:
+        return (1, key)
+    posture, leg, d = parts
+    s = {"+": math.inf, "-": -math.inf}.get(posture)
+    return (0, leg, -(float(posture) if s is None else s), d)
 
 
 def _when(iso: Any) -> str:
