@@ -1,15 +1,22 @@
 """orthocal: the mathematics of leg-parallelism calibration of Orthoglide-type
 parallel machines (Pashkevich & Gomolitsky). Pure functions, no I/O."""
 
-from orthocal.calibration import coefficients, jacobian, linear_deviations, statistical_floor
-from orthocal.geometry import AXES, MODELS, PARAM_NAMES, Geometry
+from orthocal.calibration import (
+    coefficients,
+    jacobian,
+    linear_deviations,
+    statistical_floor,
+    tilt_coefficient,
+)
+from orthocal.geometry import AXES, MODELS, PARAM_NAMES, TILT_NAMES, Geometry
 from orthocal.identification import (
     Identification,
     IdentificationError,
+    cannot_identify,
     exact_jacobian,
     identify,
 )
-from orthocal.kinematics import forward, inverse
+from orthocal.kinematics import axis_directions, forward, inverse
 from orthocal.measurement import deviation, deviations, leg_reading
 from orthocal.postures import posture, posture_point
 
@@ -17,9 +24,12 @@ __all__ = [
     "AXES",
     "MODELS",
     "PARAM_NAMES",
+    "TILT_NAMES",
     "Geometry",
     "Identification",
     "IdentificationError",
+    "axis_directions",
+    "cannot_identify",
     "coefficients",
     "deviation",
     "deviations",
@@ -33,4 +43,5 @@ __all__ = [
     "posture",
     "posture_point",
     "statistical_floor",
+    "tilt_coefficient",
 ]

@@ -53,20 +53,21 @@ def test_intermediate_posture_keeps_leg_parallel() -> None:
         np.testing.assert_allclose(p, expected, atol=1e-9)
 
 
-@pytest.mark.parametrize("params", [None, np.array([0.8, -1.2, 2.1, 0.3, -0.4, 0.2])])
+@pytest.mark.parametrize(
+    "params", [None, np.array([0.8, -1.2, 2.1, 0.3, -0.4, 0.2, 0.4, -0.6, 0.9])])
 def test_stroke_keys_equal_sign_keys_at_rho_max_and_min(params) -> None:
     g = Geometry(rho_min=-80.0, rho_max=45.0)
     signs = keys_for(["+", "-"])
     strokes = [("+45" if k[0] == "+" else "-80", k[1], k[2]) for k in signs]
     np.testing.assert_array_equal(orthocal.deviations(strokes, g, params),
                                   orthocal.deviations(signs, g, params))
-    np.testing.assert_array_equal(orthocal.jacobian(strokes, g, "full"),
-                                  orthocal.jacobian(signs, g, "full"))
+    np.testing.assert_array_equal(orthocal.jacobian(strokes, g, "full+tilt"),
+                                  orthocal.jacobian(signs, g, "full+tilt"))
 
 
 def test_linear_jacobian_is_the_exact_derivative_at_intermediate_strokes() -> None:
     keys = keys_for(["+60", "+30", "-50", "-100", "+12.5"])
-    for model in ("rho", "L", "full"):
+    for model in ("rho", "L", "full", "rho+tilt", "full+tilt"):
         J = orthocal.jacobian(keys, G, model)
         np.testing.assert_allclose(orthocal.exact_jacobian(keys, G, None, model), J,
                                    atol=1e-9)
@@ -77,11 +78,15 @@ def test_deviations_vanish_on_the_nominal_machine_at_any_stroke() -> None:
     np.testing.assert_allclose(orthocal.deviations(keys, G), 0.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("model", ["rho", "full"])
+@pytest.mark.parametrize("model", ["rho", "full", "rho+tilt", "full+tilt"])
 def test_identify_with_four_strokes_recovers_noiseless_offsets(model) -> None:
-    truth = np.array([1.7, -2.4, 0.9, 0.0, 0.0, 0.0])
-    if model == "full":
-        truth[3:] = [0.6, -0.3, 0.45]
+    """Four stops per leg; full+tilt, rank-deficient with two, is identifiable."""
+    truth = np.zeros(len(orthocal.PARAM_NAMES))
+    truth[:3] = [1.7, -2.4, 0.9]
+    if model.startswith("full"):
+        truth[3:6] = [0.6, -0.3, 0.45]
+    if model.endswith("tilt"):
+        truth[6:] = [0.5, -0.8, 0.3]  # mrad
     keys = keys_for(["+", "+30", "-50", "-"])
     data = dict(zip(keys, orthocal.deviations(keys, G, truth), strict=True))
     result = orthocal.identify(data, G, model=model, method="nonlinear")
