@@ -40,11 +40,13 @@ def posture_label(sign: str, leg: str | None) -> str:
     return f"Π_{leg}^{sign}" if sign in ("+", "-") else f"Π_{leg}({sign})"
 
 
-def cycle_postures(config: StationConfig) -> tuple[str, ...]:
+def cycle_postures(config: StationConfig,
+                   strokes: Sequence[float] | None = None) -> tuple[str, ...]:
     """The test postures of one cycle, in the order visited: ('+', '-') unless
-    ``[procedure] strokes`` names others (orthocal.postures: '+30', '-50', ...)."""
+    ``[procedure] strokes`` (or ``strokes``, for a design study) names others
+    (orthocal.postures: '+30', '-50', ...)."""
     m = config.machine
-    strokes = config.procedure.strokes or [m.rho_max, m.rho_min]
+    strokes = strokes or config.procedure.strokes or [m.rho_max, m.rho_min]
     geometry = m.geometry()
     return tuple(postures.posture_name(s, geometry) for s in postures.stop_order(strokes))
 
@@ -207,10 +209,12 @@ class Plan:
         return "\n".join(lines)
 
 
-def build_plan(config: StationConfig) -> Plan:
+def build_plan(config: StationConfig, strokes: Sequence[float] | None = None) -> Plan:
+    """The plan of ``config``; ``strokes`` replaces ``[procedure] strokes`` (design
+    studies try strokes the config does not hold, even beyond rho_min/rho_max)."""
     geometry = config.machine.geometry()
     proc = config.procedure
-    order = cycle_postures(config)
+    order = cycle_postures(config, strokes)
     setups = []
     for idx, setup in enumerate(config.setups):
         targets = {
