@@ -30,7 +30,7 @@ import numpy as np
 from orthocal.calibration import jacobian
 from orthocal.geometry import MODELS, PARAM_NAMES, Geometry
 from orthocal.measurement import Key
-from orthocal.postures import posture_name, stroke
+from orthocal.postures import posture_name
 
 # Relative singular value below which a combination counts as invisible (as in
 # identification: the worst well-posed case sits near 1/200).
@@ -188,13 +188,16 @@ def search_strokes(
     model: str,
     bounds: tuple[float, float],
     feasible: Callable[[float], bool] | None = None,
+    feasible_set: Callable[[tuple[float, ...]], bool] | None = None,
     cycles: int = 3,
     step: float = 1.0,
     max_stops: int = 8,
 ) -> Search:
     """D-optimal strokes: as many stops per leg as ``current`` (more, up to
     ``max_stops``, only when that many cannot identify ``model`` at all), each on
-    a ``step`` grid within ``bounds``, nonzero, distinct and ``feasible``.
+    a ``step`` grid within ``bounds``, nonzero, distinct and ``feasible``; a set
+    of strokes replaces the current one only if ``feasible_set`` accepts it (the
+    moves between stops matter too, not only each stop).
 
     The objective is ln det of the information of the run as the station fits
     it, the inverse of :func:`run_covariance` (readings only scale it), not of
@@ -228,6 +231,15 @@ def search_strokes(
         # ln det of the information (A meat⁻¹ A) = 2 ln det A − ln det meat
         return float(2.0 * np.sum(np.log(lam)) - np.linalg.slogdet(meat)[1])
 
+    checked: dict[frozenset[int], bool] = {}
+
+    def allowed(idx: Sequence[int]) -> bool:
+        key = frozenset(idx)
+        if key not in checked:
+            strokes = tuple(sorted((grid[k] for k in idx), reverse=True))
+            checked[key] = feasible_set is None or feasible_set(strokes)
+        return checked[key]
+
     def exchange(idx: list[int]) -> list[int]:
         best = objective(idx)
         improved = True
@@ -237,9 +249,9 @@ def search_strokes(
                 for cand in range(len(grid)):
                     if cand in idx:
                         continue
-                    trial = idx[:pos] + [cand] + idx[pos + 1:]
+                    trial = [*idx[:pos], cand, *idx[pos + 1:]]
                     value = objective(trial)
-                    if value > best + 1e-12:
+                    if value > best + 1e-12 and allowed(trial):
                         idx, best, improved = trial, value, True
         return idx
 
@@ -248,7 +260,7 @@ def search_strokes(
         spread = [int(k) for k in np.linspace(0, len(grid) - 1, n).round()]
         mine = [grid.index(s) for s in current if s in grid][:n]
         mine += [k for k in spread if k not in mine][: n - len(mine)]
-        starts = [s for s in (spread, mine) if len(set(s)) == n]
+        starts = [s for s in (mine, spread) if len(set(s)) == n and allowed(s)] or [mine]
         best = max((exchange(list(s)) for s in starts), key=objective)
         if np.isfinite(objective(best)) or n >= min(max_stops, len(grid)):
             break

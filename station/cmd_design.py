@@ -38,7 +38,7 @@ import numpy as np
 
 from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
-from station.plan import Plan, Read, Settle, build_plan, check_plan
+from station.plan import Plan, Read, Settle, build_plan, check_plan, effective_limits
 
 AXES = ("x", "y", "z")
 # No controller is contacted: "controller limits" wide open, narrowed by the config.
@@ -167,13 +167,14 @@ def run_time(plan: Plan, config: StationConfig) -> dict[str, Any]:
 
 def _figures(plan: Plan, config: StationConfig, model: str) -> dict[str, Any]:
     from orthocal import design
+    from orthocal.postures import stroke
 
     geometry = config.machine.geometry()
     keys, indicators = plan_keys(plan)
     q = design.quality(keys, geometry, model)
     out: dict[str, Any] = {
         "test_postures": list(plan.setups[0].order),
-        "strokes_mm": [float(design.stroke(p, geometry)) for p in plan.setups[0].order],
+        "strokes_mm": [float(stroke(p, geometry)) for p in plan.setups[0].order],
         "n_deviations": q.n_deviations, "parameters": list(q.names), "rank": q.rank,
         "identifiable": q.identifiable,
         "condition_number": _num(q.condition_number),
@@ -199,35 +200,45 @@ def _num(v: float) -> float | None:
     return float(v) if math.isfinite(v) else None
 
 
-def _feasible(config: StationConfig, limits: tuple[list[float], list[float]]):
-    def check(s: float) -> bool:
+def _feasible(config: StationConfig, limits: tuple[Any, Any]):
+    """The plan check of ``orthocal run`` for a set of strokes: soft limits,
+    workspace and plunger travel along every move of their plan."""
+    def check(strokes: Any) -> bool:
         try:
-            check_plan(build_plan(config, [s]), config, limits)
+            check_plan(build_plan(config, list(np.atleast_1d(strokes))), config, limits)
         except (BadInput, ValueError):
             return False
         return True
     return check
 
 
-def _search_bounds(config: StationConfig) -> tuple[tuple[float, float], str]:
+def _search_bounds(config: StationConfig, limits: tuple[Any, Any]
+                   ) -> tuple[tuple[float, float], str]:
     m, c = config.machine, config.controller
-    if c.soft_min is None and c.soft_max is None:
-        return (m.rho_min, m.rho_max), "[machine] rho_min..rho_max (no soft limits in the config)"
+    known = limits is not _OPEN
+    if not known and c.soft_min is None and c.soft_max is None:
+        return (m.rho_min, m.rho_max), "[machine] rho_min..rho_max (no soft limits known)"
+    lo_j, hi_j = effective_limits(config, limits)
     # The stop's joint i at L + s must respect the soft limits of every measured leg's
     # axis; the plan check (run per candidate) covers the other joints and the plungers.
     legs = [AXES.index(sp.leg) for sp in config.setups]
-    lo = max(c.soft_min[i] - m.leg_length for i in legs) if c.soft_min else -m.leg_length
-    hi = min(c.soft_max[i] - m.leg_length for i in legs) if c.soft_max else m.leg_length
-    return (max(lo, -m.leg_length + 1.0), min(hi, m.leg_length - 1.0)), \
-        "[controller] soft_min/soft_max"
+    lo = max(float(lo_j[i]) - m.leg_length for i in legs)
+    hi = min(float(hi_j[i]) - m.leg_length for i in legs)
+    source = "the controller's soft limits" if known else "[controller] soft_min/soft_max"
+    if known and (c.soft_min is not None or c.soft_max is not None):
+        source += " narrowed by the config"
+    return (max(lo, -m.leg_length + 1.0), min(hi, m.leg_length - 1.0)), source
 
 
-def design_summary(config: StationConfig, model: str, search: bool = True) -> dict[str, Any]:
+def design_summary(config: StationConfig, model: str, search: bool = True,
+                   controller_limits: tuple[Any, Any] | None = None) -> dict[str, Any]:
     """Everything ``orthocal design`` reports, as JSON-ready data. BadInput when
-    the configured plan fails the plan check (the run would refuse it too)."""
+    the configured plan fails the plan check (the run would refuse it too).
+    ``controller_limits``: the controller's soft limits when it has been asked
+    (``orthocal run --plan``); otherwise only the config's limit the search."""
     from orthocal import design
 
-    limits = _OPEN
+    limits = _OPEN if controller_limits is None else controller_limits
     plan = check_plan(build_plan(config), config, limits)
     m = config.machine
     doc: dict[str, Any] = {
@@ -238,16 +249,17 @@ def design_summary(config: StationConfig, model: str, search: bool = True) -> di
     }
     if not search:
         return doc
-    bounds, source = _search_bounds(config)
+    bounds, source = _search_bounds(config, limits)
     legs = {sp.leg: [d.lstrip("-") for d in sp.indicators.values()] for sp in plan.setups}
     try:
+        check = _feasible(config, limits)
         found = design.search_strokes(doc["strokes_mm"], legs, m.geometry(), model, bounds,
-                                      feasible=_feasible(config, limits), cycles=plan.cycles)
-    except ValueError as exc:
+                                      feasible=check, feasible_set=check, cycles=plan.cycles)
+        better = check_plan(build_plan(config, list(found.strokes)), config, limits)
+    except (ValueError, BadInput) as exc:
         doc["search"] = {"objective": OBJECTIVE, "bounds_mm": list(bounds),
-                         "bounds_from": source, "error": str(exc)}
+                         "bounds_from": source, "error": f"no better strokes: {exc}"}
         return doc
-    better = check_plan(build_plan(config, list(found.strokes)), config, limits)
     proposal = _figures(better, config, model)
     d_now, d_new = doc["d_criterion_log_det"], proposal["d_criterion_log_det"]
     p = len(proposal["parameters"])
