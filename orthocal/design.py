@@ -241,7 +241,8 @@ def search_strokes(
         return checked[key]
 
     def exchange(idx: list[int]) -> list[int]:
-        best = objective(idx)
+        # An infeasible start counts as worst: its first feasible exchange is taken.
+        best = objective(idx) if allowed(idx) else float("-inf")
         improved = True
         while improved:
             improved = False
@@ -260,8 +261,9 @@ def search_strokes(
         spread = [int(k) for k in np.linspace(0, len(grid) - 1, n).round()]
         mine = [grid.index(s) for s in current if s in grid][:n]
         mine += [k for k in spread if k not in mine][: n - len(mine)]
-        starts = [s for s in (mine, spread) if len(set(s)) == n and allowed(s)] or [mine]
-        best = max((exchange(list(s)) for s in starts), key=objective)
+        starts = [s for s in (mine, spread) if len(set(s)) == n]
+        best = max((exchange(list(s)) for s in starts),
+                   key=lambda idx: objective(idx) if allowed(idx) else float("-inf"))
         if np.isfinite(objective(best)) or n >= min(max_stops, len(grid)):
             break
         n += 1
