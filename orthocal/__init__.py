@@ -19,6 +19,7 @@ from orthocal.identification import (
 from orthocal.kinematics import axis_directions, forward, inverse
 from orthocal.measurement import deviation, deviations, leg_reading
 from orthocal.postures import posture, posture_point
+from orthocal.selection import ModelSelection, select_model
 
 __all__ = [
     "AXES",
@@ -28,6 +29,7 @@ __all__ = [
     "Geometry",
     "Identification",
     "IdentificationError",
+    "ModelSelection",
     "axis_directions",
     "cannot_identify",
     "coefficients",
@@ -42,6 +44,7 @@ __all__ = [
     "linear_deviations",
     "posture",
     "posture_point",
+    "select_model",
     "statistical_floor",
     "tilt_coefficient",
 ]
