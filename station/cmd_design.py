@@ -86,9 +86,23 @@ def _model(args: argparse.Namespace, config: StationConfig) -> str:
     import orthocal
 
     model = args.model or config.procedure.model
-    if model not in orthocal.MODELS:
-        raise BadInput(f"--model: must be one of {', '.join(orthocal.MODELS)}, got {model!r}")
+    if model not in (*orthocal.MODELS, "auto"):
+        raise BadInput(f"--model: must be one of {', '.join(orthocal.MODELS)} or auto, "
+                       f"got {model!r}")
     return model
+
+
+def _resolve_auto(plan: Plan, config: StationConfig) -> str:
+    """``auto`` chooses among nested candidates after the run; before it, the one
+    that matters is the largest these postures can identify (the smaller ones are
+    determined at least as well)."""
+    from orthocal import design
+    from orthocal.selection import CANDIDATES
+
+    keys, _ = plan_keys(plan)
+    geometry = config.machine.geometry()
+    able = [m for m in CANDIDATES if design.quality(keys, geometry, m).identifiable]
+    return able[-1] if able else CANDIDATES[0]
 
 
 # --- what the plan measures ------------------------------------------------------------
@@ -241,8 +255,13 @@ def design_summary(config: StationConfig, model: str, search: bool = True,
     limits = _OPEN if controller_limits is None else controller_limits
     plan = check_plan(build_plan(config), config, limits)
     m = config.machine
+    auto = model == "auto"
+    if auto:
+        model = _resolve_auto(plan, config)
     doc: dict[str, Any] = {
         "model": model,
+        **({"auto": f"auto picks among nested models after the run; shown for {model}, "
+                    "the largest these postures identify"} if auto else {}),
         "machine": {"leg_length": m.leg_length, "rho_min": m.rho_min, "rho_max": m.rho_max},
         "cycles": plan.cycles, "readings": plan.readings,
         **_figures(plan, config, model),
@@ -306,6 +325,7 @@ def _time(t: dict[str, Any]) -> str:
 def format_summary(doc: dict[str, Any]) -> str:
     cond = doc["condition_number"]
     lines = [
+        *([f"design: {doc['auto']}"] if "auto" in doc else []),
         f"design: model {doc['model']}, stops per leg "
         + ", ".join(f"{s:+g}" for s in doc["strokes_mm"]) + " mm "
         f"({doc['n_deviations']} deviations, {doc['cycles']} cycle(s) × "

@@ -191,3 +191,11 @@ def test_cli_design_bad_input_exits_2_with_one_line(capsys, argv, expected) -> N
     code, out, err = run_cli(capsys, "design", *argv)
     assert code == 2 and out == ""
     assert expected in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_cli_design_auto_shows_the_largest_model_the_postures_identify(capsys) -> None:
+    code, out, _ = run_cli(capsys, "design", "--model", "auto", "--json")
+    assert code == 0 and json.loads(out)["model"] == "rho+tilt"
+    code, out, _ = run_cli(capsys, "design", "--model", "auto", "--strokes", "60,30,-50,-100",
+                           "--json")
+    assert code == 0 and json.loads(out)["model"] == "full+tilt"
