@@ -199,3 +199,30 @@ def test_cli_design_auto_shows_the_largest_model_the_postures_identify(capsys) -
     code, out, _ = run_cli(capsys, "design", "--model", "auto", "--strokes", "60,30,-50,-100",
                            "--json")
     assert code == 0 and json.loads(out)["model"] == "full+tilt"
+
+
+def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
+    """``orthocal run --plan`` asks the controller for its soft limits: the search
+    stays inside them and inside the plungers' travel (the whole plan check)."""
+    from drivers.sim.station import VirtualStation
+    from station.config import load_config, toml_text
+
+    with VirtualStation(seed=2, mount_all=True, indicator_count=6) as station:
+        path = tmp_path / "station.toml"
+        path.write_text(toml_text(station.config(), "test"))
+        code, out, err = run_cli(capsys, "run", "--config", str(path), "--plan", "--out",
+                                 str(tmp_path))
+        assert code == 0, err
+        assert "plan checked" in out and "design: model rho" in out and "D-optimal" in out
+        code, out, err = run_cli(capsys, "run", "--config", str(path), "--plan", "--json",
+                                 "--out", str(tmp_path))
+        assert code == 0, err
+        doc = json.loads(out)
+    s = doc["design"]["search"]
+    assert "controller" in s["bounds_from"]
+    assert doc["design"]["noise_gain"]["drho_x"] == pytest.approx(1.867, abs=1e-3)
+    cfg = load_config(path)
+    lo, hi = doc["soft_limits"]["lower"], doc["soft_limits"]["upper"]
+    check_plan(build_plan(cfg, s["strokes_mm"]), cfg, (lo, hi))
+    assert s["d_criterion_log_det"] >= doc["design"]["d_criterion_log_det"]
+    assert not list(tmp_path.glob("run-*"))
