@@ -238,6 +238,8 @@ def _search_bounds(config: StationConfig, limits: tuple[Any, Any]
     legs = [AXES.index(sp.leg) for sp in config.setups]
     lo = max(float(lo_j[i]) - m.leg_length for i in legs)
     hi = min(float(hi_j[i]) - m.leg_length for i in legs)
+    if getattr(limits, "source", "registers") in ("absent", "nonsense"):
+        known = False  # the controller could not tell: the config's limits alone
     source = "the controller's soft limits" if known else "[controller] soft_min/soft_max"
     if known and (c.soft_min is not None or c.soft_max is not None):
         source += " narrowed by the config"
