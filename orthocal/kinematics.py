@@ -100,10 +100,14 @@ def forward(rho, geometry: Geometry, drho=None, dL=None, tilt=None) -> np.ndarra
     solution of the same q, L, all points at once, until the step is below 1e-12 mm
     (three or four steps for tilts of a few mrad: the start is off by ~q·tilt).
     """
+    return forward_on_axes(rho, geometry, drho, dL, axis_directions(tilt))
+
+
+def forward_on_axes(rho, geometry: Geometry, drho, dL, u: np.ndarray | None) -> np.ndarray:
+    """:func:`forward` for axis directions ``u`` already computed (None: e_x, e_y, e_z)."""
     rho = np.asarray(rho, dtype=float)
     drho, L = _legs(geometry, drho, dL)
     q = rho + drho
-    u = axis_directions(tilt)
     return _forward_orthogonal(q, L) if u is None else solve_spheres(q, L, u)
 
 

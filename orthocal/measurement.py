@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from orthocal.geometry import AXIS_INDEX, Geometry, split_params
-from orthocal.kinematics import axis_directions, forward
+from orthocal.kinematics import axis_directions, forward, forward_on_axes
 from orthocal.postures import check_posture, posture
 
 Key = tuple[str, str, str]  # (posture: "+", "-" or a signed stroke "+30"; leg i; direction j)
@@ -119,10 +119,11 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarr
         legs[n], dirs[n] = AXIS_INDEX[leg], AXIS_INDEX[direction]
         rho_s[n] = posture(sign, leg, geometry)
     rho_0 = posture("0", None, geometry)
-    p_s = forward(rho_s, geometry, drho, dL, tilt)
-    p_0 = np.broadcast_to(forward(rho_0, geometry, drho, dL, tilt), p_s.shape)
-    m = geometry.mount_plane
     u = axis_directions(tilt)
+    # Π0 rides along as the last row: one solve (Newton when tilted) for all points
+    p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u)
+    p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
+    m = geometry.mount_plane
     reading_s = _reading(rho_s, p_s, legs, dirs, drho, m, u)
     dev = reading_s - _reading(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m, u)
     return dev[rows]

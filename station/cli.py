@@ -74,6 +74,13 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         help="hidden leg-length errors of the virtual machine (mm; zero if absent)",
     )
     p.add_argument(
+        "--true-tilt",
+        type=_triple,
+        metavar="X,Y,Z",
+        help="hidden actuator axis tilts tilt_yx, tilt_zx, tilt_zy of the virtual machine "
+        "(mrad; zero if absent)",
+    )
+    p.add_argument(
         "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
     )
 
@@ -158,7 +165,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     ident = sub.add_parser("identify", help="identify parameters from a READINGS.csv")
     ident.add_argument("csv", metavar="READINGS.csv")
-    ident.add_argument("--model", choices=["rho", "L", "full"], default="rho")
+    ident.add_argument(
+        "--model", choices=["rho", "L", "full", "rho+tilt", "full+tilt", "auto"], default="rho",
+        help="parameters to identify; auto: the smallest model the data's cycle scatter "
+        "supports (needs a cycle column)")
     ident.add_argument("--method", choices=["linear", "nonlinear"], default="nonlinear")
     ident.add_argument("--leg-length", type=float, default=310.25)
     ident.add_argument("--rho-min", type=float, default=-100.0)

@@ -10,6 +10,10 @@ string as in the run's deviation keys ("+30xy"), so no extra column is needed;
 An optional ``cycle`` column lets a deviation appear once per cycle (repeats);
 without it a repeated (posture, leg, direction) is an error, because
 it is far more often a copy-paste slip than a deliberate repeat.
+
+``--model auto`` needs the noise of the measurement: the cycle-to-cycle scatter
+of a CSV with a cycle column (one row per deviation and cycle); a CSV with one value
+per deviation carries none, and auto is refused for it.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import json
 import math
 from pathlib import Path
 
-from orthocal import Geometry, Identification, IdentificationError, identify
+from orthocal import Geometry, Identification, IdentificationError, identify, select_model
 from orthocal.postures import check_posture, stroke
 from station.errors import BadInput, read_input
 
@@ -101,12 +105,13 @@ def format_table(result: Identification, geometry: Geometry) -> str:
         f"{len(result.keys)} deviations (L = {geometry.leg_length:g}, "
         f"ρmin = {geometry.rho_min:g}, ρmax = {geometry.rho_max:g} mm)",
         "",
-        f"  {'parameter':<10} {'value mm':>10} {'std err':>10}",
+        f"  {'parameter':<10} {'value':>10} {'std err':>10}",
     ]
     for name in result.names:
         se = result.std_errors[name]
         se_text = f"{se:10.4f}" if math.isfinite(se) else f"{'n/a':>10}"
-        lines.append(f"  {name:<10} {result.parameters[name]:10.4f} {se_text}")
+        unit = "mrad" if name.startswith("tilt_") else "mm"
+        lines.append(f"  {name:<10} {result.parameters[name]:10.4f} {se_text} {unit}")
     sigma = f"{result.sigma:.4f} mm" if math.isfinite(result.sigma) else "n/a (no redundancy)"
     lines += [
         "",
@@ -128,12 +133,27 @@ def main(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise BadInput(f"geometry: {exc}") from None
     data = read_deviations(Path(args.csv), geometry)
+    selection = None
     try:
-        result = identify(data, geometry, model=args.model, method=args.method)
+        if args.model == "auto":
+            if not any(len(v) >= 2 for v in data.values()):
+                raise BadInput(
+                    f"{args.csv}: --model auto needs the noise of the measurement, and one "
+                    "value per deviation carries none: give a CSV with a cycle column (one row "
+                    "per deviation and cycle) or name a model")
+            selection = select_model(data, geometry, method=args.method)
+            result = selection.identification
+        else:
+            result = identify(data, geometry, model=args.model, method=args.method)
     except IdentificationError as exc:
         raise BadInput(f"{args.csv}: {exc}") from None
     if args.json:
-        print(json.dumps(result.to_dict(), indent=2))
+        doc = result.to_dict()
+        if selection is not None:
+            doc["model_selection"] = selection.to_dict()
+        print(json.dumps(doc, indent=2))
     else:
         print(format_table(result, geometry))
+        if selection is not None:
+            print(f"\n  model chosen by auto: {selection.reason}")
     return 0

@@ -26,7 +26,9 @@ from station.report_text import (
     _param_html,
     _params_of,
     _truth,
+    _unit,
     _when,
+    model_notes,
 )
 
 _CSS = """
@@ -115,6 +117,8 @@ def _what_was_done(result: Mapping[str, Any]) -> str:
         '<p class="small">Δρ<sub>i</sub> (joint offset): how far axis i really is from '
         "where its controller believes it is — an error of the encoder zero. "
         "ΔL<sub>i</sub> (leg-length error): how much leg i is longer than nominal. "
+        "tilt<sub>yx</sub>, tilt<sub>zx</sub>, tilt<sub>zy</sub> (mrad): how far actuator "
+        "axis y leans toward x, and axis z toward x and toward y, off square. "
         "± values are one standard error σ; the true value lies within ±3σ with near "
         "certainty if the model is right.</p>"
     )
@@ -132,8 +136,8 @@ def _result_paragraph(result: Mapping[str, Any]) -> str:
                      "the controller's offsets were only changed if stated below.")
     if names:
         vals = "; ".join(
-            f"{_param_html(n)} = {_fmt(ident.get(n), signed=True)} ± {_fmt(errs.get(n))} mm"
-            for n in names
+            f"{_param_html(n)} = {_fmt(ident.get(n), signed=True)} ± {_fmt(errs.get(n))} "
+            f"{_unit(n)}" for n in names
         )
         what = "joint offsets" if all(n.startswith("drho") for n in names) else "parameters"
         parts.append(f"The {what} were identified as {vals}.")
@@ -144,11 +148,13 @@ def _result_paragraph(result: Mapping[str, Any]) -> str:
                 s += f" (indicator noise: {_fmt(noise)} mm)"
             parts.append(s + ".")
         truths = [(n, _truth(result, n)) for n in names]
-        diffs = [abs(_num(ident.get(n)) - t) for n, t in truths
-                 if t is not None and _num(ident.get(n)) is not None]
-        if diffs:
+        diffs = {u: [abs(_num(ident.get(n)) - t) for n, t in truths if _unit(n) == u
+                     and t is not None and _num(ident.get(n)) is not None]
+                 for u in ("mm", "mrad")}
+        if diffs["mm"] or diffs["mrad"]:
             parts.append("This was a simulated run; the identified values differ from the "
-                         f"virtual machine's hidden ones by at most {_fmt(max(diffs))} mm.")
+                         "virtual machine's hidden ones by at most " + " and ".join(
+                             f"{_fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
     wb = _dict(result.get("writeback"))
     if wb.get("status"):
         text = _WRITEBACK_TEXT.get(str(wb["status"]), f"write-back: {wb['status']}")
@@ -204,23 +210,49 @@ def _params_table(result: Mapping[str, Any]) -> str:
     ver = _dict(result.get("verification"))
     v_ident, v_errs = _dict(ver.get("identified")), _dict(ver.get("std_errors"))
     has_truth = any(_truth(result, n) is not None for n in names)
-    head = ["parameter", "identified (mm)", "σ (mm)", "±3σ interval (mm)"]
+    head = ["parameter", "unit", "identified", "σ", "±3σ interval"]
     if has_truth:
-        head.append("hidden truth (mm)")
+        head.append("hidden truth")
     if v_ident:
-        head += ["after calibration (mm)", "σ after (mm)"]
+        head += ["after calibration", "σ after"]
     rows = []
     for n in names:
         v, s = _num(ident.get(n)), _num(errs.get(n))
         interval = (f"{_fmt(v - 3 * s, signed=True)} … {_fmt(v + 3 * s, signed=True)}"
                     if v is not None and s is not None else "—")
-        row = [_param_html(n), _fmt(v, signed=True), _fmt(s), interval]
+        row = [_param_html(n), _unit(n), _fmt(v, signed=True), _fmt(s), interval]
         if has_truth:
             row.append(_fmt(_truth(result, n), signed=True))
         if v_ident:
             row += [_fmt(v_ident.get(n), signed=True), _fmt(v_errs.get(n))]
         rows.append(row)
     return _table(head, rows)
+
+
+def _model_section(result: Mapping[str, Any]) -> str:
+    """Why this model (auto's test), what these measurements can never identify,
+    what cannot be written: said, not silently fixed (issue 9)."""
+    notes = model_notes(result)
+    if not notes:
+        return ""
+    out = "".join(f"<p>{_e(n)}</p>" for n in notes)
+    sel = _dict(result.get("model_selection"))
+    cands = [c for c in sel.get("candidates") or [] if isinstance(c, dict)]
+    if cands:
+        rows = [[_e(c.get("model")), "yes" if c.get("identifiable") else "no",
+                 _fmt(c.get("F"), 2), _e(c.get("dof") or "—"),
+                 (f"{c['p_value']:.2g}" if _num(c.get("p_value")) is not None else "—"),
+                 _fmt(c.get("residual_rms_mm"), 4),
+                 "chosen" if c.get("model") == result.get("model") else
+                 ("rejected" if c.get("F") is not None else _e(c.get("note") or ""))]
+                for c in cands]
+        out += _table(["candidate", "identifiable", "F", "dof", "p", "residual RMS (mm)",
+                       "verdict"], rows, caption=(
+            f"Lack-of-fit F test of each candidate against the noise measured in this run "
+            f"(σ = {_fmt(sel.get('noise_sigma_mm'), 5)} mm per deviation, "
+            f"{_e(sel.get('noise_source'))}); the first with p ≥ {_e(sel.get('level'))} "
+            "is used."))
+    return out
 
 
 def _correlation_table(result: Mapping[str, Any]) -> str:
@@ -401,6 +433,7 @@ def render_html(result: dict) -> str:
 {"".join(figures)}
 <h2>Identified parameters</h2>
 {_params_table(result)}
+{_model_section(result)}
 {_correlation_table(result)}
 <h2>Deviations</h2>
 {_deviations_table(result)}

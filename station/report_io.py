@@ -18,8 +18,9 @@ from station.report_text import _dev_keys
 # finds status and identified values at the top, not buried alphabetically.
 _TOP_ORDER = (
     "run_dir", "status", "message", "started", "finished", "duration_s", "simulated",
-    "simulation", "machine", "model", "method", "identified", "std_errors", "correlation",
-    "residual_rms_mm", "sigma_mm", "condition_number", "noise_mm", "fit_ok", "fit_note",
+    "simulation", "machine", "model", "method", "model_selection", "identified", "std_errors",
+    "correlation", "residual_rms_mm", "sigma_mm", "condition_number", "noise_mm", "fit_ok",
+    "fit_note",
     "deviations", "deviations_rms_mm", "setups", "offsets_before", "offsets_written",
     "writeback", "verification", "timing",
 )

@@ -19,6 +19,7 @@ from station.report_text import (
     _param_tex,
     _params_of,
     _truth,
+    _unit,
 )
 
 # ---------------------------------------------------------------------- plots
@@ -143,9 +144,16 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
     # below has the numbers.
     annotate = len(names) <= 3
 
+    # Tilts are angles (mrad): on their own axis at the right, not on the mm scale.
+    ax_tilt = ax.twinx() if any(_unit(n) == "mrad" for n in names) else None
+
+    def axis_of(n: str):
+        return ax_tilt if ax_tilt is not None and _unit(n) == "mrad" else ax
+
     def draw(values, sigmas, offset, color, marker, label, above=True):
         drawn = False
         for x, n in zip(xs, names, strict=True):
+            ax = axis_of(n)
             v, s = _num(values.get(n)), _num(sigmas.get(n))
             if v is None:
                 continue
@@ -179,15 +187,16 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
          "identified before calibration")
     if v_ident:
         draw(v_ident, v_errs, 0.12, _C_AFTER, "s",
-             "re-identified after calibration (should be ≈ 0)", above=False)
-    truth = [(x, _truth(result, n)) for x, n in zip(xs, names, strict=True)]
+             "re-identified after calibration (Δρ should be ≈ 0)" if ax_tilt is not None
+             else "re-identified after calibration (should be ≈ 0)", above=False)
+    truth = [(x, _truth(result, n), n) for x, n in zip(xs, names, strict=True)]
     truth = [t for t in truth if t[1] is not None]
+    for x, t, n in truth:
+        line = axis_of(n).plot([x - (0.12 if v_ident else 0.0)], [t], "_", color=_C_TRUTH,
+                               ms=22, mew=2.2, zorder=2,
+                               label="hidden truth of the simulated machine")[0]
     if truth:
-        handles.append(ax.plot(
-            [t[0] - (0.12 if v_ident else 0.0) for t in truth], [t[1] for t in truth], "_",
-            color=_C_TRUTH, ms=22, mew=2.2, zorder=2,
-            label="hidden truth of the simulated machine",
-        )[0])
+        handles.append(line)
     handles.append(ax.plot([], [], color="#777", lw=5, alpha=0.55, label="±1σ")[0])
     handles.append(ax.plot([], [], color="#777", lw=1.2, label="±3σ")[0])
     ax.axhline(0.0, color="#555", lw=0.8)
@@ -195,6 +204,12 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
     ax.set_xlim(-0.6, len(names) - 0.4)
     ax.margins(y=0.2)  # room for the value labels beyond the outermost bars
     ax.set_ylabel("value (mm)")
+    if ax_tilt is not None:
+        first_tilt = next(x for x, n in zip(xs, names, strict=True) if _unit(n) == "mrad")
+        ax.axvline(first_tilt - 0.5, color="#999", lw=0.8, ls=":")
+        ax_tilt.axhline(0.0, color="#555", lw=0.8, ls=":")
+        ax_tilt.margins(y=0.2)
+        ax_tilt.set_ylabel("tilt (mrad)")
     ax.grid(axis="y", color="#ddd", lw=0.6)
     ax.set_axisbelow(True)
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,

@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any
 
 AXES = ("x", "y", "z")
-PARAM_NAMES = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
+PARAM_NAMES = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z",
+               "tilt_yx", "tilt_zx", "tilt_zy")
 # Grouped by leg, then posture, then direction: the order an operator measures in
 # (one setup per leg), so the plot and the tables read setup by setup.
 DEVIATION_KEYS = tuple(
@@ -26,7 +27,13 @@ _MODEL_TEXT = {
     "rho": "joint offsets Δρ only",
     "L": "leg-length errors ΔL only",
     "full": "joint offsets Δρ and leg-length errors ΔL together",
+    "rho+tilt": "joint offsets Δρ and the tilts of the actuator axes",
+    "full+tilt": "joint offsets Δρ, leg-length errors ΔL and the tilts of the actuator axes",
 }
+# Only Δρ reaches a controller (its zero offsets); the rest is the machine's build.
+NOT_WRITTEN_TEXT = ("Axis tilts and leg-length errors cannot be written to a controller: "
+                    "only the joint offsets Δρ were corrected; the tilts stay in the machine "
+                    "(and in the verification's deviations) until it is re-squared mechanically.")
 _STATUS_TEXT = {
     "ok": "Completed",
     "failed": "Failed",
@@ -66,19 +73,27 @@ def _fmt(value: Any, digits: int = 3, signed: bool = False) -> str:
     return text.replace("-", "−")
 
 
+_SYMBOL = {"drho": ("Δρ", r"\Delta\rho"), "dL": ("ΔL", r"\Delta L"), "tilt": ("tilt ", "t")}
+
+
+def _unit(name: str) -> str:
+    """Tilts are angles in mrad (model.md); everything else is a length in mm."""
+    return "mrad" if name.startswith("tilt_") else "mm"
+
+
 def _param_plain(name: str) -> str:
     kind, axis = name.split("_", 1)
-    return ("Δρ" if kind == "drho" else "ΔL") + axis
+    return _SYMBOL.get(kind, (kind + " ", ""))[0] + axis
 
 
 def _param_html(name: str) -> str:
     kind, axis = name.split("_", 1)
-    return ("Δρ" if kind == "drho" else "ΔL") + f"<sub>{html.escape(axis)}</sub>"
+    return _SYMBOL.get(kind, (kind + " ", ""))[0].strip() + f"<sub>{html.escape(axis)}</sub>"
 
 
 def _param_tex(name: str) -> str:
     kind, axis = name.split("_", 1)
-    return (r"$\Delta\rho_" if kind == "drho" else r"$\Delta L_") + axis + "$"
+    return "$" + _SYMBOL.get(kind, ("", kind))[1] + "_{" + axis + "}$"
 
 
 def _dev_parts(key: str) -> tuple[str, str, str] | None:
@@ -117,6 +132,9 @@ def _truth(result: Mapping[str, Any], name: str) -> float | None:
     if not result.get("simulated") or not isinstance(sim, Mapping):
         return None
     kind, axis = name.split("_", 1)
+    if kind == "tilt":
+        table = sim.get("true_tilt")
+        return _num(table.get(name)) if isinstance(table, Mapping) else None
     table = sim.get("true_drho" if kind == "drho" else "true_dl")
     if not isinstance(table, Mapping):
         return None
@@ -190,9 +208,25 @@ def _param_line(result: Mapping[str, Any], names: Iterable[str]) -> str:
     ident = _dict(result.get("identified"))
     errs = _dict(result.get("std_errors"))
     return "   ".join(
-        f"{_param_plain(n)} = {_fmt(ident.get(n), signed=True)} ± {_fmt(errs.get(n))}"
+        f"{_param_plain(n)} = {_fmt(ident.get(n), signed=True)} ± {_fmt(errs.get(n))} {_unit(n)}"
         for n in names
     )
+
+
+def model_notes(result: Mapping[str, Any]) -> list[str]:
+    """What the report must say about the model: why auto chose it, what cannot
+    be identified from these measurements, what cannot be written."""
+    notes = []
+    sel = _dict(result.get("model_selection"))
+    if sel.get("reason"):
+        notes.append(f"Model chosen by auto ({sel.get('test', 'F test')}, level "
+                     f"{sel.get('level')}): {sel['reason']}.")
+    for line in result.get("not_identifiable") or []:
+        notes.append(str(line))
+    names = _params_of(result)
+    if any(not n.startswith("drho_") for n in names):
+        notes.append(NOT_WRITTEN_TEXT)
+    return notes
 
 
 def summary_text(result: dict) -> str:
@@ -205,7 +239,15 @@ def summary_text(result: dict) -> str:
     lines = [head]
     names = _params_of(result)
     if names:
-        lines.append(f"  identified    {_param_line(result, names)} mm")
+        model = str(result.get("model", ""))
+        sel = _dict(result.get("model_selection"))
+        chosen = [c for c in sel.get("candidates") or [] if isinstance(c, dict)
+                  and c.get("model") == model and c.get("F") is not None]
+        why = (f" (auto: F = {_fmt(chosen[0]['F'], 2)}, p = {_fmt(chosen[0].get('p_value'))}"
+               f" against the measured noise, level {sel.get('level')})" if chosen else
+               " (auto: no candidate explains the data)" if sel else "")
+        lines.append(f"  model         {model}{why}")
+        lines.append(f"  identified    {_param_line(result, names)}")
         noise = _num(result.get("noise_mm"))
         resid = f"  residual      {_fmt(result.get('residual_rms_mm'))} mm RMS"
         if noise is not None:
@@ -230,10 +272,16 @@ def summary_text(result: dict) -> str:
             f"  verification  deviations RMS {_fmt(result.get('deviations_rms_mm'))} → "
             f"{_fmt(ver.get('deviations_rms_mm'))} mm; re-identified "
             + "  ".join(
-                f"{_param_plain(n)} = {_fmt(v, signed=True)}"
+                f"{_param_plain(n)} = {_fmt(v, signed=True)} {_unit(n)}"
                 for n, v in _dict(ver.get("identified")).items()
             )
         )
+    if names and result.get("not_identifiable"):
+        two = any("ΔL cannot be separated" in str(n) for n in result["not_identifiable"])
+        lines.append("  not identifiable  a rotation of the whole machine"
+                     + ("; ΔL beside the tilts (two postures per leg)" if two else ""))
+    if any(not n.startswith("drho_") for n in names):
+        lines.append("  not written   tilts and ΔL (a controller takes only Δρ)")
     if result.get("run_dir"):
         lines.append(f"  report        {Path(str(result['run_dir'])) / 'report.html'}")
     return "\n".join(lines)

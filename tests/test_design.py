@@ -220,7 +220,11 @@ def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
         doc = json.loads(out)
     s = doc["design"]["search"]
     assert "controller" in s["bounds_from"]
-    assert doc["design"]["noise_gain"]["drho_x"] == pytest.approx(1.867, abs=1e-3)
+    # the default model is auto: shown for rho+tilt, the largest two stops identify
+    assert doc["design"]["model"] == "rho+tilt" and "auto" in doc["design"]
+    keys = design.keys_for([60, -100], LEGS, G)
+    floor = orthocal.statistical_floor(keys, G, "rho+tilt", 1.0)
+    assert list(doc["design"]["noise_gain"].values()) == pytest.approx(list(floor), rel=1e-9)
     cfg = load_config(path)
     lo, hi = doc["soft_limits"]["lower"], doc["soft_limits"]["upper"]
     check_plan(build_plan(cfg, s["strokes_mm"]), cfg, (lo, hi))
