@@ -130,6 +130,7 @@ def test_simulated_run_with_strokes(tmp_path: Path, capsys) -> None:
     assert sum(1 for r in records if r["type"] == "reading") == 2 * 3 * (1 + 5 * 2) * 2
     report = (run_dir / "report.html").read_text()
     assert "Π<sub>x</sub>(+30 mm) along y" in report and "Π<sub>y</sub>(−50 mm)" in report
+    assert "4 test postures Π<sub>i</sub>(s)" in report and "the 24 differences" in report
 
 
 KILLER = r"""
