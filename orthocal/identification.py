@@ -115,7 +115,7 @@ def _postures_per_leg(keys: Sequence[Key]) -> int:
     return min((len(v) for v in seen.values()), default=0)
 
 
-def _why_inseparable(names: Sequence[str], involved: Sequence[str], keys: Sequence[Key]) -> str:
+def _why_inseparable(involved: Sequence[str], keys: Sequence[Key]) -> str:
     """The reason in words for the usual rank deficiency, '' when there is no known one."""
     has_l = any(n.startswith("dL_") for n in involved)
     has_tilt = any(n in TILT_NAMES for n in involved)
@@ -140,7 +140,7 @@ def _check_identifiable(
     if s[-1] <= _RANK_TOL * s[0]:
         null = vt[-1]
         involved = [nm for nm, w in zip(names, null, strict=True) if abs(w) > 0.1]
-        why = _why_inseparable(names, involved, keys) or (
+        why = _why_inseparable(involved, keys) or (
             "; measure more legs or directions, or identify fewer parameters")
         raise IdentificationError(
             "not identifiable from these deviations: "

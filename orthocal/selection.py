@@ -26,11 +26,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from orthocal.calibration import jacobian
 from orthocal.geometry import Geometry
 from orthocal.identification import (
     Identification,
@@ -107,14 +108,11 @@ def _gauge_rows(keys: Sequence[Key]) -> list[tuple[tuple[str, str], int]]:
     return rows
 
 
-def means_covariance(keys: Sequence[Key], shared_zero: bool = True) -> tuple[list[Key], np.ndarray]:
-    """Distinct keys and the covariance of their means in units of σ², the
-    variance of one per-cycle deviation. ``keys`` lists one row per cycle (a
-    key repeated once per cycle, in cycle order). Without ``shared_zero`` the
-    rows are independent; with it, the station's Π0 sharing correlates rows of
-    one gauge (leg, direction): 1/3 in the same cycle, 1/6 in adjacent cycles."""
-    distinct = list(dict.fromkeys(keys))
-    index = {k: n for n, k in enumerate(distinct)}
+def row_correlation(keys: Sequence[Key], shared_zero: bool = True) -> np.ndarray:
+    """Correlation of the rows ``keys`` (one per cycle: a key repeated once per
+    cycle, in cycle order). Without ``shared_zero`` the rows are independent;
+    with it, the station's Π0 sharing correlates rows of one gauge (leg,
+    direction): 1/3 in the same cycle, 1/6 in adjacent cycles."""
     n = len(keys)
     C = np.eye(n)
     if shared_zero:
@@ -128,6 +126,16 @@ def means_covariance(keys: Sequence[Key], shared_zero: bool = True) -> tuple[lis
                     C[a, b] = C[b, a] = _SAME_CYCLE
                 elif abs(ca - cb) == 1:
                     C[a, b] = C[b, a] = _ADJACENT_CYCLE
+    return C
+
+
+def means_covariance(keys: Sequence[Key], shared_zero: bool = True) -> tuple[list[Key], np.ndarray]:
+    """Distinct keys and the covariance of their means in units of σ², the
+    variance of one per-cycle deviation (rows as for :func:`row_correlation`)."""
+    distinct = list(dict.fromkeys(keys))
+    index = {k: n for n, k in enumerate(distinct)}
+    n = len(keys)
+    C = row_correlation(keys, shared_zero)
     A = np.zeros((len(distinct), n))
     for r, key in enumerate(keys):
         A[index[key], r] = 1.0
@@ -168,6 +176,30 @@ def noise_from_readings(stop_std: Sequence[float], readings: int) -> tuple[float
         raise ValueError("no stop with two readings or more: no within-stop scatter")
     sigma_r2 = float(np.mean(s**2))
     return math.sqrt(1.5 * sigma_r2 / readings), int(s.size * (readings - 1))
+
+
+def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma: float,
+                        inflate: float = 1.0, shared_zero: bool = True) -> Identification:
+    """``result`` with its covariance from the measured noise instead of the fit's
+    residual: least squares' sandwich (JᵀJ)⁻¹ Jᵀ (σ²·C) J (JᵀJ)⁻¹, C the rows'
+    correlation (:func:`row_correlation`), times ``inflate``² (e.g. the lack of
+    fit F of a model the data reject, so that its errors do not look small).
+
+    Ordinary least squares treats the per-cycle deviations as independent; with
+    shared Π0 stops they are not, and its standard errors come out ~10 % too
+    large for rho and ~20 % too small for the tilts of rho+tilt (BENCHMARKS.md)."""
+    keys = list(result.keys)
+    if result.method == "nonlinear":
+        J = exact_jacobian(keys, geometry, result.vector, result.model)
+    else:
+        J = jacobian(keys, geometry, result.model)
+    bread = np.linalg.inv(J.T @ J)
+    C = row_correlation(keys, shared_zero)
+    covariance = (inflate * noise_sigma) ** 2 * bread @ J.T @ C @ J @ bread
+    std = np.sqrt(np.diag(covariance))
+    correlation = covariance / np.outer(std, std)
+    return replace(result, covariance=covariance, correlation=correlation,
+                   std_errors={n: float(s) for n, s in zip(result.names, std, strict=True)})
 
 
 def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,

@@ -8,7 +8,13 @@ import math
 from typing import Any
 
 import orthocal
-from orthocal.selection import noise_from_cycles, noise_from_readings
+from orthocal.selection import (
+    LEVEL,
+    lack_of_fit,
+    noise_from_cycles,
+    noise_from_readings,
+    with_measured_noise,
+)
 from station.config import StationConfig
 from station.errors import RunFailed
 from station.sequencer import Measurement
@@ -44,17 +50,39 @@ def measurement_noise(config: StationConfig, m: Measurement) -> tuple[float, flo
 def identify_measurement(config: StationConfig, m: Measurement,
                          model: str | None = None) -> tuple[Any, dict[str, Any] | None]:
     """The identification of ``m`` with ``model`` (default: the config's) and, for
-    auto, the selection's JSON (the run JSON's ``model_selection``)."""
+    auto, the selection's JSON (the run JSON's ``model_selection``).
+
+    Standard errors: from the noise this measurement shows, with the correlation
+    its shared Π0 stops give the deviations (orthocal.selection.with_measured_noise:
+    honest where ordinary least squares is ~10-20 % off), inflated by √F when the
+    model leaves more than that noise (so a model the data reject does not look
+    precise). Without a noise estimate (one cycle of one reading), the fit's own."""
     proc = config.procedure
     model = model or proc.model
     geometry = config.machine.geometry()
+    data = m.for_identify()
+    try:
+        noise = measurement_noise(config, m)
+    except RunFailed:
+        if model == "auto":
+            raise
+        noise = None
+    selection = None
     try:
         if model != "auto":
-            return orthocal.identify(m.for_identify(), geometry, model=model,
-                                     method=proc.method), None
-        sigma, dof, source = measurement_noise(config, m)
-        sel = orthocal.select_model(m.for_identify(), geometry, sigma, dof,
-                                    method=proc.method, noise_source=source)
+            ident = orthocal.identify(data, geometry, model=model, method=proc.method)
+            test = lack_of_fit(ident, geometry, noise[0], noise[1]) if noise else None
+        else:
+            sigma, dof, source = noise  # type: ignore[misc]
+            sel = orthocal.select_model(data, geometry, sigma, dof, method=proc.method,
+                                        noise_source=source)
+            ident, selection = sel.identification, sel.to_dict()
+            test = next(t for t in sel.tests if t.model == sel.model)
     except orthocal.IdentificationError as exc:
         raise RunFailed(f"identification failed: {exc}") from None
-    return sel.identification, sel.to_dict()
+    if noise is not None:
+        rejected = (test is not None and test.F is not None and test.p_value is not None
+                    and test.p_value < LEVEL and test.F > 1.0)
+        ident = with_measured_noise(ident, geometry, noise[0],
+                                    inflate=math.sqrt(test.F) if rejected else 1.0)
+    return ident, selection

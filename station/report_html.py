@@ -247,7 +247,8 @@ def _model_section(result: Mapping[str, Any]) -> str:
     cands = [c for c in sel.get("candidates") or [] if isinstance(c, dict)]
     if cands:
         rows = [[_e(c.get("model")), "yes" if c.get("identifiable") else "no",
-                 _fmt(c.get("F"), 2), _e(c.get("dof") or "—"),
+                 _fmt(c.get("F"), 2), _e(", ".join(f"{d:g}" for d in c["dof"])
+                                         if isinstance(c.get("dof"), list) else "—"),
                  (f"{c['p_value']:.2g}" if _num(c.get("p_value")) is not None else "—"),
                  _fmt(c.get("residual_rms_mm"), 4),
                  "chosen" if c.get("model") == result.get("model") else

@@ -116,3 +116,32 @@ def test_auto_without_noise_information_is_refused():
         select_model(one_each, G)
     with pytest.raises(IdentificationError, match="positive noise"):
         select_model(one_each, G, noise_sigma=0.0, noise_dof=10)
+
+
+def test_measured_noise_standard_errors_are_honest_where_ordinary_ones_are_not():
+    from orthocal import identify
+    from orthocal.selection import with_measured_noise
+
+    rng = np.random.default_rng(6)
+    names = ("drho_x", "drho_y", "drho_z", "tilt_yx", "tilt_zx", "tilt_zy")
+    z_ols, z_noise = [], []
+    for _ in range(150):
+        truth = np.r_[rng.uniform(-2, 2, 3), 0, 0, 0, 0.5, -0.5, 0.3]
+        data, _ = station_run(truth, rng, noise=0.001)
+        r = identify(data, G, "rho+tilt")
+        sigma, _ = noise_from_cycles(data)
+        honest = with_measured_noise(r, G, sigma)
+        err = r.vector[[0, 1, 2, 6, 7, 8]] - truth[[0, 1, 2, 6, 7, 8]]
+        z_ols.append(err / [r.std_errors[n] for n in names])
+        z_noise.append(err / [honest.std_errors[n] for n in names])
+    rms_ols = np.sqrt(np.mean(np.square(z_ols), axis=0))
+    rms_noise = np.sqrt(np.mean(np.square(z_noise), axis=0))
+    # ordinary least squares' errors are too small for the tilts (shared Π0 stops) ...
+    assert rms_ols[3:].mean() > 1.15
+    # ... the measured noise with the stops' correlation gives errors of the right size
+    # (expected sqrt(ν/(ν − 2)) ≈ 1.045 with the 24-dof noise estimate; ±~5 % Monte Carlo)
+    assert 0.9 < rms_noise.mean() < 1.2
+    assert rms_noise[3:].mean() < rms_ols[3:].mean() - 0.1
+    assert np.all((rms_noise > 0.8) & (rms_noise < 1.3))
+    # and the correlation matrix stays one
+    assert np.allclose(np.diag(honest.correlation), 1.0)

@@ -125,3 +125,30 @@ def test_simulated_tilted_run_with_auto_writes_offsets_within_4_um(tmp_path, cap
     se_yx = result["std_errors"]["tilt_yx"]
     assert f"tilt yx = +{result['identified']['tilt_yx']:.3f} ± {se_yx:.3f} mrad" in text
     assert "not identifiable  a rotation of the whole machine" in text
+
+
+def test_a_tilted_simulated_run_resumes_on_the_same_tilted_machine(tmp_path, capsys):
+    from station.errors import RunFailed
+
+    def alarm_soon(station) -> None:
+        station.controller.faults.alarm_after_moves = 9  # in the second setup
+
+    true_drho = (-0.6, 0.9, 1.1)
+    args = argparse.Namespace(
+        simulate=True, config=None, plan=False, seed=3, true_drho=true_drho, true_dl=None,
+        true_tilt=TILT, noise=0.001, out=str(tmp_path / "runs"), yes=True, json=True,
+        debug=False, sim_procedure={"settle_s": 0.0, "cycles": 2, "readings": 3},
+        sim_station_hook=alarm_soon)
+    with pytest.raises(RunFailed):
+        cmd_run.run(args)
+    (run_dir,) = list((tmp_path / "runs").iterdir())
+    capsys.readouterr()
+    code = cmd_run.resume(argparse.Namespace(run_dir=str(run_dir), out=None, yes=True,
+                                             json=True, debug=False))
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    # the restarted virtual machine has the journal's tilts: auto finds them again
+    assert result["model"] == "rho+tilt"
+    assert result["simulation"]["true_tilt"]["tilt_zx"] == -0.5
+    for name, true in zip(orthocal.TILT_NAMES, TILT, strict=True):
+        assert abs(result["identified"][name] - true) < 5 * result["std_errors"][name]
