@@ -12,7 +12,8 @@ with ``model = "auto"``.
 
     python bench/model_selection.py                    # 500 runs per case, ~3 min
     python bench/model_selection.py --runs 100 --cycles 2
-    python bench/model_selection.py --only strokes     # what intermediate stops cost and buy
+    python bench/model_selection.py --only section_standard_errors
+    python bench/model_selection.py --only section_strokes   # what intermediate stops cost and buy
 
 Requirement (issue 9, noise 2 µm): untilted machines keep ``rho`` in ≥ 99 % of
 runs; with 0.2 mrad of tilt or more a tilt model is picked in ≥ 99 %.
@@ -228,8 +229,35 @@ def section_strokes(args: argparse.Namespace, rng: np.random.Generator) -> None:
         print("    SE predicted/simulated (largest of each group): " + "; ".join(cells))
 
 
+def section_standard_errors(args: argparse.Namespace, rng: np.random.Generator) -> None:
+    """Are the reported standard errors honest? RMS(error / SE) of ordinary least
+    squares against the station's (measured noise with the shared-Π0 correlation)."""
+    from orthocal import identify
+    from orthocal.selection import with_measured_noise
+
+    runs = max(args.runs // 2, 20)
+    for model, tilt in (("rho", np.zeros(3)), ("rho+tilt", np.array([0.5, -0.5, 0.3]))):
+        z_ols, z_station = [], []
+        for _ in range(runs):
+            truth = np.r_[rng.uniform(-args.offset, args.offset, 3), 0, 0, 0, tilt]
+            data, _ = simulate_run(truth, rng, args.noise, args.cycles, args.readings)
+            r = identify(data, G, model)
+            sigma, _ = noise_from_cycles(data)
+            station = with_measured_noise(r, G, sigma)
+            cols = [0, 1, 2] + ([6, 7, 8] if "tilt" in model else [])
+            err = r.vector[cols] - truth[cols]
+            z_ols.append(err / [r.std_errors[n] for n in r.names])
+            z_station.append(err / [station.std_errors[n] for n in r.names])
+
+        def rms(z: list) -> str:
+            return " / ".join(f"{v:.2f}" for v in np.sqrt(np.mean(np.square(z), axis=0)))
+
+        print(f"  RMS(error / SE), {model}, {runs} runs: ordinary least squares {rms(z_ols)}; "
+              f"station (measured noise, shared Π0) {rms(z_station)}")
+
+
 SECTIONS: list[Callable[[argparse.Namespace, np.random.Generator], None]] = [
-    section_rates, section_calibration, section_power, section_strokes,
+    section_rates, section_calibration, section_power, section_standard_errors, section_strokes,
 ]
 
 
@@ -242,11 +270,12 @@ def main() -> None:
     ap.add_argument("--offset", type=float, default=2.0, help="Δρ drawn in ±this, mm")
     ap.add_argument("--level", type=float, default=LEVEL)
     ap.add_argument("--seed", type=int, default=20261124)
-    ap.add_argument("--only", default=None, help="run one section, e.g. 'strokes'")
+    ap.add_argument("--only", choices=[f.__name__ for f in SECTIONS], default=None,
+                    help="run one section")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     for section in SECTIONS:
-        if args.only is None or section.__name__ == f"section_{args.only}":
+        if args.only in (None, section.__name__):
             section(args, rng)
 
 
