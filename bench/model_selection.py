@@ -13,6 +13,7 @@ with ``model = "auto"``.
     python bench/model_selection.py                    # 500 runs per case, ~3 min
     python bench/model_selection.py --runs 100 --cycles 2
     python bench/model_selection.py --only section_standard_errors
+    python bench/model_selection.py --only section_strokes   # what intermediate stops cost and buy
 
 Requirement (issue 9, noise 2 µm): untilted machines keep ``rho`` in ≥ 99 % of
 runs; with 0.2 mrad of tilt or more a tilt model is picked in ≥ 99 %.
@@ -29,13 +30,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthocal import Geometry, deviations
+from orthocal import MODELS, Geometry, IdentificationError, design, deviations, identify
+from orthocal.postures import posture_name
 from orthocal.selection import (
     LEVEL,
     noise_from_cycles,
     noise_from_readings,
     select_model,
 )
+from station.cmd_design import plan_keys
 
 G = Geometry()
 LEGS = "xyz"
@@ -142,6 +145,90 @@ def section_power(args: argparse.Namespace, rng: np.random.Generator) -> None:
     print(f"  power (tilt model picked, one pair tilted, {runs} runs each): " + ", ".join(cells))
 
 
+def simulate_strokes(truth: np.ndarray, strokes: list[float], rng: np.random.Generator,
+                     noise: float, cycles: int, readings: int) -> dict:
+    """Per-cycle deviations of a run through ``strokes`` (the station's visiting
+    order does not matter here: every stop of a cycle is read against the same
+    two Π0 stops)."""
+    names = [posture_name(float(st), G) for st in strokes]
+    keys = [(p, i, j) for p in names for i in LEGS for j in LEGS if i != j]
+    exact = dict(zip(keys, deviations(keys, G, truth), strict=True))
+    n = len(names)
+    data: dict = {k: [] for k in keys}
+    for i in LEGS:
+        for j in (d for d in LEGS if d != i):
+            zero = rng.normal(0.0, noise, (cycles + 1, readings)).mean(axis=1)
+            stops = rng.normal(0.0, noise, (cycles, n, readings)).mean(axis=2)
+            for c in range(cycles):
+                for k, p in enumerate(names):
+                    dev = stops[c, k] - 0.5 * (zero[c] + zero[c + 1])
+                    data[(p, i, j)].append(exact[(p, i, j)] + dev)
+    return data
+
+
+def section_strokes(args: argparse.Namespace, rng: np.random.Generator) -> None:
+    """What intermediate stops cost (run time, from the station's time model) and
+    buy (standard errors: orthocal design's prediction and the scatter of
+    simulated identifications), two against four stops per leg."""
+    from station.cmd_design import run_time
+    from station.config import parse_config
+    from station.plan import build_plan
+
+    runs = max(args.runs // 2, 50)
+    models = ("rho", "rho+tilt", "full+tilt")
+    print(f"intermediate stops ({runs} simulated runs per stroke set, noise "
+          f"{1000 * args.noise:g} µm, {args.cycles} cycles × {args.readings} readings; run time "
+          "at bench/cycle.py's timing: 100 mm/s, 1000 mm/s², settle 0.05 s, mitutoyo 9600 "
+          "baud, measurement + verification, operator mounting excluded):")
+    for strokes in ([60.0, -100.0], [60.0, 30.0, -50.0, -100.0]):
+        cfg = parse_config({
+            "controller": {"speed_mm_s": 100.0, "accel_mm_s2": 1000.0},
+            "indicators": [{"name": "A", "port": "none"}, {"name": "B", "port": "none"}],
+            "setups": [{"leg": i, "indicators": dict(zip("AB", [d for d in LEGS if d != i],
+                                                         strict=True))} for i in LEGS],
+            "procedure": {"cycles": args.cycles, "readings": args.readings,
+                          "settle_s": 0.05, "strokes": strokes}})
+        plan = build_plan(cfg)
+        t = run_time(plan, cfg)
+        keys, indicators = plan_keys(plan)
+        estimates: dict[str, list[np.ndarray]] = {m: [] for m in models}
+        for _ in range(runs):
+            truth = np.zeros(9)
+            truth[:3] = rng.uniform(-args.offset, args.offset, 3)
+            data = simulate_strokes(truth, strokes, rng, args.noise, args.cycles,
+                                    args.readings)
+            for m in models:
+                try:
+                    fit = identify(data, G, model=m, method="nonlinear")
+                    estimates[m].append(fit.vector - truth)
+                except IdentificationError:
+                    break
+        cells = []
+        for m in models:
+            q = design.quality(keys, G, m)
+            if not q.identifiable:
+                cells.append(f"{m}: not identifiable (rank {q.rank} of {len(q.names)})")
+                continue
+            J = design.design_matrix(keys, G, m)
+            pred = 1000 * args.noise * design.run_std_errors(J, indicators, args.cycles,
+                                                              args.readings)
+            # RMS error about the truth of the station's (nonlinear) fit: the linear
+            # one carries several µm of linearisation bias at ±2 mm offsets (model.md).
+            emp = 1000 * np.sqrt(np.mean(np.square(estimates[m]), axis=0))[list(MODELS[m])]
+            groups = {"Δρ": "drho", "ΔL": "dL", "tilt": "tilt"}
+            parts = []
+            for label, prefix in groups.items():
+                idx = [k for k, nm in enumerate(q.names) if nm.startswith(prefix)]
+                if idx:
+                    unit = " µrad" if prefix == "tilt" else " µm"
+                    parts.append(f"{label} {pred[idx].max():.2f}/{emp[idx].max():.2f}{unit}")
+            cells.append(f"{m}: " + ", ".join(parts))
+        label = ", ".join(f"{v:+g}" for v in strokes)
+        print(f"  stops {label} mm: run {t['total_s']:.1f} s ({t['stops']} stops, "
+              f"{t['moves']} moves per phase)")
+        print("    SE predicted/simulated (largest of each group): " + "; ".join(cells))
+
+
 def section_standard_errors(args: argparse.Namespace, rng: np.random.Generator) -> None:
     """Are the reported standard errors honest? RMS(error / SE) of ordinary least
     squares against the station's (measured noise with the shared-Π0 correlation)."""
@@ -170,7 +257,7 @@ def section_standard_errors(args: argparse.Namespace, rng: np.random.Generator) 
 
 
 SECTIONS: list[Callable[[argparse.Namespace, np.random.Generator], None]] = [
-    section_rates, section_calibration, section_power, section_standard_errors,
+    section_rates, section_calibration, section_power, section_standard_errors, section_strokes,
 ]
 
 

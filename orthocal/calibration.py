@@ -2,7 +2,8 @@
 
     Δ^s_{i,j} = b·Δρ_i + a·Δρ_j − b·ΔL_i − c·ΔL_j                          (7)
 
-with, for the posture's tilt α (Π^+: asin(ρmax/L), Π^−: asin(ρmin/L)),
+with, for the posture's tilt α = asin(s/L) at its stroke s (Π^+: ρmax, Π^−: ρmin,
+an intermediate stop Π_i(s): s itself; the derivation holds for any α),
 
     a = sin α,   b = (0.5 + sin α)·tan α,   c = (0.5 + sin α)/cos α − 0.5.
 
@@ -41,7 +42,7 @@ from orthocal.postures import tilt
 
 
 def coefficients(sign: str, geometry: Geometry) -> tuple[float, float, float]:
-    """(a, b, c) of equation (7) for posture sign '+' or '-'."""
+    """(a, b, c) of equation (7) for posture '+', '-' or a signed stroke '+30'."""
     alpha = tilt(sign, geometry)
     s, c_a, t = np.sin(alpha), np.cos(alpha), np.tan(alpha)
     mu = 0.5 + s  # fraction of leg i from its actuator joint to the indicator plane
@@ -60,9 +61,11 @@ def jacobian(keys: Sequence[Key], geometry: Geometry, model: str = "full") -> np
     of ``model`` in PARAM_NAMES order ('rho': Δρ; 'L': ΔL; 'full': Δρ then ΔL;
     'rho+tilt', 'full+tilt': then the tilts, per mrad), shape (len(keys), p)."""
     full = np.zeros((len(keys), len(PARAM_NAMES)))
-    coef = {s: (*coefficients(s, geometry), tilt_coefficient(s, geometry)) for s in ("+", "-")}
+    coef: dict[str, tuple[float, float, float, float]] = {}
     for row, key in enumerate(keys):
         sign, leg, direction = check_key(key)
+        if sign not in coef:
+            coef[sign] = (*coefficients(sign, geometry), tilt_coefficient(sign, geometry))
         a, b, c, d = coef[sign]
         i, j = AXIS_INDEX[leg], AXIS_INDEX[direction]
         full[row, i] += b

@@ -17,9 +17,9 @@ import numpy as np
 
 from orthocal.geometry import AXIS_INDEX, Geometry, split_params
 from orthocal.kinematics import axis_directions, forward, forward_on_axes
-from orthocal.postures import posture
+from orthocal.postures import check_posture, posture
 
-Key = tuple[str, str, str]  # (posture sign, leg i, direction j)
+Key = tuple[str, str, str]  # (posture: "+", "-" or a signed stroke "+30"; leg i; direction j)
 
 
 def check_key(key: Key) -> Key:
@@ -27,8 +27,10 @@ def check_key(key: Key) -> Key:
     if not (isinstance(key, tuple) and len(key) == 3):
         raise ValueError(f"a deviation key is (sign, leg, direction), got {key!r}")
     sign, leg, direction = key
-    if sign not in ("+", "-"):
-        raise ValueError(f"posture sign must be '+' or '-', got {sign!r} in {key!r}")
+    try:
+        check_posture(sign)
+    except ValueError as exc:
+        raise ValueError(f"{exc} in {key!r}") from None
     if leg not in AXIS_INDEX or direction not in AXIS_INDEX:
         raise ValueError(f"leg and direction must be x, y or z, got {key!r}")
     if leg == direction:

@@ -215,6 +215,21 @@ class ProcedureConfig(_Strict):
     max_iterations: int = Field(3, ge=1, le=10)
     # A significant correction smaller than this is not worth another round (mm).
     converge_mm: float = Field(0.002, ge=0)
+    # The stops Π_i(s) of each cycle, mm (model.md "Test postures"); absent: the
+    # paper's two, ρmax and ρmin, and every plan, journal and JSON exactly as before.
+    strokes: list[float] | None = Field(None, min_length=1, max_length=20)
+
+    @field_validator("strokes")
+    @classmethod
+    def _strokes(cls, value: list[float] | None) -> list[float] | None:
+        if value is None:
+            return value
+        for s in value:
+            if not math.isfinite(s) or s == 0:
+                raise ValueError(f"must be finite and nonzero, got {s:g}")
+        if len(set(value)) != len(value):
+            raise ValueError("must be unique")
+        return value
 
 
 class WritebackConfig(_Strict):
@@ -231,6 +246,12 @@ class StationConfig(_Strict):
 
     @model_validator(mode="after")
     def _references(self) -> StationConfig:
+        m = self.machine
+        for s in self.procedure.strokes or ():
+            if not m.rho_min <= s <= m.rho_max:
+                raise ValueError(
+                    f"procedure.strokes: {s:g} is outside [rho_min, rho_max] = "
+                    f"[{m.rho_min:g}, {m.rho_max:g}] of [machine]")
         names = [ind.name for ind in self.indicators]
         for idx, name in enumerate(names):
             if name in names[:idx]:

@@ -96,6 +96,14 @@ def _what_was_done(result: Mapping[str, Any]) -> str:
     method = {"linear": "the linearised calibration equations",
               "nonlinear": "the exact kinematic model (iterative least squares)"}.get(
         str(result.get("method")), str(result.get("method", "—")))
+    # [procedure] strokes: intermediate stops Π_i(s) beside or instead of Π_i^±.
+    kinds = {k[:-2] for k in _dict(result.get("deviations"))} or {"+", "-"}
+    n_post = len(kinds)
+    count = 3 * n_post * 2
+    postures = ("the two test postures Π<sub>i</sub><sup>+</sup> and Π<sub>i</sub><sup>−</sup> "
+                "(leg i pushed to the end of its stroke each way)") if kinds == {"+", "-"} else (
+        f"{n_post} test postures Π<sub>i</sub>(s) along leg i's axis, at the strokes s of "
+        "<code>[procedure] strokes</code>")
     stopped = ""
     if result.get("status") in ("failed", "aborted"):
         # The paragraph below describes the whole procedure; say plainly that this
@@ -106,12 +114,11 @@ def _what_was_done(result: Mapping[str, Any]) -> str:
     return stopped + (
         "<p>Two dial indicators were mounted against each leg of the machine in turn. "
         "For each leg the station moved the machine from the <i>mechanical zero</i> "
-        "posture Π<sub>0</sub> to the two test postures Π<sub>i</sub><sup>+</sup> and "
-        "Π<sub>i</sub><sup>−</sup> (leg i pushed to the end of its stroke each way) and "
+        f"posture Π<sub>0</sub> to {postures} and "
         f"back, repeatedly{_e(cyc)}, reading the indicators at every stop. On a perfectly "
         "calibrated machine each leg moves parallel to itself in these postures, so the "
-        "indicators read the same everywhere; the 12 differences "
-        "(3 legs × 2 postures × 2 indicators), called <i>deviations</i>, show how far the "
+        f"indicators read the same everywhere; the {count} differences "
+        f"(3 legs × {n_post} postures × 2 indicators), called <i>deviations</i>, show how far the "
         "legs tilt. From them the station estimated, by least squares on "
         f"{_e(method)}, the {_e(model)}.</p>"
         '<p class="small">Δρ<sub>i</sub> (joint offset): how far axis i really is from '

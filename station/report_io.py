@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from station.report_text import DEVIATION_KEYS
+from station.report_text import _dev_keys
 
 # Key order of result.json: the schema's order, so that a person opening the file
 # finds status and identified values at the top, not buried alphabetically.
@@ -66,10 +66,7 @@ def _ordered(result: Mapping[str, Any]) -> dict[str, Any]:
     for section in (out, out.get("verification")):
         if isinstance(section, dict) and isinstance(section.get("deviations"), dict):
             devs = section["deviations"]
-            keys = [k for k in DEVIATION_KEYS if k in devs] + sorted(
-                k for k in devs if k not in DEVIATION_KEYS
-            )
-            section["deviations"] = {k: devs[k] for k in keys}
+            section["deviations"] = {k: devs[k] for k in _dev_keys(devs)}
     return out
 
 

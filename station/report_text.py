@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import html
 import math
+import re
 from collections.abc import Iterable, Mapping
 from datetime import datetime
 from pathlib import Path
@@ -96,9 +97,16 @@ def _param_tex(name: str) -> str:
 
 
 def _dev_parts(key: str) -> tuple[str, str, str] | None:
-    if len(key) == 3 and key[0] in "+-" and key[1] in AXES and key[2] in AXES:
-        return key[0], key[1], key[2]
+    """(posture, leg, direction) of "+xy" or of a stroke key such as "+30xy"."""
+    if re.fullmatch(r"[+-](\d+(\.\d*)?|\.\d+)?[xyz][xyz]", key):
+        return key[:-2], key[-2], key[-1]
     return None
+
+
+def _posture_html(posture: str, leg: str) -> str:
+    if posture in ("+", "-"):
+        return f"Π<sub>{leg}</sub><sup>{'+' if posture == '+' else '−'}</sup>"
+    return f"Π<sub>{leg}</sub>({posture.replace('-', '−')} mm)"
 
 
 def _dev_html(key: str) -> str:
@@ -106,7 +114,7 @@ def _dev_html(key: str) -> str:
     if parts is None:
         return html.escape(key)
     sign, leg, d = parts
-    return f"Π<sub>{leg}</sub><sup>{'+' if sign == '+' else '−'}</sup> along {d}"
+    return f"{_posture_html(sign, leg)} along {d}"
 
 
 def _dev_tex(key: str) -> str:
@@ -114,6 +122,8 @@ def _dev_tex(key: str) -> str:
     if parts is None:
         return key
     sign, leg, d = parts
+    if sign not in ("+", "-"):
+        return rf"$\Pi_{leg}({sign})$" + f"\nalong {d}"
     return rf"$\Pi_{leg}^{{{sign}}}$" + f"\nalong {d}"
 
 
@@ -145,7 +155,18 @@ def _dev_keys(*tables: Mapping[str, Any]) -> list[str]:
     present: set[str] = set()
     for t in tables:
         present.update(t)
-    return [k for k in DEVIATION_KEYS if k in present] + sorted(present - set(DEVIATION_KEYS))
+    return sorted(present, key=_dev_order)
+
+
+def _dev_order(key: str) -> tuple:
+    """Leg, then posture from ρmax down to ρmin ('+', '+30', '-50', '-'), then
+    direction: DEVIATION_KEYS' order, with intermediate strokes in their place."""
+    parts = _dev_parts(key)
+    if parts is None:
+        return (1, key)
+    posture, leg, d = parts
+    s = {"+": math.inf, "-": -math.inf}.get(posture)
+    return (0, leg, -(float(posture) if s is None else s), d)
 
 
 def _when(iso: Any) -> str:

@@ -13,7 +13,7 @@ import numpy as np
 
 import orthocal
 from station.config import StationConfig
-from station.sequencer import Measurement
+from station.sequencer import Measurement, split_key
 from station.writeback import WritebackOutcome
 
 AXES = ("x", "y", "z")
@@ -38,7 +38,7 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
     stats = m.stats()
     deviations = {}
     for key, st in stats.items():
-        model = ident.predicted.get((key[0], key[1], key[2]))
+        model = ident.predicted.get(split_key(key))
         deviations[key] = {**st, "model": num(model)}
     means = np.array([st["mean"] for st in stats.values()])
     noise = m.noise_mm
