@@ -35,7 +35,7 @@ from station.results import (
     writeback_fields,
 )
 from station.rundir import now_iso
-from station.sequencer import Measurement, Sequencer
+from station.sequencer import Measurement, Sequencer, split_key
 from station.writeback import WritebackOutcome, write_back
 
 
@@ -183,7 +183,7 @@ class Flow:
         """The verification block, judged against what the model predicts once the
         Δρ of ``before`` are written: ΔL and tilts cannot be, and still show."""
         geometry = self.ctx.config.machine.geometry()
-        keys = [(k[0], k[1], k[2]) for k in fields["deviations"]]
+        keys = [split_key(k) for k in fields["deviations"]]  # "+xy", "+30xy"
         predicted = predicted_after_correction(keys, geometry, before.parameters)
         deviations = {k: {**v, "expected": float(p)} for (k, v), p
                       in zip(fields["deviations"].items(), predicted, strict=True)}
