@@ -244,7 +244,8 @@ def test_dropped_connection_reconnects() -> None:
     with station("tcp", faults=Faults(disconnect_next=1)) as (sim, ctl, events):
         np.testing.assert_allclose(ctl.read_positions(), PI0, atol=1e-9)
         assert sim.stats.disconnects == 1
-        assert len(events) == 1 and "connection" in events[0]["error"]
+        assert [e["event"] for e in events] == ["retry", "reconnected", "reference-check"]
+        assert "connection" in events[0]["error"] and not events[2]["lost"]
 
 
 def test_alarm_after_moves(transport: str) -> None:
