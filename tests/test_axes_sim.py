@@ -370,12 +370,13 @@ def test_controller_gone_mid_session_is_a_connection_error() -> None:
     events: list[dict] = []
     try:
         with ModbusAxisController(**sim.client_kwargs(), timeout_s=TIMEOUT_S, retries=1,
-                                  on_event=events.append) as ctl:
+                                  on_event=events.append, reconnect_s=0.3) as ctl:
             ctl.read_positions()
             sim.close()
             with pytest.raises(ControllerConnectionError, match="read positions"):
                 ctl.read_positions()
-            assert len(events) == 1
+            assert events[0]["event"] == "retry"
+            assert {e["event"] for e in events[1:]} == {"reconnect"}
     finally:
         sim.close()
 
