@@ -179,6 +179,12 @@ class SimIndicator:
             self._source = source
             self._zero = float(source()) if zero_mm is None else float(zero_mm)
 
+    @property
+    def zero_mm(self) -> float:
+        """The source position the gauge reads 0 at."""
+        with self._lock:
+            return self._zero
+
     def unmount(self) -> None:
         """Take the gauge off: it then reads ``unmounted_mm`` (plus noise)."""
         with self._lock:
