@@ -599,6 +599,9 @@ class ModbusAxisController:
         regs = self.map.axis_registers("OFFSET")
         items = [(reg, reg.encode(v)) for reg, v in zip(regs, o, strict=True)]
         self._write_words(items, "write offsets")
+        # New offsets shift every counted position of carriages that have not moved:
+        # not a jump for the reference check after a reconnect.
+        self._last_positions = self._last_target = None
         back = self._read_counts(regs, "read back offsets")
         wanted = {reg.name: reg.counts(v) for reg, v in zip(regs, o, strict=True)}
         if any(back[n] != wanted[n] for n in wanted):
