@@ -321,7 +321,7 @@ class SerialIndicator:
             raise IndicatorPortError(self.device, f"cannot open port: {e}") from e
         return self._serial
 
-    def _open_within(self, why: str) -> Any:
+    def _open_within(self, why: str, announce: bool = False) -> Any:
         """Open the port, trying again until ``reopen_s`` has passed (an adapter being
         plugged in takes a second or two to appear); every failed try is reported."""
         started = time.monotonic()
@@ -343,7 +343,7 @@ class SerialIndicator:
                             "elapsed_s": round(elapsed, 3)})
                 time.sleep(min(0.05 * 2 ** min(attempt, 4), 0.5, remaining))
                 continue
-            if attempt > 1:
+            if attempt > 1 or announce:
                 self._emit({"event": "reopened", "device": self.device, "indicator": self.name,
                             "port": self.port, "attempts": attempt,
                             "elapsed_s": round(time.monotonic() - started, 3)})
@@ -391,11 +391,13 @@ class SerialIndicator:
                 # that failed: its half-read reply is lost with it.
                 self._drop_port()
                 try:
-                    self._open_within(f"port failed: {e}")
+                    self._open_within(f"port failed: {e}", announce=True)
                 except IndicatorPortError as gone:
                     raise IndicatorPortError(
                         self.device, f"port failed: {e}; {gone.message}") from e
-                err = IndicatorTimeout(self.device, f"port failed and reopened: {e}")
+                # Bounded like any attempt; the reopen events already say what happened.
+                failures.append(IndicatorPortError(self.device, f"port failed (reopened): {e}"))
+                continue
             failures.append(err)
             if attempt < attempts:
                 self._emit(

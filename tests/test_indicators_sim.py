@@ -270,8 +270,10 @@ def test_close_interrupts_a_pending_late_reply() -> None:
     sim.close(timeout_s=5.0)  # raises if the thread were still waiting out the 60 s
 
 
-def test_unplug_is_a_port_error_naming_the_port() -> None:
-    with rig("mitutoyo", Leg(1.0), zero_mm=0.0) as (sim, ind, ev):
+def test_unplug_is_a_port_error_naming_the_port(tmp_path) -> None:
+    # Behind a stable link, as a real adapter is: a bare /dev/pts path freed by the
+    # unplug may be given to another process's pty, which the reopen would open.
+    with rig("mitutoyo", Leg(1.0), zero_mm=0.0, link=tmp_path / "usb-A") as (sim, ind, ev):
         assert ind.read() == 1.0
         port = sim.port
         sim.unplug()
