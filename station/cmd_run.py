@@ -81,8 +81,13 @@ def run(args: argparse.Namespace) -> int:
         lock = _lock(stack, config, "run", None)
         devices = open_devices(config, on_event, station)
         stack.callback(devices.close)
-        check_plan(plan, config, devices.controller.soft_limits(),
-                   start=devices.controller.read_positions())
+        operator = _operator(args, station)
+        limits = devices.controller.soft_limits()
+        check_plan(plan, config, limits)  # every posture, before anything moves
+        # A controller that lost its reference (power cut before the run) counts
+        # positions from nowhere: home it first, with the operator's consent.
+        home_if_needed(devices.controller, config, None, operator, say)
+        check_plan(plan, config, limits, start=devices.controller.read_positions())
 
         run_dir = new_run_dir(Path(args.out))
         update_run_dir(lock, run_dir)
@@ -99,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
                         "plan": plan.to_json(), "simulation": sim, "started": now_iso(),
                         "argv": sys.argv[1:]})
         say(f"orthocal: run directory {run_dir}")
-        ctx = Run(run_dir, config, plan, journal, devices, _operator(args, station), sim, args,
+        ctx = Run(run_dir, config, plan, journal, devices, operator, sim, args,
                   JournalState(), [], now_iso())
         return execute(ctx)
 

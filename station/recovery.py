@@ -73,17 +73,18 @@ def _readings(records: list[dict[str, Any]]) -> dict[tuple[str, str], list[float
             for r in records if r["type"] == "reading"}
 
 
-def home_if_needed(controller: Any, config: StationConfig, journal: Journal,
+def home_if_needed(controller: Any, config: StationConfig, journal: Journal | None,
                    operator: Operator, say: Callable[[str], None]) -> bool:
     """Home the machine if it lost its reference (HOMED clear), with the operator's
-    consent. True if it was homed now."""
+    consent. True if it was homed now. ``journal``: None before a run has one."""
     status = controller.read_status()
     if status.homed:
         return False
     say("orthocal: the controller is not homed (its reference was lost, e.g. by a power "
         "cut): positions it counts cannot be used until it is homed")
-    journal.append({"type": "event", "event": {"event": "not-homed",
-                                               "device": controller.device}})
+    if journal is not None:
+        journal.append({"type": "event", "event": {"event": "not-homed",
+                                                   "device": controller.device}})
     if not operator.confirm("Home the machine now (COMMAND 3)? The axes move to their home "
                             "switches; gauges may stay mounted"):
         raise RunFailed("the machine must be homed before the run can go on; homing "
@@ -93,8 +94,9 @@ def home_if_needed(controller: Any, config: StationConfig, journal: Journal,
     t0 = time.monotonic()
     controller.home(timeout_s=config.controller.home_timeout_s)
     position = [float(v) for v in controller.read_positions()]
-    journal.append({"type": "homed", "position": position,
-                    "elapsed_s": round(time.monotonic() - t0, 3)})
+    if journal is not None:
+        journal.append({"type": "homed", "position": position,
+                        "elapsed_s": round(time.monotonic() - t0, 3)})
     say(f"orthocal: homed in {time.monotonic() - t0:.1f} s")
     return True
 

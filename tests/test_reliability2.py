@@ -289,3 +289,16 @@ def test_a_second_station_on_the_same_machine_is_refused_at_once(
         o = orthocal("rollback", str(run_dir), "--yes")
         assert f"took over the lock on controller 127.0.0.1:{station.controller.port}" in o.err
         assert f"pid {holder.pid}" in o.err and "that process is gone" in o.err
+
+
+def test_a_run_on_a_controller_that_lost_its_reference_homes_it_first(
+        tmp_path: Path, orthocal, reference) -> None:  # noqa: F811
+    def unhomed(rig: Rig, station: VirtualStation) -> None:
+        # Power was lost before the run: the count restarted at 0 on every axis.
+        station.machine.power_cycle([0.0, 0.0, 0.0])
+
+    o = orthocal(*argv(tmp_path / "runs", "--json"), prepare=unhomed)
+    assert o.code == 0, o.err
+    assert "not homed" in o.err and "homed in" in o.err
+    assert o.rig.station.controller.stats.commands.get(3) == 1  # COMMAND 3: homing
+    assert_uninterrupted(json.loads(o.out), o.run_dir, reference)
