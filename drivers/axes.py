@@ -18,7 +18,9 @@ Wire discipline:
   reconnect, again and again within ``reconnect_s`` (each attempt reported as
   ``{"event": "reconnect", ...}``, success as ``"reconnected"``), then
   :class:`ControllerConnectionError`;
-* after a reconnect the drive's STATUS is read before anything else: a drive
+* after a reconnect, or a request that failed for good (on a serial line a drive
+  that lost power is only silent), the drive's STATUS is read before anything
+  else: a drive
   that came back with HOMED clear (power cut) raises :class:`ControllerNotHomed`
   for every request but homing and status, so a position counted from a lost
   reference is never returned;
@@ -275,7 +277,10 @@ class ModbusAxisController:
                     elif kind == "connection":
                         self._reconnect(op, error)
                         self._check_reference(op)
+
             detail = f"{op}: {error} after {attempts} attempt(s)"
+            if kind != "busy" and not self._checking:
+                self._lost_reference = None  # whatever answers next is checked first
             if kind == "busy":
                 raise ControllerBusy(self.device, detail)
             if kind == "connection":

@@ -16,7 +16,7 @@ import pytest
 
 import orthocal
 from drivers.axes import ModbusAxisController
-from drivers.errors import ControllerConnectionError, ControllerNotHomed
+from drivers.errors import ControllerConnectionError, ControllerNotHomed, ControllerTimeout
 from drivers.sim.controller import SimController
 from drivers.sim.machine import VirtualOrthoglide
 
@@ -132,6 +132,31 @@ def test_positions_that_jump_while_homed_are_refused() -> None:
         sim.machine.count_shift = np.array([0.0, 3.0, 0.0])
         with pytest.raises(ControllerNotHomed, match="positions jumped"):
             ctl.read_positions()
+    finally:
+        ctl.close()
+        sim.close()
+
+
+def test_rtu_power_cut_is_silence_then_a_drive_that_must_be_homed() -> None:
+    sim = SimController(VirtualOrthoglide(GEOMETRY, speed_mm_s=400.0, accel_mm_s2=20000.0),
+                        transport="rtu")
+    sim.start()
+    ctl = ModbusAxisController(**sim.client_kwargs(), timeout_s=0.1, retries=1)
+    try:
+        ctl.connect()
+        assert np.allclose(ctl.read_positions(), PI0, atol=1e-3)
+        sim.power_cut(1.0, count_mm=0.0)
+        _wait_cut(sim)
+        with pytest.raises(ControllerTimeout):
+            ctl.read_positions()  # a serial drive without power is only silent
+        deadline = time.monotonic() + 5.0
+        while not sim.powered and time.monotonic() < deadline:
+            time.sleep(0.02)
+        # Back, answering again: what it counts from the lost reference is refused.
+        with pytest.raises(ControllerNotHomed, match="HOMED clear"):
+            ctl.read_positions()
+        ctl.home(timeout_s=5.0)
+        assert np.allclose(ctl.read_positions(), PI0, atol=1e-3)
     finally:
         ctl.close()
         sim.close()
