@@ -6,7 +6,11 @@ Record types (field ``type``): ``header`` (config, plan, version, simulation),
 ``outlier``, ``event`` (driver retries and faults), ``cycle``, ``setup_done``,
 ``identification``, ``writeback`` (stage backup|intent|done|refused|declined|
 failed-restored), ``verification``, ``fault``, ``aborted``, ``finished``,
-``rollback``.
+``rollback``, and after a power cut ``homed``, ``reference-check`` (the Π0
+check after homing) and ``setup-redo`` (that setup's earlier cycles are void,
+see station.recovery). Driver events include ``retry``, ``reconnect`` /
+``reconnected`` / ``reference-check`` (controller) and ``reopen`` /
+``reopened`` (a gauge's port).
 
 A torn last line (killed mid-write) is tolerated when reading; reopening
 appends a newline and a ``resumed`` record after it, so the journal before the
