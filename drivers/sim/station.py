@@ -125,6 +125,7 @@ class VirtualStation:
         procedure: dict[str, Any] | None = None,
         writeback: dict[str, Any] | None = None,
         mount_all: bool = False,
+        controller_options: dict[str, Any] | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
@@ -148,8 +149,10 @@ class VirtualStation:
         # Stable paths, as /dev/serial/by-id/... gives a real USB adapter: a gauge
         # unplugged and plugged back (SimIndicator.unplug_for) keeps its port.
         self._link_dir = Path(tempfile.mkdtemp(prefix="orthocal-serial-by-id-"))
+        # controller_options: further SimController keywords (transport,
+        # soft_limit_registers, ...) for a station that differs from the default drive.
         self.controller = SimController(self.machine, port=port, faults=controller_faults,
-                                        seed=seed)
+                                        seed=seed, **(controller_options or {}))
         self.indicators: dict[str, SimIndicator] = {}
         try:
             self.controller.start()
@@ -214,7 +217,8 @@ class VirtualStation:
     # --- description ----------------------------------------------------------------------
 
     def ports(self) -> dict[str, Any]:
-        return {"controller": self.controller.port,
+        return {"controller": self.controller.port if self.controller.transport == "tcp"
+                else self.controller.serial_port,
                 "indicators": {n: s.port for n, s in self.indicators.items()}}
 
     def config(self) -> dict[str, Any]:
@@ -222,9 +226,8 @@ class VirtualStation:
         g = self.geometry
         return {
             "machine": {"leg_length": g.leg_length, "rho_min": g.rho_min, "rho_max": g.rho_max},
-            "controller": {"transport": "tcp", "host": "127.0.0.1",
-                           "port": self.controller.port, "device_id": 1,
-                           "profile": "orthocal-generic", "timeout_s": 1.0,
+            # TCP: host and port; RTU: the pty the client opens and its baud rate.
+            "controller": {**self.controller.client_kwargs(), "timeout_s": 1.0,
                            "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2},
             "indicators": [{"name": n, "port": s.port, "protocol": self.protocol}
                            for n, s in self.indicators.items()],
