@@ -197,10 +197,10 @@ def test_a_resume_started_while_the_port_is_gone_waits_for_it(
 
 def _limited(limit: int):
     import resource
-    import signal
 
     def preexec() -> None:
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # write() fails with EFBIG instead
+        # SIGXFSZ keeps its default (kill): the station itself must ignore it so that
+        # the write fails with EFBIG instead.
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
     return preexec
