@@ -314,9 +314,11 @@ def test_opening_waits_for_a_port_being_plugged_in(tmp_path) -> None:
         assert events[-1]["event"] == "reopened" and events[0]["event"] == "reopen"
 
 
-def test_unplug_flag_set_at_run_time() -> None:
+def test_unplug_flag_set_at_run_time(tmp_path) -> None:
     faults = IndicatorFaults()
-    with rig("sylvac", Leg(), faults=faults, timeout_s=0.2, retries=1) as (sim, ind, _):
+    # Behind a stable link: the freed /dev/pts path may go to another process's pty.
+    with rig("sylvac", Leg(), faults=faults, timeout_s=0.2, retries=1,
+             link=tmp_path / "usb-A") as (sim, ind, _):
         ind.read()
         faults.unplugged = True
         with pytest.raises((IndicatorPortError, IndicatorTimeout)) as info:
