@@ -18,13 +18,20 @@ them instead (name -> mm), for figures that need a given misplacement.
 
 The virtual controller's offsets can be persisted to a file after every write
 (``nvram_path``), like a real drive's non-volatile memory, so a resumed or
-rolled-back simulated run sees what was written before.
+rolled-back simulated run sees what was written before. The same file keeps
+whether the drive is homed and how its count relates to the carriages (a power
+cut loses both until homing), and a second file next to it
+(``sim_gauges.json``) where the operator's gauges sit and where they were
+zeroed: a station restarted for ``resume`` finds the machine and the gauges as
+the interrupted run left them.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
+import tempfile
 import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -61,8 +68,21 @@ DEFAULT_PROCEDURE: dict[str, Any] = {
 }
 
 
+MOUNTS_NAME = "sim_gauges.json"
+
+
+def _write_json(path: Path, data: Any) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(data, fh)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
 class _PersistentMachine(VirtualOrthoglide):
-    """A machine whose controller offsets survive a restart through a file."""
+    """A machine whose controller offsets and homing state survive a restart
+    through a file."""
 
     nvram_path: Path | None = None
 
@@ -70,16 +90,28 @@ class _PersistentMachine(VirtualOrthoglide):
         super().set_offsets(offsets)
         self.save_offsets()
 
+    def power_cycle(self, count_mm: Sequence[float] | None = None,
+                    seed: int | None = None) -> None:
+        super().power_cycle(count_mm, seed)
+        self.save_offsets()
+
+    def _set_homed(self) -> None:
+        super()._set_homed()
+        self.save_offsets()
+
     def save_offsets(self) -> None:
         if self.nvram_path is None:
             return
-        path = self.nvram_path
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump({"offsets_mm": [float(v) for v in self.offsets]}, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        _write_json(self.nvram_path, {
+            "offsets_mm": [float(v) for v in self.offsets],
+            "homed": bool(self._homed),  # not status(): this runs inside _advance
+            "count_shift_mm": [float(v) for v in self.count_shift]})
+
+    def load(self, saved: dict[str, Any]) -> None:
+        self.set_offsets(saved["offsets_mm"])
+        with self._lock:
+            self._homed = bool(saved.get("homed", True))
+            self.count_shift = np.asarray(saved.get("count_shift_mm", [0.0] * 3), dtype=float)
 
 
 class VirtualStation:
@@ -133,10 +165,14 @@ class VirtualStation:
         if nvram_path is not None:
             path = Path(nvram_path)
             if path.exists():
-                saved = json.loads(path.read_text())["offsets_mm"]
-                self.machine.set_offsets(saved)
+                self.machine.load(json.loads(path.read_text()))
             self.machine.nvram_path = path
+        self.mounts_path: Path | None = None
+        self._mounts: dict[str, dict[str, Any]] = {}
         names = sorted({n for s in self.setups for n in s["indicators"]})
+        # Stable paths, as /dev/serial/by-id/... gives a real USB adapter: a gauge
+        # unplugged and plugged back (SimIndicator.unplug_for) keeps its port.
+        self._link_dir = Path(tempfile.mkdtemp(prefix="orthocal-serial-by-id-"))
         # controller_options: further SimController keywords (transport,
         # soft_limit_registers, ...) for a station that differs from the default drive.
         self.controller = SimController(self.machine, port=port, faults=controller_faults,
@@ -149,10 +185,13 @@ class VirtualStation:
                 line_baud = baud if baud is not None else make_protocol(protocol).baudrate
                 sim = SimIndicator(protocol, lambda: 0.0, noise_mm=noise_mm,
                                    baud=line_baud if line_time else None, faults=faults,
-                                   seed=None if seed is None else seed * 101 + i, name=name)
+                                   seed=None if seed is None else seed * 101 + i, name=name,
+                                   link=self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00")
                 sim.unmount()
                 self.indicators[name] = sim
                 sim.start()
+            if nvram_path is not None:
+                self._restore_mounts(Path(nvram_path).with_name(MOUNTS_NAME))
             if mount_all:
                 # A separate process cannot be told where the operator mounted
                 # the gauges: all six stay where their setups put them.
@@ -191,13 +230,19 @@ class VirtualStation:
         else:
             error = float(self._mount_draw(name, leg, where)) * self.mount_error_mm
         self.mount_log.append((name, leg, direction, error))
+        gauge = self.indicators[name]
+        gauge.mount(self._source_at(leg, direction, error))
+        self._mounts[name] = {"leg": leg, "direction": direction, "zero_mm": gauge.zero_mm,
+                              "stand_error_mm": error}
+        self._save_mounts()
+
+    def _source_at(self, leg: str, direction: str, stand_error: float) -> Callable[[], float]:
         # Through self.source(leg, direction), which tests wrap to inject knocks.
-        self._stand_error = error
+        self._stand_error = stand_error
         try:
-            src = self.source(leg, direction)
+            return self.source(leg, direction)
         finally:
             self._stand_error = 0.0
-        self.indicators[name].mount(src)
 
     def _mount_draw(self, name: str, leg: str, where: str | None) -> float:
         """Uniform in [-1, 1]: from (seed, placement) when both are known, else fresh."""
@@ -209,6 +254,24 @@ class VirtualStation:
 
     def unmount(self, name: str) -> None:
         self.indicators[name].unmount()
+        if self._mounts.pop(name, None) is not None:
+            self._save_mounts()
+
+    def _save_mounts(self) -> None:
+        if self.mounts_path is not None:
+            _write_json(self.mounts_path, self._mounts)
+
+    def _restore_mounts(self, path: Path) -> None:
+        """The gauges stay on the machine while the station restarts."""
+        self.mounts_path = path
+        if not path.exists():
+            return
+        for name, m in json.loads(path.read_text()).items():
+            if name in self.indicators:
+                # the stand stays where it was placed, misplacement included
+                src = self._source_at(m["leg"], m["direction"], m.get("stand_error_mm", 0.0))
+                self.indicators[name].mount(src, zero_mm=m["zero_mm"])
+                self._mounts[name] = m
 
     # --- description ----------------------------------------------------------------------
 
@@ -237,14 +300,18 @@ class VirtualStation:
         return self.machine.offsets
 
     def persist_offsets(self, path: str | Path) -> None:
+        """Keep the drive's memory in ``path`` and the gauges' mounting next to it."""
         self.machine.nvram_path = Path(path)
         self.machine.save_offsets()
+        self.mounts_path = Path(path).with_name(MOUNTS_NAME)
+        self._save_mounts()
 
     def close(self) -> None:
         for sim in self.indicators.values():
             sim.close()
         self.indicators = {}
         self.controller.close()
+        shutil.rmtree(self._link_dir, ignore_errors=True)
 
     def __enter__(self) -> VirtualStation:
         return self
