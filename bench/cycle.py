@@ -116,6 +116,13 @@ def physical_floor(run_dir: Path, start_m: np.ndarray, timing: Timing
     before = np.array([result["offsets_before"][a] for a in AXES])
     written = result.get("offsets_written")
     after = before if not written else np.array([written[a] for a in AXES])
+    # Closed loop: each phase runs on the offsets the write-back before it left.
+    offsets_of = {"m": before}
+    current = before
+    for it in result.get("iterations") or []:
+        offsets_of[it["phase"]] = current
+        if it.get("offsets_written"):
+            current = np.array([it["offsets_written"][a] for a in AXES])
     # Stops in the order they were read, with the most readings any gauge took there.
     stops: dict[str, int] = {}
     for r in records:
@@ -126,7 +133,8 @@ def physical_floor(run_dir: Path, start_m: np.ndarray, timing: Timing
     for stop in stops:
         phase, setup, _cycle, sign = stop.split(":")
         rho = np.array(plan["setups"][int(setup)]["postures"][sign], dtype=float)
-        target = rho + (before if phase == "m" else after)  # machine scale
+        target = rho + offsets_of.get(phase, before if phase == "m" else after)  # machine
+
         distance = float(np.max(np.abs(target - position)))
         if distance > 1e-3:  # the station skips moves within a µm, as the drive would
             moves += _Profile.trapezoid(distance, timing.speed_mm_s, timing.accel_mm_s2).duration
@@ -161,6 +169,7 @@ def station_command(profile: str | None) -> list[str]:
 def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None,
              timing: Timing, out: Path, profile: str | None = None,
              true_drho: list[float] | None = None, quiet: bool = True,
+             mount_error_mm: float = 0.0,
              strokes: list[float] | None = None) -> Outcome:
     rng = np.random.default_rng(seed)
     drho = true_drho if true_drho is not None else \
@@ -168,7 +177,7 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
     with VirtualStation(drho, (0.0, 0.0, 0.0), noise_mm, seed, speed_mm_s=timing.speed_mm_s,
                         accel_mm_s2=timing.accel_mm_s2, protocol=timing.protocol,
                         baud=timing.baud, line_time=True, indicator_count=6,
-                        mount_all=True) as station:
+                        mount_all=True, mount_error_mm=mount_error_mm) as station:
         machine = station.machine
         started: list[float] = []
         move_to = machine.move_to
@@ -218,6 +227,11 @@ def report(label: str, o: Outcome) -> None:
           f"{o.cycles_used('v')}; Δρ error "
           + ", ".join(f"{e:+.2f}" for e in o.errors_um) + " µm, reported SE "
           + ", ".join(f"{s:.2f}" for s in o.std_errors_um) + " µm")
+    its = o.result.get("iterations") or []
+    if its:
+        print(f"    closed loop: {sum(1 for i in its if i.get('offsets_written'))} write-back(s),"
+              f" phases {' '.join(i['phase'] for i in its)}, converged "
+              f"{o.result.get('converged')}")
 
 
 def main() -> None:
@@ -237,6 +251,9 @@ def main() -> None:
                              "(--fixed-cycles) on the same machines")
     parser.add_argument("--fixed-cycles", type=int, default=3)
     parser.add_argument("--profile", metavar="FILE", help="run the station under cProfile")
+    parser.add_argument("--mount-error", type=float, default=0.0, metavar="MM",
+                        help="stands off the legs' middles by up to this: the closed loop "
+                             "then takes more than one write-back")
     parser.add_argument("--verbose", action="store_true", help="show the station's stderr")
     parser.add_argument("--strokes", type=lambda t: [float(v) for v in t.split(",")],
                         default=None, metavar="A,B,..",
@@ -257,7 +274,7 @@ def main() -> None:
                 o = run_once(seed=args.seed + k, noise_mm=args.noise, cycles=args.cycles,
                              target_se=args.target_se, timing=timing, out=out,
                              profile=args.profile, quiet=not args.verbose,
-                             strokes=args.strokes)
+                             mount_error_mm=args.mount_error, strokes=args.strokes)
                 report(f"seed {args.seed + k}", o)
                 ratios.append(o.ratio)
             if len(ratios) > 1:

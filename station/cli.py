@@ -83,6 +83,11 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
     )
+    p.add_argument(
+        "--mount-error", type=float, default=None, metavar="MM",
+        help="indicator stands placed by eye: each mounting is off the leg's middle by a "
+             "hidden random amount uniform in +-MM (default 5; 0: perfectly placed)",
+    )
 
 
 def _probe_options(p: argparse.ArgumentParser) -> None:

@@ -35,7 +35,7 @@ from station.writeback import rollback as do_rollback
 
 def _operator(args: argparse.Namespace, station: Any) -> Operator:
     if station is not None:
-        return VirtualOperator(station.mount, station.unmount, say=say)
+        return VirtualOperator(station.mount, station.unmount, say=say, place_fn=station.place)
     return ConsoleOperator(yes=bool(args.yes))
 
 

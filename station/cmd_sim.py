@@ -11,6 +11,7 @@ gauges, so six fixed indicators stand two per leg, all mounted at once.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import random
 import signal
@@ -19,7 +20,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from drivers.sim.station import VirtualStation
+from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM, VirtualStation
 from station.config import dump_toml, parse_config
 from station.errors import BadInput
 
@@ -34,6 +35,9 @@ def main(args: argparse.Namespace) -> int:
     noise = 0.002 if args.noise is None else args.noise
     if noise < 0:
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
+    mount_error = DEFAULT_MOUNT_ERROR_MM if args.mount_error is None else args.mount_error
+    if not (math.isfinite(mount_error) and mount_error >= 0):
+        raise BadInput(f"--mount-error: must be >= 0 mm, got {mount_error}")
     if args.speed is not None and not args.speed > 0:
         raise BadInput(f"--speed: must be > 0 mm/s, got {args.speed}")
     kwargs: dict[str, Any] = {}
@@ -51,13 +55,15 @@ def main(args: argparse.Namespace) -> int:
         try:
             station = VirtualStation(drho, dl, noise, seed, protocol=args.protocol,
                                      indicator_count=6, port=args.port, mount_all=True,
+                                     mount_error_mm=mount_error,
                                      controller_options={"transport": args.transport},
                                      true_tilt=tilt, **kwargs)
         except OSError as exc:
             raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
         with station:
             header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, hidden Δρ = {drho} mm, "
-                      f"ΔL = {dl} mm, tilts = {tilt} mrad, noise {noise} mm\n"
+                      f"ΔL = {dl} mm, tilts = {tilt} mrad, noise {noise} mm, stands off by "
+                      f"up to {mount_error} mm\n"
                       f"Use: orthocal run --config {out}")
             # Validated like any operator's config: what we hand out must load.
             config = parse_config(station.config(), "orthocal sim")

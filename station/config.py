@@ -217,6 +217,10 @@ class ProcedureConfig(_Strict):
     model: Literal["rho", "L", "full", "rho+tilt", "full+tilt", "auto"] = "auto"
     method: Literal["linear", "nonlinear"] = "nonlinear"
     verify: bool = True
+    # Closed loop (design.md): write-backs at most, each verified; 1 = one round, no loop.
+    max_iterations: int = Field(3, ge=1, le=10)
+    # A significant correction smaller than this is not worth another round (mm).
+    converge_mm: float = Field(0.002, ge=0)
     # The stops Π_i(s) of each cycle, mm (model.md "Test postures"); absent: the
     # paper's two, ρmax and ρmin, and every plan, journal and JSON exactly as before.
     strokes: list[float] | None = Field(None, min_length=1, max_length=20)

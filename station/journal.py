@@ -5,12 +5,12 @@ Record types (field ``type``): ``header`` (config, plan, version, simulation),
 ``resumed``, ``setup`` (mounted), ``reading`` (stop, indicator, values),
 ``outlier``, ``event`` (driver retries and faults), ``cycle``, ``setup_done``,
 ``identification``, ``writeback`` (stage backup|intent|done|refused|declined|
-failed-restored), ``verification``, ``fault``, ``aborted``, ``finished``,
-``rollback``, and after a power cut ``homed``, ``reference-check`` (the Π0
-check after homing) and ``setup-redo`` (that setup's earlier cycles are void,
-see station.recovery). Driver events include ``retry``, ``reconnect`` /
-``reconnected`` / ``reference-check`` (controller) and ``reopen`` /
-``reopened`` (a gauge's port).
+failed-restored; ``round`` k of the closed loop), ``verification`` (``round``
+k), ``fault``, ``aborted``, ``finished``, ``rollback``, and after a power cut
+``homed``, ``reference-check`` (the Π0 check after homing) and ``setup-redo``
+(that setup's earlier cycles are void, see station.recovery). Driver events
+include ``retry``, ``reconnect`` / ``reconnected`` / ``reference-check``
+(controller) and ``reopen`` / ``reopened`` (a gauge's port).
 
 A torn last line (killed mid-write) is tolerated when reading; reopening
 appends a newline and a ``resumed`` record after it, so the journal before the
@@ -172,7 +172,11 @@ class JournalState:
     mounted: list[tuple[str, int]] = field(default_factory=list)  # (phase, setup)
     identification: dict[str, Any] | None = None
     writeback: dict[str, dict[str, Any]] = field(default_factory=dict)  # stage -> record
+    # Closed loop: write-back round -> stage -> record (``writeback`` is round 1),
+    # and the identification of each verification by round.
+    writebacks: dict[int, dict[str, dict[str, Any]]] = field(default_factory=dict)
     verification: dict[str, Any] | None = None
+    verifications: dict[int, dict[str, Any]] = field(default_factory=dict)
     finished: dict[str, Any] | None = None
     events: int = 0
     retries: int = 0
@@ -198,9 +202,12 @@ def replay(records: list[dict[str, Any]]) -> JournalState:
         elif kind == "identification":
             state.identification = rec
         elif kind == "writeback":
-            state.writeback[rec["stage"]] = rec
+            # Records from before the closed loop carry no round: they are round 1.
+            state.writebacks.setdefault(int(rec.get("round", 1)), {})[rec["stage"]] = rec
+            state.writeback = state.writebacks[1] if 1 in state.writebacks else {}
         elif kind == "verification":
-            state.verification = rec
+            state.verifications[int(rec.get("round", 1))] = rec
+            state.verification = state.verifications.get(1)
         elif kind == "finished":
             state.finished = rec
         elif kind == "event":

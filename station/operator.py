@@ -32,7 +32,8 @@ class Operator(Protocol):
 
 def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str, str],
                       all_names: Sequence[str]) -> str:
-    what = "verification" if phase == "v" else "measurement"
+    # "v", "v2", ...: the verification after each write-back of the closed loop.
+    what = "verification" if phase.startswith("v") else "measurement"
     mounts = ", ".join(f"{n} along {d}" for n, d in indicators.items())
     others = [n for n in all_names if n not in indicators]
     remove = f"; remove {', '.join(others)}" if others else ""
@@ -104,20 +105,26 @@ class ConsoleOperator:
 
 class VirtualOperator:
     """Mounts simulated indicators through ``mount_fn(name, leg, direction)`` and
-    ``unmount_fn(name)``; says yes to every question."""
+    ``unmount_fn(name)``; says yes to every question. ``place_fn("phase:setup")``,
+    if given, is told which placement the next mountings are, so that a simulated
+    stand placed again for the same setup after a resume stands where it stood."""
 
     def __init__(self, mount_fn: Callable[[str, str, str], None],
                  unmount_fn: Callable[[str], None],
-                 say: Callable[[str], None] | None = None) -> None:
+                 say: Callable[[str], None] | None = None,
+                 place_fn: Callable[[str], None] | None = None) -> None:
         self._mount = mount_fn
         self._unmount = unmount_fn
         self._say = say
+        self._place = place_fn
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
               all_names: Sequence[str]) -> None:
         for name in all_names:
             if name not in indicators:
                 self._unmount(name)
+        if self._place is not None:
+            self._place(f"{phase}:{setup}")
         for name, direction in indicators.items():
             self._mount(name, leg, direction)
         if self._say is not None:

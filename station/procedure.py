@@ -1,5 +1,10 @@
 """The run's flow, shared by ``orthocal run`` and ``orthocal resume``: measure, identify,
-write back, verify, finish; replaying from the journal what a resumed run already did."""
+write back, verify, and again while the verification finds a significant correction
+(the closed loop); replaying from the journal what a resumed run already did.
+
+station.loop decides the next step from what happened so far (a pure state machine);
+:class:`Flow` performs each step or, on resume, replays it from the journal.
+"""
 
 from __future__ import annotations
 
@@ -10,11 +15,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from drivers.errors import DeviceError
+from orthocal.loop import WRITABLE, predicted_after_correction, significant_corrections
 from station.config import StationConfig
 from station.devices import Devices
 from station.errors import BadInput, RunFailed, say, storage_message
 from station.journal import JOURNAL_NAME, Journal, JournalState, read_journal
+from station.loop import LoopState, next_step
 from station.operator import ConsoleOperator, Operator, VirtualOperator
 from station.plan import MotionChecker, Plan
 from station.progress import Progress
@@ -27,7 +36,7 @@ from station.results import (
     writeback_fields,
 )
 from station.rundir import now_iso
-from station.sequencer import Measurement, Sequencer
+from station.sequencer import Measurement, Sequencer, split_key
 from station.writeback import WritebackOutcome, write_back
 
 
@@ -100,32 +109,17 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
         progress=progress)
     result = base_result(ctx.run_dir, ctx.config, ctx.sim, ctx.started_iso)
     ctx.result = result
+    proc = ctx.config.procedure
+    flow = Flow(ctx, seq, result)
+    loop = LoopState(max_iterations=proc.max_iterations, verify=proc.verify)
     try:
-        measurement = seq.measure("m")
-        ident = _identify(ctx, measurement)
-        result.update(measurement_fields(ctx.config, measurement, ident))
-        if ctx.state.identification is None:
-            ctx.journal.append({"type": "identification", **ident_json(ident)})
-        outcome = write_back(
-            controller=ctx.devices.controller, identified=dict(ident.parameters),
-            max_abs_offset_mm=ctx.config.writeback.max_abs_offset_mm, run_dir=ctx.run_dir,
-            journal=ctx.journal, operator=ctx.operator, prior=ctx.state)
-        writeback_fields(result, outcome, ctx.devices.controller)
-        status, message = _status_of(outcome)
-        if outcome.status == "written" and ctx.config.procedure.verify:
-            vm = seq.measure("v")
-            vident = _identify(ctx, vm, model=ident.model)  # auto chose it: verify it
-            vfields = measurement_fields(ctx.config, vm, vident)
-            result["verification"] = {
-                "identified": vfields["identified"], "std_errors": vfields["std_errors"],
-                "residual_rms_mm": vfields["residual_rms_mm"],
-                "deviations_rms_mm": vfields["deviations_rms_mm"],
-                "deviations": vfields["deviations"], "setups": vfields["setups"],
-            }
-            if ctx.state.verification is None:
-                ctx.journal.append({"type": "verification", **ident_json(vident),
-                                    "deviations_rms_mm": vfields["deviations_rms_mm"]})
-        result["status"], result["message"] = status, message
+        # The whole flow: station.loop decides, Flow performs (or replays) the step.
+        while (step := next_step(loop)).kind != "finish":
+            if step.kind == "measure":
+                loop.measured(flow.measure(step.phase or "m"))
+            else:
+                loop.wrote(flow.write(step.round))
+        flow.stopped(step.reason or "converged")
     except KeyboardInterrupt:
         message = (f"aborted by the operator (Ctrl-C); {_stopped(seq)}, journal kept. "
                    f"Continue with: orthocal resume {ctx.run_dir}")
@@ -142,6 +136,128 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
         raise
     _finish(ctx, seq, result, result["status"], result["message"], final=True)
     return (0 if result["status"] == "ok" else 1), result
+
+
+class Flow:
+    """The steps of station.loop against the devices, each one replayed from the
+    journal when a resumed run already did it; fills the result as it goes."""
+
+    def __init__(self, ctx: Run, seq: Sequencer, result: dict[str, Any]) -> None:
+        self.ctx, self.seq, self.result = ctx, seq, result
+        self.idents: list[Any] = []  # identification of each measurement, in order
+        self.outcomes: list[WritebackOutcome] = []
+        self.iterations: list[dict[str, Any]] = result.setdefault("iterations", [])
+
+    def measure(self, phase: str) -> bool:
+        """Measure (or replay) one phase and identify it; True if the correction it
+        asks for is significant (station.loop writes the first one regardless)."""
+        ctx = self.ctx
+        n = len(self.idents)
+        m = self.seq.measure(phase)
+        # Every round with the model the first identification used (auto chose it).
+        ident = _identify(ctx, m, model=self.idents[0].model if n else None)
+        self.idents.append(ident)
+        fields = measurement_fields(ctx.config, m, ident)
+        sig = significant_corrections(
+            ident.parameters, ident.std_errors, ctx.config.procedure.converge_mm,
+            previous_std_errors=self.idents[n - 1].std_errors if n else None)
+        self.iterations.append({
+            "phase": phase, "identified": fields["identified"],
+            "std_errors": fields["std_errors"], "offsets_written": None, "writeback": None,
+            "deviations_rms_mm": fields["deviations_rms_mm"],
+            "residual_rms_mm": fields["residual_rms_mm"],
+            "noise_floor_mm": fields["noise_floor_mm"], "significant": sig})
+        if n == 0:
+            self.result.update(fields)
+            if ctx.state.identification is None:
+                ctx.journal.append({"type": "identification", **ident_json(ident)})
+            return bool(sig)
+        self.result["verification"] = self._verification(fields, self.idents[n - 1])
+        if n not in ctx.state.verifications:
+            ctx.journal.append({"type": "verification", "round": n, "phase": phase,
+                                **ident_json(ident),
+                                "deviations_rms_mm": fields["deviations_rms_mm"],
+                                "significant": sig})
+        return bool(sig)
+
+    def _verification(self, fields: dict[str, Any], before: Any) -> dict[str, Any]:
+        """The verification block, judged against what the model predicts once the
+        Δρ of ``before`` are written: ΔL and tilts cannot be, and still show."""
+        geometry = self.ctx.config.machine.geometry()
+        keys = [split_key(k) for k in fields["deviations"]]  # "+xy", "+30xy"
+        predicted = predicted_after_correction(keys, geometry, before.parameters)
+        deviations = {k: {**v, "expected": float(p)} for (k, v), p
+                      in zip(fields["deviations"].items(), predicted, strict=True)}
+        gaps = [v["mean"] - v["expected"] for v in deviations.values()]
+        return {
+            "identified": fields["identified"], "std_errors": fields["std_errors"],
+            "residual_rms_mm": fields["residual_rms_mm"],
+            "deviations_rms_mm": fields["deviations_rms_mm"],
+            "expected_rms_mm": float(np.sqrt(np.mean(np.square(predicted))))
+            if len(keys) else None,
+            "vs_expected_rms_mm": float(np.sqrt(np.mean(np.square(gaps)))) if gaps else None,
+            "noise_floor_mm": fields["noise_floor_mm"],
+            "deviations": deviations, "setups": fields["setups"],
+        }
+
+    def write(self, round: int) -> str:
+        """Write-back ``round`` (1-based) of the correction the last measurement found."""
+        ctx = self.ctx
+        ident = self.idents[round - 1]
+        first = self.outcomes[0] if self.outcomes else None
+        outcome = write_back(
+            controller=ctx.devices.controller, identified=dict(ident.parameters),
+            max_abs_offset_mm=ctx.config.writeback.max_abs_offset_mm, run_dir=ctx.run_dir,
+            journal=ctx.journal, operator=ctx.operator, prior=ctx.state, round=round,
+            offsets_at_start=first.before if first is not None else None)
+        self.outcomes.append(outcome)
+        self.iterations[round - 1]["offsets_written"] = outcome.written
+        self.iterations[round - 1]["writeback"] = outcome.status
+        if round == 1:
+            writeback_fields(self.result, outcome, ctx.devices.controller)
+        elif outcome.written is not None:
+            self.result["offsets_written"] = outcome.written
+        self.result["writeback"] = {**outcome.to_json(), "round": round}
+        self._totals()
+        return outcome.status
+
+    def _totals(self) -> None:
+        """Top-level ``identified``: the total Δρ written since the run started (the
+        other parameters as the first identification found them)."""
+        total = dict(self.iterations[0]["identified"])
+        written = [it for it in self.iterations if it["offsets_written"] is not None]
+        if written:
+            for name in WRITABLE:
+                if name in total:
+                    total[name] = sum(it["identified"].get(name, 0.0) for it in written)
+        self.result["identified"] = total
+
+    def stopped(self, reason: str) -> None:
+        """Status, message and the loop's verdict once station.loop says finish."""
+        proc = self.ctx.config.procedure
+        first = self.outcomes[0] if self.outcomes else None
+        last = self.outcomes[-1] if self.outcomes else None
+        status, message = _status_of(first) if first is not None else ("ok", None)
+        if last is not None and last is not first:
+            if last.status == "failed-restored":
+                status, message = "failed", f"closed loop, round {len(self.outcomes)}: " \
+                    f"{last.reason}"
+            elif last.status in ("refused", "declined"):
+                message = (f"closed loop stopped before round {len(self.outcomes)}: "
+                           f"write-back {last.reason}")
+        converged = reason == "converged"
+        if reason == "max_iterations":
+            message = (f"closed loop did not converge: {proc.max_iterations} write-back(s) "
+                       "done and the last verification still finds a significant "
+                       "correction; run again or look for errors outside the model")
+        self.result["converged"] = converged
+        self.result["loop"] = {
+            "stopped": reason, "detail": last.reason if last is not None and not converged
+            and reason in ("refused", "declined", "failed") else None,
+            "write_backs": sum(1 for o in self.outcomes if o.status == "written"),
+            "max_iterations": proc.max_iterations, "converge_mm": proc.converge_mm,
+        }
+        self.result["status"], self.result["message"] = status, message
 
 
 def _stopped(seq: Sequencer) -> str:

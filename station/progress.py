@@ -37,7 +37,10 @@ class Progress:
             pass  # a display glitch must never stop a run
 
     def _event(self, event: str, info: dict[str, Any]) -> None:
-        phase = {"m": "measure", "v": "verify"}.get(info.get("phase", ""), "")
+        code = info.get("phase", "")
+        # "v2", "v3": the closed loop's later verifications.
+        phase = {"m": "measure", "v": "verify"}.get(code) or (
+            f"verify {code[1:]}" if code.startswith("v") else "")
         if event == "read":
             self.steps += 1
             sp = self.plan.setups[info["setup"]]

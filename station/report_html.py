@@ -400,6 +400,18 @@ def _info_list(result: Mapping[str, Any]) -> str:
     return '<dl class="kv">' + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
 
 
+def _loop_section(result: Mapping[str, Any]) -> str:
+    """The closed loop's rounds (station.report_loop): plot and table."""
+    from station import report_loop
+    from station.report_plots import _pyplot, _svg
+
+    try:
+        plot = report_loop.plot_rounds(result, _pyplot, _svg)
+    except Exception:
+        plot = None  # the table still tells the rounds
+    return report_loop.html_section(result, plot)
+
+
 def render_html(result: dict) -> str:
     """The whole report as one HTML string (no external resources)."""
     status = str(result.get("status", "unknown"))
@@ -408,6 +420,7 @@ def render_html(result: dict) -> str:
     try:
         plot_dev = _plot_deviations(result)
         plot_par = _plot_parameters(result)
+        loop_section = _loop_section(result)
     finally:
         if "matplotlib" in sys.modules:
             _release_fonts()
@@ -439,6 +452,7 @@ def render_html(result: dict) -> str:
 {_result_paragraph(result)}
 {_fit_box(result)}
 {"".join(figures)}
+{loop_section}
 <h2>Identified parameters</h2>
 {_params_table(result)}
 {_model_section(result)}

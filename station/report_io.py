@@ -22,7 +22,7 @@ _TOP_ORDER = (
     "correlation", "residual_rms_mm", "sigma_mm", "condition_number", "noise_mm", "fit_ok",
     "fit_note",
     "deviations", "deviations_rms_mm", "setups", "offsets_before", "offsets_written",
-    "writeback", "verification", "timing",
+    "writeback", "verification", "iterations", "converged", "loop", "timing",
 )
 
 

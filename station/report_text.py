@@ -282,6 +282,9 @@ def summary_text(result: dict) -> str:
                      + ("; ΔL beside the tilts (two postures per leg)" if two else ""))
     if any(not n.startswith("drho_") for n in names):
         lines.append("  not written   tilts and ΔL (a controller takes only Δρ)")
+    from station import report_loop
+
+    lines += report_loop.summary_lines(result)
     if result.get("run_dir"):
         lines.append(f"  report        {Path(str(result['run_dir'])) / 'report.html'}")
     return "\n".join(lines)

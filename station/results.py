@@ -65,7 +65,8 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
                         "matrix": [[num(x) for x in row] for row in np.asarray(corr)]},
         "residual_rms_mm": num(resid), "sigma_mm": num(ident.sigma),
         "condition_number": num(ident.condition_number),
-        "noise_mm": num(noise), "fit_ok": bool(fit_ok), "fit_note": fit_note,
+        "noise_mm": num(noise), "noise_floor_mm": num(expected), "fit_ok": bool(fit_ok),
+        "fit_note": fit_note,
         "deviations": deviations,
         # said in every report, never silently fixed (issue 9)
         "not_identifiable": orthocal.cannot_identify(
@@ -96,7 +97,9 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
             "true_dl": dict(zip(AXES, sim["true_dl"], strict=True)),
             "true_tilt": dict(zip(("tilt_yx", "tilt_zx", "tilt_zy"),
                                   sim.get("true_tilt") or (0.0, 0.0, 0.0), strict=True)),
-            "noise_mm": sim["noise_mm"]},
+            "noise_mm": sim["noise_mm"],
+            # Stands placed by eye: each mounting off the leg's middle by up to this.
+            "mount_error_mm": sim.get("mount_error_mm", 0.0)},
         "machine": {"leg_length": m.leg_length, "rho_min": m.rho_min, "rho_max": m.rho_max},
         "model": config.procedure.model, "method": config.procedure.method,
         "identified": {}, "std_errors": {}, "offsets_before": None, "offsets_written": None,

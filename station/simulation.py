@@ -30,12 +30,19 @@ def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
     noise = args.noise if args.noise is not None else DEFAULT_NOISE_MM
     if not (math.isfinite(noise) and noise >= 0):
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
+    from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
+
+    mount = getattr(args, "mount_error", None)
+    mount = DEFAULT_MOUNT_ERROR_MM if mount is None else mount
+    if not (math.isfinite(mount) and mount >= 0):
+        raise BadInput(f"--mount-error: must be >= 0 mm, got {mount}")
     return {
         "seed": seed,
         "true_drho": drho,
         "true_dl": dl,
         "true_tilt": tilt,
         "noise_mm": noise,
+        "mount_error_mm": mount,
         # Test hooks (not on the command line): the six-indicator style, a procedure.
         "indicators": int(getattr(args, "sim_indicators", 2) or 2),
         "procedure": getattr(args, "sim_procedure", None),
@@ -58,6 +65,8 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         indicator_count=params["indicators"], nvram_path=nvram,
         procedure=params.get("procedure"), writeback=params.get("writeback"),
         speed_mm_s=speed, accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
+        # Journals from before stand misplacement existed ran with perfect stands.
+        mount_error_mm=params.get("mount_error_mm", 0.0),
     )
 
 

@@ -7,6 +7,12 @@ read back → journal done. If a write or its read-back fails, the backup is
 written back and the outcome says so. Writes are absolute values computed from
 the backup, so redoing an interrupted write-back after a resume is harmless and
 never applies Δρ twice.
+
+Closed loop: write-back round k > 1 (records carry ``"round": k``) journals the
+offsets it starts from as its own ``backup`` stage but leaves offsets_backup.json
+alone, so rollback always restores the offsets from before the first round; it
+also refuses a total correction (from ``offsets_at_start``, the offsets before
+the run) beyond max_abs_offset_mm.
 """
 
 from __future__ import annotations
@@ -65,8 +71,14 @@ def write_back(
     journal: Journal,
     operator: Operator,
     prior: JournalState | None = None,
+    round: int = 1,
+    offsets_at_start: dict[str, float] | None = None,
 ) -> WritebackOutcome:
-    stages = prior.writeback if prior is not None else {}
+    stages = prior.writebacks.get(round, {}) if prior is not None else {}
+
+    def log(record: dict[str, Any]) -> None:
+        journal.append({"type": "writeback", "round": round, **record})
+
     for final in ("done", "refused", "declined", "failed-restored", "skipped"):
         if final in stages:
             rec = stages[final]
@@ -75,7 +87,7 @@ def write_back(
     drho = {a: identified.get(f"drho_{a}") for a in AXES}
     if all(v is None for v in drho.values()):
         reason = "the model identifies no joint offsets (model 'L'): nothing to write"
-        journal.append({"type": "writeback", "stage": "skipped", "reason": reason})
+        log({"stage": "skipped", "reason": reason})
         return WritebackOutcome("skipped", reason, None, None)
     delta = np.array([drho[a] or 0.0 for a in AXES])
 
@@ -83,31 +95,36 @@ def write_back(
         before = {a: float(v) for a, v in stages["backup"]["before"].items()}
     else:
         before = _axes(controller.read_offsets())
-        save_backup(run_dir, before, controller.name)
-        journal.append({"type": "writeback", "stage": "backup", "before": before,
-                        "file": BACKUP_NAME})
+        if round == 1:
+            save_backup(run_dir, before, controller.name)
+            log({"stage": "backup", "before": before, "file": BACKUP_NAME})
+        else:  # the file keeps the offsets from before the first round, for rollback
+            log({"stage": "backup", "before": before})
     before_v = np.array([before[a] for a in AXES])
 
+    new = _axes(before_v - delta)
     too_big = [f"Δρ_{a} = {d:+.4f} mm" for a, d in zip(AXES, delta, strict=True)
                if abs(d) > max_abs_offset_mm]
+    if offsets_at_start is not None:
+        too_big += [f"total Δρ_{a} = {offsets_at_start[a] - new[a]:+.4f} mm since the run "
+                    "started" for a in AXES
+                    if abs(offsets_at_start[a] - new[a]) > max_abs_offset_mm
+                    and abs(delta[AXES.index(a)]) <= max_abs_offset_mm]
     if too_big:
         reason = (f"refused: {', '.join(too_big)} beyond max_abs_offset_mm = "
                   f"{max_abs_offset_mm:g}; nothing written")
-        journal.append({"type": "writeback", "stage": "refused", "reason": reason,
-                        "before": before})
+        log({"stage": "refused", "reason": reason, "before": before})
         return WritebackOutcome("refused", reason, before, None)
 
-    new = _axes(before_v - delta)
     if "intent" not in stages:
-        question = "Write offsets " + ", ".join(
+        what = "Write offsets " if round == 1 else f"Closed loop, round {round}: write offsets "
+        question = what + ", ".join(
             f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + " to the controller?"
         if not operator.confirm(question):
             reason = "declined by the operator; offsets unchanged"
-            journal.append({"type": "writeback", "stage": "declined", "reason": reason,
-                            "before": before})
+            log({"stage": "declined", "reason": reason, "before": before})
             return WritebackOutcome("declined", reason, before, None)
-        journal.append({"type": "writeback", "stage": "intent", "before": before,
-                        "written": new})
+        log({"stage": "intent", "before": before, "written": new})
     else:
         new = {a: float(v) for a, v in stages["intent"]["written"].items()}
 
@@ -120,19 +137,17 @@ def write_back(
         # `orthocal resume` writes the whole correction again.
         try:
             controller.write_offsets([before[a] for a in AXES])
-            journal.append({"type": "writeback", "stage": "interrupted-restored",
-                            "before": before})
+            log({"stage": "interrupted-restored", "before": before})
         except DeviceError as exc2:
-            journal.append({"type": "writeback", "stage": "failed",
-                            "reason": f"interrupted; restore failed: {exc2}",
-                            "before": before})
+            log({"stage": "failed", "reason": f"interrupted; restore failed: {exc2}",
+                 "before": before})
         raise
     except DeviceError as exc:
         try:
             controller.write_offsets([before[a] for a in AXES])
         except DeviceError as exc2:
-            journal.append({"type": "writeback", "stage": "failed",
-                            "reason": f"{exc}; restore failed: {exc2}", "before": before})
+            log({"stage": "failed", "reason": f"{exc}; restore failed: {exc2}",
+                 "before": before})
             from station.errors import RunFailed
 
             raise RunFailed(
@@ -140,11 +155,9 @@ def write_back(
                 f"the controller's offsets are uncertain: run `orthocal rollback {run_dir}`"
             ) from exc2
         reason = f"write-back failed ({exc}); the backed-up offsets were restored"
-        journal.append({"type": "writeback", "stage": "failed-restored", "reason": reason,
-                        "before": before})
+        log({"stage": "failed-restored", "reason": reason, "before": before})
         return WritebackOutcome("failed-restored", reason, before, None)
-    journal.append({"type": "writeback", "stage": "done", "before": before,
-                    "written": readback})
+    log({"stage": "done", "before": before, "written": readback})
     return WritebackOutcome("written", None, before, readback)
 
 

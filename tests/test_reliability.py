@@ -143,8 +143,11 @@ def orthocal(tmp_path: Path, monkeypatch, capsys) -> Iterator[Callable[..., Outc
 
 def run_args(tmp_path: Path, *extra: str, procedure: dict[str, Any] | None = None,
              drho: tuple[float, float, float] = TRUE_DRHO) -> list[str]:
+    # Stands placed exactly (--mount-error 0): one write-back, two phases, so the
+    # faults injected per setup land where these tests count them.
     return ["run", "--simulate", "--seed", str(SEED), "--true-drho",
-            ",".join(str(v) for v in drho), "--out", str(tmp_path / "runs"),
+            ",".join(str(v) for v in drho), "--mount-error", "0",
+            "--out", str(tmp_path / "runs"),
             "--sim-speed", SPEED, "--sim-procedure", json.dumps(procedure or PROCEDURE),
             *extra]
 

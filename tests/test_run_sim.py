@@ -22,7 +22,7 @@ FAST = {"cycles": 2, "readings": 3, "settle_s": 0.0}
 def args_for(tmp_path: Path, **extra: Any) -> argparse.Namespace:
     base = dict(simulate=True, config=None, plan=False, seed=7, true_drho=None, true_dl=None,
                 noise=0.002, out=str(tmp_path / "runs"), yes=False, json=True, debug=False,
-                sim_procedure=FAST)
+                sim_procedure=FAST, mount_error=0.0)
     base.update(extra)
     return argparse.Namespace(**base)
 

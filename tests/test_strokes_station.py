@@ -104,7 +104,8 @@ TRUE_DRHO = (0.7, -1.1, 0.5)
 def run_argv(out: Path) -> list[str]:
     return ["run", "--simulate", "--seed", "11", "--true-drho", ",".join(map(str, TRUE_DRHO)),
             "--noise", "0", "--sim-procedure", json.dumps(FAST), "--sim-speed", "20000",
-            "--yes", "--json", "--out", str(out)]
+            # stands exact: one write-back, the two phases counted below (issue 10)
+            "--mount-error", "0", "--yes", "--json", "--out", str(out)]
 
 
 def test_simulated_run_with_strokes(tmp_path: Path, capsys) -> None:
@@ -113,7 +114,7 @@ def test_simulated_run_with_strokes(tmp_path: Path, capsys) -> None:
     args = argparse.Namespace(simulate=True, config=None, plan=False, seed=11,
                               true_drho=TRUE_DRHO, true_dl=None, noise=0.002,
                               out=str(tmp_path / "runs"), yes=False, json=True, debug=False,
-                              sim_procedure=FAST)
+                              sim_procedure=FAST, mount_error=0.0)  # one write-back
     assert cmd_run.run(args) == 0
     result = json.loads(capsys.readouterr().out)
     keys = set(result["deviations"])

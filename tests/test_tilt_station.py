@@ -95,7 +95,8 @@ def test_simulated_tilted_run_with_auto_writes_offsets_within_4_um(tmp_path, cap
     args = argparse.Namespace(
         simulate=True, config=None, plan=False, seed=11, true_drho=true_drho, true_dl=None,
         true_tilt=TILT, noise=0.001, out=str(tmp_path / "runs"), yes=True, json=True,
-        debug=False, sim_procedure={"settle_s": 0.0})
+        debug=False, sim_procedure={"settle_s": 0.0},
+        mount_error=0.0)  # stands exact: their misfit would blur the tilts (issue 10)
     assert cmd_run.run(args) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok" and result["model"] == "rho+tilt"

@@ -184,3 +184,65 @@ def test_ctrl_c_between_offset_writes_restores_the_backup(tmp_path: Path, rig) -
                      prior=replay(records))
     assert out.status == "written"
     np.testing.assert_allclose(station.offsets, [0.15, -0.3, 0.95], atol=1e-9)
+
+
+def test_a_second_round_keeps_the_first_backup_and_checks_the_total(tmp_path: Path,
+                                                                     rig) -> None:
+    station, controller, journal = rig
+    start = dict(zip("xyz", START, strict=True))
+    first = write_back(controller=controller, identified={"drho_x": 2.0, "drho_y": 0.0,
+                                                          "drho_z": 0.0},
+                       max_abs_offset_mm=2.5, run_dir=tmp_path, journal=journal,
+                       operator=Operator())
+    assert first.status == "written" and first.before == start
+    # Round 2: 0.4 mm alone is fine, but 2.4 + 0.4 since the run started is not.
+    op = Operator()
+    refused = write_back(controller=controller, identified={"drho_x": 0.6, "drho_y": 0.0,
+                                                            "drho_z": 0.0},
+                         max_abs_offset_mm=2.5, run_dir=tmp_path, journal=journal,
+                         operator=op, round=2, offsets_at_start=first.before)
+    assert refused.status == "refused" and "total" in (refused.reason or "")
+    assert op.asked == []  # nothing to confirm: refused before asking
+    np.testing.assert_allclose(station.offsets, [START[0] - 2.0, START[1], START[2]],
+                               atol=1e-9)
+    second = write_back(controller=controller, identified={"drho_x": 0.03, "drho_y": 0.0,
+                                                           "drho_z": 0.0},
+                        max_abs_offset_mm=2.5, run_dir=tmp_path, journal=journal,
+                        operator=op, round=3, offsets_at_start=first.before)
+    assert second.status == "written" and "round 3" in op.asked[0]
+    np.testing.assert_allclose(station.offsets, [START[0] - 2.03, START[1], START[2]],
+                               atol=1e-9)
+    # The backup file still holds the offsets from before the first round ...
+    assert json.loads((tmp_path / BACKUP_NAME).read_text())["offsets_mm"] == start
+    records = read_journal(tmp_path / "journal.jsonl")
+    state = replay(records)
+    assert sorted(state.writebacks) == [1, 2, 3] and "done" in state.writebacks[3]
+    # ... so rollback undoes every round at once.
+    rollback(controller, tmp_path, journal)
+    np.testing.assert_allclose(station.offsets, START, atol=1e-9)
+
+
+def test_a_resumed_round_two_writes_its_journaled_intent_once(tmp_path: Path, rig) -> None:
+    station, controller, journal = rig
+    ident = {"drho_x": 0.1, "drho_y": 0.0, "drho_z": 0.0}
+    write_back(controller=controller, identified=ident, max_abs_offset_mm=3.0,
+               run_dir=tmp_path, journal=journal, operator=Operator())
+    before2 = dict(zip("xyz", controller.read_offsets(), strict=True))
+    new2 = {**before2, "x": before2["x"] - 0.02}
+    # Killed in round 2 after the write reached the drive, before "done" was journaled.
+    journal.append({"type": "writeback", "round": 2, "stage": "backup", "before": before2})
+    journal.append({"type": "writeback", "round": 2, "stage": "intent", "before": before2,
+                    "written": new2})
+    controller.write_offsets([new2[a] for a in "xyz"])
+    state = replay(read_journal(tmp_path / "journal.jsonl"))
+    again = write_back(controller=controller, identified={**ident, "drho_x": 0.02},
+                       max_abs_offset_mm=3.0, run_dir=tmp_path, journal=journal,
+                       operator=Operator(), prior=state, round=2)
+    assert again.status == "written"
+    np.testing.assert_allclose(station.offsets, [new2[a] for a in "xyz"], atol=1e-9)
+    # round 1, replayed, is not redone either
+    done = write_back(controller=controller, identified=ident, max_abs_offset_mm=3.0,
+                      run_dir=tmp_path, journal=journal, operator=Operator(),
+                      prior=replay(read_journal(tmp_path / "journal.jsonl")), round=1)
+    assert done.status == "written"
+    np.testing.assert_allclose(station.offsets, [new2[a] for a in "xyz"], atol=1e-9)

@@ -379,17 +379,20 @@ class VirtualOrthoglide:
     def _rho_kin(self) -> np.ndarray:
         return self._advance(self._clock()) - self.offsets_initial
 
-    def leg_reading(self, leg: str, direction: str) -> float:
+    def leg_reading(self, leg: str, direction: str, mount: float | None = None) -> float:
         """What a dial indicator on ``leg`` measuring along ``direction`` reads (mm):
-        :func:`orthocal.leg_reading` at the instantaneous joint values, true ΔL."""
+        :func:`orthocal.leg_reading` at the instantaneous joint values, true ΔL, its
+        stand in the plane x_leg = ``mount`` (default: the nominal L/2)."""
         with self._lock:
             rho = self._rho_kin()
         return float(orthocal.leg_reading(rho, leg, direction, self.geometry,
-                                          self.true_drho, self.true_dl, tilt=self.true_tilt))
+                                          self.true_drho, self.true_dl, mount=mount,
+                                          tilt=self.true_tilt))
 
-    def source(self, leg: str, direction: str) -> Callable[[], float]:
+    def source(self, leg: str, direction: str,
+               mount: float | None = None) -> Callable[[], float]:
         """A zero-argument callable for a simulated indicator's ``source``."""
-        return lambda: self.leg_reading(leg, direction)
+        return lambda: self.leg_reading(leg, direction, mount)
 
     def end_point(self) -> np.ndarray:
         """The end point P (mm) at this instant."""

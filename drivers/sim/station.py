@@ -9,6 +9,13 @@ operator — here :meth:`mount` — re-mounts them before each setup) and
 ``indicator_count=6`` (A..F, two per leg; one of them mounted reversed to
 exercise the sign convention).
 
+Stand misplacement (``mount_error_mm``): an operator sets each indicator stand
+"at the middle of the leg" by eye, so each mounting puts the indicator's plane
+x_i = M_i off the nominal L/2 by a hidden error drawn uniform in
+±``mount_error_mm`` (model.md, "Where the indicator plane is"); every mounting
+draws anew, as a real operator places the stand again. ``mount_errors`` fixes
+them instead (name -> mm), for figures that need a given misplacement.
+
 The virtual controller's offsets can be persisted to a file after every write
 (``nvram_path``), like a real drive's non-volatile memory, so a resumed or
 rolled-back simulated run sees what was written before. The same file keeps
@@ -25,6 +32,7 @@ import json
 import os
 import shutil
 import tempfile
+import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -40,6 +48,9 @@ from orthocal import Geometry
 # Fast but physical: moves still take time, so in-position waits are real.
 SIM_SPEED_MM_S = 1000.0
 SIM_ACCEL_MM_S2 = 20000.0
+# How far off the leg's middle an operator sets a stand by eye (model.md: 5-10 mm);
+# the command line's default, so that a default simulated run shows the closed loop.
+DEFAULT_MOUNT_ERROR_MM = 5.0
 
 TWO_SETUPS: list[dict[str, Any]] = [
     {"leg": "x", "indicators": {"A": "y", "B": "z"}},
@@ -126,6 +137,8 @@ class VirtualStation:
         procedure: dict[str, Any] | None = None,
         writeback: dict[str, Any] | None = None,
         mount_all: bool = False,
+        mount_error_mm: float = 0.0,
+        mount_errors: dict[str, float] | None = None,
         controller_options: dict[str, Any] | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
@@ -135,6 +148,15 @@ class VirtualStation:
         self.speed_mm_s = speed_mm_s
         self.accel_mm_s2 = accel_mm_s2
         self.setups = TWO_SETUPS if indicator_count == 2 else SIX_SETUPS
+        if not (np.isfinite(mount_error_mm) and mount_error_mm >= 0):
+            raise ValueError(f"mount_error_mm must be >= 0, got {mount_error_mm}")
+        self.mount_error_mm = float(mount_error_mm)
+        self._fixed_mounts = dict(mount_errors or {})
+        self._seed = seed
+        self._placement: str | None = None  # the operator's "phase:setup", see place()
+        self._stand_error = 0.0  # of the mounting in progress, for source()
+        #: Every mounting: (indicator, leg, direction, mount error in mm), in order.
+        self.mount_log: list[tuple[str, str, str, float]] = []
         self.procedure = {**DEFAULT_PROCEDURE, **(procedure or {})}
         self.writeback = dict(writeback or {})
         self.machine = _PersistentMachine(
@@ -183,18 +205,52 @@ class VirtualStation:
     # --- the virtual operator's hands ---------------------------------------------------
 
     def source(self, leg: str, direction: str) -> Callable[[], float]:
+        """What a gauge on ``leg`` along ``direction`` reads, its stand in the plane
+        the mounting in progress drew (``self._stand_error`` off the nominal L/2)."""
         sign = -1.0 if direction.startswith("-") else 1.0
         axis = direction.lstrip("-")
-        read = self.machine.source(leg, axis)
+        plane = self.geometry.mount_plane + self._stand_error
+        read = self.machine.source(leg, axis, plane)
         return lambda: sign * read()
+
+    def place(self, where: str | None) -> None:
+        """Name the placement of the next mountings (the operator's "phase:setup"):
+        their stand errors become a function of the seed and the placement, so a
+        simulated run resumed after a kill places a stand exactly where the
+        uninterrupted run would have. None: a fresh draw at every mounting."""
+        self._placement = where
 
     def mount(self, name: str, leg: str, direction: str) -> None:
         """Put indicator ``name`` against the middle of ``leg`` along ``direction``
-        ("-y": reversed) and zero it there."""
+        ("-y": reversed), as placed by eye (a new stand error at every mounting,
+        see :meth:`place`), and zero it there."""
+        where = self._placement
+        if name in self._fixed_mounts:
+            error = float(self._fixed_mounts[name])
+        else:
+            error = float(self._mount_draw(name, leg, where)) * self.mount_error_mm
+        self.mount_log.append((name, leg, direction, error))
         gauge = self.indicators[name]
-        gauge.mount(self.source(leg, direction))
-        self._mounts[name] = {"leg": leg, "direction": direction, "zero_mm": gauge.zero_mm}
+        gauge.mount(self._source_at(leg, direction, error))
+        self._mounts[name] = {"leg": leg, "direction": direction, "zero_mm": gauge.zero_mm,
+                              "stand_error_mm": error}
         self._save_mounts()
+
+    def _source_at(self, leg: str, direction: str, stand_error: float) -> Callable[[], float]:
+        # Through self.source(leg, direction), which tests wrap to inject knocks.
+        self._stand_error = stand_error
+        try:
+            return self.source(leg, direction)
+        finally:
+            self._stand_error = 0.0
+
+    def _mount_draw(self, name: str, leg: str, where: str | None) -> float:
+        """Uniform in [-1, 1]: from (seed, placement) when both are known, else fresh."""
+        if where is None or self._seed is None:
+            return float(np.random.default_rng().uniform(-1.0, 1.0))
+        # A stream of its own (crc32 of the placement): the gauges' noise is unchanged.
+        key = zlib.crc32(f"{where}:{name}:{leg}".encode())
+        return float(np.random.default_rng([self._seed, 7, key]).uniform(-1.0, 1.0))
 
     def unmount(self, name: str) -> None:
         self.indicators[name].unmount()
@@ -212,8 +268,9 @@ class VirtualStation:
             return
         for name, m in json.loads(path.read_text()).items():
             if name in self.indicators:
-                self.indicators[name].mount(self.source(m["leg"], m["direction"]),
-                                            zero_mm=m["zero_mm"])
+                # the stand stays where it was placed, misplacement included
+                src = self._source_at(m["leg"], m["direction"], m.get("stand_error_mm", 0.0))
+                self.indicators[name].mount(src, zero_mm=m["zero_mm"])
                 self._mounts[name] = m
 
     # --- description ----------------------------------------------------------------------

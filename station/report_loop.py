@@ -1,0 +1,167 @@
+"""The closed loop in the report: the rounds' summary lines, a plot and a table.
+
+Reads the result's ``iterations`` (one entry per measurement: the first
+measurement, then each verification), ``converged`` and ``loop``; everything is
+read with ``.get`` (a run stopped halfway has fewer entries). Kept apart from
+station.report so the two can change independently.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from station.loop import STOP_REASONS
+
+WRITABLE = ("drho_x", "drho_y", "drho_z")
+
+
+def _num(value: Any) -> float | None:
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _um(value: Any) -> str:
+    v = _num(value)
+    return "—" if v is None else f"{v * 1000:.2f} µm"
+
+
+def correction_mm(entry: Mapping[str, Any]) -> float | None:
+    """The largest |Δρ| an identification asks to write (mm)."""
+    ident = entry.get("identified") or {}
+    values = [abs(v) for n in WRITABLE if (v := _num(ident.get(n))) is not None]
+    return max(values) if values else None
+
+
+def _label(n: int, entry: Mapping[str, Any]) -> str:
+    return "measurement" if n == 0 else f"verification {n}"
+
+
+def stop_text(result: Mapping[str, Any]) -> str:
+    loop = result.get("loop") or {}
+    reason = loop.get("stopped")
+    text = STOP_REASONS.get(reason, str(reason))
+    if loop.get("detail"):
+        text += f" ({loop['detail']})"
+    return text
+
+
+def judged_line(result: Mapping[str, Any]) -> str | None:
+    """With ΔL or tilts in the model the verification cannot go to zero: say what it
+    was judged against (the model's prediction after writing Δρ)."""
+    ver = result.get("verification") or {}
+    expected = _num(ver.get("expected_rms_mm"))
+    if expected is None or expected < 1e-4:
+        return None
+    return (f"verification judged against the model after correction: deviations RMS "
+            f"{_um(ver.get('deviations_rms_mm'))}, predicted {_um(expected)} (ΔL and tilts "
+            f"cannot be written), measured − predicted {_um(ver.get('vs_expected_rms_mm'))}")
+
+
+def summary_lines(result: Mapping[str, Any]) -> list[str]:
+    """The rounds for the text summary: one line per measurement, then the verdict."""
+    judged = judged_line(result)
+    lines = [f"  {judged}"] if judged else []
+    return lines + _round_lines(result)
+
+
+def _round_lines(result: Mapping[str, Any]) -> list[str]:
+    iterations = result.get("iterations") or []
+    if len(iterations) < 2 and not (result.get("loop") or {}).get("stopped"):
+        return []
+    loop = result.get("loop") or {}
+    if loop.get("stopped") in ("not-verified", "skipped"):
+        return [f"  closed loop   off: {stop_text(result)}"]
+    writes = sum(1 for e in iterations if e.get("offsets_written"))
+    head = f"  closed loop   {writes} write-back(s), {len(iterations)} measurement(s): "
+    if result.get("converged"):
+        head += "converged — " + stop_text(result)
+    else:
+        head += "NOT CONVERGED — " + stop_text(result)
+    lines = [head]
+    for n, e in enumerate(iterations):
+        sig = e.get("significant") or []
+        verdict = ("significant" if sig else "noise") if n else "first identification"
+        action = "written" if e.get("offsets_written") else (e.get("writeback") or "not written")
+        lines.append(f"    {_label(n, e):<15} deviations RMS {_um(e.get('deviations_rms_mm'))}"
+                     f" (floor {_um(e.get('noise_floor_mm'))}), correction max "
+                     f"{_um(correction_mm(e))} ({verdict}) → {action}")
+    if loop.get("max_iterations") is not None:
+        lines.append(f"    (at most {loop['max_iterations']} write-backs, a correction counts "
+                     f"beyond 3σ and {_um(loop.get('converge_mm'))})")
+    return lines
+
+
+def plot_rounds(result: Mapping[str, Any], pyplot: Any, svg: Any) -> str | None:
+    """Deviations RMS, correction and noise floor per measurement, log scale (µm).
+    None after a single write-back: Figure 1 already shows before and after, and a
+    figure costs ~0.2 s with the operator waiting at the end of the run."""
+    iterations = result.get("iterations") or []
+    if sum(1 for e in iterations if e.get("offsets_written")) < 2:
+        return None
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 3.8))
+    xs = list(range(len(iterations)))
+
+    def series(values: list[float | None]) -> tuple[list[int], list[float]]:
+        pts = [(x, v * 1000) for x, v in zip(xs, values, strict=True)
+               if v is not None and v > 0]
+        return [p[0] for p in pts], [p[1] for p in pts]
+
+    dev = series([_num(e.get("deviations_rms_mm")) for e in iterations])
+    cor = series([correction_mm(e) for e in iterations])
+    floor = series([_num(e.get("noise_floor_mm")) for e in iterations])
+    ax.plot(*dev, "o-", color="#1f5fa8", label="deviations RMS")
+    ax.plot(*cor, "s-", color="#e08a00", label="correction max |Δρ|")
+    ax.plot(*floor, "--", color="#777777", label="noise floor (scatter)")
+    converge = _num((result.get("loop") or {}).get("converge_mm"))
+    if converge:
+        ax.axhline(converge * 1000, color="#c0392b", lw=0.8, ls=":",
+                   label="converge_mm")
+    ax.set_yscale("log")
+    ax.set_xticks(xs, [_label(n, e) for n, e in enumerate(iterations)], fontsize=8)
+    ax.set_ylabel("µm")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    return svg(fig)
+
+
+def html_section(result: Mapping[str, Any], plot: str | None) -> str:
+    """The "Closed loop" section of report.html (empty when there was one measurement)."""
+    iterations = result.get("iterations") or []
+    if len(iterations) < 2 and not (result.get("loop") or {}).get("stopped"):
+        return ""
+    e = html.escape
+    if (result.get("loop") or {}).get("stopped") in ("not-verified", "skipped"):
+        return f"<h2>Closed loop</h2><p>Off: {e(stop_text(result))}.</p>"
+    verdict = ("converged" if result.get("converged") else "<b>did not converge</b>")
+    parts = [f"<h2>Closed loop</h2><p>The loop {verdict}: {e(stop_text(result))}.</p>"]
+    judged = judged_line(result)
+    if judged:
+        parts.append(f"<p>The {e(judged)}.</p>")
+    if plot:
+        parts.append(f"<figure>{plot}<figcaption>Each round: the deviations' RMS, the "
+                     "largest correction the identification asks for, and the noise floor "
+                     "from the cycle-to-cycle scatter. A correction within 3 standard errors "
+                     "or below converge_mm is not written.</figcaption></figure>")
+    rows = []
+    for n, it in enumerate(iterations):
+        written = it.get("offsets_written")
+        rows.append(
+            "<tr>" + "".join(f"<td>{c}</td>" for c in (
+                e(_label(n, it)), _um(it.get("deviations_rms_mm")),
+                _um(it.get("residual_rms_mm")), _um(it.get("noise_floor_mm")),
+                _um(correction_mm(it)), e(", ".join(it.get("significant") or []) or "—"),
+                e(", ".join(f"{a} {v:+.4f}" for a, v in written.items()) if written
+                  else str(it.get("writeback") or "—")),
+            )) + "</tr>")
+    parts.append("<table><thead><tr><th>measurement</th><th>deviations RMS</th>"
+                 "<th>residual RMS</th><th>noise floor</th><th>correction max</th>"
+                 "<th>significant</th><th>offsets written (mm)</th></tr></thead><tbody>"
+                 + "".join(rows) + "</tbody></table>")
+    return "\n".join(parts)
