@@ -154,15 +154,20 @@ class Flow:
         ctx = self.ctx
         n = len(self.idents)
         m = self.seq.measure(phase)
-        # Every round with the model the first identification used (auto chose it).
-        ident = _identify(ctx, m, model=self.idents[0].model if n else None)
+        # With auto, every round chooses its model again: misplaced stands bias the
+        # first round by (stand error × leg tilt), a misfit no model explains that
+        # can push the choice to a tilt model on a square machine; it vanishes with
+        # the offsets, so a later round's choice sees the machine as it is.
+        ident, selection = _identify(ctx, m)
+        if n == 0 and selection is not None:
+            self.result["model_selection"] = selection
         self.idents.append(ident)
         fields = measurement_fields(ctx.config, m, ident)
         sig = significant_corrections(
             ident.parameters, ident.std_errors, ctx.config.procedure.converge_mm,
             previous_std_errors=self.idents[n - 1].std_errors if n else None)
         self.iterations.append({
-            "phase": phase, "identified": fields["identified"],
+            "phase": phase, "model": ident.model, "identified": fields["identified"],
             "std_errors": fields["std_errors"], "offsets_written": None, "writeback": None,
             "deviations_rms_mm": fields["deviations_rms_mm"],
             "residual_rms_mm": fields["residual_rms_mm"],
@@ -278,13 +283,10 @@ def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
     return "failed", outcome.reason
 
 
-def _identify(ctx: Run, m: Measurement, model: str | None = None) -> Any:
+def _identify(ctx: Run, m: Measurement) -> tuple[Any, dict[str, Any] | None]:
     from station.models import identify_measurement
 
-    ident, selection = identify_measurement(ctx.config, m, model)
-    if selection is not None:
-        ctx.result["model_selection"] = selection
-    return ident
+    return identify_measurement(ctx.config, m)
 
 
 def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
