@@ -30,6 +30,8 @@ from drivers.sim.indicators import IndicatorFaults, SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
 from orthocal import Geometry
 
+STANDARD_STROKE_MM = 12.5  # station.config's default stroke_mm (preload: half)
+
 # Fast but physical: moves still take time, so in-position waits are real.
 SIM_SPEED_MM_S = 1000.0
 SIM_ACCEL_MM_S2 = 20000.0
@@ -93,6 +95,8 @@ class VirtualStation:
         procedure: dict[str, Any] | None = None,
         writeback: dict[str, Any] | None = None,
         mount_all: bool = False,
+        motion: str = "coordinated",
+        strokes: dict[str, tuple[float, float]] | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
@@ -104,7 +108,8 @@ class VirtualStation:
         self.procedure = {**DEFAULT_PROCEDURE, **(procedure or {})}
         self.writeback = dict(writeback or {})
         self.machine = _PersistentMachine(
-            self.geometry, true_drho, true_dl, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
+            self.geometry, true_drho, true_dl, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2,
+            motion=motion)
         if nvram_path is not None:
             path = Path(nvram_path)
             if path.exists():
@@ -112,6 +117,10 @@ class VirtualStation:
                 self.machine.set_offsets(saved)
             self.machine.nvram_path = path
         names = sorted({n for s in self.setups for n in s["indicators"]})
+        # (stroke, preload) per gauge: standard 12.5 mm gauges pushed in by half unless
+        # given (the config's defaults, so config() need not repeat them).
+        self.strokes = {n: (STANDARD_STROKE_MM, STANDARD_STROKE_MM / 2) for n in names}
+        self.strokes.update(strokes or {})
         self.controller = SimController(self.machine, port=port, faults=controller_faults,
                                         seed=seed)
         self.indicators: dict[str, SimIndicator] = {}
@@ -122,7 +131,9 @@ class VirtualStation:
                 line_baud = baud if baud is not None else make_protocol(protocol).baudrate
                 sim = SimIndicator(protocol, lambda: 0.0, noise_mm=noise_mm,
                                    baud=line_baud if line_time else None, faults=faults,
-                                   seed=None if seed is None else seed * 101 + i, name=name)
+                                   seed=None if seed is None else seed * 101 + i, name=name,
+                                   stroke_mm=self.strokes[name][0],
+                                   preload_mm=self.strokes[name][1])
                 sim.unmount()
                 self.indicators[name] = sim
                 sim.start()
@@ -166,8 +177,12 @@ class VirtualStation:
             "controller": {"transport": "tcp", "host": "127.0.0.1",
                            "port": self.controller.port, "device_id": 1,
                            "profile": "orthocal-generic", "timeout_s": 1.0,
-                           "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2},
-            "indicators": [{"name": n, "port": s.port, "protocol": self.protocol}
+                           "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2,
+                           # The simulator knows how its axes move; a real config says it
+                           # when the profile's default (independent) is too cautious.
+                           "motion": self.machine.motion},
+            "indicators": [{"name": n, "port": s.port, "protocol": self.protocol,
+                            "stroke_mm": self.strokes[n][0], "preload_mm": self.strokes[n][1]}
                            for n, s in self.indicators.items()],
             "setups": [dict(s) for s in self.setups],
             "procedure": dict(self.procedure),
