@@ -224,6 +224,11 @@ class PlungerGuard:
                                        max(old[1], p_hi, n_hi + max(ends)))
             if base == rec.label:  # the move's last leg: its target is a stop
                 previous = sign
+        self._journal({"type": "event", "event": {
+            "event": "plunger-guard-learned", "where": self._where,
+            "polls": sum(r.polls for r in self._moves),
+            "predicted_mm": {f"{name} {label}": [round(lo, 4), round(hi, 4)]
+                             for (label, name), (lo, hi) in self.predicted.items()}}})
 
     def check_cycle(self, cycle: int) -> None:
         """Refuse a later cycle, before it moves, if a move would come within the margin."""

@@ -168,7 +168,7 @@ def test_motion_comes_from_the_profile_unless_the_config_says() -> None:
     assert motion_model(config()) == "independent"
     assert motion_model(config(motion="coordinated")) == "coordinated"
     assert motion_model(config(profile="iai-pcon-direct")) == "independent"
-    with pytest.raises(BadInput, match="controller.profile"):
+    with pytest.raises(BadInput, match=r"controller\.profile"):
         motion_model(config(profile="nonesuch"))
     data = copy.deepcopy(BASE)
     data["controller"]["motion"] = "interpolated"
