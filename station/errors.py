@@ -1,7 +1,9 @@
-"""Errors that end a command with a known exit status and one clear line."""
+"""Errors that end a command with a known exit status and one clear line, and the line
+for the operator on stderr."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 
@@ -21,3 +23,8 @@ def read_input(path: Path, encoding: str = "utf-8") -> str:
         raise BadInput(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise BadInput(f"{path}: cannot read ({exc})") from None
+
+
+def say(*parts: object) -> None:
+    """A line for the operator on stderr (stdout carries the summary or the JSON)."""
+    print(*parts, file=sys.stderr, flush=True)

@@ -157,7 +157,7 @@ def test_generic_gauge_units_and_errors_reach_the_driver(tmp_path: Path, scale: 
     from drivers.errors import IndicatorReplyError
     from drivers.indicators import make_protocol
     from drivers.sim.indicators import IndicatorFaults, SimIndicator
-    from station.cmd_run import build_indicators
+    from station.devices import build_indicators
 
     wire = make_protocol("generic", {
         "baudrate": 9600, "request": "R\r", "terminator": "\r",

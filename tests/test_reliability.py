@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.station import VirtualStation
-from station import cmd_run
+from station import devices, simulation
 from station.cli import main
 from station.journal import read_journal
 
@@ -100,7 +100,7 @@ def orthocal(tmp_path: Path, monkeypatch, capsys) -> Iterator[Callable[..., Outc
     def invoke(*argv: str, prepare: Prepare | None = None, out_dir: Path | None = None,
                rig: Rig | None = None) -> Outcome:
         rig = rig if rig is not None else Rig()
-        real_start = cmd_run.start_station
+        real_start = simulation.start_station
 
         def start(params: dict[str, Any], nvram: Path | None) -> VirtualStation:
             station = real_start(params, nvram)
@@ -128,13 +128,13 @@ def orthocal(tmp_path: Path, monkeypatch, capsys) -> Iterator[Callable[..., Outc
                 prepare(rig, station)
             return station
 
-        monkeypatch.setattr(cmd_run, "start_station", start)
+        monkeypatch.setattr(simulation, "start_station", start)
         out_dir = out_dir if out_dir is not None else tmp_path / "runs"
         try:
             code = main(list(argv))
         except SystemExit as exc:  # argparse reports usage errors by exiting 2
             code = exc.code if isinstance(exc.code, int) else 1
-        monkeypatch.setattr(cmd_run, "start_station", real_start)
+        monkeypatch.setattr(simulation, "start_station", real_start)
         out, err = capsys.readouterr()
         return Outcome(code, out, err, rig, out_dir)
 
@@ -385,7 +385,7 @@ def _write_reply_lost(rig: Rig, station: VirtualStation) -> None:
     # station cannot know what the drive holds.
     f = station.controller.faults
     _on_offset_write(rig, station,
-                     lambda: setattr(f, "drop_next", cmd_run.DEVICE_RETRIES + 1))
+                     lambda: setattr(f, "drop_next", devices.DEVICE_RETRIES + 1))
 
 
 WRITEBACK_FAULTS = {

@@ -1,0 +1,109 @@
+"""The run's result document (result.json and ``--json``): its fields from a
+measurement, an identification and a write-back, and its printing."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from station.config import StationConfig
+from station.sequencer import Measurement
+from station.writeback import WritebackOutcome
+
+AXES = ("x", "y", "z")
+
+
+def ident_json(ident: Any) -> dict[str, Any]:
+    return {"model": ident.model, "method": ident.method,
+            "parameters": {k: float(v) for k, v in ident.parameters.items()},
+            "std_errors": {k: num(v) for k, v in ident.std_errors.items()},
+            "residual_rms_mm": num(ident.residual_rms)}
+
+
+def num(v: Any) -> float | None:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dict[str, Any]:
+    stats = m.stats()
+    deviations = {}
+    for key, st in stats.items():
+        model = ident.predicted.get((key[0], key[1], key[2]))
+        deviations[key] = {**st, "model": num(model)}
+    means = np.array([st["mean"] for st in stats.values()])
+    noise = m.noise_mm
+    # What the residual should be if the model explains the data: the standard
+    # error of a deviation mean, from the cycle-to-cycle scatter (or, with one
+    # cycle, from the scatter of readings at a stop), floored at the resolution.
+    sems = [st["std"] / math.sqrt(st["n"]) for st in stats.values() if st["std"] is not None]
+    expected = float(np.sqrt(np.mean(np.square(sems)))) if sems else (
+        (noise or 0.0) * math.sqrt(1.5 / config.procedure.readings))
+    resolution = min(ind.resolution_mm for ind in config.indicators)
+    expected = max(expected, resolution)
+    resid = float(ident.residual_rms)
+    fit_ok = resid <= 3.0 * expected
+    fit_note = (f"residual {resid:.4f} mm vs {expected:.4f} mm expected from the scatter: "
+                + ("the model explains the data" if fit_ok else
+                   "larger than the noise explains: errors outside the model (leg lengths, "
+                   "play, a loose indicator?)"))
+    corr = ident.correlation
+    return {
+        "model": ident.model, "method": ident.method,
+        "identified": {k: float(v) for k, v in ident.parameters.items()},
+        "std_errors": {k: num(v) for k, v in ident.std_errors.items()},
+        "correlation": {"names": list(ident.names),
+                        "matrix": [[num(x) for x in row] for row in np.asarray(corr)]},
+        "residual_rms_mm": num(resid), "sigma_mm": num(ident.sigma),
+        "condition_number": num(ident.condition_number),
+        "noise_mm": num(noise), "fit_ok": bool(fit_ok), "fit_note": fit_note,
+        "deviations": deviations,
+        "deviations_rms_mm": float(np.sqrt(np.mean(means**2))) if means.size else None,
+        "setups": [{"leg": o.leg, "indicators": o.indicators, "cycles_used": o.cycles_used,
+                    "cycles_max": o.cycles_max, "repeats": o.repeats, "flagged": o.flagged,
+                    "spread_mm": o.spread_mm} for o in m.setups],
+    }
+
+
+def writeback_fields(result: dict[str, Any], outcome: WritebackOutcome, controller: Any) -> None:
+    result["writeback"] = outcome.to_json()
+    result["offsets_before"] = outcome.before if outcome.before is not None else \
+        {a: float(v) for a, v in zip(AXES, controller.read_offsets(), strict=True)}
+    result["offsets_written"] = outcome.written
+
+
+def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None,
+                started_iso: str) -> dict[str, Any]:
+    m = config.machine
+    return {
+        "run_dir": str(run_dir), "status": "failed", "message": None,
+        "started": started_iso, "finished": None, "duration_s": None,
+        "simulated": sim is not None,
+        "simulation": None if sim is None else {
+            "seed": sim["seed"], "true_drho": dict(zip(AXES, sim["true_drho"], strict=True)),
+            "true_dl": dict(zip(AXES, sim["true_dl"], strict=True)),
+            "noise_mm": sim["noise_mm"]},
+        "machine": {"leg_length": m.leg_length, "rho_min": m.rho_min, "rho_max": m.rho_max},
+        "model": config.procedure.model, "method": config.procedure.method,
+        "identified": {}, "std_errors": {}, "offsets_before": None, "offsets_written": None,
+        "writeback": None, "verification": None,
+    }
+
+
+def print_result(args: argparse.Namespace, result: dict[str, Any]) -> None:
+    if getattr(args, "json", False):
+        from station.report import _jsonable
+
+        print(json.dumps(_jsonable(result), allow_nan=False))
+    else:
+        from station import report
+
+        print(report.summary_text(result))

@@ -1,0 +1,70 @@
+"""The run directory: creating one, what it holds, and reopening one for resume and
+rollback.
+
+A run directory holds everything needed to understand and to continue a run:
+config.toml (the config it ran with), plan.txt / plan.json, journal.jsonl,
+offsets_backup.json, result.json and report.html and, for a simulated run,
+simulation.json (the hidden errors, to restart the virtual station on resume) and
+controller_nvram.json (the virtual controller's non-volatile offsets).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from station.config import StationConfig, dump_toml
+from station.errors import BadInput, RunFailed
+from station.journal import JOURNAL_NAME, JournalState, read_journal, replay
+from station.plan import Plan
+
+SIM_NAME = "simulation.json"
+NVRAM_NAME = "controller_nvram.json"
+
+
+def version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("orthocal")
+    except Exception:
+        return "unknown"
+
+
+def now_iso() -> str:
+    return datetime.now(UTC).astimezone().isoformat(timespec="seconds")
+
+
+def new_run_dir(out: Path) -> Path:
+    out.mkdir(parents=True, exist_ok=True)
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    for n in range(1000):
+        path = out / (f"run-{stamp}" if n == 0 else f"run-{stamp}-{n}")
+        try:
+            path.mkdir()
+            return path
+        except FileExistsError:
+            continue
+    raise RunFailed(f"cannot create a run directory under {out}")
+
+
+def write_run_files(run_dir: Path, config: StationConfig, plan: Plan,
+                    sim: dict[str, Any] | None) -> None:
+    """What a run directory holds before the first record of its journal."""
+    if sim is not None:
+        (run_dir / SIM_NAME).write_text(json.dumps(sim, indent=2) + "\n")
+    (run_dir / "config.toml").write_text(dump_toml(config))
+    (run_dir / "plan.txt").write_text(plan.format() + "\n")
+    (run_dir / "plan.json").write_text(json.dumps(plan.to_json(), indent=1) + "\n")
+
+
+def reopen(args: argparse.Namespace) -> tuple[Path, list[dict[str, Any]], JournalState]:
+    """The run directory named on the command line, its journal and replayed state."""
+    run_dir = Path(args.run_dir)
+    if not run_dir.is_dir():
+        raise BadInput(f"{run_dir}: no such run directory")
+    records = read_journal(run_dir / JOURNAL_NAME)
+    return run_dir, records, replay(records)
