@@ -73,6 +73,11 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
     )
+    p.add_argument(
+        "--motion", choices=["coordinated", "independent"], default=None,
+        help="how the virtual controller moves its axes: together on the straight line "
+             "(coordinated, the default) or each on its own trapezoid (independent)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

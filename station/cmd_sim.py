@@ -48,6 +48,7 @@ def main(args: argparse.Namespace) -> int:
         try:
             station = VirtualStation(drho, dl, noise, seed, protocol=args.protocol,
                                      indicator_count=6, port=args.port, mount_all=True,
+                                     motion=getattr(args, "motion", None) or "coordinated",
                                      **kwargs)
         except OSError as exc:
             raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None

@@ -34,6 +34,7 @@ def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "true_drho": drho,
         "true_dl": dl,
         "noise_mm": noise,
+        "motion": getattr(args, "motion", None) or "coordinated",
         # Test hooks (not on the command line): the six-indicator style, a procedure.
         "indicators": int(getattr(args, "sim_indicators", 2) or 2),
         "procedure": getattr(args, "sim_procedure", None),
@@ -54,6 +55,7 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         indicator_count=params["indicators"], nvram_path=nvram,
         procedure=params.get("procedure"), writeback=params.get("writeback"),
         speed_mm_s=speed, accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
+        motion=params.get("motion") or "coordinated",
     )
 
 

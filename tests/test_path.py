@@ -231,17 +231,18 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
     true_drho = (0.7, -1.1, 0.5)
     stations: list[Any] = []
 
-    def independent(station: Any) -> None:
-        station.machine.motion = "independent"
-        stations.append(station)
+    def keep(station: Any) -> None:
+        assert station.machine.motion == "independent"  # --motion, kept for resume
+        stations.append((station, dict(station.indicators)))
 
-    def independent_alarm(station: Any) -> None:
-        independent(station)
+    def alarm(station: Any) -> None:
+        keep(station)
         # the second move is the first half of Π_x^+ → Π_x^− (a waypoint move)
         station.controller.faults.alarm_after_moves = 1
 
     with pytest.raises(RunFailed) as info:
-        cmd_run.run(args_for(tmp_path, true_drho=true_drho, sim_station_hook=independent_alarm))
+        cmd_run.run(args_for(tmp_path, true_drho=true_drho, motion="independent",
+                             sim_station_hook=alarm))
     (run_dir,) = list((tmp_path / "runs").iterdir())
     assert "alarm 17" in str(info.value) and f"orthocal resume {run_dir}" in str(info.value)
     plan_text = (run_dir / "plan.txt").read_text()
@@ -250,14 +251,15 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
     capsys.readouterr()
     code = cmd_run.resume(argparse.Namespace(run_dir=str(run_dir), out=None, yes=False,
                                              json=True, debug=False,
-                                             sim_station_hook=independent))
+                                             sim_station_hook=keep))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok"
     for axis, true in zip("xyz", true_drho, strict=True):
         assert abs(result["identified"][f"drho_{axis}"] - true) < 0.01
     # no gauge ever read at an end of its stroke: not at the stops, not in the guard's polls
-    assert all(sim.clamped == 0 for st in stations for sim in st.indicators.values())
+    assert len(stations) == 2
+    assert all(sim.clamped == 0 for _, sims in stations for sim in sims.values())
     # a waypoint move is no reading stop: every stop was read once per phase and cycle,
     # but the two read before the alarm, whose cycle was redone after remounting
     records = read_journal(run_dir / "journal.jsonl")
