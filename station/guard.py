@@ -34,11 +34,18 @@ import numpy as np
 
 from station.config import StationConfig
 from station.errors import RunFailed
-from station.motion import independent_path, straight_path
+from station.motion import independent_path, straight_path, trapezoid_time
 
 # Nominal travel change within one poll window below which the signal estimate is
 # taken as exact (the gauge's sampling instant no longer matters).
-QUIET_MM = 0.02
+QUIET_MM = 0.05
+# The signal's rate is taken over at least this much of a move (from its start at
+# rest, where the signal is exact), so one reading's noise is not extrapolated.
+MIN_RATE_BASE_S = 0.03
+# The signal at a move's target is extrapolated from the part done once this
+# fraction of the move is behind: a reading's noise (µm) and the sampling skew
+# (tens of µm) grow by 1/progress.
+MIN_PROGRESS = 0.15
 
 
 class PlungerGuardStop(RunFailed):
@@ -56,6 +63,8 @@ class _Gauge:
     rate: float = 0.0
     t_signal: float = 0.0
     seen: tuple[float, float] = (0.0, 0.0)
+    start_signal: float = 0.0  # at the stop the current move started from
+    samples: list[tuple[float, float]] = field(default_factory=list)  # (progress, Δsignal)
 
 
 @dataclass
@@ -127,74 +136,169 @@ class PlungerGuard:
             return independent_path(start, target, c.speed_mm_s, c.accel_mm_s2)
         return straight_path(start, target)
 
+    def begin_move(self, start: Sequence[float], legs: Sequence[Sequence[float]]) -> None:
+        """A move from a stop (``start``) through its sub-moves' targets ``legs``: the
+        nominal travel along every sub-move's modelled path, and the signal at rest."""
+        if not self.watching:
+            return
+        a = np.asarray(start, dtype=float)
+        b = np.asarray(legs[-1], dtype=float)
+        self._route_a, self._route_d = a, b - a
+        self._route_paths = []
+        here = a
+        for leg in legs:
+            leg_v = np.asarray(leg, dtype=float)
+            self._route_paths.append(self._model_path(here, leg_v))
+            here = leg_v
+        # Per gauge and sub-move: nominal travel along it, and the extremes of all
+        # the sub-moves after it.
+        self._route_nominal: dict[str, list[np.ndarray]] = {}
+        self._route_after: dict[str, list[tuple[float, float]]] = {}
+        for g in self._gauges.values():
+            tracks = [self._nominal(self._setup, g.name, g.direction, p)
+                      for p in self._route_paths]
+            after: list[tuple[float, float]] = []
+            lo, hi = np.inf, -np.inf
+            for t in reversed(tracks):
+                after.append((lo, hi))
+                lo, hi = min(lo, float(t.min())), max(hi, float(t.max()))
+            self._route_nominal[g.name] = tracks
+            self._route_after[g.name] = after[::-1]
+            g.start_signal = g.signal
+            g.samples = []
+        self._leg_index = 0
+
+    def _progress(self, p: np.ndarray) -> float:
+        """Fraction of the move done at joint position p (projection on its chord)."""
+        d = self._route_d
+        norm = float(d @ d)
+        return 0.0 if norm <= 0 else float(np.clip((p - self._route_a) @ d / norm, 0.0, 1.0))
+
     def watch(self, start: Sequence[float], target: Sequence[float], label: str
               ) -> Callable[[], None] | None:
-        """The poll for one (sub-)move from ``start`` to ``target`` (None: not watching)."""
+        """The poll for the next sub-move of the move begun by begin_move (None: not
+        watching)."""
         if not self.watching:
             return None
-        path = self._model_path(np.asarray(start, float), np.asarray(target, float))
-        nominal = {g.name: self._nominal(self._setup, g.name, g.direction, path)
-                   for g in self._gauges.values()}
-        # Remaining extremes from each sample on: what the rest of the move will add.
-        rest_hi = {n: np.maximum.accumulate(t[::-1])[::-1] for n, t in nominal.items()}
-        rest_lo = {n: np.minimum.accumulate(t[::-1])[::-1] for n, t in nominal.items()}
+        index = self._leg_index
+        self._leg_index += 1
+        path = self._route_paths[index]
+        nominal = {n: tracks[index] for n, tracks in self._route_nominal.items()}
+        # Remaining extremes from each sample on, this sub-move and the ones after it.
+        rest_hi = {n: np.maximum(np.maximum.accumulate(t[::-1])[::-1],
+                                 self._route_after[n][index][1])
+                   for n, t in nominal.items()}
+        rest_lo = {n: np.minimum(np.minimum.accumulate(t[::-1])[::-1],
+                                 self._route_after[n][index][0])
+                   for n, t in nominal.items()}
         record = _MoveRecord(label, nominal={n: (float(t.min()), float(t.max()))
                                              for n, t in nominal.items()})
         self._moves.append(record)
         names = list(self._gauges)
-        last_poll = [time.monotonic()]
+        started = time.monotonic()
+        c = self.config.controller
+        arrival = started + trapezoid_time(float(np.max(np.abs(np.asarray(target, float)
+                                                               - np.asarray(start, float)))),
+                                           c.speed_mm_s, c.accel_mm_s2)
+        last_poll = [started]
+        took = [0.0]
+        # The signal at rest is exact: it anchors the rate estimate of this sub-move.
+        anchor = {n: g.signal for n, g in self._gauges.items()}
+        for g in self._gauges.values():
+            g.rate, g.t_signal = 0.0, started
 
         def nearest(p: np.ndarray) -> int:
             return int(np.argmin(np.sum((path - p) ** 2, axis=1)))
 
         def poll() -> None:
+            began = time.monotonic()
+            if record.polls and began + took[0] > arrival:
+                # A poll now would end after the arrival and delay its detection; the
+                # last one predicted the rest of the path (nominal extremes to the end).
+                return
             before = np.asarray(self._positions(), dtype=float)
             values = self._read(names)
             after = np.asarray(self._positions(), dtype=float)
             now = time.monotonic()
-            k_b, k_a = nearest(before), nearest(after)
-            k = min(k_b, k_a)
+            took[0] = now - began
+            k = min(nearest(before), nearest(after))
             horizon = (now - last_poll[0]) + 0.5 * self._brake_s
+            if now + 2 * took[0] > arrival:
+                # The next poll will be skipped: look ahead to the arrival.
+                horizon = max(horizon, arrival - now)
             last_poll[0] = now
             self.polls += 1
             record.polls += 1
+            ends = np.vstack([before, after])
+            u = 0.5 * (self._progress(before) + self._progress(after))
             for name, g in self._gauges.items():
                 travel = float(values[name][0]) - g.baseline
                 g.seen = (min(g.seen[0], travel), max(g.seen[1], travel))
                 lo_hi = record.travel.get(name, (travel, travel))
                 record.travel[name] = (min(lo_hi[0], travel), max(lo_hi[1], travel))
-                t_b, t_a = nominal[name][k_b], nominal[name][k_a]
+                # Nominal travel where the axes were just before and just after the
+                # gauges were read: the gauge sampled somewhere in between.
+                t_b, t_a = self._nominal(self._setup, name, g.direction, ends)
                 if abs(t_a - t_b) <= QUIET_MM:
-                    signal = travel - 0.5 * (t_a + t_b)
-                    if now > g.t_signal and g.t_signal > 0:
-                        g.rate = (signal - g.signal) / (now - g.t_signal)
-                    g.signal, g.t_signal = signal, now
-                ahead = max(0.0, now - g.t_signal) + horizon
-                hi = max(travel, float(rest_hi[name][k]) + g.signal + max(g.rate, 0.0) * ahead)
-                lo = min(travel, float(rest_lo[name][k]) + g.signal + min(g.rate, 0.0) * ahead)
+                    g.signal, g.t_signal = travel - 0.5 * float(t_a + t_b), now
+                    if now - started >= MIN_RATE_BASE_S:
+                        g.rate = (g.signal - anchor[name]) / (now - started)
+                    g.samples.append((u, g.signal - g.start_signal))
+                ahead = (now - g.t_signal) + horizon
+                sig_hi = g.signal + max(g.rate, 0.0) * ahead
+                sig_lo = g.signal + min(g.rate, 0.0) * ahead
+                end = self._signal_at_end(g)
+                if end is not None:
+                    sig_hi, sig_lo = max(sig_hi, end), min(sig_lo, end)
+                hi = max(travel, float(rest_hi[name][k]) + sig_hi)
+                lo = min(travel, float(rest_lo[name][k]) + sig_lo)
                 if hi > g.high - self.margin or lo < g.low + self.margin:
                     self._trip(g, label, travel, hi, lo)
 
         return poll
 
+    @staticmethod
+    def _signal_at_end(g: _Gauge) -> float | None:
+        """The signal at the move's target, extrapolated linearly in the move's
+        progress from its value at the starting stop (the signal is a smooth function
+        of the joint positions), once enough of the move is done to trust the slope."""
+        us = np.array([u for u, _ in g.samples])
+        if us.size == 0 or us.max() < MIN_PROGRESS:
+            return None
+        ds = np.array([d for _, d in g.samples])
+        slope = float(us @ ds / (us @ us))  # least squares through the starting stop
+        return g.start_signal + slope
+
+    def at_rest(self, position: Sequence[float], means: Mapping[str, float]) -> None:
+        """A stop's mean readings at ``position``: the signal there, exactly."""
+        if not self.watching:
+            return
+        here = np.asarray(position, dtype=float)[None, :]
+        for name, g in self._gauges.items():
+            if name in means:
+                nominal = float(self._nominal(self._setup, name, g.direction, here)[0])
+                g.signal = float(means[name]) - g.baseline - nominal
+
     def _trip(self, g: _Gauge, label: str, travel: float, hi: float, lo: float) -> None:
         try:
-            self._stop()
-        finally:
-            pushed = hi > g.high - self.margin
-            end, predicted = (g.high, hi) if pushed else (g.low, lo)
-            gap = (end - predicted) if pushed else (predicted - end)
-            what = "its stop (pushed in)" if pushed else "the end where the leg leaves it"
-            self._journal({"type": "event", "event": {
-                "event": "plunger-guard", "indicator": g.name, "where": self._where,
-                "move": label, "travel_mm": travel, "predicted_mm": predicted,
-                "end_mm": end, "margin_mm": self.margin}})
-            raise PlungerGuardStop(
-                f"plunger guard: indicator {g.name} ({g.direction}) on {self._where}, "
-                f"move to {label}: its plunger was at {travel:+.3f} mm from the mounting "
-                f"point and heading within {gap:.3f} mm of {what} ({end:+.3f} mm; margin "
-                f"{self.margin:g} mm). Re-mount it with "
-                f"{'less' if pushed else 'more'} preload or use a longer stroke")
+            self._stop()  # COMMAND 2 first; the sequencer's abort stops again and reports
+        except Exception:
+            pass  # a failed stop is the sequencer's to report (it stops again on abort)
+        pushed = hi > g.high - self.margin
+        end, predicted = (g.high, hi) if pushed else (g.low, lo)
+        gap = (end - predicted) if pushed else (predicted - end)
+        what = "its stop (pushed in)" if pushed else "the end where the leg leaves it"
+        heading = f"heading within {gap:.3f} mm of" if gap >= 0 else \
+            f"heading {-gap:.3f} mm past"
+        self._journal({"type": "event", "event": {
+            "event": "plunger-guard", "indicator": g.name, "where": self._where,
+            "move": label, "travel_mm": travel, "predicted_mm": predicted,
+            "end_mm": end, "margin_mm": self.margin}})
+        raise PlungerGuardStop(
+            f"plunger guard: indicator {g.name} ({g.direction}) on {self._where}, "
+            f"move to {label}: its plunger was at {travel:+.3f} mm from the mounting "
+            f"point and {heading} {what} ({end:+.3f} mm; margin {self.margin:g} mm). "
+            f"Re-mount it with {'less' if pushed else 'more'} preload or use a longer stroke")
 
     # --- later cycles --------------------------------------------------------------------
 

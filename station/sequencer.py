@@ -402,6 +402,7 @@ class Sequencer:
         legs = self.checker.route(self._position, target, step.label, self._setup,
                                   self._mounted)
         self.progress("move", label=step.label, targets=step.targets)
+        self.guard.begin_move(self._position, legs)
         for number, leg in enumerate(legs, start=1):
             # Each waypoint is a move of its own (COMMAND 1, a deadline from its own
             # length); none is a reading stop, so the journal and resume ignore them.
@@ -452,6 +453,8 @@ class Sequencer:
                                    int(arr.size), rejected)
             self.counters.readings += len(vals)
         self._stops[step.stop] = stats
+        if self._position is not None:
+            self.guard.at_rest(self._position, {n: st.mean for n, st in stats.items()})
         if self._guard_pending and step.sign == "0" and self._setup is not None:
             # The mounting point: travel is counted from these readings.
             self._guard_pending = False

@@ -60,7 +60,9 @@ def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -
         stations.append((station, station.indicators["A"]))
 
     with pytest.raises(RunFailed) as info:
-        cmd_run.run(args_for(tmp_path, true_drho=(-2.0, -2.0, -2.0),
+        # at a real machine's speed (the tests' default virtual machine runs 10 times
+        # faster, leaving the guard one or two polls per sub-move)
+        cmd_run.run(args_for(tmp_path, true_drho=(-2.0, -2.0, -2.0), sim_speed=100.0,
                              sim_station_hook=short_preload))
     message = str(info.value)
     (run_dir,) = list((tmp_path / "runs").iterdir())
@@ -77,7 +79,7 @@ def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -
     # stopped before the end: the plunger is still on the leg, and never read at its end
     ((station, sim),) = stations
     travel = sim._source() - sim._zero
-    assert -0.3 < travel < -0.05 and sim.clamped == 0
+    assert -0.3 < travel < -0.05 and sim.clamped == 0, message
     assert not station.machine.status().moving
     assert json.loads((run_dir / "result.json").read_text())["status"] == "failed"
 
@@ -122,6 +124,7 @@ def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> No
                    ).setups[0].postures
     path = [g["0"], g["+"], g["-"], g["0"]]
     for a, b, label in zip(path, path[1:], ["Π_x^+", "Π_x^-", "Π0"], strict=False):
+        guard.begin_move(a, [b])
         assert guard.watch(a, b, label) is not None
     # cycle 1 ended with A 0.65 mm lifted at Π_x^−: within 0.2 mm of its 0.8 mm preload
     # once the move's own nominal swing is added; B far from its ends
@@ -138,6 +141,7 @@ def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> No
     # the same cycle with a comfortable preload goes ahead
     guard2, _ = _guard(6.25, [])
     for a, b, label in zip(path, path[1:], ["Π_x^+", "Π_x^-", "Π0"], strict=False):
+        guard2.begin_move(a, [b])
         guard2.watch(a, b, label)
     guard2.learn({"+": {"A": 0.9, "B": 2.1}, "-": {"A": 0.35, "B": 2.2},
                   "0": {"A": 1.0, "B": 2.0}})
@@ -176,6 +180,7 @@ def test_guard_poll_stops_on_a_drifting_signal_before_the_end() -> None:
         guard = PlungerGuard(cfg, checker.nominal_travel, positions, read,
                              lambda: stops.append("stop"), lambda r: None)
         guard.mount("coordinated", sp, "m", {"A": "y"}, {"A": 10.0})
+        guard.begin_move(a, [b])
         poll = guard.watch(a, b, "Π_x^+")
         assert poll is not None
         try:
