@@ -47,6 +47,7 @@ from drivers.errors import (
     ReadbackMismatch,
     TargetRefused,
 )
+from drivers.limits import SoftLimits, read_soft_limits
 from drivers.registers import Register, RegisterMap, contiguous_runs, load_map
 
 _pymodbus_log = logging.getLogger("pymodbus")
@@ -331,15 +332,24 @@ class ModbusAxisController:
         code = next((counts[n] for n in self.map.alarm_code if counts[n]), 0)
         return AxisStatus(alarm_code=code, **flags)
 
-    def soft_limits(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) joint limits in mm as the controller enforces them."""
-        if self.map.has_role("SOFT_MIN"):
+    def soft_limits(self) -> SoftLimits:
+        """(lower, upper) joint limits in mm as the controller enforces them; where the
+        controller cannot tell (exception 2, no such registers in the map, a range
+        that is none), the limits given to the driver, else NaN with the reason
+        (:mod:`drivers.limits`): the station decides what to do without them."""
+        def read() -> np.ndarray:
             regs = self.map.axis_registers("SOFT_MIN") + self.map.axis_registers("SOFT_MAX")
-            both = self._read_mm(regs, "read soft limits")
-            return both[:3], both[3:]
-        if self._given_limits is not None:
-            return self._given_limits[0].copy(), self._given_limits[1].copy()
-        raise self._unsupported("soft_limits")
+            return self._read_mm(regs, "read soft limits")
+
+        return read_soft_limits(
+            read, self.map.has_role("SOFT_MIN"), self._given_limits,
+            self.map.unsupported.get("soft_limits",
+                                     f"profile {self.map.name!r} has no soft-limit registers"))
+
+    def read_raw(self, name: str) -> int:
+        """The raw integer value of one register of the map (bring-up: which
+        registers a controller answers); a read request only."""
+        return self._read_counts([self.map[name]], f"read {name}")[name]
 
     def move(self, targets: Sequence[float], speed_mm_s: float | None = None) -> None:
         """Write SPEED (if given), the three targets in one write, then the move command.

@@ -23,6 +23,8 @@ _COMMANDS = {
     "rollback": "station.cmd_run:rollback",
     "sim": "station.cmd_sim:main",
     "identify": "station.cmd_identify:main",
+    "probe": "station.cmd_probe:main",
+    "init": "station.cmd_init:main",
 }
 
 
@@ -80,6 +82,17 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _probe_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("ports", nargs="*", metavar="PORT",
+                   help="serial ports to probe (default: every port the system lists)")
+    p.add_argument("--controller", metavar="HOST:PORT",
+                   help="Modbus TCP controller to probe (or a serial device: Modbus RTU)")
+    p.add_argument("--device-id", type=int, default=1, help="Modbus device id (default 1)")
+    p.add_argument("--baudrate", type=int, default=19200, help="RTU line speed (default 19200)")
+    p.add_argument("--timeout", type=float, default=0.5, metavar="S",
+                   help="wait per protocol tried on a port (default 0.5 s)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="orthocal",
@@ -120,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="write a station config pointing at the virtual station",
     )
     sim.add_argument("--port", type=int, default=0, help="Modbus TCP port (0: any free one)")
+    sim.add_argument("--transport", choices=["tcp", "rtu"], default="tcp",
+                     help="Modbus TCP on 127.0.0.1, or RTU over a pseudo-terminal pair")
     sim.add_argument("--speed", type=float, default=None, help="axis speed, mm/s")
     sim.add_argument(
         "--protocol",
@@ -129,6 +144,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _sim_options(sim)
     sim.add_argument("--debug", action="store_true", help="show tracebacks of failures")
+
+    probe = sub.add_parser("probe", help="bring-up: which port is which gauge, what the "
+                           "controller reports (reads only, never moves)")
+    _probe_options(probe)
+    probe.add_argument("--config", metavar="FILE",
+                       help="probe the controller (and, without PORTs, the indicator ports) "
+                       "of a station config")
+    probe.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    probe.add_argument("--debug", action="store_true", help="show tracebacks of failures")
+
+    init = sub.add_parser("init", help="write a commented starter config from what probe finds")
+    init.add_argument("--out", metavar="FILE", required=True, help="the config to write "
+                      "(never overwritten)")
+    _probe_options(init)
+    init.add_argument("--debug", action="store_true", help="show tracebacks of failures")
 
     ident = sub.add_parser("identify", help="identify parameters from a READINGS.csv")
     ident.add_argument("csv", metavar="READINGS.csv")

@@ -1,6 +1,8 @@
 """``orthocal sim --config-out FILE``: the virtual station as its own process.
 
-Runs until SIGINT/SIGTERM and writes a station config (TOML) pointing at it, so
+Runs until SIGINT/SIGTERM and writes a station config (TOML) pointing at it
+(Modbus TCP on 127.0.0.1, or with ``--transport rtu`` Modbus RTU over a
+pseudo-terminal pair whose client end the config names), so
 ``orthocal run --config FILE`` can rehearse the real workflow from another
 terminal. A separate process cannot be told where the operator mounted the
 gauges, so six fixed indicators stand two per leg, all mounted at once.
@@ -49,6 +51,7 @@ def main(args: argparse.Namespace) -> int:
             station = VirtualStation(drho, dl, noise, seed, protocol=args.protocol,
                                      indicator_count=6, port=args.port, mount_all=True,
                                      motion=getattr(args, "motion", None) or "coordinated",
+                                     controller_options={"transport": args.transport},
                                      **kwargs)
         except OSError as exc:
             raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
@@ -59,7 +62,11 @@ def main(args: argparse.Namespace) -> int:
             # Validated like any operator's config: what we hand out must load.
             config = parse_config(station.config(), "orthocal sim")
             out.write_text(dump_toml(config, header))
-            print(f"orthocal sim: Modbus TCP on 127.0.0.1:{station.controller.port}, "
+            link = (f"Modbus TCP on 127.0.0.1:{station.controller.port}"
+                    if args.transport == "tcp" else
+                    f"Modbus RTU on {station.controller.serial_port} "
+                    f"({station.controller.baudrate} 8N1, a pseudo-terminal)")
+            print(f"orthocal sim: {link}, "
                   f"{len(station.indicators)} indicators ({args.protocol}); "
                   f"config written to {out}", file=sys.stderr, flush=True)
             print(f"orthocal sim: hidden Δρ = {drho} mm; stop with Ctrl-C",

@@ -104,6 +104,8 @@ class PlungerGuard:
         # (move label, gauge) -> predicted (min, max) travel for later cycles
         self.predicted: dict[tuple[str, str], tuple[float, float]] = {}
         self.polls = 0
+        # The smallest distance of a prediction from the margin so far (mm).
+        self.slack = np.inf
 
     # --- a mounting --------------------------------------------------------------------
 
@@ -121,6 +123,7 @@ class PlungerGuard:
                                         ind.stroke_mm - ind.preload, float(baseline[name]))
         self._moves = []
         self.predicted = {}
+        self.slack = np.inf
         self.watching = self.enabled and bool(self._gauges)
 
     def forget(self) -> None:
@@ -245,14 +248,20 @@ class PlungerGuard:
                         g.rate = (g.signal - anchor[name]) / (now - started)
                     g.samples.append((u, g.signal - g.start_signal))
                 ahead = (now - g.t_signal) + horizon
-                sig_hi = g.signal + max(g.rate, 0.0) * ahead
-                sig_lo = g.signal + min(g.rate, 0.0) * ahead
+                hi = max(travel, float(rest_hi[name][k]) + g.signal
+                         + max(g.rate, 0.0) * ahead)
+                lo = min(travel, float(rest_lo[name][k]) + g.signal
+                         + min(g.rate, 0.0) * ahead)
                 end = self._signal_at_end(g)
                 if end is not None:
-                    sig_hi, sig_lo = max(sig_hi, end), min(sig_lo, end)
-                hi = max(travel, float(rest_hi[name][k]) + sig_hi)
-                lo = min(travel, float(rest_lo[name][k]) + sig_lo)
-                if hi > g.high - self.margin or lo < g.low + self.margin:
+                    # At the target the nominal travel is known (0 at a test posture):
+                    # the extrapolated signal goes with it, not with the swing on the
+                    # way, along which the signal is no straight line in the progress.
+                    at_target = float(self._route_nominal[name][-1][-1]) + end
+                    hi, lo = max(hi, at_target), min(lo, at_target)
+                slack = min(g.high - self.margin - hi, lo - g.low - self.margin)
+                self.slack = min(self.slack, slack)
+                if slack < 0:
                     self._trip(g, label, travel, hi, lo)
 
         return poll
@@ -331,6 +340,7 @@ class PlungerGuard:
         self._journal({"type": "event", "event": {
             "event": "plunger-guard-learned", "where": self._where,
             "polls": sum(r.polls for r in self._moves),
+            "min_slack_mm": round(float(self.slack), 4),
             "predicted_mm": {f"{name} {label}": [round(lo, 4), round(hi, 4)]
                              for (label, name), (lo, hi) in self.predicted.items()}}})
 

@@ -14,6 +14,11 @@ from typing import Protocol, TextIO
 
 from station.errors import BadInput, RunFailed
 
+try:
+    import termios
+except ImportError:  # pragma: no cover - not POSIX
+    termios = None  # type: ignore[assignment]
+
 
 class Operator(Protocol):
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
@@ -51,8 +56,29 @@ class ConsoleOperator:
             raise BadInput("operator prompts need a terminal (stdin is not a TTY); "
                            "pass --yes to answer them automatically")
 
-    def _ask(self, prompt: str) -> str:
+    def _say(self, text: str) -> None:
+        # Every line for the operator goes out with the live bar off the screen: a
+        # redrawing bar and a direct write land on one line ("… s leftmeasurement").
         with self.pause():
+            print(text, file=self._out, flush=True)
+
+    def _discard_typeahead(self) -> None:
+        """Forget keys typed before the question was shown: an Enter pressed during
+        a move must not answer the next prompt (a write-back among them), and an
+        answer consumed before its question would let the live bar redraw over it."""
+        if termios is None:
+            return
+        try:
+            if self._in.isatty():
+                termios.tcflush(self._in.fileno(), termios.TCIFLUSH)
+        except (AttributeError, OSError, ValueError, termios.error):
+            pass  # not a terminal (a pipe, a test stream): nothing typed ahead to drop
+
+    def _ask(self, prompt: str, preamble: str = "") -> str:
+        with self.pause():
+            self._discard_typeahead()
+            if preamble:
+                print(preamble, file=self._out)
             print(prompt, end="", file=self._out, flush=True)
             line = self._in.readline()
         if not line:  # EOF: nobody is there to answer
@@ -61,16 +87,17 @@ class ConsoleOperator:
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
               all_names: Sequence[str]) -> None:
-        print(mount_instruction(phase, setup, leg, indicators, all_names), file=self._out)
+        instruction = mount_instruction(phase, setup, leg, indicators, all_names)
         if self.yes:
+            self._say(instruction)
             return
-        answer = self._ask("Press Enter when done (or type 'abort'): ")
+        answer = self._ask("Press Enter when done (or type 'abort'): ", instruction)
         if answer in ("a", "abort", "q", "quit", "n", "no"):
             raise RunFailed(f"aborted by the operator at setup {setup + 1}")
 
     def confirm(self, question: str) -> bool:
         if self.yes:
-            print(f"{question} [y/N] yes (--yes)", file=self._out)
+            self._say(f"{question} [y/N] yes (--yes)")
             return True
         return self._ask(f"{question} [y/N] ") in ("y", "yes")
 

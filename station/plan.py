@@ -124,6 +124,7 @@ class Plan:
     readings: int
     settle_s: float
     limits: tuple[list[float], list[float]] | None = None
+    limits_source: str = ""
     # Per indicator and setup: (min, max) plunger travel found by the check, mm.
     travel: dict[str, tuple[float, float]] = field(default_factory=dict)
     # The controller's path model and the waypoints the check put on moves whose
@@ -156,7 +157,7 @@ class Plan:
             "readings": self.readings,
             "settle_s": self.settle_s,
             "soft_limits": None if self.limits is None else
-            {"lower": self.limits[0], "upper": self.limits[1]},
+            {"lower": self.limits[0], "upper": self.limits[1], "source": self.limits_source},
             "setups": [
                 {"index": sp.index, "leg": sp.leg, "indicators": sp.indicators,
                  "postures": {k: list(v) for k, v in sp.postures.items()}}
@@ -176,7 +177,8 @@ class Plan:
         ]
         if self.limits is not None:
             lo, hi = self.limits
-            lines.append("soft limits (mm): " + ", ".join(
+            source = f" ({self.limits_source})" if self.limits_source else ""
+            lines.append(f"soft limits{source} (mm): " + ", ".join(
                 f"ρ_{a} ∈ [{lo[i]:.3f}, {hi[i]:.3f}]" for i, a in enumerate(AXES)))
         if self.motion is not None:
             lines.append(f"controller path: {self.motion} axes" + (
@@ -235,14 +237,42 @@ def build_plan(config: StationConfig) -> Plan:
 def effective_limits(
     config: StationConfig, controller_limits: tuple[Sequence[float], Sequence[float]]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The controller's soft limits, narrowed (never widened) by the config."""
+    """The controller's soft limits, narrowed (never widened) by the config.
+
+    Where the controller cannot tell its limits (``controller_limits.source`` is
+    "absent" or "nonsense", drivers.limits.SoftLimits) they come from
+    ``[controller] soft_min`` / ``soft_max`` alone; with neither, BadInput names both
+    ways to provide them, before anything moves (design.md, "Register map").
+    """
+    c = config.controller
+    if getattr(controller_limits, "source", "registers") in ("absent", "nonsense"):
+        missing = [k for k in ("soft_min", "soft_max") if getattr(c, k) is None]
+        if missing:
+            reason = getattr(controller_limits, "reason", "") or "the controller has none"
+            raise BadInput(
+                f"soft limits: {reason}; give them as [controller] "
+                f"{' and '.join(missing)} (joint mm, x, y, z) in the config, or map the "
+                "controller's soft-limit registers in [controller.registers] (SOFT_MIN_X.. "
+                "SOFT_MAX_Z = address); nothing has moved")
+        return (np.asarray(c.soft_min, dtype=float).copy(),
+                np.asarray(c.soft_max, dtype=float).copy())
     lo = np.asarray(controller_limits[0], dtype=float).copy()
     hi = np.asarray(controller_limits[1], dtype=float).copy()
-    if config.controller.soft_min is not None:
-        lo = np.maximum(lo, config.controller.soft_min)
-    if config.controller.soft_max is not None:
-        hi = np.minimum(hi, config.controller.soft_max)
+    if c.soft_min is not None:
+        lo = np.maximum(lo, c.soft_min)
+    if c.soft_max is not None:
+        hi = np.minimum(hi, c.soft_max)
     return lo, hi
+
+
+def limits_source(config: StationConfig, controller_limits: object) -> str:
+    """Where the limits the plan uses come from, in words for the listing."""
+    c = config.controller
+    if getattr(controller_limits, "source", "registers") in ("absent", "nonsense"):
+        return "from the config ([controller] soft_min/soft_max)"
+    if c.soft_min is not None or c.soft_max is not None:
+        return "the controller's, narrowed by the config"
+    return "the controller's"
 
 
 def motion_model(config: StationConfig) -> str:
@@ -416,6 +446,7 @@ def check_plan(
     plan.travel. ``start``: the current joint positions, to check the first move."""
     checker = MotionChecker(config, controller_limits)
     plan.limits = (checker.lo.tolist(), checker.hi.tolist())
+    plan.limits_source = limits_source(config, controller_limits)
     position = None if start is None else np.asarray(start, dtype=float)
     for sp in plan.setups:
         mounted: dict[str, str] = {}

@@ -9,9 +9,13 @@ its own asyncio loop; ``start()``/``close()`` (or ``with``) leave no thread,
 task, socket or pty behind.
 
 It behaves like a drive: COMMAND 1/2/3/4 is taken at once and reads back 0;
-moves take time; STATUS follows the machine; a target outside the soft limits
-(default [L+ρmin−10, L+ρmax+10] on every axis) is refused with exception 3, as
-are an unknown command, a zero speed or an offset beyond ``max_offset_mm``;
+moves take time; STATUS follows the machine; TARGET_* power up at the axes'
+positions (not 0); a target outside the soft limits (default [L+ρmin−10,
+L+ρmax+10] on every axis) is refused with exception 3, and so is a COMMAND 1
+whose stored targets are outside them (the limits may have changed since), an
+unknown command, a zero speed or an offset beyond ``max_offset_mm``; an
+address outside the map, or any table but the holding registers, answers
+exception 2 (``soft_limit_registers=False`` leaves SOFT_MIN/SOFT_MAX out too);
 writing OFFSET acts on the legs through the machine. Requests for another
 device id get no reply on RTU and exception 0x0B (gateway: no response) on TCP.
 
@@ -52,7 +56,9 @@ if _pymodbus_log.level == logging.NOTSET:
     # pymodbus logs every dropped frame as an error; the operator console is ours.
     _pymodbus_log.setLevel(logging.CRITICAL)
 
-_READ_CODES = {3, 4, 23}  # function codes whose reads consume a taken COMMAND
+_READ_CODES = {3, 23}  # function codes whose reads consume a taken COMMAND
+_REGISTER_CODES = {3, 6, 16, 22, 23}  # holding-register functions: the map's only table
+_WRITE_CODES = {5, 6, 15, 16, 22, 23}  # counted in SimStats.writes
 
 
 @dataclass
@@ -88,6 +94,8 @@ class SimStats:
 
     requests: int = 0
     replies: int = 0
+    #: write requests received (function 5, 6, 15, 16, 22, 23), answered or not
+    writes: int = 0
     dropped: int = 0
     garbled: int = 0
     delayed: int = 0
@@ -193,6 +201,7 @@ class SimController:
         soft_limits: tuple[Sequence[float], Sequence[float]] | None = None,
         max_offset_mm: float = 50.0,
         baudrate: int = 115200,
+        soft_limit_registers: bool | tuple[Sequence[float], Sequence[float]] = True,
     ) -> None:
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"transport must be 'tcp' or 'rtu', got {transport!r}")
@@ -209,6 +218,10 @@ class SimController:
         self.soft_max = np.asarray(hi, dtype=float).reshape(3)
         if np.any(self.soft_min >= self.soft_max):
             raise ValueError("soft limits: every lower limit must be below the upper one")
+        # What SOFT_MIN/SOFT_MAX show: the limits enforced (True); nothing, answering
+        # exception 2 as a drive that keeps them in parameters (False); or a given
+        # (lower, upper), such as the zeros of a drive never set up.
+        self.soft_limit_registers = soft_limit_registers
         self.map = GENERIC
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
@@ -328,12 +341,24 @@ class SimController:
     def _simdata(self) -> list[SimData]:
         data = []
         for reg in self.map.registers:
+            if reg.name.startswith("SOFT_") and self.soft_limit_registers is False:
+                continue  # not served: exception 2, like any address outside the map
             data.append(SimData(reg.address, count=reg.words, values=0,
                                 datatype=DataType.REGISTERS, readonly=reg.access == "R"))
         return data
 
     def _init_registers(self, registers: list[int], start: int) -> None:
-        for ax, lo, hi in zip(AXES, self.soft_min, self.soft_max, strict=True):
+        """Power-up values. TARGET_* start where the axes stand, as on a drive: a
+        client writing one target then COMMAND 1 moves that axis alone. They are
+        not reset per connection: an integrator's tool (mbpoll) connects once per
+        request, and a drive keeps its targets across connections."""
+        for ax, rho in zip(AXES, self.machine.targets(), strict=True):
+            self._put(registers, start, self._regs[f"TARGET_{ax}"], rho)
+        if self.soft_limit_registers is False:
+            return
+        shown = (self.soft_min, self.soft_max) if self.soft_limit_registers is True else \
+            tuple(np.asarray(v, dtype=float).reshape(3) for v in self.soft_limit_registers)
+        for ax, lo, hi in zip(AXES, *shown, strict=True):
             self._put(registers, start, self._regs[f"SOFT_MIN_{ax}"], lo)
             self._put(registers, start, self._regs[f"SOFT_MAX_{ax}"], hi)
 
@@ -364,6 +389,10 @@ class SimController:
                       registers: list[int], set_values: list[int] | list[bool] | None
                       ) -> ExcCodes | None:
         """pymodbus SimDevice hook: runs before the datastore answers or is written."""
+        if function_code not in _REGISTER_CODES:
+            # The map is holding registers only: input registers, coils and discrete
+            # inputs are outside it, as on a drive that has none.
+            return ExcCodes.ILLEGAL_ADDRESS
         if not self._inited:
             self._init_registers(registers, start)
             self._inited = True
@@ -407,6 +436,13 @@ class SimController:
         codes = {self.map.command_code(c): c for c in self.map.commands}
         if command and command not in codes:
             return ExcCodes.ILLEGAL_VALUE
+        if command and codes[command] == "move":
+            # Stored targets are checked again when they are used: limits may have
+            # changed since they were written, and a drive never moves outside them.
+            targets = np.array([self._get(new, start, self._regs[f"TARGET_{ax}"])
+                                for ax in AXES])
+            if np.any(targets < self.soft_min - 1e-9) or np.any(targets > self.soft_max + 1e-9):
+                return ExcCodes.ILLEGAL_VALUE
         # Validated: apply in the order a drive would (parameters, then the command).
         if hit(speed_reg):
             self.machine.speed_mm_s = self._get(new, start, speed_reg)
@@ -444,6 +480,8 @@ class SimController:
         """What to do with a request: 'ignore', 'busy', 'gateway' or 'serve'."""
         with self._lock:
             self.stats.requests += 1
+            if pdu.function_code in _WRITE_CODES:
+                self.stats.writes += 1
             f = self.faults
             if f.estop != self._estop_seen:
                 self._estop_seen = f.estop

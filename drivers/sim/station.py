@@ -97,6 +97,7 @@ class VirtualStation:
         mount_all: bool = False,
         motion: str = "coordinated",
         strokes: dict[str, tuple[float, float]] | None = None,
+        controller_options: dict[str, Any] | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
@@ -118,11 +119,13 @@ class VirtualStation:
             self.machine.nvram_path = path
         names = sorted({n for s in self.setups for n in s["indicators"]})
         # (stroke, preload) per gauge: standard 12.5 mm gauges pushed in by half unless
-        # given (the config's defaults, so config() need not repeat them).
+        # given (the config's defaults).
         self.strokes = {n: (STANDARD_STROKE_MM, STANDARD_STROKE_MM / 2) for n in names}
         self.strokes.update(strokes or {})
+        # controller_options: further SimController keywords (transport,
+        # soft_limit_registers, ...) for a station that differs from the default drive.
         self.controller = SimController(self.machine, port=port, faults=controller_faults,
-                                        seed=seed)
+                                        seed=seed, **(controller_options or {}))
         self.indicators: dict[str, SimIndicator] = {}
         try:
             self.controller.start()
@@ -166,7 +169,8 @@ class VirtualStation:
     # --- description ----------------------------------------------------------------------
 
     def ports(self) -> dict[str, Any]:
-        return {"controller": self.controller.port,
+        return {"controller": self.controller.port if self.controller.transport == "tcp"
+                else self.controller.serial_port,
                 "indicators": {n: s.port for n, s in self.indicators.items()}}
 
     def config(self) -> dict[str, Any]:
@@ -174,9 +178,8 @@ class VirtualStation:
         g = self.geometry
         return {
             "machine": {"leg_length": g.leg_length, "rho_min": g.rho_min, "rho_max": g.rho_max},
-            "controller": {"transport": "tcp", "host": "127.0.0.1",
-                           "port": self.controller.port, "device_id": 1,
-                           "profile": "orthocal-generic", "timeout_s": 1.0,
+            # TCP: host and port; RTU: the pty the client opens and its baud rate.
+            "controller": {**self.controller.client_kwargs(), "timeout_s": 1.0,
                            "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2,
                            # The simulator knows how its axes move; a real config says it
                            # when the profile's default (independent) is too cautious.

@@ -1,0 +1,162 @@
+"""``orthocal probe [PORT ...] [--controller HOST:PORT | --config FILE] [--json]``:
+bring-up, what answers where (design.md, "Command line").
+
+For each port named (else the config's indicator ports with ``--config``, else
+every port pyserial lists) it tries each built-in indicator protocol at its
+usual line settings and reports which answers, with a live reading, or why
+none did. With ``--controller`` or ``--config`` it reads the controller's
+status, positions, offsets and soft limits and which registers of the profile
+answer. It never moves an axis and never writes a register: only reading
+requests go out (drivers.probe).
+
+Exit status: 0 when everything asked for was probed (a silent port is a
+finding, not a failure); 1 when the controller could not be reached; 2 bad
+arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from station.errors import BadInput
+
+DEFAULT_TIMEOUT_S = 0.5
+
+
+def controller_from_args(args: argparse.Namespace, config: Any) -> Any:
+    """An unconnected ModbusAxisController for --controller or the config's
+    [controller]: one retry, so that a silent controller is found out quickly."""
+    from drivers.axes import ModbusAxisController
+
+    if config is not None:
+        c = config.controller
+        try:
+            return ModbusAxisController(
+                transport=c.transport, host=c.host, port=c.port, device_id=c.device_id,
+                profile=c.profile,
+                overrides={n: {"address": a} for n, a in c.registers.items()} or None,
+                timeout_s=min(c.timeout_s, 2.0), retries=1, baudrate=c.baudrate,
+                soft_limits=None)
+        except ValueError as exc:
+            raise BadInput(f"controller: {exc}") from None
+    spec = args.controller
+    if spec.startswith(("/", "COM")):
+        return ModbusAxisController(transport="rtu", port=spec, device_id=args.device_id,
+                                    baudrate=args.baudrate, timeout_s=1.0, retries=1)
+    host, sep, port = spec.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise BadInput(f"--controller: expected HOST:PORT (or a serial device for RTU), "
+                       f"got {spec!r}")
+    return ModbusAxisController(transport="tcp", host=host, port=int(port),
+                                device_id=args.device_id, timeout_s=1.0, retries=1)
+
+
+def default_ports(config: Any) -> list[str]:
+    if config is not None:
+        return [ind.port for ind in config.indicators]
+    from serial.tools import list_ports
+
+    return sorted(p.device for p in list_ports.comports())
+
+
+def gather(args: argparse.Namespace) -> dict[str, Any]:
+    """The probe's findings as design.md's JSON: ``indicators`` and ``controller``."""
+    from drivers.errors import DeviceError
+    from drivers.probe import probe_controller, probe_port
+    from station.config import load_config
+
+    if getattr(args, "config", None) and args.controller:
+        raise BadInput("--controller and --config: give one of them")
+    if not args.timeout > 0:
+        raise BadInput(f"--timeout: must be > 0 s, got {args.timeout}")
+    config = load_config(args.config) if getattr(args, "config", None) else None
+    ports = list(args.ports) or default_ports(config)
+    found: dict[str, Any] = {"indicators": [probe_port(p, args.timeout).to_json()
+                                            for p in ports],
+                             "controller": None}
+    if args.controller or config is not None:
+        # Reads only (drivers.probe): a probe never moves an axis or writes a register.
+        ctl = controller_from_args(args, config)
+        try:
+            ctl.connect()
+            found["controller"] = probe_controller(ctl)
+        except DeviceError as exc:
+            found["controller"] = {"address": ctl.device.removeprefix("controller "),
+                                   "error": exc.message}
+        finally:
+            ctl.close()
+    return found
+
+
+def main(args: argparse.Namespace) -> int:
+    found = gather(args)
+    if args.json:
+        print(json.dumps(found, indent=1))
+    else:
+        print_human(found)
+    controller = found["controller"]
+    return 1 if controller is not None and "error" in controller else 0
+
+
+def _mm(values: dict[str, float] | None) -> str:
+    if values is None:
+        return "-"
+    return ", ".join(f"{a} {v:.3f}" for a, v in values.items())
+
+
+def print_human(found: dict[str, Any], stream: Any = None) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(file=stream or sys.stdout, highlight=False, soft_wrap=False)
+    inds = found["indicators"]
+    if not inds:
+        console.print("indicators: no serial ports found (name them: orthocal probe PORT ...)")
+    else:
+        table = Table(title="indicators", title_justify="left")
+        for col in ("port", "protocol", "line", "reading (mm)", "note"):
+            table.add_column(col, overflow="fold")
+        for ind in inds:
+            reading = "-" if ind["reading_mm"] is None else f"{ind['reading_mm']:+.4f}"
+            table.add_row(ind["port"], ind["protocol"] or "none", ind["line"] or "-", reading,
+                          ind["reason"] or "")
+        console.print(table)
+    c = found["controller"]
+    if c is None:
+        return
+    if "error" in c:
+        console.print(f"controller {c['address']}: {c['error']}")
+        return
+    st = c.get("status")
+    flags = "-" if st is None else " ".join(
+        k for k in ("homed", "moving", "in_position", "alarm", "estop") if st[k]) or "(none)"
+    if st is not None and st["alarm_code"]:
+        flags += f" (alarm code {st['alarm_code']})"
+    limits = c.get("soft_limits_mm") or {}
+    if limits.get("lower") is not None:
+        lim = "; ".join(f"ρ_{a} ∈ [{limits['lower'][a]:.3f}, {limits['upper'][a]:.3f}]"
+                        for a in "xyz") + f" ({limits['source']})"
+    else:
+        lim = f"unknown: {limits.get('reason') or '-'}"
+    table = Table(title=f"controller {c['address']} (profile {c['profile']})",
+                  title_justify="left", show_header=False)
+    table.add_column("what")
+    table.add_column("value", overflow="fold")
+    table.add_row("status", flags)
+    table.add_row("positions (mm)", _mm(c.get("positions_mm")))
+    table.add_row("offsets (mm)", _mm(c.get("offsets_mm")))
+    table.add_row("soft limits (mm)", lim)
+    for key, error in (c.get("errors") or {}).items():
+        table.add_row(f"{key}: error", error)
+    regs = c["registers"]
+    answer = [n for n, r in regs.items() if r["state"] == "ok"]
+    absent = [n for n, r in regs.items() if r["state"] == "absent"]
+    other = [f"{n} ({r['state']})" for n, r in regs.items() if r["state"] not in ("ok", "absent")]
+    table.add_row("registers answering", " ".join(answer) or "none")
+    table.add_row("registers absent (exception 2)", " ".join(absent) or "none")
+    if other:
+        table.add_row("registers failing", " ".join(other))
+    console.print(table)
