@@ -13,14 +13,15 @@ Travel is counted from the mounting point (the reading at the mounting's
 first Π0), + pushed in; the stroke spans −preload .. stroke − preload.
 
 Prediction while moving. Plunger travel = nominal travel (the plan's model of
-the path the controller takes, known for the whole move) + signal (measured −
-nominal; a smooth function of the joint positions, so it changes slowly). At
-each poll the positions are read before and after the gauges; the signal is
-updated only when the nominal travel barely changed during that window (a
-fast nominal swing would make the gauge's sampling instant matter), and is
-extrapolated over the time to the next poll plus half the braking time. The
-predicted extremes are the remaining nominal extremes + that signal; the
-measured travel itself also counts.
+the path the controller takes, known for the whole move, waypoints included)
++ signal (measured − nominal; a smooth function of the joint positions). At
+each poll the positions are read just before and just after the gauges; the
+signal is updated only where the nominal travel is flat over that window (on
+a fast swing the gauge's sampling instant would matter). Ahead of the axes the
+plunger is predicted at every remaining point of the move as nominal travel +
+the signal carried along the move's progress at the slope seen so far
+(median of the samples' slopes, once 15 % of the move is done); the axes are
+stopped when that, or the measured travel itself, comes within the margin.
 """
 
 from __future__ import annotations
@@ -39,9 +40,6 @@ from station.motion import independent_path, straight_path, trapezoid_time
 # Nominal travel change within one poll window below which the signal estimate is
 # taken as exact (the gauge's sampling instant no longer matters).
 QUIET_MM = 0.05
-# The signal's rate is taken over at least this much of a move (from its start at
-# rest, where the signal is exact), so one reading's noise is not extrapolated.
-MIN_RATE_BASE_S = 0.03
 # The signal at a move's target is extrapolated from the part done once this
 # fraction of the move is behind: a reading's noise (µm) and the sampling skew
 # (tens of µm) grow by 1/progress.
@@ -60,8 +58,6 @@ class _Gauge:
     high: float  # stroke − preload
     baseline: float  # the reading at the mounting point
     signal: float = 0.0
-    rate: float = 0.0
-    t_signal: float = 0.0
     seen: tuple[float, float] = (0.0, 0.0)
     start_signal: float = 0.0  # at the stop the current move started from
     samples: list[tuple[float, float]] = field(default_factory=list)  # (progress, Δsignal)
@@ -93,8 +89,6 @@ class PlungerGuard:
         self._read = read
         self._stop = stop
         self._journal = journal
-        c = config.controller
-        self._brake_s = c.speed_mm_s / c.accel_mm_s2
         self._motion = "coordinated"
         self._setup: Any = None
         self._where = ""
@@ -141,7 +135,8 @@ class PlungerGuard:
 
     def begin_move(self, start: Sequence[float], legs: Sequence[Sequence[float]]) -> None:
         """A move from a stop (``start``) through its sub-moves' targets ``legs``: the
-        nominal travel along every sub-move's modelled path, and the signal at rest."""
+        modelled path of every sub-move, its progress along the move and the nominal
+        travel there; the signal at rest anchors the move."""
         if not self.watching:
             return
         a = np.asarray(start, dtype=float)
@@ -153,29 +148,22 @@ class PlungerGuard:
             leg_v = np.asarray(leg, dtype=float)
             self._route_paths.append(self._model_path(here, leg_v))
             here = leg_v
-        # Per gauge and sub-move: nominal travel along it, and the extremes of all
-        # the sub-moves after it.
-        self._route_nominal: dict[str, list[np.ndarray]] = {}
-        self._route_after: dict[str, list[tuple[float, float]]] = {}
+        self._route_u = [self._progress(p) for p in self._route_paths]
+        self._route_nominal: dict[str, list[np.ndarray]] = {
+            g.name: [self._nominal(self._setup, g.name, g.direction, p)
+                     for p in self._route_paths] for g in self._gauges.values()}
         for g in self._gauges.values():
-            tracks = [self._nominal(self._setup, g.name, g.direction, p)
-                      for p in self._route_paths]
-            after: list[tuple[float, float]] = []
-            lo, hi = np.inf, -np.inf
-            for t in reversed(tracks):
-                after.append((lo, hi))
-                lo, hi = min(lo, float(t.min())), max(hi, float(t.max()))
-            self._route_nominal[g.name] = tracks
-            self._route_after[g.name] = after[::-1]
             g.start_signal = g.signal
             g.samples = []
         self._leg_index = 0
 
-    def _progress(self, p: np.ndarray) -> float:
-        """Fraction of the move done at joint position p (projection on its chord)."""
+    def _progress(self, p: np.ndarray) -> np.ndarray:
+        """Fraction of the move done at joint position(s) p (projection on its chord)."""
         d = self._route_d
         norm = float(d @ d)
-        return 0.0 if norm <= 0 else float(np.clip((p - self._route_a) @ d / norm, 0.0, 1.0))
+        if norm <= 0:
+            return np.zeros(np.shape(p)[:-1])
+        return np.clip((np.asarray(p) - self._route_a) @ d / norm, 0.0, 1.0)
 
     def watch(self, start: Sequence[float], target: Sequence[float], label: str
               ) -> Callable[[], None] | None:
@@ -187,13 +175,10 @@ class PlungerGuard:
         self._leg_index += 1
         path = self._route_paths[index]
         nominal = {n: tracks[index] for n, tracks in self._route_nominal.items()}
-        # Remaining extremes from each sample on, this sub-move and the ones after it.
-        rest_hi = {n: np.maximum(np.maximum.accumulate(t[::-1])[::-1],
-                                 self._route_after[n][index][1])
-                   for n, t in nominal.items()}
-        rest_lo = {n: np.minimum(np.minimum.accumulate(t[::-1])[::-1],
-                                 self._route_after[n][index][0])
-                   for n, t in nominal.items()}
+        # This sub-move's samples and every later sub-move's: what is still ahead.
+        ahead_t = {n: np.concatenate(tracks[index:]) for n, tracks in
+                   self._route_nominal.items()}
+        ahead_u = np.concatenate(self._route_u[index:])
         record = _MoveRecord(label, nominal={n: (float(t.min()), float(t.max()))
                                              for n, t in nominal.items()})
         self._moves.append(record)
@@ -203,12 +188,7 @@ class PlungerGuard:
         arrival = started + trapezoid_time(float(np.max(np.abs(np.asarray(target, float)
                                                                - np.asarray(start, float)))),
                                            c.speed_mm_s, c.accel_mm_s2)
-        last_poll = [started]
         took = [0.0]
-        # The signal at rest is exact: it anchors the rate estimate of this sub-move.
-        anchor = {n: g.signal for n, g in self._gauges.items()}
-        for g in self._gauges.values():
-            g.rate, g.t_signal = 0.0, started
 
         def nearest(p: np.ndarray) -> int:
             return int(np.argmin(np.sum((path - p) ** 2, axis=1)))
@@ -217,48 +197,40 @@ class PlungerGuard:
             began = time.monotonic()
             if record.polls and began + took[0] > arrival:
                 # A poll now would end after the arrival and delay its detection; the
-                # last one predicted the rest of the path (nominal extremes to the end).
+                # last one predicted the rest of the path.
                 return
             before = np.asarray(self._positions(), dtype=float)
             values = self._read(names)
             after = np.asarray(self._positions(), dtype=float)
-            now = time.monotonic()
-            took[0] = now - began
-            k = min(nearest(before), nearest(after))
-            horizon = (now - last_poll[0]) + 0.5 * self._brake_s
-            if now + 2 * took[0] > arrival:
-                # The next poll will be skipped: look ahead to the arrival.
-                horizon = max(horizon, arrival - now)
-            last_poll[0] = now
+            took[0] = time.monotonic() - began
+            k_b, k_a = nearest(before), nearest(after)
+            k0, k1 = min(k_b, k_a), max(k_b, k_a)
             self.polls += 1
             record.polls += 1
             ends = np.vstack([before, after])
-            u = 0.5 * (self._progress(before) + self._progress(after))
+            u = float(np.mean(self._progress(ends)))
             for name, g in self._gauges.items():
                 travel = float(values[name][0]) - g.baseline
                 g.seen = (min(g.seen[0], travel), max(g.seen[1], travel))
                 lo_hi = record.travel.get(name, (travel, travel))
                 record.travel[name] = (min(lo_hi[0], travel), max(lo_hi[1], travel))
                 # Nominal travel where the axes were just before and just after the
-                # gauges were read: the gauge sampled somewhere in between.
+                # gauges were read, and along the path between: the gauge sampled
+                # somewhere in there, so only a flat stretch gives the signal.
                 t_b, t_a = self._nominal(self._setup, name, g.direction, ends)
-                if abs(t_a - t_b) <= QUIET_MM:
-                    g.signal, g.t_signal = travel - 0.5 * float(t_a + t_b), now
-                    if now - started >= MIN_RATE_BASE_S:
-                        g.rate = (g.signal - anchor[name]) / (now - started)
+                window = np.concatenate([nominal[name][k0:k1 + 1], [t_b, t_a]])
+                if float(window.max() - window.min()) <= QUIET_MM:
+                    g.signal = travel - 0.5 * float(t_a + t_b)
                     g.samples.append((u, g.signal - g.start_signal))
-                ahead = (now - g.t_signal) + horizon
-                hi = max(travel, float(rest_hi[name][k]) + g.signal
-                         + max(g.rate, 0.0) * ahead)
-                lo = min(travel, float(rest_lo[name][k]) + g.signal
-                         + min(g.rate, 0.0) * ahead)
-                end = self._signal_at_end(g)
-                if end is not None:
-                    # At the target the nominal travel is known (0 at a test posture):
-                    # the extrapolated signal goes with it, not with the swing on the
-                    # way, along which the signal is no straight line in the progress.
-                    at_target = float(self._route_nominal[name][-1][-1]) + end
-                    hi, lo = max(hi, at_target), min(lo, at_target)
+                # Ahead: nominal travel + the signal, carried from here along the move's
+                # progress at the slope seen so far (the signal is a smooth function of
+                # the joint positions).
+                offset = k0 if k0 < len(nominal[name]) else len(nominal[name]) - 1
+                t_rest = ahead_t[name][offset:]
+                u_rest = ahead_u[offset:]
+                predicted = t_rest + g.signal + self._slope(g) * (u_rest - u)
+                hi = max(travel, float(predicted.max()))
+                lo = min(travel, float(predicted.min()))
                 slack = min(g.high - self.margin - hi, lo - g.low - self.margin)
                 self.slack = min(self.slack, slack)
                 if slack < 0:
@@ -267,16 +239,12 @@ class PlungerGuard:
         return poll
 
     @staticmethod
-    def _signal_at_end(g: _Gauge) -> float | None:
-        """The signal at the move's target, extrapolated linearly in the move's
-        progress from its value at the starting stop (the signal is a smooth function
-        of the joint positions), once enough of the move is done to trust the slope."""
-        us = np.array([u for u, _ in g.samples])
-        if us.size == 0 or us.max() < MIN_PROGRESS:
-            return None
-        ds = np.array([d for _, d in g.samples])
-        slope = float(us @ ds / (us @ us))  # least squares through the starting stop
-        return g.start_signal + slope
+    def _slope(g: _Gauge) -> float:
+        """d(signal)/d(progress) from the samples once enough of the move is done
+        (a reading's noise and the sampling skew grow by 1/progress); the median
+        of the samples' slopes, so one knocked reading does not swing it."""
+        slopes = [d / u for u, d in g.samples if u >= MIN_PROGRESS]
+        return float(np.median(slopes)) if slopes else 0.0
 
     def at_rest(self, position: Sequence[float], means: Mapping[str, float]) -> None:
         """A stop's mean readings at ``position``: the signal there, exactly."""
