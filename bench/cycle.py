@@ -26,6 +26,7 @@ exceed the floor's moves, the station moved more than its stops needed.
     python bench/cycle.py [--cycles 3] [--target-se MM] [--noise 0.005] [--seed 1]
     python bench/cycle.py --compare --target-se 0.002 --cycles 6   # adaptive vs fixed
     python bench/cycle.py --profile /tmp/run.prof                  # cProfile the station
+    python bench/cycle.py --strokes 60,30,-50,-100                 # four stops per leg
     python bench/cycle.py --path-cost     # coordinated vs independent axes (waypoints),
                                           # and what the plunger guard costs
 
@@ -169,11 +170,14 @@ def first_cycle_extra_s(records: list[dict[str, Any]]) -> tuple[float, int]:
 
 
 def station_config(station: VirtualStation, timing: Timing, cycles: int,
-                   target_se: float | None) -> dict[str, Any]:
+                   target_se: float | None, strokes: list[float] | None = None
+                   ) -> dict[str, Any]:
     config = station.config()
     config["controller"].update(speed_mm_s=timing.speed_mm_s, accel_mm_s2=timing.accel_mm_s2)
     config["procedure"].update(cycles=cycles, readings=timing.readings,
                                settle_s=timing.settle_s, plunger_guard=timing.guard)
+    if strokes:
+        config["procedure"]["strokes"] = strokes
     if target_se is not None:
         config["procedure"]["target_std_error_mm"] = target_se
     return config
@@ -188,7 +192,8 @@ def station_command(profile: str | None) -> list[str]:
 
 def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None,
              timing: Timing, out: Path, profile: str | None = None,
-             true_drho: list[float] | None = None, quiet: bool = True) -> Outcome:
+             true_drho: list[float] | None = None, quiet: bool = True,
+             strokes: list[float] | None = None) -> Outcome:
     rng = np.random.default_rng(seed)
     drho = true_drho if true_drho is not None else \
         [round(float(v), 4) for v in rng.uniform(-2.0, 2.0, 3)]
@@ -208,8 +213,8 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
         machine.move_to = recording_move_to  # type: ignore[method-assign]
         start_m = machine.actual() + machine.offsets
         cfg_path = out / f"station-{seed}.toml"
-        cfg_path.write_text(toml_text(station_config(station, timing, cycles, target_se),
-                                    "bench/cycle.py"))
+        cfg_path.write_text(toml_text(station_config(station, timing, cycles, target_se,
+                                                     strokes), "bench/cycle.py"))
         cmd = [*station_command(profile), "run", "--config", str(cfg_path), "--yes", "--json",
                "--out", str(out / "runs")]
         spawned = time.time()  # the journal stamps records with time.time()
@@ -272,6 +277,9 @@ def main() -> None:
     parser.add_argument("--fixed-cycles", type=int, default=3)
     parser.add_argument("--profile", metavar="FILE", help="run the station under cProfile")
     parser.add_argument("--verbose", action="store_true", help="show the station's stderr")
+    parser.add_argument("--strokes", type=lambda t: [float(v) for v in t.split(",")],
+                        default=None, metavar="A,B,..",
+                        help="[procedure] strokes (stops per leg, mm)")
     parser.add_argument("--motion", choices=["coordinated", "independent"],
                         default="coordinated", help="how the virtual controller moves")
     parser.add_argument("--no-guard", action="store_true",
@@ -297,7 +305,8 @@ def main() -> None:
             for k in range(args.repeat):
                 o = run_once(seed=args.seed + k, noise_mm=args.noise, cycles=args.cycles,
                              target_se=args.target_se, timing=timing, out=out,
-                             profile=args.profile, quiet=not args.verbose)
+                             profile=args.profile, quiet=not args.verbose,
+                             strokes=args.strokes)
                 report(f"seed {args.seed + k}", o)
                 ratios.append(o.ratio)
             if len(ratios) > 1:

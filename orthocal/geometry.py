@@ -8,8 +8,25 @@ import numpy as np
 
 AXES: tuple[str, str, str] = ("x", "y", "z")
 AXIS_INDEX = {a: i for i, a in enumerate(AXES)}
-PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
-MODELS: dict[str, tuple[int, ...]] = {"rho": (0, 1, 2), "L": (3, 4, 5), "full": (0, 1, 2, 3, 4, 5)}
+PARAM_NAMES: tuple[str, ...] = (
+    "drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z", "tilt_yx", "tilt_zx", "tilt_zy",
+)  # fmt: skip
+TILT_NAMES: tuple[str, str, str] = ("tilt_yx", "tilt_zx", "tilt_zy")
+# The tilts are named and reported in mrad (model.md, "Extended model"); the
+# kinematics works in radians.
+MRAD = 1e-3
+# Columns of PARAM_NAMES each model identifies (design.md, "Models").
+MODELS: dict[str, tuple[int, ...]] = {
+    "rho": (0, 1, 2),
+    "L": (3, 4, 5),
+    "full": (0, 1, 2, 3, 4, 5),
+    "rho+tilt": (0, 1, 2, 6, 7, 8),
+    "full+tilt": (0, 1, 2, 3, 4, 5, 6, 7, 8),
+}
+# The pair of axes {i, j} whose angle each tilt changes: tilt_yx leans y toward x, etc.
+TILT_PAIRS: dict[frozenset[str], int] = {
+    frozenset("xy"): 6, frozenset("xz"): 7, frozenset("yz"): 8,
+}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -39,18 +56,28 @@ class Geometry:
         return self.leg_length / 2.0
 
 
-def split_params(params: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """(Δρ, ΔL) from a 6-vector ordered as PARAM_NAMES (None: all zero)."""
+def full_params(params) -> np.ndarray:
+    """The 9-vector of PARAM_NAMES from ``params``: None (all zero), a 9-vector,
+    or a 6-vector (Δρ, ΔL) of the paper's model, whose tilts are zero."""
     if params is None:
-        return np.zeros(3), np.zeros(3)
+        return np.zeros(len(PARAM_NAMES))
     params = np.asarray(params, dtype=float)
-    if params.shape != (6,):
-        raise ValueError(f"expected 6 parameters {PARAM_NAMES}, got shape {params.shape}")
-    return params[:3], params[3:]
+    if params.shape == (6,):
+        return np.concatenate([params, np.zeros(3)])
+    if params.shape != (len(PARAM_NAMES),):
+        raise ValueError(f"expected 6 or 9 parameters {PARAM_NAMES}, got shape {params.shape}")
+    return params
+
+
+def split_params(params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Δρ, ΔL, tilts in mrad) from a 9- or 6-vector ordered as PARAM_NAMES
+    (None: all zero)."""
+    v = full_params(params)
+    return v[:3], v[3:6], v[6:]
 
 
 def params_vector(values: dict[str, float]) -> np.ndarray:
-    """6-vector from a dict by PARAM_NAMES; missing names are zero."""
+    """9-vector from a dict by PARAM_NAMES; missing names are zero."""
     unknown = set(values) - set(PARAM_NAMES)
     if unknown:
         raise ValueError(f"unknown parameter name(s): {sorted(unknown)}")

@@ -1,4 +1,5 @@
-"""Identification of Δρ, ΔL from measured deviations (model.md, "Identification").
+"""Identification of Δρ, ΔL and the axis tilts from measured deviations
+(model.md, "Identification" and "Extended model").
 
 ``linear``: the paper's Moore–Penrose solution of the linearised system (7).
 ``nonlinear``: least squares on the exact model (1), started from the linear
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from orthocal.calibration import jacobian
-from orthocal.geometry import MODELS, PARAM_NAMES, Geometry
+from orthocal.geometry import MODELS, PARAM_NAMES, TILT_NAMES, Geometry, full_params
 from orthocal.measurement import Key, check_key, deviations
 
 METHODS = ("linear", "nonlinear")
@@ -56,7 +57,7 @@ class Identification:
 
     @property
     def vector(self) -> np.ndarray:
-        """All six parameters in PARAM_NAMES order (those not in the model are 0)."""
+        """All nine parameters in PARAM_NAMES order (those not in the model are 0)."""
         return np.array([self.parameters.get(n, 0.0) for n in PARAM_NAMES])
 
     def to_dict(self) -> dict:
@@ -106,7 +107,28 @@ def _flatten(deviations_in) -> tuple[list[Key], np.ndarray]:
     return keys, np.asarray(values)
 
 
-def _check_identifiable(J: np.ndarray, names: Sequence[str], n_distinct: int) -> float:
+def _postures_per_leg(keys: Sequence[Key]) -> int:
+    """The fewest distinct test postures any measured leg was seen in."""
+    seen: dict[str, set[str]] = {}
+    for sign, leg, _ in keys:
+        seen.setdefault(leg, set()).add(sign)
+    return min((len(v) for v in seen.values()), default=0)
+
+
+def _why_inseparable(involved: Sequence[str], keys: Sequence[Key]) -> str:
+    """The reason in words for the usual rank deficiency, '' when there is no known one."""
+    has_l = any(n.startswith("dL_") for n in involved)
+    has_tilt = any(n in TILT_NAMES for n in involved)
+    if has_l and has_tilt and _postures_per_leg(keys) <= 2:
+        return (": with two postures per leg ΔL cannot be separated from the tilts (a common "
+                "change of offsets, leg lengths and axis angles leaves every deviation as it "
+                "is); measure more stops per leg, or identify rho+tilt")
+    return ""
+
+
+def _check_identifiable(
+    J: np.ndarray, names: Sequence[str], n_distinct: int, keys: Sequence[Key] = ()
+) -> float:
     """Refuse what the data cannot determine; return the condition number of J."""
     p = J.shape[1]
     if n_distinct < p:
@@ -118,26 +140,57 @@ def _check_identifiable(J: np.ndarray, names: Sequence[str], n_distinct: int) ->
     if s[-1] <= _RANK_TOL * s[0]:
         null = vt[-1]
         involved = [nm for nm, w in zip(names, null, strict=True) if abs(w) > 0.1]
+        why = _why_inseparable(involved, keys) or (
+            "; measure more legs or directions, or identify fewer parameters")
         raise IdentificationError(
             "not identifiable from these deviations: "
             f"{', '.join(involved)} cannot be separated (rank {int(np.sum(s > _RANK_TOL * s[0]))}"
-            f" < {p}); measure more legs or directions, or identify fewer parameters"
+            f" < {p}){why}"
         )
     return float(s[0] / s[-1])
+
+
+# Said in every report: the measurements see angles between legs' lines, never the
+# machine's orientation against the base (model.md, "Extended model").
+ROTATION_NOTE = (
+    "A rotation of the whole machine against the base cannot be identified: it changes "
+    "no deviation (every leg still translates along its own line). Only the angles "
+    "between the actuator axes are observable; the tilts are stated in the frame of "
+    "the x axis and the x–y plane of the x and y axes."
+)
+
+
+def cannot_identify(keys: Sequence[Key], geometry: Geometry | None = None,
+                    model: str = "full+tilt") -> list[str]:
+    """What these deviations can never determine, in sentences for the report:
+    always a rotation of the whole machine; and, when ``model`` is rank-deficient
+    with these ``keys``, which parameters cannot be separated and why."""
+    geometry = geometry or Geometry()
+    notes = [ROTATION_NOTE]
+    if model not in MODELS:
+        raise IdentificationError(f"model must be one of {sorted(MODELS)}, got {model!r}")
+    keys = list(keys)
+    names = tuple(PARAM_NAMES[c] for c in MODELS[model])
+    try:
+        _check_identifiable(jacobian(keys, geometry, model), names, len(set(keys)), keys)
+    except IdentificationError as exc:
+        notes.append(f"Model {model}: {exc}.")
+    return notes
 
 
 def exact_jacobian(
     keys: Sequence[Key], geometry: Geometry, params=None, model: str = "full"
 ) -> np.ndarray:
-    """Jacobian of the exact deviations (1) at the 6-vector ``params``, columns the
-    parameters of ``model``; central differences with h = 1e-5 mm (truncation
-    error O(h²·curvature) ≈ 1e-12, far below any µm). At zero it equals (7)."""
-    base = np.zeros(6) if params is None else np.asarray(params, dtype=float)
+    """Jacobian of the exact deviations (1') at ``params`` (9-vector, or a 6-vector
+    without tilts), columns the parameters of ``model``; central differences with
+    h = 1e-5 mm or mrad (truncation error O(h²·curvature) ≈ 1e-12, far below any
+    µm). At zero it equals (7')."""
+    base = full_params(params)
     h = 1e-5
     cols = MODELS[model]
     J = np.empty((len(keys), len(cols)))
     for c, col in enumerate(cols):
-        step = np.zeros(6)
+        step = np.zeros(len(PARAM_NAMES))
         step[col] = h
         forward_diff = deviations(keys, geometry, base + step)
         J[:, c] = (forward_diff - deviations(keys, geometry, base - step)) / (2 * h)
@@ -156,7 +209,9 @@ def identify(
     ``deviations_in`` maps ``(sign, leg, direction)`` keys, e.g. ``("+", "x", "y")``,
     to a deviation in mm or to a sequence of repeated measurements of it; any
     subset of the 12 deviations that determines the model will do.
-    ``model``: 'rho' (Δρ only), 'L' (ΔL only) or 'full' (both; ill-conditioned).
+    ``model``: 'rho' (Δρ only), 'L' (ΔL only), 'full' (both; ill-conditioned),
+    'rho+tilt' (Δρ and the three axis tilts, mrad) or 'full+tilt' (all nine; needs
+    more than two postures per leg).
     ``method``: 'linear' (pseudoinverse of (7)) or 'nonlinear' (exact model (1)).
     ``sigma``: known noise σ of one deviation; default σ̂ from the residuals.
     """
@@ -171,10 +226,10 @@ def identify(
     cols = MODELS[model]
     names = tuple(PARAM_NAMES[c] for c in cols)
     J0 = jacobian(keys, geometry, model) if keys else np.zeros((0, len(cols)))
-    condition = _check_identifiable(J0, names, len(set(keys)))
+    condition = _check_identifiable(J0, names, len(set(keys)), keys)
 
     x_lin = np.linalg.pinv(J0) @ y
-    full = np.zeros(6)
+    full = np.zeros(len(PARAM_NAMES))
     full[list(cols)] = x_lin
     converged = True
     if method == "nonlinear":
@@ -183,12 +238,12 @@ def identify(
         from scipy.optimize import least_squares
 
         def residual(x: np.ndarray) -> np.ndarray:
-            trial = np.zeros(6)
+            trial = np.zeros(len(PARAM_NAMES))
             trial[list(cols)] = x
             return deviations(keys, geometry, trial) - y
 
         def jac(x: np.ndarray) -> np.ndarray:
-            trial = np.zeros(6)
+            trial = np.zeros(len(PARAM_NAMES))
             trial[list(cols)] = x
             return exact_jacobian(keys, geometry, trial, model)
 
@@ -207,7 +262,9 @@ def identify(
     if method == "nonlinear":
         model_values = deviations(keys, geometry, full)
     else:
-        model_values = jacobian(keys, geometry) @ full
+        # the tilt columns apart, so that models without tilt keep (7)'s numbers
+        J_all = jacobian(keys, geometry, "full+tilt")
+        model_values = J_all[:, :6] @ full[:6] + J_all[:, 6:] @ full[6:]
     residuals = y - model_values
     n, p = len(y), len(cols)
     dof = n - p

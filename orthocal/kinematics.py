@@ -1,7 +1,13 @@
-"""Exact kinematics of model (1) for any parameter set.
+"""Exact kinematics of model (1) and of the extended model with tilted axes.
 
-Leg i is a bar of length L_i = L + ΔL_i from the actuator joint at
-(ρ_i + Δρ_i)·e_i to the end point P:
+Leg i is a bar of length L_i = L + ΔL_i from the actuator joint (carriage)
+A_i = (ρ_i + Δρ_i)·u_i to the end point P:
+
+    |P − A_i| = L_i                                                         (1')
+
+with u_i the direction of actuator axis i (model.md, "Extended model"):
+u_x = e_x, u_y = normalise(e_y + t_yx·e_x), u_z = normalise(e_z + t_zx·e_x +
+t_zy·e_y), tilts t in mrad. With zero tilts u_i = e_i and (1') is the paper's
 
     (p_i − (ρ_i + Δρ_i))² + p_j² + p_k² = L_i²                              (1)
 
@@ -13,7 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from orthocal.geometry import Geometry
+from orthocal.geometry import MRAD, Geometry
+
+# Newton on the sphere equations stops when its step is below this (mm).
+_NEWTON_TOL = 1e-12
+_NEWTON_MAX_STEPS = 30
 
 
 def _legs(geometry: Geometry, drho, dL) -> tuple[np.ndarray, np.ndarray]:
@@ -22,31 +32,47 @@ def _legs(geometry: Geometry, drho, dL) -> tuple[np.ndarray, np.ndarray]:
     return drho, L
 
 
-def inverse(p, geometry: Geometry, drho=None, dL=None) -> np.ndarray:
-    """Joint coordinates ρ that put the end point at ``p``:
-    ρ_i = p_i + sqrt(L_i² − p_j² − p_k²) − Δρ_i (model.md, inverse kinematics)."""
+def axis_directions(tilt=None) -> np.ndarray | None:
+    """Rows u_x, u_y, u_z of the actuator axes for tilts (t_yx, t_zx, t_zy) in mrad
+    (model.md, "Extended model"); None when every tilt is zero, so that callers
+    keep the paper's closed forms (and today's numbers to the bit)."""
+    if tilt is None:
+        return None
+    t = np.asarray(tilt, dtype=float) * MRAD
+    if t.shape != (3,):
+        raise ValueError(f"expected 3 tilts (tilt_yx, tilt_zx, tilt_zy), got shape {t.shape}")
+    if not np.any(t):
+        return None
+    u = np.array([[1.0, 0.0, 0.0], [t[0], 1.0, 0.0], [t[1], t[2], 1.0]])
+    return u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+def inverse(p, geometry: Geometry, drho=None, dL=None, tilt=None) -> np.ndarray:
+    """Joint coordinates ρ that put the end point at ``p``.
+
+    |P − q_i·u_i| = L_i is a quadratic in q_i = ρ_i + Δρ_i whose working root
+    (carriage beyond P) is q_i = u_i·P + sqrt(L_i² − |P − (u_i·P)·u_i|²); with
+    u_i = e_i it is ρ_i = p_i + sqrt(L_i² − p_j² − p_k²) − Δρ_i (model.md).
+    """
     p = np.asarray(p, dtype=float)
     drho, L = _legs(geometry, drho, dL)
-    sq = p**2
-    others = sq.sum(axis=-1, keepdims=True) - sq  # p_j² + p_k² for each i
+    u = axis_directions(tilt)
+    if u is None:
+        sq = p**2
+        along = p
+        others = sq.sum(axis=-1, keepdims=True) - sq  # p_j² + p_k² for each i
+    else:
+        along = p @ u.T  # u_i·P for each i
+        perp = p[..., None, :] - along[..., :, None] * u  # P − (u_i·P)·u_i
+        others = (perp**2).sum(axis=-1)
     radicand = L**2 - others
     if np.any(radicand < 0):
         raise ValueError("point outside the reach of a leg")
-    return p + np.sqrt(radicand) - drho
+    return along + np.sqrt(radicand) - drho
 
 
-def forward(rho, geometry: Geometry, drho=None, dL=None) -> np.ndarray:
-    """End point P for joint coordinates ρ, in closed form.
-
-    With q_i = ρ_i + Δρ_i, k_i = q_i² − L_i² and s = |P|², (1) gives
-    p_i = (s + k_i)/(2 q_i); then s = Σ p_i² is the quadratic
-    A s² + B s + C = 0 with A = Σ w_i, B = 2 Σ k_i w_i − 1, C = Σ k_i² w_i,
-    w_i = 1/(4 q_i²). The working branch is the smaller root (P near the
-    origin at Π0), taken as 2C / (−B + sqrt(B² − 4AC)) to avoid cancellation.
-    """
-    rho = np.asarray(rho, dtype=float)
-    drho, L = _legs(geometry, drho, dL)
-    q = rho + drho
+def _forward_orthogonal(q: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """Closed-form P for carriages at q_i·e_i (model.md, forward kinematics)."""
     k = q**2 - L**2
     w = 1.0 / (4.0 * q**2)
     A = w.sum(axis=-1)
@@ -57,3 +83,44 @@ def forward(rho, geometry: Geometry, drho=None, dL=None) -> np.ndarray:
         raise ValueError("joint coordinates outside the assembly domain")
     s = 2.0 * C / (-B + np.sqrt(disc))
     return (s[..., None] + k) / (2.0 * q)
+
+
+def forward(rho, geometry: Geometry, drho=None, dL=None, tilt=None) -> np.ndarray:
+    """End point P for joint coordinates ρ.
+
+    Orthogonal axes (tilts zero or None), closed form: with q_i = ρ_i + Δρ_i,
+    k_i = q_i² − L_i² and s = |P|², (1) gives p_i = (s + k_i)/(2 q_i); then
+    s = Σ p_i² is the quadratic A s² + B s + C = 0 with A = Σ w_i,
+    B = 2 Σ k_i w_i − 1, C = Σ k_i² w_i, w_i = 1/(4 q_i²). The working branch is
+    the smaller root (P near the origin at Π0), taken as 2C / (−B + sqrt(B² − 4AC))
+    to avoid cancellation.
+
+    Tilted axes: no closed form. Newton on the three sphere equations
+    F_i(P) = |P − A_i|² − L_i² = 0 (Jacobian rows 2(P − A_i)) from the orthogonal
+    solution of the same q, L, all points at once, until the step is below 1e-12 mm
+    (three or four steps for tilts of a few mrad: the start is off by ~q·tilt).
+    """
+    return forward_on_axes(rho, geometry, drho, dL, axis_directions(tilt))
+
+
+def forward_on_axes(rho, geometry: Geometry, drho, dL, u: np.ndarray | None) -> np.ndarray:
+    """:func:`forward` for axis directions ``u`` already computed (None: e_x, e_y, e_z)."""
+    rho = np.asarray(rho, dtype=float)
+    drho, L = _legs(geometry, drho, dL)
+    q = rho + drho
+    return _forward_orthogonal(q, L) if u is None else solve_spheres(q, L, u)
+
+
+def solve_spheres(q: np.ndarray, L: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """P with |P − q_i·u_i| = L_i for any axis directions ``u`` (rows): Newton from
+    the orthogonal closed form, all points of ``q`` (..., 3) at once."""
+    p = _forward_orthogonal(q, L)
+    a = q[..., :, None] * u  # carriage positions A_i, shape (..., 3, 3)
+    for _ in range(_NEWTON_MAX_STEPS):
+        d = p[..., None, :] - a  # rows P − A_i
+        f = (d**2).sum(axis=-1) - L**2
+        step = np.linalg.solve(2.0 * d, f[..., None])[..., 0]
+        p = p - step
+        if step.size == 0 or float(np.max(np.abs(step))) < _NEWTON_TOL:
+            return p
+    raise ValueError("forward kinematics did not converge (joint coordinates near a singularity)")

@@ -3,9 +3,10 @@ shows (model.md, "Measurement").
 
 The indicator is fixed to the base in the plane x_i = M (the middle of leg i
 at Π0, nominally L/2) and reads the j-coordinate of the leg's axis where the
-leg crosses that plane. The deviation Δ^s_{i,j} is the reading at Π_i^s minus
-the reading at Π0; the simulator and the nonlinear identification both use
-these functions.
+leg crosses that plane; with tilted actuator axes the carriage leaves the
+coordinate axis but the plane stays where the base holds it. The deviation
+Δ^s_{i,j} is the reading at Π_i^s minus the reading at Π0; the simulator and
+the nonlinear identification both use these functions.
 """
 
 from __future__ import annotations
@@ -15,10 +16,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from orthocal.geometry import AXIS_INDEX, Geometry, split_params
-from orthocal.kinematics import forward
-from orthocal.postures import posture
+from orthocal.kinematics import axis_directions, forward, forward_on_axes
+from orthocal.postures import check_posture, posture
 
-Key = tuple[str, str, str]  # (posture sign, leg i, direction j)
+Key = tuple[str, str, str]  # (posture: "+", "-" or a signed stroke "+30"; leg i; direction j)
 
 
 def check_key(key: Key) -> Key:
@@ -26,8 +27,10 @@ def check_key(key: Key) -> Key:
     if not (isinstance(key, tuple) and len(key) == 3):
         raise ValueError(f"a deviation key is (sign, leg, direction), got {key!r}")
     sign, leg, direction = key
-    if sign not in ("+", "-"):
-        raise ValueError(f"posture sign must be '+' or '-', got {sign!r} in {key!r}")
+    try:
+        check_posture(sign)
+    except ValueError as exc:
+        raise ValueError(f"{exc} in {key!r}") from None
     if leg not in AXIS_INDEX or direction not in AXIS_INDEX:
         raise ValueError(f"leg and direction must be x, y or z, got {key!r}")
     if leg == direction:
@@ -35,17 +38,31 @@ def check_key(key: Key) -> Key:
     return key
 
 
-def _reading(rho: np.ndarray, p: np.ndarray, i, j, drho: np.ndarray, mount: float) -> np.ndarray:
+def _reading(
+    rho: np.ndarray, p: np.ndarray, i, j, drho: np.ndarray, mount: float,
+    u: np.ndarray | None = None,
+) -> np.ndarray:
     """The reading of leg i along j given the joints ``rho`` and the end point ``p``
     (both (..., 3)); ``i`` and ``j`` are axis indices: scalars, or one per row
-    when ``rho`` and ``p`` are (n, 3). The forward solve stays with the caller, who may share it."""
+    when ``rho`` and ``p`` are (n, 3). ``u``: the axis directions (rows), None for
+    e_x, e_y, e_z. The forward solve stays with the caller, who may share it.
+
+    The indicator plane x_i = M is fixed to the base; the carriage
+    A = q_i·u_i (q = ρ + Δρ) leaves the coordinate axis when u_i is tilted, so the
+    leg's axis A → P crosses the plane at the fraction t = (A_i − M)/(A_i − p_i)
+    from A, where its j-coordinate is A_j + t·(p_j − A_j). With u_i = e_i
+    (A_i = q_i, A_j = 0) this is the paper's t·p_j, bit for bit.
+    """
 
     def pick(a: np.ndarray, k) -> np.ndarray:
         # one index for every point, or one per row of a (n, 3) array
         return a[..., k] if np.ndim(k) == 0 else a[np.arange(a.shape[0]), k]
 
     q_i = pick(rho, i) + drho[i]
-    return (q_i - mount) / (q_i - pick(p, i)) * pick(p, j)
+    if u is None:
+        return (q_i - mount) / (q_i - pick(p, i)) * pick(p, j)
+    a_i, a_j = q_i * u[i, i], q_i * u[i, j]
+    return a_j + (a_i - mount) / (a_i - pick(p, i)) * (pick(p, j) - a_j)
 
 
 def leg_reading(
@@ -56,23 +73,27 @@ def leg_reading(
     drho=None,
     dL=None,
     mount: float | None = None,
+    tilt=None,
 ) -> np.ndarray:
-    """Coordinate along ``direction`` of leg ``leg``'s axis in the plane x_leg = M.
+    """Coordinate along ``direction`` of leg ``leg``'s axis in the base-fixed plane
+    x_leg = M (model.md, "Where the indicator plane is").
 
-    The leg runs from the actuator joint A = q_i·e_i (q = ρ + Δρ) to P; it crosses
-    x_i = M at the fraction t = (q_i − M)/(q_i − p_i) from A, where its
-    j-coordinate is t·p_j (A_j = 0). ``rho`` has shape (..., 3).
+    The leg runs from the carriage A = q_i·u_i (q = ρ + Δρ; u_i = e_i unless
+    ``tilt`` (mrad) tilts the axes) to P and crosses x_i = M at the fraction
+    t = (A_i − M)/(A_i − p_i) from A, where its j-coordinate is
+    A_j + t·(p_j − A_j). ``rho`` has shape (..., 3).
     """
     drho_v = np.zeros(3) if drho is None else np.asarray(drho, dtype=float)
     rho = np.asarray(rho, dtype=float)
-    p = forward(rho, geometry, drho_v, dL)
+    p = forward(rho, geometry, drho_v, dL, tilt)
     m = geometry.mount_plane if mount is None else mount
-    return _reading(rho, p, AXIS_INDEX[leg], AXIS_INDEX[direction], drho_v, m)
+    return _reading(rho, p, AXIS_INDEX[leg], AXIS_INDEX[direction], drho_v, m,
+                    axis_directions(tilt))
 
 
 def deviation(key: Key, geometry: Geometry, params=None) -> float:
     """Exact Δ^s_{i,j} = reading at Π_i^s − reading at Π0 for the parameter
-    6-vector ``params`` (PARAM_NAMES order)."""
+    9-vector ``params`` (PARAM_NAMES order; a 6-vector means zero tilts)."""
     return float(deviations([key], geometry, params)[0])
 
 
@@ -83,22 +104,26 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarr
     and one for Π0 (per-row leg and direction indices), because the nonlinear
     identification evaluates this hundreds of times.
     """
-    drho, dL = split_params(params)
+    drho, dL, tilt = split_params(params)
     if len(keys) == 0:
         return np.empty(0)
-    legs = np.empty(len(keys), dtype=int)
-    dirs = np.empty(len(keys), dtype=int)
-    rho_s = np.empty((len(keys), 3))
-    cache: dict[tuple[str, str], np.ndarray] = {}
-    for n, key in enumerate(keys):
+    # Repeated keys (one per cycle) share one solve: the fit calls this per step.
+    row_of: dict[Key, int] = {}
+    rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
+    distinct = list(row_of)
+    legs = np.empty(len(distinct), dtype=int)
+    dirs = np.empty(len(distinct), dtype=int)
+    rho_s = np.empty((len(distinct), 3))
+    for n, key in enumerate(distinct):
         sign, leg, direction = check_key(key)
         legs[n], dirs[n] = AXIS_INDEX[leg], AXIS_INDEX[direction]
-        if (sign, leg) not in cache:
-            cache[(sign, leg)] = posture(sign, leg, geometry)
-        rho_s[n] = cache[(sign, leg)]
+        rho_s[n] = posture(sign, leg, geometry)
     rho_0 = posture("0", None, geometry)
-    p_s = forward(rho_s, geometry, drho, dL)
-    p_0 = np.broadcast_to(forward(rho_0, geometry, drho, dL), p_s.shape)
+    u = axis_directions(tilt)
+    # Π0 rides along as the last row: one solve (Newton when tilted) for all points
+    p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u)
+    p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
     m = geometry.mount_plane
-    reading_s = _reading(rho_s, p_s, legs, dirs, drho, m)
-    return reading_s - _reading(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m)
+    reading_s = _reading(rho_s, p_s, legs, dirs, drho, m, u)
+    dev = reading_s - _reading(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m, u)
+    return dev[rows]

@@ -1,21 +1,76 @@
-"""Test postures Π0, Π_i^+ and Π_i^− of the nominal machine (model.md, "Test postures")."""
+"""Test postures of the nominal machine (model.md, "Test postures").
+
+A posture is named by a string: ``"0"`` is Π0; ``"+"`` / ``"-"`` are Π_i^± at
+the geometry's ρmax / ρmin (the paper's postures); a signed stroke such as
+``"+30"`` or ``"-50.5"`` (mm) is an intermediate stop Π_i(s) with P = s·e_i.
+Every test posture is the same construction at its stroke s: leg i's joint at
+L + s, the two other joints at L·cos α with α = asin(s/L), so that leg i stays
+parallel to its axis and P = s·e_i.
+"""
 
 from __future__ import annotations
+
+import re
 
 import numpy as np
 
 from orthocal.geometry import AXIS_INDEX, Geometry
 
 SIGNS = ("+", "-")
+_STROKE = re.compile(r"^[+-](\d+(\.\d*)?|\.\d+)$")
+
+
+def check_posture(name: str) -> str:
+    """Validate a test-posture name ('+', '-' or a signed nonzero stroke such as
+    '+30'); raises ValueError."""
+    if name in SIGNS:
+        return name
+    if isinstance(name, str) and _STROKE.match(name) and float(name) != 0.0:
+        return name
+    raise ValueError(
+        f"posture must be '+', '-' or a signed nonzero stroke in mm such as '+30', got {name!r}")
+
+
+def stroke(name: str, geometry: Geometry) -> float:
+    """The stroke s of a test posture: ρmax for '+', ρmin for '-', the number itself
+    for a signed stroke string."""
+    if name == "+":
+        return geometry.rho_max
+    if name == "-":
+        return geometry.rho_min
+    s = float(check_posture(name))
+    if not -geometry.leg_length < s < geometry.leg_length:
+        raise ValueError(f"stroke {name} mm must lie within ±leg_length ({geometry.leg_length:g})")
+    return s
+
+
+def posture_name(s: float, geometry: Geometry) -> str:
+    """The canonical name of the stop at stroke ``s``: '+' / '-' at the geometry's
+    ρmax / ρmin (so that the paper's postures keep their keys), else '%+g'."""
+    if s == geometry.rho_max:
+        return "+"
+    if s == geometry.rho_min:
+        return "-"
+    name = f"{s:+g}"
+    if float(name) != s:  # %g rounds to 6 significant digits; keep the exact value
+        name = f"{s:+.17g}"
+    return check_posture(name)
+
+
+def stop_order(strokes) -> list[float]:
+    """The order a cycle visits its stops, starting and ending at Π0 (s = 0):
+    positive strokes ascending, then negative ones descending. Each joint then
+    passes each point of its range at most twice, the least any order can do
+    (the far ends must be reached and left), i.e. 2·(max − min) of travel for
+    leg i's joint, and the paper's Π+ → Π− order is the two-stroke case."""
+    strokes = [float(s) for s in strokes]
+    return sorted(s for s in strokes if s > 0) + sorted((s for s in strokes if s < 0),
+                                                          reverse=True)
 
 
 def tilt(sign: str, geometry: Geometry) -> float:
-    """α = asin(ρmax/L) for Π^+, asin(ρmin/L) for Π^− (negative)."""
-    if sign == "+":
-        return float(np.arcsin(geometry.rho_max / geometry.leg_length))
-    if sign == "-":
-        return float(np.arcsin(geometry.rho_min / geometry.leg_length))
-    raise ValueError(f"posture sign must be '+' or '-', got {sign!r}")
+    """α = asin(s/L) of a test posture (Π^+: asin(ρmax/L); Π^−: negative)."""
+    return float(np.arcsin(stroke(sign, geometry) / geometry.leg_length))
 
 
 def posture(sign: str, leg: str | None, geometry: Geometry) -> np.ndarray:
@@ -23,22 +78,22 @@ def posture(sign: str, leg: str | None, geometry: Geometry) -> np.ndarray:
 
     ``posture("0", None, g)`` is Π0 = (L, L, L), P = 0. ``posture("+", "x", g)`` is
     Π_x^+: ρ_x = L + ρmax and the two other joints at L·cos α, so that P = ρmax·e_x
-    and leg x stays parallel to its axis.
+    and leg x stays parallel to its axis; ``posture("+30", "x", g)`` likewise at
+    s = 30 mm.
     """
     L = geometry.leg_length
     if sign == "0":
         return np.full(3, L)
     if leg not in AXIS_INDEX:
         raise ValueError(f"leg must be one of x, y, z, got {leg!r}")
-    stroke = geometry.rho_max if sign == "+" else geometry.rho_min
     rho = np.full(3, L * np.cos(tilt(sign, geometry)))
-    rho[AXIS_INDEX[leg]] = L + stroke
+    rho[AXIS_INDEX[leg]] = L + stroke(sign, geometry)
     return rho
 
 
 def posture_point(sign: str, leg: str | None, geometry: Geometry) -> np.ndarray:
-    """Nominal end point P of a test posture: 0 at Π0, ρmax·e_i or ρmin·e_i at Π_i^±."""
+    """Nominal end point P of a test posture: 0 at Π0, s·e_i at Π_i(s)."""
     p = np.zeros(3)
     if sign != "0":
-        p[AXIS_INDEX[leg]] = geometry.rho_max if sign == "+" else geometry.rho_min
+        p[AXIS_INDEX[leg]] = stroke(sign, geometry)
     return p

@@ -25,6 +25,7 @@ _COMMANDS = {
     "identify": "station.cmd_identify:main",
     "probe": "station.cmd_probe:main",
     "init": "station.cmd_init:main",
+    "design": "station.cmd_design:main",
 }
 
 
@@ -71,6 +72,13 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         type=_triple,
         metavar="X,Y,Z",
         help="hidden leg-length errors of the virtual machine (mm; zero if absent)",
+    )
+    p.add_argument(
+        "--true-tilt",
+        type=_triple,
+        metavar="X,Y,Z",
+        help="hidden actuator axis tilts tilt_yx, tilt_zx, tilt_zy of the virtual machine "
+        "(mrad; zero if absent)",
     )
     p.add_argument(
         "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
@@ -162,13 +170,30 @@ def build_parser() -> argparse.ArgumentParser:
 
     ident = sub.add_parser("identify", help="identify parameters from a READINGS.csv")
     ident.add_argument("csv", metavar="READINGS.csv")
-    ident.add_argument("--model", choices=["rho", "L", "full"], default="rho")
+    ident.add_argument(
+        "--model", choices=["rho", "L", "full", "rho+tilt", "full+tilt", "auto"], default="rho",
+        help="parameters to identify; auto: the smallest model the data's cycle scatter "
+        "supports (needs a cycle column)")
     ident.add_argument("--method", choices=["linear", "nonlinear"], default="nonlinear")
     ident.add_argument("--leg-length", type=float, default=310.25)
     ident.add_argument("--rho-min", type=float, default=-100.0)
     ident.add_argument("--rho-max", type=float, default=60.0)
     ident.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     ident.add_argument("--debug", action="store_true", help="show tracebacks of failures")
+
+    design = sub.add_parser(
+        "design", help="before anything moves: how well the planned postures determine a "
+        "model, the run time, and better strokes")
+    design.add_argument("--config", metavar="FILE", help="station config (TOML)")
+    design.add_argument("--model", default=None,
+                        help="model to design for (default: the config's, else rho)")
+    design.add_argument("--strokes", metavar="A,B,C", default=None,
+                        help="stops per leg in mm, replacing [procedure] strokes")
+    design.add_argument("--leg-length", type=float, default=310.25)
+    design.add_argument("--rho-min", type=float, default=-100.0)
+    design.add_argument("--rho-max", type=float, default=60.0)
+    design.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    design.add_argument("--debug", action="store_true", help="show tracebacks of failures")
     return parser
 
 

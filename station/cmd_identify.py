@@ -2,9 +2,18 @@
 
 READINGS.csv (design.md): header ``posture,leg,direction,deviation_mm``, one row
 per deviation, posture ``+``/``-``, leg and direction ``x``/``y``/``z``
-(direction ≠ leg). An optional ``cycle`` column lets a deviation appear once per
-cycle (repeats); without it a repeated (posture, leg, direction) is an error,
-because it is far more often a copy-paste slip than a deliberate repeat.
+(direction ≠ leg). An intermediate stop Π_i(s) (``[procedure] strokes``) is a
+posture written as its signed stroke in mm, ``+30`` or ``-50.5``: the same
+string as in the run's deviation keys ("+30xy"), so no extra column is needed;
+``+``/``-`` remain ρmax/ρmin of the geometry options.
+
+An optional ``cycle`` column lets a deviation appear once per cycle (repeats);
+without it a repeated (posture, leg, direction) is an error, because
+it is far more often a copy-paste slip than a deliberate repeat.
+
+``--model auto`` needs the noise of the measurement: the cycle-to-cycle scatter
+of a CSV with a cycle column (one row per deviation and cycle); a CSV with one value
+per deviation carries none, and auto is refused for it.
 """
 
 from __future__ import annotations
@@ -15,7 +24,8 @@ import json
 import math
 from pathlib import Path
 
-from orthocal import Geometry, Identification, IdentificationError, identify
+from orthocal import Geometry, Identification, IdentificationError, identify, select_model
+from orthocal.postures import check_posture, stroke
 from station.errors import BadInput, read_input
 
 REQUIRED = ("posture", "leg", "direction", "deviation_mm")
@@ -23,8 +33,9 @@ OPTIONAL = ("cycle",)
 Key = tuple[str, str, str]
 
 
-def read_deviations(path: Path) -> dict[Key, list[float]]:
-    """Parse READINGS.csv; every problem is a BadInput naming the file and line."""
+def read_deviations(path: Path, geometry: Geometry | None = None) -> dict[Key, list[float]]:
+    """Parse READINGS.csv; every problem is a BadInput naming the file and line.
+    With ``geometry``, a stroke posture must also lie within ±leg_length."""
     text = read_input(path, encoding="utf-8-sig")  # a spreadsheet's BOM is not a column
     rows = csv.reader(text.splitlines())
     header = next(rows, None)
@@ -50,8 +61,14 @@ def read_deviations(path: Path) -> dict[Key, list[float]]:
             raise BadInput(f"{path}: line {lineno}: {len(row)} fields, expected {len(columns)}")
         cell = {c: row[i].strip() for c, i in col.items()}
         sign, leg, direction = cell["posture"], cell["leg"].lower(), cell["direction"].lower()
-        if sign not in ("+", "-"):
-            raise BadInput(f"{path}: line {lineno}: posture must be + or -, got {sign!r}")
+        try:
+            check_posture(sign)
+            if geometry is not None:
+                stroke(sign, geometry)
+        except ValueError:
+            raise BadInput(
+                f"{path}: line {lineno}: posture must be + or - or a signed nonzero stroke "
+                f"in mm within ±leg_length such as +30, got {sign!r}") from None
         for field, value in (("leg", leg), ("direction", direction)):
             if value not in ("x", "y", "z"):
                 raise BadInput(f"{path}: line {lineno}: {field} must be x, y or z, got {value!r}")
@@ -82,28 +99,31 @@ def read_deviations(path: Path) -> dict[Key, list[float]]:
 
 def format_table(result: Identification, geometry: Geometry) -> str:
     """Human-readable result: parameters ± standard errors, fit, per-deviation table."""
+    width = max(10, *(len(f"Π_{k[1]}({k[0]}) {k[2]}") for k in result.keys))
     lines = [
         f"Identification: model {result.model}, method {result.method}, "
         f"{len(result.keys)} deviations (L = {geometry.leg_length:g}, "
         f"ρmin = {geometry.rho_min:g}, ρmax = {geometry.rho_max:g} mm)",
         "",
-        f"  {'parameter':<10} {'value mm':>10} {'std err':>10}",
+        f"  {'parameter':<10} {'value':>10} {'std err':>10}",
     ]
     for name in result.names:
         se = result.std_errors[name]
         se_text = f"{se:10.4f}" if math.isfinite(se) else f"{'n/a':>10}"
-        lines.append(f"  {name:<10} {result.parameters[name]:10.4f} {se_text}")
+        unit = "mrad" if name.startswith("tilt_") else "mm"
+        lines.append(f"  {name:<10} {result.parameters[name]:10.4f} {se_text} {unit}")
     sigma = f"{result.sigma:.4f} mm" if math.isfinite(result.sigma) else "n/a (no redundancy)"
     lines += [
         "",
         f"  residual RMS {result.residual_rms:.4f} mm, σ̂ {sigma}, "
         f"condition number {result.condition_number:.2f}",
         "",
-        f"  {'deviation':<10} {'measured':>10} {'model':>10} {'residual':>10}",
+        f"  {'deviation':<{width}} {'measured':>10} {'model':>10} {'residual':>10}",
     ]
     for key, value, res in zip(result.keys, result.values, result.residuals, strict=True):
-        label = f"Π_{key[1]}^{key[0]} {key[2]}"
-        lines.append(f"  {label:<10} {value:10.4f} {value - res:10.4f} {res:10.4f}")
+        posture = f"^{key[0]}" if key[0] in ("+", "-") else f"({key[0]})"
+        label = f"Π_{key[1]}{posture} {key[2]}"
+        lines.append(f"  {label:<{width}} {value:10.4f} {value - res:10.4f} {res:10.4f}")
     return "\n".join(lines)
 
 
@@ -112,13 +132,28 @@ def main(args: argparse.Namespace) -> int:
         geometry = Geometry(leg_length=args.leg_length, rho_min=args.rho_min, rho_max=args.rho_max)
     except ValueError as exc:
         raise BadInput(f"geometry: {exc}") from None
-    data = read_deviations(Path(args.csv))
+    data = read_deviations(Path(args.csv), geometry)
+    selection = None
     try:
-        result = identify(data, geometry, model=args.model, method=args.method)
+        if args.model == "auto":
+            if not any(len(v) >= 2 for v in data.values()):
+                raise BadInput(
+                    f"{args.csv}: --model auto needs the noise of the measurement, and one "
+                    "value per deviation carries none: give a CSV with a cycle column (one row "
+                    "per deviation and cycle) or name a model")
+            selection = select_model(data, geometry, method=args.method)
+            result = selection.identification
+        else:
+            result = identify(data, geometry, model=args.model, method=args.method)
     except IdentificationError as exc:
         raise BadInput(f"{args.csv}: {exc}") from None
     if args.json:
-        print(json.dumps(result.to_dict(), indent=2))
+        doc = result.to_dict()
+        if selection is not None:
+            doc["model_selection"] = selection.to_dict()
+        print(json.dumps(doc, indent=2))
     else:
         print(format_table(result, geometry))
+        if selection is not None:
+            print(f"\n  model chosen by auto: {selection.reason}")
     return 0

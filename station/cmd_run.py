@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from station import simulation
+from station.cmd_design import design_summary, format_summary
 from station.config import load_config, parse_config
 from station.devices import build_controller, open_devices
 from station.errors import BadInput, RunFailed, say
@@ -63,7 +64,11 @@ def run(args: argparse.Namespace) -> int:
             stack.callback(controller.close)
             check_plan(plan, config, controller.soft_limits(),
                        start=controller.read_positions())
-            print(json.dumps(plan.to_json()) if args.json else plan.format())
+            # The experiment's quality and time before anything moves (orthocal design).
+            summary = design_summary(config, config.procedure.model,
+                                     controller_limits=controller.soft_limits())
+            print(json.dumps({**plan.to_json(), "design": summary}) if args.json
+                  else plan.format() + "\n" + format_summary(summary))
             return 0
         devices = open_devices(config, on_event, station)
         stack.callback(devices.close)

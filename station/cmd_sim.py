@@ -30,6 +30,7 @@ def main(args: argparse.Namespace) -> int:
     drho = list(args.true_drho) if args.true_drho is not None else \
         [round(rng.uniform(-2.0, 2.0), 4) for _ in range(3)]
     dl = list(args.true_dl) if args.true_dl is not None else [0.0, 0.0, 0.0]
+    tilt = list(args.true_tilt) if args.true_tilt is not None else [0.0, 0.0, 0.0]
     noise = 0.002 if args.noise is None else args.noise
     if noise < 0:
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
@@ -52,12 +53,12 @@ def main(args: argparse.Namespace) -> int:
                                      indicator_count=6, port=args.port, mount_all=True,
                                      motion=getattr(args, "motion", None) or "coordinated",
                                      controller_options={"transport": args.transport},
-                                     **kwargs)
+                                     true_tilt=tilt, **kwargs)
         except OSError as exc:
             raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
         with station:
             header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, hidden Δρ = {drho} mm, "
-                      f"ΔL = {dl} mm, noise {noise} mm\n"
+                      f"ΔL = {dl} mm, tilts = {tilt} mrad, noise {noise} mm\n"
                       f"Use: orthocal run --config {out}")
             # Validated like any operator's config: what we hand out must load.
             config = parse_config(station.config(), "orthocal sim")
@@ -69,7 +70,7 @@ def main(args: argparse.Namespace) -> int:
             print(f"orthocal sim: {link}, "
                   f"{len(station.indicators)} indicators ({args.protocol}); "
                   f"config written to {out}", file=sys.stderr, flush=True)
-            print(f"orthocal sim: hidden Δρ = {drho} mm; stop with Ctrl-C",
+            print(f"orthocal sim: hidden Δρ = {drho} mm, tilts = {tilt} mrad; stop with Ctrl-C",
                   file=sys.stderr, flush=True)
             while not stop.wait(0.5):
                 pass

@@ -213,9 +213,27 @@ class ProcedureConfig(_Strict):
     # either end of its stroke; later cycles are refused if predicted that close.
     plunger_guard: bool = True
     plunger_margin_mm: float = Field(0.2, ge=0, le=10)
-    model: Literal["rho", "L", "full"] = "rho"
+    # auto: the smallest model the run's own noise supports (orthocal.select_model);
+    # the default, because on a square machine it keeps rho (≥ 99 % of runs) and on
+    # one 0.2 mrad off square it finds the tilts rho alone turns into Δρ errors.
+    model: Literal["rho", "L", "full", "rho+tilt", "full+tilt", "auto"] = "auto"
     method: Literal["linear", "nonlinear"] = "nonlinear"
     verify: bool = True
+    # The stops Π_i(s) of each cycle, mm (model.md "Test postures"); absent: the
+    # paper's two, ρmax and ρmin, and every plan, journal and JSON exactly as before.
+    strokes: list[float] | None = Field(None, min_length=1, max_length=20)
+
+    @field_validator("strokes")
+    @classmethod
+    def _strokes(cls, value: list[float] | None) -> list[float] | None:
+        if value is None:
+            return value
+        for s in value:
+            if not math.isfinite(s) or s == 0:
+                raise ValueError(f"must be finite and nonzero, got {s:g}")
+        if len(set(value)) != len(value):
+            raise ValueError("must be unique")
+        return value
 
 
 class WritebackConfig(_Strict):
@@ -232,6 +250,12 @@ class StationConfig(_Strict):
 
     @model_validator(mode="after")
     def _references(self) -> StationConfig:
+        m = self.machine
+        for s in self.procedure.strokes or ():
+            if not m.rho_min <= s <= m.rho_max:
+                raise ValueError(
+                    f"procedure.strokes: {s:g} is outside [rho_min, rho_max] = "
+                    f"[{m.rho_min:g}, {m.rho_max:g}] of [machine]")
         names = [ind.name for ind in self.indicators]
         for idx, name in enumerate(names):
             if name in names[:idx]:

@@ -36,6 +36,7 @@ import numpy as np
 from station.config import StationConfig
 from station.errors import RunFailed
 from station.motion import independent_path, straight_path, trapezoid_time
+from station.plan import posture_label
 
 # Nominal travel change within one poll window below which the signal estimate is
 # taken as exact (the gauge's sampling instant no longer matters).
@@ -282,24 +283,25 @@ class PlungerGuard:
     def learn(self, stop_means: Mapping[str, Mapping[str, float]]) -> None:
         """End of the first cycle: predict each later move's travel from what this
         one showed: its polled extremes, and its nominal extremes + the signal at
-        the move's two stops (``stop_means``: sign "0" "+" "-" -> gauge -> mean
+        the move's two stops (``stop_means``: posture "0", "+", "-", "+30".. -> gauge -> mean
         reading there; nominal travel at a test posture is 0, the leg is parallel)."""
         if not self.watching:
             return
         self.watching = False
         stop_travel = {sign: {n: v - self._gauges[n].baseline for n, v in means.items()
                               if n in self._gauges} for sign, means in stop_means.items()}
+        by_label = {posture_label(p, self._setup.leg): p for p in stop_means}
         previous = "0"
         for rec in self._moves:
-            base = rec.label.split(" (")[0]
-            sign = "0" if base == "Π0" else base[-1]
+            base = rec.label.split(" (waypoint")[0]
+            sign = by_label.get(base, "0")
             for name in self._gauges:
                 n_lo, n_hi = rec.nominal[name]
                 p_lo, p_hi = rec.travel.get(name, (n_lo, n_hi))
                 ends = [stop_travel.get(s, {}).get(name, 0.0) for s in (previous, sign)]
                 if "0" in (previous, sign):
                     ends.append(0.0)  # the opening Π0 is the mounting point
-                key = (base, name)
+                key = (base, name)  # the move's label: its target
                 old = self.predicted.get(key, (np.inf, -np.inf))
                 self.predicted[key] = (min(old[0], p_lo, n_lo + min(ends)),
                                        max(old[1], p_hi, n_hi + max(ends)))

@@ -4,7 +4,9 @@ before anything moves.
 A setup is: move to Π0, prompt the operator to mount the setup's indicators
 (at Π0, the middle of the leg), read Π0, then cycles Π_i^+ → Π_i^− → Π0, each
 stop settled and read. Consecutive cycles share their Π0 stop, and Π_i^+ goes
-straight to Π_i^−, so no axis travels further than the postures require.
+straight to Π_i^−, so no axis travels further than the postures require. With
+``[procedure] strokes`` a cycle visits Π_i(s) for every stroke, in the order of
+:func:`orthocal.postures.stop_order` (out along +, back through to −, home).
 
 Stop ids are ``"{phase}:{setup}:{cycle}:{posture}"`` (phase ``m`` measurement,
 ``v`` verification; cycle 0 holds only the first Π0). The sequencer generates
@@ -21,6 +23,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 import orthocal
+from orthocal import postures
 from station.config import StationConfig
 from station.errors import BadInput
 from station.motion import real_path, waypoints
@@ -33,7 +36,20 @@ PHASES = {"m": "measurement", "v": "verification"}
 
 
 def posture_label(sign: str, leg: str | None) -> str:
-    return "Π0" if sign == "0" else f"Π_{leg}^{sign}"
+    if sign == "0":
+        return "Π0"
+    return f"Π_{leg}^{sign}" if sign in ("+", "-") else f"Π_{leg}({sign})"
+
+
+def cycle_postures(config: StationConfig,
+                   strokes: Sequence[float] | None = None) -> tuple[str, ...]:
+    """The test postures of one cycle, in the order visited: ('+', '-') unless
+    ``[procedure] strokes`` (or ``strokes``, for a design study) names others
+    (orthocal.postures: '+30', '-50', ...)."""
+    m = config.machine
+    strokes = strokes or config.procedure.strokes or [m.rho_max, m.rho_min]
+    geometry = m.geometry()
+    return tuple(postures.posture_name(s, geometry) for s in postures.stop_order(strokes))
 
 
 def stop_id(phase: str, setup: int, cycle: int, sign: str) -> str:
@@ -66,7 +82,7 @@ class Read:
     stop: str
     setup: int
     cycle: int
-    sign: str  # "0", "+" or "-"
+    sign: str  # "0", "+", "-" or a stroke such as "+30"
     indicators: tuple[str, ...]
     n: int
     kind: str = "read"
@@ -88,7 +104,8 @@ class SetupPlan:
     index: int
     leg: str
     indicators: dict[str, str]  # name -> "y" or "-y"
-    postures: dict[str, tuple[float, float, float]]  # "0", "+", "-" -> joint targets
+    postures: dict[str, tuple[float, float, float]]  # "0", "+", "-", "+30" -> joint targets
+    order: tuple[str, ...] = ("+", "-")  # the test postures of a cycle, in order
 
     def move(self, sign: str) -> Move:
         return Move(self.postures[sign], posture_label(sign, self.leg))
@@ -107,7 +124,7 @@ class SetupPlan:
     def cycle_steps(self, phase: str, cycle: int, settle_s: float, n: int) -> list[Step]:
         names = tuple(self.indicators)
         steps: list[Step] = []
-        for sign in ("+", "-", "0"):
+        for sign in (*self.order, "0"):
             steps += [
                 self.move(sign),
                 Settle(settle_s),
@@ -152,7 +169,11 @@ class Plan:
                 yield from sp.cycle_steps(phase, cycle, self.settle_s, self.readings)
 
     def to_json(self) -> dict:
+        # Only a plan with [procedure] strokes says so: the default's JSON stays as it was.
+        strokes = {} if self.setups[0].order == ("+", "-") else {
+            "test_postures": list(self.setups[0].order)}
         return {
+            **strokes,
             "cycles": self.cycles,
             "readings": self.readings,
             "settle_s": self.settle_s,
@@ -170,9 +191,12 @@ class Plan:
         }
 
     def format(self) -> str:
+        order = self.setups[0].order
+        cycle = "Π0 → Π+ → Π− → Π0" if order == ("+", "-") else \
+            " → ".join(["Π0", *(posture_label(s, "i") for s in order), "Π0"])
         lines = [
             f"plan: {len(self.setups)} setup(s) × up to {self.cycles} cycle(s) "
-            f"(Π0 → Π+ → Π− → Π0) × {self.readings} reading(s) per stop, "
+            f"({cycle}) × {self.readings} reading(s) per stop, "
             f"settle {self.settle_s:g} s"
         ]
         if self.limits is not None:
@@ -221,16 +245,20 @@ def route_key(start: Sequence[float], target: Sequence[float]) -> tuple:
     return (*(round(float(v), 3) for v in start), *(round(float(v), 3) for v in target))
 
 
-def build_plan(config: StationConfig) -> Plan:
+def build_plan(config: StationConfig, strokes: Sequence[float] | None = None) -> Plan:
+    """The plan of ``config``; ``strokes`` replaces ``[procedure] strokes`` (design
+    studies try strokes the config does not hold, even beyond rho_min/rho_max)."""
     geometry = config.machine.geometry()
     proc = config.procedure
+    order = cycle_postures(config, strokes)
     setups = []
     for idx, setup in enumerate(config.setups):
-        postures = {
+        targets = {
             s: tuple(float(v) for v in orthocal.posture(s, setup.leg, geometry))
-            for s in ("0", "+", "-")
+            for s in ("0", *order)
         }
-        setups.append(SetupPlan(idx, setup.leg, dict(setup.indicators), postures))  # type: ignore[arg-type]
+        setups.append(SetupPlan(idx, setup.leg, dict(setup.indicators), targets,  # type: ignore[arg-type]
+                                order))
     return Plan(setups, proc.cycles, proc.readings, proc.settle_s)
 
 

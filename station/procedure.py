@@ -113,7 +113,7 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
         status, message = _status_of(outcome)
         if outcome.status == "written" and ctx.config.procedure.verify:
             vm = seq.measure("v")
-            vident = _identify(ctx, vm)
+            vident = _identify(ctx, vm, model=ident.model)  # auto chose it: verify it
             vfields = measurement_fields(ctx.config, vm, vident)
             result["verification"] = {
                 "identified": vfields["identified"], "std_errors": vfields["std_errors"],
@@ -161,15 +161,13 @@ def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
     return "failed", outcome.reason
 
 
-def _identify(ctx: Run, m: Measurement) -> Any:
-    import orthocal
+def _identify(ctx: Run, m: Measurement, model: str | None = None) -> Any:
+    from station.models import identify_measurement
 
-    proc = ctx.config.procedure
-    try:
-        return orthocal.identify(m.for_identify(), ctx.config.machine.geometry(),
-                                 model=proc.model, method=proc.method)
-    except orthocal.IdentificationError as exc:
-        raise RunFailed(f"identification failed: {exc}") from None
+    ident, selection = identify_measurement(ctx.config, m, model)
+    if selection is not None:
+        ctx.result["model_selection"] = selection
+    return ident
 
 
 def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from station.plan import Plan
+from station.plan import Plan, posture_label
 
 
 class Progress:
@@ -16,7 +16,7 @@ class Progress:
         from station.console import RunProgress
 
         self.plan = plan
-        per_phase = sum(1 + 3 * plan.cycles for _ in plan.setups)
+        per_phase = sum(1 + (len(sp.order) + 1) * plan.cycles for sp in plan.setups)
         self.bar = RunProgress(per_phase * (2 if verify else 1), enabled=enabled)
         self.steps = 0
 
@@ -41,7 +41,7 @@ class Progress:
         if event == "read":
             self.steps += 1
             sp = self.plan.setups[info["setup"]]
-            posture = "Π0" if info["sign"] == "0" else f"Π_{sp.leg}^{info['sign']}"
+            posture = posture_label(info["sign"], sp.leg)
             self.bar.total_steps = max(self.bar.total_steps, self.steps)
             self.bar.update(f"{sp.index + 1}/{len(self.plan.setups)} (leg {sp.leg}, {phase})",
                             posture, max(info["cycle"], 1), self.plan.cycles, self.steps)
@@ -50,7 +50,8 @@ class Progress:
             self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: {devs} mm")
         elif event == "cycle_replayed":
             # Replayed cycles count as done for the time estimate.
-            self.steps += 3 + (1 if info["cycle"] == 1 else 0)
+            sp = self.plan.setups[info["setup"]]
+            self.steps += len(sp.order) + 1 + (1 if info["cycle"] == 1 else 0)
             self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: "
                      "from the journal")
         elif event == "repeat":

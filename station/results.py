@@ -11,8 +11,9 @@ from typing import Any
 
 import numpy as np
 
+import orthocal
 from station.config import StationConfig
-from station.sequencer import Measurement
+from station.sequencer import Measurement, split_key
 from station.writeback import WritebackOutcome
 
 AXES = ("x", "y", "z")
@@ -37,7 +38,7 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
     stats = m.stats()
     deviations = {}
     for key, st in stats.items():
-        model = ident.predicted.get((key[0], key[1], key[2]))
+        model = ident.predicted.get(split_key(key))
         deviations[key] = {**st, "model": num(model)}
     means = np.array([st["mean"] for st in stats.values()])
     noise = m.noise_mm
@@ -66,6 +67,9 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
         "condition_number": num(ident.condition_number),
         "noise_mm": num(noise), "fit_ok": bool(fit_ok), "fit_note": fit_note,
         "deviations": deviations,
+        # said in every report, never silently fixed (issue 9)
+        "not_identifiable": orthocal.cannot_identify(
+            ident.keys, config.machine.geometry(), "full+tilt"),
         "deviations_rms_mm": float(np.sqrt(np.mean(means**2))) if means.size else None,
         "setups": [{"leg": o.leg, "indicators": o.indicators, "cycles_used": o.cycles_used,
                     "cycles_max": o.cycles_max, "repeats": o.repeats, "flagged": o.flagged,
@@ -90,6 +94,8 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
         "simulation": None if sim is None else {
             "seed": sim["seed"], "true_drho": dict(zip(AXES, sim["true_drho"], strict=True)),
             "true_dl": dict(zip(AXES, sim["true_dl"], strict=True)),
+            "true_tilt": dict(zip(("tilt_yx", "tilt_zx", "tilt_zy"),
+                                  sim.get("true_tilt") or (0.0, 0.0, 0.0), strict=True)),
             "noise_mm": sim["noise_mm"]},
         "machine": {"leg_length": m.leg_length, "rho_min": m.rho_min, "rho_max": m.rho_max},
         "model": config.procedure.model, "method": config.procedure.method,

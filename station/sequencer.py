@@ -1,4 +1,5 @@
-"""Executes the plan: per setup, mount, then cycles Π0 → Π_i^+ → Π_i^− → Π0.
+"""Executes the plan: per setup, mount, then cycles Π0 → Π_i^+ → Π_i^− → Π0
+(or through the configured strokes Π_i(s)).
 
 Deviation of a cycle = mean at Π_i^s − mean of the two Π0 stops bracketing it
 (cancels linear drift of gauge and machine); a reversed mount ("-y") flips the
@@ -48,6 +49,11 @@ from station.plan import (
 )
 
 MAD_SCALE = 1.4826  # MAD of a normal sample × this ≈ σ
+
+
+def split_key(key: str) -> tuple[str, str, str]:
+    """A JSON deviation key ("+xy", "+30xy", "-50.5zx") as (posture, leg, direction)."""
+    return key[:-2], key[-2], key[-1]
 
 
 class ReadingSource(Protocol):
@@ -175,7 +181,7 @@ class Measurement:
         return float(math.sqrt(np.mean(np.square(self.within_std))))
 
     def for_identify(self) -> dict[tuple[str, str, str], list[float]]:
-        return {(k[0], k[1], k[2]): list(v) for k, v in self.deviations.items()}
+        return {split_key(k): list(v) for k, v in self.deviations.items()}
 
 
 @dataclass
@@ -352,21 +358,20 @@ class Sequencer:
     def _finish_cycle(self, phase: str, sp: SetupPlan, cycle: int
                       ) -> tuple[dict[str, float], list[float]]:
         start = self._stops[stop_id(phase, sp.index, cycle - 1, "0")]
-        plus = self._stops[stop_id(phase, sp.index, cycle, "+")]
-        minus = self._stops[stop_id(phase, sp.index, cycle, "-")]
+        tests = [(p, self._stops[stop_id(phase, sp.index, cycle, p)]) for p in sp.order]
         end = self._stops[stop_id(phase, sp.index, cycle, "0")]
         if cycle == self._guard_cycle:
-            self.guard.learn({sign: {n: st.mean for n, st in stops.items()}
-                              for sign, stops in (("+", plus), ("-", minus), ("0", end))})
+            self.guard.learn({posture: {n: st.mean for n, st in stops.items()}
+                              for posture, stops in (*tests, ("0", end))})
         devs: dict[str, float] = {}
         within: list[float] = []
         for name, direction in sp.indicators.items():
             sign = -1.0 if direction.startswith("-") else 1.0
             axis = direction.lstrip("-")
             base = 0.5 * (start[name].mean + end[name].mean)
-            devs[f"+{sp.leg}{axis}"] = sign * (plus[name].mean - base)
-            devs[f"-{sp.leg}{axis}"] = sign * (minus[name].mean - base)
-            for st in (plus[name], minus[name], end[name]):
+            for posture, stop in tests:
+                devs[f"{posture}{sp.leg}{axis}"] = sign * (stop[name].mean - base)
+            for st in (*(stop[name] for _, stop in tests), end[name]):
                 if st.std is not None:
                     within.append(st.std)
         self.journal.append({"type": "cycle", "phase": phase, "setup": sp.index,

@@ -26,6 +26,7 @@ def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
     drho = list(args.true_drho) if args.true_drho is not None else \
         [round(float(v), 4) for v in rng.uniform(-DEFAULT_SIM_DRHO_MM, DEFAULT_SIM_DRHO_MM, 3)]
     dl = list(args.true_dl) if args.true_dl is not None else [0.0, 0.0, 0.0]
+    tilt = list(getattr(args, "true_tilt", None) or [0.0, 0.0, 0.0])
     noise = args.noise if args.noise is not None else DEFAULT_NOISE_MM
     if not (math.isfinite(noise) and noise >= 0):
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
@@ -33,6 +34,7 @@ def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "seed": seed,
         "true_drho": drho,
         "true_dl": dl,
+        "true_tilt": tilt,
         "noise_mm": noise,
         "motion": getattr(args, "motion", None) or "coordinated",
         # Test hooks (not on the command line): the six-indicator style, a procedure.
@@ -51,6 +53,8 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
     speed = params.get("speed_mm_s") or SIM_SPEED_MM_S
     return VirtualStation(
         true_drho=params["true_drho"], true_dl=params["true_dl"],
+        # journals of runs before the tilts existed have none: an orthogonal machine
+        true_tilt=params.get("true_tilt") or (0.0, 0.0, 0.0),
         noise_mm=params["noise_mm"], seed=params["seed"],
         indicator_count=params["indicators"], nvram_path=nvram,
         procedure=params.get("procedure"), writeback=params.get("writeback"),

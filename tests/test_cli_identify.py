@@ -6,8 +6,10 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
+import orthocal
 from station.cli import main
 
 PAPER_ROWS = """\
@@ -93,8 +95,14 @@ def test_repeats_with_cycle_column(tmp_path, capsys):
         ("posture,leg,direction,deviation_mm\n", "no data rows"),
         ("posture,leg,direction,deviation_mm\n+,x,y,0.1\n+,w,y,0.1\n",
          "line 3: leg must be x, y or z, got 'w'"),
-        ("posture,leg,direction,deviation_mm\n0,x,y,0.1\n", "line 2: posture must be + or -"),
+        ("posture,leg,direction,deviation_mm\n0,x,y,0.1\n",
+         "line 2: posture must be + or - or a signed"),
         ("posture,leg,direction,deviation_mm\n+,x,x,0.1\n", "line 2: direction must differ"),
+        ("posture,leg,direction,deviation_mm\n+,x,y,0.1\n+0,x,y,0.1\n",
+         "line 3: posture must be + or - or a signed nonzero stroke"),
+        ("posture,leg,direction,deviation_mm\n+,x,y,0.1\n-400,x,y,0.1\n",
+         "line 3: posture must be + or - or a signed nonzero stroke in mm within ±leg_length"),
+        ("posture,leg,direction,deviation_mm\n30,x,y,0.1\n", "line 2: posture must be"),
         ("posture,leg,direction,deviation_mm\n+,x,y,nan\n", "line 2: deviation_mm must be finite"),
         ("posture,leg,direction,deviation_mm\n+,x,y,0.1mm\n",
          "line 2: deviation_mm is not a number"),
@@ -115,6 +123,27 @@ def test_bad_csv_exits_2_naming_the_line(tmp_path, capsys, content, expected):
     assert expected in err
     assert err.count("\n") == 1 and "Traceback" not in err
     assert out == ""
+
+
+def test_intermediate_strokes_in_the_posture_column(tmp_path, capsys):
+    """Four stops per leg, written as '+', '+30', '-50', '-': the offsets of a
+    noiseless machine come back to 1e-4 mm and the table names each stroke."""
+    truth = np.array([1.2, -0.7, 0.4, 0, 0, 0])
+    g = orthocal.Geometry()
+    keys = [(p, i, j) for p in ("+", "+30", "-50", "-") for i in "xyz" for j in "xyz" if i != j]
+    values = orthocal.deviations(keys, g, truth)
+    rows = ["posture,leg,direction,deviation_mm"] + [
+        f"{p},{i},{j},{v:.12f}" for (p, i, j), v in zip(keys, values, strict=True)]
+    path = tmp_path / "strokes.csv"
+    path.write_text("\n".join(rows) + "\n")
+    code, out, _ = run_cli(capsys, "identify", str(path), "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["n_deviations"] == 24
+    np.testing.assert_allclose([doc["parameters"][f"drho_{a}"] for a in "xyz"], truth[:3],
+                               atol=1e-4)
+    code, out, _ = run_cli(capsys, "identify", str(path))
+    assert code == 0 and "Π_x(+30) y" in out and "Π_y(-50) z" in out and "Π_z^- x" in out
 
 
 def test_missing_file_and_bad_geometry(tmp_path, paper_csv, capsys):

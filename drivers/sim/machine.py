@@ -134,8 +134,9 @@ class VirtualOrthoglide:
     """The machine behind the simulated controller.
 
     ``true_drho``/``true_dl``: hidden joint offsets Δρ and leg-length errors ΔL
-    (mm, 3-vectors; or pass ``true_params`` as the 6-vector of
-    :data:`orthocal.PARAM_NAMES`). ``offsets``: the controller's zero offsets at
+    (mm, 3-vectors); ``true_tilt``: hidden actuator axis tilts (tilt_yx, tilt_zx,
+    tilt_zy, mrad; model.md "Extended model"); or pass ``true_params`` as the 6- or
+    9-vector of :data:`orthocal.PARAM_NAMES`. ``offsets``: the controller's zero offsets at
     delivery (o_initial). ``start``: initial controller positions ρ (default Π0).
     """
 
@@ -146,6 +147,7 @@ class VirtualOrthoglide:
         true_dl: Sequence[float] | None = None,
         *,
         true_params: Sequence[float] | None = None,
+        true_tilt: Sequence[float] | None = None,
         offsets: Sequence[float] = (0.0, 0.0, 0.0),
         speed_mm_s: float = 50.0,
         accel_mm_s2: float = 500.0,
@@ -158,12 +160,13 @@ class VirtualOrthoglide:
     ) -> None:
         self.geometry = geometry or Geometry()
         if true_params is not None:
-            if true_drho is not None or true_dl is not None:
-                raise ValueError("give true_params or true_drho/true_dl, not both")
-            p = _vec(true_params, 6, "true_params")
-            true_drho, true_dl = p[:3], p[3:]
+            if true_drho is not None or true_dl is not None or true_tilt is not None:
+                raise ValueError("give true_params or true_drho/true_dl/true_tilt, not both")
+            p = orthocal.geometry.full_params(np.asarray(true_params, dtype=float))
+            true_drho, true_dl, true_tilt = p[:3], p[3:6], p[6:]
         self.true_drho = _vec(true_drho if true_drho is not None else (0, 0, 0), 3, "true_drho")
         self.true_dl = _vec(true_dl if true_dl is not None else (0, 0, 0), 3, "true_dl")
+        self.true_tilt = _vec(true_tilt if true_tilt is not None else (0, 0, 0), 3, "true_tilt")
         self.offsets_initial = _vec(offsets, 3, "offsets")
         if speed_mm_s <= 0 or accel_mm_s2 <= 0:
             raise ValueError("speed and acceleration must be > 0")
@@ -373,7 +376,7 @@ class VirtualOrthoglide:
         with self._lock:
             rho = self._rho_kin()
         return float(orthocal.leg_reading(rho, leg, direction, self.geometry,
-                                          self.true_drho, self.true_dl))
+                                          self.true_drho, self.true_dl, tilt=self.true_tilt))
 
     def source(self, leg: str, direction: str) -> Callable[[], float]:
         """A zero-argument callable for a simulated indicator's ``source``."""
@@ -383,7 +386,7 @@ class VirtualOrthoglide:
         """The end point P (mm) at this instant."""
         with self._lock:
             rho = self._rho_kin()
-        return orthocal.forward(rho, self.geometry, self.true_drho, self.true_dl)
+        return orthocal.forward(rho, self.geometry, self.true_drho, self.true_dl, self.true_tilt)
 
 
 def _vec(values: Sequence[float] | np.ndarray, n: int, what: str) -> np.ndarray:

@@ -48,7 +48,7 @@ SIX_SETUPS: list[dict[str, Any]] = [
 ]
 DEFAULT_PROCEDURE: dict[str, Any] = {
     "cycles": 3, "readings": 5, "settle_s": 0.02, "repeatability_mm": 0.02,
-    "max_repeats": 1, "model": "rho", "method": "nonlinear", "verify": True,
+    "max_repeats": 1, "model": "auto", "method": "nonlinear", "verify": True,
 }
 
 
@@ -81,6 +81,7 @@ class VirtualStation:
         noise_mm: float = 0.002,
         seed: int | None = 0,
         *,
+        true_tilt: Sequence[float] = (0.0, 0.0, 0.0),
         geometry: Geometry | None = None,
         speed_mm_s: float = SIM_SPEED_MM_S,
         accel_mm_s2: float = SIM_ACCEL_MM_S2,
@@ -109,8 +110,8 @@ class VirtualStation:
         self.procedure = {**DEFAULT_PROCEDURE, **(procedure or {})}
         self.writeback = dict(writeback or {})
         self.machine = _PersistentMachine(
-            self.geometry, true_drho, true_dl, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2,
-            motion=motion)
+            self.geometry, true_drho, true_dl, true_tilt=true_tilt, speed_mm_s=speed_mm_s,
+            accel_mm_s2=accel_mm_s2, motion=motion)
         if nvram_path is not None:
             path = Path(nvram_path)
             if path.exists():

@@ -1,0 +1,272 @@
+"""Design of the experiment before it runs: how well a set of test postures
+determines a model, and which strokes would do better.
+
+Everything follows from the Jacobian J of the deviations, system (7) / (7')
+at the nominal machine (:func:`orthocal.jacobian`, equal there to the exact
+model's derivative). With independent noise σ on each deviation the least
+squares estimate has covariance σ²·(JᵀJ)⁻¹; its diagonal's root per unit σ is
+each parameter's *noise gain*, the statistical floor
+(:func:`orthocal.statistical_floor`).
+
+A stop's deviations are referenced to the mean of the two Π0 stops around it
+(station's sequencer), so in a real run the deviations of one indicator in
+one cycle share noise; :func:`run_covariance` propagates that exactly to the
+covariance C of the station's estimate per unit of indicator noise. Its
+inverse is the run's information matrix. A design is scored D-optimal (max
+ln det C⁻¹: the confidence ellipsoid's volume shrinks as det C^(1/2); the
+score does not depend on the parameters' units beyond a constant, so mm and
+mrad need no weighting) or A-optimal (min trace C: the sum of the squared
+standard errors). The stroke search here is D-optimal; A is reported beside it.
+
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from orthocal.calibration import jacobian
+from orthocal.geometry import MODELS, PARAM_NAMES, Geometry
+from orthocal.measurement import Key
+from orthocal.postures import posture_name
+
+# Relative singular value below which a combination counts as invisible (as in
+# identification: the worst well-posed case sits near 1/200).
+RANK_TOL = 1e-9
+# A weight below this fraction of the largest is left out of the words.
+_WORD_TOL = 0.05
+
+
+@dataclass(frozen=True)
+class Quality:
+    """How well deviations ``keys`` determine ``model`` (per unit deviation noise)."""
+
+    model: str
+    names: tuple[str, ...]
+    n_deviations: int
+    rank: int
+    condition_number: float  # inf when rank-deficient
+    noise_gain: dict[str, float]  # σ_param / σ_deviation; inf when not identifiable
+    log_det: float  # ln det JᵀJ (D criterion); -inf when rank-deficient
+    trace_cov: float  # trace (JᵀJ)⁻¹ (A criterion); inf when rank-deficient
+    invisible: tuple[dict[str, float], ...]  # null-space combinations (largest weight 1)
+    weakest: dict[str, float]  # best-hidden combination (smallest singular value)
+
+    @property
+    def identifiable(self) -> bool:
+        return self.rank == len(self.names)
+
+
+def design_matrix(keys: Sequence[Key], geometry: Geometry, model: str) -> np.ndarray:
+    """J of (7)/(7') for ``keys`` and ``model`` at the nominal machine."""
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {sorted(MODELS)}, got {model!r}")
+    return jacobian(list(keys), geometry, model)
+
+
+def _combination(names: Sequence[str], v: np.ndarray) -> dict[str, float]:
+    v = v / v[np.argmax(np.abs(v))]
+    return {n: float(w) for n, w in zip(names, v, strict=True) if abs(w) >= _WORD_TOL}
+
+
+def quality(keys: Sequence[Key], geometry: Geometry, model: str) -> Quality:
+    """Rank, condition number, noise gains, D and A criteria and the invisible
+    parameter combinations of ``model`` measured by ``keys``."""
+    J = design_matrix(keys, geometry, model)
+    names = tuple(PARAM_NAMES[c] for c in MODELS[model])
+    p = len(names)
+    # full_matrices: vt is p×p even with fewer deviations than parameters.
+    _, s, vt = np.linalg.svd(J.reshape(-1, p), full_matrices=True)
+    s = np.concatenate([s, np.zeros(p - s.size)])
+    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
+    invisible = tuple(_combination(names, vt[k]) for k in range(rank, p))
+    weakest = _combination(names, vt[-1])
+    if rank < p:
+        gains = {n: float("inf") for n in names}
+        return Quality(model, names, len(keys), rank, float("inf"), gains, float("-inf"),
+                       float("inf"), invisible, weakest)
+    cov = np.linalg.inv(J.T @ J)
+    gains = {n: float(np.sqrt(cov[k, k])) for k, n in enumerate(names)}
+    return Quality(model, names, len(keys), rank, float(s[0] / s[-1]), gains,
+                   float(2.0 * np.sum(np.log(s))), float(np.trace(cov)), (), weakest)
+
+
+def describe(q: Quality) -> list[str]:
+    """In words: what the deviations cannot separate (null space), or, when all is
+    identifiable, which combination is worst determined."""
+
+    def term(name: str, w: float, first: bool) -> str:
+        mag = "" if abs(abs(w) - 1.0) < 5e-3 else f"{abs(w):.2f}·"
+        sign = ("−" if w < 0 else "") if first else (" − " if w < 0 else " + ")
+        return f"{sign}{mag}{name}"
+
+    def combo(c: dict[str, float]) -> str:
+        return "".join(term(n, w, k == 0) for k, (n, w) in enumerate(c.items()))
+
+    if not q.identifiable:
+        out = [f"rank {q.rank} < {len(q.names)}: these postures cannot separate the "
+               f"parameters of model {q.model}."]
+        for c in q.invisible:
+            if len(c) == 1:
+                out.append(f"{next(iter(c))} changes no deviation at all: it is invisible.")
+            else:
+                out.append(f"moving along {combo(c)} (mm, mrad for tilts) changes no "
+                           f"deviation: {', '.join(c)} cannot be told apart; fix one of "
+                           "them, identify a smaller model, or add strokes.")
+        return out
+    gain = max(q.noise_gain.values())
+    return [f"all {len(q.names)} parameters identifiable; the worst-determined "
+            f"combination is {combo(q.weakest)} (largest noise gain {gain:.3g})."]
+
+
+def keys_for(strokes: Sequence[float], legs: dict[str, Sequence[str]],
+             geometry: Geometry) -> list[Key]:
+    """Deviation keys of the stops at ``strokes`` for legs → measured directions."""
+    names = [posture_name(float(s), geometry) for s in strokes]
+    return [(p, leg, d) for p in names for leg, dirs in legs.items() for d in dirs]
+
+
+def run_covariance(J: np.ndarray, indicators: Sequence[Sequence[int]], cycles: int,
+                   readings: int) -> np.ndarray:
+    """Covariance of the station's estimate per unit² of indicator (reading) noise
+    for a whole run, as the station measures and fits it.
+
+    ``J`` has one row per deviation key; ``indicators`` lists, per mounted
+    indicator, its rows (one per stop). Each cycle an indicator reads Π0, its n
+    stops and Π0 again (shared with the next cycle), ``readings`` times each; a
+    deviation is its stop's mean minus the mean of the two Π0 means around it,
+    so within a cycle var = 1.5/r, cov = 0.5/r, and between consecutive cycles
+    cov = 0.25/r. The station fits the c cycles' deviations by ordinary least
+    squares, X = 1_c ⊗ J_m stacked over indicators m, whose covariance is
+    (XᵀX)⁻¹ XᵀΣX (XᵀX)⁻¹ with
+
+        XᵀX = c·Σ_m J_mᵀJ_m,
+        XᵀΣX = (1/r)·Σ_m [c·J_mᵀJ_m + (c − 0.5)·b_m b_mᵀ],  b_m = J_mᵀ1.
+
+    The b_m term is the shared Π0: stops read against the same Π0 pair add less
+    information than independent deviations would."""
+    A, meat = _run_terms(J, indicators, cycles)
+    inv = np.linalg.inv(A)
+    return inv @ meat @ inv / readings
+
+
+def _run_terms(J: np.ndarray, indicators: Sequence[Sequence[int]], cycles: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    p = J.shape[1]
+    A = np.zeros((p, p))
+    meat = np.zeros((p, p))
+    for rows in indicators:
+        Jm = J[list(rows)]
+        b = Jm.sum(axis=0)
+        A += cycles * Jm.T @ Jm
+        meat += cycles * Jm.T @ Jm + (cycles - 0.5) * np.outer(b, b)
+    return A, meat
+
+
+def run_std_errors(J: np.ndarray, indicators: Sequence[Sequence[int]], cycles: int,
+                   readings: int) -> np.ndarray:
+    """Each parameter's standard error per unit of indicator noise for a whole run
+    (:func:`run_covariance`)."""
+    return np.sqrt(np.diag(run_covariance(J, indicators, cycles, readings)))
+
+
+@dataclass(frozen=True)
+class Search:
+    """Result of :func:`search_strokes`."""
+
+    strokes: tuple[float, ...]
+    quality: Quality
+    candidates: int  # feasible grid strokes considered
+
+
+def search_strokes(
+    current: Sequence[float],
+    legs: dict[str, Sequence[str]],
+    geometry: Geometry,
+    model: str,
+    bounds: tuple[float, float],
+    feasible: Callable[[float], bool] | None = None,
+    feasible_set: Callable[[tuple[float, ...]], bool] | None = None,
+    cycles: int = 3,
+    step: float = 1.0,
+    max_stops: int = 8,
+) -> Search:
+    """D-optimal strokes: as many stops per leg as ``current`` (more, up to
+    ``max_stops``, only when that many cannot identify ``model`` at all), each on
+    a ``step`` grid within ``bounds``, nonzero, distinct and ``feasible``; a set
+    of strokes replaces the current one only if ``feasible_set`` accepts it (the
+    moves between stops matter too, not only each stop).
+
+    The objective is ln det of the information of the run as the station fits
+    it, the inverse of :func:`run_covariance` (readings only scale it), not of
+    JᵀJ alone: that would ignore the shared Π0 and favour stops bunched at one
+    end, whose deviations share most of their noise.
+
+    Coordinate exchange: replace one stroke at a time by the candidate that most
+    improves the objective, until no exchange does. Starts from ``current``
+    (its infeasible strokes replaced) and from the candidates spread evenly, and
+    keeps the better: never worse than a feasible ``current``."""
+    lo, hi = bounds
+    grid_v = np.round(np.arange(np.ceil(lo / step) * step, hi + 1e-9, step), 9)
+    grid_v = np.unique(np.concatenate([grid_v, [s for s in current if lo <= s <= hi]]))
+    grid = [float(s) for s in grid_v if s != 0 and (feasible is None or feasible(float(s)))]
+    if not grid:
+        raise ValueError(f"no feasible stroke within [{lo:g}, {hi:g}] mm")
+    per_stop = len(keys_for([1.0], legs, geometry))
+    J = design_matrix(keys_for(grid, legs, geometry), geometry, model)
+    rows = J.reshape(len(grid), per_stop, -1)  # [stroke, indicator, parameter]
+
+    def objective(idx: Sequence[int]) -> float:
+        sub = rows[list(idx)]  # [stop, indicator, parameter]
+        A = cycles * np.einsum("smp,smq->pq", sub, sub)
+        lam = np.linalg.eigvalsh(A)
+        # λ = s², so RANK_TOL on singular values would sit below rounding; 1e-12 on
+        # λ (1e-6 on s) still passes the worst well-posed design (full+tilt, ~1/300).
+        if lam[0] <= 1e-12 * lam[-1]:
+            return float("-inf")
+        b = sub.sum(axis=0)  # [indicator, parameter]
+        meat = A + (cycles - 0.5) * b.T @ b
+        # ln det of the information (A meat⁻¹ A) = 2 ln det A − ln det meat
+        return float(2.0 * np.sum(np.log(lam)) - np.linalg.slogdet(meat)[1])
+
+    checked: dict[frozenset[int], bool] = {}
+
+    def allowed(idx: Sequence[int]) -> bool:
+        key = frozenset(idx)
+        if key not in checked:
+            strokes = tuple(sorted((grid[k] for k in idx), reverse=True))
+            checked[key] = feasible_set is None or feasible_set(strokes)
+        return checked[key]
+
+    def exchange(idx: list[int]) -> list[int]:
+        # An infeasible start counts as worst: its first feasible exchange is taken.
+        best = objective(idx) if allowed(idx) else float("-inf")
+        improved = True
+        while improved:
+            improved = False
+            for pos in range(len(idx)):
+                for cand in range(len(grid)):
+                    if cand in idx:
+                        continue
+                    trial = [*idx[:pos], cand, *idx[pos + 1:]]
+                    value = objective(trial)
+                    if value > best + 1e-12 and allowed(trial):
+                        idx, best, improved = trial, value, True
+        return idx
+
+    n = max(1, min(len(current), len(grid)))
+    while True:
+        spread = [int(k) for k in np.linspace(0, len(grid) - 1, n).round()]
+        mine = [grid.index(s) for s in current if s in grid][:n]
+        mine += [k for k in spread if k not in mine][: n - len(mine)]
+        starts = [s for s in (mine, spread) if len(set(s)) == n]
+        best = max((exchange(list(s)) for s in starts),
+                   key=lambda idx: objective(idx) if allowed(idx) else float("-inf"))
+        if np.isfinite(objective(best)) or n >= min(max_stops, len(grid)):
+            break
+        n += 1
+    strokes = tuple(sorted((grid[k] for k in best), reverse=True))
+    return Search(strokes, quality(keys_for(strokes, legs, geometry), geometry, model),
+                  len(grid))

@@ -1,0 +1,88 @@
+"""Which model the station identifies: a named one, or ``auto`` resolved by
+:func:`orthocal.select_model` against the noise this very measurement shows
+(design.md, "Models")."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import orthocal
+from orthocal.selection import (
+    LEVEL,
+    lack_of_fit,
+    noise_from_cycles,
+    noise_from_readings,
+    with_measured_noise,
+)
+from station.config import StationConfig
+from station.errors import RunFailed
+from station.sequencer import Measurement
+
+
+def measurement_noise(config: StationConfig, m: Measurement) -> tuple[float, float, str]:
+    """(σ of one per-cycle deviation, its degrees of freedom, where it comes from).
+
+    From two cycles on, the cycle-to-cycle scatter: it holds every noise the
+    deviations carry (the machine's repeatability between stops too), which the
+    scatter of readings at one stop misses. With one cycle, the within-stop
+    scatter. Floored at the gauges' quantisation (resolution/√12 per reading),
+    so quantised data that never scatter do not claim zero noise."""
+    proc = config.procedure
+    data = m.for_identify()
+    resolution = min(ind.resolution_mm for ind in config.indicators)
+    floor = resolution / math.sqrt(12.0) * math.sqrt(1.5 / proc.readings)
+    if any(len(v) >= 2 for v in data.values()):
+        sigma, dof = noise_from_cycles(data)
+        source = "cycle-to-cycle scatter"
+    elif m.within_std and proc.readings >= 2:
+        sigma, dof = noise_from_readings(m.within_std, proc.readings)
+        source = "scatter of the readings at each stop"
+    else:
+        raise RunFailed("model auto needs the noise of the measurement, and one cycle of one "
+                        "reading per stop shows none: set [procedure] cycles >= 2 (or "
+                        "readings >= 2), or name a model")
+    if sigma < floor:
+        sigma, source = floor, source + ", floored at the gauge resolution"
+    return sigma, dof, source
+
+
+def identify_measurement(config: StationConfig, m: Measurement,
+                         model: str | None = None) -> tuple[Any, dict[str, Any] | None]:
+    """The identification of ``m`` with ``model`` (default: the config's) and, for
+    auto, the selection's JSON (the run JSON's ``model_selection``).
+
+    Standard errors: from the noise this measurement shows, with the correlation
+    its shared Π0 stops give the deviations (orthocal.selection.with_measured_noise:
+    honest where ordinary least squares is ~10-20 % off), inflated by √F when the
+    model leaves more than that noise (so a model the data reject does not look
+    precise). Without a noise estimate (one cycle of one reading), the fit's own."""
+    proc = config.procedure
+    model = model or proc.model
+    geometry = config.machine.geometry()
+    data = m.for_identify()
+    try:
+        noise = measurement_noise(config, m)
+    except RunFailed:
+        if model == "auto":
+            raise
+        noise = None
+    selection = None
+    try:
+        if model != "auto":
+            ident = orthocal.identify(data, geometry, model=model, method=proc.method)
+            test = lack_of_fit(ident, geometry, noise[0], noise[1]) if noise else None
+        else:
+            sigma, dof, source = noise  # type: ignore[misc]
+            sel = orthocal.select_model(data, geometry, sigma, dof, method=proc.method,
+                                        noise_source=source)
+            ident, selection = sel.identification, sel.to_dict()
+            test = next(t for t in sel.tests if t.model == sel.model)
+    except orthocal.IdentificationError as exc:
+        raise RunFailed(f"identification failed: {exc}") from None
+    if noise is not None:
+        rejected = (test is not None and test.F is not None and test.p_value is not None
+                    and test.p_value < LEVEL and test.F > 1.0)
+        ident = with_measured_noise(ident, geometry, noise[0],
+                                    inflate=math.sqrt(test.F) if rejected else 1.0)
+    return ident, selection

@@ -1,0 +1,464 @@
+"""report.html: one self-contained page (plots inline as SVG) from the result."""
+
+from __future__ import annotations
+
+import html
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from station.report_io import _atomic_write
+from station.report_plots import _plot_deviations, _plot_parameters, _release_fonts
+from station.report_text import (
+    _MODEL_TEXT,
+    _STATUS_TEXT,
+    _WRITEBACK_TEXT,
+    AXES,
+    PARAM_NAMES,
+    _dev_html,
+    _dev_keys,
+    _dict,
+    _duration,
+    _fmt,
+    _max_abs,
+    _num,
+    _param_html,
+    _params_of,
+    _truth,
+    _unit,
+    _when,
+    model_notes,
+)
+
+_CSS = """
+body{font-family:-apple-system,"Segoe UI",Roboto,"Helvetica Neue",Arial,sans-serif;
+ color:#1d2330;max-width:60rem;margin:2rem auto;padding:0 1.2rem;line-height:1.5;font-size:15px}
+h1{font-size:1.6rem;margin:0 0 .3rem}
+h2{font-size:1.2rem;margin:2rem 0 .6rem;border-bottom:1px solid #d0d5dd;padding-bottom:.2rem}
+h3{font-size:1rem;margin:1.2rem 0 .4rem}
+.meta{color:#555;margin:0 0 1rem}
+.status{display:inline-block;padding:.15rem .7rem;border-radius:1rem;font-weight:600;
+ font-size:.95rem;vertical-align:middle;margin-left:.6rem;border:1px solid}
+.st-ok{background:#e6f4ea;color:#1e6b30;border-color:#9fd3ab}
+.st-failed,.st-aborted{background:#fdecea;color:#a52a1a;border-color:#f0a99f}
+.st-refused{background:#fff4e0;color:#8a5300;border-color:#f0c97a}
+.box{background:#f6f8fa;border:1px solid #d0d5dd;border-radius:6px;padding:.7rem 1rem;
+ margin:.8rem 0}
+.warn{background:#fff8e6;border-color:#f0c97a}
+.bad{background:#fdecea;border-color:#f0a99f}
+table{border-collapse:collapse;margin:.4rem 0 1rem;font-size:.9rem}
+th,td{border:1px solid #d0d5dd;padding:.25rem .6rem;text-align:right;vertical-align:top}
+th{background:#f0f2f5;font-weight:600}
+td.l,th.l{text-align:left}
+td.num{font-variant-numeric:tabular-nums;white-space:nowrap}
+figure{margin:1rem 0;page-break-inside:avoid;break-inside:avoid}
+figure svg{width:100%;height:auto;display:block}
+figcaption{font-size:.88rem;color:#444;margin-top:.3rem}
+dl.kv{display:grid;grid-template-columns:max-content auto;gap:.15rem 1rem;margin:.4rem 0}
+dl.kv dt{color:#555}dl.kv dd{margin:0}
+.small{font-size:.85rem;color:#555}
+code{font-family:ui-monospace,Menlo,Consolas,monospace;font-size:.88em;word-break:break-all}
+@media print{body{margin:0;max-width:none;font-size:11pt}h2{page-break-after:avoid}
+ table,.box{page-break-inside:avoid}}
+"""
+
+
+def _e(value: Any) -> str:
+    return html.escape(str(value), quote=True)
+
+
+def _table(head: list[str], rows: list[list[str]], left: int = 1, caption: str = "") -> str:
+    """Cells are trusted HTML fragments: callers escape text with _e()."""
+    ths = "".join(
+        f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(head)
+    )
+    body = "".join(
+        "<tr>" + "".join(
+            f'<td class="l">{c}</td>' if i < left else f'<td class="num">{c}</td>'
+            for i, c in enumerate(row)
+        ) + "</tr>"
+        for row in rows
+    )
+    cap = f'<p class="small">{caption}</p>' if caption else ""
+    return f"<table><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>{cap}"
+
+
+def _what_was_done(result: Mapping[str, Any]) -> str:
+    setups = result.get("setups") if isinstance(result.get("setups"), list) else []
+    cycles = sorted({s.get("cycles_used") for s in setups if isinstance(s, dict)
+                     and isinstance(s.get("cycles_used"), int)})
+    cyc = ""
+    if cycles:
+        cyc = (f" ({cycles[0]} cycle{'s' if cycles[0] != 1 else ''} per leg)"
+               if len(cycles) == 1 else f" ({cycles[0]}–{cycles[-1]} cycles per leg)")
+    model = _MODEL_TEXT.get(str(result.get("model")), str(result.get("model", "—")))
+    method = {"linear": "the linearised calibration equations",
+              "nonlinear": "the exact kinematic model (iterative least squares)"}.get(
+        str(result.get("method")), str(result.get("method", "—")))
+    # [procedure] strokes: intermediate stops Π_i(s) beside or instead of Π_i^±.
+    kinds = {k[:-2] for k in _dict(result.get("deviations"))} or {"+", "-"}
+    n_post = len(kinds)
+    count = 3 * n_post * 2
+    postures = ("the two test postures Π<sub>i</sub><sup>+</sup> and Π<sub>i</sub><sup>−</sup> "
+                "(leg i pushed to the end of its stroke each way)") if kinds == {"+", "-"} else (
+        f"{n_post} test postures Π<sub>i</sub>(s) along leg i's axis, at the strokes s of "
+        "<code>[procedure] strokes</code>")
+    stopped = ""
+    if result.get("status") in ("failed", "aborted"):
+        # The paragraph below describes the whole procedure; say plainly that this
+        # run did not get through it, or a reader takes it for a completed calibration.
+        done = len(setups)
+        stopped = (f"<p><b>This run stopped early</b>, after measuring {done} of the "
+                   "3 legs; see the result below.</p>")
+    return stopped + (
+        "<p>Two dial indicators were mounted against each leg of the machine in turn. "
+        "For each leg the station moved the machine from the <i>mechanical zero</i> "
+        f"posture Π<sub>0</sub> to {postures} and "
+        f"back, repeatedly{_e(cyc)}, reading the indicators at every stop. On a perfectly "
+        "calibrated machine each leg moves parallel to itself in these postures, so the "
+        f"indicators read the same everywhere; the {count} differences "
+        f"(3 legs × {n_post} postures × 2 indicators), called <i>deviations</i>, show how far the "
+        "legs tilt. From them the station estimated, by least squares on "
+        f"{_e(method)}, the {_e(model)}.</p>"
+        '<p class="small">Δρ<sub>i</sub> (joint offset): how far axis i really is from '
+        "where its controller believes it is — an error of the encoder zero. "
+        "ΔL<sub>i</sub> (leg-length error): how much leg i is longer than nominal. "
+        "tilt<sub>yx</sub>, tilt<sub>zx</sub>, tilt<sub>zy</sub> (mrad): how far actuator "
+        "axis y leans toward x, and axis z toward x and toward y, off square. "
+        "± values are one standard error σ; the true value lies within ±3σ with near "
+        "certainty if the model is right.</p>"
+    )
+
+
+def _result_paragraph(result: Mapping[str, Any]) -> str:
+    status = str(result.get("status"))
+    parts: list[str] = []
+    names = _params_of(result)
+    ident, errs = _dict(result.get("identified")), _dict(result.get("std_errors"))
+    if status in ("failed", "aborted"):
+        msg = result.get("message") or "no reason recorded"
+        parts.append(f"<b>The run did not complete</b>: {_e(msg)}. "
+                     "Everything measured up to that point is kept in the run directory; "
+                     "the controller's offsets were only changed if stated below.")
+    if names:
+        vals = "; ".join(
+            f"{_param_html(n)} = {_fmt(ident.get(n), signed=True)} ± {_fmt(errs.get(n))} "
+            f"{_unit(n)}" for n in names
+        )
+        what = "joint offsets" if all(n.startswith("drho") for n in names) else "parameters"
+        parts.append(f"The {what} were identified as {vals}.")
+        resid, noise = _num(result.get("residual_rms_mm")), _num(result.get("noise_mm"))
+        if resid is not None:
+            s = f"The fitted model reproduces the measured deviations to {_fmt(resid)} mm RMS"
+            if noise is not None:
+                s += f" (indicator noise: {_fmt(noise)} mm)"
+            parts.append(s + ".")
+        truths = [(n, _truth(result, n)) for n in names]
+        diffs = {u: [abs(_num(ident.get(n)) - t) for n, t in truths if _unit(n) == u
+                     and t is not None and _num(ident.get(n)) is not None]
+                 for u in ("mm", "mrad")}
+        if diffs["mm"] or diffs["mrad"]:
+            parts.append("This was a simulated run; the identified values differ from the "
+                         "virtual machine's hidden ones by at most " + " and ".join(
+                             f"{_fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
+    wb = _dict(result.get("writeback"))
+    if wb.get("status"):
+        text = _WRITEBACK_TEXT.get(str(wb["status"]), f"write-back: {wb['status']}")
+        reason = f" ({_e(wb['reason'])})" if wb.get("reason") else ""
+        parts.append(f"{_e(text[0].upper() + text[1:])}{reason}.")
+    ver = _dict(result.get("verification"))
+    if ver:
+        after = _num(ver.get("deviations_rms_mm"))
+        worst = _max_abs(_dict(ver.get("deviations")))
+        s = ("A verification measurement shows the legs now parallel to within "
+             f"{_fmt(after)} mm RMS")
+        if worst is not None:
+            s += f" (largest deviation {_fmt(worst)} mm)"
+        before = _num(result.get("deviations_rms_mm"))
+        if before is not None:
+            s += f", against {_fmt(before)} mm RMS before calibration"
+        parts.append(s + ".")
+    elif names and status == "ok":
+        parts.append("No verification measurement was made.")
+    if not parts:
+        parts.append("No measurement results were recorded.")
+    return "<p>" + " ".join(parts) + "</p>"
+
+
+def _fit_box(result: Mapping[str, Any]) -> str:
+    if result.get("residual_rms_mm") is None and not result.get("fit_note"):
+        return ""
+    rows = [
+        ("residual RMS (measured − model)", f"{_fmt(result.get('residual_rms_mm'))} mm"),
+        ("σ = √(RSS / (n − p))", f"{_fmt(result.get('sigma_mm'))} mm"),
+        ("indicator noise (spread of readings at a stop)", f"{_fmt(result.get('noise_mm'))} mm"),
+        ("condition number (sensitivity of the fit to noise)",
+         _fmt(result.get("condition_number"), 2)),
+        ("deviations RMS before calibration", f"{_fmt(result.get('deviations_rms_mm'))} mm"),
+    ]
+    dl = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in rows)
+    ok = result.get("fit_ok")
+    cls = "box" if ok is not False else "box warn"
+    verdict = ("The model explains the data: the residual is at the level of the indicator "
+               "noise." if ok else "Warning: the residual is larger than the indicator noise "
+               "explains; the machine may have errors this model does not include."
+               if ok is False else "")
+    note = (f"<p><b>Fit quality:</b> {_e(result['fit_note'])}</p>"
+            if result.get("fit_note") else "")
+    return f'<div class="{cls}">{note}<p>{_e(verdict)}</p><dl class="kv">{dl}</dl></div>'
+
+
+def _params_table(result: Mapping[str, Any]) -> str:
+    names = _params_of(result)
+    if not names:
+        return "<p>No parameters were identified.</p>"
+    ident, errs = _dict(result.get("identified")), _dict(result.get("std_errors"))
+    ver = _dict(result.get("verification"))
+    v_ident, v_errs = _dict(ver.get("identified")), _dict(ver.get("std_errors"))
+    has_truth = any(_truth(result, n) is not None for n in names)
+    head = ["parameter", "unit", "identified", "σ", "±3σ interval"]
+    if has_truth:
+        head.append("hidden truth")
+    if v_ident:
+        head += ["after calibration", "σ after"]
+    rows = []
+    for n in names:
+        v, s = _num(ident.get(n)), _num(errs.get(n))
+        interval = (f"{_fmt(v - 3 * s, signed=True)} … {_fmt(v + 3 * s, signed=True)}"
+                    if v is not None and s is not None else "—")
+        row = [_param_html(n), _unit(n), _fmt(v, signed=True), _fmt(s), interval]
+        if has_truth:
+            row.append(_fmt(_truth(result, n), signed=True))
+        if v_ident:
+            row += [_fmt(v_ident.get(n), signed=True), _fmt(v_errs.get(n))]
+        rows.append(row)
+    return _table(head, rows)
+
+
+def _model_section(result: Mapping[str, Any]) -> str:
+    """Why this model (auto's test), what these measurements can never identify,
+    what cannot be written: said, not silently fixed (issue 9)."""
+    notes = model_notes(result)
+    if not notes:
+        return ""
+    out = "".join(f"<p>{_e(n)}</p>" for n in notes)
+    sel = _dict(result.get("model_selection"))
+    cands = [c for c in sel.get("candidates") or [] if isinstance(c, dict)]
+    if cands:
+        rows = [[_e(c.get("model")), "yes" if c.get("identifiable") else "no",
+                 _fmt(c.get("F"), 2), _e(", ".join(f"{d:g}" for d in c["dof"])
+                                         if isinstance(c.get("dof"), list) else "—"),
+                 (f"{c['p_value']:.2g}" if _num(c.get("p_value")) is not None else "—"),
+                 _fmt(c.get("residual_rms_mm"), 4),
+                 "chosen" if c.get("model") == result.get("model") else
+                 ("rejected" if c.get("F") is not None else _e(c.get("note") or ""))]
+                for c in cands]
+        out += _table(["candidate", "identifiable", "F", "dof", "p", "residual RMS (mm)",
+                       "verdict"], rows, caption=(
+            f"Lack-of-fit F test of each candidate against the noise measured in this run "
+            f"(σ = {_fmt(sel.get('noise_sigma_mm'), 5)} mm per deviation, "
+            f"{_e(sel.get('noise_source'))}); the first with p ≥ {_e(sel.get('level'))} "
+            "is used."))
+    return out
+
+
+def _correlation_table(result: Mapping[str, Any]) -> str:
+    corr = _dict(result.get("correlation"))
+    names, matrix = corr.get("names"), corr.get("matrix")
+    if not isinstance(names, list) or not isinstance(matrix, list) or not names:
+        return ""
+    head = "".join(f"<th>{_param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)}</th>"
+                   for n in names)
+    rows = []
+    for i, n in enumerate(names):
+        row = matrix[i] if i < len(matrix) and isinstance(matrix[i], list) else []
+        cells = []
+        for j in range(len(names)):
+            r = _num(row[j]) if j < len(row) else None
+            # Shade by |r|: strongly correlated pairs (|r| near 1) are the ones the
+            # measurement cannot tell apart, and should jump out at the reader.
+            shade = "" if r is None or i == j else (
+                f' style="background:rgba(192,57,43,{min(abs(r), 1.0) * 0.55:.2f})"')
+            # 0.9997 would print as "1.00", which reads as "identical" rather than
+            # "almost inseparable"; give such values their digits.
+            digits = 4 if r is not None and i != j and abs(r) >= 0.995 else 2
+            cells.append(f'<td class="num"{shade}>{_fmt(r, digits)}</td>')
+        label = _param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)
+        rows.append(f'<tr><th class="l">{label}</th>{"".join(cells)}</tr>')
+    return (f'<h3>Correlation of the estimates</h3><table><thead><tr><th></th>{head}</tr>'
+            f'</thead><tbody>{"".join(rows)}</tbody></table>'
+            '<p class="small">Values near ±1 mean the measurement cannot separate the two '
+            "parameters: an error in one is absorbed by the other.</p>")
+
+
+def _deviations_table(result: Mapping[str, Any]) -> str:
+    before = _dict(result.get("deviations"))
+    after = _dict(_dict(result.get("verification")).get("deviations"))
+    keys = _dev_keys(before, after)
+    if not keys:
+        return "<p>No deviations were measured.</p>"
+    head = ["deviation", "measured (mm)", "std (mm)", "n", "model (mm)", "residual (mm)"]
+    if after:
+        head += ["after: measured (mm)", "after: std (mm)"]
+    rows = []
+    for k in keys:
+        b, a = _dict(before.get(k)), _dict(after.get(k))
+        m, f = _num(b.get("mean")), _num(b.get("model"))
+        resid = m - f if m is not None and f is not None else None
+        n = b.get("n")
+        row = [_dev_html(k), _fmt(m, signed=True), _fmt(b.get("std")),
+               _e(n) if isinstance(n, int) else "—", _fmt(f, signed=True),
+               _fmt(resid, signed=True)]
+        if after:
+            row += [_fmt(a.get("mean"), signed=True), _fmt(a.get("std"))]
+        rows.append(row)
+    return _table(head, rows, caption=(
+        "Π<sub>i</sub><sup>±</sup> along j: reading of the indicator touching leg i in "
+        "direction j, in test posture Π<sub>i</sub><sup>±</sup>, minus its reading in "
+        "Π<sub>0</sub>. std: spread over the measurement cycles; n: number of cycles."))
+
+
+def _setups_table(result: Mapping[str, Any]) -> str:
+    setups = result.get("setups")
+    if not isinstance(setups, list) or not setups:
+        return "<p>No setup was measured.</p>"
+    rows = []
+    for s in setups:
+        s = _dict(s)
+        inds = ", ".join(f"{_e(k)} → {_e(v)}" for k, v in _dict(s.get("indicators")).items())
+        cu, cm = s.get("cycles_used"), s.get("cycles_max")
+        cycles = f"{_e(cu)} of {_e(cm)}" if cm is not None else _e(cu if cu is not None else "—")
+        flagged = s.get("flagged")
+        rows.append([
+            f"leg {_e(s.get('leg', '—'))}", inds or "—", cycles, _e(s.get("repeats", "—")),
+            _fmt(s.get("spread_mm")),
+            "<b>yes</b> — spread above the repeatability limit" if flagged else "no",
+        ])
+    return _table(["setup", "indicators (name → direction)", "cycles used", "repeats",
+                   "spread (mm)", "flagged"], rows, left=2)
+
+
+def _offsets_section(result: Mapping[str, Any]) -> str:
+    before = _dict(result.get("offsets_before"))
+    written = result.get("offsets_written")
+    written = written if isinstance(written, dict) else {}
+    wb = _dict(result.get("writeback"))
+    out = []
+    if wb:
+        status = str(wb.get("status", "—"))
+        cls = "box" if status == "written" else "box warn"
+        text = _WRITEBACK_TEXT.get(status, status)
+        reason = f"<br>Reason: {_e(wb['reason'])}" if wb.get("reason") else ""
+        out.append(f'<div class="{cls}"><b>Write-back: {_e(status)}</b> — {_e(text)}.'
+                   f"{reason}</div>")
+    if before or written:
+        rows = []
+        for a in AXES:
+            if a not in before and a not in written:
+                continue
+            b, w = _num(before.get(a)), _num(written.get(a))
+            change = _fmt(w - b, signed=True) if b is not None and w is not None else "—"
+            rows.append([f"axis {a}", _fmt(b, signed=True),
+                         _fmt(w, signed=True) if written else "not written", change])
+        out.append(_table(["axis", "offset before (mm)", "offset written (mm)", "change (mm)"],
+                          rows, caption=(
+            "The controller's joint zero offset o<sub>i</sub>; the correction is "
+            "o<sub>i</sub> ← o<sub>i</sub> − Δρ<sub>i</sub>. The old values are saved in "
+            "the run directory, so <code>orthocal rollback</code> can restore them.")))
+    return "".join(out) or "<p>The controller's offsets were not read.</p>"
+
+
+def _info_list(result: Mapping[str, Any]) -> str:
+    machine = _dict(result.get("machine"))
+    timing = _dict(result.get("timing"))
+    rows = [
+        ("run directory", f"<code>{_e(result.get('run_dir', '—'))}</code>"),
+        ("started", _e(_when(result.get("started")))),
+        ("finished", _e(_when(result.get("finished")))),
+        ("duration", _e(_duration(result.get("duration_s", timing.get("wall_s"))))),
+        ("machine", _e(
+            f"leg length L = {_fmt(machine.get('leg_length'), 2)} mm, joint stroke "
+            f"ρmin = {_fmt(machine.get('rho_min'), 1)} mm … ρmax = "
+            f"{_fmt(machine.get('rho_max'), 1)} mm") if machine else "—"),
+        ("model", _e(f"{_MODEL_TEXT.get(str(result.get('model')), result.get('model', '—'))}"
+                     f" ({result.get('method', '—')})")),
+    ]
+    if result.get("simulated"):
+        sim = _dict(result.get("simulation"))
+        desc = "virtual machine (no hardware)"
+        if sim:
+            desc += (f"; seed {sim.get('seed') if sim.get('seed') is not None else 'random'}"
+                     f", indicator noise σ = {_fmt(sim.get('noise_mm'), 4)} mm")
+        rows.append(("simulation", _e(desc)))
+    else:
+        rows.append(("devices", "as configured in the station config (config.toml)"))
+    if timing:
+        rows.append(("timing", _e(
+            f"wall {_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "
+            f"{timing.get('readings', '—')} readings, retries: {timing.get('retries', '—')}")))
+    return '<dl class="kv">' + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
+
+
+def render_html(result: dict) -> str:
+    """The whole report as one HTML string (no external resources)."""
+    status = str(result.get("status", "unknown"))
+    title = "Calibration report"
+    when = _when(result.get("started"))
+    try:
+        plot_dev = _plot_deviations(result)
+        plot_par = _plot_parameters(result)
+    finally:
+        if "matplotlib" in sys.modules:
+            _release_fonts()
+    figures = []
+    if plot_dev:
+        figures.append(
+            f"<figure>{plot_dev}<figcaption>Figure 1. The 12 leg deviations: how far each "
+            "indicator's reading in a test posture differs from its reading in "
+            "Π<sub>0</sub>. Before calibration: measured (blue; error bar = std over the "
+            "cycles, often smaller than the marker) and as the fitted model explains them "
+            "(orange). After calibration: the verification measurement (green), which "
+            "should be close to zero.</figcaption></figure>")
+    if plot_par:
+        figures.append(
+            f"<figure>{plot_par}<figcaption>Figure 2. Identified parameters with ±1σ (thick) "
+            "and ±3σ (thin) error bars; after calibration the re-identified values should be "
+            "near zero. In a simulated run the red bar marks the value hidden in the virtual "
+            "machine.</figcaption></figure>")
+    status_cls = f"st-{status}" if status in _STATUS_TEXT else "st-failed"
+    sim_tag = " (simulated)" if result.get("simulated") else ""
+    badge = f'<span class="status {status_cls}">{_e(_STATUS_TEXT.get(status, status))}</span>'
+    body = f"""
+<h1>{_e(title)}{_e(sim_tag)}{badge}</h1>
+<p class="meta">Orthoglide-type parallel machine · leg-parallelism calibration · {_e(when)}</p>
+{_info_list(result)}
+<h2>What was done</h2>
+{_what_was_done(result)}
+<h2>Result</h2>
+{_result_paragraph(result)}
+{_fit_box(result)}
+{"".join(figures)}
+<h2>Identified parameters</h2>
+{_params_table(result)}
+{_model_section(result)}
+{_correlation_table(result)}
+<h2>Deviations</h2>
+{_deviations_table(result)}
+<h2>Setups</h2>
+{_setups_table(result)}
+<h2>Controller offsets</h2>
+{_offsets_section(result)}
+<p class="small">Generated by orthocal. All lengths in millimetres.</p>
+"""
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+            f'<meta name="viewport" content="width=device-width, initial-scale=1">'
+            f"<title>{_e(title)} — {_e(when)}</title><style>{_CSS}</style></head>"
+            f"<body>{body}</body></html>\n")
+
+
+def write_html(result: dict, run_dir: Path) -> Path:
+    """Write ``run_dir/report.html``: self-contained, plots inline as SVG."""
+    path = Path(run_dir) / "report.html"
+    _atomic_write(path, render_html(result))
+    return path

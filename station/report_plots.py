@@ -1,0 +1,240 @@
+"""The report's figures: deviations and identified parameters as inline SVG
+(matplotlib, imported on demand)."""
+
+from __future__ import annotations
+
+import io
+import re
+from collections.abc import Mapping
+from typing import Any
+
+from station.report_text import (
+    AXES,
+    _dev_keys,
+    _dev_parts,
+    _dev_tex,
+    _dict,
+    _fmt,
+    _num,
+    _param_tex,
+    _params_of,
+    _truth,
+    _unit,
+)
+
+# ---------------------------------------------------------------------- plots
+
+
+def _pyplot():
+    # Imported on demand: matplotlib costs ~0.5 s, and `orthocal identify` or
+    # summary_text must not pay for it. Agg first: the station has no display.
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _svg(fig) -> str:
+    plt = _pyplot()
+    try:
+        buf = io.StringIO()
+        fig.savefig(buf, format="svg", bbox_inches="tight", metadata={"Date": None})
+    finally:
+        plt.close(fig)
+    svg = buf.getvalue()
+    # Drop the XML prolog and DOCTYPE (not valid inside HTML, and the DOCTYPE
+    # names an external DTD) and fix the size so CSS can scale it to the page.
+    svg = svg[svg.index("<svg") :]
+    svg = re.sub(r"<metadata>.*?</metadata>", "", svg, flags=re.S)
+    svg = re.sub(r'(<svg[^>]*?)\swidth="[^"]*"\s+height="[^"]*"', r"\1", svg, count=1)
+    return svg
+
+
+_C_BEFORE, _C_MODEL, _C_AFTER, _C_TRUTH = "#1f5fa8", "#e08a00", "#2e8b3d", "#c0392b"
+
+
+def _plot_deviations(result: Mapping[str, Any]) -> str | None:
+    before = _dict(result.get("deviations"))
+    ver = _dict(result.get("verification"))
+    after = _dict(ver.get("deviations"))
+    keys = _dev_keys(before, after)
+    if not keys:
+        return None
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(10, 4.6))
+    # A gap between legs so the three setups read as three groups.
+    xs, leg_spans = [], {}
+    for i, key in enumerate(keys):
+        parts = _dev_parts(key)
+        group = AXES.index(parts[1]) if parts else 3
+        x = i + 0.7 * group
+        xs.append(x)
+        leg_spans.setdefault(group, []).append(x)
+
+    def series(table, field, offset):
+        pts = [(x + offset, _num(_dict(table.get(k)).get(field)))
+               for x, k in zip(xs, keys, strict=True)]
+        return [p for p in pts if p[1] is not None]
+
+    def errs(table, offset):
+        out = []
+        for x, k in zip(xs, keys, strict=True):
+            row = _dict(table.get(k))
+            m = _num(row.get("mean"))
+            if m is not None:
+                out.append((x + offset, m, _num(row.get("std")) or 0.0))
+        return out
+
+    handles = []
+    pts = errs(before, -0.22)
+    if pts:
+        handles.append(ax.errorbar(
+            [p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts],
+            fmt="o", color=_C_BEFORE, ms=6, capsize=3, lw=1.2,
+            label="before: measured (mean ± std)",
+        ))
+    pts = series(before, "model", 0.0)
+    if pts:
+        handles.append(ax.plot(
+            [p[0] for p in pts], [p[1] for p in pts], "D", color=_C_MODEL, ms=6, mfc="none",
+            mew=1.6, label="before: model fit",
+        )[0])
+    pts = errs(after, 0.22)
+    if pts:
+        handles.append(ax.errorbar(
+            [p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts],
+            fmt="s", color=_C_AFTER, ms=6, capsize=3, lw=1.2,
+            label="after: verification (mean ± std)",
+        ))
+    ax.axhline(0.0, color="#555", lw=0.8)
+    ax.set_xticks(xs, [_dev_tex(k) for k in keys], fontsize=9)
+    ax.set_ylabel("deviation (mm)")
+    ax.set_xlim(min(xs) - 0.6, max(xs) + 0.6)
+    for group, span in leg_spans.items():
+        if group < 3:
+            ax.axvspan(min(span) - 0.45, max(span) + 0.45, color="#f2f4f7" if group % 2 else
+                       "#ffffff", zorder=0)
+            ax.text((min(span) + max(span)) / 2, 1.01, f"leg {AXES[group]}",
+                    transform=ax.get_xaxis_transform(), ha="center", va="bottom",
+                    fontsize=10, fontweight="bold")
+    ax.grid(axis="y", color="#ddd", lw=0.6)
+    ax.set_axisbelow(True)
+    if handles:
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.17),
+                  ncol=len(handles), frameon=False, fontsize=9, columnspacing=1.2)
+    return _svg(fig)
+
+
+def _plot_parameters(result: Mapping[str, Any]) -> str | None:
+    names = _params_of(result)
+    if not names:
+        return None
+    ident = _dict(result.get("identified"))
+    errs = _dict(result.get("std_errors"))
+    ver = _dict(result.get("verification"))
+    v_ident, v_errs = _dict(ver.get("identified")), _dict(ver.get("std_errors"))
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    xs = list(range(len(names)))
+    handles = []
+    # With six parameters the labels no longer fit between the bars and cover each
+    # other; the full model's σ is large enough to read from the bars, and the table
+    # below has the numbers.
+    annotate = len(names) <= 3
+
+    # Tilts are angles (mrad): on their own axis at the right, not on the mm scale.
+    ax_tilt = ax.twinx() if any(_unit(n) == "mrad" for n in names) else None
+
+    def axis_of(n: str):
+        return ax_tilt if ax_tilt is not None and _unit(n) == "mrad" else ax
+
+    def draw(values, sigmas, offset, color, marker, label, above=True):
+        drawn = False
+        for x, n in zip(xs, names, strict=True):
+            ax = axis_of(n)
+            v, s = _num(values.get(n)), _num(sigmas.get(n))
+            if v is None:
+                continue
+            if s is not None:
+                # Thin bar ±3σ (where the true value almost surely is), thick ±1σ.
+                ax.plot([x + offset] * 2, [v - 3 * s, v + 3 * s], color=color, lw=1.2,
+                        solid_capstyle="butt")
+                ax.plot([x + offset] * 2, [v - s, v + s], color=color, lw=5, alpha=0.55,
+                        solid_capstyle="butt")
+            ax.plot([x + offset], [v], marker, color=color, ms=7, mec="white", mew=0.8,
+                    zorder=3)
+            # σ is often far smaller than the axis range and the bars vanish into the
+            # marker; the number next to it still tells the reader how sure we are.
+            drawn = True
+            if not annotate:
+                continue
+            label_text = _fmt(v, signed=True) + (f" ± {_fmt(s)}" if s is not None else "")
+            # Beyond the end of the ±3σ bar on a white ground: beside the marker the
+            # text would cross the truth bar, the zero line and the neighbouring series.
+            # "before" goes above and "after" below, so the two never collide.
+            reach = 3 * s if s is not None else 0.0
+            ax.annotate(label_text, (x + offset, v + reach if above else v - reach),
+                        xytext=(0, 5 if above else -5), textcoords="offset points",
+                        va="bottom" if above else "top", ha="center", fontsize=8,
+                        color=color, zorder=4,
+                        bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 0.8})
+        if drawn:
+            handles.append(ax.plot([], [], marker, color=color, ms=7, label=label)[0])
+
+    draw(ident, errs, -0.12 if v_ident else 0.0, _C_BEFORE, "o",
+         "identified before calibration")
+    if v_ident:
+        draw(v_ident, v_errs, 0.12, _C_AFTER, "s",
+             "re-identified after calibration (Δρ should be ≈ 0)" if ax_tilt is not None
+             else "re-identified after calibration (should be ≈ 0)", above=False)
+    truth = [(x, _truth(result, n), n) for x, n in zip(xs, names, strict=True)]
+    truth = [t for t in truth if t[1] is not None]
+    for x, t, n in truth:
+        line = axis_of(n).plot([x - (0.12 if v_ident else 0.0)], [t], "_", color=_C_TRUTH,
+                               ms=22, mew=2.2, zorder=2,
+                               label="hidden truth of the simulated machine")[0]
+    if truth:
+        handles.append(line)
+    handles.append(ax.plot([], [], color="#777", lw=5, alpha=0.55, label="±1σ")[0])
+    handles.append(ax.plot([], [], color="#777", lw=1.2, label="±3σ")[0])
+    ax.axhline(0.0, color="#555", lw=0.8)
+    ax.set_xticks(xs, [_param_tex(n) for n in names], fontsize=11)
+    ax.set_xlim(-0.6, len(names) - 0.4)
+    ax.margins(y=0.2)  # room for the value labels beyond the outermost bars
+    ax.set_ylabel("value (mm)")
+    if ax_tilt is not None:
+        first_tilt = next(x for x, n in zip(xs, names, strict=True) if _unit(n) == "mrad")
+        ax.axvline(first_tilt - 0.5, color="#999", lw=0.8, ls=":")
+        ax_tilt.axhline(0.0, color="#555", lw=0.8, ls=":")
+        ax_tilt.margins(y=0.2)
+        ax_tilt.set_ylabel("tilt (mrad)")
+    ax.grid(axis="y", color="#ddd", lw=0.6)
+    ax.set_axisbelow(True)
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
+              frameon=False, fontsize=9)
+    return _svg(fig)
+
+
+# ----------------------------------------------------------------------- html
+
+
+def _release_fonts() -> None:
+    """Close the font files matplotlib keeps open in its caches.
+
+    Its font and mathtext caches hold every TrueType file open for the life of the
+    process; in a long-lived station (and under the tests' leak check) that reads as
+    leaked descriptors. A report is drawn once per run, so re-reading the fonts next
+    time costs nothing that matters. Private API, hence the guarded lookups.
+    """
+    import gc
+
+    from matplotlib import font_manager, mathtext
+
+    for cached in (getattr(font_manager, "_get_font", None),
+                   getattr(getattr(mathtext, "MathTextParser", None), "_parse_cached", None)):
+        clear = getattr(cached, "cache_clear", None)
+        if clear is not None:
+            clear()
+    gc.collect()

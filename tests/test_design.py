@@ -1,0 +1,232 @@
+"""``orthocal design`` and orthocal.design: the experiment's quality before it runs."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+import orthocal
+from orthocal import design
+from station.cli import main
+from station.cmd_design import design_summary, plan_keys, run_time
+from station.config import parse_config
+from station.plan import build_plan, check_plan
+
+G = orthocal.Geometry()
+LEGS = {a: [d for d in "xyz" if d != a] for a in "xyz"}
+
+
+def run_cli(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize("model", ["rho", "L", "full", "rho+tilt"])
+@pytest.mark.parametrize("strokes", [[60, -100], [60, 30, -50, -100]])
+def test_noise_gains_are_the_statistical_floor(model, strokes) -> None:
+    keys = design.keys_for(strokes, LEGS, G)
+    q = design.quality(keys, G, model)
+    floor = orthocal.statistical_floor(keys, G, model, 1.0)
+    np.testing.assert_allclose(list(q.noise_gain.values()), floor, rtol=1e-12)
+    assert q.rank == len(q.names) and q.identifiable
+    J = orthocal.jacobian(keys, G, model)
+    assert q.condition_number == pytest.approx(np.linalg.cond(J), rel=1e-9)
+
+
+def test_paper_figures() -> None:
+    """model.md: condition 61.87 for the full model, noise gain 1.87 for Δρ alone."""
+    keys = design.keys_for([60, -100], LEGS, G)
+    assert design.quality(keys, G, "full").condition_number == pytest.approx(61.87, abs=0.01)
+    assert design.quality(keys, G, "rho").noise_gain["drho_x"] == pytest.approx(1.867, abs=1e-3)
+
+
+def test_full_tilt_from_two_postures_is_explained_in_words() -> None:
+    q = design.quality(design.keys_for([60, -100], LEGS, G), G, "full+tilt")
+    assert q.rank == 8 and not q.identifiable and len(q.invisible) == 1
+    (combo,) = q.invisible
+    # ΔL and the tilts trade against each other (model.md, "Extended model")
+    assert {"dL_x", "dL_y", "dL_z", "tilt_yx", "tilt_zx", "tilt_zy"} <= set(combo)
+    J = orthocal.jacobian(design.keys_for([60, -100], LEGS, G), G, "full+tilt")
+    v = np.array([combo.get(n, 0.0) for n in q.names])
+    assert np.abs(J @ v).max() < 0.05 * np.abs(J).max()  # it really changes (almost) nothing
+    words = " ".join(design.describe(q))
+    assert "rank 8 < 9" in words and "cannot be told apart" in words and "dL_x" in words
+
+
+def test_run_covariance_matches_a_simulated_run() -> None:
+    """Monte Carlo of what the station does: noisy readings at Π0 / stops / Π0 ...,
+    deviations against the two Π0 means around each stop, OLS over all cycles."""
+    strokes, cycles, readings = [60, 30, -50, -100], 3, 2
+    keys = design.keys_for(strokes, LEGS, G)
+    J = orthocal.jacobian(keys, G, "rho")
+    n = len(strokes)
+    indicators = [[k * 6 + m for k in range(n)] for m in range(6)]
+    predicted = design.run_std_errors(J, indicators, cycles, readings)
+    rng = np.random.default_rng(5)
+    draws = 4000
+    X = np.vstack([J[rows] for _ in range(cycles) for rows in indicators])
+    pinv = np.linalg.pinv(X)
+    estimates = []
+    for _ in range(draws):
+        per_ind = []
+        for _m in indicators:
+            zero = rng.normal(0, 1, (cycles + 1, readings)).mean(axis=1)
+            stops = rng.normal(0, 1, (cycles, n, readings)).mean(axis=2)
+            per_ind.append(stops - 0.5 * (zero[:-1] + zero[1:])[:, None])  # [cycle, stop]
+        y = [per_ind[m][c] for c in range(cycles) for m in range(len(indicators))]
+        estimates.append(pinv @ np.concatenate(y))
+    empirical = np.std(estimates, axis=0, ddof=1)
+    np.testing.assert_allclose(empirical, predicted, rtol=0.04)
+    # and the shared Π0 matters: independent deviations would claim a different figure
+    naive = np.sqrt(np.diag(np.linalg.inv(X.T @ X)) * 1.5 / readings)
+    assert np.all(np.abs(naive / predicted - 1) > 0.06)
+
+
+def test_search_stays_within_limits_and_improves_its_objective() -> None:
+    def objective(strokes) -> float:
+        keys = design.keys_for(strokes, LEGS, G)
+        J = orthocal.jacobian(keys, G, "rho")
+        ind = [[k * 6 + m for k in range(len(strokes))] for m in range(6)]
+        return -np.linalg.slogdet(design.run_covariance(J, ind, 3, 5))[1]
+
+    refused = {-60.0, -59.0, 45.0}
+    found = design.search_strokes([30, -40], LEGS, G, "rho", (-70.0, 50.0),
+                                  feasible=lambda s: s not in refused, cycles=3)
+    assert all(-70 <= s <= 50 and s != 0 and s not in refused for s in found.strokes)
+    assert len(set(found.strokes)) == len(found.strokes) == 2
+    assert objective(found.strokes) > objective([30, -40]) + 0.1
+    # the optimum of this model is at the ends of the allowed range
+    assert found.strokes == (50.0, -70.0)
+
+
+def test_search_respects_a_set_check_and_adds_stops_only_when_it_must() -> None:
+    calls = []
+
+    def no_big_pair(strokes) -> bool:
+        calls.append(strokes)
+        return not (max(strokes) > 50 and min(strokes) < -90)
+
+    found = design.search_strokes([60, -100], LEGS, G, "rho", (-100.0, 60.0),
+                                  feasible_set=no_big_pair, cycles=3)
+    assert no_big_pair(found.strokes) and calls
+    tilt = design.search_strokes([60, -100], LEGS, G, "full+tilt", (-100.0, 60.0), cycles=3)
+    assert len(tilt.strokes) == 3 and tilt.quality.identifiable
+
+
+BASE = {
+    "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],
+    "setups": [{"leg": leg, "indicators": dict(zip("AB", [d for d in "xyz" if d != leg],
+                                                   strict=True))} for leg in "xyz"],
+    "procedure": {"cycles": 2, "readings": 3, "settle_s": 0.1},
+}
+
+
+def test_summary_numbers_are_orthocal_s_and_the_plan_s() -> None:
+    cfg = parse_config(copy.deepcopy(BASE))
+    doc = design_summary(cfg, "rho")
+    plan = build_plan(cfg)
+    keys, _ = plan_keys(plan)
+    floor = orthocal.statistical_floor(keys, G, "rho", 1.0)
+    assert list(doc["noise_gain"].values()) == pytest.approx(list(floor), rel=1e-12)
+    t = doc["run_time"]
+    stops = sum(1 + 3 * 2 for _ in plan.setups)  # opening Π0 + 3 stops per cycle
+    assert t["stops"] == stops and t["settle_s"] == pytest.approx(0.1 * stops)
+    assert t["total_s"] == pytest.approx(2 * (t["moves_s"] + t["settle_s"] + t["readings_s"]))
+    # Π0 is shared between setups: a move fewer than stops minus the first position
+    assert t["moves"] == stops - 1 - (len(plan.setups) - 1)
+
+
+def test_search_never_leaves_the_config_soft_limits() -> None:
+    data = copy.deepcopy(BASE)
+    L = 310.25
+    data["machine"] = {"rho_min": -80.0, "rho_max": 40.0}
+    data["controller"] = {"soft_min": [L - 90] * 3, "soft_max": [L + 50] * 3}
+    cfg = parse_config(data)
+    doc = design_summary(cfg, "rho")
+    s = doc["search"]
+    assert s["bounds_mm"] == [-90.0, 50.0] and "soft_min" in s["bounds_from"]
+    assert all(-90 <= v <= 50 for v in s["strokes_mm"])
+    assert s["strokes_mm"] != doc["strokes_mm"]  # the wider stops are worth proposing
+    assert "rho_min = -90" in s["config"] or "rho_max = 50" in s["config"]
+    assert s["d_criterion_log_det"] >= doc["d_criterion_log_det"]
+    # the proposal passes the same plan check as a run (wide controller, config limits)
+    check_plan(build_plan(cfg, s["strokes_mm"]), cfg, ([-1e6] * 3, [1e6] * 3))
+
+
+def test_more_strokes_cost_time() -> None:
+    cfg = parse_config(copy.deepcopy(BASE))
+    two = run_time(build_plan(cfg), cfg)
+    four = run_time(build_plan(cfg, [60, 30, -50, -100]), cfg)
+    assert four["stops"] > two["stops"] and four["total_s"] > two["total_s"]
+
+
+def test_cli_design_text_and_json(capsys) -> None:
+    code, out, err = run_cli(capsys, "design", "--model", "full+tilt")
+    assert code == 0, err
+    assert "rank 8 of 9" in out and "cannot be told apart" in out and "D-optimal" in out
+    code, out, _ = run_cli(capsys, "design", "--model", "full+tilt", "--strokes",
+                           "60,30,-50,-100", "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["rank"] == 9 and doc["test_postures"] == ["+30", "+", "-50", "-"]
+    assert doc["search"]["rank"] == 9
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["--strokes", "0,30"], "procedure.strokes: must be finite and nonzero"),
+        (["--strokes", "30,abc"], "--strokes: expected numbers"),
+        (["--strokes", "30,90"], "procedure.strokes: 90 is outside"),
+        (["--model", "nope"], "--model: must be one of"),
+        (["--rho-min", "5"], "machine.rho_min"),
+        (["--config", "/nonexistent/station.toml"], "/nonexistent/station.toml"),
+    ],
+)
+def test_cli_design_bad_input_exits_2_with_one_line(capsys, argv, expected) -> None:
+    code, out, err = run_cli(capsys, "design", *argv)
+    assert code == 2 and out == ""
+    assert expected in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_cli_design_auto_shows_the_largest_model_the_postures_identify(capsys) -> None:
+    code, out, _ = run_cli(capsys, "design", "--model", "auto", "--json")
+    assert code == 0 and json.loads(out)["model"] == "rho+tilt"
+    code, out, _ = run_cli(capsys, "design", "--model", "auto", "--strokes", "60,30,-50,-100",
+                           "--json")
+    assert code == 0 and json.loads(out)["model"] == "full+tilt"
+
+
+def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
+    """``orthocal run --plan`` asks the controller for its soft limits: the search
+    stays inside them and inside the plungers' travel (the whole plan check)."""
+    from drivers.sim.station import VirtualStation
+    from station.config import load_config, toml_text
+
+    with VirtualStation(seed=2, mount_all=True, indicator_count=6) as station:
+        path = tmp_path / "station.toml"
+        path.write_text(toml_text(station.config(), "test"))
+        code, out, err = run_cli(capsys, "run", "--config", str(path), "--plan", "--out",
+                                 str(tmp_path))
+        assert code == 0, err
+        assert "plan checked" in out and "design: model rho" in out and "D-optimal" in out
+        code, out, err = run_cli(capsys, "run", "--config", str(path), "--plan", "--json",
+                                 "--out", str(tmp_path))
+        assert code == 0, err
+        doc = json.loads(out)
+    s = doc["design"]["search"]
+    assert "controller" in s["bounds_from"]
+    # the default model is auto: shown for rho+tilt, the largest two stops identify
+    assert doc["design"]["model"] == "rho+tilt" and "auto" in doc["design"]
+    keys = design.keys_for([60, -100], LEGS, G)
+    floor = orthocal.statistical_floor(keys, G, "rho+tilt", 1.0)
+    assert list(doc["design"]["noise_gain"].values()) == pytest.approx(list(floor), rel=1e-9)
+    cfg = load_config(path)
+    lo, hi = doc["soft_limits"]["lower"], doc["soft_limits"]["upper"]
+    check_plan(build_plan(cfg, s["strokes_mm"]), cfg, (lo, hi))
+    assert s["d_criterion_log_det"] >= doc["design"]["d_criterion_log_det"]
+    assert not list(tmp_path.glob("run-*"))

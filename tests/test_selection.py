@@ -1,0 +1,147 @@
+"""``auto``: model selection by a lack-of-fit F test against the measured noise."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from orthocal import Geometry, IdentificationError, deviations
+from orthocal.selection import (
+    means_covariance,
+    noise_from_cycles,
+    noise_from_readings,
+    select_model,
+)
+
+G = Geometry()
+GAUGES = [(i, j) for i in "xyz" for j in "xyz" if i != j]
+
+
+def station_run(truth, rng, noise=0.002, cycles=3, readings=5):
+    """Per-cycle deviations as the station forms them: stop means of gaussian
+    readings, P − (Z_before + Z_after)/2, consecutive cycles sharing their Π0."""
+    keys = [(s, i, j) for i, j in GAUGES for s in "+-"]
+    exact = dict(zip(keys, deviations(keys, G, truth), strict=True))
+    raw = rng.normal(0, noise, (6, 3 * cycles + 1, readings))
+    m = raw.mean(axis=2)
+    data = {}
+    for g, (i, j) in enumerate(GAUGES):
+        for s, off in (("+", 1), ("-", 2)):
+            data[(s, i, j)] = [exact[(s, i, j)] + m[g, 3 * (k - 1) + off]
+                               - 0.5 * (m[g, 3 * (k - 1)] + m[g, 3 * k])
+                               for k in range(1, cycles + 1)]  # fmt: skip
+    return data, raw.std(axis=2, ddof=1).ravel()
+
+
+def test_means_covariance_of_the_shared_zero_procedure():
+    keys = [("+", "x", "y"), ("-", "x", "y")]
+    _, C = means_covariance(keys)
+    assert C == pytest.approx(np.array([[1, 1 / 3], [1 / 3, 1]]))
+    # two cycles, in units of σ²: var of a mean (2 + 2/6)/4, +/- (2/3 + 2/6)/4
+    keys2 = [("+", "x", "y"), ("+", "x", "y"), ("-", "x", "y"), ("-", "x", "y")]
+    _, C2 = means_covariance(keys2)
+    assert C2[0, 0] == pytest.approx((2 + 2 / 6) / 4)
+    assert C2[0, 1] == pytest.approx((2 / 3 + 2 / 6) / 4)
+    _, Ci = means_covariance(keys2, shared_zero=False)
+    assert Ci == pytest.approx(np.eye(2) / 2)
+    # different gauges never correlate
+    _, Cg = means_covariance([("+", "x", "y"), ("+", "x", "z")])
+    assert Cg == pytest.approx(np.eye(2))
+
+
+def test_noise_estimates_recover_the_reading_noise():
+    rng = np.random.default_rng(1)
+    data, stop_std = station_run(np.zeros(9), rng, noise=0.002, cycles=30)
+    expected = 0.002 * np.sqrt(1.5 / 5)  # one per-cycle deviation
+    sigma, dof = noise_from_cycles(data)
+    assert dof == 12 * 29
+    assert sigma == pytest.approx(expected, rel=0.08)
+    sigma_r, dof_r = noise_from_readings(stop_std, 5)
+    assert sigma_r == pytest.approx(expected, rel=0.05) and dof_r == 6 * 91 * 4
+    with pytest.raises(ValueError, match="two cycles"):
+        noise_from_cycles({("+", "x", "y"): 0.1})
+
+
+def test_untilted_machine_keeps_rho_and_a_tilted_one_gets_tilts():
+    rng = np.random.default_rng(2)
+    plain = np.r_[1.2, -0.8, 2.0, 0, 0, 0, 0, 0, 0]
+    data, _ = station_run(plain, rng)
+    sel = select_model(data, G)
+    assert sel.model == "rho" and sel.supported
+    assert sel.tests[0].passed and len(sel.tests) == 1
+    assert "F = " in sel.reason and "0.001" in sel.reason
+    tilted = np.r_[1.2, -0.8, 2.0, 0, 0, 0, 0.3, -0.2, 0.25]
+    data, _ = station_run(tilted, rng)
+    sel = select_model(data, G)
+    assert sel.model == "rho+tilt"
+    assert not sel.tests[0].passed and sel.tests[0].p_value < 1e-6
+    assert "rho leaves more than the noise" in sel.reason
+    ident = sel.identification
+    for n, truth in zip(("drho_x", "drho_y", "drho_z", "tilt_yx", "tilt_zx", "tilt_zy"),
+                        tilted[[0, 1, 2, 6, 7, 8]], strict=True):
+        assert abs(ident.parameters[n] - truth) < 5 * ident.std_errors[n]
+    doc = sel.to_dict()
+    assert doc["model"] == "rho+tilt" and doc["level"] == 0.001
+    assert [c["model"] for c in doc["candidates"]] == ["rho", "rho+tilt"]
+
+
+def test_the_f_statistic_follows_its_distribution_on_untilted_machines():
+    rng = np.random.default_rng(3)
+    p_values = []
+    for _ in range(120):
+        truth = np.r_[rng.uniform(-2, 2, 3), np.zeros(6)]
+        data, _ = station_run(truth, rng, cycles=2)
+        p_values.append(select_model(data, G).tests[0].p_value)
+    p = np.array(p_values)
+    # uniform under the null: a fifth below 0.2, half below 0.5 (binomial slack)
+    assert 0.10 < np.mean(p < 0.2) < 0.32
+    assert 0.36 < np.mean(p < 0.5) < 0.64
+
+
+def test_nothing_explains_the_data_uses_the_largest_and_says_so():
+    rng = np.random.default_rng(4)
+    data, _ = station_run(np.zeros(9), rng)
+    data[("+", "x", "y")] = [v + 0.05 for v in data[("+", "x", "y")]]  # a loose indicator
+    sel = select_model(data, G)
+    assert not sel.supported and sel.model == "rho+tilt"
+    assert "no candidate explains the data" in sel.reason
+    full_tilt = sel.tests[-1]
+    assert full_tilt.model == "full+tilt" and not full_tilt.identifiable
+    assert "ΔL cannot be separated from the tilts" in full_tilt.note
+
+
+def test_auto_without_noise_information_is_refused():
+    one_each = {(s, i, j): 0.001 for s in "+-" for i, j in GAUGES}
+    with pytest.raises(IdentificationError, match="auto needs the noise"):
+        select_model(one_each, G)
+    with pytest.raises(IdentificationError, match="positive noise"):
+        select_model(one_each, G, noise_sigma=0.0, noise_dof=10)
+
+
+def test_measured_noise_standard_errors_are_honest_where_ordinary_ones_are_not():
+    from orthocal import identify
+    from orthocal.selection import with_measured_noise
+
+    rng = np.random.default_rng(6)
+    names = ("drho_x", "drho_y", "drho_z", "tilt_yx", "tilt_zx", "tilt_zy")
+    z_ols, z_noise = [], []
+    for _ in range(150):
+        truth = np.r_[rng.uniform(-2, 2, 3), 0, 0, 0, 0.5, -0.5, 0.3]
+        data, _ = station_run(truth, rng, noise=0.001)
+        r = identify(data, G, "rho+tilt")
+        sigma, _ = noise_from_cycles(data)
+        honest = with_measured_noise(r, G, sigma)
+        err = r.vector[[0, 1, 2, 6, 7, 8]] - truth[[0, 1, 2, 6, 7, 8]]
+        z_ols.append(err / [r.std_errors[n] for n in names])
+        z_noise.append(err / [honest.std_errors[n] for n in names])
+    rms_ols = np.sqrt(np.mean(np.square(z_ols), axis=0))
+    rms_noise = np.sqrt(np.mean(np.square(z_noise), axis=0))
+    # ordinary least squares' errors are too small for the tilts (shared Π0 stops) ...
+    assert rms_ols[3:].mean() > 1.15
+    # ... the measured noise with the stops' correlation gives errors of the right size
+    # (expected sqrt(ν/(ν − 2)) ≈ 1.045 with the 24-dof noise estimate; ±~5 % Monte Carlo)
+    assert 0.9 < rms_noise.mean() < 1.2
+    assert rms_noise[3:].mean() < rms_ols[3:].mean() - 0.1
+    assert np.all((rms_noise > 0.8) & (rms_noise < 1.3))
+    # and the correlation matrix stays one
+    assert np.allclose(np.diag(honest.correlation), 1.0)
