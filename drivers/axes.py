@@ -14,8 +14,16 @@ Wire discipline:
   then :class:`ControllerTimeout`; exception 6 (busy) → retry after a short
   back-off, then :class:`ControllerBusy`; exception 3 on a target write →
   :class:`TargetRefused`; any other exception code → :class:`ExceptionResponse`;
-  a lost TCP connection → reconnect on the next attempt, then
+  a lost connection (closed, reset, refused: the drive lost power, a cable) →
+  reconnect, again and again within ``reconnect_s`` (each attempt reported as
+  ``{"event": "reconnect", ...}``, success as ``"reconnected"``), then
   :class:`ControllerConnectionError`;
+* after a reconnect, or a request that failed for good (on a serial line a drive
+  that lost power is only silent), the drive's STATUS is read before anything
+  else: a drive
+  that came back with HOMED clear (power cut) raises :class:`ControllerNotHomed`
+  for every request but homing and status, so a position counted from a lost
+  reference is never returned;
 * every wait has a finite deadline; positions are compared within a tolerance,
   never for equality.
 """
@@ -40,6 +48,7 @@ from drivers.errors import (
     ControllerBusy,
     ControllerConnectionError,
     ControllerError,
+    ControllerNotHomed,
     ControllerTimeout,
     EStopError,
     ExceptionResponse,
@@ -70,6 +79,12 @@ EXCEPTION_NAMES = {
 
 _READ_FC = {"holding": 3, "input": 4, "coil": 1, "discrete": 2}
 _SLACK = 1e-9  # float noise when comparing mm values derived from integer counts
+# Requests that make sense on a drive that lost its reference: homing needs them.
+_REFERENCE_FREE_OPS = frozenset({"read status", "home", "stop", "reset_alarm",
+                                 "read offsets", "write offsets", "read back offsets"})
+# A position further than this outside the last known span (last position to the
+# last target) after a reconnect is a count that restarted, not motion.
+_JUMP_MM = 0.05
 
 
 def move_time(distance_mm: float, speed_mm_s: float, accel_mm_s2: float) -> float:
@@ -119,6 +134,7 @@ class ModbusAxisController:
         timeout_factor: float = 1.5,
         timeout_margin_s: float = 1.0,
         busy_backoff_s: float = 0.02,
+        reconnect_s: float = 10.0,
     ) -> None:
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"transport must be 'tcp' or 'rtu', got {transport!r}")
@@ -148,6 +164,20 @@ class ModbusAxisController:
         self.timeout_factor = float(timeout_factor)
         self.timeout_margin_s = float(timeout_margin_s)
         self.busy_backoff_s = float(busy_backoff_s)
+        if not (math.isfinite(reconnect_s) and reconnect_s >= 0):
+            raise ValueError("reconnect_s must be finite and >= 0")
+        self.reconnect_s = float(reconnect_s)
+        #: successful reconnects after a lost connection (the station re-checks the
+        #: drive's reference when this changes)
+        self.reconnects = 0
+        # set when a reconnect found HOMED clear; cleared by a completed homing
+        # after a reconnect: None until STATUS says whether the reference survived
+        self._lost_reference: bool | None = False
+        self._lost_why = ""
+        self._checking = False
+        # the last positions read and the last target written, to recognise a jump
+        self._last_positions: np.ndarray | None = None
+        self._last_target: np.ndarray | None = None
         self._given_limits = None
         if soft_limits is not None:
             lo, hi = (_vec3(v, "soft_limits") for v in soft_limits)
@@ -205,6 +235,7 @@ class ModbusAxisController:
         with self._lock:
             if self._client is None:
                 self.connect()
+            self._check_reference(op)
             kind, error = "timeout", ""
             attempts = self.retries + 1
             for attempt in range(1, attempts + 1):
@@ -217,8 +248,9 @@ class ModbusAxisController:
                     kind, error = "timeout", (
                         f"no reply within {self.timeout_s:g} s" if "No response" in text
                         else f"invalid reply ({_short(exc)})")
-                except ConnectionException as exc:
-                    # Reconnect on the next attempt (pymodbus connects lazily in execute).
+                except (ConnectionException, OSError) as exc:
+                    # pymodbus maps most socket failures to ConnectionException but lets
+                    # a reset during a read through as ConnectionResetError.
                     client.close()
                     kind, error = "connection", f"connection lost ({_short(exc)})"
                 else:
@@ -243,12 +275,84 @@ class ModbusAxisController:
                                 attempt=attempt)
                     if kind == "busy":
                         time.sleep(self.busy_backoff_s * attempt)
+                    elif kind == "connection":
+                        self._reconnect(op, error)
+                        self._check_reference(op)
+
             detail = f"{op}: {error} after {attempts} attempt(s)"
+            if kind != "busy" and not self._checking:
+                self._lost_reference = None  # whatever answers next is checked first
             if kind == "busy":
                 raise ControllerBusy(self.device, detail)
             if kind == "connection":
                 raise ControllerConnectionError(self.device, detail)
             raise ControllerTimeout(self.device, detail)
+
+    def _reconnect(self, op: str, error: str) -> None:
+        """Open a new connection, trying again until ``reconnect_s`` has passed (a drive
+        that lost power refuses connections until it has booted). Every failed attempt
+        is reported; ControllerConnectionError once the budget is spent."""
+        client = self._client
+        assert client is not None
+        started = time.monotonic()
+        deadline = started + self.reconnect_s
+        attempt = 0
+        while True:
+            attempt += 1
+            try:
+                up = client.connect()
+            except OSError:
+                up = False
+            elapsed = time.monotonic() - started
+            if up:
+                self.reconnects += 1
+                self._event(event="reconnected", device=self.device, op=op,
+                            attempts=attempt, elapsed_s=round(elapsed, 3))
+                self._lost_reference = None  # unknown until STATUS is read again
+                return
+            client.close()
+            self._event(event="reconnect", device=self.device, op=op, error=error,
+                        attempt=attempt, elapsed_s=round(elapsed, 3))
+            if time.monotonic() >= deadline:
+                raise ControllerConnectionError(
+                    self.device, f"{op}: {error}; not back within {self.reconnect_s:g} s "
+                    f"({attempt} reconnect attempt(s))")
+            time.sleep(min(0.1 * attempt, 1.0, max(0.0, deadline - time.monotonic())))
+
+    def _check_reference(self, op: str) -> None:
+        """After a reconnect, read STATUS (and the positions) before anything else: a
+        drive that restarted has lost the reference its positions are counted from."""
+        if self._checking or op in _REFERENCE_FREE_OPS:
+            return
+        if self._lost_reference is None:
+            self._checking = True
+            try:
+                homed = self.read_status().homed
+                jump = None
+                if homed and self._last_positions is not None:
+                    now = self.read_positions()
+                    lo = np.minimum(self._last_positions, self._last_target) - _JUMP_MM
+                    hi = np.maximum(self._last_positions, self._last_target) + _JUMP_MM
+                    if np.any(now < lo) or np.any(now > hi):
+                        jump = now
+            finally:
+                self._checking = False
+            if not homed:
+                self._lost_reference = True
+                self._lost_why = "HOMED clear after the connection came back (power cut?)"
+            elif jump is not None:
+                assert self._last_positions is not None
+                self._lost_reference = True
+                self._lost_why = (f"positions jumped from {_fmt(self._last_positions)} to "
+                                  f"{_fmt(jump)} while the connection was lost")
+            else:
+                self._lost_reference = False
+            self._event(event="reference-check", device=self.device,
+                        lost=bool(self._lost_reference),
+                        why=self._lost_why if self._lost_reference else None)
+        if self._lost_reference:
+            raise ControllerNotHomed(self.device, f"{op}: lost its reference "
+                                     f"({self._lost_why}): the machine must be homed")
 
     def _dev(self, reg: Register) -> int:
         return self.device_id if reg.device_id is None else reg.device_id
@@ -316,7 +420,12 @@ class ModbusAxisController:
 
     def read_positions(self) -> np.ndarray:
         """Actual joint positions ρ (mm, shape (3,)): one block read on orthocal-generic."""
-        return self._read_mm(self.map.axis_registers("ACTUAL"), "read positions")
+        pos = self._read_mm(self.map.axis_registers("ACTUAL"), "read positions")
+        if not self._checking:
+            self._last_positions = pos.copy()
+            if self._last_target is None:
+                self._last_target = pos.copy()
+        return pos
 
     def read_status(self) -> AxisStatus:
         """STATUS and ALARM_CODE (one read on orthocal-generic), decoded by the map."""
@@ -365,6 +474,7 @@ class ModbusAxisController:
         items = [(reg, reg.encode(v)) for reg, v in
                  zip(self.map.axis_registers("TARGET"), rho, strict=True)]
         self._write_words(items, "write targets", refused=f"targets {_fmt(rho)}")
+        self._last_target = rho.copy()
         self._command("move")
 
     def _write_speed(self, speed_mm_s: float) -> None:
@@ -482,6 +592,9 @@ class ModbusAxisController:
                 raise AlarmError(self.device, f"alarm {st.alarm_code} while homing",
                                  st.alarm_code)
             if st.homed and not st.moving:
+                with self._lock:
+                    self._lost_reference = False
+                    self._last_positions = self._last_target = None
                 return
             if time.monotonic() >= deadline:
                 raise MoveTimeout(self.device, f"homing not done within {timeout_s:.1f} s")
@@ -510,6 +623,9 @@ class ModbusAxisController:
         regs = self.map.axis_registers("OFFSET")
         items = [(reg, reg.encode(v)) for reg, v in zip(regs, o, strict=True)]
         self._write_words(items, "write offsets")
+        # New offsets shift every counted position of carriages that have not moved:
+        # not a jump for the reference check after a reconnect.
+        self._last_positions = self._last_target = None
         back = self._read_counts(regs, "read back offsets")
         wanted = {reg.name: reg.counts(v) for reg, v in zip(regs, o, strict=True)}
         if any(back[n] != wanted[n] for n in wanted):

@@ -31,6 +31,11 @@ class ControllerConnectionError(ControllerError):
     """The controller cannot be reached (refused, no route, port missing)."""
 
 
+class ControllerNotHomed(ControllerError):
+    """The controller lost its reference (power cut: HOMED clear, or counted positions
+    that jumped); nothing it reports can be used until it is homed again."""
+
+
 class ControllerTimeout(ControllerError):
     """A request got no reply in time (after the bounded retries)."""
 

@@ -10,7 +10,11 @@ lines are independent.
 Failure model of one reading: a missing, partial, garbled or gauge-error reply
 is retried (bounded, each retry reported through ``on_event`` so the station
 can journal it); a port that fails at the OS level (unplugged USB adapter) is
-not retried and raises :class:`~drivers.errors.IndicatorPortError` at once.
+closed and opened again, by its path, until ``reopen_s`` has passed (a stable
+path such as ``/dev/serial/by-id/...`` comes back when the adapter is plugged
+in again; each attempt is reported), then the reading goes on; a port still
+gone after that raises :class:`~drivers.errors.IndicatorPortError`. Opening
+the indicator waits for its port within the same budget.
 """
 
 from __future__ import annotations
@@ -274,9 +278,12 @@ class SerialIndicator:
         retries: int = 3,
         on_event: EventSink | None = None,
         serial_factory: Callable[..., Any] = serial.serial_for_url,
+        reopen_s: float = 10.0,
     ) -> None:
         if timeout_s <= 0:
             raise ValueError("timeout_s must be positive")
+        if not reopen_s >= 0:
+            raise ValueError("reopen_s must be >= 0")
         if retries < 0:
             raise ValueError("retries must be >= 0")
         self.name = name
@@ -295,7 +302,8 @@ class SerialIndicator:
         self._lock = threading.Lock()
         self._serial: Any = None
         self._closed = False
-        self._open()
+        self.reopen_s = float(reopen_s)
+        self._open_within("cannot open port")
 
     @property
     def device(self) -> str:
@@ -312,6 +320,34 @@ class SerialIndicator:
         except _PORT_ERRORS as e:
             raise IndicatorPortError(self.device, f"cannot open port: {e}") from e
         return self._serial
+
+    def _open_within(self, why: str, announce: bool = False) -> Any:
+        """Open the port, trying again until ``reopen_s`` has passed (an adapter being
+        plugged in takes a second or two to appear); every failed try is reported."""
+        started = time.monotonic()
+        attempt = 0
+        while True:
+            attempt += 1
+            try:
+                ser = self._open()
+            except IndicatorPortError as e:
+                elapsed = time.monotonic() - started
+                remaining = self.reopen_s - elapsed
+                if remaining <= 0:
+                    detail = e.message if attempt == 1 else (
+                        f"{e.message}; still gone after {self.reopen_s:g} s "
+                        f"({attempt} attempt(s))")
+                    raise IndicatorPortError(self.device, detail) from e
+                self._emit({"event": "reopen", "device": self.device, "indicator": self.name,
+                            "port": self.port, "attempt": attempt, "error": why,
+                            "elapsed_s": round(elapsed, 3)})
+                time.sleep(min(0.05 * 2 ** min(attempt, 4), 0.5, remaining))
+                continue
+            if attempt > 1 or announce:
+                self._emit({"event": "reopened", "device": self.device, "indicator": self.name,
+                            "port": self.port, "attempts": attempt,
+                            "elapsed_s": round(time.monotonic() - started, 3)})
+            return ser
 
     def _drop_port(self) -> None:
         ser, self._serial = self._serial, None
@@ -339,7 +375,8 @@ class SerialIndicator:
         failures: list[IndicatorError] = []
         attempts = 1 + self.retries
         for attempt in range(1, attempts + 1):
-            ser = self._serial if self._serial is not None else self._open()
+            ser = self._serial if self._serial is not None else \
+                self._open_within("port was lost")
             try:
                 return self._exchange(ser)
             except serial.SerialTimeoutException as e:
@@ -349,8 +386,18 @@ class SerialIndicator:
             except (IndicatorTimeout, IndicatorReplyError) as e:
                 err = e
             except _PORT_ERRORS as e:
+                # The adapter went away (or is going): reopen it by its path within
+                # the budget, then take the reading again. Never retry on a port
+                # that failed: its half-read reply is lost with it.
                 self._drop_port()
-                raise IndicatorPortError(self.device, f"port failed: {e}") from e
+                try:
+                    self._open_within(f"port failed: {e}", announce=True)
+                except IndicatorPortError as gone:
+                    raise IndicatorPortError(
+                        self.device, f"port failed: {e}; {gone.message}") from e
+                # Bounded like any attempt; the reopen events already say what happened.
+                failures.append(IndicatorPortError(self.device, f"port failed (reopened): {e}"))
+                continue
             failures.append(err)
             if attempt < attempts:
                 self._emit(

@@ -197,7 +197,21 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _ignore_file_size_signal() -> None:
+    """Under a file-size limit (ulimit -f) a write past it would kill the process with
+    SIGXFSZ; ignored, the write fails with EFBIG and the run ends as on a full disk:
+    the record cut off, the axes stopped, one line saying how to resume."""
+    import signal
+
+    if hasattr(signal, "SIGXFSZ"):
+        try:
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        except ValueError:
+            pass  # not the main thread (an embedding application): leave its handlers
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    _ignore_file_size_signal()
     args = build_parser().parse_args(argv)  # bad arguments: argparse exits 2 with usage
     module_name, func_name = _COMMANDS[args.command].split(":")
     from drivers.errors import DeviceError

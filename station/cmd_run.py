@@ -21,11 +21,13 @@ from station import simulation
 from station.cmd_design import design_summary, format_summary
 from station.config import load_config, parse_config
 from station.devices import build_controller, open_devices
-from station.errors import BadInput, RunFailed, say
+from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
 from station.journal import JOURNAL_NAME, Journal, JournalState
+from station.lock import MachineLock, acquire, taken_over_message, update_run_dir
 from station.operator import ConsoleOperator, Operator, VirtualOperator
 from station.plan import build_plan, check_plan
 from station.procedure import Run, execute
+from station.recovery import check_reference, drop_redone, home_if_needed
 from station.results import AXES, print_result
 from station.rundir import NVRAM_NAME, new_run_dir, now_iso, reopen, version, write_run_files
 from station.writeback import rollback as do_rollback
@@ -35,6 +37,17 @@ def _operator(args: argparse.Namespace, station: Any) -> Operator:
     if station is not None:
         return VirtualOperator(station.mount, station.unmount, say=say)
     return ConsoleOperator(yes=bool(args.yes))
+
+
+def _lock(stack: ExitStack, config: Any, command: str, run_dir: Path | None) -> MachineLock:
+    """One station per machine: hold the controller's lock until the command ends."""
+    c = config.controller
+    lock = acquire(c.transport, c.host, c.port, c.device_id, command=command, run_dir=run_dir)
+    stack.callback(lock.release)
+    note = taken_over_message(lock)
+    if note is not None:
+        say(f"orthocal: {note}")
+    return lock
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,15 +83,25 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps({**plan.to_json(), "design": summary}) if args.json
                   else plan.format() + "\n" + format_summary(summary))
             return 0
+        lock = _lock(stack, config, "run", None)
         devices = open_devices(config, on_event, station)
         stack.callback(devices.close)
-        check_plan(plan, config, devices.controller.soft_limits(),
-                   start=devices.controller.read_positions())
+        operator = _operator(args, station)
+        limits = devices.controller.soft_limits()
+        check_plan(plan, config, limits)  # every posture, before anything moves
+        # A controller that lost its reference (power cut before the run) counts
+        # positions from nowhere: home it first, with the operator's consent.
+        home_if_needed(devices.controller, config, None, operator, say)
+        check_plan(plan, config, limits, start=devices.controller.read_positions())
 
         run_dir = new_run_dir(Path(args.out))
-        if station is not None:
-            station.persist_offsets(run_dir / NVRAM_NAME)
-        write_run_files(run_dir, config, plan, sim)
+        update_run_dir(lock, run_dir)
+        try:
+            if station is not None:
+                station.persist_offsets(run_dir / NVRAM_NAME)
+            write_run_files(run_dir, config, plan, sim)
+        except OSError as exc:
+            raise StorageFull(f"{storage_message(run_dir, exc)}; nothing moved") from None
         journal = Journal(run_dir / JOURNAL_NAME)
         stack.callback(journal.close)
         journal_box.append(journal)
@@ -86,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
                         "plan": plan.to_json(), "simulation": sim, "started": now_iso(),
                         "argv": sys.argv[1:]})
         say(f"orthocal: run directory {run_dir}")
-        ctx = Run(run_dir, config, plan, journal, devices, _operator(args, station), sim, args,
+        ctx = Run(run_dir, config, plan, journal, devices, operator, sim, args,
                   JournalState(), [], now_iso())
         return execute(ctx)
 
@@ -103,10 +126,12 @@ def resume(args: argparse.Namespace) -> int:
         return 0 if state.finished.get("status") == "ok" else 1
     config = load_config(run_dir / "config.toml")
     sim = state.header.get("simulation")
+    records = drop_redone(records)
     with ExitStack() as stack:
         station, config = simulation.restart_station(stack, args, sim, run_dir, config)
         if station is None:
             ConsoleOperator.require_tty_or_yes(bool(args.yes))
+        _lock(stack, config, "resume", run_dir)
         plan = build_plan(config)
         journal = Journal(run_dir / JOURNAL_NAME)
         stack.callback(journal.close)
@@ -122,10 +147,26 @@ def resume(args: argparse.Namespace) -> int:
         stack.callback(devices.close)
         check_plan(plan, config, devices.controller.soft_limits())
         say(f"orthocal: resuming {run_dir}")
+        operator = _operator(args, station)
+        try:
+            if home_if_needed(devices.controller, config, journal, operator, say):
+                records = check_reference(devices.controller, devices.indicators, config,
+                                          plan, journal, records, say)
+        except BaseException:
+            _stop_quietly(devices.controller)
+            raise
         started = state.header.get("started") or now_iso()
-        ctx = Run(run_dir, config, plan, journal, devices, _operator(args, station), sim, args,
+        ctx = Run(run_dir, config, plan, journal, devices, operator, sim, args,
                   state, records, started)
         return execute(ctx)
+
+
+def _stop_quietly(controller: Any) -> None:
+    """Axes stopped on any fault of homing or of the Π0 check."""
+    try:
+        controller.stop()
+    except Exception:
+        pass  # the fault being raised says what went wrong
 
 
 def rollback(args: argparse.Namespace) -> int:
@@ -134,6 +175,7 @@ def rollback(args: argparse.Namespace) -> int:
     sim = state.header.get("simulation") if state.header else None
     with ExitStack() as stack:
         station, config = simulation.restart_station(stack, args, sim, run_dir, config)
+        _lock(stack, config, "rollback", run_dir)
         journal = Journal(run_dir / JOURNAL_NAME)
         stack.callback(journal.close)
         controller = build_controller(config, None)

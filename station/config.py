@@ -62,6 +62,10 @@ class ControllerConfig(_Strict):
     # Single register entries overriding the profile's map: name -> address.
     registers: dict[str, int] = Field(default_factory=dict)
     timeout_s: float = Field(2.0, gt=0, le=60)
+    #: how long a lost connection is retried (a drive that lost power boots in seconds)
+    reconnect_s: float = Field(10.0, ge=0, le=600)
+    #: deadline of homing (COMMAND 3) when resume homes the machine
+    home_timeout_s: float = Field(120.0, gt=0, le=3600)
     # Axis speed of the test moves (written before each move) and the acceleration
     # the station assumes when it derives each move's deadline.
     speed_mm_s: float = Field(50.0, gt=0, le=65535)
@@ -124,6 +128,8 @@ class IndicatorConfig(_Strict):
     preload_mm: float | None = Field(None, ge=0)
     resolution_mm: float = Field(0.001, gt=0)
     timeout_s: float = Field(1.0, gt=0, le=60)
+    #: how long a vanished port is reopened by its path (an adapter plugged back)
+    reopen_s: float = Field(10.0, ge=0, le=600)
     # Line settings: the protocol's own unless given (generic needs them).
     baudrate: int | None = Field(None, gt=0)
     bytesize: Literal[7, 8] | None = None

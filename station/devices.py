@@ -40,7 +40,7 @@ def build_controller(config: StationConfig, on_event: Callable[[dict], None] | N
             profile=c.profile,
             overrides={name: {"address": addr} for name, addr in c.registers.items()} or None,
             timeout_s=c.timeout_s, retries=DEVICE_RETRIES, baudrate=c.baudrate,
-            on_event=on_event, acceleration_mm_s2=c.accel_mm_s2)
+            on_event=on_event, acceleration_mm_s2=c.accel_mm_s2, reconnect_s=c.reconnect_s)
     except ValueError as exc:  # an unknown profile or a bad register override
         raise BadInput(f"controller: {exc}") from None
     return controller.connect()
@@ -71,7 +71,7 @@ def build_indicators(config: StationConfig, names: list[str] | None,
                 raise BadInput(f"indicators.{ind.name}: {exc}") from None
             opened.append(SerialIndicator(ind.name, ind.port, protocol,
                                           timeout_s=ind.timeout_s, retries=DEVICE_RETRIES,
-                                          on_event=on_event))
+                                          on_event=on_event, reopen_s=ind.reopen_s))
         return IndicatorGroup(opened)
     except BaseException:
         for ind in opened:

@@ -15,6 +15,26 @@ class RunFailed(Exception):
     """The run failed or was aborted (exit 1) with everything recorded so far kept."""
 
 
+class StorageFull(RunFailed):
+    """A record could not be saved: the disk is full (ENOSPC) or a file-size limit
+    was reached (EFBIG). Nothing half-written is left behind."""
+
+
+def storage_message(path: Path, exc: OSError) -> str:
+    """One line saying what could not be saved and why, naming a full disk as such."""
+    import errno
+
+    if exc.errno == errno.ENOSPC:
+        why = "the disk is full (no space left on the device)"
+    elif exc.errno == errno.EFBIG:
+        why = "the disk is full for this run (file-size limit reached)"
+    elif exc.errno == errno.EDQUOT:
+        why = "the disk quota is exceeded"
+    else:
+        why = f"cannot write ({exc.strerror or exc})"
+    return f"{path}: {why}"
+
+
 def read_input(path: Path, encoding: str = "utf-8") -> str:
     """The text of a file the user named (config, CSV); unreadable is bad input."""
     try:

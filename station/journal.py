@@ -6,12 +6,21 @@ Record types (field ``type``): ``header`` (config, plan, version, simulation),
 ``outlier``, ``event`` (driver retries and faults), ``cycle``, ``setup_done``,
 ``identification``, ``writeback`` (stage backup|intent|done|refused|declined|
 failed-restored), ``verification``, ``fault``, ``aborted``, ``finished``,
-``rollback``.
+``rollback``, and after a power cut ``homed``, ``reference-check`` (the Π0
+check after homing) and ``setup-redo`` (that setup's earlier cycles are void,
+see station.recovery). Driver events include ``retry``, ``reconnect`` /
+``reconnected`` / ``reference-check`` (controller) and ``reopen`` /
+``reopened`` (a gauge's port).
 
 A torn last line (killed mid-write) is tolerated when reading; reopening
 appends a newline and a ``resumed`` record after it, so the journal before the
 kill stays a byte prefix of the final one and the torn fragment is recognisably
 followed by a resume.
+
+A record that cannot be saved (disk full: ENOSPC, or EFBIG under a file-size
+limit) is cut off again: the file is truncated back to its last whole record
+and :class:`~station.errors.StorageFull` raised, so the caller never uses what
+it could not journal and a later reader never meets half a record.
 """
 
 from __future__ import annotations
@@ -24,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from station.errors import BadInput
+from station.errors import BadInput, StorageFull, storage_message
 
 JOURNAL_NAME = "journal.jsonl"
 
@@ -56,41 +65,64 @@ class Journal:
         self.path = Path(path)
         self._lock = threading.Lock()
         new = not self.path.exists()
-        self._fh = open(self.path, "ab")  # held open for the whole run
+        # Unbuffered: a failed write must not leave bytes in a buffer that a later
+        # flush or close would write after the truncation.
+        self._fd: int | None = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        self._good = os.fstat(self._fd).st_size  # length up to the last whole record
         self.torn = False
-        if not new and self.path.stat().st_size > 0:
+        if not new and self._good > 0:
             with open(self.path, "rb") as fh:
                 fh.seek(-1, os.SEEK_END)
                 self.torn = fh.read(1) != b"\n"
         if new:
             fsync_dir(self.path.parent)
 
+    @property
+    def closed(self) -> bool:
+        return self._fd is None
+
     def append(self, record: dict[str, Any]) -> None:
         record = {"t": round(time.time(), 6), **record}
         line = (json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n").encode()
         with self._lock:
-            if self._fh.closed:
+            if self._fd is None:
                 raise RuntimeError("journal is closed")
-            if self.torn:
-                # Terminate the fragment a kill left behind; readers skip it.
-                self._fh.write(b"\n")
-                self.torn = False
-            self._fh.write(line)
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
+            # Terminate the fragment a kill left behind; readers skip it.
+            data = (b"\n" if self.torn else b"") + line
+            try:
+                view = memoryview(data)
+                while view:
+                    view = view[os.write(self._fd, view):]
+                os.fsync(self._fd)
+            except OSError as exc:
+                self._cut_back()
+                raise StorageFull(storage_message(self.path, exc) + "; the record "
+                                  f"{record.get('type')!r} was not saved") from exc
+            self._good += len(data)
+            self.torn = False
+
+    def _cut_back(self) -> None:
+        """Remove whatever part of a failed append reached the file."""
+        assert self._fd is not None
+        try:
+            os.ftruncate(self._fd, self._good)
+            os.fsync(self._fd)
+        except OSError:
+            pass  # truncating never needs space; if even this fails, the reader copes
 
     def flush(self) -> None:
         with self._lock:
-            if not self._fh.closed:
-                self._fh.flush()
-                os.fsync(self._fh.fileno())
+            if self._fd is not None:
+                os.fsync(self._fd)
 
     def close(self) -> None:
         with self._lock:
-            if not self._fh.closed:
-                self._fh.flush()
-                os.fsync(self._fh.fileno())
-                self._fh.close()
+            if self._fd is not None:
+                fd, self._fd = self._fd, None
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
 
     def __enter__(self) -> Journal:
         return self

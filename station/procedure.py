@@ -13,11 +13,12 @@ from typing import Any
 from drivers.errors import DeviceError
 from station.config import StationConfig
 from station.devices import Devices
-from station.errors import BadInput, RunFailed, say
+from station.errors import BadInput, RunFailed, say, storage_message
 from station.journal import JOURNAL_NAME, Journal, JournalState, read_journal
 from station.operator import ConsoleOperator, Operator, VirtualOperator
 from station.plan import MotionChecker, Plan
 from station.progress import Progress
+from station.recovery import resume_hint
 from station.results import (
     base_result,
     ident_json,
@@ -132,8 +133,8 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
         raise RunFailed(message) from None
     except (DeviceError, RunFailed) as exc:
         stopped = _stopped(seq)
-        message = (f"{exc}. {stopped[0].upper()}{stopped[1:]}, journal kept; after fixing "
-                   f"the cause continue with: orthocal resume {ctx.run_dir}")
+        message = (f"{exc}. {stopped[0].upper()}{stopped[1:]}, journal kept; "
+                   f"{resume_hint(exc)} with: orthocal resume {ctx.run_dir}")
         _finish(ctx, seq, result, "failed", message, final=False)
         raise RunFailed(message) from exc
     except BadInput:
@@ -196,7 +197,11 @@ def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
             pass
     from station import report
 
-    report.write_result(result, ctx.run_dir)
+    try:
+        report.write_result(result, ctx.run_dir)
+    except OSError as exc:  # a full disk: the journal holds the run; say so and go on
+        say(f"orthocal: result.json not written ({storage_message(ctx.run_dir, exc)})")
+        return
     try:
         report.write_html(result, ctx.run_dir)
     except Exception as exc:  # the report is a view; result.json and the journal are the record

@@ -40,3 +40,11 @@ def no_leaks():
             pass
     assert not extra, f"threads left behind: {[t.name for t in extra]}"
     assert not real, f"file descriptors left behind: {real}"
+
+
+@pytest.fixture(autouse=True)
+def machine_locks_in_tmp(tmp_path_factory, monkeypatch):
+    """Runs lock their controller in a per-user state directory: keep the tests'
+    locks out of the home directory (subprocesses inherit the variable)."""
+    if "ORTHOCAL_STATE_DIR" not in os.environ:
+        monkeypatch.setenv("ORTHOCAL_STATE_DIR", str(tmp_path_factory.mktemp("state")))

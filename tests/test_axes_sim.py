@@ -244,7 +244,8 @@ def test_dropped_connection_reconnects() -> None:
     with station("tcp", faults=Faults(disconnect_next=1)) as (sim, ctl, events):
         np.testing.assert_allclose(ctl.read_positions(), PI0, atol=1e-9)
         assert sim.stats.disconnects == 1
-        assert len(events) == 1 and "connection" in events[0]["error"]
+        assert [e["event"] for e in events] == ["retry", "reconnected", "reference-check"]
+        assert "connection" in events[0]["error"] and not events[2]["lost"]
 
 
 def test_alarm_after_moves(transport: str) -> None:
@@ -369,12 +370,13 @@ def test_controller_gone_mid_session_is_a_connection_error() -> None:
     events: list[dict] = []
     try:
         with ModbusAxisController(**sim.client_kwargs(), timeout_s=TIMEOUT_S, retries=1,
-                                  on_event=events.append) as ctl:
+                                  on_event=events.append, reconnect_s=0.3) as ctl:
             ctl.read_positions()
             sim.close()
             with pytest.raises(ControllerConnectionError, match="read positions"):
                 ctl.read_positions()
-            assert len(events) == 1
+            assert events[0]["event"] == "retry"
+            assert {e["event"] for e in events[1:]} == {"reconnect"}
     finally:
         sim.close()
 

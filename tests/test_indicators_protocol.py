@@ -321,23 +321,35 @@ def test_babbling_line_without_terminator_is_garbled(mocker: Any) -> None:
             ind.read()
 
 
-def test_port_that_fails_is_a_port_error_without_retries_then_reopened(mocker: Any) -> None:
+def test_port_that_fails_is_reopened_by_its_path_and_the_reading_goes_on(mocker: Any) -> None:
     dead = FakeSerial([])
     mocker.patch.object(dead, "write", side_effect=serial.SerialException("write failed: EIO"))
     alive = FakeSerial([(b"1\r", b"01A+0001.000\r")])
     factory = mocker.Mock(side_effect=[dead, alive])
     events: list[dict[str, Any]] = []
     ind = SerialIndicator("B", PORT, "mitutoyo", serial_factory=factory, on_event=events.append)
+    # A replugged adapter comes back on the same path: reopened, the reading taken.
+    assert ind.read() == 1.0
+    assert dead.closed and factory.call_count == 2
+    assert [e["event"] for e in events] == ["reopened"]  # journaled; never a retry
+    assert events[0]["port"] == PORT and events[0]["attempts"] == 1
+    ind.close()
+
+
+def test_port_that_fails_and_stays_gone_is_a_port_error(mocker: Any) -> None:
+    dead = FakeSerial([])
+    mocker.patch.object(dead, "write", side_effect=serial.SerialException("write failed: EIO"))
+    gone = serial.SerialException("could not open port: No such file or directory")
+    factory = mocker.Mock(side_effect=[dead, gone, gone, gone, gone])
+    events: list[dict[str, Any]] = []
+    ind = SerialIndicator("B", PORT, "mitutoyo", serial_factory=factory, on_event=events.append,
+                          reopen_s=0.1)
     with pytest.raises(IndicatorPortError) as info:
         ind.read()
     assert info.value.device == f"indicator B ({PORT})"
-    assert "EIO" in str(info.value)
+    assert "EIO" in str(info.value) and "still gone after 0.1 s" in str(info.value)
     assert not info.value.transient
-    assert events == []
-    assert dead.closed
-    # A replugged adapter comes back on the same path: the next read reopens it.
-    assert ind.read() == 1.0
-    assert factory.call_count == 2
+    assert events and {e["event"] for e in events} == {"reopen"}
     ind.close()
 
 
@@ -345,6 +357,7 @@ def test_termios_failure_is_a_port_error(mocker: Any) -> None:
     fake = FakeSerial([])
     mocker.patch.object(fake, "reset_input_buffer", side_effect=termios.error(5, "I/O error"))
     ind = SerialIndicator("C", PORT, "sylvac", serial_factory=mocker.Mock(return_value=fake))
+    # Reopened after each failure (it is the same failing port), then given up.
     with pytest.raises(IndicatorPortError, match="I/O error"):
         ind.read()
     ind.close()
@@ -353,7 +366,7 @@ def test_termios_failure_is_a_port_error(mocker: Any) -> None:
 def test_port_that_cannot_be_opened(mocker: Any) -> None:
     factory = mocker.Mock(side_effect=serial.SerialException("could not open port"))
     with pytest.raises(IndicatorPortError) as info:
-        SerialIndicator("D", "/dev/ttyUSB9", "mahr", serial_factory=factory)
+        SerialIndicator("D", "/dev/ttyUSB9", "mahr", serial_factory=factory, reopen_s=0.0)
     assert info.value.device == "indicator D (/dev/ttyUSB9)"
 
 

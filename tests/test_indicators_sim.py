@@ -35,12 +35,14 @@ def rig(
     *,
     timeout_s: float = 1.0,
     retries: int = 3,
+    reopen_s: float = 0.3,
     **sim_kw: Any,
 ) -> Iterator[tuple[SimIndicator, SerialIndicator, list[dict[str, Any]]]]:
     events: list[dict[str, Any]] = []
     with SimIndicator(protocol, source, **sim_kw) as sim:
         with SerialIndicator(
-            "A", sim.port, protocol, timeout_s=timeout_s, retries=retries, on_event=events.append
+            "A", sim.port, protocol, timeout_s=timeout_s, retries=retries, on_event=events.append,
+            reopen_s=reopen_s,
         ) as ind:
             yield sim, ind, events
 
@@ -268,8 +270,10 @@ def test_close_interrupts_a_pending_late_reply() -> None:
     sim.close(timeout_s=5.0)  # raises if the thread were still waiting out the 60 s
 
 
-def test_unplug_is_a_port_error_naming_the_port() -> None:
-    with rig("mitutoyo", Leg(1.0), zero_mm=0.0) as (sim, ind, ev):
+def test_unplug_is_a_port_error_naming_the_port(tmp_path) -> None:
+    # Behind a stable link, as a real adapter is: a bare /dev/pts path freed by the
+    # unplug may be given to another process's pty, which the reopen would open.
+    with rig("mitutoyo", Leg(1.0), zero_mm=0.0, link=tmp_path / "usb-A") as (sim, ind, ev):
         assert ind.read() == 1.0
         port = sim.port
         sim.unplug()
@@ -277,15 +281,44 @@ def test_unplug_is_a_port_error_naming_the_port() -> None:
         with pytest.raises(IndicatorPortError) as info:
             ind.read()
         assert info.value.device == f"indicator A ({port})"
-        assert not ev  # a dead port is not retried
+        assert "still gone after 0.3 s" in info.value.message
+        # A dead port is not asked again, only reopened (within reopen_s).
+        assert any(e["event"] == "reopen" for e in ev)
         # The driver tries to reopen it next time, and finds nothing there.
         with pytest.raises(IndicatorPortError, match="cannot open"):
             ind.read()
 
 
-def test_unplug_flag_set_at_run_time() -> None:
+def test_adapter_pulled_and_plugged_back_behind_a_stable_link(tmp_path) -> None:
+    link = tmp_path / "usb-Mitutoyo_A-if00-port0"
+    with rig("mitutoyo", Leg(1.0), zero_mm=0.0, link=link, reopen_s=5.0) as (sim, ind, ev):
+        assert sim.port == str(link) and os.path.realpath(link) == sim.tty
+        assert ind.read() == 1.0
+        sim.unplug_for(0.4)
+        assert not os.path.lexists(link)
+        assert ind.read_n(3) == [1.0] * 3  # waits for the adapter, then reads on
+        assert os.path.realpath(link) == sim.tty  # a new pty (the kernel may reuse a number)
+        kinds = [e["event"] for e in ev]
+        assert kinds.count("reopened") == 1 and kinds.index("reopen") < kinds.index("reopened")
+        assert all(e["port"] == str(link) for e in ev)
+
+
+def test_opening_waits_for_a_port_being_plugged_in(tmp_path) -> None:
+    link = tmp_path / "usb-Sylvac_B"
+    with SimIndicator("sylvac", Leg(2.0), zero_mm=0.0, link=link) as sim:
+        sim.unplug_for(0.4)
+        events: list[dict[str, Any]] = []
+        with SerialIndicator("B", str(link), "sylvac", reopen_s=5.0,
+                             on_event=events.append) as ind:
+            assert ind.read() == 2.0
+        assert events[-1]["event"] == "reopened" and events[0]["event"] == "reopen"
+
+
+def test_unplug_flag_set_at_run_time(tmp_path) -> None:
     faults = IndicatorFaults()
-    with rig("sylvac", Leg(), faults=faults, timeout_s=0.2, retries=1) as (sim, ind, _):
+    # Behind a stable link: the freed /dev/pts path may go to another process's pty.
+    with rig("sylvac", Leg(), faults=faults, timeout_s=0.2, retries=1,
+             link=tmp_path / "usb-A") as (sim, ind, _):
         ind.read()
         faults.unplugged = True
         with pytest.raises((IndicatorPortError, IndicatorTimeout)) as info:
@@ -296,7 +329,7 @@ def test_unplug_flag_set_at_run_time() -> None:
 
 def test_opening_a_missing_port_is_a_port_error() -> None:
     with pytest.raises(IndicatorPortError) as info:
-        SerialIndicator("Z", "/dev/pts/does-not-exist", "mahr")
+        SerialIndicator("Z", "/dev/pts/does-not-exist", "mahr", reopen_s=0.0)
     assert "/dev/pts/does-not-exist" in str(info.value)
 
 

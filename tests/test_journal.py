@@ -81,3 +81,64 @@ def test_corruption_in_the_middle_is_an_error(tmp_path: Path) -> None:
 def test_missing_journal_is_bad_input(tmp_path: Path) -> None:
     with pytest.raises(BadInput, match="no journal"):
         read_journal(tmp_path / "journal.jsonl")
+
+
+# A real file-size limit (RLIMIT_FSIZE) in a child process: with SIGXFSZ ignored a
+# write past the limit fails with EFBIG, as one on a full disk fails with ENOSPC.
+FULL_CHILD = r"""
+import json, sys
+from station.errors import StorageFull
+from station.journal import Journal
+
+j = Journal(sys.argv[1])
+n = 0
+try:
+    while True:
+        j.append({"type": "reading", "stop": f"m:0:{n}:+", "indicator": "A",
+                  "values": [0.001 * n] * 7})
+        n += 1
+except StorageFull as exc:
+    print(json.dumps({"saved": n, "error": str(exc)}))
+try:
+    j.append({"type": "reading", "stop": "again", "indicator": "A", "values": [1.0] * 200})
+except StorageFull:
+    print(json.dumps({"again": "refused"}))
+j.close()
+"""
+
+
+def _limited(limit: int):
+    import resource
+    import signal
+
+    def preexec() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return preexec
+
+
+@pytest.mark.parametrize("limit", [1000, 1337])
+def test_a_full_disk_leaves_only_whole_records(tmp_path: Path, limit: int) -> None:
+    import subprocess
+    import sys
+
+    path = tmp_path / "journal.jsonl"
+    proc = subprocess.run([sys.executable, "-c", FULL_CHILD, str(path)], capture_output=True,
+                          text=True, timeout=60, preexec_fn=_limited(limit),
+                          cwd=Path(__file__).parent.parent)
+    assert proc.returncode == 0, proc.stderr
+    first, again = (json.loads(line) for line in proc.stdout.splitlines())
+    assert "the disk is full" in first["error"] and "was not saved" in first["error"]
+    assert again == {"again": "refused"}
+    raw = path.read_bytes()
+    # Only whole records: the part of the failed record that fit was cut off again.
+    assert raw.endswith(b"\n") and len(raw) <= limit
+    records = read_journal(path)
+    assert len(records) == first["saved"] > 0
+    assert [r["stop"] for r in records] == [f"m:0:{n}:+" for n in range(first["saved"])]
+    # After space is freed the journal goes on where it stopped.
+    with Journal(path) as j:
+        assert not j.torn
+        j.append({"type": "resumed"})
+    assert [r["type"] for r in read_journal(path)][-1] == "resumed"

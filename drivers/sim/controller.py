@@ -19,6 +19,12 @@ exception 2 (``soft_limit_registers=False`` leaves SOFT_MIN/SOFT_MAX out too);
 writing OFFSET acts on the legs through the machine. Requests for another
 device id get no reply on RTU and exception 0x0B (gateway: no response) on TCP.
 
+A power cut (``Faults.power_cut_*`` or :meth:`SimController.power_cut`) makes
+the controller unreachable for a while (TCP: open connections closed, new ones
+refused, as a drive that is off; RTU: silent), then it serves again with HOMED
+clear and its counted position lost (the ACTUAL registers jump); a move before
+homing (COMMAND 3) faults with alarm 83, as IAI drives do.
+
 Fault injection: :class:`Faults`, a dataclass whose fields may be changed while
 the server runs (``sim.faults.drop_next = 2``); random faults draw from an RNG
 seeded with ``seed`` so a run is reproducible. The datastore is pymodbus 3.16's
@@ -34,6 +40,8 @@ import asyncio
 import contextlib
 import logging
 import random
+import socket
+import struct
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -86,6 +94,15 @@ class Faults:
     alarm_code: int = 17
     #: the emergency stop input (takes effect at the controller's next request)
     estop: bool = False
+    #: after N more completed moves, the power goes halfway through the next one:
+    #: unreachable for power_cut_s (TCP: connections closed, new ones refused; RTU:
+    #: silent), then back unhomed with its count restarted at power_cut_count_mm
+    #: on every axis (None: random) and moves refused with alarm 83 until homed
+    power_cut_after_moves: int | None = None
+    power_cut_s: float = 3.0
+    power_cut_count_mm: float | None = 0.0
+    #: False: only the network goes (a cable, a switch): back homed, positions kept
+    power_cut_loses_reference: bool = True
 
 
 @dataclass
@@ -103,6 +120,7 @@ class SimStats:
     ignored: int = 0
     disconnects: int = 0
     refused: int = 0
+    power_cuts: int = 0
     commands: dict[int, int] = field(default_factory=dict)
 
 
@@ -234,6 +252,10 @@ class SimController:
         self._ready = threading.Event()
         self._error: BaseException | None = None
         self._moves_done = 0
+        self._cut_moves_done = 0
+        self._powered = True
+        self._server: _SimTcpServer | _SimSerialServer | None = None
+        self._tasks: set[asyncio.Task] = set()
         self._estop_seen = False
         self._inited = False
         self._regs = {r.name: r for r in self.map.registers}
@@ -312,29 +334,90 @@ class SimController:
         finally:
             self._ready.set()
 
-    async def _serve(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._stop = asyncio.Event()
+    def _new_server(self, port: int) -> _SimTcpServer | _SimSerialServer:
         device = SimDevice(id=self.device_id, simdata=self._simdata(), action=self._action)
         server: _SimTcpServer | _SimSerialServer
         if self.transport == "tcp":
-            server = _SimTcpServer(device, address=(self.host, self._requested_port))
+            server = _SimTcpServer(device, address=(self.host, port))
         else:
             assert self._pty is not None
             server = _SimSerialServer(device, framer=FramerType.RTU, port=self._pty.path_a,
                                       baudrate=self.baudrate, timeout=1.0, reconnect_delay=0.0)
         server.sim = self
+        return server
+
+    async def _serve(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        self._server = self._new_server(self._requested_port)
         try:
-            await server.serve_forever(background=True)
+            await self._server.serve_forever(background=True)
             if self.transport == "tcp":
-                self._port = server.transport.sockets[0].getsockname()[1]
+                self._port = self._server.transport.sockets[0].getsockname()[1]
             self._ready.set()
             await self._stop.wait()
         finally:
-            await server.shutdown()
+            for task in list(self._tasks):
+                task.cancel()
+            if self._tasks:
+                await asyncio.gather(*self._tasks, return_exceptions=True)
+            if self._server is not None:
+                await self._server.shutdown()
             # Let the loop run the transports' connection_lost callbacks (socket close).
             for _ in range(3):
                 await asyncio.sleep(0)
+
+    # --- power --------------------------------------------------------------------------------
+
+    def power_cut(self, off_s: float = 3.0, count_mm: float | Sequence[float] | None = 0.0,
+                  delay_s: float = 0.0, lose_reference: bool = True) -> None:
+        """Test hook: cut the power ``delay_s`` from now for ``off_s`` (see
+        :class:`Faults`, ``power_cut_*``). Thread-safe; returns at once."""
+        loop = self._loop
+        if loop is None:
+            raise RuntimeError("simulated controller not started")
+        loop.call_soon_threadsafe(self._spawn_cut, off_s, count_mm, delay_s, lose_reference)
+
+    @property
+    def powered(self) -> bool:
+        return self._powered
+
+    def _spawn_cut(self, off_s: float, count_mm: float | Sequence[float] | None,
+                   delay_s: float, lose_reference: bool = True) -> None:
+        task = asyncio.ensure_future(self._power_cut(off_s, count_mm, delay_s, lose_reference))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _power_cut(self, off_s: float, count_mm: float | Sequence[float] | None,
+                         delay_s: float, lose_reference: bool) -> None:
+        if delay_s > 0:
+            await asyncio.sleep(delay_s)
+        count = None if count_mm is None else np.broadcast_to(
+            np.asarray(count_mm, dtype=float), (3,))
+        with self._lock:
+            self._powered = False
+            self.stats.power_cuts += 1
+        # The carriages stop where they are; the count and HOMED are lost at once
+        # (nobody can read them until the power is back).
+        if lose_reference:
+            self.machine.power_cycle(count, seed=self._rng.randrange(2**31))
+        if self.transport == "tcp" and self._server is not None:
+            server, self._server = self._server, None
+            for conn in list(server.active_connections.values()):
+                _reset(conn)
+            await server.shutdown()  # new connections refused
+        assert self._stop is not None
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._stop.wait(), off_s)
+        if self._stop.is_set():
+            return
+        if self.transport == "tcp":
+            self._inited = False
+            server = self._new_server(self.port)
+            await server.serve_forever(background=True)
+            self._server = server
+        with self._lock:
+            self._powered = True
 
     # --- datastore ----------------------------------------------------------------------------
 
@@ -467,6 +550,16 @@ class SimController:
                         m.raise_alarm(self.faults.alarm_code, delay_s=duration / 2)
                     else:
                         self._moves_done += 1
+                n = self.faults.power_cut_after_moves
+                if n is not None:
+                    if self._cut_moves_done >= n:
+                        self.faults.power_cut_after_moves = None
+                        self._cut_moves_done = 0
+                        f = self.faults
+                        self._spawn_cut(f.power_cut_s, f.power_cut_count_mm, duration / 2,
+                                        f.power_cut_loses_reference)
+                    else:
+                        self._cut_moves_done += 1
         elif name == "stop":
             m.stop()
         elif name == "home":
@@ -486,7 +579,7 @@ class SimController:
             if f.estop != self._estop_seen:
                 self._estop_seen = f.estop
                 self.machine.set_estop(f.estop)
-            if f.silent:
+            if f.silent or not self._powered:
                 self.stats.ignored += 1
                 return "ignore"
             if pdu.dev_id != self.device_id:
@@ -519,6 +612,19 @@ class SimController:
             if f.delay_s > 0:
                 self.stats.delayed += 1
             return fate, max(0.0, f.delay_s)
+
+
+def _reset(conn: Any) -> None:
+    """Drop a TCP connection the way a drive losing power does to its peer: a reset
+    (the client's next recv/send raises ConnectionResetError), not a clean close."""
+    transport = getattr(conn, "transport", None)
+    if transport is None:
+        return
+    sock = transport.get_extra_info("socket")
+    if sock is not None:
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    transport.abort()
 
 
 __all__ = ["Faults", "SimController", "SimStats", "default_soft_limits"]

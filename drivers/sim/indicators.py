@@ -16,9 +16,12 @@ What a pty does not do, the simulator emulates:
 
 Unplugging (``faults.unplugged = True`` or :meth:`SimIndicator.unplug`) closes
 both pty ends: the path disappears, the driver's open port fails with EIO and a
-reopen finds no device, as with a pulled USB adapter. It cannot be undone (a
-new pty would get a new path); make a new simulator to "replug". Beware that
-the kernel may reuse the path for a pty created later.
+reopen finds no device, as with a pulled USB adapter. Beware that the kernel may
+reuse the path for a pty created later. With ``link`` (a stable path, as
+``/dev/serial/by-id/...`` is) :attr:`SimIndicator.port` is that symlink: an
+unplug removes it, :meth:`SimIndicator.replug` opens a new pty and points the
+link at it (``unplug_for(s)`` does both, s apart), so a driver that opened the
+link can open it again.
 
 An unmounted indicator (``unmount()``) answers as a gauge lying on the bench
 does: a constant reading (``unmounted_mm``) plus noise.
@@ -109,6 +112,7 @@ class SimIndicator:
         unmounted_mm: float = 0.0,
         stroke_mm: float | None = None,
         preload_mm: float | None = None,
+        link: str | os.PathLike[str] | None = None,
     ) -> None:
         self.protocol = make_protocol(protocol) if isinstance(protocol, str) else protocol
         if self.protocol.reply_format is None:
@@ -144,6 +148,19 @@ class SimIndicator:
         self.replies = 0
         self.source_error: Exception | None = None  # the last exception source() raised
 
+        self.link = None if link is None else os.fspath(link)
+        self._master = self._slave = -1
+        self.tty = ""
+        self._plug_in()
+        self.port: str = self.link if self.link is not None else self.tty
+        self._wake_r, self._wake_w = os.pipe()
+        self._stop = threading.Event()
+        self._pulled = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._replug_timer: threading.Timer | None = None
+        self._closed = False
+
+    def _plug_in(self) -> None:
         master, slave = os.openpty()
         # Raw on both ends: otherwise the line discipline turns CR into LF and
         # echoes requests back to the driver.
@@ -156,12 +173,13 @@ class SimIndicator:
         # Keep the slave open: with no slave opener the master reads EIO, which
         # would make select() spin while the driver has the port closed.
         self._slave = slave
-        self.port: str = os.ttyname(slave)
-        self._wake_r, self._wake_w = os.pipe()
-        self._stop = threading.Event()
-        self._pulled = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._closed = False
+        self.tty = os.ttyname(slave)
+        if self.link is not None:
+            tmp = f"{self.link}.new"
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+            os.symlink(self.tty, tmp)
+            os.replace(tmp, self.link)  # the link never points nowhere while plugged
 
     # --- what the gauge shows ------------------------------------------------------
 
@@ -176,6 +194,12 @@ class SimIndicator:
         with self._lock:
             self._source = source
             self._zero = float(source()) if zero_mm is None else float(zero_mm)
+
+    @property
+    def zero_mm(self) -> float:
+        """The source position the gauge reads 0 at."""
+        with self._lock:
+            return self._zero
 
     def unmount(self) -> None:
         """Take the gauge off: it then reads ``unmounted_mm`` (plus noise)."""
@@ -276,9 +300,38 @@ class SimIndicator:
         if not self._pulled.wait(timeout_s):
             raise TimeoutError(f"simulated indicator {self.name} did not unplug in {timeout_s} s")
 
+    def replug(self) -> None:
+        """Plug the adapter back in: a new pty behind the same ``link``."""
+        if self.link is None:
+            raise RuntimeError("replug needs a stable link (the pty path would change)")
+        if self._closed:
+            return
+        if self._thread is not None:
+            self._thread.join(5.0)
+            self._thread = None
+        self._pull_plug()
+        self._pulled.clear()
+        self._plug_in()
+        self.faults.unplugged = False
+        self.start()
+
+    def unplug_for(self, seconds: float) -> None:
+        """Pull the plug now and plug it back ``seconds`` later (in the background)."""
+        self.unplug()
+        timer = threading.Timer(seconds, self.replug)
+        timer.name = f"sim-indicator-{self.name}-replug"
+        timer.daemon = True
+        self._replug_timer = timer
+        timer.start()
+
     def close(self, timeout_s: float = 5.0) -> None:
         if self._closed:
             return
+        timer = self._replug_timer
+        if timer is not None:
+            timer.cancel()
+            if timer is not threading.current_thread():
+                timer.join(timeout_s)
         self._stop.set()
         self._wake()
         if self._thread is not None:
@@ -306,6 +359,9 @@ class SimIndicator:
             os.write(self._wake_w, b"x")
 
     def _pull_plug(self) -> None:
+        if self.link is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.link)
         for attr in ("_master", "_slave"):
             fd = getattr(self, attr)
             if fd >= 0:

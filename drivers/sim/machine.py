@@ -13,6 +13,13 @@ i.e. with the offsets the machine was delivered with, commanding ρ gives
 q = ρ + Δρ_true; after the station writes o_i ← o_i − Δρ̂_i the machine behaves
 nominally. Leg lengths are L + ΔL_true. All kinematics come from :mod:`orthocal`.
 
+Counting: a drive counts its position from the reference homing found. A
+power cut (:meth:`VirtualOrthoglide.power_cycle`) stops the carriages where they
+are and loses that reference: HOMED clears, the count restarts from a value
+unrelated to the carriage (``count_shift``), and moves are refused with
+:data:`ALARM_NOT_HOMED` until :meth:`home` re-establishes it (``home_error_mm``:
+how far the new reference lies from the old one, 0 for a repeatable switch).
+
 Motion (``motion``): "coordinated", the three axes move together along a
 straight line in joint space with a trapezoidal profile of the longest axis
 (speed, acceleration), so they arrive together; or "independent", each axis
@@ -191,6 +198,10 @@ class VirtualOrthoglide:
         self._estop = False
         self._pending_alarm: tuple[float, int] | None = None
         self.moves_started = 0
+        # controller count = m − o − count_shift; 0 while the homing reference holds
+        self.count_shift = np.zeros(3)
+        #: where the next homing puts the reference relative to the first (mm, 3)
+        self.home_error_mm = np.zeros(3)
 
     # --- evaluation -------------------------------------------------------------------------
 
@@ -206,7 +217,7 @@ class VirtualOrthoglide:
         pos, done = self._motion.position(now)
         if done:
             if self._motion.homing:
-                self._homed = True
+                self._set_homed()
             self._rest = pos
             self._motion = None
         return pos
@@ -215,9 +226,13 @@ class VirtualOrthoglide:
         if self._motion is not None:
             pos, done = self._motion.position(t)
             if done and self._motion.homing:
-                self._homed = True
+                self._set_homed()
             self._rest = pos
             self._motion = None
+
+    def _set_homed(self) -> None:
+        self._homed = True
+        self.count_shift = np.asarray(self.home_error_mm, dtype=float).copy()
 
     def _start(self, target_m: np.ndarray, now: float, homing: bool = False) -> float:
         start = self._advance(now)
@@ -228,7 +243,7 @@ class VirtualOrthoglide:
             self._rest = target_m.copy()
             self._motion = None
             if homing:
-                self._homed = True
+                self._set_homed()
             return 0.0
         if self.motion == "coordinated":
             shared = _Profile.trapezoid(dist, self._speed, self.accel_mm_s2)
@@ -271,12 +286,12 @@ class VirtualOrthoglide:
     def actual(self) -> np.ndarray:
         """Joint positions ρ as the controller counts them (mm)."""
         with self._lock:
-            return self._advance(self._clock()) - self._o
+            return self._advance(self._clock()) - self._o - self.count_shift
 
     def targets(self) -> np.ndarray:
         """The last commanded targets ρ (controller counts, mm)."""
         with self._lock:
-            return self._target_m - self._o
+            return self._target_m - self._o - self.count_shift
 
     def status(self) -> MachineStatus:
         with self._lock:
@@ -304,7 +319,26 @@ class VirtualOrthoglide:
                 self._alarm = ALARM_NOT_HOMED
                 return 0.0
             self.moves_started += 1
-            return self._start(rho + self._o, now)
+            return self._start(rho + self._o + self.count_shift, now)
+
+    def power_cycle(self, count_mm: Sequence[float] | None = None,
+                    seed: int | None = None) -> None:
+        """Power lost and back: the carriages stop where they are, the alarm and any
+        pending fault clear, HOMED clears and the count restarts at ``count_mm``
+        (3 values; None: random within ±100 mm, as an encoder that powers up anywhere)."""
+        with self._lock:
+            now = self._clock()
+            self._advance(now)
+            self._freeze(now)
+            self._target_m = self._rest.copy()
+            self._pending_alarm = None
+            self._alarm = 0
+            self._homed = False
+            if count_mm is None:
+                count = np.random.default_rng(seed).uniform(-100.0, 100.0, 3)
+            else:
+                count = _vec(count_mm, 3, "count_mm")
+            self.count_shift = self._rest - self._o - count
 
     def home(self) -> float:
         """Start homing: clears HOMED, moves to the home position, sets HOMED."""

@@ -11,13 +11,20 @@ exercise the sign convention).
 
 The virtual controller's offsets can be persisted to a file after every write
 (``nvram_path``), like a real drive's non-volatile memory, so a resumed or
-rolled-back simulated run sees what was written before.
+rolled-back simulated run sees what was written before. The same file keeps
+whether the drive is homed and how its count relates to the carriages (a power
+cut loses both until homing), and a second file next to it
+(``sim_gauges.json``) where the operator's gauges sit and where they were
+zeroed: a station restarted for ``resume`` finds the machine and the gauges as
+the interrupted run left them.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -52,8 +59,21 @@ DEFAULT_PROCEDURE: dict[str, Any] = {
 }
 
 
+MOUNTS_NAME = "sim_gauges.json"
+
+
+def _write_json(path: Path, data: Any) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(data, fh)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
 class _PersistentMachine(VirtualOrthoglide):
-    """A machine whose controller offsets survive a restart through a file."""
+    """A machine whose controller offsets and homing state survive a restart
+    through a file."""
 
     nvram_path: Path | None = None
 
@@ -61,16 +81,28 @@ class _PersistentMachine(VirtualOrthoglide):
         super().set_offsets(offsets)
         self.save_offsets()
 
+    def power_cycle(self, count_mm: Sequence[float] | None = None,
+                    seed: int | None = None) -> None:
+        super().power_cycle(count_mm, seed)
+        self.save_offsets()
+
+    def _set_homed(self) -> None:
+        super()._set_homed()
+        self.save_offsets()
+
     def save_offsets(self) -> None:
         if self.nvram_path is None:
             return
-        path = self.nvram_path
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump({"offsets_mm": [float(v) for v in self.offsets]}, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        _write_json(self.nvram_path, {
+            "offsets_mm": [float(v) for v in self.offsets],
+            "homed": bool(self._homed),  # not status(): this runs inside _advance
+            "count_shift_mm": [float(v) for v in self.count_shift]})
+
+    def load(self, saved: dict[str, Any]) -> None:
+        self.set_offsets(saved["offsets_mm"])
+        with self._lock:
+            self._homed = bool(saved.get("homed", True))
+            self.count_shift = np.asarray(saved.get("count_shift_mm", [0.0] * 3), dtype=float)
 
 
 class VirtualStation:
@@ -115,14 +147,18 @@ class VirtualStation:
         if nvram_path is not None:
             path = Path(nvram_path)
             if path.exists():
-                saved = json.loads(path.read_text())["offsets_mm"]
-                self.machine.set_offsets(saved)
+                self.machine.load(json.loads(path.read_text()))
             self.machine.nvram_path = path
+        self.mounts_path: Path | None = None
+        self._mounts: dict[str, dict[str, Any]] = {}
         names = sorted({n for s in self.setups for n in s["indicators"]})
         # (stroke, preload) per gauge: standard 12.5 mm gauges pushed in by half unless
         # given (the config's defaults).
         self.strokes = {n: (STANDARD_STROKE_MM, STANDARD_STROKE_MM / 2) for n in names}
         self.strokes.update(strokes or {})
+        # Stable paths, as /dev/serial/by-id/... gives a real USB adapter: a gauge
+        # unplugged and plugged back (SimIndicator.unplug_for) keeps its port.
+        self._link_dir = Path(tempfile.mkdtemp(prefix="orthocal-serial-by-id-"))
         # controller_options: further SimController keywords (transport,
         # soft_limit_registers, ...) for a station that differs from the default drive.
         self.controller = SimController(self.machine, port=port, faults=controller_faults,
@@ -137,10 +173,13 @@ class VirtualStation:
                                    baud=line_baud if line_time else None, faults=faults,
                                    seed=None if seed is None else seed * 101 + i, name=name,
                                    stroke_mm=self.strokes[name][0],
-                                   preload_mm=self.strokes[name][1])
+                                   preload_mm=self.strokes[name][1],
+                                   link=self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00")
                 sim.unmount()
                 self.indicators[name] = sim
                 sim.start()
+            if nvram_path is not None:
+                self._restore_mounts(Path(nvram_path).with_name(MOUNTS_NAME))
             if mount_all:
                 # A separate process cannot be told where the operator mounted
                 # the gauges: all six stay where their setups put them.
@@ -162,10 +201,30 @@ class VirtualStation:
     def mount(self, name: str, leg: str, direction: str) -> None:
         """Put indicator ``name`` against the middle of ``leg`` along ``direction``
         ("-y": reversed) and zero it there."""
-        self.indicators[name].mount(self.source(leg, direction))
+        gauge = self.indicators[name]
+        gauge.mount(self.source(leg, direction))
+        self._mounts[name] = {"leg": leg, "direction": direction, "zero_mm": gauge.zero_mm}
+        self._save_mounts()
 
     def unmount(self, name: str) -> None:
         self.indicators[name].unmount()
+        if self._mounts.pop(name, None) is not None:
+            self._save_mounts()
+
+    def _save_mounts(self) -> None:
+        if self.mounts_path is not None:
+            _write_json(self.mounts_path, self._mounts)
+
+    def _restore_mounts(self, path: Path) -> None:
+        """The gauges stay on the machine while the station restarts."""
+        self.mounts_path = path
+        if not path.exists():
+            return
+        for name, m in json.loads(path.read_text()).items():
+            if name in self.indicators:
+                self.indicators[name].mount(self.source(m["leg"], m["direction"]),
+                                            zero_mm=m["zero_mm"])
+                self._mounts[name] = m
 
     # --- description ----------------------------------------------------------------------
 
@@ -198,14 +257,18 @@ class VirtualStation:
         return self.machine.offsets
 
     def persist_offsets(self, path: str | Path) -> None:
+        """Keep the drive's memory in ``path`` and the gauges' mounting next to it."""
         self.machine.nvram_path = Path(path)
         self.machine.save_offsets()
+        self.mounts_path = Path(path).with_name(MOUNTS_NAME)
+        self._save_mounts()
 
     def close(self) -> None:
         for sim in self.indicators.values():
             sim.close()
         self.indicators = {}
         self.controller.close()
+        shutil.rmtree(self._link_dir, ignore_errors=True)
 
     def __enter__(self) -> VirtualStation:
         return self

@@ -1,0 +1,187 @@
+"""Resuming after the controller lost its reference (a power cut): homing, then the
+Π0 check that decides whether the interrupted setup's cycles can be kept.
+
+Every cycle is measured from Π0 (its deviations are readings at Π_i^± minus the
+Π0 readings that bracket it), so the cycles of a setup measured before the power
+cut stay valid only if homing found the same reference. The gauges of that setup
+are still on the machine; at Π0 they must read what the journal says they read
+there, within what the gauges' noise and the setup's own Π0 drift explain:
+
+    tol = K · sqrt(σ²/n_now + σ²/n_then + s_Π0²),  floored at 3 × the resolution,
+
+with σ the pooled scatter of single readings within the setup's stops, n the
+readings averaged now and then, s_Π0 the standard deviation of the setup's Π0
+stop means across its cycles (drift, temperature). A larger difference means
+the new reference differs: the setup's cycles are dropped and it is redone (the
+journal's ``setup-redo`` record says so; see :func:`drop_redone`).
+
+Only the setup the power cut interrupted can be checked (its gauges are the
+mounted ones). A reference that moved also invalidates setups finished before
+the cut; homing switches repeat to a few µm, which is what this check confirms
+for the axes the mounted gauges see.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from station.config import StationConfig
+from station.errors import RunFailed
+from station.journal import Journal
+from station.operator import Operator
+from station.plan import MotionChecker, Plan, stop_id
+
+K_SIGMA = 4.0  # a false redo costs a setup; a kept bad setup costs the answer
+_CYCLE_RECORDS = ("cycle", "setup_done", "repeat")
+
+
+def drop_redone(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The journal's records without the cycles of setups redone after them: a
+    ``setup-redo`` record voids every earlier cycle/setup_done/repeat record of its
+    (phase, setup), so replaying measures that setup again from its first cycle."""
+    last_redo: dict[tuple[str, int], int] = {}
+    for i, r in enumerate(records):
+        if r["type"] == "setup-redo":
+            last_redo[(r["phase"], int(r["setup"]))] = i
+    if not last_redo:
+        return records
+    return [r for i, r in enumerate(records)
+            if not (r["type"] in _CYCLE_RECORDS
+                    and i < last_redo.get((r["phase"], int(r["setup"])), -1))]
+
+
+def interrupted_setup(records: list[dict[str, Any]]) -> tuple[str, int, dict[str, str]] | None:
+    """(phase, setup, mounted indicators) of the setup that was live when the run
+    stopped: the last one mounted and not finished."""
+    mounted = None
+    for r in records:
+        if r["type"] == "setup":
+            mounted = (r["phase"], int(r["setup"]), dict(r["indicators"]))
+        elif r["type"] == "setup_done" and mounted is not None and \
+                (r["phase"], int(r["setup"])) == mounted[:2]:
+            mounted = None
+    return mounted
+
+
+def _readings(records: list[dict[str, Any]]) -> dict[tuple[str, str], list[float]]:
+    return {(r["stop"], r["indicator"]): [float(v) for v in r["values"]]
+            for r in records if r["type"] == "reading"}
+
+
+def home_if_needed(controller: Any, config: StationConfig, journal: Journal | None,
+                   operator: Operator, say: Callable[[str], None]) -> bool:
+    """Home the machine if it lost its reference (HOMED clear), with the operator's
+    consent. True if it was homed now. ``journal``: None before a run has one."""
+    status = controller.read_status()
+    if status.homed:
+        return False
+    say("orthocal: the controller is not homed (its reference was lost, e.g. by a power "
+        "cut): positions it counts cannot be used until it is homed")
+    if journal is not None:
+        journal.append({"type": "event", "event": {"event": "not-homed",
+                                                   "device": controller.device}})
+    if not operator.confirm("Home the machine now (COMMAND 3)? The axes move to their home "
+                            "switches; gauges may stay mounted"):
+        raise RunFailed("the machine must be homed before the run can go on; homing "
+                        "declined, nothing moved")
+    if status.alarm:
+        controller.reset_alarm()  # e.g. alarm 83: a move was refused while unhomed
+    t0 = time.monotonic()
+    controller.home(timeout_s=config.controller.home_timeout_s)
+    position = [float(v) for v in controller.read_positions()]
+    if journal is not None:
+        journal.append({"type": "homed", "position": position,
+                        "elapsed_s": round(time.monotonic() - t0, 3)})
+    say(f"orthocal: homed in {time.monotonic() - t0:.1f} s")
+    return True
+
+
+def check_reference(controller: Any, indicators: Any, config: StationConfig, plan: Plan,
+                    journal: Journal, records: list[dict[str, Any]],
+                    say: Callable[[str], None]) -> list[dict[str, Any]]:
+    """After homing: move to Π0 with the interrupted setup's gauges still mounted and
+    compare their readings with the journaled Π0 readings. Returns the records to
+    resume from (the setup's cycles dropped if the reference moved)."""
+    live = interrupted_setup(records)
+    if live is None:
+        journal.append({"type": "reference-check", "result": "no setup in progress"})
+        return records
+    phase, index, mounted = live
+    cycles = sorted(int(r["cycle"]) for r in records if r["type"] == "cycle"
+                    and r["phase"] == phase and int(r["setup"]) == index)
+    if not cycles:
+        journal.append({"type": "reference-check", "phase": phase, "setup": index,
+                        "result": "no cycle to keep"})
+        return records
+    readings = _readings(records)
+    names = list(mounted)
+    sp = plan.setups[index]
+    # The journaled Π0 stops of the kept cycles (cycle c ends at stop c:0).
+    p0 = [c for c in [0, *cycles] if all((stop_id(phase, index, c, "0"), n) in readings
+                                         for n in names)]
+    if not p0:
+        journal.append({"type": "reference-check", "phase": phase, "setup": index,
+                        "result": "no Π0 reading journaled"})
+        return records
+    target = sp.move("0").targets
+    start = np.asarray(controller.read_positions(), dtype=float)
+    MotionChecker(config, controller.soft_limits()).check(start, target, "Π0 (reference check)",
+                                                         sp, mounted)
+    controller.move_and_wait(list(target), speed_mm_s=config.controller.speed_mm_s, start=start)
+    if plan.settle_s > 0:
+        time.sleep(plan.settle_s)
+    now = indicators.read(plan.readings, names)
+    verdicts: dict[str, dict[str, float]] = {}
+    ok = True
+    for name in names:
+        stops = [readings[(stop_id(phase, index, c, "0"), name)] for c in p0]
+        # pooled within-stop scatter of this gauge over every stop of the setup
+        own = [v for (stop, n), v in readings.items() if n == name and
+               stop.startswith(f"{phase}:{index}:") and len(v) > 1]
+        dof = sum(len(v) - 1 for v in own)
+        sigma = math.sqrt(sum(float(np.sum((np.asarray(v) - np.mean(v)) ** 2)) for v in own)
+                          / dof) if dof else 0.0
+        means = [float(np.mean(v)) for v in stops]
+        drift = float(np.std(means, ddof=1)) if len(means) > 1 else 0.0
+        then = stops[-1]
+        resolution = config.indicator(name).resolution_mm
+        tol = max(K_SIGMA * math.sqrt(sigma**2 / len(now[name]) + sigma**2 / len(then)
+                                      + drift**2), 3.0 * resolution)
+        diff = float(np.mean(now[name]) - np.mean(then))
+        verdicts[name] = {"now_mm": float(np.mean(now[name])), "then_mm": float(np.mean(then)),
+                          "difference_mm": diff, "tolerance_mm": tol}
+        ok = ok and abs(diff) <= tol
+    journal.append({"type": "reference-check", "phase": phase, "setup": index,
+                    "result": "same" if ok else "moved", "gauges": verdicts,
+                    "cycles": cycles})
+    worst = max(verdicts.items(), key=lambda kv: abs(kv[1]["difference_mm"]) /
+                kv[1]["tolerance_mm"])
+    detail = (f"gauge {worst[0]} at Π0 differs by {worst[1]['difference_mm']:+.4f} mm "
+              f"(tolerance {worst[1]['tolerance_mm']:.4f} mm)")
+    if ok:
+        say(f"orthocal: same reference after homing ({detail}): keeping the "
+            f"{len(cycles)} cycle(s) of setup {index + 1} measured before")
+        return records
+    journal.append({"type": "setup-redo", "phase": phase, "setup": index,
+                    "reason": f"reference moved by homing: {detail}",
+                    "cycles_dropped": cycles})
+    say(f"orthocal: the reference moved with homing ({detail}): setup {index + 1} is "
+        f"redone; its {len(cycles)} earlier cycle(s) are dropped")
+    return drop_redone([*records, {"type": "setup-redo", "phase": phase, "setup": index}])
+
+
+def resume_hint(exc: BaseException) -> str:
+    """What the operator does before ``orthocal resume``, for the fault that ended a run."""
+    from drivers.errors import ControllerNotHomed
+    from station.errors import StorageFull
+
+    if isinstance(exc, ControllerNotHomed):
+        return "resume homes it (after asking) and checks Π0 before going on"
+    if isinstance(exc, StorageFull):
+        return "free some disk space, then continue"
+    return "after fixing the cause continue"
