@@ -9,10 +9,11 @@ timed from spawn to exit, so process start, imports and connecting count.
 The floor is what the physics of the run that actually happened costs:
 
 * each move between consecutive stops, timed with the simulator's own motion
-  profile (``drivers.sim.machine._Profile.trapezoid``: the axes move together
-  on a straight line in joint space, so a move lasts as long as a rest-to-rest
-  trapezoid over its longest axis), in the machine's own scale, so the move
-  that a write-back's new offsets cause is counted;
+  profile (``drivers.sim.machine._Profile.trapezoid``: coordinated or
+  independent, a move lasts as long as a rest-to-rest trapezoid over its
+  longest axis), in the machine's own scale, so the move that a write-back's
+  new offsets cause is counted; waypoints are not part of the floor, they are
+  what independent axes cost;
 * the settle time at every stop;
 * at every stop, the serial line time of its readings: readings × (request +
   reply characters) × bits per character / baud; the gauges of a stop are read
@@ -26,6 +27,8 @@ exceed the floor's moves, the station moved more than its stops needed.
     python bench/cycle.py --compare --target-se 0.002 --cycles 6   # adaptive vs fixed
     python bench/cycle.py --profile /tmp/run.prof                  # cProfile the station
     python bench/cycle.py --strokes 60,30,-50,-100                 # four stops per leg
+    python bench/cycle.py --path-cost     # coordinated vs independent axes (waypoints),
+                                          # and what the plunger guard costs
 
 Target: wall / floor ≤ 1.05.
 """
@@ -33,12 +36,13 @@ Target: wall / floor ≤ 1.05.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +68,8 @@ class Timing:
     settle_s: float = 0.05
     readings: int = 5
     protocol: str = "mitutoyo"
+    motion: str = "coordinated"  # how the virtual controller moves its axes
+    guard: bool = True  # procedure.plunger_guard
 
 
 @dataclass
@@ -80,6 +86,11 @@ class Outcome:
     true_drho: list[float]
     # Seconds from spawn to the journal's header, to its first and last reading, to exit.
     timeline: dict[str, float]
+    clamped: int = 0
+    # Mean extra seconds per stop of a mounting's first cycle (move + settle + read)
+    # against the same stop of later cycles, and how many stops it averages: the
+    # plunger guard's cost, paired within one run (same load, same moves).
+    first_cycle_extra: tuple[float, int] = (0.0, 0)
 
     @property
     def ratio(self) -> float:
@@ -145,13 +156,34 @@ def physical_floor(run_dir: Path, start_m: np.ndarray, timing: Timing
     return moves, settle, line, len(stops)
 
 
+def first_cycle_extra_s(records: list[dict[str, Any]]) -> tuple[float, int]:
+    """From the journal: each stop's time (its reading record minus the previous
+    stop's), first cycle against the mean of the same stop in later cycles."""
+    ends: dict[str, float] = {}
+    for r in records:
+        if r["type"] == "reading":
+            ends[r["stop"]] = r["t"]  # the last gauge's record closes the stop
+    order = sorted(ends, key=ends.get)  # type: ignore[arg-type]
+    took = {s: ends[s] - ends[p] for p, s in itertools.pairwise(order)}
+    extra = []
+    for stop, t in took.items():
+        phase, setup, cycle, sign = stop.split(":")
+        if cycle != "1":
+            continue
+        later = [took[k] for k in took if k.split(":")[:2] == [phase, setup]
+                 and k.split(":")[3] == sign and k.split(":")[2] not in ("0", "1")]
+        if later:
+            extra.append(t - float(np.mean(later)))
+    return (float(np.mean(extra)) if extra else 0.0), len(extra)
+
+
 def station_config(station: VirtualStation, timing: Timing, cycles: int,
                    target_se: float | None, strokes: list[float] | None = None
                    ) -> dict[str, Any]:
     config = station.config()
     config["controller"].update(speed_mm_s=timing.speed_mm_s, accel_mm_s2=timing.accel_mm_s2)
     config["procedure"].update(cycles=cycles, readings=timing.readings,
-                               settle_s=timing.settle_s)
+                               settle_s=timing.settle_s, plunger_guard=timing.guard)
     if strokes:
         config["procedure"]["strokes"] = strokes
     if target_se is not None:
@@ -177,7 +209,8 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
     with VirtualStation(drho, (0.0, 0.0, 0.0), noise_mm, seed, speed_mm_s=timing.speed_mm_s,
                         accel_mm_s2=timing.accel_mm_s2, protocol=timing.protocol,
                         baud=timing.baud, line_time=True, indicator_count=6,
-                        mount_all=True, mount_error_mm=mount_error_mm) as station:
+                        mount_all=True, mount_error_mm=mount_error_mm,
+                        motion=timing.motion) as station:
         machine = station.machine
         started: list[float] = []
         move_to = machine.move_to
@@ -198,6 +231,8 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, capture_output=True, text=True)
         wall = time.perf_counter() - t0
+        # Readings a gauge gave at an end of its stroke (stops and the guard's polls).
+        clamped = sum(sim.clamped for sim in station.indicators.values())
     if proc.returncode != 0:
         sys.stderr.write(proc.stderr[-4000:])
         raise SystemExit(f"station run failed (exit {proc.returncode})")
@@ -210,8 +245,10 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
     readings = [r["t"] for r in records if r["type"] == "reading"]
     timeline = {"header": records[0]["t"] - spawned, "first reading": readings[0] - spawned,
                 "last reading": readings[-1] - spawned, "exit": wall}
+    first_cycle_extra = first_cycle_extra_s(records)
     return Outcome(wall, moves + settle + line, moves, settle, line, float(sum(started)),
-                   sum(1 for d in started if d > 0), stops, result, drho, timeline)
+                   sum(1 for d in started if d > 0), stops, result, drho, timeline, clamped,
+                   first_cycle_extra)
 
 
 def report(label: str, o: Outcome) -> None:
@@ -221,7 +258,10 @@ def report(label: str, o: Outcome) -> None:
           f"line {o.floor_line_s:.2f}; {o.stops} stops), ratio {o.ratio:.3f}")
     print(f"    machine moves: {o.machine_moves} started, {o.machine_moves_s:.2f} s "
           f"(floor's moves {o.floor_moves_s:.2f} s); station's own wall_s "
-          f"{t.get('wall_s')} s")
+          f"{t.get('wall_s')} s; readings at a stroke end {o.clamped}")
+    extra, n = o.first_cycle_extra
+    print(f"    first cycle after mounting: {1000 * extra:+.1f} ms per stop against later "
+          f"cycles ({n} stops)")
     print("    timeline from spawn: " + ", ".join(f"{k} {v:.2f} s" for k, v in o.timeline.items()))
     print(f"    cycles used: measurement {o.cycles_used('m')}, verification "
           f"{o.cycles_used('v')}; Δρ error "
@@ -258,9 +298,16 @@ def main() -> None:
     parser.add_argument("--strokes", type=lambda t: [float(v) for v in t.split(",")],
                         default=None, metavar="A,B,..",
                         help="[procedure] strokes (stops per leg, mm)")
+    parser.add_argument("--motion", choices=["coordinated", "independent"],
+                        default="coordinated", help="how the virtual controller moves")
+    parser.add_argument("--no-guard", action="store_true",
+                        help="procedure.plunger_guard = false")
+    parser.add_argument("--path-cost", action="store_true",
+                        help="same machines: coordinated, independent (waypoints), and "
+                             "coordinated without the plunger guard")
     args = parser.parse_args()
     timing = Timing(speed_mm_s=args.speed, accel_mm_s2=args.accel, settle_s=args.settle,
-                    readings=args.readings)
+                    readings=args.readings, motion=args.motion, guard=not args.no_guard)
     print(f"timing: {timing.speed_mm_s:g} mm/s, {timing.accel_mm_s2:g} mm/s², "
           f"{timing.protocol} at {timing.baud} baud "
           f"({1000 * line_time_per_reading(timing.protocol, timing.baud):.2f} ms per reading), "
@@ -268,6 +315,9 @@ def main() -> None:
           f"noise {1000 * args.noise:g} µm")
     with tempfile.TemporaryDirectory(prefix="orthocal-cycle-") as tmp:
         out = Path(tmp)
+        if args.path_cost:
+            path_cost(args, timing, out)
+            return
         if not args.compare:
             ratios = []
             for k in range(args.repeat):
@@ -309,6 +359,44 @@ def main() -> None:
               f" Δρ error RMS {rms(adaptive, 'errors_um'):.2f} µm, reported SE RMS "
               f"{rms(adaptive, 'std_errors_um'):.2f} µm")
         print(f"time saved: {wf - wa:.2f} s per calibration ({100 * (wf - wa) / wf:.0f} %)")
+
+
+def path_cost(args: argparse.Namespace, base: Timing, out: Path) -> None:
+    """Wall time of the same calibrations three ways: coordinated axes with the
+    plunger guard (the default), independent axes (the plan adds waypoints to keep
+    the plungers in their strokes) with the guard, coordinated without the guard."""
+    cases = {"coordinated": replace(base, motion="coordinated", guard=True),
+             "independent": replace(base, motion="independent", guard=True),
+             "coordinated, no guard": replace(base, motion="coordinated", guard=False)}
+    walls: dict[str, list[float]] = {k: [] for k in cases}
+    moves: dict[str, list[int]] = {k: [] for k in cases}
+    motion_s: dict[str, list[float]] = {k: [] for k in cases}
+    extra: dict[str, list[float]] = {k: [] for k in cases}
+    for k in range(args.repeat):
+        seed = args.seed + k
+        for label, timing in cases.items():
+            o = run_once(seed=seed, noise_mm=args.noise, cycles=args.cycles, target_se=None,
+                         timing=timing, out=out)
+            report(f"seed {seed} {label}", o)
+            walls[label].append(o.wall_s)
+            moves[label].append(o.machine_moves)
+            motion_s[label].append(o.machine_moves_s)
+            extra[label].append(o.first_cycle_extra[0])
+    mean = {k: float(np.mean(v)) for k, v in walls.items()}
+    for label in cases:
+        print(f"{label}: mean wall {mean[label]:.2f} s, machine moves "
+              f"{np.mean(moves[label]):.0f} ({np.mean(motion_s[label]):.2f} s of motion), "
+              f"first-cycle stops {1000 * np.mean(extra[label]):+.1f} ms each")
+    w = mean["independent"] - mean["coordinated"]
+    m = float(np.mean(motion_s["independent"]) - np.mean(motion_s["coordinated"]))
+    print(f"waypoints for independent axes: {w:+.2f} s wall per calibration "
+          f"({100 * w / mean['coordinated']:+.1f} %), of which {m:+.2f} s motion, "
+          f"{np.mean(moves['independent']) - np.mean(moves['coordinated']):+.0f} moves")
+    g = mean["coordinated"] - mean["coordinated, no guard"]
+    e = float(np.mean(extra["coordinated"]) - np.mean(extra["coordinated, no guard"]))
+    print(f"plunger guard: {g:+.2f} s wall per calibration; paired within runs, a "
+          f"watched stop takes {1000 * e:+.1f} ms more ({18 * e:+.2f} s over the 18 "
+          f"stops of the six first cycles)")
 
 
 if __name__ == "__main__":

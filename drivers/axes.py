@@ -506,14 +506,16 @@ class ModbusAxisController:
         return t * self.timeout_factor + self.timeout_margin_s
 
     def wait_in_position(self, targets: Sequence[float], timeout_s: float,
-                         tolerance_mm: float = 0.002, expected_s: float | None = None
-                         ) -> np.ndarray:
+                         tolerance_mm: float = 0.002, expected_s: float | None = None,
+                         watch: Callable[[], None] | None = None) -> np.ndarray:
         """Poll until IN_POSITION (and not MOVING) and every axis within tolerance.
 
         Raises EStopError / AlarmError as soon as the drive reports them, and
         MoveTimeout at the deadline. Returns the actual positions. ``expected_s``:
         when the move should end; from one poll interval before it, polls come
-        every ``arrival_poll_s`` instead.
+        every ``arrival_poll_s`` instead. ``watch``: called between polls while the
+        axes move (it may take a while: the poll waits that much less); whatever
+        it raises ends the wait (the caller stops the axes).
         """
         rho = _vec3(targets, "targets")
         if not (math.isfinite(timeout_s) and timeout_s > 0):
@@ -545,14 +547,21 @@ class ModbusAxisController:
             now = time.monotonic()
             interval = self.arrival_poll_s if now >= arriving else \
                 min(self.poll_interval_s, arriving - now)
-            time.sleep(min(interval, remaining))
+            if watch is not None:
+                watch()
+                interval -= time.monotonic() - now
+                remaining = deadline - time.monotonic()
+            if interval > 0 and remaining > 0:
+                time.sleep(min(interval, remaining))
 
     def move_and_wait(self, targets: Sequence[float], speed_mm_s: float | None = None,
                       timeout_s: float | None = None,
-                      start: Sequence[float] | None = None) -> np.ndarray:
+                      start: Sequence[float] | None = None,
+                      watch: Callable[[], None] | None = None) -> np.ndarray:
         """move() then wait_in_position(); the deadline comes from the distance, the
         speed and the acceleration with a margin unless ``timeout_s`` is given.
-        ``start``: the positions the caller has just read (saves reading them again)."""
+        ``start``: the positions the caller has just read (saves reading them again);
+        ``watch``: see wait_in_position."""
         rho = _vec3(targets, "targets")
         expected = None
         if timeout_s is None or start is not None:
@@ -563,7 +572,7 @@ class ModbusAxisController:
             if timeout_s is None:
                 timeout_s = self.move_timeout(distance, speed)
         self.move(rho, speed_mm_s)
-        return self.wait_in_position(rho, timeout_s, expected_s=expected)
+        return self.wait_in_position(rho, timeout_s, expected_s=expected, watch=watch)
 
     def stop(self) -> None:
         """Command a decelerating stop; returns once the command is taken."""

@@ -7,7 +7,7 @@ serial framing stay inside the drivers.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -60,9 +60,11 @@ class AxisController(Protocol):
         speed_mm_s: float | None = None,
         timeout_s: float | None = None,
         start: Sequence[float] | None = None,
+        watch: Callable[[], None] | None = None,
     ) -> np.ndarray:
         """move() then wait_in_position() with a timeout derived from distance and speed
-        unless one is given; ``start``: positions the caller has just read."""
+        unless one is given; ``start``: positions the caller has just read; ``watch``:
+        called between polls while the axes move, may raise to end the wait."""
         ...
 
     def stop(self) -> None: ...

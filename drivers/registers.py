@@ -222,6 +222,10 @@ class RegisterMap(BaseModel):
     offset_convention: str = ""
     #: read registers up to this many addresses apart in one request
     merge_gap: int = Field(default=0, ge=0, le=16)
+    #: the path of a move: "coordinated" (the axes interpolated on the straight line
+    #: in joint space) or "independent" (each axis its own trapezoid: the short moves
+    #: finish first); the safe default promises no interpolation
+    motion: Literal["coordinated", "independent"] = "independent"
 
     _by_name: dict[str, Register] = PrivateAttr(default_factory=dict)
 
@@ -360,6 +364,9 @@ GENERIC = RegisterMap(
     },
     offset_convention="commanded ρ_i puts the carriage at ρ_i + o_i; write-back sets "
                       "o_i ← o_i − Δρ_i",
+    # design.md: COMMAND 1 promises no interpolation, so a controller serving this
+    # map is planned as independent axes unless its config says coordinated.
+    motion="independent",
 )
 
 
@@ -435,6 +442,8 @@ Not confirmed (treat as assumptions to check on the bench):
         "reset_alarm": [*(CommandStep(reg=f"ALARM_RESET_{ax}", value=1) for ax in AXES),
                         *(CommandStep(reg=f"ALARM_RESET_{ax}", value=0) for ax in AXES)],
     },
+    # Each axis is its own slave and starts on its own PCMD write.
+    motion="independent",
     unsupported={
         "offsets": "the IAI PCON/ACON direct-numeric map has no Modbus-writable zero offset "
                    "(the home offset is user parameter No. 22, set with IAI's tools); "

@@ -88,6 +88,11 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         help="indicator stands placed by eye: each mounting is off the leg's middle by a "
              "hidden random amount uniform in +-MM (default 5; 0: perfectly placed)",
     )
+    p.add_argument(
+        "--motion", choices=["coordinated", "independent"], default=None,
+        help="how the virtual controller moves its axes: together on the straight line "
+             "(coordinated, the default) or each on its own trapezoid (independent)",
+    )
 
 
 def _probe_options(p: argparse.ArgumentParser) -> None:

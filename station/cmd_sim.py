@@ -56,6 +56,7 @@ def main(args: argparse.Namespace) -> int:
             station = VirtualStation(drho, dl, noise, seed, protocol=args.protocol,
                                      indicator_count=6, port=args.port, mount_all=True,
                                      mount_error_mm=mount_error,
+                                     motion=getattr(args, "motion", None) or "coordinated",
                                      controller_options={"transport": args.transport},
                                      true_tilt=tilt, **kwargs)
         except OSError as exc:

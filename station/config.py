@@ -71,6 +71,9 @@ class ControllerConfig(_Strict):
     speed_mm_s: float = Field(50.0, gt=0, le=65535)
     accel_mm_s2: float = Field(500.0, gt=0)
     baudrate: int = Field(19200, gt=0)
+    # The path COMMAND 1 takes: "coordinated" (straight line in joint space) or
+    # "independent" (each axis its own trapezoid); default: what the profile says.
+    motion: Literal["coordinated", "independent"] | None = None
     # Narrow the controller's own soft limits (joint mm, x/y/z); never widen them.
     soft_min: list[float] | None = Field(None, min_length=3, max_length=3)
     soft_max: list[float] | None = Field(None, min_length=3, max_length=3)
@@ -211,6 +214,11 @@ class ProcedureConfig(_Strict):
     target_std_error_mm: float | None = Field(None, gt=0)
     # Outlier rule at a stop: |r - median| > k * 1.4826 * MAD (floored at the resolution).
     outlier_k: float = Field(5.0, gt=0)
+    # The plunger guard: during a mounting's first cycle the gauges are watched while
+    # the axes move, and the axes stopped before a plunger comes this close to
+    # either end of its stroke; later cycles are refused if predicted that close.
+    plunger_guard: bool = True
+    plunger_margin_mm: float = Field(0.2, ge=0, le=10)
     # auto: the smallest model the run's own noise supports (orthocal.select_model);
     # the default, because on a square machine it keeps rho (≥ 99 % of runs) and on
     # one 0.2 mrad off square it finds the tilts rho alone turns into Δρ errors.

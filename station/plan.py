@@ -26,11 +26,12 @@ import orthocal
 from orthocal import postures
 from station.config import StationConfig
 from station.errors import BadInput
+from station.motion import real_path, waypoints
 
 AXES = ("x", "y", "z")
-# Points checked along each joint-interpolated move (ends included); the leg's
-# sideways excursion is smooth, ~5 mm at most, so 64 points resolve it to µm.
-PATH_SAMPLES = 64
+# Most waypoints put on one move to keep the plungers in their strokes; each is a
+# rest-to-rest sub-move (bench/cycle.py measures what they cost).
+MAX_WAYPOINTS = 10
 PHASES = {"m": "measurement", "v": "verification"}
 
 
@@ -143,6 +144,22 @@ class Plan:
     limits_source: str = ""
     # Per indicator and setup: (min, max) plunger travel found by the check, mm.
     travel: dict[str, tuple[float, float]] = field(default_factory=dict)
+    # The controller's path model and the waypoints the check put on moves whose
+    # single COMMAND 1 would take a plunger out of its stroke (see route_key).
+    motion: str | None = None
+    routes: dict[tuple, list[tuple[float, float, float]]] = field(default_factory=dict)
+    start: tuple[float, ...] | None = None
+
+    def waypoints_of(self) -> Iterator[tuple[Step, list[tuple[float, float, float]]]]:
+        """Each step of the measurement phase with the waypoints of its move."""
+        position = self.start
+        for step in self.steps("m"):
+            via: list[tuple[float, float, float]] = []
+            if isinstance(step, Move):
+                if position is not None:
+                    via = self.routes.get(route_key(position, step.targets), [])
+                position = step.targets
+            yield step, via
 
     def steps(self, phase: str = "m") -> Iterator[Step]:
         """Every step of one phase at the configured number of cycles."""
@@ -168,7 +185,9 @@ class Plan:
                 for sp in self.setups
             ],
             "travel_mm": {k: list(v) for k, v in self.travel.items()},
-            "steps": [asdict(s) for s in self.steps("m")],
+            "motion": self.motion,
+            "steps": [asdict(s) | ({"via": [list(w) for w in via]} if via else {})
+                      for s, via in self.waypoints_of()],
         }
 
     def format(self) -> str:
@@ -185,12 +204,21 @@ class Plan:
             source = f" ({self.limits_source})" if self.limits_source else ""
             lines.append(f"soft limits{source} (mm): " + ", ".join(
                 f"ρ_{a} ∈ [{lo[i]:.3f}, {hi[i]:.3f}]" for i, a in enumerate(AXES)))
+        if self.motion is not None:
+            lines.append(f"controller path: {self.motion} axes" + (
+                " (each axis its own trapezoid)" if self.motion == "independent"
+                else " (straight line in joint space)")
+                + "; a move whose path would take a plunger out of its stroke goes via "
+                "waypoints, one COMMAND 1 each")
         number = 0
-        for step in self.steps("m"):
+        for step, via in self.waypoints_of():
             number += 1
             if isinstance(step, Move):
                 text = f"move {step.label:<7} ρ = (" + ", ".join(
                     f"{t:.3f}" for t in step.targets) + ")"
+                if via:
+                    text += f" via {len(via)} waypoint(s): " + "; ".join(
+                        "(" + ", ".join(f"{t:.3f}" for t in w) + ")" for w in via)
             elif isinstance(step, Prompt):
                 lines.append(f"setup {step.setup + 1}: leg {step.leg}")
                 text = ("prompt: mount " + ", ".join(f"{n} ({d})" for n, d in step.indicators)
@@ -209,6 +237,12 @@ class Plan:
         lines.append("plan checked: every target inside the soft limits and the workspace, "
                      "every plunger within its stroke")
         return "\n".join(lines)
+
+
+def route_key(start: Sequence[float], target: Sequence[float]) -> tuple:
+    """Routes are keyed by their ends (to the µm): a move with gauges mounted
+    joins two postures of one leg, so it belongs to one setup."""
+    return (*(round(float(v), 3) for v in start), *(round(float(v), 3) for v in target))
 
 
 def build_plan(config: StationConfig, strokes: Sequence[float] | None = None) -> Plan:
@@ -269,33 +303,106 @@ def limits_source(config: StationConfig, controller_limits: object) -> str:
     return "the controller's"
 
 
-def _path(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
-    t = np.linspace(0.0, 1.0, PATH_SAMPLES)[:, None]
-    return np.asarray(a, dtype=float) + (np.asarray(b, dtype=float) - np.asarray(a)) * t
+def motion_model(config: StationConfig) -> str:
+    """The path model of the controller: the config's ``[controller] motion``, else
+    what the register-map profile promises (design.md: COMMAND 1 promises no
+    interpolation unless the profile says the axes are coordinated)."""
+    if config.controller.motion is not None:
+        return config.controller.motion
+    from drivers.registers import PROFILES
+
+    profile = PROFILES.get(config.controller.profile)
+    if profile is None:
+        raise BadInput(f"controller.profile: unknown register map "
+                       f"{config.controller.profile!r}; built-in: {sorted(PROFILES)}")
+    return profile.motion
 
 
 class MotionChecker:
-    """Checks one joint-interpolated move: soft limits, workspace, and the travel
-    of every mounted indicator, at PATH_SAMPLES points along the way. The plan
-    check runs it over every move of the plan; the sequencer runs it again before
-    every physical move, from the actual position (a resumed run starts anywhere)."""
+    """Checks one move along the path the controller really takes (station.motion:
+    coordinated or independent axes, at the configured speed and acceleration):
+    soft limits, workspace, the leg crossing each mounted indicator's plane and
+    every plunger's travel. Where the path of a single COMMAND 1 would take a
+    plunger out of its stroke (or inside the guard's margin of an end), the move
+    is split by waypoints that put the end point at even steps on its straight
+    line (station.motion.waypoints), as few as make it hold. The plan check
+    runs it over every move of the plan; the sequencer runs it again before every
+    physical move, from the actual position (a resumed run starts anywhere)."""
 
     def __init__(self, config: StationConfig,
                  controller_limits: tuple[Sequence[float], Sequence[float]]) -> None:
         self.config = config
         self.geometry = config.machine.geometry()
         self.lo, self.hi = effective_limits(config, controller_limits)
+        self.motion = motion_model(config)
+        self.speed = config.controller.speed_mm_s
+        self.accel = config.controller.accel_mm_s2
+        self.margin = config.procedure.plunger_margin_mm
         self.travel: dict[str, tuple[float, float]] = {}
+
+    def path(self, start: Sequence[float], target: Sequence[float]) -> np.ndarray:
+        return real_path(start, target, self.motion, self.speed, self.accel)
 
     def check(self, start: Sequence[float] | None, target: Sequence[float], label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
+        self.route(start, target, label, setup, mounted)
+
+    def route(self, start: Sequence[float] | None, target: Sequence[float], label: str,
+              setup: SetupPlan | None = None, mounted: dict[str, str] | None = None
+              ) -> list[np.ndarray]:
+        """The targets of the sub-moves that reach ``target`` (waypoints, then the
+        target itself); raises BadInput when no route up to MAX_WAYPOINTS holds."""
         target_v = np.asarray(target, dtype=float)
-        path = target_v[None, :] if start is None else _path(start, target_v)
         where = "" if setup is None else f"setup {setup.index + 1} (leg {setup.leg}), "
         where += label if start is None else f"move to {label}"
-        self._limits(path, where)
-        if setup is not None and mounted:
-            self._travel(setup, mounted, path, where)
+        if start is None:
+            self._limits(target_v[None, :], where)
+            return [target_v]
+        fallback: tuple[list[np.ndarray], dict[str, tuple[float, float]]] | None = None
+        error: BadInput | None = None
+        for n in range(MAX_WAYPOINTS + 1):
+            legs = waypoints(start, target_v, n, self.geometry)
+            try:
+                travel, tight = self._route_travel(start, legs, where, setup, mounted)
+            except BadInput as exc:
+                error = exc
+                if not mounted:
+                    break  # limits and workspace: more waypoints only approach the line
+                continue
+            if not tight:
+                self._commit(travel)
+                return legs
+            if fallback is None:
+                fallback = (legs, travel)
+        if fallback is not None:
+            # Within the stroke, though inside the guard's margin: the guard watches.
+            self._commit(fallback[1])
+            return fallback[0]
+        assert error is not None
+        raise error
+
+    def _route_travel(self, start: Sequence[float], legs: list[np.ndarray], where: str,
+                      setup: SetupPlan | None, mounted: dict[str, str] | None
+                      ) -> tuple[dict[str, tuple[float, float]], bool]:
+        travel: dict[str, tuple[float, float]] = {}
+        tight = False
+        here = np.asarray(start, dtype=float)
+        for leg in legs:
+            path = self.path(here, leg)
+            self._limits(path, where)
+            if setup is not None and mounted:
+                for key, (t_min, t_max, close) in self._travel(setup, mounted, path,
+                                                               where).items():
+                    old = travel.get(key, (t_min, t_max))
+                    travel[key] = (min(old[0], t_min), max(old[1], t_max))
+                    tight |= close
+            here = leg
+        return travel, tight
+
+    def _commit(self, travel: dict[str, tuple[float, float]]) -> None:
+        for key, (t_min, t_max) in travel.items():
+            old = self.travel.get(key, (0.0, 0.0))
+            self.travel[key] = (min(old[0], t_min), max(old[1], t_max))
 
     def _limits(self, points: np.ndarray, where: str) -> None:
         lo, hi = self.lo, self.hi
@@ -312,30 +419,34 @@ class MotionChecker:
             raise BadInput(f"plan: {where}: outside the machine's workspace; "
                            "nothing has moved") from None
 
+    def nominal_travel(self, sp: SetupPlan, name: str, direction: str,
+                       path: np.ndarray) -> np.ndarray:
+        """Plunger travel (mm, + pushed in) of indicator ``name`` mounted on
+        ``sp``'s leg at Π0, at each joint position of ``path``: nominal model."""
+        sign = -1.0 if direction.startswith("-") else 1.0
+        axis = direction.lstrip("-")
+        rho0 = np.asarray(sp.postures["0"])
+        zero = float(orthocal.leg_reading(rho0, sp.leg, axis, self.geometry))
+        return sign * (orthocal.leg_reading(path, sp.leg, axis, self.geometry) - zero)
+
     def _travel(self, sp: SetupPlan, mounted: dict[str, str], path: np.ndarray,
-                where: str) -> None:
+                where: str) -> dict[str, tuple[float, float, bool]]:
         geometry = self.geometry
         mount = geometry.mount_plane
-        rho0 = np.asarray(sp.postures["0"])
         i = AXES.index(sp.leg)
         p = orthocal.forward(path, geometry)
         # The indicator touches the leg only while the leg crosses its plane x_i = M.
         spans = (np.minimum(p[:, i], path[:, i]) <= mount) & \
             (mount <= np.maximum(p[:, i], path[:, i]))
+        out: dict[str, tuple[float, float, bool]] = {}
         for name, direction in mounted.items():
             ind = self.config.indicator(name)
             if not np.all(spans):
                 raise BadInput(f"plan: {where}: leg {sp.leg} no longer crosses the plane of "
                                f"indicator {name}; nothing has moved")
-            sign = -1.0 if direction.startswith("-") else 1.0
-            axis = direction.lstrip("-")
-            zero = float(orthocal.leg_reading(rho0, sp.leg, axis, geometry))
-            travel = sign * (orthocal.leg_reading(path, sp.leg, axis, geometry) - zero)
+            travel = self.nominal_travel(sp, name, direction, path)
             low, high = -ind.preload, ind.stroke_mm - ind.preload
             t_min, t_max = float(travel.min()), float(travel.max())
-            key = f"{name} on leg {sp.leg} (setup {sp.index + 1})"
-            old = self.travel.get(key, (0.0, 0.0))
-            self.travel[key] = (min(old[0], t_min), max(old[1], t_max))
             if t_max > high + 1e-9:
                 raise BadInput(
                     f"plan: {where}: indicator {name} ({direction}) would be pushed "
@@ -346,6 +457,9 @@ class MotionChecker:
                     f"plan: {where}: the leg would lift off indicator {name} ({direction}) "
                     f"by {-t_min - ind.preload:.3f} mm (travel {t_min:.3f} mm, preload "
                     f"{ind.preload:g} mm); nothing has moved")
+            close = t_max > high - self.margin or t_min < low + self.margin
+            out[f"{name} on leg {sp.leg} (setup {sp.index + 1})"] = (t_min, t_max, close)
+        return out
 
 
 def check_plan(
@@ -371,7 +485,12 @@ def check_plan(
             if isinstance(step, Prompt):
                 mounted = dict(step.indicators)
             elif isinstance(step, Move):
-                checker.check(position, step.targets, step.label, sp, mounted)
+                legs = checker.route(position, step.targets, step.label, sp, mounted)
+                if position is not None and len(legs) > 1:
+                    plan.routes[route_key(position, step.targets)] = [
+                        tuple(float(v) for v in leg) for leg in legs[:-1]]
                 position = np.asarray(step.targets)
     plan.travel = checker.travel
+    plan.motion = checker.motion
+    plan.start = None if start is None else tuple(float(v) for v in start)
     return plan

@@ -32,6 +32,7 @@ import numpy as np
 
 from drivers.base import AxisController
 from station.config import StationConfig
+from station.guard import PlungerGuard
 from station.journal import Journal
 from station.operator import Operator
 from station.plan import (
@@ -227,6 +228,12 @@ class Sequencer:
         self._stops: dict[str, dict[str, StopStat]] = {}
         self._all_names = [ind.name for ind in config.indicators]
         self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
+        self.guard = PlungerGuard(
+            config, checker.nominal_travel, controller.read_positions,
+            lambda names: indicators.read(1, names), controller.stop, self._journal_safe)
+        # The guard arms at a mounting's first Π0 reading and watches the cycle after it.
+        self._guard_pending = False
+        self._guard_cycle: int | None = None
 
     # --- the procedure ---------------------------------------------------------------
 
@@ -276,6 +283,8 @@ class Sequencer:
         self._setup = sp
         self._live_setup = False
         self._mounted = {}  # a new setup: nothing of ours is mounted until its prompt
+        self.guard.forget()
+        self._guard_pending, self._guard_cycle = False, None
         cycle = 0
         repeats = 0
         passes: list[list[tuple[int, dict[str, float], list[float]]]] = []
@@ -340,6 +349,8 @@ class Sequencer:
             for step in sp.start_steps(phase, cycle - 1, self.plan.settle_s,
                                        self.plan.readings):
                 self._execute(phase, step)
+        if self._guard_cycle is not None and cycle > self._guard_cycle:
+            self.guard.check_cycle(cycle)
         for step in sp.cycle_steps(phase, cycle, self.plan.settle_s, self.plan.readings):
             self._execute(phase, step)
         return self._finish_cycle(phase, sp, cycle)
@@ -349,6 +360,9 @@ class Sequencer:
         start = self._stops[stop_id(phase, sp.index, cycle - 1, "0")]
         tests = [(p, self._stops[stop_id(phase, sp.index, cycle, p)]) for p in sp.order]
         end = self._stops[stop_id(phase, sp.index, cycle, "0")]
+        if cycle == self._guard_cycle:
+            self.guard.learn({posture: {n: st.mean for n, st in stops.items()}
+                              for posture, stops in (*tests, ("0", end))})
         devs: dict[str, float] = {}
         within: list[float] = []
         for name, direction in sp.indicators.items():
@@ -388,22 +402,33 @@ class Sequencer:
         if np.allclose(self._position, target, atol=1e-3):
             return  # already there: consecutive setups share Π0
         # The plan was checked from nominal postures; the actual start may differ
-        # (first move, resumed run), so the path actually travelled is checked too.
-        self.checker.check(self._position, target, step.label, self._setup, self._mounted)
+        # (first move, resumed run, new offsets), so the path really taken from here
+        # is checked again and its waypoints (if any) derived from here.
+        legs = self.checker.route(self._position, target, step.label, self._setup,
+                                  self._mounted)
         self.progress("move", label=step.label, targets=step.targets)
-        start = self._position
-        self._position = None  # unknown until the move has arrived
-        actual = self.controller.move_and_wait(list(target),
-                                               speed_mm_s=self.config.controller.speed_mm_s,
-                                               start=start)
-        self._position = np.asarray(actual, dtype=float)
-        self.counters.moves += 1
+        self.guard.begin_move(self._position, legs)
+        for number, leg in enumerate(legs, start=1):
+            # Each waypoint is a move of its own (COMMAND 1, a deadline from its own
+            # length); none is a reading stop, so the journal and resume ignore them.
+            label = step.label if number == len(legs) else \
+                f"{step.label} (waypoint {number}/{len(legs) - 1})"
+            start = self._position
+            self._position = None  # unknown until the move has arrived
+            watch = None if start is None else self.guard.watch(start, leg, label)
+            extra = {} if watch is None else {"watch": watch}
+            actual = self.controller.move_and_wait(
+                list(leg), speed_mm_s=self.config.controller.speed_mm_s, start=start, **extra)
+            self._position = np.asarray(actual, dtype=float)
+            self.counters.moves += 1
 
     def _prompt(self, phase: str, step: Prompt) -> None:
         indicators = dict(step.indicators)
         self.progress("prompt", phase=phase, setup=step.setup)
         self.operator.mount(phase, step.setup, step.leg, indicators, self._all_names)
         self._mounted = indicators
+        self.guard.forget()
+        self._guard_pending, self._guard_cycle = True, None
         self.journal.append({"type": "setup", "phase": phase, "setup": step.setup,
                              "leg": step.leg, "indicators": indicators,
                              "position": None if self._position is None
@@ -433,5 +458,13 @@ class Sequencer:
                                    int(arr.size), rejected)
             self.counters.readings += len(vals)
         self._stops[step.stop] = stats
+        if self._position is not None:
+            self.guard.at_rest(self._position, {n: st.mean for n, st in stats.items()})
+        if self._guard_pending and step.sign == "0" and self._setup is not None:
+            # The mounting point: travel is counted from these readings.
+            self._guard_pending = False
+            self._guard_cycle = step.cycle + 1
+            self.guard.mount(self.checker.motion, self._setup, step.stop.split(":")[0],
+                             self._mounted, {n: st.mean for n, st in stats.items()})
         self.progress("read", phase=step.stop.split(":")[0], stop=step.stop, setup=step.setup,
                       cycle=step.cycle, sign=step.sign, values=values)

@@ -43,6 +43,7 @@ def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "true_tilt": tilt,
         "noise_mm": noise,
         "mount_error_mm": mount,
+        "motion": getattr(args, "motion", None) or "coordinated",
         # Test hooks (not on the command line): the six-indicator style, a procedure.
         "indicators": int(getattr(args, "sim_indicators", 2) or 2),
         "procedure": getattr(args, "sim_procedure", None),
@@ -67,6 +68,7 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         speed_mm_s=speed, accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
         # Journals from before stand misplacement existed ran with perfect stands.
         mount_error_mm=params.get("mount_error_mm", 0.0),
+        motion=params.get("motion") or "coordinated",
     )
 
 

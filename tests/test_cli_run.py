@@ -83,7 +83,9 @@ def test_plan_lists_and_exits_0_without_moving(station_toml, tmp_path: Path, cap
 
 
 def test_plan_refused_by_stroke_exit_2(station_toml, tmp_path: Path, capsys) -> None:
-    path = station_toml(D={"stroke_mm": 6.0})  # D stands on leg y, reversed
+    # D stands on leg y, reversed: leg y's swing pushes it in, and it is at its stop
+    # already (no waypoint helps)
+    path = station_toml(D={"stroke_mm": 6.0, "preload_mm": 6.0})
     assert main(["run", "--config", str(path), "--yes", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "indicator D" in err and "Π_y^" in err and "nothing has moved" in err

@@ -486,7 +486,9 @@ def test_a_knock_on_the_stand_is_rejected_and_recorded(tmp_path: Path, orthocal)
 
         station.source = knocking  # type: ignore[method-assign]
 
-    procedure = {**PROCEDURE, "cycles": 3, "readings": 5}
+    # The knocks are placed by counting the gauge's readings at stops: without the
+    # plunger guard's readings during the first cycle's moves.
+    procedure = {**PROCEDURE, "cycles": 3, "readings": 5, "plunger_guard": False}
     o = orthocal(*run_args(tmp_path, "--json", procedure=procedure), prepare=prepare)
     assert o.code == 0, o.err
     result = json.loads(o.out)

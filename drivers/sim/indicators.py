@@ -25,6 +25,12 @@ link can open it again.
 
 An unmounted indicator (``unmount()``) answers as a gauge lying on the bench
 does: a constant reading (``unmounted_mm``) plus noise.
+
+A finite plunger (``stroke_mm``, mounted pushed in by ``preload_mm``, default
+half the stroke): the reading is the plunger's travel from where it was
+mounted (+ pushed in), so it clamps at −preload (the leg has left the fully
+extended plunger) and at stroke − preload (the plunger is at its stop).
+``clamped`` counts the readings taken there.
 """
 
 from __future__ import annotations
@@ -104,6 +110,8 @@ class SimIndicator:
         seed: int | None = None,
         name: str = "A",
         unmounted_mm: float = 0.0,
+        stroke_mm: float | None = None,
+        preload_mm: float | None = None,
         link: str | os.PathLike[str] | None = None,
     ) -> None:
         self.protocol = make_protocol(protocol) if isinstance(protocol, str) else protocol
@@ -122,6 +130,14 @@ class SimIndicator:
         self.baud = baud
         self.faults = faults if faults is not None else IndicatorFaults()
         self.unmounted_mm = unmounted_mm
+        if stroke_mm is not None and not stroke_mm > 0:
+            raise ValueError("stroke_mm must be > 0")
+        if preload_mm is not None and (stroke_mm is None or not 0 <= preload_mm <= stroke_mm):
+            raise ValueError("preload_mm needs a stroke_mm and must be within 0..stroke_mm")
+        self.stroke_mm = stroke_mm
+        self.preload_mm = (stroke_mm / 2.0 if preload_mm is None and stroke_mm is not None
+                           else preload_mm)
+        self.clamped = 0
         self._char_s = self.protocol.bits_per_char / baud if baud else 0.0
         self._rng = random.Random(seed)
         self._lock = threading.Lock()  # source/zero against the simulator thread
@@ -198,6 +214,12 @@ class SimIndicator:
         with self._lock:
             source, zero = self._source, self._zero
         raw = self.unmounted_mm if source is None else self.sign * (float(source()) - zero)
+        if source is not None and self.stroke_mm is not None:
+            assert self.preload_mm is not None
+            low, high = -self.preload_mm, self.stroke_mm - self.preload_mm
+            if not low < raw < high:
+                self.clamped += 1
+                raw = min(max(raw, low), high)
         if self.noise_mm > 0:
             raw += self._rng.gauss(0.0, self.noise_mm)
         # + 0.0 turns -0.0 into 0.0: a gauge shows +0.000, not -0.000.

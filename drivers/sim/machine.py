@@ -20,10 +20,13 @@ unrelated to the carriage (``count_shift``), and moves are refused with
 :data:`ALARM_NOT_HOMED` until :meth:`home` re-establishes it (``home_error_mm``:
 how far the new reference lies from the old one, 0 for a repeatable switch).
 
-Motion: the three axes move together along a straight line in joint space with
-a trapezoidal profile of the longest axis (speed, acceleration), so they arrive
-together. State is evaluated lazily from a clock, so the machine needs no thread
-of its own; every public method is thread-safe.
+Motion (``motion``): "coordinated", the three axes move together along a
+straight line in joint space with a trapezoidal profile of the longest axis
+(speed, acceleration), so they arrive together; or "independent", each axis
+runs its own trapezoid at the commanded speed and acceleration, as drives that
+do not interpolate do (IAI's among them): the short moves finish first.
+State is evaluated lazily from a clock, so the machine needs no thread of its
+own; every public method is thread-safe.
 """
 
 from __future__ import annotations
@@ -101,21 +104,37 @@ class _Profile:
 
 @dataclass
 class _Motion:
+    """Axis i at start_i + scale_i·s_i(τ), s_i from profiles[i]. Coordinated: one
+    shared profile, scale = the unit direction (longest axis ±1); independent:
+    each axis its own profile over its own distance, scale ±1."""
+
     t0: float
     start: np.ndarray
-    direction: np.ndarray  # unit vector (longest axis component ±1)
-    profile: _Profile
+    scale: np.ndarray
+    profiles: list[_Profile]
     end: np.ndarray
     homing: bool = False
 
-    def position(self, now: float) -> tuple[np.ndarray, float, bool]:
-        """(position, path speed, finished) at ``now``."""
+    @property
+    def duration(self) -> float:
+        return max(p.duration for p in self.profiles)
+
+    def position(self, now: float) -> tuple[np.ndarray, bool]:
+        """(position, finished) at ``now``."""
         tau = now - self.t0
         # t0 + duration - t0 can fall a rounding error short of duration.
-        if tau >= self.profile.duration - _EPS:
-            return self.end.copy(), 0.0, True
-        s, v = self.profile.at(tau)
-        return self.start + self.direction * s, v, False
+        if tau >= self.duration - _EPS:
+            return self.end.copy(), True
+        s = np.array([p.at(tau)[0] for p in self.profiles])
+        return self.start + self.scale * s, False
+
+    def braking(self, now: float, accel: float) -> _Motion:
+        """Each axis decelerates from where it is at ``now`` to rest (coordinated
+        axes share s and v, so they stay on their line)."""
+        tau = now - self.t0
+        brakes = [_Profile.braking(*p.at(tau), accel) for p in self.profiles]
+        end = self.start + self.scale * np.array([b.length for b in brakes])
+        return _Motion(now, self.start, self.scale, brakes, end, homing=False)
 
 
 class VirtualOrthoglide:
@@ -144,6 +163,7 @@ class VirtualOrthoglide:
         homed: bool = True,
         in_position_band_mm: float = 0.001,
         clock: Callable[[], float] = time.monotonic,
+        motion: str = "coordinated",
     ) -> None:
         self.geometry = geometry or Geometry()
         if true_params is not None:
@@ -158,6 +178,9 @@ class VirtualOrthoglide:
         if speed_mm_s <= 0 or accel_mm_s2 <= 0:
             raise ValueError("speed and acceleration must be > 0")
         self.accel_mm_s2 = float(accel_mm_s2)
+        if motion not in ("coordinated", "independent"):
+            raise ValueError(f"motion must be 'coordinated' or 'independent', got {motion!r}")
+        self.motion = motion
         self._speed = float(speed_mm_s)
         self._band = float(in_position_band_mm)
         self._clock = clock
@@ -191,7 +214,7 @@ class VirtualOrthoglide:
             self._alarm = code
         if self._motion is None:
             return self._rest.copy()
-        pos, _v, done = self._motion.position(now)
+        pos, done = self._motion.position(now)
         if done:
             if self._motion.homing:
                 self._set_homed()
@@ -201,7 +224,7 @@ class VirtualOrthoglide:
 
     def _freeze(self, t: float) -> None:
         if self._motion is not None:
-            pos, _v, done = self._motion.position(t)
+            pos, done = self._motion.position(t)
             if done and self._motion.homing:
                 self._set_homed()
             self._rest = pos
@@ -222,9 +245,15 @@ class VirtualOrthoglide:
             if homing:
                 self._set_homed()
             return 0.0
-        profile = _Profile.trapezoid(dist, self._speed, self.accel_mm_s2)
-        self._motion = _Motion(now, start, delta / dist, profile, target_m.copy(), homing)
-        return profile.duration
+        if self.motion == "coordinated":
+            shared = _Profile.trapezoid(dist, self._speed, self.accel_mm_s2)
+            profiles, scale = [shared] * 3, delta / dist
+        else:
+            profiles = [_Profile.trapezoid(abs(float(d)), self._speed, self.accel_mm_s2)
+                        for d in delta]
+            scale = np.where(delta < 0, -1.0, 1.0)
+        self._motion = _Motion(now, start, scale, profiles, target_m.copy(), homing)
+        return self._motion.duration
 
     # --- what the controller sees ---------------------------------------------------------
 
@@ -326,14 +355,10 @@ class VirtualOrthoglide:
         with self._lock:
             now = self._clock()
             self._advance(now)
-            m = self._motion
-            if m is None:
+            if self._motion is None:
                 return
-            s, v = m.profile.at(now - m.t0)
-            brake = _Profile.braking(s, v, self.accel_mm_s2)
             # An interrupted homing leaves the axis un-homed, as on a real drive.
-            self._motion = _Motion(now, m.start, m.direction, brake,
-                                   m.start + m.direction * brake.length, homing=False)
+            self._motion = self._motion.braking(now, self.accel_mm_s2)
 
     def reset_alarm(self) -> bool:
         """Clear the alarm (not while the e-stop is engaged); True if cleared."""

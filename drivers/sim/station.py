@@ -45,6 +45,8 @@ from drivers.sim.indicators import IndicatorFaults, SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
 from orthocal import Geometry
 
+STANDARD_STROKE_MM = 12.5  # station.config's default stroke_mm (preload: half)
+
 # Fast but physical: moves still take time, so in-position waits are real.
 SIM_SPEED_MM_S = 1000.0
 SIM_ACCEL_MM_S2 = 20000.0
@@ -139,6 +141,8 @@ class VirtualStation:
         mount_all: bool = False,
         mount_error_mm: float = 0.0,
         mount_errors: dict[str, float] | None = None,
+        motion: str = "coordinated",
+        strokes: dict[str, tuple[float, float]] | None = None,
         controller_options: dict[str, Any] | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
@@ -161,7 +165,7 @@ class VirtualStation:
         self.writeback = dict(writeback or {})
         self.machine = _PersistentMachine(
             self.geometry, true_drho, true_dl, true_tilt=true_tilt, speed_mm_s=speed_mm_s,
-            accel_mm_s2=accel_mm_s2)
+            accel_mm_s2=accel_mm_s2, motion=motion)
         if nvram_path is not None:
             path = Path(nvram_path)
             if path.exists():
@@ -170,6 +174,10 @@ class VirtualStation:
         self.mounts_path: Path | None = None
         self._mounts: dict[str, dict[str, Any]] = {}
         names = sorted({n for s in self.setups for n in s["indicators"]})
+        # (stroke, preload) per gauge: standard 12.5 mm gauges pushed in by half unless
+        # given (the config's defaults).
+        self.strokes = {n: (STANDARD_STROKE_MM, STANDARD_STROKE_MM / 2) for n in names}
+        self.strokes.update(strokes or {})
         # Stable paths, as /dev/serial/by-id/... gives a real USB adapter: a gauge
         # unplugged and plugged back (SimIndicator.unplug_for) keeps its port.
         self._link_dir = Path(tempfile.mkdtemp(prefix="orthocal-serial-by-id-"))
@@ -186,6 +194,8 @@ class VirtualStation:
                 sim = SimIndicator(protocol, lambda: 0.0, noise_mm=noise_mm,
                                    baud=line_baud if line_time else None, faults=faults,
                                    seed=None if seed is None else seed * 101 + i, name=name,
+                                   stroke_mm=self.strokes[name][0],
+                                   preload_mm=self.strokes[name][1],
                                    link=self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00")
                 sim.unmount()
                 self.indicators[name] = sim
@@ -287,8 +297,12 @@ class VirtualStation:
             "machine": {"leg_length": g.leg_length, "rho_min": g.rho_min, "rho_max": g.rho_max},
             # TCP: host and port; RTU: the pty the client opens and its baud rate.
             "controller": {**self.controller.client_kwargs(), "timeout_s": 1.0,
-                           "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2},
-            "indicators": [{"name": n, "port": s.port, "protocol": self.protocol}
+                           "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2,
+                           # The simulator knows how its axes move; a real config says it
+                           # when the profile's default (independent) is too cautious.
+                           "motion": self.machine.motion},
+            "indicators": [{"name": n, "port": s.port, "protocol": self.protocol,
+                            "stroke_mm": self.strokes[n][0], "preload_mm": self.strokes[n][1]}
                            for n, s in self.indicators.items()],
             "setups": [dict(s) for s in self.setups],
             "procedure": dict(self.procedure),

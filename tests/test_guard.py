@@ -1,0 +1,196 @@
+"""The plunger guard (issue 11): gauges watched while the axes move during a
+mounting's first cycle, the axes stopped before a plunger reaches an end of its
+stroke, later cycles refused before moving when predicted too close; and the
+simulated gauge's finite stroke it is tested with."""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from drivers.sim.indicators import SimIndicator
+from station import cmd_run
+from station.config import parse_config
+from station.errors import RunFailed
+from station.guard import PlungerGuard, PlungerGuardStop
+from station.journal import read_journal
+from station.plan import MotionChecker, build_plan
+
+FAST = {"cycles": 2, "readings": 3, "settle_s": 0.0}
+
+
+def args_for(tmp_path: Path, **extra: Any) -> argparse.Namespace:
+    base = dict(simulate=True, config=None, plan=False, seed=3, true_drho=None, true_dl=None,
+                noise=0.002, out=str(tmp_path / "runs"), yes=False, json=True, debug=False,
+                sim_procedure=FAST)
+    base.update(extra)
+    return argparse.Namespace(**base)
+
+
+def test_simulated_gauge_clamps_at_the_ends_of_its_stroke() -> None:
+    position = [0.0]
+    with SimIndicator("mitutoyo", lambda: position[0], stroke_mm=1.0, preload_mm=0.3) as sim:
+        assert (sim.stroke_mm, sim.preload_mm) == (1.0, 0.3)
+        for value, expected in ((0.2, 0.2), (-0.5, -0.3), (0.9, 0.7), (0.0, 0.0)):
+            position[0] = value
+            assert sim._value_mm() == pytest.approx(expected)
+        assert sim.clamped == 2
+    with SimIndicator("mitutoyo", lambda: 0.0, stroke_mm=12.5) as sim:
+        assert sim.preload_mm == 6.25  # mounted pushed in by half by default
+    with pytest.raises(ValueError):
+        SimIndicator("mitutoyo", lambda: 0.0, preload_mm=0.3)  # a preload needs a stroke
+
+
+def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -> None:
+    # Gauge A is mounted with only 0.3 mm of preload on a machine with large offsets:
+    # the signal on the way to Π_x^+ (-0.66 mm) would lift the leg off its plunger.
+    # The plan cannot know it (nominally the travel stays within -0.06 mm after its
+    # waypoints); the guard sees it coming and stops the axes, naming the gauge.
+    stations: list[Any] = []
+
+    def short_preload(station: Any) -> None:
+        station.strokes["A"] = (12.5, 0.3)
+        station.indicators["A"].preload_mm = 0.3
+        stations.append((station, station.indicators["A"]))
+
+    with pytest.raises(RunFailed) as info:
+        # at a real machine's speed (the tests' default virtual machine runs 10 times
+        # faster, leaving the guard one or two polls per sub-move)
+        cmd_run.run(args_for(tmp_path, true_drho=(-2.0, -2.0, -2.0), sim_speed=100.0,
+                             sim_station_hook=short_preload))
+    message = str(info.value)
+    (run_dir,) = list((tmp_path / "runs").iterdir())
+    assert "\n" not in message
+    assert "plunger guard: indicator A (y) on measurement setup 1 (leg x), move to Π_x^+" \
+        in message
+    assert "the end where the leg leaves it" in message and "more preload" in message
+    assert f"orthocal resume {run_dir}" in message
+    records = read_journal(run_dir / "journal.jsonl")
+    trips = [r["event"] for r in records if r["type"] == "event"
+             and r["event"]["event"] == "plunger-guard"]
+    assert len(trips) == 1 and trips[0]["indicator"] == "A"
+    assert records[-1]["type"] == "fault" and "plunger guard" in records[-1]["error"]
+    # stopped before the end: the plunger is still on the leg, and never read at its end
+    ((station, sim),) = stations
+    travel = sim._source() - sim._zero
+    assert -0.3 < travel < -0.05 and sim.clamped == 0, message
+    assert not station.machine.status().moving
+    assert json.loads((run_dir / "result.json").read_text())["status"] == "failed"
+
+
+def test_guard_leaves_a_normal_run_alone(tmp_path: Path, capsys) -> None:
+    code = cmd_run.run(args_for(tmp_path, true_drho=(1.5, -1.8, 1.2)))
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["status"] == "ok"
+    records = read_journal(Path(result["run_dir"]) / "journal.jsonl")
+    events = [r["event"] for r in records if r["type"] == "event"]
+    assert not any(e["event"] == "plunger-guard" for e in events)
+    learned = [e for e in events if e["event"] == "plunger-guard-learned"]
+    assert len(learned) == 6  # each mounting's first cycle: 3 setups × 2 phases
+    assert all(e["polls"] > 0 for e in learned)
+    for e in learned:
+        for lo, hi in e["predicted_mm"].values():
+            assert -6.25 + 0.2 < lo <= hi < 6.25 - 0.2
+
+
+def _guard(preload: float, journal: list[dict[str, Any]]) -> tuple[PlungerGuard, Any]:
+    data = {"indicators": [{"name": "A", "port": "/dev/a", "preload_mm": preload},
+                           {"name": "B", "port": "/dev/b"}],
+            "setups": [{"leg": "x", "indicators": {"A": "y", "B": "z"}}],
+            "controller": {"motion": "coordinated"}}
+    cfg = parse_config(copy.deepcopy(data))
+    checker = MotionChecker(cfg, ([0, 0, 0], [1000, 1000, 1000]))
+    sp = build_plan(cfg).setups[0]
+    stops: list[str] = []
+    guard = PlungerGuard(cfg, checker.nominal_travel, lambda: np.zeros(3),
+                         lambda names: {n: [0.0] for n in names},
+                         lambda: stops.append("stop"), journal.append)
+    guard.mount("coordinated", sp, "m", dict(sp.indicators), {"A": 1.0, "B": 2.0})
+    return guard, sp
+
+
+def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> None:
+    journal: list[dict[str, Any]] = []
+    guard, _ = _guard(0.8, journal)
+    g = build_plan(parse_config({"indicators": [{"name": "A", "port": "/dev/a"}],
+                                 "setups": [{"leg": "x", "indicators": {"A": "y"}}]})
+                   ).setups[0].postures
+    path = [g["0"], g["+"], g["-"], g["0"]]
+    for a, b, label in zip(path, path[1:], ["Π_x^+", "Π_x^-", "Π0"], strict=False):
+        guard.begin_move(a, [b])
+        assert guard.watch(a, b, label) is not None
+    # cycle 1 ended with A 0.65 mm lifted at Π_x^−: within 0.2 mm of its 0.8 mm preload
+    # once the move's own nominal swing is added; B far from its ends
+    guard.learn({"+": {"A": 1.0 - 0.1, "B": 2.1}, "-": {"A": 1.0 - 0.65, "B": 2.2},
+                 "0": {"A": 1.0, "B": 2.0}})
+    assert not guard.watching
+    assert journal[-1]["event"]["event"] == "plunger-guard-learned"
+    with pytest.raises(PlungerGuardStop) as info:
+        guard.check_cycle(2)
+    msg = str(info.value)
+    assert "indicator A (y) on measurement setup 1 (leg x)" in msg and "cycle 2" in msg
+    assert "nothing has moved" in msg and "more preload" in msg
+    assert journal[-1]["event"]["event"] == "plunger-guard-refused"
+    # the same cycle with a comfortable preload goes ahead
+    guard2, _ = _guard(6.25, [])
+    for a, b, label in zip(path, path[1:], ["Π_x^+", "Π_x^-", "Π0"], strict=False):
+        guard2.begin_move(a, [b])
+        guard2.watch(a, b, label)
+    guard2.learn({"+": {"A": 0.9, "B": 2.1}, "-": {"A": 0.35, "B": 2.2},
+                  "0": {"A": 1.0, "B": 2.0}})
+    guard2.check_cycle(2)
+
+
+def test_guard_poll_stops_on_a_drifting_signal_before_the_end() -> None:
+    # Positions follow the planned straight path Π0 → Π_x^+ sample by sample; gauge A
+    # (preload 2 mm) reads the nominal travel (down to -0.88 mm on the way) plus a
+    # signal growing linearly along the move. +0.2 mm: never near an end. -1.5 mm:
+    # -0.88 - 1.5 would pass the end at -2; the guard stops before the gauge gets
+    # within its 0.2 mm margin.
+    cfg = parse_config({"indicators": [{"name": "A", "port": "/dev/a", "preload_mm": 2.0}],
+                        "setups": [{"leg": "x", "indicators": {"A": "y"}}],
+                        "controller": {"motion": "coordinated"}})
+    checker = MotionChecker(cfg, ([0, 0, 0], [1000, 1000, 1000]))
+    sp = build_plan(cfg).setups[0]
+    a, b = np.asarray(sp.postures["0"]), np.asarray(sp.postures["+"])
+    path = a + (b - a) * np.linspace(0, 1, 41)[:, None]
+
+    def run(signal_at_end: float) -> tuple[int, list[str], float]:
+        k = [0]
+        stops: list[str] = []
+        last = [0.0]
+
+        def positions() -> np.ndarray:
+            return path[min(k[0], 40)]
+
+        def read(names: list[str]) -> dict[str, list[float]]:
+            here = path[min(k[0], 40)]
+            nominal = float(checker.nominal_travel(sp, "A", "y", here[None])[0])
+            last[0] = nominal + signal_at_end * min(k[0], 40) / 40
+            k[0] += 1
+            return {"A": [10.0 + last[0]]}
+
+        guard = PlungerGuard(cfg, checker.nominal_travel, positions, read,
+                             lambda: stops.append("stop"), lambda r: None)
+        guard.mount("coordinated", sp, "m", {"A": "y"}, {"A": 10.0})
+        guard.begin_move(a, [b])
+        poll = guard.watch(a, b, "Π_x^+")
+        assert poll is not None
+        try:
+            while k[0] <= 40:
+                poll()
+        except PlungerGuardStop:
+            pass
+        return k[0], stops, last[0]
+
+    polls, stops, _ = run(0.2)
+    assert polls > 40 and stops == []
+    polls, stops, travel = run(-1.5)
+    assert stops == ["stop"] and polls < 40 and travel > -2.0 + 0.2
