@@ -93,7 +93,9 @@ def test_guard_leaves_a_normal_run_alone(tmp_path: Path, capsys) -> None:
     events = [r["event"] for r in records if r["type"] == "event"]
     assert not any(e["event"] == "plunger-guard" for e in events)
     learned = [e for e in events if e["event"] == "plunger-guard-learned"]
-    assert len(learned) == 6  # each mounting's first cycle: 3 setups × 2 phases
+    # each mounting's first cycle: 3 setups × the phases the closed loop measured
+    # (misplaced stands can ask for a second write-back and its verification)
+    assert len(learned) == 3 * len(result["iterations"])
     assert all(e["polls"] > 0 for e in learned)
     for e in learned:
         for lo, hi in e["predicted_mm"].values():
