@@ -18,6 +18,7 @@ Part "small": hidden Δρ uniform in ±0.5 mm, stands within ±1 mm, 1 µm noise
 one round fixes these machines, so every run must take exactly one write-back.
 
     python bench/closed_loop.py [--runs 20] [--seed 1] [--part misplaced|small|both]
+                                [--model rho|auto|...]
 """
 
 from __future__ import annotations
@@ -33,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 AXES = ("x", "y", "z")
-# The issue's model: Δρ only (auto would take rho+tilt for the stands' misfit).
-PROCEDURE = json.dumps({"settle_s": 0.0, "model": "rho"})
+# The issue's model is Δρ only; --model auto measures the station's default, whose
+# first round may take rho+tilt for the stands' misfit and later rounds choose again.
+MODEL = "rho"
 
 
 def station_command() -> list[str]:
@@ -46,7 +48,8 @@ def calibrate(seed: int, drho: np.ndarray, mount_mm: float, noise: float, out: P
     cmd = [*station_command(), "run", "--simulate", "--seed", str(seed),
            # "=": a value starting with "-" would read as an option
            "--true-drho=" + ",".join(f"{v:.4f}" for v in drho), "--mount-error", str(mount_mm),
-           "--noise", str(noise), "--sim-speed", "20000", "--sim-procedure", PROCEDURE,
+           "--noise", str(noise), "--sim-speed", "20000",
+           "--sim-procedure", json.dumps({"settle_s": 0.0, "model": MODEL}),
            "--yes", "--json", "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -95,7 +98,10 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=20)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--part", choices=["misplaced", "small", "both"], default="both")
+    parser.add_argument("--model", default="rho", help="the procedure's model (default rho)")
     args = parser.parse_args()
+    global MODEL
+    MODEL = args.model
     with tempfile.TemporaryDirectory(prefix="orthocal-loop-") as tmp:
         if args.part in ("misplaced", "both"):
             m = part("misplaced stands", args.runs, args.seed, 2.9, 8.0, 0.001, Path(tmp))

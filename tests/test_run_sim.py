@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -33,16 +34,26 @@ def only_run_dir(tmp_path: Path) -> Path:
 
 
 def check_recovered(result: dict, true_drho: tuple[float, float, float]) -> None:
+    # Not 3 SE alone: FAST's two cycles estimate the noise with 12 degrees of freedom,
+    # the station's standard errors are optimistic with so few cycles (measured:
+    # RMS error 1.9 um over seeds against ~1.2 um reported at 2 um noise; 1.13x at
+    # the default 3 x 5, bench/station_accuracy.py), and the plunger guard's readings
+    # during moves draw on the gauges' noise as the machine's timing lets them, so
+    # a seed's draw is not repeatable. 5 um is 2.6x that measured RMS.
     for axis, true in zip("xyz", true_drho, strict=True):
         name = f"drho_{axis}"
         err = result["identified"][name] - true
-        assert abs(err) <= 3 * result["std_errors"][name], (name, err, result["std_errors"])
+        bound = max(4 * result["std_errors"][name], 0.005)
+        assert abs(err) <= bound, (name, err, result["std_errors"])
     ver = result["verification"]
     # after write-back the machine is nominal: deviations at the noise level ...
     assert ver["deviations_rms_mm"] < 0.005 < result["deviations_rms_mm"]
-    # ... and what is left to identify is zero within its own statistics
+    # ... and what is left to identify is the written correction's own error seen
+    # through the verification's noise: zero within both (the closed loop's rule)
+    first = result["iterations"][0]["std_errors"]
     for name, value in ver["identified"].items():
-        assert abs(value) <= max(3 * ver["std_errors"][name], 0.003), (name, value)
+        se = math.hypot(ver["std_errors"][name], first.get(name) or 0.0)
+        assert abs(value) <= max(3 * se, 0.003), (name, value)
 
 
 @pytest.mark.parametrize("count", [2, 6])
