@@ -264,7 +264,9 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
     # but the two read before the alarm, whose cycle was redone after remounting
     records = read_journal(run_dir / "journal.jsonl")
     stops = [r["stop"] for r in records if r["type"] == "reading" and r["indicator"] == "A"]
-    assert len(set(stops)) == 2 * 3 * (1 + 3 * FAST["cycles"])
+    # (every phase the closed loop measured: a second write-back adds one)
+    phases = len(result["iterations"])
+    assert len(set(stops)) == phases * 3 * (1 + 3 * FAST["cycles"])
     assert sorted(s for s in set(stops) if stops.count(s) > 1) == ["m:0:0:0", "m:0:1:+"]
     # moves: 3 per cycle + 1 waypoint on each Π_i^+ → Π_i^−
-    assert result["timing"]["moves"] >= 2 * 3 * 4 * FAST["cycles"] - 4
+    assert result["timing"]["moves"] >= phases * 3 * 4 * FAST["cycles"] - 4

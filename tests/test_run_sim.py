@@ -82,10 +82,13 @@ def test_simulated_run_recovers_hidden_offsets(tmp_path: Path, capsys, count: in
         assert len(set().union(*names)) == 6 and "-z" in setups[1]["indicators"].values()
     kinds = [r["type"] for r in read_journal(run_dir / "journal.jsonl")]
     assert kinds[0] == "header" and kinds[-1] == "finished"
-    assert kinds.count("reading") == 2 * 3 * (1 + 3 * FAST["cycles"]) * 2  # 2 phases
+    # every phase the closed loop measured (noise can ask for a second write-back)
+    phases = len(result["iterations"])
+    assert kinds.count("reading") == 2 * 3 * (1 + 3 * FAST["cycles"]) * phases
     stages = [r["stage"] for r in read_journal(run_dir / "journal.jsonl")
               if r["type"] == "writeback"]
-    assert stages == ["backup", "intent", "done"]
+    rounds = sum(1 for it in result["iterations"] if it["offsets_written"] is not None)
+    assert stages == ["backup", "intent", "done"] * rounds and rounds >= 1
 
 
 def test_fault_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
