@@ -25,13 +25,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from station_accuracy import simulated_run  # bench/ is sys.path[0] when run as a script
 
 AXES = ("x", "y", "z")
 # The model is Δρ only; --model auto measures the station's default, whose
@@ -39,23 +38,12 @@ AXES = ("x", "y", "z")
 MODEL = "rho"
 
 
-def station_command() -> list[str]:
-    script = Path(sys.executable).with_name("orthocal")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "station"]
-
-
 def calibrate(seed: int, drho: np.ndarray, mount_mm: float, noise: float, out: Path) -> dict:
-    cmd = [*station_command(), "run", "--simulate", "--seed", str(seed),
-           # "=": a value starting with "-" would read as an option
-           "--true-drho=" + ",".join(f"{v:.4f}" for v in drho), "--mount-error", str(mount_mm),
-           "--noise", str(noise), "--sim-speed", "20000",
-           "--sim-procedure", json.dumps({"settle_s": 0.0, "model": MODEL}),
-           "--yes", "--json", "--out", str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        sys.stderr.write(proc.stderr[-4000:])
-        raise SystemExit(f"seed {seed}: station run failed (exit {proc.returncode})")
-    return json.loads(proc.stdout)
+    # "=": a value starting with "-" would read as an option
+    return simulated_run(
+        seed, out, "--true-drho=" + ",".join(f"{v:.4f}" for v in drho),
+        "--mount-error", str(mount_mm), "--noise", str(noise), "--sim-speed", "20000",
+        "--sim-procedure", json.dumps({"settle_s": 0.0, "model": MODEL}))
 
 
 def writes(r: dict) -> int:

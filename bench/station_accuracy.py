@@ -34,14 +34,20 @@ def station_command() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "station"]
 
 
-def calibrate(seed: int, noise: float, out: Path) -> dict:
-    cmd = [*station_command(), "run", "--simulate", "--seed", str(seed), "--noise", str(noise),
+def simulated_run(seed: int, out: Path, *options: str) -> dict:
+    """``orthocal run --simulate --seed SEED OPTIONS --yes --json`` as a subprocess:
+    its JSON result; a failed run ends the benchmark with the station's stderr."""
+    cmd = [*station_command(), "run", "--simulate", "--seed", str(seed), *options,
            "--yes", "--json", "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         sys.stderr.write(proc.stderr[-4000:])
         raise SystemExit(f"seed {seed}: station run failed (exit {proc.returncode})")
     return json.loads(proc.stdout)
+
+
+def calibrate(seed: int, noise: float, out: Path) -> dict:
+    return simulated_run(seed, out, "--noise", str(noise))
 
 
 def main() -> None:
