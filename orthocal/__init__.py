@@ -19,7 +19,7 @@ from orthocal.identification import (
 from orthocal.kinematics import axis_directions, forward, inverse
 from orthocal.measurement import deviation, deviations, leg_reading
 from orthocal.postures import posture, posture_point
-from orthocal.selection import ModelSelection, select_model
+from orthocal.selection import ModelSelection, coverage_factor, select_model
 
 __all__ = [
     "AXES",
@@ -33,6 +33,7 @@ __all__ = [
     "axis_directions",
     "cannot_identify",
     "coefficients",
+    "coverage_factor",
     "deviation",
     "deviations",
     "exact_jacobian",

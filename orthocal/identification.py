@@ -54,6 +54,14 @@ class Identification:
     residuals: np.ndarray
     predicted: dict[Key, float] = field(default_factory=dict)
     converged: bool = True
+    #: Degrees of freedom behind ``std_errors``: the fit's ``dof`` when they come
+    #: from its own residual, the noise estimate's when from the measured noise
+    #: (orthocal.selection.with_measured_noise). Sets the coverage factor.
+    se_dof: float | None = None
+
+    @property
+    def std_error_dof(self) -> float:
+        return float(self.dof if self.se_dof is None else self.se_dof)
 
     @property
     def vector(self) -> np.ndarray:
@@ -74,6 +82,7 @@ class Identification:
             "residual_rms_mm": num(self.residual_rms),
             "sigma_mm": num(self.sigma),
             "dof": self.dof,
+            "std_errors_dof": num(self.std_error_dof),
             "condition_number": num(self.condition_number),
             "n_deviations": len(self.keys),
             "correlation": {

@@ -179,7 +179,8 @@ def noise_from_readings(stop_std: Sequence[float], readings: int) -> tuple[float
 
 
 def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma: float,
-                        inflate: float = 1.0, shared_zero: bool = True) -> Identification:
+                        inflate: float = 1.0, shared_zero: bool = True,
+                        noise_dof: float | None = None) -> Identification:
     """``result`` with its covariance from the measured noise instead of the fit's
     residual: least squares' sandwich (JᵀJ)⁻¹ Jᵀ (σ²·C) J (JᵀJ)⁻¹, C the rows'
     correlation (:func:`row_correlation`), times ``inflate``² (e.g. the lack of
@@ -187,7 +188,10 @@ def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma:
 
     Ordinary least squares treats the per-cycle deviations as independent; with
     shared Π0 stops they are not, and its standard errors come out ~10 % too
-    large for rho and ~20 % too small for the tilts of rho+tilt (BENCHMARKS.md)."""
+    large for rho and ~20 % too small for the tilts of rho+tilt (BENCHMARKS.md).
+    ``noise_dof``, the degrees of freedom of ``noise_sigma``, becomes the result's
+    ``se_dof``: with few cycles σ̂ is itself uncertain, and an interval of k
+    standard errors needs k from Student's t, not the normal (:func:`coverage_factor`)."""
     keys = list(result.keys)
     if result.method == "nonlinear":
         J = exact_jacobian(keys, geometry, result.vector, result.model)
@@ -199,7 +203,26 @@ def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma:
     std = np.sqrt(np.diag(covariance))
     correlation = covariance / np.outer(std, std)
     return replace(result, covariance=covariance, correlation=correlation,
-                   std_errors={n: float(s) for n, s in zip(result.names, std, strict=True)})
+                   std_errors={n: float(s) for n, s in zip(result.names, std, strict=True)},
+                   se_dof=None if noise_dof is None else float(noise_dof))
+
+
+def coverage_factor(dof: float | None, coverage: float = 0.95) -> float:
+    """k such that ±k standard errors hold the truth with probability ``coverage``
+    when the standard errors rest on ``dof`` degrees of freedom (GUM G.3: Student's
+    t). Two cycles of a six-gauge run give about 12 dof and k95 = 2.18, not 1.96;
+    k99.73 = 3.8, not 3: "within 3 standard errors" fails three times as often as
+    the normal promises. ``dof`` None or infinite: the normal's k."""
+    from scipy.stats import norm, t  # imported on demand, as in lack_of_fit
+
+    if not (0.0 < coverage < 1.0):
+        raise ValueError(f"coverage must lie in (0, 1), got {coverage!r}")
+    tail = (1.0 + coverage) / 2.0
+    if dof is None or not math.isfinite(dof):
+        return float(norm.ppf(tail))
+    if dof <= 0:
+        raise ValueError(f"coverage_factor needs dof > 0, got {dof!r}")
+    return float(t.ppf(tail, dof))
 
 
 def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,

@@ -84,5 +84,6 @@ def identify_measurement(config: StationConfig, m: Measurement,
         rejected = (test is not None and test.F is not None and test.p_value is not None
                     and test.p_value < LEVEL and test.F > 1.0)
         ident = with_measured_noise(ident, geometry, noise[0],
-                                    inflate=math.sqrt(test.F) if rejected else 1.0)
+                                    inflate=math.sqrt(test.F) if rejected else 1.0,
+                                    noise_dof=noise[1])
     return ident, selection

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import DeviceError
+from orthocal import coverage_factor
 from orthocal.loop import WRITABLE, predicted_after_correction, significant_corrections
 from station.config import StationConfig
 from station.devices import Devices
@@ -32,6 +33,7 @@ from station.results import (
     base_result,
     ident_json,
     measurement_fields,
+    num,
     print_result,
     writeback_fields,
 )
@@ -163,12 +165,15 @@ class Flow:
             self.result["model_selection"] = selection
         self.idents.append(ident)
         fields = measurement_fields(ctx.config, m, ident)
+        prev = self.idents[n - 1] if n else None
         sig = significant_corrections(
             ident.parameters, ident.std_errors, ctx.config.procedure.converge_mm,
-            previous_std_errors=self.idents[n - 1].std_errors if n else None)
+            previous_std_errors=prev.std_errors if prev else None,
+            dof=ident.std_error_dof, previous_dof=prev.std_error_dof if prev else None)
         self.iterations.append({
             "phase": phase, "model": ident.model, "identified": fields["identified"],
-            "std_errors": fields["std_errors"], "offsets_written": None, "writeback": None,
+            "std_errors": fields["std_errors"], "std_errors_dof": fields["std_errors_dof"],
+            "offsets_written": None, "writeback": None,
             "deviations_rms_mm": fields["deviations_rms_mm"],
             "residual_rms_mm": fields["residual_rms_mm"],
             "noise_floor_mm": fields["noise_floor_mm"], "significant": sig})
@@ -196,6 +201,7 @@ class Flow:
         gaps = [v["mean"] - v["expected"] for v in deviations.values()]
         return {
             "identified": fields["identified"], "std_errors": fields["std_errors"],
+            "std_errors_dof": fields["std_errors_dof"],
             "residual_rms_mm": fields["residual_rms_mm"],
             "deviations_rms_mm": fields["deviations_rms_mm"],
             "expected_rms_mm": float(np.sqrt(np.mean(np.square(predicted))))
@@ -262,7 +268,28 @@ class Flow:
             "write_backs": sum(1 for o in self.outcomes if o.status == "written"),
             "max_iterations": proc.max_iterations, "converge_mm": proc.converge_mm,
         }
+        self.result["remaining"] = self._remaining()
         self.result["status"], self.result["message"] = status, message
+
+    def _remaining(self) -> dict[str, Any] | None:
+        """What the last measurement says is left of Δρ on the machine as it now
+        stands, not written (below k standard errors or converge_mm, the loop's
+        limit, or a write-back refused). The loop stops on a correction too small
+        to be worth a round, not on none at all: the truth is
+        ``identified + remaining``, within k95 of its standard errors. None when the
+        last correction was written and nothing measured after it (verify off)."""
+        if not self.iterations or self.iterations[-1]["offsets_written"] is not None:
+            return None
+        last = self.iterations[-1]
+        names = [n for n in WRITABLE if n in last["identified"]]
+        dof = last.get("std_errors_dof")
+        return {
+            "phase": last["phase"], "round": len(self.iterations),
+            "estimate": {n: last["identified"][n] for n in names},
+            "std_errors": {n: last["std_errors"].get(n) for n in names},
+            "std_errors_dof": dof,
+            "coverage_factor_95": num(coverage_factor(dof)) if dof else None,
+        }
 
 
 def _stopped(seq: Sequencer) -> str:

@@ -8,6 +8,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from orthocal import coverage_factor
 from station.report_io import _atomic_write
 from station.report_plots import _plot_deviations, _plot_parameters, _release_fonts
 from station.report_text import (
@@ -126,8 +127,9 @@ def _what_was_done(result: Mapping[str, Any]) -> str:
         "ΔL<sub>i</sub> (leg-length error): how much leg i is longer than nominal. "
         "tilt<sub>yx</sub>, tilt<sub>zx</sub>, tilt<sub>zy</sub> (mrad): how far actuator "
         "axis y leans toward x, and axis z toward x and toward y, off square. "
-        "± values are one standard error σ; the true value lies within ±3σ with near "
-        "certainty if the model is right.</p>"
+        "± values are one standard error σ, from the noise measured in this run; the "
+        "95 % interval is ±kσ, k from Student's t on that noise's degrees of freedom "
+        "(GUM), so that few cycles do not claim more than they show.</p>"
     )
 
 
@@ -217,7 +219,10 @@ def _params_table(result: Mapping[str, Any]) -> str:
     ver = _dict(result.get("verification"))
     v_ident, v_errs = _dict(ver.get("identified")), _dict(ver.get("std_errors"))
     has_truth = any(_truth(result, n) is not None for n in names)
-    head = ["parameter", "unit", "identified", "σ", "±3σ interval"]
+    dof = _num(result.get("std_errors_dof"))
+    k = coverage_factor(dof) if dof is not None and dof > 0 else coverage_factor(None)
+    head = ["parameter", "unit", "identified", "σ",
+            f"95 % interval (k = {k:.2f}" + (f", {dof:g} dof)" if dof is not None else ")")]
     if has_truth:
         head.append("hidden truth")
     if v_ident:
@@ -225,7 +230,7 @@ def _params_table(result: Mapping[str, Any]) -> str:
     rows = []
     for n in names:
         v, s = _num(ident.get(n)), _num(errs.get(n))
-        interval = (f"{_fmt(v - 3 * s, signed=True)} … {_fmt(v + 3 * s, signed=True)}"
+        interval = (f"{_fmt(v - k * s, signed=True)} … {_fmt(v + k * s, signed=True)}"
                     if v is not None and s is not None else "—")
         row = [_param_html(n), _unit(n), _fmt(v, signed=True), _fmt(s), interval]
         if has_truth:

@@ -23,6 +23,7 @@ def ident_json(ident: Any) -> dict[str, Any]:
     return {"model": ident.model, "method": ident.method,
             "parameters": {k: float(v) for k, v in ident.parameters.items()},
             "std_errors": {k: num(v) for k, v in ident.std_errors.items()},
+            "std_errors_dof": num(ident.std_error_dof),
             "residual_rms_mm": num(ident.residual_rms)}
 
 
@@ -61,6 +62,9 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
         "model": ident.model, "method": ident.method,
         "identified": {k: float(v) for k, v in ident.parameters.items()},
         "std_errors": {k: num(v) for k, v in ident.std_errors.items()},
+        # with few cycles the noise behind the standard errors is itself uncertain:
+        # an interval of k standard errors takes k from Student's t with these dof
+        "std_errors_dof": num(ident.std_error_dof),
         "correlation": {"names": list(ident.names),
                         "matrix": [[num(x) for x in row] for row in np.asarray(corr)]},
         "residual_rms_mm": num(resid), "sigma_mm": num(ident.sigma),

@@ -48,3 +48,4 @@ def machine_locks_in_tmp(tmp_path_factory, monkeypatch):
     locks out of the home directory (subprocesses inherit the variable)."""
     if "ORTHOCAL_STATE_DIR" not in os.environ:
         monkeypatch.setenv("ORTHOCAL_STATE_DIR", str(tmp_path_factory.mktemp("state")))
+

@@ -9,6 +9,7 @@ import socket
 from pathlib import Path
 
 import pytest
+from truth import assert_truth, drho
 
 from drivers.sim.station import VirtualStation
 from station.cli import main
@@ -149,7 +150,5 @@ def test_kill_9_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok"
     assert journal.read_bytes().startswith(before)
-    for axis, true in zip("xyz", (1.1, -0.4, 0.6), strict=True):
-        name = f"drho_{axis}"
-        assert abs(result["identified"][name] - true) <= 3 * result["std_errors"][name]
+    assert_truth(result, drho((1.1, -0.4, 0.6)))
     assert result["verification"]["deviations_rms_mm"] < 0.005

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from truth import assert_truth, drho
 
 from station import cmd_run, report
 from station.journal import read_journal
@@ -45,11 +46,12 @@ def test_misplaced_stands_take_a_second_round_that_removes_the_bias(tmp_path: Pa
     first_error = max(abs(its[0]["identified"][f"drho_{a}"] - t)
                       for a, t in zip("xyz", true, strict=True))
     assert first_error > 0.005  # the first round alone is biased by the stands
-    last = its[-1]
-    for a, t in zip("xyz", true, strict=True):
+    # the total written plus what the last round found left is the truth within the
+    # last round's uncertainty; what is left is no more than that round resolves
+    assert_truth(result, drho(true))
+    assert result["remaining"]["estimate"] == {n: its[-1]["identified"][n] for n in drho(true)}
+    for a in "xyz":
         name = f"drho_{a}"
-        # the total written is the truth within 3 standard errors of the last identification
-        assert abs(result["identified"][name] - t) <= 3 * last["std_errors"][name] + 1e-4
         assert result["offsets_written"][a] == pytest.approx(
             result["offsets_before"][a] - result["identified"][name], abs=0.0011)
     assert result["loop"]["stopped"] == "converged"
@@ -88,6 +90,20 @@ def test_max_iterations_stops_the_loop_and_says_why(tmp_path: Path, capsys) -> N
     assert result["loop"]["stopped"] == "max_iterations"
     assert "did not converge" in result["message"]
     assert "NOT CONVERGED" in report.summary_text(result)
+    # what the last verification found is still on the machine, and the run says so
+    last = result["iterations"][-1]
+    assert result["remaining"]["round"] == 2 and last["significant"]
+    assert result["remaining"]["estimate"] == {
+        n: last["identified"][n] for n in ("drho_x", "drho_y", "drho_z")}
+    assert "left over" in report.summary_text(result)
+
+
+def test_without_verification_nothing_is_claimed_about_what_is_left(tmp_path: Path,
+                                                                   capsys) -> None:
+    result = run(tmp_path, capsys, true_drho=(0.3, -0.2, 0.4),
+                 sim_procedure={**FAST, "verify": False})
+    assert writes(result) == 1 and len(result["iterations"]) == 1
+    assert result["remaining"] is None and "left over" not in report.summary_text(result)
 
 
 def test_report_says_why_the_loop_did_not_go_on() -> None:

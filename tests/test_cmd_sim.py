@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 import serial
 from pymodbus.client import ModbusTcpClient
+from truth import assert_truth, drho
 
 from station.config import load_config
 
@@ -111,9 +112,7 @@ def test_run_from_another_process_calibrates_it(sim_process, tmp_path):
     )  # fmt: skip
     assert run.returncode == 0, run.stderr
     result = json.loads(run.stdout)
-    truth = {"drho_x": 0.5, "drho_y": -0.3, "drho_z": 0.8}
-    for name, value in truth.items():
-        assert abs(result["identified"][name] - value) < 4 * result["std_errors"][name] + 1e-4
+    assert_truth(result, drho((0.5, -0.3, 0.8)))
     assert result["verification"]["deviations_rms_mm"] < 0.005
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=10) == 0

@@ -84,6 +84,25 @@ def test_significance_needs_both_three_sigma_and_converge_mm() -> None:
                                    previous_std_errors=big) == ["drho_x"]
 
 
+def test_significance_takes_k_from_students_t_on_the_noise_dof() -> None:
+    se = {"drho_x": 0.001}
+    at = {"drho_x": 0.0035}  # 3.5 σ
+    # the noise known exactly (dof None): the normal's 3
+    assert significant_corrections(at, se, 0.002) == ["drho_x"]
+    assert significant_corrections(at, se, 0.002, dof=1e6) == ["drho_x"]
+    # two cycles give ~12 dof: k = 3.76, 3.5 σ is noise that rewrites a fixed machine
+    assert significant_corrections(at, se, 0.002, dof=12) == []
+    assert significant_corrections({"drho_x": 0.0039}, se, 0.002, dof=12) == ["drho_x"]
+    # a fixed k overrides
+    assert significant_corrections(at, se, 0.002, k=3.0, dof=12) == ["drho_x"]
+    # two rounds of 12 dof each: Welch–Satterthwaite gives 24, k = 3.34 on √2 σ
+    both = {"drho_x": 0.0049}  # 3.46 of √2 σ
+    assert significant_corrections(both, se, 0.002, previous_std_errors=se, dof=12,
+                                   previous_dof=12) == ["drho_x"]
+    assert significant_corrections(both, se, 0.002, previous_std_errors=se, dof=12,
+                                   previous_dof=4) == []
+
+
 def walk(max_iterations: int, verify: bool, significant: list[bool],
          writes: list[str]) -> list[Step]:
     """Drive next_step with scripted outcomes; returns every step taken."""

@@ -11,6 +11,8 @@ import time
 import tomllib
 from pathlib import Path
 
+from truth import assert_truth, drho
+
 from station.cli import main
 from station.config import toml_text
 
@@ -39,8 +41,9 @@ def test_run_over_modbus_rtu_to_a_successful_result(tmp_path: Path, capsys) -> N
         assert code == 0, err
         result = json.loads(out)
         assert result["status"] == "ok"
-        for axis, true in zip("xyz", (0.4, -0.6, 0.2), strict=True):
-            assert abs(result["identified"][f"drho_{axis}"] - true) < 0.01
+        # one cycle of two readings: the standard errors are ~3 µm, and the gauges'
+        # 5 mm mounting error biases the first round; the run's statement holds both
+        assert_truth(result, drho((0.4, -0.6, 0.2)))
         assert result["verification"]["deviations_rms_mm"] < 0.01
     finally:
         proc.send_signal(signal.SIGINT)
