@@ -12,7 +12,10 @@ at every mounting), 1 µm indicator noise. Printed per run: the error of the
 first round alone (max over the axes of |Δρ̂ − Δρ|: what a single write-back
 leaves in the machine), the number of write-backs, and the final error of the
 total written correction in units of the last identification's standard error
-(the loop ends "within 3σ of the truth" when that is ≤ 3 on every axis).
+(the loop ends "within 3σ of the truth" when that is ≤ 3 on every axis), and
+the run's own final statement: identified + remaining (what the last
+verification found left, not written) against the truth, in the remaining's
+standard errors, and whether it lies inside the run's 95 % interval.
 
 Part "small": hidden Δρ uniform in ±0.5 mm, stands within ±1 mm, 1 µm noise:
 one round fixes these machines, so every run must take exactly one write-back.
@@ -56,7 +59,8 @@ def part(name: str, runs: int, seed0: int, drho_max: float, mount_mm: float, noi
           f"noise {noise * 1000:g} µm, {runs} runs")
     print(f"{'seed':>5} {'true Δρ (mm)':>26} {'1st round err':>14} {'write-backs':>11} "
           f"{'final |err|/σ (x y z)':>24} {'converged':>9} {'wall s':>7}")
-    rows: dict[str, list] = {"first": [], "rounds": [], "z": [], "converged": []}
+    rows: dict[str, list] = {"first": [], "rounds": [], "z": [], "converged": [],
+                             "statement": [], "inside": []}
     for k in range(runs):
         seed = seed0 + k
         rng = np.random.default_rng([seed, 10])
@@ -70,6 +74,13 @@ def part(name: str, runs: int, seed0: int, drho_max: float, mount_mm: float, noi
         last = r["iterations"][-1]
         z = [abs(r["identified"][f"drho_{a}"] - t) / last["std_errors"][f"drho_{a}"]
              for a, t in zip(AXES, drho, strict=True)]
+        rem = r.get("remaining") or {}
+        for a, t in zip(AXES, drho, strict=True):
+            n = f"drho_{a}"
+            if n in (rem.get("estimate") or {}):
+                zs = (r["identified"][n] + rem["estimate"][n] - t) / rem["std_errors"][n]
+                rows["statement"].append(zs)
+                rows["inside"].append(abs(zs) <= rem["coverage_factor_95"])
         rows["first"].append(first)
         rows["rounds"].append(writes(r))
         rows["z"].append(max(z))
@@ -103,12 +114,22 @@ def main() -> None:
             print(f"closed loop: final total within 3σ of the truth on every axis in "
                   f"{within}/{args.runs} runs (worst {max(m['z']):.2f}σ); converged in "
                   f"{sum(m['converged'])}/{args.runs}")
+            statement(m)
         if args.part in ("small", "both"):
             s = part("small offsets, well-placed stands", args.runs, args.seed, 0.5, 1.0,
                      0.001, Path(tmp))
             one = sum(1 for n in s["rounds"] if n == 1)
             print(f"exactly one write-back in {one}/{args.runs} runs; final total within 3σ "
                   f"in {sum(1 for z in s['z'] if z <= 3)}/{args.runs}")
+            statement(s)
+
+
+def statement(rows: dict[str, list]) -> None:
+    z = np.asarray(rows["statement"])
+    if z.size:
+        print(f"the run's statement (identified + remaining): RMS(error/SE) "
+              f"{float(np.sqrt(np.mean(z**2))):.2f}, max {float(np.max(np.abs(z))):.2f}; "
+              f"inside its 95 % interval {sum(rows['inside'])}/{z.size}")
 
 
 if __name__ == "__main__":

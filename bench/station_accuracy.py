@@ -12,6 +12,12 @@ show; target 0.8–1.2). Also printed: the RMS of the per-value ratio
 error / standard error, and the RMS error itself. With 20 runs × 3 axes the
 figure is itself uncertain by about 1/sqrt(2·60) ≈ 9 %.
 
+The same for the run's final statement, which is what the station claims about
+the machine once the closed loop stopped: the truth is ``identified +
+remaining`` (what the last verification found left, not written) ± its
+standard errors; printed with how many values lie inside the 95 % interval
+(k95 from Student's t on the dof the run reports; target 95 %).
+
     python bench/station_accuracy.py [--runs 20] [--noise 0.005] [--seed 1]
 """
 
@@ -56,7 +62,7 @@ def main() -> None:
     parser.add_argument("--noise", type=float, default=0.005, metavar="MM")
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
-    errors, ses = [], []
+    errors, ses, zs, inside = [], [], [], 0
     with tempfile.TemporaryDirectory(prefix="orthocal-honesty-") as tmp:
         for k in range(args.runs):
             seed = args.seed + k
@@ -66,6 +72,14 @@ def main() -> None:
             se = [r["std_errors"][f"drho_{a}"] for a in AXES]
             errors.append(e)
             ses.append(se)
+            rem = r.get("remaining") or {}
+            for a in AXES:
+                n = f"drho_{a}"
+                if n not in (rem.get("estimate") or {}):
+                    continue
+                z = (r["identified"][n] + rem["estimate"][n] - truth[a]) / rem["std_errors"][n]
+                zs.append(z)
+                inside += abs(z) <= rem["coverage_factor_95"]
             cycles = [s["cycles_used"] for s in r["setups"]]
             print(f"seed {seed}: error " + ", ".join(f"{1000 * v:+6.2f}" for v in e)
                   + " µm; SE " + ", ".join(f"{1000 * v:.2f}" for v in se)
@@ -80,6 +94,11 @@ def main() -> None:
           f"{1000 * rms_err:.2f} µm, RMS reported SE {1000 * rms_se:.2f} µm")
     print(f"honesty RMS(error)/RMS(SE) = {rms_err / rms_se:.3f}; RMS(error/SE) = "
           f"{per_value:.3f} (± ~{100 / np.sqrt(2 * n):.0f} % from {n} values; target 0.8–1.2)")
+    if zs:
+        z = np.asarray(zs)
+        print(f"final statement (identified + remaining): RMS(error/SE) = "
+              f"{float(np.sqrt(np.mean(z**2))):.3f}, max {float(np.max(np.abs(z))):.2f}; "
+              f"inside its 95 % interval {inside}/{z.size} ({100 * inside / z.size:.0f} %)")
 
 
 if __name__ == "__main__":
