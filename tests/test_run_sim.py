@@ -12,8 +12,9 @@ from typing import Any
 
 import numpy as np
 import pytest
-from truth import assert_truth, drho
+from truth import TRUTH_COVERAGE, assert_truth, drho
 
+from orthocal import coverage_factor
 from station import cmd_run
 from station.errors import RunFailed
 from station.journal import read_journal
@@ -36,7 +37,7 @@ def only_run_dir(tmp_path: Path) -> Path:
 
 def check_recovered(result: dict, true_drho: tuple[float, float, float]) -> None:
     # The truth lies within the run's own statement (identified + what the last
-    # verification found left, ± k·SE with k from t on its dof: conftest.truth_miss).
+    # verification found left, ± k·SE with k from t on its dof: tests/truth.py).
     # Against the first identification's SE alone it does not: misplaced stands bias
     # that round beyond its noise, which the loop is there to remove.
     assert_truth(result, drho(true_drho))
@@ -46,9 +47,10 @@ def check_recovered(result: dict, true_drho: tuple[float, float, float]) -> None
     # ... and what is left to identify is the written correction's own error seen
     # through the verification's noise: zero within both (the closed loop's rule)
     first = result["iterations"][0]["std_errors"]
+    k = coverage_factor(ver["std_errors_dof"], TRUTH_COVERAGE)
     for name, value in ver["identified"].items():
         se = math.hypot(ver["std_errors"][name], first.get(name) or 0.0)
-        assert abs(value) <= max(3 * se, 0.003), (name, value)
+        assert abs(value) <= max(k * se, 0.003), (name, value)
 
 
 @pytest.mark.parametrize("count", [2, 6])
