@@ -13,9 +13,10 @@ first round alone (max over the axes of |Δρ̂ − Δρ|: what a single write-b
 leaves in the machine), the number of write-backs, and the final error of the
 total written correction in units of the last identification's standard error
 (the loop ends "within 3σ of the truth" when that is ≤ 3 on every axis), and
-the run's own final statement: identified + remaining (what the last
-verification found left, not written) against the truth, in the remaining's
-standard errors, and whether it lies inside the run's 95 % interval.
+the run's own final statement: remaining.total (the correction the controller
+holds plus what the last verification found left, not written) against the
+truth, in the remaining's standard errors, and whether it lies inside the
+run's 95 % interval.
 
 Part "small": hidden Δρ uniform in ±0.5 mm, stands within ±1 mm, 1 µm noise:
 one round fixes these machines, so every run must take exactly one write-back.
@@ -78,7 +79,7 @@ def part(name: str, runs: int, seed0: int, drho_max: float, mount_mm: float, noi
         for a, t in zip(AXES, drho, strict=True):
             n = f"drho_{a}"
             if n in (rem.get("estimate") or {}):
-                zs = (r["identified"][n] + rem["estimate"][n] - t) / rem["std_errors"][n]
+                zs = (rem["total"][n] - t) / rem["std_errors"][n]
                 rows["statement"].append(zs)
                 rows["inside"].append(abs(zs) <= rem["coverage_factor_95"])
         rows["first"].append(first)
@@ -127,7 +128,7 @@ def main() -> None:
 def statement(rows: dict[str, list]) -> None:
     z = np.asarray(rows["statement"])
     if z.size:
-        print(f"the run's statement (identified + remaining): RMS(error/SE) "
+        print(f"the run's statement (remaining.total): RMS(error/SE) "
               f"{float(np.sqrt(np.mean(z**2))):.2f}, max {float(np.max(np.abs(z))):.2f}; "
               f"inside its 95 % interval {sum(rows['inside'])}/{z.size}")
 

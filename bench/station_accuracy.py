@@ -13,9 +13,9 @@ error / standard error, and the RMS error itself. With 20 runs × 3 axes the
 figure is itself uncertain by about 1/sqrt(2·60) ≈ 9 %.
 
 The same for the run's final statement, which is what the station claims about
-the machine once the closed loop stopped: the truth is ``identified +
-remaining`` (what the last verification found left, not written) ± its
-standard errors; printed with how many values lie inside the 95 % interval
+the machine once the closed loop stopped: the truth is ``remaining.total``
+(the correction the controller holds plus what the last verification found
+left, not written) ± its standard errors; printed with how many values lie inside the 95 % interval
 (k95 from Student's t on the dof the run reports; target 95 %).
 
     python bench/station_accuracy.py [--runs 20] [--noise 0.005] [--seed 1]
@@ -79,7 +79,7 @@ def main() -> None:
                 n = f"drho_{a}"
                 if n not in (rem.get("estimate") or {}):
                     continue
-                z = (r["identified"][n] + rem["estimate"][n] - truth[a]) / rem["std_errors"][n]
+                z = (rem["total"][n] - truth[a]) / rem["std_errors"][n]
                 zs.append(z)
                 inside += abs(z) <= rem["coverage_factor_95"]
             cycles = [s["cycles_used"] for s in r["setups"]]
@@ -98,7 +98,7 @@ def main() -> None:
           f"{per_value:.3f} (± ~{100 / np.sqrt(2 * n):.0f} % from {n} values; target 0.8–1.2)")
     if zs:
         z = np.asarray(zs)
-        print(f"final statement (identified + remaining): RMS(error/SE) = "
+        print(f"final statement (remaining.total): RMS(error/SE) = "
               f"{float(np.sqrt(np.mean(z**2))):.3f}, max {float(np.max(np.abs(z))):.2f}; "
               f"inside its 95 % interval {inside}/{z.size} ({100 * inside / z.size:.0f} %)")
 

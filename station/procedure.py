@@ -275,17 +275,23 @@ class Flow:
         """What the last measurement says is left of Δρ on the machine as it now
         stands, not written (below k standard errors or converge_mm, the loop's
         limit, or a write-back refused). The loop stops on a correction too small
-        to be worth a round, not on none at all: the truth is
-        ``identified + remaining``, within k95 of its standard errors. None when the
+        to be worth a round, not on none at all. ``total``: the machine's Δρ at the
+        start of the run as the whole run measured it, the correction the
+        controller really holds (offsets read back, rounded to its count) plus what
+        is left; the truth lies within k95 of its standard errors. None when the
         last correction was written and nothing measured after it (verify off)."""
         if not self.iterations or self.iterations[-1]["offsets_written"] is not None:
             return None
         last = self.iterations[-1]
         names = [n for n in WRITABLE if n in last["identified"]]
+        before, now = self.result.get("offsets_before"), self.result.get("offsets_written")
+        applied = {f"drho_{a}": before[a] - now[a] for a in before} \
+            if isinstance(before, dict) and isinstance(now, dict) else {}
         dof = last.get("std_errors_dof")
         return {
             "phase": last["phase"], "round": len(self.iterations),
             "estimate": {n: last["identified"][n] for n in names},
+            "total": {n: applied.get(n, 0.0) + last["identified"][n] for n in names},
             "std_errors": {n: last["std_errors"].get(n) for n in names},
             "std_errors_dof": dof,
             "coverage_factor_95": num(coverage_factor(dof)) if dof else None,

@@ -96,7 +96,7 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     left = remaining_text(result)
     if left:
         lines.append(f"  left over     {left}: measured by the last verification, not "
-                     "written (the truth is identified + this)")
+                     "written (the machine's Δρ is the correction applied + this)")
     return lines
 
 
@@ -187,7 +187,7 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
         parts.append(f"<p>Left over after the last write-back, as the last verification "
                      f"measured it (not written: below what a further round resolves): "
                      f"{e(left)}. The machine's offsets are off by this much; the truth "
-                     f"is the identified Δρ plus it.</p>")
+                     f"is the correction applied plus it (the JSON's remaining.total).</p>")
     rows = []
     for n, it in enumerate(iterations):
         written = it.get("offsets_written")

@@ -6,8 +6,8 @@ from orthocal import coverage_factor
 
 # Tests that compare a simulated run with its hidden truth use the station's own
 # statement, so they test its honesty rather than a bound picked to pass: the truth
-# is ``identified + remaining`` (what the last verification found left, not
-# written) within k of its standard errors, k from Student's t on the dof behind
+# is ``remaining.total`` (the correction applied plus what the last verification
+# found left, not written) within k of its standard errors, k from Student's t on the dof behind
 # them. At coverage 1 − 1e-4 per value an honest station fails such a check about
 # once in 3000 runs of three axes. The check is coarse by design (standard errors a
 # quarter of the true ones fail it in most runs, half only in one run of 15): the
@@ -23,8 +23,8 @@ def truth_miss(result: dict, truth: dict[str, float],
     rem = result.get("remaining") or {}
     misses = {}
     for name, value in truth.items():
-        if name in (rem.get("estimate") or {}):
-            centre = result["identified"][name] + rem["estimate"][name]
+        if name in (rem.get("total") or {}):
+            centre = rem["total"][name]
             se, dof = rem["std_errors"][name], rem["std_errors_dof"]
         else:
             centre = result["identified"][name]
