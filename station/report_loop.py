@@ -123,8 +123,8 @@ def _round_lines(result: Mapping[str, Any]) -> list[str]:
                      f"{_um(correction_mm(e))} ({verdict}) → {action}")
     if loop.get("max_iterations") is not None:
         lines.append(f"    (at most {loop['max_iterations']} write-backs, a correction counts "
-                     f"beyond k σ, 3 for the normal, more for Student's t on the noise's few "
-                     f"dof, and beyond {_um(loop.get('converge_mm'))})")
+                     f"beyond k σ, k from Student's t on the noise's dof for one false alarm "
+                     f"in a thousand runs, and beyond {_um(loop.get('converge_mm'))})")
     return lines
 
 
@@ -179,8 +179,8 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
         parts.append(f"<figure>{plot}<figcaption>Each round: the deviations' RMS, the "
                      "largest correction the identification asks for, and the noise floor "
                      "from the cycle-to-cycle scatter. A correction within k standard errors "
-                     "(3 for the normal; Student's t on the noise's degrees of freedom, so "
-                     "that a machine already fixed is rewritten in 0.27 % of values) "
+                     "(Student's t on the noise's degrees of freedom, so "
+                     "that a machine already fixed is rewritten in one run of a thousand) "
                      "or below converge_mm is not written.</figcaption></figure>")
     left = remaining_text(result)
     if left:

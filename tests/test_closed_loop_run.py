@@ -80,7 +80,7 @@ def test_a_machine_one_round_fixes_gets_exactly_one_write_back(tmp_path: Path, c
                                                                seed: int) -> None:
     # Gauges of 0.5 µm noise: what the first round's own noise leaves (~0.5 µm) is
     # 4σ under converge_mm, so only a bias could ask for a second round. At 1 µm the
-    # loop's 0.27 % false-alarm rate per value rewrites one run in ~120 by design.
+    # loop's false-alarm rate rewrites one run in a thousand by design.
     result = run(tmp_path, capsys, seed=seed, true_drho=(0.3, -0.2, 0.4), mount_error=0.0,
                  noise=0.0005)
     assert writes(result) == 1 and len(result["iterations"]) == 2

@@ -70,38 +70,37 @@ def test_significance_needs_both_three_sigma_and_converge_mm() -> None:
     se = {"drho_x": 0.001, "drho_y": 0.001, "drho_z": 0.0001}
     # 2.5 σ: noise; 4 σ but below converge_mm: not worth a round; both: significant.
     params = {"drho_x": 0.0025, "drho_y": 0.004, "drho_z": 0.0025}
-    assert significant_corrections(params, se, converge_mm=0.002) == ["drho_y", "drho_z"]
-    assert significant_corrections(params, se, converge_mm=0.003) == ["drho_y"]
-    assert significant_corrections(params, {"drho_x": None}, converge_mm=0.0) == []
+    assert significant_corrections(params, se, converge_mm=0.002, k=3.0) == ["drho_y", "drho_z"]
+    assert significant_corrections(params, se, converge_mm=0.003, k=3.0) == ["drho_y"]
+    assert significant_corrections(params, {"drho_x": None}, converge_mm=0.0, k=3.0) == []
     # After a write-back the previous correction's own noise counts too:
     # 4 σ of this measurement is under 3 σ of both (4 < 3·√2).
     prev = {"drho_x": 0.001, "drho_y": 0.001, "drho_z": 0.0001}
-    assert significant_corrections(params, se, 0.002, previous_std_errors=prev) == ["drho_z"]
+    assert significant_corrections(params, se, 0.002, previous_std_errors=prev, k=3.0) == ["drho_z"]
     # A previous se inflated by misfit (the stands' bias) does not hide a correction.
     big = {"drho_x": 0.01, "drho_y": 0.01, "drho_z": 0.01}
-    assert significant_corrections(params, se, 0.002, previous_std_errors=big) == ["drho_z"]
+    assert significant_corrections(params, se, 0.002, previous_std_errors=big, k=3.0) == ["drho_z"]
     assert significant_corrections({"drho_x": 0.0045}, se, 0.002,
-                                   previous_std_errors=big) == ["drho_x"]
+                                   previous_std_errors=big, k=3.0) == ["drho_x"]
 
 
 def test_significance_takes_k_from_students_t_on_the_noise_dof() -> None:
     se = {"drho_x": 0.001}
-    at = {"drho_x": 0.0035}  # 3.5 σ
-    # the noise known exactly (dof None): the normal's 3
-    assert significant_corrections(at, se, 0.002) == ["drho_x"]
-    assert significant_corrections(at, se, 0.002, dof=1e6) == ["drho_x"]
-    # two cycles give ~12 dof: k = 3.76, 3.5 σ is noise that rewrites a fixed machine
-    assert significant_corrections(at, se, 0.002, dof=12) == []
-    assert significant_corrections({"drho_x": 0.0039}, se, 0.002, dof=12) == ["drho_x"]
+    # the noise known exactly (dof None): the normal's k for FALSE_ALARM, 3.59
+    assert significant_corrections({"drho_x": 0.0036}, se, 0.002) == ["drho_x"]
+    assert significant_corrections({"drho_x": 0.0035}, se, 0.002) == []
+    assert significant_corrections({"drho_x": 0.0036}, se, 0.002, dof=1e6) == ["drho_x"]
+    # two cycles give ~12 dof: k = 4.96, 4.5 σ is noise that would rewrite a fixed machine
+    assert significant_corrections({"drho_x": 0.0045}, se, 0.002, dof=12) == []
+    assert significant_corrections({"drho_x": 0.0050}, se, 0.002, dof=12) == ["drho_x"]
     # a fixed k overrides
-    assert significant_corrections(at, se, 0.002, k=3.0, dof=12) == ["drho_x"]
-    # two rounds of 12 dof each: Welch–Satterthwaite gives 24, k = 3.34 on √2 σ
-    both = {"drho_x": 0.0049}  # 3.46 of √2 σ
+    assert significant_corrections({"drho_x": 0.0035}, se, 0.002, k=3.0, dof=12) == ["drho_x"]
+    # two rounds of 12 dof each: Welch–Satterthwaite gives 24, k = 4.18 on √2 σ
+    both = {"drho_x": 0.0060}  # 4.24 of √2 σ
     assert significant_corrections(both, se, 0.002, previous_std_errors=se, dof=12,
                                    previous_dof=12) == ["drho_x"]
     assert significant_corrections(both, se, 0.002, previous_std_errors=se, dof=12,
                                    previous_dof=4) == []
-
 
 def walk(max_iterations: int, verify: bool, significant: list[bool],
          writes: list[str]) -> list[Step]:
