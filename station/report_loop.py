@@ -185,9 +185,10 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
     left = remaining_text(result)
     if left:
         parts.append(f"<p>Left over after the last write-back, as the last verification "
-                     f"measured it (not written: below what a further round resolves): "
-                     f"{e(left)}. The machine's offsets are off by this much; the truth "
-                     f"is the correction applied plus it (the JSON's remaining.total).</p>")
+                     f"measured it and the loop did not write it (too small to be worth a "
+                     f"round, or the loop stopped as said above): {e(left)}. The machine's "
+                     f"offsets are off by this much; its Δρ is the correction applied plus "
+                     f"it (the JSON's remaining.total).</p>")
     rows = []
     for n, it in enumerate(iterations):
         written = it.get("offsets_written")
