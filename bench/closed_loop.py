@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from station_accuracy import simulated_run  # bench/ is sys.path[0] when run as a script
+from station_accuracy import simulated_run, statement_z  # bench/ is sys.path[0]
 
 AXES = ("x", "y", "z")
 # The model is Δρ only; --model auto measures the station's default, whose
@@ -76,13 +76,9 @@ def part(name: str, runs: int, seed0: int, drho_max: float, mount_mm: float, noi
         last = r["iterations"][-1]
         z = [abs(r["identified"][f"drho_{a}"] - t) / last["std_errors"][f"drho_{a}"]
              for a, t in zip(AXES, drho, strict=True)]
-        rem = r.get("remaining") or {}
-        stated = []
-        for a, t in zip(AXES, drho, strict=True):
-            n = f"drho_{a}"
-            if n in (rem.get("total") or {}):
-                stated.append((rem["total"][n] - t) / rem["std_errors"][n])
-                rows["inside"].append(abs(stated[-1]) <= rem["coverage_factor_95"])
+        scored = statement_z(r, dict(zip(AXES, drho, strict=True)))
+        stated = [z for z, _ in scored]
+        rows["inside"] += [ok for _, ok in scored]
         rows["statement"].append(stated)
         rows["first"].append(first)
         rows["rounds"].append(writes(r))

@@ -144,8 +144,8 @@ def physical_floor(run_dir: Path, start_m: np.ndarray, timing: Timing
     for stop in stops:
         phase, setup, _cycle, sign = stop.split(":")
         rho = np.array(plan["setups"][int(setup)]["postures"][sign], dtype=float)
-        target = rho + offsets_of.get(phase, before if phase == "m" else after)  # machine
-
+        # machine scale: the offsets the phase ran on
+        target = rho + offsets_of.get(phase, before if phase == "m" else after)
         distance = float(np.max(np.abs(target - position)))
         if distance > 1e-3:  # the station skips moves within a µm, as the drive would
             moves += _Profile.trapezoid(distance, timing.speed_mm_s, timing.accel_mm_s2).duration

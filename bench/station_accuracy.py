@@ -15,8 +15,9 @@ figure is itself uncertain by about 1/sqrt(2·60) ≈ 9 %.
 The same for the run's final statement, which is what the station claims about
 the machine once the closed loop stopped: the truth is ``remaining.total``
 (the correction the controller holds plus what the last verification found
-left, not written) ± its standard errors; printed with how many values lie inside the 95 % interval
-(k95 from Student's t on the dof the run reports; target 95 %).
+left, not written) ± its standard errors; printed with how many values lie
+inside the 95 % interval (k95 from Student's t on the dof the run reports;
+target 95 %).
 
     python bench/station_accuracy.py [--runs 20] [--noise 0.005] [--seed 1]
 """
@@ -52,6 +53,20 @@ def simulated_run(seed: int, out: Path, *options: str) -> dict:
     return json.loads(proc.stdout)
 
 
+def statement_z(r: dict, truth: dict[str, float]) -> list[tuple[float, bool]]:
+    """Per axis, the run's statement against the truth (axis → mm): (remaining.total
+    − truth) / its SE, and whether that lies inside the run's 95 % interval. Empty
+    when the run states nothing (no measurement after the last write-back)."""
+    rem = r.get("remaining") or {}
+    out = []
+    for a in AXES:
+        n = f"drho_{a}"
+        if n in (rem.get("total") or {}):
+            z = (rem["total"][n] - truth[a]) / rem["std_errors"][n]
+            out.append((z, abs(z) <= rem["coverage_factor_95"]))
+    return out
+
+
 def calibrate(seed: int, noise: float, out: Path) -> dict:
     # A fast virtual axis and no settle: neither changes a reading, both the wall time.
     return simulated_run(seed, out, "--noise", str(noise), "--sim-speed", "20000",
@@ -74,14 +89,9 @@ def main() -> None:
             se = [r["std_errors"][f"drho_{a}"] for a in AXES]
             errors.append(e)
             ses.append(se)
-            rem = r.get("remaining") or {}
-            for a in AXES:
-                n = f"drho_{a}"
-                if n not in (rem.get("estimate") or {}):
-                    continue
-                z = (rem["total"][n] - truth[a]) / rem["std_errors"][n]
+            for z, ok in statement_z(r, truth):
                 zs.append(z)
-                inside += abs(z) <= rem["coverage_factor_95"]
+                inside += ok
             cycles = [s["cycles_used"] for s in r["setups"]]
             print(f"seed {seed}: error " + ", ".join(f"{1000 * v:+6.2f}" for v in e)
                   + " µm; SE " + ", ".join(f"{1000 * v:.2f}" for v in se)

@@ -9,21 +9,12 @@ station.report so the two can change independently.
 from __future__ import annotations
 
 import html
-import math
 from collections.abc import Mapping
 from typing import Any
 
+from orthocal.loop import WRITABLE
 from station.loop import STOP_REASONS
-
-WRITABLE = ("drho_x", "drho_y", "drho_z")
-
-
-def _num(value: Any) -> float | None:
-    try:
-        f = float(value)
-    except (TypeError, ValueError):
-        return None
-    return f if math.isfinite(f) else None
+from station.report_text import _num
 
 
 def _um(value: Any) -> str:
