@@ -91,7 +91,31 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--motion", choices=["coordinated", "independent"], default=None,
         help="how the virtual controller moves its axes: together on the straight line "
-             "(coordinated, the default) or each on its own trapezoid (independent)",
+             "(coordinated, the default; the config then says so) or each on its own "
+             "profile (independent, the default with --drive-delays or --drive-sequence; "
+             "the config then says nothing, as for a drive that does not interpolate)",
+    )
+    # The virtual drive's own behaviour, never written to the config it hands the
+    # station: what a real drive does without saying (design.md, "Register map").
+    # Strings here, checked in station.simulation: a bad value is one line, exit 2.
+    p.add_argument(
+        "--drive-profile", metavar="SHAPE[,SHAPE,SHAPE]", default=None,
+        help="the virtual drive's profile shape: trapezoid (default), scurve "
+             "(jerk-limited) or cosine; one for all axes or x,y,z (independent only)",
+    )
+    p.add_argument(
+        "--drive-accel", metavar="MM_S2[,MM_S2,MM_S2]", default=None,
+        help="the virtual drive's own acceleration (mm/s²; one, or x,y,z when "
+             "independent), while the config still tells the station the default one",
+    )
+    p.add_argument(
+        "--drive-delays", metavar="X,Y,Z", default=None,
+        help="start delay of each axis after the move command (s, >= 0; independent)",
+    )
+    p.add_argument(
+        "--drive-sequence", metavar="ORDER", default=None,
+        help="the virtual drive moves one axis after another in this order, e.g. zyx "
+             "(the next starts when the previous has arrived; independent)",
     )
 
 

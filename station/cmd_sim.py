@@ -6,6 +6,9 @@ pseudo-terminal pair whose client end the config names), so
 ``orthocal run --config FILE`` can rehearse the real workflow from another
 terminal. A separate process cannot be told where the operator mounted the
 gauges, so six fixed indicators stand two per leg, all mounted at once.
+The drive moves as ``--motion`` and ``--drive-*`` say (station.simulation), and
+the config it writes tells the station only what an integrator would: that the
+axes are coordinated, if they are, and the default acceleration.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from typing import Any
 from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM, VirtualStation
 from station.config import dump_toml, parse_config
 from station.errors import BadInput
+from station.simulation import drive_motion, drive_params_from_args
 
 
 def main(args: argparse.Namespace) -> int:
@@ -40,6 +44,7 @@ def main(args: argparse.Namespace) -> int:
         raise BadInput(f"--mount-error: must be >= 0 mm, got {mount_error}")
     if args.speed is not None and not args.speed > 0:
         raise BadInput(f"--speed: must be > 0 mm/s, got {args.speed}")
+    drive = drive_params_from_args(args)
     kwargs: dict[str, Any] = {}
     if args.speed is not None:
         kwargs["speed_mm_s"] = args.speed
@@ -56,7 +61,7 @@ def main(args: argparse.Namespace) -> int:
             station = VirtualStation(drho, dl, noise, seed, protocol=args.protocol,
                                      indicator_count=6, port=args.port, mount_all=True,
                                      mount_error_mm=mount_error,
-                                     motion=getattr(args, "motion", None) or "coordinated",
+                                     motion=drive_motion(drive),
                                      controller_options={"transport": args.transport},
                                      true_tilt=tilt, **kwargs)
         except OSError as exc:
@@ -64,7 +69,7 @@ def main(args: argparse.Namespace) -> int:
         with station:
             header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, hidden Δρ = {drho} mm, "
                       f"ΔL = {dl} mm, tilts = {tilt} mrad, noise {noise} mm, stands off by "
-                      f"up to {mount_error} mm\n"
+                      f"up to {mount_error} mm, drive {_describe(drive)}\n"
                       f"Use: orthocal run --config {out}")
             # Validated like any operator's config: what we hand out must load.
             config = parse_config(station.config(), "orthocal sim")
@@ -85,3 +90,19 @@ def main(args: argparse.Namespace) -> int:
             signal.signal(s, handler)
     print("orthocal sim: stopped", file=sys.stderr)
     return 0
+
+
+def _describe(drive: dict[str, Any]) -> str:
+    """The drive's behaviour in the config's header line (the config itself says
+    nothing of it: that is the point)."""
+    parts = [drive["motion"]]
+    if drive["drive_profile"]:
+        parts.append("profile " + ",".join(drive["drive_profile"]))
+    if drive["drive_accel_mm_s2"]:
+        parts.append("accel " + ",".join(f"{a:g}" for a in drive["drive_accel_mm_s2"])
+                     + " mm/s²")
+    if drive["drive_delays_s"]:
+        parts.append("delays " + ",".join(f"{d:g}" for d in drive["drive_delays_s"]) + " s")
+    if drive["drive_sequence"]:
+        parts.append("sequence " + drive["drive_sequence"])
+    return ", ".join(parts)

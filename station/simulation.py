@@ -1,5 +1,12 @@
 """The in-process virtual station behind ``orthocal run --simulate``: its hidden errors
-from the command line, starting it, and restarting it for resume and rollback."""
+from the command line, starting it, and restarting it for resume and rollback.
+
+The drive's behaviour (``--motion`` and the ``--drive-*`` options: profile shape,
+own acceleration, start delays, one axis after another) goes into the simulated
+run's parameters as plain JSON values (the journal header keeps them), and
+:func:`drive_motion` rebuilds the same :class:`~drivers.sim.machine.DriveMotion`
+from them for ``resume``; a journal from before these existed has none and gets
+the plain drive of its ``motion``."""
 
 from __future__ import annotations
 
@@ -8,13 +15,16 @@ import math
 import secrets
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from station.config import StationConfig, parse_config
 from station.errors import BadInput
 from station.rundir import NVRAM_NAME
+
+if TYPE_CHECKING:
+    from drivers.sim.machine import DriveMotion
 
 DEFAULT_NOISE_MM = 0.002
 DEFAULT_SIM_DRHO_MM = 2.0  # random hidden Δρ are drawn uniform in ±this
@@ -43,7 +53,7 @@ def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "true_tilt": tilt,
         "noise_mm": noise,
         "mount_error_mm": mount,
-        "motion": getattr(args, "motion", None) or "coordinated",
+        **drive_params_from_args(args),
         # Test hooks (not on the command line): the six-indicator style, a procedure.
         "indicators": int(getattr(args, "sim_indicators", 2) or 2),
         "procedure": getattr(args, "sim_procedure", None),
@@ -68,8 +78,97 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         speed_mm_s=speed, accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
         # Journals from before stand misplacement existed ran with perfect stands.
         mount_error_mm=params.get("mount_error_mm", 0.0),
-        motion=params.get("motion") or "coordinated",
+        motion=drive_motion(params),
     )
+
+
+def _numbers(option: str, text: str, counts: tuple[int, ...], unit: str,
+             positive: bool) -> list[float]:
+    """``text`` as comma-separated finite numbers, as many as one of ``counts``,
+    each > 0 (``positive``) or >= 0; repeated to three."""
+    try:
+        values = [float(p) for p in text.split(",")]
+    except ValueError:
+        raise BadInput(f"{option}: expected numbers ({unit}) separated by commas, "
+                       f"got {text!r}") from None
+    if len(values) not in counts:
+        what = " or ".join({1: "one value", 3: "three values x,y,z"}[c] for c in counts)
+        raise BadInput(f"{option}: expected {what}, got {text!r}")
+    for v in values:
+        if not math.isfinite(v) or v < 0 or (positive and v == 0):
+            raise BadInput(f"{option}: must be {'>' if positive else '>='} 0 {unit}, "
+                           f"got {text!r}")
+    return values * 3 if len(values) == 1 else values
+
+
+def drive_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The virtual drive from ``--motion`` and ``--drive-*`` (BadInput naming the
+    option), as JSON values: ``motion`` and ``drive_profile`` (3 shapes),
+    ``drive_accel_mm_s2`` (3 values), ``drive_delays_s`` (3), ``drive_sequence``,
+    each None when not given."""
+    from drivers.sim.machine import SHAPES
+
+    profile = getattr(args, "drive_profile", None)
+    accel = getattr(args, "drive_accel", None)
+    delays = getattr(args, "drive_delays", None)
+    sequence = getattr(args, "drive_sequence", None)
+    shapes: list[str] | None = None
+    if profile is not None:
+        shapes = [p.strip().lower() for p in str(profile).split(",")]
+        if len(shapes) not in (1, 3) or any(sh not in SHAPES for sh in shapes):
+            raise BadInput(f"--drive-profile: expected {'|'.join(SHAPES)}, one for all axes "
+                           f"or three x,y,z, got {profile!r}")
+        shapes = shapes * 3 if len(shapes) == 1 else shapes
+    accels = None if accel is None else _numbers("--drive-accel", str(accel), (1, 3),
+                                                 "mm/s²", positive=True)
+    delay_values = None if delays is None else _numbers("--drive-delays", str(delays), (3,),
+                                                        "s", positive=False)
+    if sequence is not None:
+        given_sequence, sequence = sequence, str(sequence).strip().lower()
+        if sorted(sequence) != ["x", "y", "z"]:
+            raise BadInput(f"--drive-sequence: expected an order of x, y and z, each once "
+                           f"(e.g. zyx), got {given_sequence!r}")
+    motion = getattr(args, "motion", None)
+    timed = delay_values is not None or sequence is not None
+    if motion is None:
+        # Delays and a sequence exist only on a drive that does not interpolate.
+        motion = "independent" if timed else "coordinated"
+    if motion == "coordinated":
+        for option, given in (("--drive-delays", delay_values is not None),
+                              ("--drive-sequence", sequence is not None)):
+            if given:
+                raise BadInput(f"{option}: a coordinated drive has none; give "
+                               f"--motion independent (or leave --motion out)")
+        for option, values in (("--drive-profile", shapes), ("--drive-accel", accels)):
+            if values is not None and len(set(values)) > 1:
+                raise BadInput(f"{option}: a coordinated drive has one for all axes; give "
+                               f"one value, or --motion independent")
+    params = {"motion": motion, "drive_profile": shapes, "drive_accel_mm_s2": accels,
+              "drive_delays_s": delay_values, "drive_sequence": sequence}
+    drive_motion(params)  # anything left that the drive refuses, said now
+    return params
+
+
+def drive_motion(params: dict[str, Any]) -> DriveMotion:
+    """The :class:`~drivers.sim.machine.DriveMotion` of a simulated run's
+    parameters (from :func:`drive_params_from_args`, or a journal header: keys
+    missing in older ones mean the plain drive of ``motion``)."""
+    from drivers.sim.machine import DriveMotion
+
+    motion = params.get("motion") or "coordinated"
+    shapes, accels = params.get("drive_profile"), params.get("drive_accel_mm_s2")
+    delays, sequence = params.get("drive_delays_s"), params.get("drive_sequence")
+    try:
+        if motion not in ("coordinated", "independent"):
+            raise ValueError(f"motion must be coordinated or independent, got {motion!r}")
+        return DriveMotion(
+            coordinated=motion == "coordinated",
+            shape=tuple(shapes) if shapes else "trapezoid",
+            accel_mm_s2=tuple(accels) if accels else None,
+            start_delay_s=tuple(delays) if delays else (0.0, 0.0, 0.0),
+            sequence=sequence or None)
+    except (ValueError, TypeError) as exc:
+        raise BadInput(f"--motion/--drive-*: {exc}") from None
 
 
 def station_hook(args: argparse.Namespace, station: Any) -> None:

@@ -30,7 +30,10 @@ A finite plunger (``stroke_mm``, mounted pushed in by ``preload_mm``, default
 half the stroke): the reading is the plunger's travel from where it was
 mounted (+ pushed in), so it clamps at −preload (the leg has left the fully
 extended plunger) and at stroke − preload (the plunger is at its stop).
-``clamped`` counts the readings taken there.
+``clamped`` counts the readings taken there; a plunger driven past an end
+between two readings goes unseen by it, which is why the virtual station counts
+out-of-stroke moves from the trajectory itself (drivers.sim.station), with this
+gauge's own :meth:`SimIndicator.travel_mm` and :meth:`SimIndicator.stroke_limits`.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ import tty
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Literal, Self
+from typing import Any, Literal, Self
 
 from drivers.indicators import IndicatorProtocol, make_protocol
 
@@ -210,13 +213,29 @@ class SimIndicator:
     def mounted(self) -> bool:
         return self._source is not None
 
+    def stroke_limits(self) -> tuple[float, float] | None:
+        """(−preload, stroke − preload): the plunger travel the gauge can show
+        (None: an endless plunger)."""
+        if self.stroke_mm is None:
+            return None
+        assert self.preload_mm is not None  # set with the stroke
+        return -self.preload_mm, self.stroke_mm - self.preload_mm
+
+    def travel_mm(self, source_mm: Any) -> Any:
+        """Plunger travel (+ pushed in) at source position(s) ``source_mm`` (a float
+        or an array): sign·(source − zero), what a reading shows before the clamp.
+        Reads the zero without the lock (one float, read atomically): the virtual
+        station evaluates it under the machine's lock, which ``mount`` and ``zero``
+        take while they hold this gauge's."""
+        return self.sign * (source_mm - self._zero)
+
     def _value_mm(self) -> float:
         with self._lock:
             source, zero = self._source, self._zero
         raw = self.unmounted_mm if source is None else self.sign * (float(source()) - zero)
-        if source is not None and self.stroke_mm is not None:
-            assert self.preload_mm is not None
-            low, high = -self.preload_mm, self.stroke_mm - self.preload_mm
+        limits = self.stroke_limits()
+        if source is not None and limits is not None:
+            low, high = limits
             if not low < raw < high:
                 self.clamped += 1
                 raw = min(max(raw, low), high)
