@@ -500,9 +500,14 @@ class ModbusAxisController:
             raise ControllerError(self.device, "speed unknown: give speed_mm_s or timeout_s")
         return self._speed
 
-    def move_timeout(self, distance_mm: float, speed_mm_s: float) -> float:
-        """Deadline of a move: trapezoid time × timeout_factor + timeout_margin_s."""
-        t = move_time(distance_mm, speed_mm_s, self.acceleration_mm_s2)
+    def move_timeout(self, distance_mm: float | Sequence[float], speed_mm_s: float) -> float:
+        """Deadline of a move: trapezoid time × timeout_factor + timeout_margin_s.
+
+        ``distance_mm``: one axis's travel, or every axis's: then the axes are
+        allowed to move one after another (COMMAND 1 promises no more), so the
+        trapezoid times add up."""
+        distances = np.atleast_1d(np.abs(np.asarray(distance_mm, dtype=float)))
+        t = sum(move_time(float(d), speed_mm_s, self.acceleration_mm_s2) for d in distances)
         return t * self.timeout_factor + self.timeout_margin_s
 
     def wait_in_position(self, targets: Sequence[float], timeout_s: float,
@@ -558,8 +563,9 @@ class ModbusAxisController:
                       timeout_s: float | None = None,
                       start: Sequence[float] | None = None,
                       watch: Callable[[], None] | None = None) -> np.ndarray:
-        """move() then wait_in_position(); the deadline comes from the distance, the
-        speed and the acceleration with a margin unless ``timeout_s`` is given.
+        """move() then wait_in_position(); the deadline comes from the distances, the
+        speed and the acceleration with a margin (the axes one after another, see
+        move_timeout) unless ``timeout_s`` is given.
         ``start``: the positions the caller has just read (saves reading them again);
         ``watch``: see wait_in_position."""
         rho = _vec3(targets, "targets")
@@ -568,9 +574,11 @@ class ModbusAxisController:
             here = self.read_positions() if start is None else _vec3(start, "start")
             distance = float(np.max(np.abs(rho - here)))
             speed = speed_mm_s if speed_mm_s is not None else self._current_speed()
+            # When the axes would arrive moving together: from then on the wait polls
+            # fast. The deadline allows them one after another.
             expected = move_time(distance, speed, self.acceleration_mm_s2)
             if timeout_s is None:
-                timeout_s = self.move_timeout(distance, speed)
+                timeout_s = self.move_timeout(np.abs(rho - here), speed)
         self.move(rho, speed_mm_s)
         return self.wait_in_position(rho, timeout_s, expected_s=expected, watch=watch)
 

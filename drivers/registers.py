@@ -222,9 +222,9 @@ class RegisterMap(BaseModel):
     offset_convention: str = ""
     #: read registers up to this many addresses apart in one request
     merge_gap: int = Field(default=0, ge=0, le=16)
-    #: the path of a move: "coordinated" (the axes interpolated on the straight line
-    #: in joint space) or "independent" (each axis its own trapezoid: the short moves
-    #: finish first); the safe default promises no interpolation
+    #: what a move promises: "coordinated" (the axes interpolated on the straight line
+    #: in joint space) or "independent" (each axis monotone to its target at any pace,
+    #: in any order); the safe default promises no interpolation
     motion: Literal["coordinated", "independent"] = "independent"
 
     _by_name: dict[str, Register] = PrivateAttr(default_factory=dict)

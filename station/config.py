@@ -67,12 +67,13 @@ class ControllerConfig(_Strict):
     #: deadline of homing (COMMAND 3) when resume homes the machine
     home_timeout_s: float = Field(120.0, gt=0, le=3600)
     # Axis speed of the test moves (written before each move) and the acceleration
-    # the station assumes when it derives each move's deadline.
+    # the station assumes when it derives each move's deadline (never its safety).
     speed_mm_s: float = Field(50.0, gt=0, le=65535)
     accel_mm_s2: float = Field(500.0, gt=0)
     baudrate: int = Field(19200, gt=0)
-    # The path COMMAND 1 takes: "coordinated" (straight line in joint space) or
-    # "independent" (each axis its own trapezoid); default: what the profile says.
+    # What COMMAND 1 promises: "coordinated" (the joints on the straight line) or
+    # "independent" (each axis monotone to its target, any pace, any order: the plan
+    # holds over the move's joint-space box); default: what the profile says.
     motion: Literal["coordinated", "independent"] | None = None
     # Narrow the controller's own soft limits (joint mm, x/y/z); never widen them.
     soft_min: list[float] | None = Field(None, min_length=3, max_length=3)

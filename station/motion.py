@@ -1,24 +1,46 @@
-"""The path the controller really takes between two stops (design.md, "Register
-map": COMMAND 1 promises no interpolation).
+"""Where the axes can be during one COMMAND 1, and bounds over that set
+(design.md, "Register map": COMMAND 1 promises no interpolation).
 
-Two motion models, named in the register-map profile (``RegisterMap.motion``)
-and overridable in the config (``[controller] motion``):
+The station never models a drive's timing: profile shape, acceleration, start
+delays and the order of the axes are the drive's own and cannot be measured
+from here. What it assumes instead, by motion model (the register-map
+profile's ``motion``, overridden by ``[controller] motion``):
 
-* ``coordinated``: the axes move together on the straight line in joint space
-  (one trapezoid on the longest axis, the others scaled to arrive with it);
-* ``independent``: each axis runs its own rest-to-rest trapezoid at the
-  commanded speed and acceleration, all starting together, so the short moves
-  finish first and the path bends away from the straight line.
+* ``independent`` (the built-in profiles' default): within one COMMAND 1 each
+  axis moves monotonically from where it is to its target, at any pace and in
+  any order (trapezoids, S-curves, axes a few ms apart, one axis after
+  another). The joint positions it can pass through are then exactly the
+  joint-space box spanned by the move's two ends, and a move is safe only if
+  it is safe everywhere in that box: "safe for any axis timing".
+* ``coordinated``: the controller interpolates: the joints stay on the straight
+  line between the two ends in joint space, at any speed profile along it
+  (its following error is taken to be far below the plunger margin).
 
-The plan check samples the path in time and checks every sample; for the
-independent model it checks the straight line too, since a controller that
-promises nothing may also interpolate.
+A bound over the set (:func:`segment_bound`) is found by branch and bound on
+grids over it (the box's corners, edges and interior, or the line's samples):
+each cell's extreme is its corners' widened by the error bound of multilinear
+interpolation, Σ_i h_i²/8 · max|∂²f/∂ρ_i²|, with the second derivatives taken
+from the grid's own second differences (× CURVATURE_SAFETY), and no widening
+along an axis where the cell's edges show the function monotone. Cells whose
+bound may hide a more extreme value are split until the bound is within
+``tolerance`` of the extreme found: where the function is monotone over the box
+the corners hold the extremes; where it is not (a leg that swings through its
+middle), the search finds the inside extreme.
+
+Waypoints (:func:`route`) split a move into sub-moves, each its own COMMAND 1,
+placed where the end point lies on its straight line from one stop to the next
+(nominal kinematics: between two test postures of leg i that line is axis i,
+along which leg i stays parallel to itself and its indicators read their
+mounting value). They are placed greedily, each sub-move as long as its box
+allows, which gives the fewest; then, for that count, spread so that the
+smallest slack of any sub-move is as large as it can be (room for what the
+plan cannot know: the travel the offsets themselves cause).
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -28,98 +50,259 @@ from orthocal import Geometry
 
 MotionModel = Literal["coordinated", "independent"]
 MOTION_MODELS: tuple[str, ...] = ("coordinated", "independent")
-# Samples per path (ends included). The leg's sideways excursion is smooth; on
-# an independent path it turns within the short axes' trapezoid (~10 % of a
-# long move), so 160 samples in time put ~16 on the turn: µm resolution.
-PATH_SAMPLES = 160
+#: What the plan guarantees under each model, in the words of the plan listing.
+GUARANTEE = {
+    "independent": "safe for any axis timing (each axis moves monotonically from its start "
+                   "to its target, at any pace, in any order: the whole joint-space box of "
+                   "each move's ends is checked)",
+    "coordinated": "the controller interpolates: the joints stay on the straight line "
+                   "between stops in joint space, at any speed profile along it",
+}
+# A bound is refined until it lies within this of the extreme found (mm of travel).
+TOLERANCE_MM = 0.005
+# Branch and bound: cells are halved at most this many times (a 160 mm move: cells
+# of 0.6 mm), and a round samples at most this many points.
+MAX_DEPTH = 8
+MAX_SAMPLES = 20000
+# The largest second derivative inside a cell is taken as at most this many times
+# the largest second difference the grid shows (smooth functions on a grid fine
+# enough that the widening is below the tolerance: their curvature varies slowly).
+CURVATURE_SAFETY = 2.0
+# Bisection steps of the greedy waypoint placement (fraction of the move: 1/4096).
+BISECTION_STEPS = 12
 
 
-def trapezoid_position(distance: float, v_max: float, accel: float,
-                       t: np.ndarray) -> np.ndarray:
-    """Distance travelled at times ``t`` by a rest-to-rest move over ``distance``
-    (a triangle when too short to cruise); ``distance`` at and after the end."""
-    t = np.asarray(t, dtype=float)
-    if distance <= 0:
-        return np.zeros_like(t)
-    t_acc = v_max / accel
-    if v_max * t_acc >= distance:  # never reaches v_max
-        t_acc = math.sqrt(distance / accel)
-        v_peak = accel * t_acc
-        cruise = 0.0
-    else:
-        v_peak = v_max
-        cruise = (distance - v_max * t_acc) / v_max
-    d_acc = 0.5 * v_peak * t_acc
-    t_dec = t_acc + cruise
-    total = t_dec + t_acc
-    s = np.where(t < t_acc, 0.5 * accel * np.clip(t, 0.0, None) ** 2,
-                 np.where(t < t_dec, d_acc + v_peak * (t - t_acc),
-                          distance - 0.5 * accel * np.clip(total - t, 0.0, None) ** 2))
-    return np.clip(s, 0.0, distance)
+class OutsideWorkspace(ValueError):
+    """Part of the set a move can pass through has no forward kinematics."""
 
 
-def trapezoid_time(distance: float, v_max: float, accel: float) -> float:
-    """Duration of the rest-to-rest move (drivers.axes.move_time, restated here so
-    the plan does not need the driver)."""
-    if distance <= 0:
-        return 0.0
-    d_acc = v_max**2 / accel
-    if distance <= d_acc:
-        return 2.0 * math.sqrt(distance / accel)
-    return distance / v_max + v_max / accel
+@dataclass(frozen=True)
+class Bound:
+    """Lower and upper bound of each column of a function over a move's set."""
+
+    lo: np.ndarray
+    hi: np.ndarray
 
 
-def straight_path(a: Sequence[float], b: Sequence[float],
-                  samples: int = PATH_SAMPLES) -> np.ndarray:
-    """Points on the straight line from a to b (the coordinated path)."""
-    t = np.linspace(0.0, 1.0, samples)[:, None]
-    a_v = np.asarray(a, dtype=float)
-    return a_v + (np.asarray(b, dtype=float) - a_v) * t
+Values = Callable[[np.ndarray], np.ndarray]  # (n, 3) joints -> (n, m) values
 
 
-def independent_path(a: Sequence[float], b: Sequence[float], speed: float, accel: float,
-                     samples: int = PATH_SAMPLES) -> np.ndarray:
-    """Joint positions sampled uniformly in time while each axis runs its own
-    trapezoid from a to b (ends included)."""
-    a_v = np.asarray(a, dtype=float)
-    delta = np.asarray(b, dtype=float) - a_v
-    duration = trapezoid_time(float(np.max(np.abs(delta))), speed, accel)
-    t = np.linspace(0.0, duration, samples)
-    out = np.empty((samples, 3))
-    for i in range(3):
-        out[:, i] = a_v[i] + math.copysign(1.0, delta[i]) * trapezoid_position(
-            abs(float(delta[i])), speed, accel, t)
-    return out
-
-
-def real_path(a: Sequence[float], b: Sequence[float], motion: str, speed: float,
-              accel: float) -> np.ndarray:
-    """Every point the plan check must hold at for one COMMAND 1 from a to b."""
-    line = straight_path(a, b)
+def _space(a: np.ndarray, b: np.ndarray,
+           motion: str) -> tuple[int, Callable[[np.ndarray], np.ndarray]]:
+    """The set a move can pass through as the image of the unit cube [0, 1]^d:
+    (d, u ↦ joints). The line: d = 1; the box: one dimension per axis that moves."""
     if motion == "coordinated":
-        return line
-    return np.vstack([independent_path(a, b, speed, accel), line])
+        return (1 if np.any(a != b) else 0), lambda u: a + (b - a) * u[..., :1]
+    active = [i for i in range(3) if abs(b[i] - a[i]) > 1e-12]
+
+    def joints(u: np.ndarray) -> np.ndarray:
+        out = np.broadcast_to(a, (*u.shape[:-1], 3)).copy()
+        for k, i in enumerate(active):
+            out[..., i] = a[i] + (b[i] - a[i]) * u[..., k]
+        return out
+
+    return len(active), joints
 
 
-def waypoints(a: Sequence[float], b: Sequence[float], n: int,
-              geometry: Geometry) -> list[np.ndarray]:
-    """The targets of n + 1 sub-moves from a to b: ``n`` waypoints that put the
-    end point at even steps on the straight line from P(a) to P(b) (nominal
-    kinematics), then b.
+def reachable_points(a: Sequence[float], b: Sequence[float], motion: str,
+                     n: int = 5) -> np.ndarray:
+    """A grid of n points per dimension over the joint positions one COMMAND 1 from
+    a to b can pass through: the box of its ends (independent) or the straight
+    line (coordinated)."""
+    a_v, b_v = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    d, joints = _space(a_v, b_v, motion)
+    if d == 0:
+        return a_v[None, :].copy()
+    mesh = np.meshgrid(*[np.linspace(0.0, 1.0, n)] * d, indexing="ij")
+    return joints(np.stack([m.ravel() for m in mesh], axis=-1))
 
-    Between two test postures of leg i the end point runs along axis i, so at
-    every waypoint leg i is parallel to its axis and its indicators read their
-    mounting value; each sub-move's own path (straight in joint space, or bent by
-    independent axes) strays only by what a short move can. Waypoints on the
-    straight line in joint space would not do: that line itself swings leg x by
-    4.9 mm between Π_x^+ and Π_x^− of the paper's machine.
-    """
+
+def _cell_extremes(values: np.ndarray, dims: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Per grid cell, the min and max of the cell's corners along the grid axes
+    ``dims`` (each of size ≥ 2) of ``values``."""
+    lo, hi = values, values
+    for axis in dims:
+        n = values.shape[axis]
+        a = [slice(None)] * values.ndim
+        b = [slice(None)] * values.ndim
+        a[axis], b[axis] = slice(0, n - 1), slice(1, n)
+        lo = np.minimum(lo[tuple(a)], lo[tuple(b)])
+        hi = np.maximum(hi[tuple(a)], hi[tuple(b)])
+    return lo, hi
+
+
+def cell_bounds(values: np.ndarray, dims: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bound of a smooth function over each cell of a regular grid
+    (``values``: grid axes ``dims``, each of size ≥ 3, other axes batch/columns).
+
+    Multilinear interpolation on a cell errs by at most Σ_i D_i s_i(1 − s_i)/2
+    (s the position in the cell, D_i = h_i² max|∂²f/∂ρ_i²| over the cell, taken
+    from the second differences at the cell's nodes × CURVATURE_SAFETY). Where,
+    along axis i, every edge of a cell changes f by at least D_i/2 in one sense, f
+    is monotone along i inside the cell and its extremes lie on a face: no
+    widening for that axis. Elsewhere the axis adds D_i/8. So a bound is exact
+    where the function is monotone on the grid's scale (a plunger at a stop, the
+    leg parallel) and widened only where an extreme may hide inside a cell."""
+    cell_lo, cell_hi = _cell_extremes(values, dims)
+    widen = np.zeros(cell_lo.shape)
+    for axis in dims:
+        n = values.shape[axis]
+        # |second difference| at every node (the ends take their neighbour's), then
+        # per cell the larger over its nodes
+        d2 = np.abs(np.diff(values, n=2, axis=axis))
+        d2 = np.concatenate([np.take(d2, [0], axis=axis), d2, np.take(d2, [n - 3], axis=axis)],
+                            axis=axis)
+        d2_cell = CURVATURE_SAFETY * _cell_extremes(d2, dims)[1]
+        others = tuple(a for a in dims if a != axis)
+        d_lo, d_hi = _cell_extremes(np.diff(values, axis=axis), others)  # the cells' edges
+        monotone = (d_lo >= d2_cell / 2.0) | (d_hi <= -d2_cell / 2.0)
+        widen = widen + np.where(monotone, 0.0, d2_cell / 8.0)
+    return cell_lo - widen, cell_hi + widen
+
+
+def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str,
+                  low: np.ndarray | None = None, high: np.ndarray | None = None,
+                  tolerance: float = TOLERANCE_MM) -> Bound | None:
+    """Bound of each column of ``f`` over the set a move from a to b can pass
+    through (module docstring), by branch and bound: every cell is sampled on a
+    3-point grid per dimension and bounded (:func:`cell_bounds`); a cell whose
+    bound lies more than ``tolerance`` beyond the best value found so far is split
+    in two along every dimension, until none is (or the depth or cell budget is
+    spent: the bound then stays as wide as the cells left). ``low``/``high``: a
+    sample beyond them ends the search at once with None (the move is refused
+    before its bound is sharp), as does a bound beyond them. Raises
+    OutsideWorkspace when ``f`` does (the set leaves the machine's workspace)."""
+    a_v, b_v = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    d, joints = _space(a_v, b_v, motion)
+    if d == 0:
+        v = _evaluate(f, a_v[None, :])[0]
+        return None if _outside(v, v, low, high) else Bound(v, v)
+    offsets = np.stack([m.ravel() for m in np.meshgrid(*[np.array([0.0, 0.5, 1.0])] * d,
+                                                       indexing="ij")], axis=-1)  # (3^d, d)
+    corners = np.stack([m.ravel() for m in np.meshgrid(*[np.array([0.0, 0.5])] * d,
+                                                       indexing="ij")], axis=-1)  # (2^d, d)
+    c0, size = np.zeros((1, d)), np.ones((1, d))  # cells in the unit cube
+    best_lo = best_hi = None
+    final_lo: list[np.ndarray] = []
+    final_hi: list[np.ndarray] = []
+    dims = tuple(range(1, d + 1))
+    for depth in range(MAX_DEPTH):
+        u = c0[:, None, :] + size[:, None, :] * offsets[None, :, :]  # (B, 3^d, d)
+        values = _evaluate(f, joints(u.reshape(-1, d)))
+        m = values.shape[-1]
+        flat = values.reshape(-1, m)
+        lo_now, hi_now = flat.min(axis=0), flat.max(axis=0)
+        if _outside(lo_now, hi_now, low, high):
+            return None
+        best_lo = lo_now if best_lo is None else np.minimum(best_lo, lo_now)
+        best_hi = hi_now if best_hi is None else np.maximum(best_hi, hi_now)
+        grid = values.reshape(len(c0), *([3] * d), m)
+        sub_lo, sub_hi = cell_bounds(grid, dims)
+        sub_lo, sub_hi = sub_lo.reshape(-1, m), sub_hi.reshape(-1, m)  # (B·2^d, m)
+        sub_c0 = (c0[:, None, :] + size[:, None, :] * corners[None, :, :]).reshape(-1, d)
+        sub_size = np.repeat(size / 2.0, len(corners), axis=0)
+        split = np.any(sub_lo < best_lo - tolerance, axis=1) | \
+            np.any(sub_hi > best_hi + tolerance, axis=1)
+        if depth == MAX_DEPTH - 1 or np.count_nonzero(split) * len(offsets) > MAX_SAMPLES:
+            split[:] = False  # the budget is spent: these bounds stand as they are
+        final_lo.append(sub_lo[~split].min(axis=0, initial=np.inf))
+        final_hi.append(sub_hi[~split].max(axis=0, initial=-np.inf))
+        if not np.any(split):
+            break
+        c0, size = sub_c0[split], sub_size[split]
+    lo, hi = np.min(final_lo, axis=0), np.max(final_hi, axis=0)
+    if _outside(lo, hi, low, high):
+        return None
+    return Bound(lo, hi)
+
+
+def _evaluate(f: Values, points: np.ndarray) -> np.ndarray:
+    try:
+        values = np.asarray(f(points), dtype=float)
+    except ValueError as exc:
+        raise OutsideWorkspace(str(exc)) from None
+    return values.reshape(len(points), -1)
+
+
+def _outside(lo: np.ndarray, hi: np.ndarray, low: np.ndarray | None,
+             high: np.ndarray | None) -> bool:
+    # 1e-9: a bound that touches its limit (a stop, where the travel is exact) holds
+    return bool((low is not None and np.any(lo < low - 1e-9))
+                or (high is not None and np.any(hi > high + 1e-9)))
+
+
+def line_point(a: Sequence[float], b: Sequence[float],
+               geometry: Geometry) -> Callable[[float], np.ndarray]:
+    """λ ↦ the joints that put the end point at fraction λ of its straight line
+    from P(a) to P(b) (nominal kinematics); the joint-space line where an end has
+    no forward kinematics (the plan check then says where)."""
     a_v = np.asarray(a, dtype=float)
     b_v = np.asarray(b, dtype=float)
-    fractions = [k / (n + 1) for k in range(1, n + 1)]
     try:
         pa, pb = orthocal.forward(a_v, geometry), orthocal.forward(b_v, geometry)
-        via = [orthocal.inverse(pa + (pb - pa) * f, geometry) for f in fractions]
-    except ValueError:  # an end outside the workspace: the plan check says where
-        via = [a_v + (b_v - a_v) * f for f in fractions]
-    return [np.asarray(v, dtype=float) for v in via] + [b_v]
+    except ValueError:
+        return lambda lam: a_v + (b_v - a_v) * lam
+
+    def at(lam: float) -> np.ndarray:
+        if lam <= 0.0:
+            return a_v.copy()
+        if lam >= 1.0:
+            return b_v.copy()
+        try:
+            return np.asarray(orthocal.inverse(pa + (pb - pa) * lam, geometry), dtype=float)
+        except ValueError:
+            return a_v + (b_v - a_v) * lam
+
+    return at
+
+
+Feasible = Callable[[np.ndarray, np.ndarray, float], bool]  # (start, end, slack) -> safe
+
+
+def _greedy(feasible: Feasible, at: Callable[[float], np.ndarray], slack: float,
+            max_waypoints: int) -> list[float] | None:
+    """Fractions of the waypoints, each sub-move as long as ``feasible`` allows."""
+    cuts: list[float] = []
+    t0 = 0.0
+    while True:
+        start = at(t0)
+        if feasible(start, at(1.0), slack):
+            return cuts
+        if len(cuts) >= max_waypoints:
+            return None
+        lo, hi = t0, 1.0
+        for _ in range(BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            if feasible(start, at(mid), slack):
+                lo = mid
+            else:
+                hi = mid
+        if lo <= t0:
+            return None  # not even a short step from here holds
+        cuts.append(lo)
+        t0 = lo
+
+
+def route(feasible: Feasible, a: Sequence[float], b: Sequence[float], geometry: Geometry,
+          max_waypoints: int, max_slack: float = 0.0) -> list[np.ndarray] | None:
+    """The targets of the sub-moves from a to b (waypoints, then b), fewest first
+    (module docstring), or None when no route of up to ``max_waypoints`` holds.
+    ``feasible(start, end, slack)`` says whether one COMMAND 1 from start to end is
+    safe with ``slack`` mm to spare; with the count found, the waypoints are
+    spread for the largest common slack up to ``max_slack``."""
+    at = line_point(a, b, geometry)
+    cuts = _greedy(feasible, at, 0.0, max_waypoints)
+    if cuts is None:
+        return None
+    if cuts and max_slack > 0:
+        # The largest slack that the same number of waypoints still achieves.
+        count = len(cuts)
+        lo, hi = 0.0, max_slack
+        for _ in range(8):
+            mid = 0.5 * (lo + hi)
+            spread = _greedy(feasible, at, mid, count)
+            if spread is None:
+                hi = mid
+            else:
+                lo, cuts = mid, spread
+    return [at(t) for t in cuts] + [np.asarray(b, dtype=float)]

@@ -130,9 +130,12 @@ def check_reference(controller: Any, indicators: Any, config: StationConfig, pla
         return records
     target = sp.move("0").targets
     start = np.asarray(controller.read_positions(), dtype=float)
-    MotionChecker(config, controller.soft_limits()).check(start, target, "Π0 (reference check)",
-                                                         sp, mounted)
-    controller.move_and_wait(list(target), speed_mm_s=config.controller.speed_mm_s, start=start)
+    legs = MotionChecker(config, controller.soft_limits()).route(
+        start, target, "Π0 (reference check)", sp, mounted)
+    here = start
+    for leg in legs:  # waypoints where a single COMMAND 1 could take a plunger too far
+        here = controller.move_and_wait(list(leg), speed_mm_s=config.controller.speed_mm_s,
+                                        start=here)
     if plan.settle_s > 0:
         time.sleep(plan.settle_s)
     now = indicators.read(plan.readings, names)
