@@ -12,21 +12,30 @@ first one showed and refused before moving if they would come that close.
 Travel is counted from the mounting point (the reading at the mounting's
 first Π0), + pushed in; the stroke spans −preload .. stroke − preload.
 
-Prediction while moving. Plunger travel = nominal travel (the plan's model of
-the path the controller takes, known for the whole move, waypoints included)
-+ signal (measured − nominal; a smooth function of the joint positions). At
-each poll the positions are read just before and just after the gauges; the
-signal is updated only where the nominal travel is flat over that window (on
-a fast swing the gauge's sampling instant would matter). Ahead of the axes the
-plunger is predicted at every remaining point of the move as nominal travel +
-the signal carried along the move's progress at the slope seen so far
-(median of the samples' slopes, once 15 % of the move is done); the axes are
-stopped when that, or the measured travel itself, comes within the margin.
+Prediction while moving. Plunger travel = nominal travel + signal (measured −
+nominal; a smooth function of the joint positions). The guard models no drive:
+the nominal travel still ahead is bounded over every position the axes may
+pass through from where they are (station.motion: the box from here to the
+sub-move's target for independent axes, then the later sub-moves' boxes), the
+same bound the plan check used. At each poll the positions are read just
+before and just after the gauges; the signal is measured where the nominal
+travel is flat over the box of that window, and elsewhere (on a fast swing the
+gauge's sampling instant would matter) only kept within what the reading
+allows over that box, so that a knocked stand still shows at once. Ahead, the
+signal is carried along the move's progress at the slope seen so far (median of
+the samples' slopes, once 15 % of the move is done); the axes are stopped when
+nominal bound + signal, or the measured travel itself, comes within the margin.
+
+A stop is a second line, not the end: the trip (:class:`PlungerGuardTrip`)
+carries what the sequencer needs to re-plan from where the machine stands
+(:meth:`PlungerGuard.signal_envelope`): more waypoints, a lower speed, the
+cycle's readings taken again. Later cycles route their moves with the signal
+the first cycle measured at each stop (:meth:`PlungerGuard.route_signal`).
 """
 
 from __future__ import annotations
 
-import time
+import itertools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -35,8 +44,7 @@ import numpy as np
 
 from station.config import StationConfig
 from station.errors import RunFailed
-from station.motion import independent_path, straight_path, trapezoid_time
-from station.plan import posture_label
+from station.plan import MotionChecker, PathRefused, posture_label
 
 # Nominal travel change within one poll window below which the signal estimate is
 # taken as exact (the gauge's sampling instant no longer matters).
@@ -45,10 +53,23 @@ QUIET_MM = 0.05
 # fraction of the move is behind: a reading's noise (µm) and the sampling skew
 # (tens of µm) grow by 1/progress.
 MIN_PROGRESS = 0.15
+# Positions within this of the sub-move's target: the axes have arrived.
+ARRIVED_MM = 0.002
+
 
 
 class PlungerGuardStop(RunFailed):
     """A plunger would have come within the margin of an end of its stroke."""
+
+
+class PlungerGuardTrip(PlungerGuardStop):
+    """The guard stopped the axes mid-move; the sequencer may re-plan from where
+    they stand (``indicator``, ``label``: the gauge and the move)."""
+
+    def __init__(self, message: str, indicator: str, label: str) -> None:
+        super().__init__(message)
+        self.indicator = indicator
+        self.label = label
 
 
 @dataclass
@@ -61,6 +82,9 @@ class _Gauge:
     signal: float = 0.0
     seen: tuple[float, float] = (0.0, 0.0)
     start_signal: float = 0.0  # at the stop the current move started from
+    end_signal: float = 0.0  # predicted at the move's target by the last poll
+    prior_slope: float = 0.0  # the signal's change over the move, as it was routed
+    rest_nominal: float = 0.0  # nominal travel where the last at_rest was taken
     samples: list[tuple[float, float]] = field(default_factory=list)  # (progress, Δsignal)
 
 
@@ -77,7 +101,7 @@ class PlungerGuard:
     ``watch`` for each (sub-)move of its first cycle, ``learn`` at the end of that
     cycle, ``check_cycle`` before each later one."""
 
-    def __init__(self, config: StationConfig, nominal: Callable[..., np.ndarray],
+    def __init__(self, config: StationConfig, checker: MotionChecker,
                  positions: Callable[[], np.ndarray],
                  read: Callable[[list[str]], dict[str, list[float]]],
                  stop: Callable[[], None], journal: Callable[[dict[str, Any]], None]
@@ -85,12 +109,14 @@ class PlungerGuard:
         self.config = config
         self.enabled = config.procedure.plunger_guard
         self.margin = config.procedure.plunger_margin_mm
-        self._nominal = nominal  # (setup, name, direction, path) -> travel along path
+        self._move_margin = self.margin
+        self._shifted = False
+        self._checker = checker
+        self._nominal = checker.nominal_travel  # (setup, name, direction, path) -> travel
         self._positions = positions
         self._read = read
         self._stop = stop
         self._journal = journal
-        self._motion = "coordinated"
         self._setup: Any = None
         self._where = ""
         self._gauges: dict[str, _Gauge] = {}
@@ -98,16 +124,18 @@ class PlungerGuard:
         self._moves: list[_MoveRecord] = []
         # (move label, gauge) -> predicted (min, max) travel for later cycles
         self.predicted: dict[tuple[str, str], tuple[float, float]] = {}
+        # posture ("0", "+", "-", "+30") -> gauge -> signal at that stop, learned in
+        # the mounting's first cycle (route_signal)
+        self.stop_signal: dict[str, dict[str, float]] = {}
         self.polls = 0
         # The smallest distance of a prediction from the margin so far (mm).
         self.slack = np.inf
 
     # --- a mounting --------------------------------------------------------------------
 
-    def mount(self, motion: str, setup: Any, phase: str, mounted: Mapping[str, str],
+    def mount(self, setup: Any, phase: str, mounted: Mapping[str, str],
               baseline: Mapping[str, float]) -> None:
         """Start watching a new mounting; ``baseline``: each gauge's Π0 reading."""
-        self._motion = motion
         self._setup = setup
         self._where = f"{'verification' if phase == 'v' else 'measurement'} setup " \
                       f"{setup.index + 1} (leg {setup.leg})"
@@ -118,45 +146,63 @@ class PlungerGuard:
                                         ind.stroke_mm - ind.preload, float(baseline[name]))
         self._moves = []
         self.predicted = {}
+        # the mounting point: travel 0 by definition
+        self.stop_signal = {"0": {n: 0.0 for n in self._gauges}}
+        self._shifted = False
         self.slack = np.inf
+        self._move_margin = self.margin
         self.watching = self.enabled and bool(self._gauges)
+
+    @property
+    def where(self) -> str:
+        """The mounting watched, in words ("measurement setup 1 (leg x)")."""
+        return self._where
 
     def forget(self) -> None:
         self._gauges = {}
         self.watching = False
         self.predicted = {}
+        self.stop_signal = {}
+
+    def restart_cycle(self) -> None:
+        """The cycle in progress is taken again (after a recovered trip): what its
+        moves showed so far is no prediction of the cycle that replaces it."""
+        self._moves = []
+        self.slack = np.inf
 
     # --- while moving ------------------------------------------------------------------
 
-    def _model_path(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
-        c = self.config.controller
-        if self._motion == "independent":
-            return independent_path(start, target, c.speed_mm_s, c.accel_mm_s2)
-        return straight_path(start, target)
-
-    def begin_move(self, start: Sequence[float], legs: Sequence[Sequence[float]]) -> None:
+    def begin_move(self, start: Sequence[float], legs: Sequence[Sequence[float]],
+                   signal: Mapping[str, tuple[float, float]] | None = None,
+                   margin: float | None = None) -> None:
         """A move from a stop (``start``) through its sub-moves' targets ``legs``: the
-        modelled path of every sub-move, its progress along the move and the nominal
-        travel there; the signal at rest anchors the move."""
+        bound of the nominal travel over every sub-move and its progress along the
+        move; the signal at rest anchors the move. ``signal``: the signal at the
+        start and the target the move was routed with; its change is the slope
+        carried ahead until the move's own samples tell it. ``margin``: this move's,
+        instead of plunger_margin_mm (a re-plan from where a plunger stood closer to
+        its end: it may come no closer than that)."""
         if not self.watching:
             return
+        self._move_margin = self.margin if margin is None else margin
         a = np.asarray(start, dtype=float)
         b = np.asarray(legs[-1], dtype=float)
         self._route_a, self._route_d = a, b - a
-        self._route_paths = []
-        here = a
-        for leg in legs:
-            leg_v = np.asarray(leg, dtype=float)
-            self._route_paths.append(self._model_path(here, leg_v))
-            here = leg_v
-        self._route_u = [self._progress(p) for p in self._route_paths]
-        self._route_nominal: dict[str, list[np.ndarray]] = {
-            g.name: [self._nominal(self._setup, g.name, g.direction, p)
-                     for p in self._route_paths] for g in self._gauges.values()}
-        for g in self._gauges.values():
-            g.start_signal = g.signal
+        self._route_legs = [np.asarray(leg, dtype=float) for leg in legs]
+        starts = [a, *self._route_legs[:-1]]
+        self._route_bounds = [self._checker.travel_bound(self._setup, self._mounting(), u, v)
+                              for u, v in zip(starts, self._route_legs, strict=True)]
+        self._route_u = [(float(self._progress(u)), float(self._progress(v)))
+                         for u, v in zip(starts, self._route_legs, strict=True)]
+        for name, g in self._gauges.items():
+            g.start_signal = g.end_signal = g.signal
             g.samples = []
+            ends = (signal or {}).get(name)
+            g.prior_slope = 0.0 if ends is None else float(ends[1] - ends[0])
         self._leg_index = 0
+
+    def _mounting(self) -> dict[str, str]:
+        return {n: g.direction for n, g in self._gauges.items()}
 
     def _progress(self, p: np.ndarray) -> np.ndarray:
         """Fraction of the move done at joint position(s) p (projection on its chord)."""
@@ -174,81 +220,105 @@ class PlungerGuard:
             return None
         index = self._leg_index
         self._leg_index += 1
-        path = self._route_paths[index]
-        nominal = {n: tracks[index] for n, tracks in self._route_nominal.items()}
-        # This sub-move's samples and every later sub-move's: what is still ahead.
-        ahead_t = {n: np.concatenate(tracks[index:]) for n, tracks in
-                   self._route_nominal.items()}
-        ahead_u = np.concatenate(self._route_u[index:])
-        record = _MoveRecord(label, nominal={n: (float(t.min()), float(t.max()))
-                                             for n, t in nominal.items()})
+        target_v = np.asarray(target, dtype=float)
+        record = _MoveRecord(label, nominal=dict(self._route_bounds[index]))
         self._moves.append(record)
         names = list(self._gauges)
-        started = time.monotonic()
-        c = self.config.controller
-        arrival = started + trapezoid_time(float(np.max(np.abs(np.asarray(target, float)
-                                                               - np.asarray(start, float)))),
-                                           c.speed_mm_s, c.accel_mm_s2)
-        took = [0.0]
-
-        def nearest(p: np.ndarray) -> int:
-            return int(np.argmin(np.sum((path - p) ** 2, axis=1)))
+        mounting = self._mounting()
+        arrived = [False]
 
         def poll() -> None:
-            began = time.monotonic()
-            if record.polls and began + took[0] > arrival:
-                # A poll now would end after the arrival and delay its detection; the
-                # last one predicted the rest of the path.
+            if arrived[0]:
+                # The last poll found the axes at the target (measured, not modelled):
+                # the drive is about to report it; a poll now would only delay that.
                 return
             before = np.asarray(self._positions(), dtype=float)
             values = self._read(names)
             after = np.asarray(self._positions(), dtype=float)
-            took[0] = time.monotonic() - began
-            k_b, k_a = nearest(before), nearest(after)
-            k0, k1 = min(k_b, k_a), max(k_b, k_a)
+            arrived[0] = bool(np.all(np.abs(after - target_v) <= ARRIVED_MM))
             self.polls += 1
             record.polls += 1
             ends = np.vstack([before, after])
             u = float(np.mean(self._progress(ends)))
+            # The gauge sampled somewhere between the two positions: the nominal travel
+            # over their box says whether that instant matters.
+            window = self._checker.travel_bound(self._setup, mounting, before, after)
+            # What is still ahead: from here to this sub-move's target, then the rest.
+            here_bounds = self._checker.travel_bound(self._setup, mounting, after, target_v)
             for name, g in self._gauges.items():
                 travel = float(values[name][0]) - g.baseline
                 g.seen = (min(g.seen[0], travel), max(g.seen[1], travel))
                 lo_hi = record.travel.get(name, (travel, travel))
                 record.travel[name] = (min(lo_hi[0], travel), max(lo_hi[1], travel))
-                # Nominal travel where the axes were just before and just after the
-                # gauges were read, and along the path between: the gauge sampled
-                # somewhere in there, so only a flat stretch gives the signal.
-                t_b, t_a = self._nominal(self._setup, name, g.direction, ends)
-                window = np.concatenate([nominal[name][k0:k1 + 1], [t_b, t_a]])
-                if float(window.max() - window.min()) <= QUIET_MM:
+                w_lo, w_hi = window[name]
+                if w_hi - w_lo <= QUIET_MM:
+                    t_b, t_a = self._nominal(self._setup, name, g.direction, ends)
                     g.signal = travel - 0.5 * float(t_a + t_b)
                     g.samples.append((u, g.signal - g.start_signal))
-                # Ahead: nominal travel + the signal, carried from here along the move's
-                # progress at the slope seen so far (the signal is a smooth function of
-                # the joint positions).
-                offset = k0 if k0 < len(nominal[name]) else len(nominal[name]) - 1
-                t_rest = ahead_t[name][offset:]
-                u_rest = ahead_u[offset:]
-                predicted = t_rest + g.signal + self._slope(g) * (u_rest - u)
-                hi = max(travel, float(predicted.max()))
-                lo = min(travel, float(predicted.min()))
-                slack = min(g.high - self.margin - hi, lo - g.low - self.margin)
+                else:
+                    # Only an interval is known: kept consistent with it (a knocked
+                    # stand moves the signal at once, a swing does not).
+                    g.signal = min(max(g.signal, travel - w_hi), travel - w_lo)
+                slope = self._slope(g)
+                g.end_signal = g.signal + slope * (1.0 - u)
+                lo, hi = travel, travel
+                ahead = [(here_bounds[name], (u, self._route_u[index][1]))] + [
+                    (self._route_bounds[k][name], self._route_u[k])
+                    for k in range(index + 1, len(self._route_bounds))]
+                for (n_lo, n_hi), (u0, u1) in ahead:
+                    s0, s1 = (g.signal + slope * (v - u) for v in (u0, u1))
+                    lo = min(lo, n_lo + min(s0, s1))
+                    hi = max(hi, n_hi + max(s0, s1))
+                slack = min(g.high - self._move_margin - hi, lo - g.low - self._move_margin)
                 self.slack = min(self.slack, slack)
                 if slack < 0:
                     self._trip(g, label, travel, hi, lo)
 
         return poll
 
+    def signal_envelope(self, target_sign: str | None = None
+                        ) -> dict[str, tuple[float, float]]:
+        """Per gauge, the signal the rest of the interrupted move adds to the nominal
+        travel: (now, at the move's end: as measured there before, if it is a stop
+        of this mounting already read, else as carried at the slope seen); the
+        re-plan after a trip (MotionChecker.route's ``signal``)."""
+        known = self.stop_signal.get(target_sign or "", {})
+        return {name: (g.signal, known.get(name, g.end_signal))
+                for name, g in self._gauges.items()}
+
+    def retreat_signal(self) -> dict[str, tuple[float, float]]:
+        """Per gauge, the signal on the way back after a trip: (now, at the stop the
+        interrupted move started from)."""
+        return {name: (g.signal, g.start_signal) for name, g in self._gauges.items()}
+
+    def route_signal(self, start_sign: str | None, target_sign: str | None
+                     ) -> dict[str, tuple[float, float]] | None:
+        """The signal a later cycle's move from posture ``start_sign`` to
+        ``target_sign`` adds (at its start, at its target), from what the first
+        cycle measured at both stops (None: not learned yet, or a stop it did not
+        see)."""
+        a = self.stop_signal.get(start_sign or "")
+        b = self.stop_signal.get(target_sign or "")
+        if a is not None and b is None and self._shifted:
+            b = a
+        if a is None or b is None:
+            return None
+        return {n: (a[n], b[n]) for n in self._gauges if n in a and n in b}
+
     @staticmethod
     def _slope(g: _Gauge) -> float:
         """d(signal)/d(progress) from the samples once enough of the move is done
         (a reading's noise and the sampling skew grow by 1/progress); the median
-        of the samples' slopes, so one knocked reading does not swing it."""
+        of the samples' slopes, so one knocked reading does not swing it. Before
+        that, the slope the move was routed with (0 where nothing is known)."""
         slopes = [d / u for u, d in g.samples if u >= MIN_PROGRESS]
-        return float(np.median(slopes)) if slopes else 0.0
+        return float(np.median(slopes)) if slopes else g.prior_slope
 
-    def at_rest(self, position: Sequence[float], means: Mapping[str, float]) -> None:
-        """A stop's mean readings at ``position``: the signal there, exactly."""
+    def at_rest(self, position: Sequence[float], means: Mapping[str, float],
+                sign: str | None = None) -> None:
+        """A stop's mean readings at ``position``: the signal there, exactly. At the
+        stop of posture ``sign`` it is also what moves to and from that stop are
+        routed with (route_signal)."""
         if not self.watching:
             return
         here = np.asarray(position, dtype=float)[None, :]
@@ -256,6 +326,30 @@ class PlungerGuard:
             if name in means:
                 nominal = float(self._nominal(self._setup, name, g.direction, here)[0])
                 g.signal = float(means[name]) - g.baseline - nominal
+                g.rest_nominal = nominal
+        if sign is not None:
+            self.stop_signal[sign] = {n: g.signal for n, g in self._gauges.items()
+                                      if n in means}
+
+    def zero_moved(self) -> None:
+        """A gauge's zero moved (a knocked stand): what was measured at the stops
+        before no longer holds; until a stop is read again, a move to it is routed
+        with the signal at its start held all the way (the stand's shift)."""
+        self.stop_signal = {}
+        self._shifted = True
+
+    def expect_stop(self, sign: str | None) -> None:
+        """After a trip on the way to posture ``sign``: until that stop is read, the
+        signal there is the one the trip predicted."""
+        if sign is not None and sign not in self.stop_signal:
+            self.stop_signal[sign] = {n: g.end_signal for n, g in self._gauges.items()}
+
+    def slack_now(self) -> float:
+        """How far the plunger nearest an end of its stroke is from it, at the signal
+        measured last (mm; at rest after a stop)."""
+        here = [min(g.high - (g.signal + t), (g.signal + t) - g.low)
+                for g, t in ((g, g.rest_nominal) for g in self._gauges.values())]
+        return float(min(here)) if here else np.inf
 
     def _trip(self, g: _Gauge, label: str, travel: float, hi: float, lo: float) -> None:
         try:
@@ -272,66 +366,84 @@ class PlungerGuard:
             "event": "plunger-guard", "indicator": g.name, "where": self._where,
             "move": label, "travel_mm": travel, "predicted_mm": predicted,
             "end_mm": end, "margin_mm": self.margin}})
-        raise PlungerGuardStop(
+        raise PlungerGuardTrip(
             f"plunger guard: indicator {g.name} ({g.direction}) on {self._where}, "
             f"move to {label}: its plunger was at {travel:+.3f} mm from the mounting "
             f"point and {heading} {what} ({end:+.3f} mm; margin {self.margin:g} mm). "
-            f"Re-mount it with {'less' if pushed else 'more'} preload or use a longer stroke")
+            f"Re-mount it with {'less' if pushed else 'more'} preload or use a longer stroke",
+            g.name, label)
 
     # --- later cycles --------------------------------------------------------------------
 
     def learn(self, stop_means: Mapping[str, Mapping[str, float]]) -> None:
-        """End of the first cycle: predict each later move's travel from what this
-        one showed: its polled extremes, and its nominal extremes + the signal at
-        the move's two stops (``stop_means``: posture "0", "+", "-", "+30".. -> gauge -> mean
-        reading there; nominal travel at a test posture is 0, the leg is parallel)."""
+        """End of the first cycle: the signal at each stop (``stop_means``: posture
+        "0", "+", "-", "+30".. -> gauge -> mean reading there; nominal travel at a
+        test posture is 0, the leg is parallel), with which every later move is
+        routed (route_signal), and each move's travel as polled."""
         if not self.watching:
             return
         self.watching = False
         stop_travel = {sign: {n: v - self._gauges[n].baseline for n, v in means.items()
                               if n in self._gauges} for sign, means in stop_means.items()}
-        by_label = {posture_label(p, self._setup.leg): p for p in stop_means}
-        previous = "0"
+        # nominal travel at a stop is 0: its travel is the signal there
+        self.stop_signal = {sign: dict(values) for sign, values in stop_travel.items()}
+        self._shifted = False
         for rec in self._moves:
-            base = rec.label.split(" (waypoint")[0]
-            sign = by_label.get(base, "0")
+            base = rec.label.split(" (waypoint")[0]  # the move's label: its target
             for name in self._gauges:
                 n_lo, n_hi = rec.nominal[name]
                 p_lo, p_hi = rec.travel.get(name, (n_lo, n_hi))
-                ends = [stop_travel.get(s, {}).get(name, 0.0) for s in (previous, sign)]
-                if "0" in (previous, sign):
-                    ends.append(0.0)  # the opening Π0 is the mounting point
-                key = (base, name)  # the move's label: its target
-                old = self.predicted.get(key, (np.inf, -np.inf))
-                self.predicted[key] = (min(old[0], p_lo, n_lo + min(ends)),
-                                       max(old[1], p_hi, n_hi + max(ends)))
-            if base == rec.label:  # the move's last leg: its target is a stop
-                previous = sign
+                old = self.predicted.get((base, name), (np.inf, -np.inf))
+                self.predicted[(base, name)] = (min(old[0], p_lo), max(old[1], p_hi))
         self._journal({"type": "event", "event": {
             "event": "plunger-guard-learned", "where": self._where,
             "polls": sum(r.polls for r in self._moves),
             "min_slack_mm": round(float(self.slack), 4),
+            "stop_signal_mm": {sign: {n: round(v, 4) for n, v in values.items()}
+                               for sign, values in self.stop_signal.items()},
             "predicted_mm": {f"{name} {label}": [round(lo, 4), round(hi, 4)]
                              for (label, name), (lo, hi) in self.predicted.items()}}})
 
     def check_cycle(self, cycle: int) -> None:
-        """Refuse a later cycle, before it moves, if a move would come within the margin."""
-        if not self.enabled:
+        """Refuse a later cycle, before it moves, where a move came within the margin
+        in the first cycle, or where no route keeps the margin with the signal the
+        first cycle measured at its stops (the routes found are the checker's, so the
+        cycle then moves along them)."""
+        if not self.enabled or not self._gauges:
             return
         for (label, name), (lo, hi) in self.predicted.items():
             g = self._gauges[name]
             if hi > g.high - self.margin or lo < g.low + self.margin:
                 pushed = hi > g.high - self.margin
                 end, value = (g.high, hi) if pushed else (g.low, lo)
-                gap = abs(end - value)
-                self._journal({"type": "event", "event": {
-                    "event": "plunger-guard-refused", "indicator": g.name,
-                    "where": self._where, "move": label, "cycle": cycle,
-                    "predicted_mm": value, "end_mm": end, "margin_mm": self.margin}})
-                raise PlungerGuardStop(
-                    f"plunger guard: indicator {g.name} ({g.direction}) on {self._where}: "
-                    f"cycle {cycle}'s move to {label} would bring its plunger to "
-                    f"{value:+.3f} mm, within {gap:.3f} mm of the end of its stroke "
-                    f"({end:+.3f} mm; margin {self.margin:g} mm), predicted from the first "
-                    f"cycle; nothing has moved. Re-mount it with "
-                    f"{'less' if pushed else 'more'} preload or use a longer stroke")
+                self._refuse(cycle, label, g, pushed, (
+                    f"would bring its plunger to {value:+.3f} mm, within "
+                    f"{abs(end - value):.3f} mm of the end of its stroke ({end:+.3f} mm; "
+                    f"margin {self.margin:g} mm), as the first cycle showed"),
+                    {"predicted_mm": value, "end_mm": end})
+        sp = self._setup
+        signs = ["0", *sp.order, "0"]
+        for a, b in itertools.pairwise(signs):
+            label = posture_label(b, sp.leg)
+            try:
+                self._checker.route(sp.postures[a], sp.postures[b], label, sp,
+                                    self._mounting(), signal=self.route_signal(a, b),
+                                    strict=True)
+            except PathRefused as exc:
+                g = self._gauges.get(exc.indicator or "")
+                if g is None:
+                    raise
+                self._refuse(cycle, label, g, exc.pushed, (
+                    f"cannot keep its plunger {self.margin:g} mm from the ends of its "
+                    f"stroke with the travel the first cycle measured at the stops "
+                    f"({exc.detail})"), {})
+
+    def _refuse(self, cycle: int, label: str, g: _Gauge, pushed: bool, what: str,
+                extra: dict[str, Any]) -> None:
+        self._journal({"type": "event", "event": {
+            "event": "plunger-guard-refused", "indicator": g.name, "where": self._where,
+            "move": label, "cycle": cycle, "margin_mm": self.margin, **extra}})
+        raise PlungerGuardStop(
+            f"plunger guard: indicator {g.name} ({g.direction}) on {self._where}: cycle "
+            f"{cycle}'s move to {label} {what}; nothing has moved. Re-mount it with "
+            f"{'less' if pushed else 'more'} preload or use a longer stroke")

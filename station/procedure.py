@@ -31,6 +31,7 @@ from station.progress import Progress
 from station.recovery import resume_hint
 from station.results import (
     base_result,
+    guard_fields,
     ident_json,
     measurement_fields,
     num,
@@ -329,16 +330,17 @@ def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
     wall = time.monotonic() - ctx.t0
     started = ctx.state.started
     result["duration_s"] = round(time.time() - started, 3) if started else round(wall, 3)
-    retries = 0
+    records: list[dict[str, Any]] = []
     try:
         records = read_journal(ctx.run_dir / JOURNAL_NAME)
-        retries = sum(1 for r in records if r["type"] == "event"
-                      and r.get("event", {}).get("event") == "retry")
     except BadInput:
         pass
+    retries = sum(1 for r in records if r["type"] == "event"
+                  and r.get("event", {}).get("event") == "retry")
     result["timing"] = {"wall_s": round(wall, 3), "moves": seq.counters.moves,
                         "readings": seq.counters.readings, "retries": retries,
                         "outliers_rejected": seq.counters.rejected}
+    result["plunger_guard"] = guard_fields(records)
     if final:
         ctx.journal.append({"type": "finished", "status": status, "message": message})
     else:

@@ -402,6 +402,14 @@ def _info_list(result: Mapping[str, Any]) -> str:
         rows.append(("timing", _e(
             f"wall {_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "
             f"{timing.get('readings', '—')} readings, retries: {timing.get('retries', '—')}")))
+    guard = _dict(result.get("plunger_guard"))
+    recovered = [r for r in guard.get("recovered") or [] if isinstance(r, dict)]
+    if recovered:
+        rows.append(("plunger guard", "<br>".join(_e(
+            f"stopped the axes: indicator {r.get('indicator')} on {r.get('where')}, move to "
+            f"{r.get('move')}; re-planned from where they stood via {r.get('waypoints')} "
+            f"waypoint(s) at {_fmt(r.get('speed_mm_s'), 1)} mm/s, the cycle taken again")
+            for r in recovered)))
     return '<dl class="kv">' + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
 
 

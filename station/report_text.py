@@ -229,6 +229,21 @@ def model_notes(result: Mapping[str, Any]) -> list[str]:
     return notes
 
 
+def guard_lines(result: dict) -> list[str]:
+    """The plunger guard's stops that the run recovered from (or none)."""
+    guard = _dict(result.get("plunger_guard"))
+    recovered = [r for r in guard.get("recovered") or [] if isinstance(r, dict)]
+    if not recovered:
+        return []
+    lines = [f"  plunger guard stopped the axes {guard.get('stops')} time(s) and the run "
+             f"recovered ({guard.get('retakes', 0)} cycle(s) taken again):"]
+    for r in recovered:
+        lines.append(f"    indicator {r.get('indicator')} on {r.get('where')}, move to "
+                     f"{r.get('move')}: re-planned from where the axes stopped via "
+                     f"{r.get('waypoints')} waypoint(s) at {_fmt(r.get('speed_mm_s'), 1)} mm/s")
+    return lines
+
+
 def summary_text(result: dict) -> str:
     """A few lines for the end of a run: status, identified values, residual,
     offsets written, verification before → after, where the report is."""
@@ -282,6 +297,7 @@ def summary_text(result: dict) -> str:
                      + ("; ΔL beside the tilts (two postures per leg)" if two else ""))
     if any(not n.startswith("drho_") for n in names):
         lines.append("  not written   tilts and ΔL (a controller takes only Δρ)")
+    lines += guard_lines(result)
     from station import report_loop
 
     lines += report_loop.summary_lines(result)

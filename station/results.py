@@ -82,6 +82,21 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
     }
 
 
+def guard_fields(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """What the plunger guard did, from the journal (every session of a resumed run):
+    each time it stopped the axes, how the run went on, and the cycles taken again."""
+    events = [r["event"] for r in records if r.get("type") == "event"
+              and isinstance(r.get("event"), dict)]
+    recovered = [{k: e.get(k) for k in ("where", "move", "indicator", "waypoints",
+                                        "speed_mm_s")}
+                 for e in events if e.get("event") == "plunger-guard-recovery"
+                 and e.get("result") == "recovered"]
+    return {"stops": sum(1 for e in events if e.get("event") == "plunger-guard"),
+            "recovered": recovered,
+            "retakes": sum(1 for e in events if e.get("event") == "retake"),
+            "refused": sum(1 for e in events if e.get("event") == "plunger-guard-refused")}
+
+
 def writeback_fields(result: dict[str, Any], outcome: WritebackOutcome, controller: Any) -> None:
     result["writeback"] = outcome.to_json()
     result["offsets_before"] = outcome.before if outcome.before is not None else \

@@ -32,13 +32,16 @@ import numpy as np
 
 from drivers.base import AxisController
 from station.config import StationConfig
-from station.guard import PlungerGuard
+from station.errors import BadInput, RunFailed
+from station.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.journal import Journal
 from station.operator import Operator
 from station.plan import (
+    SIGNAL_PAD_MM,
     Checkpoint,
     MotionChecker,
     Move,
+    PathRefused,
     Plan,
     Prompt,
     Read,
@@ -49,6 +52,22 @@ from station.plan import (
 )
 
 MAD_SCALE = 1.4826  # MAD of a normal sample × this ≈ σ
+# The plunger guard's second line: after a trip the rest of the move is re-planned
+# from where the axes stopped, at this fraction of the speed (again at each trip of
+# the same mounting, down to MIN_SPEED_FRACTION), at most MAX_RECOVERIES times per
+# mounting; the cycle the trip touched is taken again (at most MAX_RETAKES times)
+# when its closing Π0 shows a gauge's zero moved by more than ZERO_MOVED_MM (or the
+# repeatability limit, if larger): a knocked stand.
+RECOVERY_SPEED_FACTOR = 0.5
+MIN_SPEED_FRACTION = 0.1
+MAX_RECOVERIES = 6
+MAX_RETAKES = 2
+ZERO_MOVED_MM = 0.005
+# Waypoints a re-plan may use: from a plunger stopped close to its end the first
+# sub-moves must be short (their box small), growing as it gets away.
+RECOVERY_WAYPOINTS = 40
+# How long the axes may take to come to rest after the guard's stop (COMMAND 2).
+STOP_TIMEOUT_S = 10.0
 
 
 def split_key(key: str) -> tuple[str, str, str]:
@@ -189,6 +208,12 @@ class Counters:
     moves: int = 0
     readings: int = 0
     rejected: int = 0
+    guard_recoveries: int = 0
+    retakes: int = 0
+
+
+def _phase_name(phase: str) -> str:
+    return "verification" if phase.startswith("v") else "measurement"
 
 
 class Sequencer:
@@ -229,11 +254,21 @@ class Sequencer:
         self._all_names = [ind.name for ind in config.indicators]
         self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
         self.guard = PlungerGuard(
-            config, checker.nominal_travel, controller.read_positions,
+            config, checker, controller.read_positions,
             lambda names: indicators.read(1, names), controller.stop, self._journal_safe)
         # The guard arms at a mounting's first Π0 reading and watches the cycle after it.
         self._guard_pending = False
         self._guard_cycle: int | None = None
+        # The posture the axes last arrived at ("0", "+", "-", "+30"; None: unknown),
+        # the speed factor and recoveries of the current mounting, and whether the
+        # guard stopped the axes in the cycle in progress.
+        self._at: str | None = None
+        self._touched = False
+        self._leg_start: np.ndarray | None = None  # where the sub-move in progress began
+        self._speed_factor = 1.0
+        self._recoveries = 0
+        #: Recovered guard events (the summary and the report list them).
+        self.recovered: list[dict[str, Any]] = []
 
     # --- the procedure ---------------------------------------------------------------
 
@@ -351,9 +386,57 @@ class Sequencer:
                 self._execute(phase, step)
         if self._guard_cycle is not None and cycle > self._guard_cycle:
             self.guard.check_cycle(cycle)
-        for step in sp.cycle_steps(phase, cycle, self.plan.settle_s, self.plan.readings):
+        retakes = 0
+        while True:
+            self._touched = False
+            for step in sp.cycle_steps(phase, cycle, self.plan.settle_s, self.plan.readings):
+                self._execute(phase, step)
+            moved = self._zero_moved(phase, sp, cycle) if self._touched else None
+            if moved is None:
+                return self._finish_cycle(phase, sp, cycle)
+            retakes += 1
+            if retakes > MAX_RETAKES:
+                raise RunFailed(
+                    f"plunger guard: {_phase_name(phase)} setup {sp.index + 1} (leg "
+                    f"{sp.leg}), cycle {cycle}: {moved} again after {MAX_RETAKES} retakes "
+                    "of the cycle; check the stands, then orthocal resume")
+            self._retake(phase, sp, cycle, moved)
+
+    def _zero_moved(self, phase: str, sp: SetupPlan, cycle: int) -> str | None:
+        """After the guard stopped the axes in this cycle: did a gauge's zero move
+        (its Π0 before and after the cycle disagree)? Said in words, or None."""
+        start = self._stops[stop_id(phase, sp.index, cycle - 1, "0")]
+        end = self._stops[stop_id(phase, sp.index, cycle, "0")]
+        limit = max(ZERO_MOVED_MM, self.config.procedure.repeatability_mm)
+        moved = {n: end[n].mean - start[n].mean for n in sp.indicators
+                 if abs(end[n].mean - start[n].mean) > limit}
+        verdict = None if not moved else "the zero of " + ", ".join(
+            f"indicator {n} moved by {v:+.3f} mm" for n, v in moved.items()) + (
+            f" across a cycle the guard stopped (limit {limit:g} mm): the stand moved")
+        self.journal.append({"type": "event", "event": {
+            "event": "plunger-guard-zero-check", "phase": phase, "setup": sp.index,
+            "cycle": cycle, "limit_mm": limit, "moved": verdict is not None,
+            "zero_change_mm": {n: end[n].mean - start[n].mean for n in sp.indicators}}})
+        return verdict
+
+    def _retake(self, phase: str, sp: SetupPlan, cycle: int, why: str) -> None:
+        """Back to Π0 and its reading again: the readings of a cycle across which a
+        gauge's zero moved are taken again (a cycle must not mix readings from
+        before and after a knock)."""
+        stops = [stop_id(phase, sp.index, cycle - 1, "0")] + [
+            stop_id(phase, sp.index, cycle, p) for p in (*sp.order, "0")]
+        self.journal.append({"type": "event", "event": {
+            "event": "retake", "phase": phase, "setup": sp.index, "cycle": cycle,
+            "stops": stops, "why": why}})
+        self.counters.retakes += 1
+        for stop in stops[1:]:
+            self._stops.pop(stop, None)
+        self.guard.restart_cycle()
+        self.guard.zero_moved()
+        names = tuple(sp.indicators)
+        for step in (Settle(self.plan.settle_s),
+                     Read(stops[0], sp.index, cycle - 1, "0", names, self.plan.readings)):
             self._execute(phase, step)
-        return self._finish_cycle(phase, sp, cycle)
 
     def _finish_cycle(self, phase: str, sp: SetupPlan, cycle: int
                       ) -> tuple[dict[str, float], list[float]]:
@@ -396,31 +479,181 @@ class Sequencer:
 
     def _move(self, step: Move) -> None:
         target = np.asarray(step.targets, dtype=float)
+        sign = self._sign_of(step)
         # Always ask the drive: a write-back shifts the counted position of a carriage
         # that has not moved, and a resumed run starts wherever the machine stopped.
         self._position = np.asarray(self.controller.read_positions(), dtype=float)
         if np.allclose(self._position, target, atol=1e-3):
+            self._at = sign
             return  # already there: consecutive setups share Π0
         # The plan was checked from nominal postures; the actual start may differ
-        # (first move, resumed run, new offsets), so the path really taken from here
-        # is checked again and its waypoints (if any) derived from here.
-        legs = self.checker.route(self._position, target, step.label, self._setup,
-                                  self._mounted)
+        # (first move, resumed run, new offsets), so the move is checked again from
+        # here and its waypoints (if any) derived from here; once the guard has
+        # learned the mounting's signal, it is part of the check.
+        signal = self._route_signal(sign)
+        # Where the guard no longer watches, the route must keep its margin.
+        strict = bool(self._mounted) and self.guard.enabled and not self.guard.watching
+        try:
+            legs = self.checker.route(self._position, target, step.label, self._setup,
+                                      self._mounted, signal=signal, strict=strict)
+        except PathRefused as exc:
+            if not (self._mounted and signal is not None):
+                raise  # the plan's own check, from where the machine stands: bad input
+            raise PlungerGuardStop(
+                f"plunger guard: with the travel measured under this mounting, "
+                f"{str(exc).removeprefix('plan: ')}. Re-mount the gauge with "
+                f"{'less' if exc.pushed else 'more'} preload or use a longer stroke"
+            ) from None
         self.progress("move", label=step.label, targets=step.targets)
-        self.guard.begin_move(self._position, legs)
+        self._at = None
+        self.guard.begin_move(self._position, legs, signal)
+        touched = False
+        trip: PlungerGuardTrip | None = None
+        while True:
+            try:
+                if trip is not None:  # inside the try: a trip on the way back is caught
+                    legs = self._recover(step, trip, sign)
+                    trip = None
+                self._sub_moves(step, legs)
+                break
+            except PlungerGuardTrip as exc:
+                trip, touched = exc, True
+        self._at = sign
+        if touched:
+            self._touched = True
+
+    def _route_signal(self, sign: str | None) -> dict[str, tuple[float, float]] | None:
+        """The travel beyond the nominal model a move of this mounting is routed with
+        (at its start, at its target): what the guard measured at both stops (None:
+        a stop not read yet under this mounting)."""
+        if not self._mounted:
+            return None
+        return self.guard.route_signal(self._at, sign)
+
+    def _sign_of(self, step: Move) -> str | None:
+        """The posture a move goes to, from the setup's postures (None: not one)."""
+        if self._setup is None:
+            return "0" if step.label == "Π0" else None
+        for sign, targets in self._setup.postures.items():
+            if tuple(targets) == tuple(step.targets):
+                return sign
+        return None
+
+    def _sub_moves(self, step: Move, legs: Sequence[np.ndarray], watched: bool = False
+                   ) -> None:
+        """One COMMAND 1 per target of ``legs`` (``watched``: a way back after a
+        trip, labelled so)."""
+        speed = self.config.controller.speed_mm_s * self._speed_factor
         for number, leg in enumerate(legs, start=1):
             # Each waypoint is a move of its own (COMMAND 1, a deadline from its own
             # length); none is a reading stop, so the journal and resume ignore them.
-            label = step.label if number == len(legs) else \
-                f"{step.label} (waypoint {number}/{len(legs) - 1})"
+            label = step.label if number == len(legs) and not watched else \
+                f"{step.label} ({'way back' if watched else 'waypoint'} {number}/" \
+                f"{len(legs) - (0 if watched else 1)})"
             start = self._position
+            self._leg_start = start
             self._position = None  # unknown until the move has arrived
             watch = None if start is None else self.guard.watch(start, leg, label)
             extra = {} if watch is None else {"watch": watch}
             actual = self.controller.move_and_wait(
-                list(leg), speed_mm_s=self.config.controller.speed_mm_s, start=start, **extra)
+                list(leg), speed_mm_s=speed, start=start, **extra)
             self._position = np.asarray(actual, dtype=float)
             self.counters.moves += 1
+
+    def _recover(self, step: Move, trip: PlungerGuardTrip, sign: str | None
+                 ) -> list[np.ndarray]:
+        """The guard stopped the axes mid-move: wait until they rest and measure the
+        gauges there; back to where the interrupted sub-move began (its box lies
+        inside the one just travelled, and there the leg is parallel again), measure
+        again, and re-plan the rest of the move from there with what the gauges
+        showed (more waypoints where needed), at a lower speed. Where the way back
+        does not hold, the rest is re-planned from where the axes stand. Raises the
+        trip (the run stops) when no safe path is left; returns the sub-moves on."""
+        self._recoveries += 1
+        here, means = self._at_rest_after_stop()
+        record: dict[str, Any] = {
+            "event": "plunger-guard-recovery", "indicator": trip.indicator,
+            "where": self.guard.where, "move": trip.label, "from": [float(v) for v in here],
+            "readings_mm": means}
+        if self._recoveries > MAX_RECOVERIES:
+            record["result"] = f"stopped: {MAX_RECOVERIES} recoveries on this mounting"
+            self._journal_safe({"type": "event", "event": record})
+            raise PlungerGuardStop(
+                f"{trip} (the guard stopped this mounting's axes {self._recoveries} times; "
+                "check the stand)") from None
+        self._speed_factor = max(MIN_SPEED_FRACTION,
+                                 self._speed_factor * RECOVERY_SPEED_FACTOR)
+        speed = self.config.controller.speed_mm_s * self._speed_factor
+        target = np.asarray(step.targets, dtype=float)
+        # what the trip predicted at the target, before the way back moves the guard on
+        ahead = self.guard.signal_envelope(sign)
+        self.guard.expect_stop(sign)
+        back = self._leg_start
+        if back is not None and np.max(np.abs(back - here)) > 1e-3:
+            try:
+                retreat = self._replan(here, back, step.label, self.guard.retreat_signal())
+            except BadInput:
+                retreat = None  # no safe way back: on from here
+            if retreat is not None:
+                record["back_to"] = [float(v) for v in back]
+                self._sub_moves(step, retreat, watched=True)  # a trip here: caught by _move
+                here, means = self._at_rest_after_stop()
+        signal = {n: (now, ahead[n][1]) for n, (now, _) in
+                  self.guard.signal_envelope(sign).items()}
+        record["signal_mm"] = {n: list(v) for n, v in signal.items()}
+        try:
+            legs = self._replan(here, target, step.label, signal)
+        except BadInput as exc:
+            record["result"] = f"no safe path: {exc}"
+            self._journal_safe({"type": "event", "event": record})
+            raise PlungerGuardStop(
+                f"{trip}; no safe path from where the axes stopped: "
+                f"{str(exc).removeprefix('plan: ')}") from None
+        record.update(result="recovered", waypoints=len(legs) - 1, speed_mm_s=speed,
+                      route=[[float(v) for v in leg] for leg in legs])
+        self.journal.append({"type": "event", "event": record})
+        self.recovered.append(record)
+        self.counters.guard_recoveries += 1
+        self.progress("guard_recovered", label=step.label, indicator=trip.indicator)
+        return legs
+
+    def _at_rest_after_stop(self) -> tuple[np.ndarray, dict[str, float]]:
+        """Positions once the axes rest, and the mounted gauges' mean readings there
+        (what the guard's signal is then measured from)."""
+        here = self._wait_stopped()
+        self._position = here
+        names = list(self._mounted)
+        values = self.indicators.read(max(1, self.plan.readings), names)
+        means = {n: float(np.mean(values[n])) for n in names}
+        self.guard.at_rest(here, means)
+        return here, means
+
+    def _replan(self, here: np.ndarray, target: np.ndarray, label: str,
+                signal: dict[str, tuple[float, float]]) -> list[np.ndarray]:
+        """A route from where a plunger may stand inside the margin: it may come no
+        closer to its end than it is (less a reading's pad), never past it; the guard
+        watches it with that margin. Raises BadInput when none holds."""
+        margin = min(self.guard.margin, self.guard.slack_now() - SIGNAL_PAD_MM)
+        if margin < 0:
+            raise BadInput(f"plan: a plunger stands within {SIGNAL_PAD_MM:g} mm of the end "
+                           "of its stroke")
+        legs = self.checker.route(here, target, label, self._setup, self._mounted,
+                                  signal=signal, strict=True, margin=margin,
+                                  max_waypoints=RECOVERY_WAYPOINTS)
+        self.guard.begin_move(here, legs, signal, margin=margin)
+        return legs
+
+    def _wait_stopped(self) -> np.ndarray:
+        """Positions once the drive reports no motion (finite wait: STOP_TIMEOUT_S)."""
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        while True:
+            status = self.controller.read_status()
+            if not status.moving:
+                return np.asarray(self.controller.read_positions(), dtype=float)
+            if time.monotonic() >= deadline:
+                raise RunFailed(f"plunger guard: the axes still move {STOP_TIMEOUT_S:g} s "
+                                "after the stop; check the drive")
+            time.sleep(0.01)
 
     def _prompt(self, phase: str, step: Prompt) -> None:
         indicators = dict(step.indicators)
@@ -429,6 +662,7 @@ class Sequencer:
         self._mounted = indicators
         self.guard.forget()
         self._guard_pending, self._guard_cycle = True, None
+        self._speed_factor, self._recoveries = 1.0, 0
         self.journal.append({"type": "setup", "phase": phase, "setup": step.setup,
                              "leg": step.leg, "indicators": indicators,
                              "position": None if self._position is None
@@ -459,12 +693,13 @@ class Sequencer:
             self.counters.readings += len(vals)
         self._stops[step.stop] = stats
         if self._position is not None:
-            self.guard.at_rest(self._position, {n: st.mean for n, st in stats.items()})
+            self.guard.at_rest(self._position, {n: st.mean for n, st in stats.items()},
+                               step.sign)
         if self._guard_pending and step.sign == "0" and self._setup is not None:
             # The mounting point: travel is counted from these readings.
             self._guard_pending = False
             self._guard_cycle = step.cycle + 1
-            self.guard.mount(self.checker.motion, self._setup, step.stop.split(":")[0],
+            self.guard.mount(self._setup, step.stop.split(":")[0],
                              self._mounted, {n: st.mean for n, st in stats.items()})
         self.progress("read", phase=step.stop.split(":")[0], stop=step.stop, setup=step.setup,
                       cycle=step.cycle, sign=step.sign, values=values)

@@ -111,10 +111,10 @@ def _guard(preload: float, journal: list[dict[str, Any]]) -> tuple[PlungerGuard,
     checker = MotionChecker(cfg, ([0, 0, 0], [1000, 1000, 1000]))
     sp = build_plan(cfg).setups[0]
     stops: list[str] = []
-    guard = PlungerGuard(cfg, checker.nominal_travel, lambda: np.zeros(3),
+    guard = PlungerGuard(cfg, checker, lambda: np.zeros(3),
                          lambda names: {n: [0.0] for n in names},
                          lambda: stops.append("stop"), journal.append)
-    guard.mount("coordinated", sp, "m", dict(sp.indicators), {"A": 1.0, "B": 2.0})
+    guard.mount(sp, "m", dict(sp.indicators), {"A": 1.0, "B": 2.0})
     return guard, sp
 
 
@@ -179,20 +179,24 @@ def test_guard_poll_stops_on_a_drifting_signal_before_the_end() -> None:
             k[0] += 1
             return {"A": [10.0 + last[0]]}
 
-        guard = PlungerGuard(cfg, checker.nominal_travel, positions, read,
+        guard = PlungerGuard(cfg, checker, positions, read,
                              lambda: stops.append("stop"), lambda r: None)
-        guard.mount("coordinated", sp, "m", {"A": "y"}, {"A": 10.0})
+        guard.mount(sp, "m", {"A": "y"}, {"A": 10.0})
         guard.begin_move(a, [b])
         poll = guard.watch(a, b, "Π_x^+")
         assert poll is not None
         try:
-            while k[0] <= 40:
+            # (the poll reads no more once the axes stand at the target, as the drive
+            # stops calling it once it reports in position)
+            for _ in range(60):
                 poll()
         except PlungerGuardStop:
             pass
         return k[0], stops, last[0]
 
     polls, stops, _ = run(0.2)
-    assert polls > 40 and stops == []
+    # polled all the way (the 40th read already saw the axes at the target) and never
+    # stopped them
+    assert polls == 40 and stops == []
     polls, stops, travel = run(-1.5)
     assert stops == ["stop"] and polls < 40 and travel > -2.0 + 0.2
