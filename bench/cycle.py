@@ -27,8 +27,9 @@ exceed the floor's moves, the station moved more than its stops needed.
     python bench/cycle.py --compare --target-se 0.002 --cycles 6   # adaptive vs fixed
     python bench/cycle.py --profile /tmp/run.prof                  # cProfile the station
     python bench/cycle.py --strokes 60,30,-50,-100                 # four stops per leg
-    python bench/cycle.py --path-cost     # coordinated vs independent axes (waypoints),
-                                          # and what the plunger guard costs
+    python bench/cycle.py --path-cost     # the plan for any axis timing against a
+                                          # coordinated controller, on drives of every
+                                          # kind, and what the plunger guard costs
 
 Target: wall / floor ≤ 1.05.
 """
@@ -52,7 +53,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drivers.indicators import make_protocol
-from drivers.sim.machine import _Profile
+from drivers.sim.machine import DriveMotion, _Profile
 from drivers.sim.station import VirtualStation
 from station.config import toml_text
 from station.journal import read_journal
@@ -68,7 +69,10 @@ class Timing:
     settle_s: float = 0.05
     readings: int = 5
     protocol: str = "mitutoyo"
-    motion: str = "coordinated"  # how the virtual controller moves its axes
+    # How the virtual controller moves its axes (a DriveMotion or its name), and the
+    # acceleration the drive really has (None: the one the config gives the station).
+    motion: str | DriveMotion = "coordinated"
+    drive_accel: float | None = None
     guard: bool = True  # procedure.plunger_guard
 
 
@@ -87,6 +91,8 @@ class Outcome:
     # Seconds from spawn to the journal's header, to its first and last reading, to exit.
     timeline: dict[str, float]
     clamped: int = 0
+    # Moves that drove a plunger past an end of its stroke, read or not (simulator).
+    out_of_stroke: int = 0
     # Mean extra seconds per stop of a mounting's first cycle (move + settle + read)
     # against the same stop of later cycles, and how many stops it averages: the
     # plunger guard's cost, paired within one run (same load, same moves).
@@ -210,7 +216,8 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
                         accel_mm_s2=timing.accel_mm_s2, protocol=timing.protocol,
                         baud=timing.baud, line_time=True, indicator_count=6,
                         mount_all=True, mount_error_mm=mount_error_mm,
-                        motion=timing.motion) as station:
+                        motion=timing.motion, drive_accel_mm_s2=timing.drive_accel
+                        ) as station:
         machine = station.machine
         started: list[float] = []
         move_to = machine.move_to
@@ -231,8 +238,10 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, capture_output=True, text=True)
         wall = time.perf_counter() - t0
-        # Readings a gauge gave at an end of its stroke (stops and the guard's polls).
+        # Readings a gauge gave at an end of its stroke (stops and the guard's polls),
+        # and every move that drove a plunger past an end, read or not.
         clamped = sum(sim.clamped for sim in station.indicators.values())
+        out_of_stroke = station.out_of_stroke_count
     if proc.returncode != 0:
         sys.stderr.write(proc.stderr[-4000:])
         raise SystemExit(f"station run failed (exit {proc.returncode})")
@@ -248,7 +257,7 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
     first_cycle_extra = first_cycle_extra_s(records)
     return Outcome(wall, moves + settle + line, moves, settle, line, float(sum(started)),
                    sum(1 for d in started if d > 0), stops, result, drho, timeline, clamped,
-                   first_cycle_extra)
+                   out_of_stroke, first_cycle_extra)
 
 
 def report(label: str, o: Outcome) -> None:
@@ -258,7 +267,8 @@ def report(label: str, o: Outcome) -> None:
           f"line {o.floor_line_s:.2f}; {o.stops} stops), ratio {o.ratio:.3f}")
     print(f"    machine moves: {o.machine_moves} started, {o.machine_moves_s:.2f} s "
           f"(floor's moves {o.floor_moves_s:.2f} s); station's own wall_s "
-          f"{t.get('wall_s')} s; readings at a stroke end {o.clamped}")
+          f"{t.get('wall_s')} s; readings at a stroke end {o.clamped}, moves past a stroke "
+          f"end {o.out_of_stroke}")
     extra, n = o.first_cycle_extra
     print(f"    first cycle after mounting: {1000 * extra:+.1f} ms per stop against later "
           f"cycles ({n} stops)")
@@ -303,8 +313,9 @@ def main() -> None:
     parser.add_argument("--no-guard", action="store_true",
                         help="procedure.plunger_guard = false")
     parser.add_argument("--path-cost", action="store_true",
-                        help="same machines: coordinated, independent (waypoints), and "
-                             "coordinated without the plunger guard")
+                        help="same machines on drives of every kind (bench.cycle.PATH_CASES)"
+                             ": the plan for any axis timing against a coordinated "
+                             "controller, and coordinated without the plunger guard")
     args = parser.parse_args()
     timing = Timing(speed_mm_s=args.speed, accel_mm_s2=args.accel, settle_s=args.settle,
                     readings=args.readings, motion=args.motion, guard=not args.no_guard)
@@ -361,17 +372,31 @@ def main() -> None:
         print(f"time saved: {wf - wa:.2f} s per calibration ({100 * (wf - wa) / wf:.0f} %)")
 
 
+# --path-cost: the same calibrations on drives that disagree with the station. The
+# config tells the station "coordinated" only for the coordinated drive; for every
+# other one it says nothing, so the plan holds for any axis timing (the default).
+PATH_CASES: dict[str, dict[str, Any]] = {
+    "coordinated (the config says so)": {"motion": "coordinated"},
+    "any timing: trapezoid drive": {"motion": "independent"},
+    "any timing: S-curve, axes 5 ms apart, 60 % of the acceleration": {
+        "motion": DriveMotion(shape="scurve", start_delay_s=(0.0, 0.005, 0.010)),
+        "drive_accel": 600.0},
+    "any timing: one axis after another (z, y, x)": {"motion": DriveMotion(sequence="zyx")},
+    "coordinated, no guard": {"motion": "coordinated", "guard": False},
+}
+
+
 def path_cost(args: argparse.Namespace, base: Timing, out: Path) -> None:
-    """Wall time of the same calibrations three ways: coordinated axes with the
-    plunger guard (the default), independent axes (the plan adds waypoints to keep
-    the plungers in their strokes) with the guard, coordinated without the guard."""
-    cases = {"coordinated": replace(base, motion="coordinated", guard=True),
-             "independent": replace(base, motion="independent", guard=True),
-             "coordinated, no guard": replace(base, motion="coordinated", guard=False)}
+    """Wall time of the same calibrations on each drive of PATH_CASES: what the plan
+    for any axis timing costs against a coordinated controller (waypoints, and on
+    slower drives the drive itself), that no plunger ever left its stroke, and what
+    the plunger guard costs (coordinated with and without it)."""
+    cases = {label: replace(base, **kw) for label, kw in PATH_CASES.items()}
     walls: dict[str, list[float]] = {k: [] for k in cases}
     moves: dict[str, list[int]] = {k: [] for k in cases}
     motion_s: dict[str, list[float]] = {k: [] for k in cases}
     extra: dict[str, list[float]] = {k: [] for k in cases}
+    outside: dict[str, int] = dict.fromkeys(cases, 0)
     for k in range(args.repeat):
         seed = args.seed + k
         for label, timing in cases.items():
@@ -382,18 +407,17 @@ def path_cost(args: argparse.Namespace, base: Timing, out: Path) -> None:
             moves[label].append(o.machine_moves)
             motion_s[label].append(o.machine_moves_s)
             extra[label].append(o.first_cycle_extra[0])
+            outside[label] += o.out_of_stroke
     mean = {k: float(np.mean(v)) for k, v in walls.items()}
+    reference = "coordinated (the config says so)"
     for label in cases:
-        print(f"{label}: mean wall {mean[label]:.2f} s, machine moves "
-              f"{np.mean(moves[label]):.0f} ({np.mean(motion_s[label]):.2f} s of motion), "
-              f"first-cycle stops {1000 * np.mean(extra[label]):+.1f} ms each")
-    w = mean["independent"] - mean["coordinated"]
-    m = float(np.mean(motion_s["independent"]) - np.mean(motion_s["coordinated"]))
-    print(f"waypoints for independent axes: {w:+.2f} s wall per calibration "
-          f"({100 * w / mean['coordinated']:+.1f} %), of which {m:+.2f} s motion, "
-          f"{np.mean(moves['independent']) - np.mean(moves['coordinated']):+.0f} moves")
-    g = mean["coordinated"] - mean["coordinated, no guard"]
-    e = float(np.mean(extra["coordinated"]) - np.mean(extra["coordinated, no guard"]))
+        print(f"{label}: mean wall {mean[label]:.2f} s "
+              f"({100 * (mean[label] / mean[reference] - 1):+.1f} % against coordinated), "
+              f"machine moves {np.mean(moves[label]):.0f} ({np.mean(motion_s[label]):.2f} s "
+              f"of motion), moves past a stroke end {outside[label]}, first-cycle stops "
+              f"{1000 * np.mean(extra[label]):+.1f} ms each")
+    g = mean[reference] - mean["coordinated, no guard"]
+    e = float(np.mean(extra[reference]) - np.mean(extra["coordinated, no guard"]))
     print(f"plunger guard: {g:+.2f} s wall per calibration; paired within runs, a "
           f"watched stop takes {1000 * e:+.1f} ms more ({18 * e:+.2f} s over the 18 "
           f"stops of the six first cycles)")
