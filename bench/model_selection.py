@@ -31,14 +31,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from orthocal import MODELS, Geometry, IdentificationError, design, deviations, identify
+from orthocal.noise import noise_from_cycles, noise_from_readings
 from orthocal.postures import posture_name
-from orthocal.selection import (
-    LEVEL,
-    noise_from_cycles,
-    noise_from_readings,
-    select_model,
-)
-from station.cmd_design import plan_keys
+from orthocal.selection import LEVEL, select_model
+from station.commands.design import plan_keys
 
 G = Geometry()
 LEGS = "xyz"
@@ -170,9 +166,9 @@ def section_strokes(args: argparse.Namespace, rng: np.random.Generator) -> None:
     """What intermediate stops cost (run time, from the station's time model) and
     buy (standard errors: orthocal design's prediction and the scatter of
     simulated identifications), two against four stops per leg."""
-    from station.cmd_design import run_time
+    from station.commands.design import run_time
     from station.config import parse_config
-    from station.plan import build_plan
+    from station.plan.steps import build_plan
 
     runs = max(args.runs // 2, 50)
     models = ("rho", "rho+tilt", "full+tilt")

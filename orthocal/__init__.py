@@ -1,6 +1,22 @@
 """orthocal: the mathematics of leg-parallelism calibration of Orthoglide-type
 parallel machines (Pashkevich & Gomolitsky). Pure functions, no I/O."""
 
+from orthocal.accuracy import (
+    FRAMES,
+    ErrorField,
+    Grid,
+    OptimalOffsets,
+    Squareness,
+    covariance_matrix,
+    error_field,
+    field_stats,
+    fit_frame,
+    optimal_offsets,
+    rigid_fit,
+    squareness,
+    tool_error,
+    workspace_grid,
+)
 from orthocal.calibration import (
     coefficients,
     jacobian,
@@ -9,43 +25,61 @@ from orthocal.calibration import (
     tilt_coefficient,
 )
 from orthocal.geometry import AXES, MODELS, PARAM_NAMES, TILT_NAMES, Geometry
-from orthocal.identification import (
-    Identification,
-    IdentificationError,
-    cannot_identify,
-    exact_jacobian,
-    identify,
-)
+from orthocal.identification import Identification, cannot_identify, exact_jacobian, identify
+from orthocal.inputs import IdentificationError
 from orthocal.kinematics import axis_directions, forward, inverse
 from orthocal.measurement import deviation, deviations, leg_reading
+from orthocal.noise import coverage_factor
 from orthocal.postures import posture, posture_point
-from orthocal.selection import ModelSelection, coverage_factor, select_model
+from orthocal.selection import ModelSelection, select_model
+from orthocal.stands import StandEstimate, Stands
+from orthocal.tool_interval import AfterInterval, after_interval, assumes, field_jacobian
 
 __all__ = [
     "AXES",
+    "FRAMES",
     "MODELS",
     "PARAM_NAMES",
     "TILT_NAMES",
+    "AfterInterval",
+    "ErrorField",
     "Geometry",
+    "Grid",
     "Identification",
     "IdentificationError",
     "ModelSelection",
+    "OptimalOffsets",
+    "Squareness",
+    "StandEstimate",
+    "Stands",
+    "after_interval",
+    "assumes",
     "axis_directions",
     "cannot_identify",
     "coefficients",
+    "covariance_matrix",
     "coverage_factor",
     "deviation",
     "deviations",
+    "error_field",
     "exact_jacobian",
+    "field_jacobian",
+    "field_stats",
+    "fit_frame",
     "forward",
     "identify",
     "inverse",
     "jacobian",
     "leg_reading",
     "linear_deviations",
+    "optimal_offsets",
     "posture",
     "posture_point",
+    "rigid_fit",
     "select_model",
+    "squareness",
     "statistical_floor",
     "tilt_coefficient",
+    "tool_error",
+    "workspace_grid",
 ]

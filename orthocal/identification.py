@@ -21,17 +21,27 @@ import numpy as np
 
 from orthocal.calibration import jacobian
 from orthocal.geometry import MODELS, PARAM_NAMES, TILT_NAMES, Geometry, full_params
-from orthocal.measurement import Key, check_key, deviations
+from orthocal.inputs import IdentificationError, flatten_deviations
+from orthocal.measurement import Key, deviations
+from orthocal.noise import noise_from_cycles
+from orthocal.numbers import finite
+from orthocal.stands import (
+    StandEstimate,
+    Stands,
+    incidence,
+    prior_penalty,
+    ridge_covariance,
+    stand_estimates,
+    stand_gauges,
+    stand_jacobian,
+)
 
 METHODS = ("linear", "nonlinear")
 # Relative singular value below which a parameter combination counts as not
 # identifiable; the worst well-posed case (full model, 12 deviations) sits at 1/62.
 _RANK_TOL = 1e-9
-
-
-class IdentificationError(ValueError):
-    """The request cannot be identified (too few deviations, rank deficiency,
-    bad keys or values). The message says which and why."""
+# σ (mm) below which the start of a fit with stands is not weighted (see there).
+_START_SIGMA = 1e-3
 
 
 @dataclass(frozen=True)
@@ -58,10 +68,32 @@ class Identification:
     #: from its own residual, the noise estimate's when from the measured noise
     #: (orthocal.selection.with_measured_noise). Sets the coverage factor.
     se_dof: float | None = None
+    #: The indicator stands, when they were modelled (``identify(..., stands=)``):
+    #: each stand's position, mm off L/2, with its posterior SD, or not observable
+    #: (orthocal.stands). Empty without the option.
+    stands: dict[str, StandEstimate] = field(default_factory=dict)
+    #: The option the stands were modelled with (None: not modelled).
+    stand_model: Stands | None = None
+    #: σ of one deviation that weighed the stands' prior against the data (mm).
+    stand_sigma: float | None = None
 
     @property
     def std_error_dof(self) -> float:
         return float(self.dof if self.se_dof is None else self.se_dof)
+
+    @property
+    def stand_offsets(self) -> np.ndarray:
+        """The stands' estimated offsets (mm off L/2) in the order of ``stands``."""
+        return np.array([e.offset for e in self.stands.values()])
+
+    @property
+    def mount_offsets(self) -> np.ndarray | None:
+        """Each row's indicator-plane offset from L/2 as identified (mm), for
+        :func:`orthocal.deviations`; None when the stands were not modelled."""
+        if self.stand_model is None:
+            return None
+        _, S = incidence(self.keys, self.stand_model)
+        return S @ self.stand_offsets
 
     @property
     def vector(self) -> np.ndarray:
@@ -71,49 +103,27 @@ class Identification:
     def to_dict(self) -> dict:
         """JSON-ready summary (design.md's identify fields plus statistics)."""
 
-        def num(v: float) -> float | None:
-            return None if not np.isfinite(v) else float(v)
-
         return {
             "model": self.model,
             "method": self.method,
-            "parameters": {k: num(v) for k, v in self.parameters.items()},
-            "std_errors": {k: num(v) for k, v in self.std_errors.items()},
-            "residual_rms_mm": num(self.residual_rms),
-            "sigma_mm": num(self.sigma),
+            "parameters": {k: finite(v) for k, v in self.parameters.items()},
+            "std_errors": {k: finite(v) for k, v in self.std_errors.items()},
+            "residual_rms_mm": finite(self.residual_rms),
+            "sigma_mm": finite(self.sigma),
             "dof": self.dof,
-            "std_errors_dof": num(self.std_error_dof),
-            "condition_number": num(self.condition_number),
+            "std_errors_dof": finite(self.std_error_dof),
+            "condition_number": finite(self.condition_number),
             "n_deviations": len(self.keys),
             "correlation": {
                 "names": list(self.names),
-                "matrix": [[num(v) for v in row] for row in self.correlation],
+                "matrix": [[finite(v) for v in row] for row in self.correlation],
             },
-            "predicted": {"".join(k): num(v) for k, v in self.predicted.items()},
+            "predicted": {"".join(k): finite(v) for k, v in self.predicted.items()},
             "converged": self.converged,
-        }
-
-
-def _flatten(deviations_in) -> tuple[list[Key], np.ndarray]:
-    """Rows (key, value) from a mapping key → float | sequence of floats, or from
-    an iterable of (key, value) pairs (repeats allowed in both)."""
-    items: Iterable = deviations_in.items() if isinstance(deviations_in, Mapping) else deviations_in
-    keys: list[Key] = []
-    values: list[float] = []
-    for key, value in items:
-        key = tuple(key)
-        try:
-            check_key(key)  # type: ignore[arg-type]
-        except ValueError as exc:
-            raise IdentificationError(str(exc)) from None
-        repeats = np.atleast_1d(np.asarray(value, dtype=float))
-        if repeats.ndim != 1 or repeats.size == 0:
-            raise IdentificationError(f"deviation {key!r} has no value")
-        if not np.all(np.isfinite(repeats)):
-            raise IdentificationError(f"deviation {key!r} is not a finite number: {value!r}")
-        keys.extend([key] * repeats.size)  # type: ignore[list-item]
-        values.extend(repeats.tolist())
-    return keys, np.asarray(values)
+        } | ({} if self.stand_model is None else {"stands": {
+            **self.stand_model.to_dict(),
+            "sigma_mm": finite(self.stand_sigma) if self.stand_sigma is not None else None,
+            "estimates": {n: e.to_dict() for n, e in self.stands.items()}}})
 
 
 def _postures_per_leg(keys: Sequence[Key]) -> int:
@@ -188,12 +198,14 @@ def cannot_identify(keys: Sequence[Key], geometry: Geometry | None = None,
 
 
 def exact_jacobian(
-    keys: Sequence[Key], geometry: Geometry, params=None, model: str = "full"
+    keys: Sequence[Key], geometry: Geometry, params=None, model: str = "full",
+    mount_offsets=None,
 ) -> np.ndarray:
     """Jacobian of the exact deviations (1') at ``params`` (9-vector, or a 6-vector
     without tilts), columns the parameters of ``model``; central differences with
     h = 1e-5 mm or mrad (truncation error O(h²·curvature) ≈ 1e-12, far below any
-    µm). At zero it equals (7')."""
+    µm). At zero it equals (7'). ``mount_offsets``: each row's indicator plane
+    off L/2 (mm; :func:`orthocal.measurement.deviations`), None for L/2."""
     base = full_params(params)
     h = 1e-5
     cols = MODELS[model]
@@ -201,8 +213,8 @@ def exact_jacobian(
     for c, col in enumerate(cols):
         step = np.zeros(len(PARAM_NAMES))
         step[col] = h
-        forward_diff = deviations(keys, geometry, base + step)
-        J[:, c] = (forward_diff - deviations(keys, geometry, base - step)) / (2 * h)
+        forward_diff = deviations(keys, geometry, base + step, mount_offsets)
+        J[:, c] = (forward_diff - deviations(keys, geometry, base - step, mount_offsets)) / (2 * h)
     return J
 
 
@@ -212,6 +224,7 @@ def identify(
     model: str = "rho",
     method: str = "nonlinear",
     sigma: float | None = None,
+    stands: Stands | None = None,
 ) -> Identification:
     """Identify the parameters of ``model`` from measured deviations.
 
@@ -223,6 +236,15 @@ def identify(
     more than two postures per leg).
     ``method``: 'linear' (pseudoinverse of (7)) or 'nonlinear' (exact model (1)).
     ``sigma``: known noise σ of one deviation; default σ̂ from the residuals.
+    ``stands``: model the indicator stands' positions too (:class:`orthocal.stands.Stands`:
+    which gauges share a stand, their placement tolerance): random effects with
+    the tolerance's prior, the parameters by least squares and the stands by
+    their posterior mean (orthocal.stands; model.md, "Where the indicator plane
+    is"). The prior is weighed against the data by σ of one deviation:
+    ``sigma``, or (None) the cycle-to-cycle scatter of the repeats
+    (orthocal.noise.noise_from_cycles). The result's ``stands`` holds each
+    stand's offset from L/2 with its SD, or says it is not observable. None (the
+    default): the stands are taken at L/2, as without this option.
     """
     geometry = geometry or Geometry()
     if model not in MODELS:
@@ -231,11 +253,14 @@ def identify(
         raise IdentificationError(f"method must be one of {METHODS}, got {method!r}")
     if sigma is not None and not (np.isfinite(sigma) and sigma > 0):
         raise IdentificationError(f"sigma must be a positive number, got {sigma!r}")
-    keys, y = _flatten(deviations_in)
+    keys, y = flatten_deviations(deviations_in)
     cols = MODELS[model]
     names = tuple(PARAM_NAMES[c] for c in cols)
     J0 = jacobian(keys, geometry, model) if keys else np.zeros((0, len(cols)))
     condition = _check_identifiable(J0, names, len(set(keys)), keys)
+    if stands is not None:
+        return _identify_with_stands(deviations_in, keys, y, geometry, model, method, sigma,
+                                     stands, J0, condition)
 
     x_lin = np.linalg.pinv(J0) @ y
     full = np.zeros(len(PARAM_NAMES))
@@ -305,4 +330,119 @@ def identify(
         residuals=residuals,
         predicted=predicted,
         converged=converged,
+    )
+
+
+def _stand_sigma(deviations_in, sigma: float | None) -> tuple[float, float | None]:
+    """σ of one deviation that weighs the stands' prior, and its dof (None: given)."""
+    if sigma is not None:
+        return float(sigma), None
+    try:
+        s, dof = noise_from_cycles(deviations_in)
+    except ValueError as exc:
+        raise IdentificationError(
+            "modelling the stands needs the noise of one deviation, to weigh their prior: "
+            f"give sigma, or measure two cycles or more ({exc})") from None
+    if not s > 0:
+        raise IdentificationError("modelling the stands needs a positive noise; the repeats "
+                                  "do not scatter: give sigma")
+    return s, float(dof)
+
+
+def _identify_with_stands(
+    deviations_in, keys: list[Key], y: np.ndarray, geometry: Geometry, model: str, method: str,
+    sigma: float | None, stands: Stands, J0: np.ndarray, condition: float,
+) -> Identification:
+    """:func:`identify` with the stands as random effects (orthocal.stands):
+    minimise Σ r²/σ² + Σ m²/σ_M² over the model's parameters θ and the stands m,
+    r the rows' residuals of the exact model read in the planes L/2 + S·m."""
+    if method != "nonlinear":
+        raise IdentificationError(
+            "the stands act through the product of their offset and the legs' slopes, which "
+            "the linearised system (7) lacks: model the stands with method 'nonlinear'")
+    sig, sig_dof = _stand_sigma(deviations_in, sigma)
+    cols = list(MODELS[model])
+    names = tuple(PARAM_NAMES[c] for c in cols)
+    p = len(cols)
+    stand_names, S = incidence(keys, stands)
+    k = len(stand_names)
+    penalty = prior_penalty(sig, stands, k)
+
+    def full_of(theta: np.ndarray) -> np.ndarray:
+        v = np.zeros(len(PARAM_NAMES))
+        v[cols] = theta
+        return v
+
+    # Start: the linear solution without stands, then the stands' columns from the
+    # exact model at it and a penalised linear solve (twice: the columns follow θ).
+    # The start's penalty is at least that of 1 µm of noise: (7)'s linearisation
+    # error (µm) must not drive the weakly seen combinations of stands far off.
+    theta = np.linalg.pinv(J0) @ y
+    m = np.zeros(k)
+    lam = np.zeros((p + k, p + k))
+    lam[p:, p:] = prior_penalty(max(sig, _START_SIGMA), stands, k)
+    for _ in range(2):
+        A = np.hstack([J0, stand_jacobian(keys, geometry, full_of(theta), S)])
+        x = np.linalg.solve(A.T @ A + lam, A.T @ y)
+        theta, m = x[:p], x[p:]
+    from scipy.optimize import least_squares
+
+    prior_w = 1.0 / stands.prior_sd
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        r = deviations(keys, geometry, full_of(x[:p]), S @ x[p:]) - y
+        return np.concatenate([r / sig, x[p:] * prior_w])
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        full = full_of(x[:p])
+        Jt = exact_jacobian(keys, geometry, full, model, S @ x[p:])
+        Jm = stand_jacobian(keys, geometry, full, S)
+        lower = np.hstack([np.zeros((k, p)), prior_w * np.eye(k)])
+        return np.vstack([np.hstack([Jt, Jm]) / sig, lower])
+
+    try:
+        sol = least_squares(residual, np.concatenate([theta, m]), jac=jac, method="lm",
+                            xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    except ValueError as exc:
+        raise IdentificationError(f"nonlinear fit failed: {exc}") from None
+    theta, m = sol.x[:p], sol.x[p:]
+    converged = bool(sol.success)
+    full = full_of(theta)
+    A = np.hstack([exact_jacobian(keys, geometry, full, model, S @ m),
+                   stand_jacobian(keys, geometry, full, S)])
+    model_values = deviations(keys, geometry, full, S @ m)
+    residuals = y - model_values
+    n = len(y)
+    dof = n - p
+    rss = float(residuals @ residuals)
+    sigma_hat = float(np.sqrt(rss / dof)) if dof > 0 else float("nan")
+    cov_all = ridge_covariance(A, p, penalty, sig**2 * np.eye(n), stands.prior_sd**2)
+    covariance = cov_all[:p, :p]
+    std = np.sqrt(np.diag(covariance))
+    correlation = covariance / np.outer(std, std)
+    predicted: dict[Key, float] = {}
+    for key, value in zip(keys, model_values, strict=True):
+        predicted.setdefault(key, float(value))
+    gauges = stand_gauges(stand_names, stands, keys)
+    return Identification(
+        model=model,
+        method=method,
+        names=names,
+        parameters={nm: float(full[c]) for nm, c in zip(names, cols, strict=True)},
+        std_errors={nm: float(s) for nm, s in zip(names, std, strict=True)},
+        covariance=covariance,
+        correlation=correlation,
+        residual_rms=float(np.sqrt(rss / n)),
+        sigma=sigma_hat,
+        dof=dof,
+        condition_number=condition,
+        keys=tuple(keys),
+        values=y,
+        residuals=residuals,
+        predicted=predicted,
+        converged=converged,
+        se_dof=sig_dof,
+        stands=stand_estimates(stand_names, gauges, m, cov_all[p:, p:], stands),
+        stand_model=stands,
+        stand_sigma=sig,
     )

@@ -18,7 +18,8 @@ import numpy as np
 
 from orthocal.geometry import AXES, Geometry, params_vector
 from orthocal.measurement import Key, deviations
-from orthocal.selection import coverage_factor
+from orthocal.noise import coverage_factor
+from orthocal.numbers import finite
 
 #: The parameters a controller can correct: its zero offsets (o_i ← o_i − Δρ_i).
 WRITABLE: tuple[str, ...] = tuple(f"drho_{a}" for a in AXES)
@@ -77,12 +78,12 @@ def significant_corrections(parameters: Mapping[str, float],
         if name not in parameters:
             continue
         value = abs(float(parameters[name]))
-        se = _finite(std_errors.get(name))
+        se = finite(std_errors.get(name))
         if se is None:
             continue
         nu = dof
         if previous_std_errors is not None:
-            prev = _finite(previous_std_errors.get(name))
+            prev = finite(previous_std_errors.get(name))
             if prev is None:
                 continue
             prev = min(prev, se)
@@ -102,8 +103,3 @@ def _welch(a: float, nu_a: float | None, b: float, nu_b: float | None) -> float 
     return (a * a + b * b) ** 2 / den if den > 0 else None
 
 
-def _finite(value: float | None) -> float | None:
-    if value is None:
-        return None
-    f = float(value)
-    return f if math.isfinite(f) else None

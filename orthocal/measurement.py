@@ -38,7 +38,7 @@ def check_key(key: Key) -> Key:
     return key
 
 
-def _reading(
+def reading_at(
     rho: np.ndarray, p: np.ndarray, i, j, drho: np.ndarray, mount: float,
     u: np.ndarray | None = None,
 ) -> np.ndarray:
@@ -87,7 +87,7 @@ def leg_reading(
     rho = np.asarray(rho, dtype=float)
     p = forward(rho, geometry, drho_v, dL, tilt)
     m = geometry.mount_plane if mount is None else mount
-    return _reading(rho, p, AXIS_INDEX[leg], AXIS_INDEX[direction], drho_v, m,
+    return reading_at(rho, p, AXIS_INDEX[leg], AXIS_INDEX[direction], drho_v, m,
                     axis_directions(tilt))
 
 
@@ -97,8 +97,15 @@ def deviation(key: Key, geometry: Geometry, params=None) -> float:
     return float(deviations([key], geometry, params)[0])
 
 
-def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarray:
+def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
+               mount_offsets=None) -> np.ndarray:
     """Exact deviations for many keys at once (repeated keys allowed).
+
+    ``mount_offsets``: None (every indicator in the nominal plane x_i = L/2), or
+    one number per key, mm: how far the stand of that row's gauge sits off L/2
+    (M = L/2 + offset, model.md, "Where the indicator plane is"); the Π0 reading
+    it is taken against uses the same plane. With None the result is bit for bit
+    the one without the argument.
 
     Vectorised: one batched forward solve for the test postures of all ``keys``
     and one for Π0 (per-row leg and direction indices), because the nonlinear
@@ -107,6 +114,12 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarr
     drho, dL, tilt = split_params(params)
     if len(keys) == 0:
         return np.empty(0)
+    if mount_offsets is not None:
+        offsets = np.asarray(mount_offsets, dtype=float).reshape(-1)
+        if offsets.shape != (len(keys),):
+            raise ValueError(f"mount_offsets needs one value per key ({len(keys)}), "
+                             f"got shape {np.shape(mount_offsets)}")
+        return _deviations_mounted(keys, geometry, drho, dL, tilt, offsets)
     # Repeated keys (one per cycle) share one solve: the fit calls this per step.
     row_of: dict[Key, int] = {}
     rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
@@ -124,6 +137,33 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None) -> np.ndarr
     p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u)
     p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
     m = geometry.mount_plane
-    reading_s = _reading(rho_s, p_s, legs, dirs, drho, m, u)
-    dev = reading_s - _reading(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m, u)
+    reading_s = reading_at(rho_s, p_s, legs, dirs, drho, m, u)
+    dev = reading_s - reading_at(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m, u)
     return dev[rows]
+
+
+def _deviations_mounted(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray,
+                        dL: np.ndarray, tilt: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """:func:`deviations` with one indicator plane per row, M = L/2 + offset: the
+    same batched solves, the readings taken in each row's own plane."""
+    row_of: dict[Key, int] = {}
+    rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
+    distinct = list(row_of)
+    legs = np.empty(len(distinct), dtype=int)
+    dirs = np.empty(len(distinct), dtype=int)
+    rho_s = np.empty((len(distinct), 3))
+    for n, key in enumerate(distinct):
+        sign, leg, direction = check_key(key)
+        legs[n], dirs[n] = AXIS_INDEX[leg], AXIS_INDEX[direction]
+        rho_s[n] = posture(sign, leg, geometry)
+    rho_0 = posture("0", None, geometry)
+    u = axis_directions(tilt)
+    p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u)
+    rows_a = np.asarray(rows)
+    # expand the distinct solves to the rows, each read in its own plane
+    p_s, rho_r = p_all[:-1][rows_a], rho_s[rows_a]
+    p_0 = np.broadcast_to(p_all[-1], rho_r.shape)
+    m = geometry.mount_plane + offsets
+    li, di = legs[rows_a], dirs[rows_a]
+    reading_s = reading_at(rho_r, p_s, li, di, drho, m, u)
+    return reading_s - reading_at(np.broadcast_to(rho_0, rho_r.shape), p_0, li, di, drho, m, u)

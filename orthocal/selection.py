@@ -20,6 +20,22 @@ freedom. The first candidate whose p-value is at least ``level`` is chosen. At
 level 0.001 a machine the smaller model describes is kept with probability
 0.999, while a tilt of 0.2 mrad (deviations of ~8 µm) is rejected for ``rho``
 far above indicator noise of a few µm (bench/model_selection.py measures both).
+
+Indicator stands (option ``stands``, orthocal.stands; issue 17): misplaced
+stands leave deviations (stand error × leg slope, the legs sloping with Δρ)
+that look like tilt. With the option every candidate is fitted with the stands
+as random effects of prior SD tolerance/√3, and
+
+- the lack of fit is the generalised residual of the deviation means whose
+  covariance is σ²·C + J_M·Σ_M·J_Mᵀ (noise and stands; same F, K − p dof);
+- since most of a tilt's signature lies along the stands' columns, where that
+  test weighs it against the stands' variance, a candidate must also not be
+  improved on by the next one: the drop of that residual when the next
+  candidate's parameters join (a likelihood-ratio F test on their number, 3
+  for the tilts). Measured by bench/stands.py: misplaced stands (±5 mm) on
+  square machines with ±1.5 mm offsets keep ``rho`` where the lack of fit
+  alone picks a tilt model in about 3 runs of 4 without the option, and 0.2
+  mrad of tilt is still found.
 """
 
 from __future__ import annotations
@@ -33,25 +49,26 @@ import numpy as np
 
 from orthocal.calibration import jacobian
 from orthocal.geometry import Geometry
-from orthocal.identification import (
-    Identification,
-    IdentificationError,
-    _flatten,
-    exact_jacobian,
-    identify,
-)
+from orthocal.identification import Identification, exact_jacobian, identify
+from orthocal.inputs import IdentificationError
 from orthocal.measurement import Key
+from orthocal.noise import (
+    means_covariance,
+    noise_from_cycles,
+    row_correlation,
+)
+from orthocal.stands import (
+    Stands,
+    describe_stands,
+    incidence,
+    prior_penalty,
+    ridge_covariance,
+    stand_estimates,
+    stand_jacobian,
+)
 
 CANDIDATES: tuple[str, ...] = ("rho", "rho+tilt", "full+tilt")
 LEVEL = 0.001
-# Consecutive cycles share their Π0 stop (station/sequencer.py): a per-cycle
-# deviation P − (Z_before + Z_after)/2 has variance 1.5·s² with s² the variance
-# of one stop mean; deviations of one gauge in the same cycle share both Π0
-# stops (covariance 0.5·s²), in adjacent cycles one (0.25·s²).
-_SAME_CYCLE, _ADJACENT_CYCLE = 0.5 / 1.5, 0.25 / 1.5
-SHARED_ZERO_LAG1 = _ADJACENT_CYCLE  # = 1/6, station.sequencer.SHARED_P0_CORRELATION
-
-
 @dataclass(frozen=True)
 class ModelTest:
     """The lack-of-fit test of one candidate (``F`` None when it was not tested)."""
@@ -65,12 +82,24 @@ class ModelTest:
     passed: bool = False
     residual_rms: float | None = None
     note: str = ""
+    #: With the stands modelled: the test against the next candidate (``against``),
+    #: F of the drop of the residual when its parameters join, on
+    #: (``dof_next``, ``dof_noise``) dof, and its p-value (:func:`nested_test`).
+    against: str | None = None
+    F_next: float | None = None
+    dof_next: int | None = None
+    p_next: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"model": self.model, "identifiable": self.identifiable, "F": self.F,
-                "dof": [self.dof_model, self.dof_noise] if self.F is not None else None,
-                "p_value": self.p_value, "passed": self.passed,
-                "residual_rms_mm": self.residual_rms, "note": self.note or None}
+        out = {"model": self.model, "identifiable": self.identifiable, "F": self.F,
+               "dof": [self.dof_model, self.dof_noise] if self.F is not None else None,
+               "p_value": self.p_value, "passed": self.passed,
+               "residual_rms_mm": self.residual_rms, "note": self.note or None}
+        if self.against is not None:
+            out["against_next"] = {"model": self.against, "F": self.F_next,
+                                   "dof": [self.dof_next, self.dof_noise],
+                                   "p_value": self.p_next}
+        return out
 
 
 @dataclass(frozen=True)
@@ -88,94 +117,23 @@ class ModelSelection:
     reason: str
     supported: bool = True
     extra: dict[str, Any] = field(default_factory=dict)
+    #: The stands option when the stands were modelled (None: at L/2, not modelled);
+    #: their estimates are the identification's ``stands``.
+    stands: Stands | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (the run JSON's ``model_selection``)."""
-        return {"model": self.model, "test": "lack-of-fit F test against the measured noise",
-                "level": self.level, "noise_sigma_mm": self.noise_sigma,
-                "noise_dof": self.noise_dof, "noise_source": self.noise_source,
-                "supported": self.supported, "reason": self.reason,
-                "candidates": [t.to_dict() for t in self.tests], **self.extra}
-
-
-def _gauge_rows(keys: Sequence[Key]) -> list[tuple[tuple[str, str], int]]:
-    """(gauge, cycle index) of each row: a key's repeats are its cycles in order."""
-    count: dict[Key, int] = {}
-    rows = []
-    for key in keys:
-        rows.append(((key[1], key[2]), count.get(key, 0)))
-        count[key] = count.get(key, 0) + 1
-    return rows
-
-
-def row_correlation(keys: Sequence[Key], shared_zero: bool = True) -> np.ndarray:
-    """Correlation of the rows ``keys`` (one per cycle: a key repeated once per
-    cycle, in cycle order). Without ``shared_zero`` the rows are independent;
-    with it, the station's Π0 sharing correlates rows of one gauge (leg,
-    direction): 1/3 in the same cycle, 1/6 in adjacent cycles."""
-    n = len(keys)
-    C = np.eye(n)
-    if shared_zero:
-        rows = _gauge_rows(keys)
-        for a in range(n):
-            for b in range(a + 1, n):
-                (ga, ca), (gb, cb) = rows[a], rows[b]
-                if ga != gb:
-                    continue
-                if ca == cb:
-                    C[a, b] = C[b, a] = _SAME_CYCLE
-                elif abs(ca - cb) == 1:
-                    C[a, b] = C[b, a] = _ADJACENT_CYCLE
-    return C
-
-
-def means_covariance(keys: Sequence[Key], shared_zero: bool = True) -> tuple[list[Key], np.ndarray]:
-    """Distinct keys and the covariance of their means in units of σ², the
-    variance of one per-cycle deviation (rows as for :func:`row_correlation`)."""
-    distinct = list(dict.fromkeys(keys))
-    index = {k: n for n, k in enumerate(distinct)}
-    n = len(keys)
-    C = row_correlation(keys, shared_zero)
-    A = np.zeros((len(distinct), n))
-    for r, key in enumerate(keys):
-        A[index[key], r] = 1.0
-    A /= A.sum(axis=1, keepdims=True)
-    return distinct, A @ C @ A.T
-
-
-def noise_from_cycles(deviations_in: Mapping | Iterable,
-                      shared_zero: bool = True) -> tuple[float, int]:
-    """σ̂ of one per-cycle deviation and its degrees of freedom from the
-    cycle-to-cycle scatter of each deviation, pooled. With shared Π0 stops the
-    scatter understates the variance by (1 − 2ρ/c), ρ = 1/6 (as in
-    station.sequencer.cycle_std_error); corrected here. Raises ValueError when
-    no deviation has two cycles."""
-    keys, y = _flatten(deviations_in)
-    groups: dict[Key, list[float]] = {}
-    for k, v in zip(keys, y, strict=True):
-        groups.setdefault(k, []).append(float(v))
-    num, dof = 0.0, 0
-    for vals in groups.values():
-        c = len(vals)
-        if c < 2:
-            continue
-        understate = 1.0 - 2.0 * SHARED_ZERO_LAG1 / c if shared_zero else 1.0
-        num += (c - 1) * float(np.var(vals, ddof=1)) / understate
-        dof += c - 1
-    if dof == 0:
-        raise ValueError("no deviation was measured in two cycles or more: no cycle scatter")
-    return math.sqrt(num / dof), dof
-
-
-def noise_from_readings(stop_std: Sequence[float], readings: int) -> tuple[float, int]:
-    """σ̂ of one per-cycle deviation from the scatter of ``readings`` readings at
-    each stop (``stop_std``: their standard deviations): a stop mean has variance
-    σ_r²/n and a deviation P − (Z + Z')/2 1.5 times that. ν = stops·(n − 1)."""
-    s = np.asarray(stop_std, dtype=float)
-    if s.size == 0 or readings < 2:
-        raise ValueError("no stop with two readings or more: no within-stop scatter")
-    sigma_r2 = float(np.mean(s**2))
-    return math.sqrt(1.5 * sigma_r2 / readings), int(s.size * (readings - 1))
+        out = {"model": self.model, "test": "lack-of-fit F test against the measured noise",
+               "level": self.level, "noise_sigma_mm": self.noise_sigma,
+               "noise_dof": self.noise_dof, "noise_source": self.noise_source,
+               "supported": self.supported, "reason": self.reason,
+               "candidates": [t.to_dict() for t in self.tests], **self.extra}
+        if self.stands is not None:
+            out["test"] += (", the stands as random effects; and against the next "
+                            "candidate (likelihood ratio)")
+            out["stands"] = {**self.stands.to_dict(), "estimates": {
+                n: e.to_dict() for n, e in self.identification.stands.items()}}
+        return out
 
 
 def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma: float,
@@ -193,6 +151,9 @@ def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma:
     ``se_dof``: with few cycles σ̂ is itself uncertain, and an interval of k
     standard errors needs k from Student's t, not the normal (:func:`coverage_factor`)."""
     keys = list(result.keys)
+    if result.stand_model is not None:
+        return _with_measured_noise_stands(result, geometry, noise_sigma, inflate,
+                                           shared_zero, noise_dof)
     if result.method == "nonlinear":
         J = exact_jacobian(keys, geometry, result.vector, result.model)
     else:
@@ -207,22 +168,47 @@ def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma:
                    se_dof=None if noise_dof is None else float(noise_dof))
 
 
-def coverage_factor(dof: float | None, coverage: float = 0.95) -> float:
-    """k such that ±k standard errors hold the truth with probability ``coverage``
-    when the standard errors rest on ``dof`` degrees of freedom (GUM G.3: Student's
-    t). Two cycles of a six-gauge run give about 12 dof and k95 = 2.18, not 1.96;
-    k99.73 = 3.8, not 3: "within 3 standard errors" fails three times as often as
-    the normal promises. ``dof`` None or infinite: the normal's k."""
-    from scipy.stats import norm, t  # imported on demand, as in lack_of_fit
+def _stand_design(result: Identification, geometry: Geometry, keys: Sequence[Key]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(J_θ, J_M, m̂) of a fit with stands at ``keys`` (rows or distinct keys):
+    the model's columns read in the identified planes, the stands' exact columns
+    (ordered as ``result.stands``) and the stands' estimates."""
+    stands = result.stand_model
+    assert stands is not None
+    names, S = incidence(keys, stands)
+    order = list(result.stands)
+    S_full = np.zeros((len(keys), len(order)))
+    for c, name in enumerate(names):
+        S_full[:, order.index(name)] = S[:, c]
+    m = result.stand_offsets
+    J_t = exact_jacobian(keys, geometry, result.vector, result.model, S_full @ m)
+    J_m = stand_jacobian(keys, geometry, result.vector, S_full)
+    return J_t, J_m, m
 
-    if not (0.0 < coverage < 1.0):
-        raise ValueError(f"coverage must lie in (0, 1), got {coverage!r}")
-    tail = (1.0 + coverage) / 2.0
-    if dof is None or not math.isfinite(dof):
-        return float(norm.ppf(tail))
-    if dof <= 0:
-        raise ValueError(f"coverage_factor needs dof > 0, got {dof!r}")
-    return float(t.ppf(tail, dof))
+
+def _with_measured_noise_stands(result: Identification, geometry: Geometry, noise_sigma: float,
+                                inflate: float, shared_zero: bool,
+                                noise_dof: float | None) -> Identification:
+    """:func:`with_measured_noise` of a fit with stands: the penalised least squares'
+    sandwich B·(Aᵀ·σ²C·A + Λ·Σ_M·Λ)·B (orthocal.stands.ridge_covariance), the
+    noise part times ``inflate``²; the stands' SDs and observability follow."""
+    stands = result.stand_model
+    assert stands is not None and result.stand_sigma is not None
+    keys = list(result.keys)
+    J_t, J_m, m = _stand_design(result, geometry, keys)
+    p = J_t.shape[1]
+    noise_cov = (inflate * noise_sigma) ** 2 * row_correlation(keys, shared_zero)
+    cov_all = ridge_covariance(np.hstack([J_t, J_m]), p,
+                               prior_penalty(result.stand_sigma, stands, len(m)), noise_cov,
+                               stands.prior_sd**2)
+    covariance = cov_all[:p, :p]
+    std = np.sqrt(np.diag(covariance))
+    correlation = covariance / np.outer(std, std)
+    gauges = {n: e.gauges for n, e in result.stands.items()}
+    estimates = stand_estimates(list(result.stands), gauges, m, cov_all[p:, p:], stands)
+    return replace(result, covariance=covariance, correlation=correlation,
+                   std_errors={n: float(s) for n, s in zip(result.names, std, strict=True)},
+                   se_dof=None if noise_dof is None else float(noise_dof), stands=estimates)
 
 
 def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
@@ -241,16 +227,62 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
     dof_model = len(distinct) - p
     if dof_model <= 0:
         return ModelTest(result.model, True, note="as many parameters as deviations: no test")
-    mean_res = np.array([np.mean(result.residuals[[k == d for k in keys]]) for d in distinct])
-    J = exact_jacobian(distinct, geometry, result.vector, result.model)
-    W = np.linalg.inv(C)
-    g = J.T @ W @ mean_res
-    rss = float(mean_res @ W @ mean_res - g @ np.linalg.solve(J.T @ W @ J, g))
+    if result.stand_model is not None:
+        rss = _marginal_rss(result, geometry, noise_sigma, shared_zero)
+    else:
+        mean_res = np.array([np.mean(result.residuals[[k == d for k in keys]])
+                             for d in distinct])
+        J = exact_jacobian(distinct, geometry, result.vector, result.model)
+        W = np.linalg.inv(C)
+        g = J.T @ W @ mean_res
+        rss = float(mean_res @ W @ mean_res - g @ np.linalg.solve(J.T @ W @ J, g))
     F = max(rss, 0.0) / dof_model / noise_sigma**2
     p_value = float(f_dist.sf(F, dof_model, noise_dof))
     return ModelTest(result.model, True, F=float(F), dof_model=dof_model,
                      dof_noise=float(noise_dof), p_value=p_value, passed=False,
                      residual_rms=float(result.residual_rms))
+
+
+def _marginal_rss(result: Identification, geometry: Geometry, noise_sigma: float,
+                  shared_zero: bool = True) -> float:
+    """The generalised residual sum of squares (mm², in units of σ² of one
+    per-cycle deviation times σ²) of a fit with stands: the deviation means'
+    residual with the stands' part put back, r* = r̄ + J_M·m̂, weighted by the
+    inverse of its covariance C + J_M·Σ_M·J_Mᵀ/σ², the model's columns
+    projected out (a Gauss–Newton step of the marginal generalised least squares
+    from the fit, as :func:`lack_of_fit` does without stands). It equals the
+    penalised residual Σ r̄ᵀC⁻¹r̄ + σ²·m̂ᵀΣ_M⁻¹m̂ at the marginal optimum."""
+    stands = result.stand_model
+    assert stands is not None
+    keys = list(result.keys)
+    distinct, C = means_covariance(keys, shared_zero)
+    mean_res = np.array([np.mean(result.residuals[[k == d for k in keys]]) for d in distinct])
+    J_t, J_m, m = _stand_design(result, geometry, distinct)
+    r_star = mean_res + J_m @ m
+    V = C + (stands.prior_sd / noise_sigma) ** 2 * (J_m @ J_m.T)
+    W = np.linalg.inv(V)
+    g = J_t.T @ W @ r_star
+    return float(r_star @ W @ r_star - g @ np.linalg.solve(J_t.T @ W @ J_t, g))
+
+
+def nested_test(small: Identification, big: Identification, geometry: Geometry,
+                noise_sigma: float, noise_dof: float,
+                shared_zero: bool = True) -> tuple[float, int, float] | None:
+    """(F, dof, p) of the drop of the generalised residual (:func:`_marginal_rss`)
+    from ``small`` to ``big``, the larger model with the same stands: F =
+    [(RSS_small − RSS_big)/(p_big − p_small)]/σ̂², F(p_big − p_small, ν) when
+    ``small`` is right. None when ``big`` has no more parameters. For fits with
+    stands (orthocal.stands): the likelihood-ratio test that sees a tilt where
+    the lack of fit, spread over K − p dof, weighs it against the stands."""
+    from scipy.stats import f as f_dist
+
+    extra = len(big.names) - len(small.names)
+    if extra <= 0 or small.stand_model is None or big.stand_model is None:
+        return None
+    drop = (_marginal_rss(small, geometry, noise_sigma, shared_zero)
+            - _marginal_rss(big, geometry, noise_sigma, shared_zero))
+    F = max(drop, 0.0) / extra / noise_sigma**2
+    return float(F), extra, float(f_dist.sf(F, extra, noise_dof))
 
 
 def select_model(
@@ -263,6 +295,7 @@ def select_model(
     method: str = "nonlinear",
     shared_zero: bool = True,
     noise_source: str = "given",
+    stands: Stands | None = None,
 ) -> ModelSelection:
     """The smallest of ``candidates`` (in the order given, smallest first) whose
     lack of fit the measured noise explains at ``level`` (module docstring).
@@ -275,6 +308,10 @@ def select_model(
     why. When none passes, the largest identifiable one is used and the result
     says the data show more than any candidate explains (``supported`` False).
     Raises IdentificationError when no candidate can be identified.
+    ``stands``: model the indicator stands (:class:`orthocal.stands.Stands`: which
+    gauges share a stand, their placement tolerance) as the module docstring
+    says; the reason then says so and the identification's ``stands`` holds
+    their estimates. None (the default): as without the option, bit for bit.
     """
     geometry = geometry or Geometry()
     if not (0.0 < level < 1.0):
@@ -289,6 +326,10 @@ def select_model(
         raise IdentificationError(f"auto needs a positive noise estimate, got {noise_sigma!r}")
     if noise_dof is None or not noise_dof > 0:
         raise IdentificationError(f"auto needs the noise's degrees of freedom, got {noise_dof!r}")
+    if stands is not None:
+        return _select_with_stands(deviations_in, geometry, float(noise_sigma),
+                                   float(noise_dof), candidates, level, method, shared_zero,
+                                   noise_source, stands)
     tests: list[ModelTest] = []
     fits: dict[str, Identification] = {}
     for model in candidates:
@@ -331,3 +372,91 @@ def select_model(
                  if skipped else ""))
     return ModelSelection(largest, fits[largest], tuple(tests), level, float(noise_sigma),
                           float(noise_dof), noise_source, reason, supported=False)
+
+
+def _select_with_stands(
+    deviations_in: Mapping | Iterable, geometry: Geometry, noise_sigma: float, noise_dof: float,
+    candidates: Sequence[str], level: float, method: str, shared_zero: bool,
+    noise_source: str, stands: Stands,
+) -> ModelSelection:
+    """:func:`select_model` with the stands modelled (module docstring): a
+    candidate passes when its lack of fit passes and the next identifiable
+    candidate does not explain significantly more (:func:`nested_test`)."""
+    if isinstance(deviations_in, Iterable) and not isinstance(deviations_in, Mapping):
+        deviations_in = list(deviations_in)  # read more than once
+    fits: dict[str, Identification] = {}
+    notes: dict[str, str] = {}
+
+    def fit_of(model: str) -> Identification | None:
+        if model not in fits and model not in notes:
+            try:
+                fits[model] = identify(deviations_in, geometry, model=model, method=method,
+                                       sigma=noise_sigma, stands=stands)
+            except IdentificationError as exc:
+                notes[model] = str(exc)
+        return fits.get(model)
+
+    order = list(candidates)
+    tests: list[ModelTest] = []
+    for n, model in enumerate(order):
+        fit = fit_of(model)
+        if fit is None:
+            tests.append(ModelTest(model, False, note=notes[model]))
+            continue
+        test = lack_of_fit(fit, geometry, noise_sigma, noise_dof, shared_zero)
+        passed = test.p_value is None or test.p_value >= level
+        nested = None
+        if passed:  # only then does the next candidate decide
+            nxt = next((m for m in order[n + 1:] if fit_of(m) is not None), None)
+            if nxt is not None:
+                nested = nested_test(fit, fits[nxt], geometry, noise_sigma, noise_dof,
+                                     shared_zero)
+            if nested is not None:
+                passed = nested[2] >= level
+                test = replace(test, against=nxt, F_next=nested[0], dof_next=nested[1],
+                               p_next=nested[2])
+        tests.append(replace(test, passed=passed))
+        if passed:
+            break
+    tested = [t for t in tests if t.identifiable]
+    if not tested:
+        raise IdentificationError("auto: no candidate model can be identified from these "
+                                  "deviations: " + "; ".join(t.note for t in tests))
+    chosen = next((t for t in tests if t.passed), None)
+    noise_txt = (f"noise {1000 * noise_sigma:.2f} µm per deviation ({noise_source}, "
+                 f"{noise_dof:g} dof)")
+
+    def why_rejected(t: ModelTest) -> str:
+        if t.F is not None and t.p_value is not None and t.p_value < level:
+            return (f"{t.model} leaves more than the noise and the stands explain (F = "
+                    f"{t.F:.1f}, p = {t.p_value:.1e} < {level:g})")
+        return (f"{t.against} explains significantly more than {t.model} (F = {t.F_next:.1f} "
+                f"on ({t.dof_next}, {t.dof_noise:g}) dof, p = {t.p_next:.1e} < {level:g})")
+
+    why_not = "; ".join(why_rejected(t) for t in tested if not t.passed and t.F is not None)
+    if chosen is not None:
+        ident = fits[chosen.model]
+        if chosen.F is not None:
+            lof = (f"F = {chosen.F:.2f} on ({chosen.dof_model}, {chosen.dof_noise:g}) dof, "
+                   f"p = {chosen.p_value:.3f} ≥ {level:g}")
+        else:
+            lof = chosen.note
+        nxt = ("" if chosen.against is None else
+               f"; {chosen.against} explains no significantly more (F = {chosen.F_next:.2f} "
+               f"on ({chosen.dof_next}, {chosen.dof_noise:g}) dof, p = {chosen.p_next:.3f})")
+        reason = (f"{chosen.model}: the smallest model whose residual the measured noise and "
+                  f"the stands explain ({lof}{nxt}; {noise_txt})"
+                  + (f"; {why_not}" if why_not else "")
+                  + f"; {describe_stands(ident.stands, stands)}")
+        return ModelSelection(chosen.model, ident, tuple(tests), level, noise_sigma, noise_dof,
+                              noise_source, reason, stands=stands)
+    largest = tested[-1].model
+    skipped = [t for t in tests if not t.identifiable]
+    reason = (f"{largest}: no candidate explains the data at level {level:g} ({why_not}; "
+              f"{noise_txt}); the largest identifiable model is used: errors outside the "
+              "model remain (play, leg lengths, a loose indicator?)"
+              + ("; not identifiable: " + "; ".join(f"{t.model}: {t.note}" for t in skipped)
+                 if skipped else "")
+              + f"; {describe_stands(fits[largest].stands, stands)}")
+    return ModelSelection(largest, fits[largest], tuple(tests), level, noise_sigma, noise_dof,
+                          noise_source, reason, supported=False, stands=stands)

@@ -6,12 +6,8 @@ import numpy as np
 import pytest
 
 from orthocal import Geometry, IdentificationError, deviations
-from orthocal.selection import (
-    means_covariance,
-    noise_from_cycles,
-    noise_from_readings,
-    select_model,
-)
+from orthocal.noise import means_covariance, noise_from_cycles, noise_from_readings
+from orthocal.selection import select_model
 
 G = Geometry()
 GAUGES = [(i, j) for i in "xyz" for j in "xyz" if i != j]

@@ -182,7 +182,7 @@ def _rotated_machine_deviations(rotation: np.ndarray, x: np.ndarray) -> np.ndarr
     """Deviations of the machine ``x`` turned as a whole by ``rotation`` against the
     base (the indicator planes stay where the base holds them)."""
     from orthocal.kinematics import solve_spheres
-    from orthocal.measurement import _reading
+    from orthocal.measurement import reading_at
 
     tilted = axis_directions(x[6:])
     u = (rotation @ (np.eye(3) if tilted is None else tilted).T).T  # rows: turned axes
@@ -192,8 +192,8 @@ def _rotated_machine_deviations(rotation: np.ndarray, x: np.ndarray) -> np.ndarr
     for s, leg, d in ALL_KEYS:
         i, j = "xyz".index(leg), "xyz".index(d)
         rho = posture(s, leg, G)
-        r_s = _reading(rho, solve_spheres(rho + x[:3], L, u), i, j, x[:3], G.mount_plane, u)
-        r_0 = _reading(rho0, solve_spheres(rho0 + x[:3], L, u), i, j, x[:3], G.mount_plane, u)
+        r_s = reading_at(rho, solve_spheres(rho + x[:3], L, u), i, j, x[:3], G.mount_plane, u)
+        r_0 = reading_at(rho0, solve_spheres(rho0 + x[:3], L, u), i, j, x[:3], G.mount_plane, u)
         out.append(float(r_s - r_0))
     return np.array(out)
 

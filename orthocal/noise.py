@@ -1,0 +1,120 @@
+"""The noise a run measures on itself: how the deviations of the station's cycles
+are correlated (consecutive cycles share their Π0 stop), the noise of one
+per-cycle deviation from the cycle-to-cycle scatter or from the scatter of the
+readings at a stop, and the coverage factor of an interval on few degrees of
+freedom (Student's t, GUM G.3)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from orthocal.inputs import flatten_deviations
+from orthocal.measurement import Key
+
+# Consecutive cycles share their Π0 stop (station.engine.sequencer): a per-cycle
+# deviation P − (Z_before + Z_after)/2 has variance 1.5·s² with s² the variance
+# of one stop mean; deviations of one gauge in the same cycle share both Π0
+# stops (covariance 0.5·s²), in adjacent cycles one (0.25·s²).
+_SAME_CYCLE, _ADJACENT_CYCLE = 0.5 / 1.5, 0.25 / 1.5
+SHARED_ZERO_LAG1 = _ADJACENT_CYCLE  # = 1/6, station.engine.sequencer.SHARED_P0_CORRELATION
+
+
+def _gauge_rows(keys: Sequence[Key]) -> list[tuple[tuple[str, str], int]]:
+    """(gauge, cycle index) of each row: a key's repeats are its cycles in order."""
+    count: dict[Key, int] = {}
+    rows = []
+    for key in keys:
+        rows.append(((key[1], key[2]), count.get(key, 0)))
+        count[key] = count.get(key, 0) + 1
+    return rows
+
+
+def row_correlation(keys: Sequence[Key], shared_zero: bool = True) -> np.ndarray:
+    """Correlation of the rows ``keys`` (one per cycle: a key repeated once per
+    cycle, in cycle order). Without ``shared_zero`` the rows are independent;
+    with it, the station's Π0 sharing correlates rows of one gauge (leg,
+    direction): 1/3 in the same cycle, 1/6 in adjacent cycles."""
+    n = len(keys)
+    C = np.eye(n)
+    if shared_zero:
+        rows = _gauge_rows(keys)
+        for a in range(n):
+            for b in range(a + 1, n):
+                (ga, ca), (gb, cb) = rows[a], rows[b]
+                if ga != gb:
+                    continue
+                if ca == cb:
+                    C[a, b] = C[b, a] = _SAME_CYCLE
+                elif abs(ca - cb) == 1:
+                    C[a, b] = C[b, a] = _ADJACENT_CYCLE
+    return C
+
+
+def means_covariance(keys: Sequence[Key], shared_zero: bool = True) -> tuple[list[Key], np.ndarray]:
+    """Distinct keys and the covariance of their means in units of σ², the
+    variance of one per-cycle deviation (rows as for :func:`row_correlation`)."""
+    distinct = list(dict.fromkeys(keys))
+    index = {k: n for n, k in enumerate(distinct)}
+    n = len(keys)
+    C = row_correlation(keys, shared_zero)
+    A = np.zeros((len(distinct), n))
+    for r, key in enumerate(keys):
+        A[index[key], r] = 1.0
+    A /= A.sum(axis=1, keepdims=True)
+    return distinct, A @ C @ A.T
+
+
+def noise_from_cycles(deviations_in: Mapping | Iterable,
+                      shared_zero: bool = True) -> tuple[float, int]:
+    """σ̂ of one per-cycle deviation and its degrees of freedom from the
+    cycle-to-cycle scatter of each deviation, pooled. With shared Π0 stops the
+    scatter understates the variance by (1 − 2ρ/c), ρ = 1/6 (as in
+    station.engine.sequencer.cycle_std_error); corrected here. Raises ValueError when
+    no deviation has two cycles."""
+    keys, y = flatten_deviations(deviations_in)
+    groups: dict[Key, list[float]] = {}
+    for k, v in zip(keys, y, strict=True):
+        groups.setdefault(k, []).append(float(v))
+    num, dof = 0.0, 0
+    for vals in groups.values():
+        c = len(vals)
+        if c < 2:
+            continue
+        understate = 1.0 - 2.0 * SHARED_ZERO_LAG1 / c if shared_zero else 1.0
+        num += (c - 1) * float(np.var(vals, ddof=1)) / understate
+        dof += c - 1
+    if dof == 0:
+        raise ValueError("no deviation was measured in two cycles or more: no cycle scatter")
+    return math.sqrt(num / dof), dof
+
+
+def noise_from_readings(stop_std: Sequence[float], readings: int) -> tuple[float, int]:
+    """σ̂ of one per-cycle deviation from the scatter of ``readings`` readings at
+    each stop (``stop_std``: their standard deviations): a stop mean has variance
+    σ_r²/n and a deviation P − (Z + Z')/2 1.5 times that. ν = stops·(n − 1)."""
+    s = np.asarray(stop_std, dtype=float)
+    if s.size == 0 or readings < 2:
+        raise ValueError("no stop with two readings or more: no within-stop scatter")
+    sigma_r2 = float(np.mean(s**2))
+    return math.sqrt(1.5 * sigma_r2 / readings), int(s.size * (readings - 1))
+
+
+def coverage_factor(dof: float | None, coverage: float = 0.95) -> float:
+    """k such that ±k standard errors hold the truth with probability ``coverage``
+    when the standard errors rest on ``dof`` degrees of freedom (GUM G.3: Student's
+    t). Two cycles of a six-gauge run give about 12 dof and k95 = 2.18, not 1.96;
+    k99.73 = 3.8, not 3: "within 3 standard errors" fails three times as often as
+    the normal promises. ``dof`` None or infinite: the normal's k."""
+    from scipy.stats import norm, t  # imported on demand, as in lack_of_fit
+
+    if not (0.0 < coverage < 1.0):
+        raise ValueError(f"coverage must lie in (0, 1), got {coverage!r}")
+    tail = (1.0 + coverage) / 2.0
+    if dof is None or not math.isfinite(dof):
+        return float(norm.ppf(tail))
+    if dof <= 0:
+        raise ValueError(f"coverage_factor needs dof > 0, got {dof!r}")
+    return float(t.ppf(tail, dof))
