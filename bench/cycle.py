@@ -9,7 +9,7 @@ timed from spawn to exit, so process start, imports and connecting count.
 The floor is what the physics of the run that actually happened costs:
 
 * each move between consecutive stops, timed with the simulator's own motion
-  profile (``drivers.sim.machine._Profile.trapezoid``: coordinated or
+  profile (``drivers.profiles.move_time``, its trapezoid's duration: coordinated or
   independent, a move lasts as long as a rest-to-rest trapezoid over its
   longest axis), in the machine's own scale, so the move that a write-back's
   new offsets cause is counted; waypoints are not part of the floor, they are
@@ -52,11 +52,12 @@ import numpy as np
 # Runnable from a plain checkout, without the editable install.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drivers.indicators import make_protocol
-from drivers.sim.machine import DriveMotion, _Profile
+from drivers.indicator_protocols import make_protocol
+from drivers.profiles import move_time
+from drivers.sim.motion import DriveMotion
 from drivers.sim.station import VirtualStation
 from station.config import toml_text
-from station.journal import read_journal
+from station.rundir.journal import read_journal
 
 AXES = ("x", "y", "z")
 
@@ -91,8 +92,12 @@ class Outcome:
     # Seconds from spawn to the journal's header, to its first and last reading, to exit.
     timeline: dict[str, float]
     clamped: int = 0
-    # Moves that drove a plunger past an end of its stroke, read or not (simulator).
+    # Moves that drove a plunger of the setup in progress past an end of its stroke,
+    # read or not (simulator); and those of gauges on the other legs, which stand
+    # mounted only because all six are (as orthocal sim stands them: an operator
+    # removes them, the station's prompt says so).
     out_of_stroke: int = 0
+    foreign_out_of_stroke: int = 0
     # Mean extra seconds per stop of a mounting's first cycle (move + settle + read)
     # against the same stop of later cycles, and how many stops it averages: the
     # plunger guard's cost, paired within one run (same load, same moves).
@@ -154,7 +159,7 @@ def physical_floor(run_dir: Path, start_m: np.ndarray, timing: Timing
         target = rho + offsets_of.get(phase, before if phase == "m" else after)
         distance = float(np.max(np.abs(target - position)))
         if distance > 1e-3:  # the station skips moves within a µm, as the drive would
-            moves += _Profile.trapezoid(distance, timing.speed_mm_s, timing.accel_mm_s2).duration
+            moves += move_time(distance, timing.speed_mm_s, timing.accel_mm_s2)
         position = target
     per_reading = line_time_per_reading(timing.protocol, timing.baud)
     settle = timing.settle_s * len(stops)
@@ -220,11 +225,13 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
                         ) as station:
         machine = station.machine
         started: list[float] = []
+        targets_of: list[np.ndarray] = []
         move_to = machine.move_to
 
         def recording_move_to(targets: Any) -> float:
             duration = move_to(targets)
             started.append(duration)
+            targets_of.append(np.asarray(targets, dtype=float))
             return duration
 
         machine.move_to = recording_move_to  # type: ignore[method-assign]
@@ -241,7 +248,7 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
         # Readings a gauge gave at an end of its stroke (stops and the guard's polls),
         # and every move that drove a plunger past an end, read or not.
         clamped = sum(sim.clamped for sim in station.indicators.values())
-        out_of_stroke = station.out_of_stroke_count
+        out_of_stroke, foreign = own_setup_events(station.out_of_stroke, targets_of)
     if proc.returncode != 0:
         sys.stderr.write(proc.stderr[-4000:])
         raise SystemExit(f"station run failed (exit {proc.returncode})")
@@ -257,7 +264,30 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
     first_cycle_extra = first_cycle_extra_s(records)
     return Outcome(wall, moves + settle + line, moves, settle, line, float(sum(started)),
                    sum(1 for d in started if d > 0), stops, result, drho, timeline, clamped,
-                   out_of_stroke, first_cycle_extra)
+                   out_of_stroke, foreign, first_cycle_extra)
+
+
+def leg_under_test(target: np.ndarray) -> str | None:
+    """The leg whose test posture (or waypoint on its axis) a joint target is: the
+    joint that differs from the two others, which are equal (None: Π0)."""
+    for i, axis in enumerate(AXES):
+        j, k = (n for n in range(3) if n != i)
+        if abs(target[j] - target[k]) < 1e-6 and abs(target[i] - target[j]) > 1e-6:
+            return axis
+    return None
+
+
+def own_setup_events(events: list[Any], targets: list[np.ndarray]) -> tuple[int, int]:
+    """(events on gauges of the leg under test, events on other legs' gauges): the
+    leg under test at a move is that of the last move to a test posture or waypoint."""
+    legs: list[str | None] = []
+    current: str | None = None
+    for target in targets:
+        current = leg_under_test(target) or current
+        legs.append(current)
+    own = sum(1 for e in events if e.move is not None and 0 < e.move <= len(legs)
+              and legs[e.move - 1] == e.leg)
+    return own, len(events) - own
 
 
 def report(label: str, o: Outcome) -> None:
@@ -268,7 +298,8 @@ def report(label: str, o: Outcome) -> None:
     print(f"    machine moves: {o.machine_moves} started, {o.machine_moves_s:.2f} s "
           f"(floor's moves {o.floor_moves_s:.2f} s); station's own wall_s "
           f"{t.get('wall_s')} s; readings at a stroke end {o.clamped}, moves past a stroke "
-          f"end {o.out_of_stroke}")
+          f"end {o.out_of_stroke} (and {o.foreign_out_of_stroke} of the other legs' gauges, "
+          "mounted only because all six are)")
     extra, n = o.first_cycle_extra
     print(f"    first cycle after mounting: {1000 * extra:+.1f} ms per stop against later "
           f"cycles ({n} stops)")

@@ -21,7 +21,8 @@ import serial
 # Runnable from a plain checkout, without the editable install.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drivers.indicators import IndicatorGroup, IndicatorProtocol, SerialIndicator, make_protocol
+from drivers.indicator_protocols import IndicatorProtocol, make_protocol
+from drivers.indicators import IndicatorGroup, SerialIndicator
 from drivers.sim.indicators import SimIndicator
 
 

@@ -47,9 +47,10 @@ from pathlib import Path
 from typing import Any
 
 from drivers.errors import DeviceError
-from station import cmd_run
+from station.commands import run as cmd_run
+from station.commands.options import ResumeOptions, RunOptions, SimOptions
 from station.errors import BadInput, RunFailed
-from station.journal import read_journal
+from station.rundir.journal import read_journal
 
 AXES = "xyz"
 
@@ -117,15 +118,7 @@ def _faulty(args: argparse.Namespace, injected: list[Any], seed: int,
         for sim in station.indicators.values():
             sim.faults.drop_rate, sim.faults.garble_rate = args.drop, args.garble
             # The gauges count requests and replies, not faults: count them here.
-            take = sim._take
-
-            def counting(rate: float, next_field: str, take: Any = take) -> bool:
-                hit = take(rate, next_field)
-                if hit:
-                    injected.append(next_field)
-                return hit
-
-            sim._take = counting
+            sim.on_fault = injected.append
         injected.append(station.controller.stats)
         describe = station.config
 
@@ -157,7 +150,7 @@ def _lost(records: list[dict[str, Any]], readings: int, taken: int) -> int:
     return missing + max(0, taken - journaled)
 
 
-def _command(call: Any, ns: argparse.Namespace, tally: Tally) -> str | None:
+def _command(call: Any, ns: Any, tally: Tally) -> str | None:
     """Run one command quietly; the line it failed with, if it failed."""
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         try:
@@ -172,11 +165,12 @@ def _command(call: Any, ns: argparse.Namespace, tally: Tally) -> str | None:
 
 def one_run(args: argparse.Namespace, seed: int, out: Path, tally: Tally) -> str:
     injected: list[Any] = []
-    ns = argparse.Namespace(
-        simulate=True, config=None, plan=False, seed=seed, true_drho=None, true_dl=None,
-        noise=args.noise, out=str(out), yes=True, json=True, debug=False,
-        sim_procedure={"cycles": args.cycles, "readings": args.readings, "settle_s": 0.0},
-        sim_speed=args.speed, sim_station_hook=_faulty(args, injected, seed))
+    ns = RunOptions(
+        sim=SimOptions(seed=seed, noise=args.noise,
+                       procedure={"cycles": args.cycles, "readings": args.readings,
+                                  "settle_s": 0.0},
+                       speed_mm_s=args.speed, station_hook=_faulty(args, injected, seed)),
+        out=out, yes=True, json=True)
     t0 = time.monotonic()
     error = _command(cmd_run.run, ns, tally)
     tally.runs += 1
@@ -186,8 +180,8 @@ def one_run(args: argparse.Namespace, seed: int, out: Path, tally: Tally) -> str
     # times at most; each resume is a fresh process in real life).
     while error is not None and not error.startswith("INTERNAL") and resumes < 3:
         resumes += 1
-        rns = argparse.Namespace(run_dir=str(run_dir), yes=True, json=True, debug=False,
-                                 sim_station_hook=_faulty(args, injected, seed, first=False))
+        rns = ResumeOptions(run_dir=run_dir, yes=True, json=True,
+                            station_hook=_faulty(args, injected, seed, first=False))
         error = _command(cmd_run.resume, rns, tally)
     tally.resumes += resumes
     result = json.loads((run_dir / "result.json").read_text())

@@ -5,7 +5,7 @@ marked unknown, with the reason, where it does not.
 Most drives answer exception 2 (illegal data address) outside their map and
 many keep their limits in parameters that Modbus cannot read; a drive that was
 never set up may report all zeros. None of these is a fault of the link: the
-station then takes the limits from its config (station.plan.effective_limits),
+station then takes the limits from its config (station.plan.steps.effective_limits),
 and refuses to move when neither source has them.
 """
 

@@ -20,7 +20,8 @@ import numpy as np
 import serial
 
 from drivers.errors import DeviceError, ExceptionResponse
-from drivers.indicators import _PORT_ERRORS, BUILTIN_PROTOCOLS, IndicatorProtocol
+from drivers.indicator_protocols import BUILTIN_PROTOCOLS, IndicatorProtocol
+from drivers.indicators import PORT_ERRORS
 
 #: the built-in protocols a probe tries, in this order
 PROBED = ("mitutoyo", "sylvac", "mahr")
@@ -102,7 +103,7 @@ def probe_port(port: str, timeout_s: float = 0.5,
         result.tried.append(f"{name} ({shown} at {line_settings(p)})")
         try:
             raw = _exchange(port, p, timeout_s, factory)
-        except _PORT_ERRORS as exc:
+        except PORT_ERRORS as exc:
             result.reason = f"cannot open or use the port: {exc}"
             return result
         if not raw:

@@ -1,4 +1,7 @@
 """Simulated devices that speak the real protocols: a virtual Orthoglide
-(:mod:`drivers.sim.machine`) behind a real pymodbus server
-(:mod:`drivers.sim.controller`, TCP or RTU over :mod:`drivers.sim.ptypair`),
-and simulated dial indicators (:mod:`drivers.sim.indicators`)."""
+(:mod:`drivers.sim.machine`, moving as :mod:`drivers.sim.motion` says) behind
+a real pymodbus server (:mod:`drivers.sim.controller`, TCP or RTU over
+:mod:`drivers.sim.ptypair`, serving the drive's registers of
+:mod:`drivers.sim.drive`), simulated dial indicators
+(:mod:`drivers.sim.indicators`), and the whole virtual station
+(:mod:`drivers.sim.station`, its out-of-stroke count in :mod:`drivers.sim.strokes`)."""

@@ -1,23 +1,16 @@
 """A simulated axis controller: a real pymodbus server serving the register map
-"orthocal-generic" (design.md) for a :class:`~drivers.sim.machine.VirtualOrthoglide`.
+"orthocal-generic" (design.md) for a :class:`~drivers.sim.machine.VirtualOrthoglide`,
+with fault injection. What the registers do (COMMAND, TARGET, the exception
+2/3 rules) is the drive's, :class:`~drivers.sim.drive.DriveRegisters`, which
+:class:`SimController` extends with the transport and the faults.
 
 Transports: Modbus TCP on 127.0.0.1 (port 0 picks a free port, reported by
 :attr:`SimController.port`) or Modbus RTU on a pseudo-terminal null-modem
 (:class:`~drivers.sim.ptypair.PtyPair`; the client opens
 :attr:`SimController.serial_port`). The server runs in a background thread with
 its own asyncio loop; ``start()``/``close()`` (or ``with``) leave no thread,
-task, socket or pty behind.
-
-It behaves like a drive: COMMAND 1/2/3/4 is taken at once and reads back 0;
-moves take time; STATUS follows the machine; TARGET_* power up at the axes'
-positions (not 0); a target outside the soft limits (default [L+ρmin−10,
-L+ρmax+10] on every axis) is refused with exception 3, and so is a COMMAND 1
-whose stored targets are outside them (the limits may have changed since), an
-unknown command, a zero speed or an offset beyond ``max_offset_mm``; an
-address outside the map, or any table but the holding registers, answers
-exception 2 (``soft_limit_registers=False`` leaves SOFT_MIN/SOFT_MAX out too);
-writing OFFSET acts on the legs through the machine. Requests for another
-device id get no reply on RTU and exception 0x0B (gateway: no response) on TCP.
+task, socket or pty behind. Requests for another device id get no reply on RTU
+and exception 0x0B (gateway: no response) on TCP.
 
 A power cut (``Faults.power_cut_*`` or :meth:`SimController.power_cut`) makes
 the controller unreachable for a while (TCP: open connections closed, new ones
@@ -53,9 +46,9 @@ from pymodbus.framer import FramerType
 from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
-from pymodbus.simulator import DataType, SimData, SimDevice
+from pymodbus.simulator import SimDevice
 
-from drivers.registers import AXES, GENERIC, Register, decode_int
+from drivers.sim.drive import DriveRegisters
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.ptypair import PtyPair
 
@@ -64,8 +57,6 @@ if _pymodbus_log.level == logging.NOTSET:
     # pymodbus logs every dropped frame as an error; the operator console is ours.
     _pymodbus_log.setLevel(logging.CRITICAL)
 
-_READ_CODES = {3, 23}  # function codes whose reads consume a taken COMMAND
-_REGISTER_CODES = {3, 6, 16, 22, 23}  # holding-register functions: the map's only table
 _WRITE_CODES = {5, 6, 15, 16, 22, 23}  # counted in SimStats.writes
 
 
@@ -123,14 +114,6 @@ class SimStats:
     power_cuts: int = 0
     commands: dict[int, int] = field(default_factory=dict)
 
-
-def default_soft_limits(machine: VirtualOrthoglide, margin_mm: float = 10.0
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """[L + ρmin − margin, L + ρmax + margin] on each axis: room for every test
-    posture of design.md with a margin (paper's machine: [200.25, 380.25] mm)."""
-    g = machine.geometry
-    return (np.full(3, g.leg_length + g.rho_min - margin_mm),
-            np.full(3, g.leg_length + g.rho_max + margin_mm))
 
 
 class _Handler(ServerRequestHandler):
@@ -198,7 +181,7 @@ class _SimSerialServer(_SimConnections, ModbusSerialServer):
     pass
 
 
-class SimController:
+class SimController(DriveRegisters):
     """A Modbus server for a virtual Orthoglide.
 
     ``SimController(machine, transport="tcp")`` then ``start()``; connect a client
@@ -223,24 +206,14 @@ class SimController:
     ) -> None:
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"transport must be 'tcp' or 'rtu', got {transport!r}")
-        self.machine = machine or VirtualOrthoglide()
+        super().__init__(machine, soft_limits=soft_limits, max_offset_mm=max_offset_mm,
+                         soft_limit_registers=soft_limit_registers)
         self.transport = transport
         self.host = host
         self.device_id = device_id
         self.faults = faults or Faults()
         self.stats = SimStats()
-        self.max_offset_mm = float(max_offset_mm)
         self.baudrate = baudrate
-        lo, hi = soft_limits if soft_limits is not None else default_soft_limits(self.machine)
-        self.soft_min = np.asarray(lo, dtype=float).reshape(3)
-        self.soft_max = np.asarray(hi, dtype=float).reshape(3)
-        if np.any(self.soft_min >= self.soft_max):
-            raise ValueError("soft limits: every lower limit must be below the upper one")
-        # What SOFT_MIN/SOFT_MAX show: the limits enforced (True); nothing, answering
-        # exception 2 as a drive that keeps them in parameters (False); or a given
-        # (lower, upper), such as the zeros of a drive never set up.
-        self.soft_limit_registers = soft_limit_registers
-        self.map = GENERIC
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
         self._requested_port = port
@@ -257,8 +230,6 @@ class SimController:
         self._server: _SimTcpServer | _SimSerialServer | None = None
         self._tasks: set[asyncio.Task] = set()
         self._estop_seen = False
-        self._inited = False
-        self._regs = {r.name: r for r in self.map.registers}
 
     # --- lifecycle --------------------------------------------------------------------------
 
@@ -335,7 +306,7 @@ class SimController:
             self._ready.set()
 
     def _new_server(self, port: int) -> _SimTcpServer | _SimSerialServer:
-        device = SimDevice(id=self.device_id, simdata=self._simdata(), action=self._action)
+        device = SimDevice(id=self.device_id, simdata=self.simdata(), action=self.action)
         server: _SimTcpServer | _SimSerialServer
         if self.transport == "tcp":
             server = _SimTcpServer(device, address=(self.host, port))
@@ -412,160 +383,44 @@ class SimController:
         if self._stop.is_set():
             return
         if self.transport == "tcp":
-            self._inited = False
+            self.power_up()
             server = self._new_server(self.port)
             await server.serve_forever(background=True)
             self._server = server
         with self._lock:
             self._powered = True
 
-    # --- datastore ----------------------------------------------------------------------------
+    # --- what the drive tells ----------------------------------------------------------------
 
-    def _simdata(self) -> list[SimData]:
-        data = []
-        for reg in self.map.registers:
-            if reg.name.startswith("SOFT_") and self.soft_limit_registers is False:
-                continue  # not served: exception 2, like any address outside the map
-            data.append(SimData(reg.address, count=reg.words, values=0,
-                                datatype=DataType.REGISTERS, readonly=reg.access == "R"))
-        return data
+    def refused_write(self) -> None:
+        with self._lock:
+            self.stats.refused += 1
 
-    def _init_registers(self, registers: list[int], start: int) -> None:
-        """Power-up values. TARGET_* start where the axes stand, as on a drive: a
-        client writing one target then COMMAND 1 moves that axis alone. They are
-        not reset per connection: an integrator's tool (mbpoll) connects once per
-        request, and a drive keeps its targets across connections."""
-        for ax, rho in zip(AXES, self.machine.targets(), strict=True):
-            self._put(registers, start, self._regs[f"TARGET_{ax}"], rho)
-        if self.soft_limit_registers is False:
-            return
-        shown = (self.soft_min, self.soft_max) if self.soft_limit_registers is True else \
-            tuple(np.asarray(v, dtype=float).reshape(3) for v in self.soft_limit_registers)
-        for ax, lo, hi in zip(AXES, *shown, strict=True):
-            self._put(registers, start, self._regs[f"SOFT_MIN_{ax}"], lo)
-            self._put(registers, start, self._regs[f"SOFT_MAX_{ax}"], hi)
+    def commanded(self, code: int) -> None:
+        with self._lock:
+            self.stats.commands[code] = self.stats.commands.get(code, 0) + 1
 
-    @staticmethod
-    def _put(registers: list[int], start: int, reg: Register, value: float) -> None:
-        i = reg.address - start
-        registers[i:i + reg.words] = reg.encode(value)
-
-    @staticmethod
-    def _get(registers: list[int], start: int, reg: Register) -> float:
-        i = reg.address - start
-        return reg.decode(registers[i:i + reg.words])
-
-    def _refresh(self, registers: list[int], start: int) -> None:
-        """Mirror the machine into the read-only registers."""
+    def moved(self, duration_s: float) -> None:
+        """The faults counted in moves: an alarm, a power cut, halfway through one."""
         m = self.machine
-        st = m.status()
-        bits = (st.homed << 0 | st.moving << 1 | st.in_position << 2 | st.alarm << 3
-                | st.estop << 4)
-        registers[self._regs["STATUS"].address - start] = bits
-        registers[self._regs["ALARM_CODE"].address - start] = st.alarm_code & 0xFFFF
-        for ax, rho in zip(AXES, m.actual(), strict=True):
-            self._put(registers, start, self._regs[f"ACTUAL_{ax}"], rho)
-        for ax, o in zip(AXES, m.offsets, strict=True):
-            self._put(registers, start, self._regs[f"OFFSET_{ax}"], o)
-
-    async def _action(self, function_code: int, start: int, address: int, count: int,
-                      registers: list[int], set_values: list[int] | list[bool] | None
-                      ) -> ExcCodes | None:
-        """pymodbus SimDevice hook: runs before the datastore answers or is written."""
-        if function_code not in _REGISTER_CODES:
-            # The map is holding registers only: input registers, coils and discrete
-            # inputs are outside it, as on a drive that has none.
-            return ExcCodes.ILLEGAL_ADDRESS
-        if not self._inited:
-            self._init_registers(registers, start)
-            self._inited = True
-        self._refresh(registers, start)
-        if set_values is None:
-            if function_code in _READ_CODES:
-                registers[self._regs["COMMAND"].address - start] = 0  # taken: reads 0
-            return None
-        result = self._write(start, address, [int(v) for v in set_values], registers)
-        if result is not None:
-            with self._lock:
-                self.stats.refused += 1
-        return result
-
-    def _write(self, start: int, address: int, values: list[int], registers: list[int]
-               ) -> ExcCodes | None:
-        new = list(registers)
-        new[address - start:address - start + len(values)] = values
-        touched = set(range(address, address + len(values)))
-
-        def hit(reg: Register) -> bool:
-            return bool(touched & set(range(reg.address, reg.address + reg.words)))
-
-        for ax, lo, hi in zip(AXES, self.soft_min, self.soft_max, strict=True):
-            reg = self._regs[f"TARGET_{ax}"]
-            if hit(reg):
-                value = self._get(new, start, reg)
-                if not lo - 1e-9 <= value <= hi + 1e-9:
-                    return ExcCodes.ILLEGAL_VALUE
-        speed_reg = self._regs["SPEED"]
-        if hit(speed_reg) and self._get(new, start, speed_reg) <= 0:
-            return ExcCodes.ILLEGAL_VALUE
-        offset_regs = [self._regs[f"OFFSET_{ax}"] for ax in AXES]
-        offsets_hit = any(hit(r) for r in offset_regs)
-        offsets = np.array([self._get(new, start, r) for r in offset_regs])
-        if offsets_hit and np.any(np.abs(offsets) > self.max_offset_mm):
-            return ExcCodes.ILLEGAL_VALUE
-        command_reg = self._regs["COMMAND"]
-        command = decode_int(new[command_reg.address - start:command_reg.address - start + 1],
-                             "u16") if hit(command_reg) else 0
-        codes = {self.map.command_code(c): c for c in self.map.commands}
-        if command and command not in codes:
-            return ExcCodes.ILLEGAL_VALUE
-        if command and codes[command] == "move":
-            # Stored targets are checked again when they are used: limits may have
-            # changed since they were written, and a drive never moves outside them.
-            targets = np.array([self._get(new, start, self._regs[f"TARGET_{ax}"])
-                                for ax in AXES])
-            if np.any(targets < self.soft_min - 1e-9) or np.any(targets > self.soft_max + 1e-9):
-                return ExcCodes.ILLEGAL_VALUE
-        # Validated: apply in the order a drive would (parameters, then the command).
-        if hit(speed_reg):
-            self.machine.speed_mm_s = self._get(new, start, speed_reg)
-        if offsets_hit:
-            self.machine.set_offsets(offsets)
-        if command:
-            with self._lock:
-                self.stats.commands[command] = self.stats.commands.get(command, 0) + 1
-            self._command(codes[command], new, start)
-        return None
-
-    def _command(self, name: str, new: list[int], start: int) -> None:
-        m = self.machine
-        if name == "move":
-            targets = [self._get(new, start, self._regs[f"TARGET_{ax}"]) for ax in AXES]
-            duration = m.move_to(targets)
-            with self._lock:
-                n = self.faults.alarm_after_moves
-                if n is not None:
-                    if self._moves_done >= n:
-                        self.faults.alarm_after_moves = None
-                        m.raise_alarm(self.faults.alarm_code, delay_s=duration / 2)
-                    else:
-                        self._moves_done += 1
-                n = self.faults.power_cut_after_moves
-                if n is not None:
-                    if self._cut_moves_done >= n:
-                        self.faults.power_cut_after_moves = None
-                        self._cut_moves_done = 0
-                        f = self.faults
-                        self._spawn_cut(f.power_cut_s, f.power_cut_count_mm, duration / 2,
-                                        f.power_cut_loses_reference)
-                    else:
-                        self._cut_moves_done += 1
-        elif name == "stop":
-            m.stop()
-        elif name == "home":
-            m.home()
-        elif name == "reset_alarm":
-            m.reset_alarm()
+        with self._lock:
+            n = self.faults.alarm_after_moves
+            if n is not None:
+                if self._moves_done >= n:
+                    self.faults.alarm_after_moves = None
+                    m.raise_alarm(self.faults.alarm_code, delay_s=duration_s / 2)
+                else:
+                    self._moves_done += 1
+            n = self.faults.power_cut_after_moves
+            if n is not None:
+                if self._cut_moves_done >= n:
+                    self.faults.power_cut_after_moves = None
+                    self._cut_moves_done = 0
+                    f = self.faults
+                    self._spawn_cut(f.power_cut_s, f.power_cut_count_mm, duration_s / 2,
+                                    f.power_cut_loses_reference)
+                else:
+                    self._cut_moves_done += 1
 
     # --- faults ---------------------------------------------------------------------------------
 
@@ -627,4 +482,4 @@ def _reset(conn: Any) -> None:
     transport.abort()
 
 
-__all__ = ["Faults", "SimController", "SimStats", "default_soft_limits"]
+__all__ = ["Faults", "SimController", "SimStats"]

@@ -32,7 +32,7 @@ mounted (+ pushed in), so it clamps at −preload (the leg has left the fully
 extended plunger) and at stroke − preload (the plunger is at its stop).
 ``clamped`` counts the readings taken there; a plunger driven past an end
 between two readings goes unseen by it, which is why the virtual station counts
-out-of-stroke moves from the trajectory itself (drivers.sim.station), with this
+out-of-stroke moves from the trajectory itself (drivers.sim.strokes), with this
 gauge's own :meth:`SimIndicator.travel_mm` and :meth:`SimIndicator.stroke_limits`.
 """
 
@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Literal, Self
 
-from drivers.indicators import IndicatorProtocol, make_protocol
+from drivers.indicator_protocols import IndicatorProtocol, make_protocol
 
 Source = Callable[[], float]
 
@@ -150,6 +150,10 @@ class SimIndicator:
         self.requests = 0
         self.replies = 0
         self.source_error: Exception | None = None  # the last exception source() raised
+        #: Called (from the simulator's thread) with the fault's counter name
+        #: ("drop_next", "error_next", "garble_next", "late_next") each time a request
+        #: gets a fault: the gauge counts requests and replies, a soak counts faults.
+        self.on_fault: Callable[[str], None] | None = None
 
         self.link = None if link is None else os.fspath(link)
         self._master = self._slave = -1
@@ -258,8 +262,12 @@ class SimIndicator:
         pending = getattr(f, next_field)
         if pending > 0:
             setattr(f, next_field, pending - 1)
-            return True
-        return rate > 0 and self._rng.random() < rate
+            hit = True
+        else:
+            hit = rate > 0 and self._rng.random() < rate
+        if hit and self.on_fault is not None:
+            self.on_fault(next_field)
+        return hit
 
     def _garble(self, line: bytes) -> bytes:
         body = line[: -len(self.protocol.terminator)]

@@ -26,48 +26,39 @@ zeroed: a station restarted for ``resume`` finds the machine and the gauges as
 the interrupted run left them.
 
 The drive (``motion``): "coordinated", "independent" or a
-:class:`~drivers.sim.machine.DriveMotion` (profile shape, acceleration, start
+:class:`~drivers.sim.motion.DriveMotion` (profile shape, acceleration, start
 delays, one axis after another), and ``drive_accel_mm_s2`` an acceleration of its
 own: what a real drive does without telling the station. ``config()`` says only
 what an integrator would write: ``motion = "coordinated"`` for a drive that
 interpolates, nothing otherwise (the profile's default, any timing), and the
 ``accel_mm_s2`` the station was given, not the drive's.
 
-Out of stroke (:attr:`VirtualStation.out_of_stroke`): ``SimIndicator.clamped``
-counts readings taken at a stroke end, which says nothing of a plunger driven
-past its end between two readings. The station therefore also follows the
-machine's trajectory itself: every motion segment (a move, a homing, the
-braking after a stop, cut where it ends or where a gauge is mounted or taken
-off) is sampled densely in time and each mounted gauge's plunger travel
-evaluated there from the geometry (:func:`orthocal.leg_reading` at the true
-joint values, the stand's plane, the true errors); one
-:class:`OutOfStroke` per segment and gauge whose travel left
-[−preload, stroke − preload]. A knocked stand (:meth:`VirtualStation.knock`)
-shifts a gauge's travel from a given instant of a given move on, for the
-readings and this count alike.
+Out of stroke (:attr:`VirtualStation.out_of_stroke`) is counted from the
+machine's trajectory, not only from the readings, and a stand can be knocked
+(:meth:`VirtualStation.knock`): :mod:`drivers.sim.strokes`.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
 import shutil
 import tempfile
-import threading
 import zlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
-from drivers.indicators import make_protocol
+from drivers.files import write_atomic
+from drivers.indicator_protocols import make_protocol
 from drivers.sim.controller import Faults, SimController
 from drivers.sim.indicators import IndicatorFaults, SimIndicator
-from drivers.sim.machine import DriveMotion, Segment, VirtualOrthoglide
-from orthocal import Geometry, leg_reading
+from drivers.sim.machine import VirtualOrthoglide
+from drivers.sim.motion import DriveMotion
+from drivers.sim.strokes import OutOfStroke, StrokeWatch
+from orthocal import Geometry
 
 STANDARD_STROKE_MM = 12.5  # station.config's default stroke_mm (preload: half)
 
@@ -95,50 +86,6 @@ DEFAULT_PROCEDURE: dict[str, Any] = {
 
 
 MOUNTS_NAME = "sim_gauges.json"
-# Closed segments wait for the next look at them (a mounting, out_of_stroke) up to
-# this many; beyond, the oldest is evaluated as each new one closes (under the
-# machine's lock, ~0.1 ms per gauge), so memory stays bounded.
-_PENDING_MAX = 64
-
-
-@dataclass(frozen=True)
-class OutOfStroke:
-    """One motion segment that drove gauge ``gauge``'s plunger past an end of its
-    stroke: ``past_mm`` beyond it (the farthest, over the segment), ``end`` "low"
-    (−preload: the leg left the fully extended plunger) or "high" (stroke −
-    preload: the plunger pushed to its stop). ``segment``/``kind``/``move``: the
-    :class:`~drivers.sim.machine.Segment` (its index, "move"/"home"/"brake", the
-    move's number in ``moves_started``)."""
-
-    gauge: str
-    leg: str
-    direction: str
-    segment: int
-    kind: str
-    move: int | None
-    past_mm: float
-    end: Literal["low", "high"]
-
-
-@dataclass
-class _Knock:
-    """A stand to be knocked during move ``on_move`` at ``at_fraction`` of its
-    duration; ``t`` (clock time) once that move has started."""
-
-    name: str
-    shift_mm: float
-    on_move: int
-    at_fraction: float
-    t: float | None = None
-
-
-def _write_json(path: Path, data: Any) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(data, fh)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 class _PersistentMachine(VirtualOrthoglide):
@@ -163,10 +110,10 @@ class _PersistentMachine(VirtualOrthoglide):
     def save_offsets(self) -> None:
         if self.nvram_path is None:
             return
-        _write_json(self.nvram_path, {
+        write_atomic(self.nvram_path, json.dumps({
             "offsets_mm": [float(v) for v in self.offsets],
             "homed": bool(self._homed),  # not status(): this runs inside _advance
-            "count_shift_mm": [float(v) for v in self.count_shift]})
+            "count_shift_mm": [float(v) for v in self.count_shift]}))
 
     def load(self, saved: dict[str, Any]) -> None:
         self.set_offsets(saved["offsets_mm"])
@@ -177,7 +124,7 @@ class _PersistentMachine(VirtualOrthoglide):
 
 class VirtualStation:
     """The virtual station (module docstring). ``motion``: the drive's
-    (:class:`~drivers.sim.machine.DriveMotion` or its name); ``accel_mm_s2`` what
+    (:class:`~drivers.sim.motion.DriveMotion` or its name); ``accel_mm_s2`` what
     the config tells the station, ``drive_accel_mm_s2`` what the drive does if it
     differs; ``clock``: the machine's clock (a stepped one in tests that follow a
     move instant by instant)."""
@@ -239,15 +186,8 @@ class VirtualStation:
             self.geometry, true_drho, true_dl, true_tilt=true_tilt, speed_mm_s=speed_mm_s,
             accel_mm_s2=accel_mm_s2 if drive_accel_mm_s2 is None else drive_accel_mm_s2,
             motion=motion, **({} if clock is None else {"clock": clock}))
-        # Out-of-stroke accounting (module docstring): segments not yet evaluated,
-        # the events by (segment, gauge), the knocks, when each gauge was mounted.
-        self._acct_lock = threading.Lock()
-        self._pending: list[Segment] = []
-        self._events: dict[tuple[int, str], OutOfStroke] = {}
-        self._knocks: list[_Knock] = []
-        self._mounted_at: dict[str, float] = {}
-        self.machine.segment_listeners.append(self._on_segment)
-        self.machine.move_listeners.append(self._on_move)
+        # Out-of-stroke accounting and knocks (drivers.sim.strokes).
+        self._watch = StrokeWatch(self.machine, self.geometry, self._mounted_gauges)
         if nvram_path is not None:
             path = Path(nvram_path)
             if path.exists():
@@ -323,8 +263,8 @@ class VirtualStation:
             error = float(self._mount_draw(name, leg, where)) * self.mount_error_mm
         self.mount_log.append((name, leg, direction, error))
         gauge = self.indicators[name]
-        self._flush()  # what happened so far, with the mounting it happened under
-        self._mounted_at[name] = self.machine.now()
+        self._watch.flush()  # what happened so far, with the mounting it happened under
+        self._watch.mounted(name)
         gauge.mount(self._source_at(name, leg, direction, error))
         self._mounts[name] = {"leg": leg, "direction": direction, "zero_mm": gauge.zero_mm,
                               "stand_error_mm": error}
@@ -343,7 +283,7 @@ class VirtualStation:
 
         def knocked() -> float:
             value = read()
-            return value + sign * self._knock_shift(name, self.machine.now())
+            return value + sign * self._watch.knock_shift(name, self.machine.now())
         return knocked
 
     def _mount_draw(self, name: str, leg: str, where: str | None) -> float:
@@ -355,9 +295,9 @@ class VirtualStation:
         return float(np.random.default_rng([self._seed, 7, key]).uniform(-1.0, 1.0))
 
     def unmount(self, name: str) -> None:
-        self._flush()
+        self._watch.flush()
         self.indicators[name].unmount()
-        self._mounted_at.pop(name, None)
+        self._watch.unmounted(name)
         if self._mounts.pop(name, None) is not None:
             self._save_mounts()
 
@@ -365,119 +305,29 @@ class VirtualStation:
 
     def knock(self, name: str, shift_mm: float, *, on_move: int, at_fraction: float) -> None:
         """Knock gauge ``name``'s stand during the machine's move number ``on_move``
-        (as :attr:`~drivers.sim.machine.VirtualOrthoglide.moves_started` counts it:
-        the next move is ``moves_started + 1``) at ``at_fraction`` (0..1) of that
-        move's duration: from then on (until the gauge is mounted again) its plunger
-        travel is ``shift_mm`` more (+ pushed in), as if the stand had slid along the
-        measuring direction. The instant is fixed when the move starts, so a stop
-        before it does not prevent the knock. Not kept across a restart of the
-        station (the mounting file knows nothing of it)."""
+        (:meth:`drivers.sim.strokes.StrokeWatch.knock`)."""
         if name not in self.indicators:
             raise ValueError(f"no indicator {name!r} (have {', '.join(self.indicators)})")
-        if not math.isfinite(shift_mm):
-            raise ValueError(f"shift_mm must be finite, got {shift_mm}")
-        if not 0.0 <= at_fraction <= 1.0:
-            raise ValueError(f"at_fraction must be within 0..1, got {at_fraction}")
-        if on_move <= self.machine.moves_started:
-            raise ValueError(f"move {on_move} has already started "
-                             f"({self.machine.moves_started} so far)")
-        with self._acct_lock:
-            self._knocks.append(_Knock(name, float(shift_mm), int(on_move), float(at_fraction)))
-
-    def _on_move(self, number: int, t0: float, duration: float) -> None:
-        # under the machine's lock: only bookkeeping here
-        with self._acct_lock:
-            for k in self._knocks:
-                if k.t is None and k.on_move == number:
-                    k.t = t0 + k.at_fraction * duration
-
-    def _knocks_of(self, name: str) -> list[tuple[float, float]]:
-        """(instant, shift) of the knocks that hit gauge ``name``'s present mounting
-        (or will: the instant is known); call with ``_acct_lock`` held."""
-        since = self._mounted_at.get(name)
-        if since is None:
-            return []
-        return [(k.t, k.shift_mm) for k in self._knocks
-                if k.name == name and k.t is not None and k.t >= since]
-
-    def _knock_shift(self, name: str, now: float) -> float:
-        with self._acct_lock:
-            return sum(shift for t, shift in self._knocks_of(name) if t <= now)
-
-    def _on_segment(self, segment: Segment) -> None:
-        # Called under the machine's lock; evaluation needs none of its state.
-        with self._acct_lock:
-            self._pending.append(segment)
-            if len(self._pending) > _PENDING_MAX:
-                # the oldest one only: a fraction of a ms, not a stall of the drive
-                self._evaluate(self._pending.pop(0))
-
-    def _flush(self) -> None:
-        """Evaluate every segment up to now (the one in progress included, as a
-        piece), before the mounting changes or the count is looked at."""
-        self.machine.flush_segment()  # not under _acct_lock: it calls _on_segment
-        with self._acct_lock:
-            self._evaluate_pending()
-
-    def _evaluate_pending(self) -> None:
-        pending, self._pending = self._pending, []
-        for segment in pending:
-            self._evaluate(segment)
-
-    def _evaluate(self, segment: Segment) -> None:
-        """The plunger travel of every mounted gauge over ``segment``, sampled
-        densely (Segment.sample), from the geometry at the true joint values, the
-        quantity SimIndicator._value_mm clamps: sign·(source − zero)."""
-        m = self.machine
-        gauges: list[tuple[str, dict[str, Any], SimIndicator]] = []
-        for name, mount in list(self._mounts.items()):  # a copy: mount() may change it
-            gauge = self.indicators.get(name)
-            if gauge is None or not gauge.mounted or gauge.stroke_mm is None:
-                continue
-            gauges.append((name, mount, gauge))
-        if not gauges:
-            return
-        knocks = {name: self._knocks_of(name) for name, _, _ in gauges}
-        times, rho = m.sample_segment(segment,
-                                      extra_times=[t for ks in knocks.values() for t, _ in ks])
-        for name, mount, gauge in gauges:
-            direction: str = mount["direction"]
-            sign = -1.0 if direction.startswith("-") else 1.0
-            plane = self.geometry.mount_plane + float(mount.get("stand_error_mm", 0.0))
-            reading = leg_reading(rho, mount["leg"], direction.lstrip("-"), self.geometry,
-                                  m.true_drho, m.true_dl, mount=plane, tilt=m.true_tilt)
-            travel = gauge.travel_mm(sign * np.asarray(reading, dtype=float))
-            for t, shift in knocks[name]:
-                travel = travel + np.where(times >= t, shift, 0.0)
-            limits = gauge.stroke_limits()
-            assert limits is not None  # a stroke, checked above
-            low, high = limits
-            below, above = low - float(np.min(travel)), float(np.max(travel)) - high
-            if below <= 0 and above <= 0:
-                continue
-            end: Literal["low", "high"] = "low" if below >= above else "high"
-            event = OutOfStroke(name, mount["leg"], direction, segment.index, segment.kind,
-                                segment.move, max(below, above), end)
-            key = (segment.index, name)
-            old = self._events.get(key)
-            if old is None or event.past_mm > old.past_mm:
-                self._events[key] = event  # one per (segment, gauge): the farthest
+        self._watch.knock(name, shift_mm, on_move=on_move, at_fraction=at_fraction)
 
     @property
     def out_of_stroke(self) -> list[OutOfStroke]:
         """Every segment so far that drove a mounted gauge's plunger past an end of
         its stroke (one per segment and gauge), whether or not a reading saw it."""
-        self._flush()
-        with self._acct_lock:
-            return list(self._events.values())
+        return self._watch.out_of_stroke()
 
     @property
     def out_of_stroke_count(self) -> int:
         return len(self.out_of_stroke)
 
+    def _mounted_gauges(self) -> list[tuple[str, dict[str, Any], SimIndicator | None]]:
+        # a copy: mount() may change the mountings while they are evaluated
+        return [(name, mount, self.indicators.get(name))
+                for name, mount in list(self._mounts.items())]
+
     def _save_mounts(self) -> None:
         if self.mounts_path is not None:
-            _write_json(self.mounts_path, self._mounts)
+            write_atomic(self.mounts_path, json.dumps(self._mounts))
 
     def _restore_mounts(self, path: Path) -> None:
         """The gauges stay on the machine while the station restarts."""
@@ -489,7 +339,7 @@ class VirtualStation:
                 # the stand stays where it was placed, misplacement included
                 src = self._source_at(name, m["leg"], m["direction"],
                                       m.get("stand_error_mm", 0.0))
-                self._mounted_at[name] = self.machine.now()
+                self._watch.mounted(name)
                 self.indicators[name].mount(src, zero_mm=m["zero_mm"])
                 self._mounts[name] = m
 
