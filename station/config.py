@@ -352,7 +352,7 @@ def load_config(path: str | Path) -> StationConfig:
 # --- writing (the run directory keeps the config it ran with) --------------------------
 
 
-def _toml_value(value: Any) -> str:
+def toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
@@ -361,14 +361,14 @@ def _toml_value(value: Any) -> str:
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') \
             .replace("\n", "\\n").replace("\r", "\\r") + '"'
     if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     if isinstance(value, dict):
-        return "{ " + ", ".join(f"{_key(k)} = {_toml_value(v)}" for k, v in value.items()) + " }"
+        return "{ " + ", ".join(f"{_key(k)} = {toml_value(v)}" for k, v in value.items()) + " }"
     raise TypeError(f"cannot write {type(value).__name__} to TOML")
 
 
 def _key(key: str) -> str:
-    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_value(key)
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else toml_value(key)
 
 
 def toml_text(data: dict[str, Any], header: str = "") -> str:
@@ -388,11 +388,11 @@ def toml_text(data: dict[str, Any], header: str = "") -> str:
             if isinstance(v, dict) and name == "[controller]":
                 subtables[k] = v
                 continue
-            lines.append(f"{_key(k)} = {_toml_value(v)}")
+            lines.append(f"{_key(k)} = {toml_value(v)}")
         for k, v in subtables.items():
             lines.append("")
             lines.append(f"[controller.{k}]")
-            lines.extend(f"{_key(a)} = {_toml_value(b)}" for a, b in v.items())
+            lines.extend(f"{_key(a)} = {toml_value(b)}" for a, b in v.items())
         lines.append("")
 
     for section in ("machine", "controller"):

@@ -1,4 +1,4 @@
-"""The adaptive-cycles rule's standard error (station.sequencer.cycle_std_error)."""
+"""The adaptive-cycles rule's standard error (station.engine.sequencer.cycle_std_error)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from station.sequencer import cycle_std_error
+from station.engine.statistics import cycle_std_error
 
 
 def _setup_cycles(rng: np.random.Generator, c: int, s: float) -> list[dict[str, float]]:

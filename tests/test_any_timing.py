@@ -9,17 +9,17 @@ re-planned from where the axes stand, the cycle taken again, the run finished.""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 from typing import Any
 
 import pytest
+from builders import simulated
 
-from station import cmd_run
-from station.journal import read_journal
+from station.commands import run as cmd_run
+from station.commands.options import RunOptions
+from station.rundir.journal import read_journal
 
-FAST = {"cycles": 2, "readings": 3, "settle_s": 0.0}
 TRUE_DRHO = (1.2, -0.9, 0.6)
 
 # The virtual station's config gives the station accel_mm_s2 = 20000 mm/s² and, for
@@ -37,12 +37,9 @@ DRIVES: dict[str, dict[str, Any]] = {
 }
 
 
-def args_for(tmp_path: Path, name: str, **extra: Any) -> argparse.Namespace:
-    base = dict(simulate=True, config=None, plan=False, seed=11, true_drho=TRUE_DRHO,
-                true_dl=None, noise=0.0, out=str(tmp_path / name), yes=False, json=True,
-                debug=False, sim_procedure=FAST)
-    base.update(extra)
-    return argparse.Namespace(**base)
+def args_for(tmp_path: Path, name: str, **extra: Any) -> RunOptions:
+    return simulated(tmp_path / name, **{"seed": 11, "true_drho": TRUE_DRHO, "noise": 0.0,
+                                         **extra})
 
 
 def run(tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str,
@@ -55,7 +52,7 @@ def run(tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str,
             hook(station)
 
     capsys.readouterr()
-    code = cmd_run.run(args_for(tmp_path, name, sim_station_hook=keep, **extra))
+    code = cmd_run.run(args_for(tmp_path, name, hook=keep, **extra))
     result = json.loads(capsys.readouterr().out)
     assert code == 0, result.get("message")
     return result, stations
@@ -86,8 +83,7 @@ def coordinated(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str,
 
         buffer = io.StringIO()
         with contextlib.redirect_stdout(buffer):
-            code = cmd_run.run(args_for(tmp, label, motion="coordinated",
-                                        sim_station_hook=keep))
+            code = cmd_run.run(args_for(tmp, label, motion="coordinated", hook=keep))
         assert code == 0
         result = json.loads(buffer.getvalue())
         assert stations[0].out_of_stroke_count == 0

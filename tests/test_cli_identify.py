@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import orthocal
-from station.cli import main
+from station.commands.cli import main
 
 PAPER_ROWS = """\
 posture,leg,direction,deviation_mm

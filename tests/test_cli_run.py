@@ -12,7 +12,7 @@ import pytest
 from truth import assert_truth, drho
 
 from drivers.sim.station import VirtualStation
-from station.cli import main
+from station.commands.cli import main
 from station.config import toml_text
 
 

@@ -5,26 +5,24 @@ without converging; rollback restores the offsets from before the first round.""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 from typing import Any
 
 import pytest
+from builders import resumed, simulated
 from truth import assert_truth, drho
 
-from station import cmd_run, report
-from station.journal import read_journal
+from station import report
+from station.commands import run as cmd_run
+from station.rundir.journal import read_journal
 
 FAST = {"cycles": 2, "readings": 3, "settle_s": 0.0, "model": "rho"}
 
 
 def run(tmp_path: Path, capsys, **extra: Any) -> dict[str, Any]:
-    args = dict(simulate=True, config=None, plan=False, seed=5, true_drho=None, true_dl=None,
-                noise=0.001, out=str(tmp_path / "runs"), yes=False, json=True, debug=False,
-                sim_procedure=FAST, mount_error=0.0)
-    args.update(extra)
-    code = cmd_run.run(argparse.Namespace(**args))
+    code = cmd_run.run(simulated(tmp_path / "runs", **{
+        "seed": 5, "noise": 0.001, "procedure": FAST, "mount_error": 0.0, **extra}))
     result = json.loads(capsys.readouterr().out)
     assert code == 0, result.get("message")
     return result
@@ -69,7 +67,7 @@ def test_misplaced_stands_take_a_second_round_that_removes_the_bias(tmp_path: Pa
     html = (run_dir / "report.html").read_text()
     assert "<h2>Closed loop</h2>" in html and html.count("<svg") >= 3
     # Rollback restores the offsets from before the first round, not the last.
-    code = cmd_run.rollback(argparse.Namespace(run_dir=str(run_dir), yes=True, json=True))
+    code = cmd_run.rollback(resumed(run_dir, yes=True))
     assert code == 0
     restored = json.loads(capsys.readouterr().out)["restored"]
     assert restored == pytest.approx(result["offsets_before"], abs=1e-9)
@@ -89,7 +87,7 @@ def test_a_machine_one_round_fixes_gets_exactly_one_write_back(tmp_path: Path, c
 
 def test_max_iterations_stops_the_loop_and_says_why(tmp_path: Path, capsys) -> None:
     result = run(tmp_path, capsys, true_drho=(2.5, -2.9, 2.2), mount_error=8.0,
-                 sim_procedure={**FAST, "max_iterations": 1})
+                 procedure={**FAST, "max_iterations": 1})
     assert writes(result) == 1 and result["converged"] is False
     assert result["loop"]["stopped"] == "max_iterations"
     assert "did not converge" in result["message"]
@@ -105,7 +103,7 @@ def test_max_iterations_stops_the_loop_and_says_why(tmp_path: Path, capsys) -> N
 def test_without_verification_nothing_is_claimed_about_what_is_left(tmp_path: Path,
                                                                    capsys) -> None:
     result = run(tmp_path, capsys, true_drho=(0.3, -0.2, 0.4),
-                 sim_procedure={**FAST, "verify": False})
+                 procedure={**FAST, "verify": False})
     assert writes(result) == 1 and len(result["iterations"]) == 1
     assert result["remaining"] is None and "left over" not in report.summary_text(result)
 
@@ -132,7 +130,7 @@ def test_report_says_why_the_loop_did_not_go_on() -> None:
 def test_a_tilted_machine_is_verified_against_the_tilts_it_keeps(tmp_path: Path,
                                                                   capsys) -> None:
     result = run(tmp_path, capsys, true_drho=(1.5, -1.0, 0.8), true_tilt=(0.4, -0.3, 0.2),
-                 sim_procedure={**FAST, "model": "rho+tilt"})
+                 procedure={**FAST, "model": "rho+tilt"})
     ver = result["verification"]
     # Tilts cannot be written: the verification still deviates by ~10 µm RMS, as the
     # model predicts, and only noise is left once the prediction is taken off.

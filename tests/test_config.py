@@ -155,9 +155,9 @@ def test_generic_gauge_units_and_errors_reach_the_driver(tmp_path: Path, scale: 
     """A gauge reporting whole µm (counting either way) and its own error replies,
     configured by TOML fields alone, read through a real pty."""
     from drivers.errors import IndicatorReplyError
-    from drivers.indicators import make_protocol
+    from drivers.indicator_protocols import make_protocol
     from drivers.sim.indicators import IndicatorFaults, SimIndicator
-    from station.devices import build_indicators
+    from station.engine.devices import build_indicators
 
     wire = make_protocol("generic", {
         "baudrate": 9600, "request": "R\r", "terminator": "\r",

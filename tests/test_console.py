@@ -10,8 +10,8 @@ import threading
 
 import pytest
 
-from station import console
-from station.console import RunProgress, format_eta, print_error, prompt_yes_no
+from station.console import terminal as console
+from station.console.terminal import RunProgress, format_eta, print_error, prompt_yes_no
 
 
 class FakeClock:

@@ -107,7 +107,7 @@ def test_keys_typed_before_a_question_do_not_answer_it() -> None:
     import io
     import threading
 
-    from station.operator import ConsoleOperator
+    from station.console.operator import ConsoleOperator
 
     master, slave = os.openpty()
     inp = os.fdopen(slave, "r")

@@ -10,10 +10,11 @@ import pytest
 
 import orthocal
 from orthocal import design
-from station.cli import main
-from station.cmd_design import design_summary, plan_keys, run_time
+from station.commands.cli import main
+from station.commands.design import design_summary, plan_keys, run_time
 from station.config import parse_config
-from station.plan import build_plan, check_plan
+from station.plan.checker import check_plan
+from station.plan.steps import build_plan
 
 G = orthocal.Geometry()
 LEGS = {a: [d for d in "xyz" if d != a] for a in "xyz"}
@@ -136,8 +137,14 @@ def test_summary_numbers_are_orthocal_s_and_the_plan_s() -> None:
     stops = sum(1 + 3 * 2 for _ in plan.setups)  # opening Π0 + 3 stops per cycle
     assert t["stops"] == stops and t["settle_s"] == pytest.approx(0.1 * stops)
     assert t["total_s"] == pytest.approx(2 * (t["moves_s"] + t["settle_s"] + t["readings_s"]))
-    # Π0 is shared between setups: a move fewer than stops minus the first position
-    assert t["moves"] == stops - 1 - (len(plan.setups) - 1)
+    # Π0 is shared between setups: a move fewer than stops minus the first position;
+    # and each waypoint the plan check put on a move (independent axes, the profile's
+    # default: any timing) is a move of its own
+    # (no controller asked: only the config limits the plan, as in design_summary)
+    checked = check_plan(build_plan(cfg), cfg, ([-1e6] * 3, [1e6] * 3))
+    waypoints = sum(len(via) for _, via in checked.waypoints_of())
+    assert waypoints > 0
+    assert t["moves"] == stops - 1 - (len(plan.setups) - 1) + waypoints
 
 
 def test_search_never_leaves_the_config_soft_limits() -> None:

@@ -5,7 +5,6 @@ simulated gauge's finite stroke it is tested with."""
 
 from __future__ import annotations
 
-import argparse
 import copy
 import json
 from pathlib import Path
@@ -13,24 +12,21 @@ from typing import Any
 
 import numpy as np
 import pytest
+from builders import simulated
 
 from drivers.sim.indicators import SimIndicator
-from station import cmd_run
+from station.commands import run as cmd_run
+from station.commands.options import RunOptions
 from station.config import parse_config
 from station.errors import RunFailed
-from station.guard import PlungerGuard, PlungerGuardStop
-from station.journal import read_journal
-from station.plan import MotionChecker, build_plan
+from station.plan.checker import MotionChecker
+from station.plan.guard import PlungerGuard, PlungerGuardStop
+from station.plan.steps import build_plan
+from station.rundir.journal import read_journal
 
-FAST = {"cycles": 2, "readings": 3, "settle_s": 0.0}
 
-
-def args_for(tmp_path: Path, **extra: Any) -> argparse.Namespace:
-    base = dict(simulate=True, config=None, plan=False, seed=3, true_drho=None, true_dl=None,
-                noise=0.002, out=str(tmp_path / "runs"), yes=False, json=True, debug=False,
-                sim_procedure=FAST)
-    base.update(extra)
-    return argparse.Namespace(**base)
+def args_for(tmp_path: Path, **extra: Any) -> RunOptions:
+    return simulated(tmp_path / "runs", **{"seed": 3, **extra})
 
 
 def test_simulated_gauge_clamps_at_the_ends_of_its_stroke() -> None:
@@ -62,8 +58,8 @@ def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -
     with pytest.raises(RunFailed) as info:
         # at a real machine's speed (the tests' default virtual machine runs 10 times
         # faster, leaving the guard one or two polls per sub-move)
-        cmd_run.run(args_for(tmp_path, true_drho=(-2.0, -2.0, -2.0), sim_speed=100.0,
-                             sim_station_hook=short_preload))
+        cmd_run.run(args_for(tmp_path, true_drho=(-2.0, -2.0, -2.0), speed=100.0,
+                             hook=short_preload))
     message = str(info.value)
     (run_dir,) = list((tmp_path / "runs").iterdir())
     assert "\n" not in message

@@ -23,13 +23,8 @@ from drivers.errors import (
     IndicatorReplyError,
     IndicatorTimeout,
 )
-from drivers.indicators import (
-    BUILTIN_PROTOCOLS,
-    IndicatorGroup,
-    IndicatorProtocol,
-    SerialIndicator,
-    make_protocol,
-)
+from drivers.indicator_protocols import BUILTIN_PROTOCOLS, IndicatorProtocol, make_protocol
+from drivers.indicators import IndicatorGroup, SerialIndicator
 
 PORT = "/dev/ttyFAKE0"
 Pair = tuple[bytes | None, bytes]

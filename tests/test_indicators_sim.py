@@ -12,7 +12,8 @@ import pytest
 import serial
 
 from drivers.errors import IndicatorPortError, IndicatorReplyError, IndicatorTimeout
-from drivers.indicators import BUILTIN_PROTOCOLS, IndicatorGroup, SerialIndicator, make_protocol
+from drivers.indicator_protocols import BUILTIN_PROTOCOLS, make_protocol
+from drivers.indicators import IndicatorGroup, SerialIndicator
 from drivers.sim.indicators import IndicatorFaults, SimIndicator
 
 PROTOCOLS = sorted(BUILTIN_PROTOCOLS)

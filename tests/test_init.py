@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from drivers.sim.station import VirtualStation
-from station.cli import main
-from station.cmd_init import propose_setups
+from station.commands.cli import main
+from station.commands.init import propose_setups
 
 
 @pytest.mark.parametrize("count", [2, 6])

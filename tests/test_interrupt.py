@@ -9,7 +9,7 @@ controller (never a correction applied twice). A noisy run must agree within
 the reported uncertainty. The journal written before the kill must be a byte
 prefix of the final one, torn last line included.
 
-Kill points are exact where it matters: a small wrapper around ``station.cli``
+Kill points are exact where it matters: a small wrapper around ``station.commands.cli``
 SIGKILLs its own process as the journal is about to record (or has recorded)
 a given record, so "after the write reached the drive but before the journal
 said so" is hit every time rather than by luck. One kill is from outside, on a
@@ -36,7 +36,7 @@ from typing import Any
 import pytest
 from truth import assert_truth, drho
 
-from station.journal import read_journal
+from station.rundir.journal import read_journal
 
 # Offsets of 2-3 mm and stands 8 mm off the legs' middles: the closed loop takes a
 # second write-back round (issue 10), so kills land in round 2 too.
@@ -51,8 +51,8 @@ LIMIT_S = 90.0  # no subprocess may outlive this; a healthy one takes a few seco
 # argv[1] = {"match": {...record fields...}, "nth": k, "when": "before|after|torn"}.
 KILLER = r"""
 import json, os, signal, sys
-import station.journal as journal
-from station.cli import main
+import station.rundir.journal as journal
+from station.commands.cli import main
 
 spec = json.loads(sys.argv[1])
 real_append = journal.Journal.append

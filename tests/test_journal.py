@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-import station.journal as journal_mod
+import station.rundir.journal as journal_mod
 from station.errors import BadInput
-from station.journal import Journal, read_journal, replay
+from station.rundir.journal import Journal, read_journal, replay
 
 
 def test_each_append_is_flushed_and_fsynced(tmp_path: Path, monkeypatch) -> None:
@@ -88,7 +88,7 @@ def test_missing_journal_is_bad_input(tmp_path: Path) -> None:
 FULL_CHILD = r"""
 import json, sys
 from station.errors import StorageFull
-from station.journal import Journal
+from station.rundir.journal import Journal
 
 j = Journal(sys.argv[1])
 n = 0

@@ -14,14 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from station import lock as machine_lock
-from station.lock import MachineBusy, acquire, taken_over_message
+from station.rundir import lock as machine_lock
+from station.rundir.lock import MachineBusy, acquire, taken_over_message
 
 ROOT = Path(__file__).resolve().parent.parent
 
 HOLDER = r"""
 import sys, time
-from station.lock import acquire
+from station.rundir.lock import acquire
 lock = acquire("tcp", "192.0.2.7", 502, 1, command="run", run_dir=sys.argv[1])
 print("held", flush=True)
 sys.stdin.readline()  # hold until told (or killed)

@@ -1,4 +1,4 @@
-"""The closed loop's maths (orthocal.loop), its state machine (station.loop) and
+"""The closed loop's maths (orthocal.loop), its state machine (station.engine.closed_loop) and
 the virtual stands' misplacement that makes the loop necessary."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from orthocal.loop import (
     predicted_after_correction,
     significant_corrections,
 )
-from station.loop import LoopState, Step, next_step, phase_of
+from station.engine.closed_loop import LoopState, Step, next_step, phase_of
 
 G = Geometry()
 KEYS = [(s, i, j) for i in "xyz" for s in "+-" for j in "xyz" if j != i]
@@ -187,3 +187,13 @@ def test_with_tilts_the_verification_is_judged_against_the_tilts_left() -> None:
         [0.0 if n.startswith("drho") else true.get(n, 0.0) for n in orthocal.PARAM_NAMES]))
     assert np.max(np.abs(left)) > 0.005  # far from zero: judging against zero would fail
     assert np.allclose(pred, left, atol=1e-6)
+
+
+def test_the_report_says_every_reason_the_loop_can_stop() -> None:
+    # The engine names the reasons (the run JSON's loop.stopped); the report, which
+    # reads the result and not the engine, says each in words.
+    from station.engine.closed_loop import STOP_REASONS
+    from station.report.rounds import STOP_TEXT
+
+    assert set(STOP_TEXT) == set(STOP_REASONS)
+    assert all(STOP_TEXT[r] for r in STOP_REASONS)

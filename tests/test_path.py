@@ -5,7 +5,6 @@ keep the plungers in their strokes."""
 
 from __future__ import annotations
 
-import argparse
 import copy
 import json
 from pathlib import Path
@@ -13,17 +12,20 @@ from typing import Any
 
 import numpy as np
 import pytest
+from builders import FAST, resumed, simulated
 
 import orthocal
-from drivers.axes import move_time
+from drivers.profiles import move_time
 from drivers.registers import GENERIC, IAI_PCON, load_map
 from drivers.sim.machine import VirtualOrthoglide
-from station import cmd_run
+from station.commands import run as cmd_run
+from station.commands.options import RunOptions
 from station.config import StationConfig, parse_config
 from station.errors import BadInput, RunFailed
-from station.journal import read_journal
-from station.motion import reachable_points
-from station.plan import MotionChecker, build_plan, check_plan, motion_model
+from station.plan.checker import MotionChecker, check_plan, motion_model
+from station.plan.motion import reachable_points
+from station.plan.steps import build_plan
+from station.rundir.journal import read_journal
 
 BASE: dict[str, Any] = {
     "controller": {"speed_mm_s": 100.0, "accel_mm_s2": 1000.0},
@@ -253,15 +255,10 @@ def test_short_gauge_gets_as_many_waypoints_as_it_needs() -> None:
 
 # --- the sequencer runs the waypoints -----------------------------------------------------
 
-FAST = {"cycles": 2, "readings": 3, "settle_s": 0.0}
 
 
-def args_for(tmp_path: Path, **extra: Any) -> argparse.Namespace:
-    base = dict(simulate=True, config=None, plan=False, seed=7, true_drho=None, true_dl=None,
-                noise=0.002, out=str(tmp_path / "runs"), yes=False, json=True, debug=False,
-                sim_procedure=FAST)
-    base.update(extra)
-    return argparse.Namespace(**base)
+def args_for(tmp_path: Path, **extra: Any) -> RunOptions:
+    return simulated(tmp_path / "runs", **extra)
 
 
 def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
@@ -280,16 +277,14 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
 
     with pytest.raises(RunFailed) as info:
         cmd_run.run(args_for(tmp_path, true_drho=true_drho, motion="independent",
-                             sim_station_hook=alarm))
+                             hook=alarm))
     (run_dir,) = list((tmp_path / "runs").iterdir())
     assert "alarm 17" in str(info.value) and f"orthocal resume {run_dir}" in str(info.value)
     plan_text = (run_dir / "plan.txt").read_text()
     assert "controller path: independent axes" in plan_text and "waypoint(s)" in plan_text
     assert not any(r["type"] == "cycle" for r in read_journal(run_dir / "journal.jsonl"))
     capsys.readouterr()
-    code = cmd_run.resume(argparse.Namespace(run_dir=str(run_dir), out=None, yes=False,
-                                             json=True, debug=False,
-                                             sim_station_hook=keep))
+    code = cmd_run.resume(resumed(run_dir, hook=keep))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok"

@@ -13,7 +13,8 @@ import pytest
 import orthocal
 from station.config import StationConfig, parse_config
 from station.errors import BadInput
-from station.plan import Move, Prompt, Read, build_plan, check_plan
+from station.plan.checker import check_plan
+from station.plan.steps import Move, Prompt, Read, build_plan
 
 BASE = {
     "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],

@@ -14,7 +14,7 @@ from drivers.probe import classify, probe_port
 from drivers.sim.controller import SimController
 from drivers.sim.indicators import SimIndicator
 from drivers.sim.ptypair import PtyPair
-from station.cli import main
+from station.commands.cli import main
 
 READINGS = {"mitutoyo": 1.234, "sylvac": -0.567, "mahr": 2.5}
 

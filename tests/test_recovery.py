@@ -1,10 +1,10 @@
-"""station.recovery on journal records alone: which setup a power cut interrupted,
+"""station.engine.recovery on journal records alone: which setup a power cut interrupted,
 and how a setup-redo voids that setup's earlier cycles (and only those)."""
 
 from __future__ import annotations
 
-from station.journal import replay
-from station.recovery import drop_redone, interrupted_setup
+from station.engine.recovery import drop_redone, interrupted_setup
+from station.rundir.journal import replay
 
 
 def _records() -> list[dict]:

@@ -2,7 +2,7 @@
 
 Faults are injected through the knobs of the simulated devices (Modbus server
 faults, pty gauge faults, the virtual machine) while ``orthocal run --simulate``
-runs in-process through ``station.cli.main``: transient faults are retried,
+runs in-process through ``station.commands.cli.main``: transient faults are retried,
 journaled and give the right answer; persistent ones stop the axes, keep the
 journal and end in one line naming the device (exit 1); a write-back that
 fails is undone; a knock on the stand is rejected and recorded; bad input
@@ -23,9 +23,10 @@ import numpy as np
 import pytest
 
 from drivers.sim.station import VirtualStation
-from station import devices, simulation
-from station.cli import main
-from station.journal import read_journal
+from station.commands import simulation
+from station.commands.cli import main
+from station.engine import devices
+from station.rundir.journal import read_journal
 
 SEED = 11
 TRUE_DRHO = (0.7, -1.1, 0.35)

@@ -23,7 +23,7 @@ from test_reliability import Rig, on_setup, orthocal  # noqa: F401  (fixture)
 
 from drivers.sim.station import VirtualStation
 from station.config import dump_toml, parse_config
-from station.journal import Journal, read_journal
+from station.rundir.journal import Journal, read_journal
 
 ROOT = Path(__file__).resolve().parent.parent
 SEED = 5
@@ -240,7 +240,7 @@ def test_a_full_disk_stops_the_run_and_resume_finishes_it(tmp_path: Path, refere
 
 HOLDER = r"""
 import sys
-from station.lock import acquire
+from station.rundir.lock import acquire
 lock = acquire("tcp", "127.0.0.1", int(sys.argv[1]), 1, command="run", run_dir=sys.argv[2])
 print("held", flush=True)
 sys.stdin.readline()

@@ -4,6 +4,7 @@ what happened, summary_text names the numbers, for complete and broken runs alik
 from __future__ import annotations
 
 import copy
+import html
 import json
 import math
 import random
@@ -251,26 +252,26 @@ def test_html_is_self_contained_for_every_kind_of_run(tmp_path: Path, case: str)
     page = path.read_text(encoding="utf-8")
     _assert_self_contained(page)
     assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
-    assert report._STATUS_TEXT[result["status"]] in page
+    assert report.STATUS_TEXT[result["status"]] in page
     if result.get("identified"):
         assert page.count("<svg") == 2
     if result.get("message"):
-        assert report.html.escape(result["message"]) in page
+        assert html.escape(result["message"]) in page
 
 
 def test_html_contains_the_numbers(tmp_path: Path) -> None:
     result = make_result()
     page = report.write_html(result, tmp_path).read_text(encoding="utf-8")
     for name, value in result["identified"].items():
-        assert report._fmt(value, signed=True) in page, name
-        assert report._fmt(result["std_errors"][name]) in page, name
+        assert report.fmt(value, signed=True) in page, name
+        assert report.fmt(result["std_errors"][name]) in page, name
     for key, dev in result["deviations"].items():
-        assert report._fmt(dev["mean"], signed=True) in page, key
-        assert report._fmt(dev["mean"] - dev["model"], signed=True) in page, key
+        assert report.fmt(dev["mean"], signed=True) in page, key
+        assert report.fmt(dev["mean"] - dev["model"], signed=True) in page, key
     for axis, value in result["offsets_written"].items():
-        assert report._fmt(value, signed=True) in page, axis
-    assert report._fmt(result["verification"]["deviations_rms_mm"]) in page
-    assert report._fmt(result["residual_rms_mm"]) in page
+        assert report.fmt(value, signed=True) in page, axis
+    assert report.fmt(result["verification"]["deviations_rms_mm"]) in page
+    assert report.fmt(result["residual_rms_mm"]) in page
     assert result["fit_note"] in page
     assert "Π<sub>x</sub><sup>+</sup> along y" in page
     assert "hidden truth" in page
@@ -283,7 +284,7 @@ def test_html_full_model_shows_leg_lengths_and_correlation(tmp_path: Path) -> No
     corr = result["correlation"]["matrix"]
     strongest = max(abs(corr[i][j]) for i in range(6) for j in range(6) if i != j)
     assert strongest > 0.9  # Δρ_i and ΔL_i act almost alike: the table must show it
-    assert report._fmt(strongest, 4 if strongest >= 0.995 else 2) in page.replace("−", "")
+    assert report.fmt(strongest, 4 if strongest >= 0.995 else 2) in page.replace("−", "")
 
 
 def test_html_explains_refused_and_missing_sections() -> None:
@@ -332,12 +333,12 @@ def test_summary_names_status_values_and_report() -> None:
     text = report.summary_text(result)
     assert text.splitlines()[0].startswith("orthocal run: COMPLETED")
     for name, value in result["identified"].items():
-        assert f"{report._param_plain(name)} = {report._fmt(value, signed=True)}" in text
-    assert report._fmt(result["residual_rms_mm"]) in text
+        assert f"{report.param_plain(name)} = {report.fmt(value, signed=True)}" in text
+    assert report.fmt(result["residual_rms_mm"]) in text
     for axis in AXES:
-        assert report._fmt(result["offsets_written"][axis]) in text
+        assert report.fmt(result["offsets_written"][axis]) in text
     before, after = result["deviations_rms_mm"], result["verification"]["deviations_rms_mm"]
-    assert f"{report._fmt(before)} → {report._fmt(after)}" in text
+    assert f"{report.fmt(before)} → {report.fmt(after)}" in text
     assert str(Path(result["run_dir"]) / "report.html") in text
     assert len(text.splitlines()) <= 8
 

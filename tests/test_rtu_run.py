@@ -13,7 +13,7 @@ from pathlib import Path
 
 from truth import assert_truth, drho
 
-from station.cli import main
+from station.commands.cli import main
 from station.config import toml_text
 
 

@@ -4,7 +4,6 @@ both setup styles work, and an interrupted run resumes to the end."""
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from pathlib import Path
@@ -12,22 +11,18 @@ from typing import Any
 
 import numpy as np
 import pytest
+from builders import FAST, resumed, simulated
 from truth import TRUTH_COVERAGE, assert_truth, drho
 
 from orthocal import coverage_factor
-from station import cmd_run
+from station.commands import run as cmd_run
+from station.commands.options import RunOptions
 from station.errors import RunFailed
-from station.journal import read_journal
-
-FAST = {"cycles": 2, "readings": 3, "settle_s": 0.0}
+from station.rundir.journal import read_journal
 
 
-def args_for(tmp_path: Path, **extra: Any) -> argparse.Namespace:
-    base = dict(simulate=True, config=None, plan=False, seed=7, true_drho=None, true_dl=None,
-                noise=0.002, out=str(tmp_path / "runs"), yes=False, json=True, debug=False,
-                sim_procedure=FAST, mount_error=0.0)
-    base.update(extra)
-    return argparse.Namespace(**base)
+def args_for(tmp_path: Path, **extra: Any) -> RunOptions:
+    return simulated(tmp_path / "runs", **{"mount_error": 0.0, **extra})
 
 
 def only_run_dir(tmp_path: Path) -> Path:
@@ -56,7 +51,7 @@ def check_recovered(result: dict, true_drho: tuple[float, float, float]) -> None
 @pytest.mark.parametrize("count", [2, 6])
 def test_simulated_run_recovers_hidden_offsets(tmp_path: Path, capsys, count: int) -> None:
     true_drho = (0.8, -1.3, 0.45)
-    code = cmd_run.run(args_for(tmp_path, true_drho=true_drho, sim_indicators=count))
+    code = cmd_run.run(args_for(tmp_path, true_drho=true_drho, indicators=count))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok" and result["writeback"]["status"] == "written"
@@ -97,8 +92,8 @@ def test_fault_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
     with pytest.raises(RunFailed) as info:
         # The plunger guard's readings during moves draw from the gauges' seeded noise
         # stream; with them this seed's verification lands at 3.5 standard errors.
-        cmd_run.run(args_for(tmp_path, true_drho=true_drho, sim_station_hook=alarm_soon,
-                             sim_procedure={**FAST, "plunger_guard": False}))
+        cmd_run.run(args_for(tmp_path, true_drho=true_drho, hook=alarm_soon,
+                             procedure={**FAST, "plunger_guard": False}))
     message = str(info.value)
     run_dir = only_run_dir(tmp_path)
     assert "alarm 17" in message and f"orthocal resume {run_dir}" in message
@@ -111,8 +106,7 @@ def test_fault_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
     assert cycles_before >= 1
     capsys.readouterr()
 
-    code = cmd_run.resume(argparse.Namespace(run_dir=str(run_dir), out=None, yes=False,
-                                             json=True, debug=False))
+    code = cmd_run.resume(resumed(run_dir))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok"
@@ -124,8 +118,7 @@ def test_fault_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
     keys = [(r["phase"], r["setup"], r["cycle"]) for r in records if r["type"] == "cycle"]
     assert len(keys) == len(set(keys))
     # resuming a finished run reports it and changes nothing
-    again = cmd_run.resume(argparse.Namespace(run_dir=str(run_dir), out=None, yes=False,
-                                              json=True, debug=False))
+    again = cmd_run.resume(resumed(run_dir))
     assert again == 0
     assert (run_dir / "journal.jsonl").read_bytes() == journal_after
 
@@ -135,8 +128,8 @@ def test_adaptive_cycles_stop_early_and_retries_are_journaled(tmp_path: Path, ca
         station.indicators["A"].faults.drop_next = 2  # two lost replies: retried
 
     procedure = {"cycles": 4, "readings": 3, "settle_s": 0.0, "target_std_error_mm": 0.01}
-    code = cmd_run.run(args_for(tmp_path, true_drho=(0.3, 0.2, -0.4), sim_procedure=procedure,
-                                sim_station_hook=flaky))
+    code = cmd_run.run(args_for(tmp_path, true_drho=(0.3, 0.2, -0.4), procedure=procedure,
+                                hook=flaky))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     # 0.01 mm is loose against 0.002 mm noise: two cycles (the minimum) suffice
@@ -165,7 +158,7 @@ def test_ctrl_c_stops_the_axes_and_says_how_to_resume(tmp_path: Path) -> None:
         station.mount = operator_hits_ctrl_c
 
     with pytest.raises(RunFailed) as info:
-        cmd_run.run(args_for(tmp_path, sim_station_hook=interrupt_second_mount))
+        cmd_run.run(args_for(tmp_path, hook=interrupt_second_mount))
     run_dir = only_run_dir(tmp_path)
     assert f"orthocal resume {run_dir}" in str(info.value)
     assert seen["station"].controller.stats.commands.get(2, 0) >= 1  # STOP was sent
@@ -175,7 +168,7 @@ def test_ctrl_c_stops_the_axes_and_says_how_to_resume(tmp_path: Path) -> None:
 
 
 def test_outlier_rule() -> None:
-    from station.sequencer import reject_outliers
+    from station.engine.statistics import reject_outliers
 
     assert reject_outliers([0.100, 0.101, 0.099, 0.100, 0.350], 5.0, 0.003) == \
         [True, True, True, True, False]
@@ -188,7 +181,7 @@ def test_pooled_noise_scale_keeps_normal_readings_and_still_catches_knocks() -> 
     """Five quantised readings per stop often have a MAD near zero: judged alone,
     a few percent of perfectly normal readings would be thrown away. Pooled over
     the stops, the scale is σ and nothing normal is rejected."""
-    from station.sequencer import NoiseScale, reject_outliers
+    from station.engine.statistics import NoiseScale, reject_outliers
 
     rng = np.random.default_rng(2)
     sigma, resolution = 0.005, 0.001

@@ -17,14 +17,17 @@ from typing import Any
 
 import numpy as np
 import pytest
+from builders import resumed, simulated
 
 import orthocal
-from drivers.sim.machine import DriveMotion, VirtualOrthoglide
+from drivers.sim.machine import VirtualOrthoglide
+from drivers.sim.motion import DriveMotion
 from drivers.sim.station import VirtualStation
-from station import cli
+from station.commands import cli
+from station.commands.options import SimOptions
+from station.commands.simulation import drive_motion, sim_params, start_station
 from station.config import parse_config
 from station.errors import BadInput
-from station.simulation import drive_motion, sim_params_from_args, start_station
 
 GEOMETRY = orthocal.Geometry()
 PI0 = orthocal.posture("0", None, GEOMETRY)
@@ -458,7 +461,7 @@ def sim_args(*argv: str) -> argparse.Namespace:
 def test_drive_options_survive_the_journal_round_trip() -> None:
     args = sim_args("--drive-profile", "scurve,cosine,trapezoid", "--drive-accel", "5000",
                     "--drive-delays", "0,0.003,0.006", "--drive-sequence", "ZYX")
-    params = sim_params_from_args(args)
+    params = sim_params(SimOptions.from_args(args))
     saved = json.loads(json.dumps(params))  # the journal header is JSON
     expected = DriveMotion(shape=("scurve", "cosine", "trapezoid"), accel_mm_s2=5000.0,
                            start_delay_s=(0.0, 0.003, 0.006), sequence="zyx")
@@ -471,13 +474,14 @@ def test_drive_options_survive_the_journal_round_trip() -> None:
     finally:
         st.close()
     # without any option, and from a journal older than them: today's drives
-    assert drive_motion(sim_params_from_args(sim_args())) == DriveMotion.named("coordinated")
+    plain = sim_params(SimOptions.from_args(sim_args()))
+    assert drive_motion(plain) == DriveMotion.named("coordinated")
     old = {k: v for k, v in params.items() if not k.startswith("drive_")}
     assert drive_motion({**old, "motion": "independent"}) == DriveMotion.named("independent")
     assert drive_motion({k: v for k, v in old.items() if k != "motion"}) \
         == DriveMotion.named("coordinated")
     # a single profile keeps the default coordinated drive, on that shape
-    coord = sim_params_from_args(sim_args("--drive-profile", "cosine"))
+    coord = sim_params(SimOptions.from_args(sim_args("--drive-profile", "cosine")))
     assert drive_motion(coord) == DriveMotion(coordinated=True, shape="cosine")
 
 
@@ -498,7 +502,7 @@ def test_drive_options_survive_the_journal_round_trip() -> None:
 def test_bad_drive_options_are_one_line_and_exit_2(
         argv: list[str], option: str, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(BadInput, match=f"^{option}: "):
-        sim_params_from_args(sim_args(*argv))
+        sim_params(SimOptions.from_args(sim_args(*argv)))
     code = cli.main(["run", "--simulate", "--seed", "5", *argv])
     err = capsys.readouterr().err
     assert code == 2
@@ -521,9 +525,9 @@ def test_a_run_against_a_sequenced_drive_resumes_with_the_same_drive(
     # delays, z then y then x. Interrupted by an alarm, resumed from the journal:
     # the restarted virtual station moves the same way, the run completes, and no
     # plunger ever left its stroke, read or not.
-    from station import cmd_run
+    from station.commands import run as cmd_run
     from station.errors import RunFailed
-    from station.journal import read_journal, replay
+    from station.rundir.journal import read_journal, replay
 
     expected = DriveMotion(shape=("scurve", "cosine", "trapezoid"), accel_mm_s2=12000.0,
                            start_delay_s=(0.0, 0.004, 0.008), sequence="zyx")
@@ -534,20 +538,16 @@ def test_a_run_against_a_sequenced_drive_resumes_with_the_same_drive(
         if len(stations) == 1:
             st.controller.faults.alarm_after_moves = 5
 
-    args = argparse.Namespace(
-        simulate=True, config=None, plan=False, seed=7, true_drho=(0.7, -1.1, 0.5),
-        true_dl=None, noise=0.002, out=str(tmp_path / "runs"), yes=False, json=True,
-        debug=False, sim_procedure={"cycles": 2, "readings": 3, "settle_s": 0.0},
-        drive_profile="scurve,cosine,trapezoid", drive_accel="12000",
-        drive_delays="0,0.004,0.008", drive_sequence="zyx", sim_station_hook=keep)
+    args = simulated(tmp_path / "runs", true_drho=(0.7, -1.1, 0.5),
+                     drive_profile="scurve,cosine,trapezoid", drive_accel="12000",
+                     drive_delays="0,0.004,0.008", drive_sequence="zyx", hook=keep)
     with pytest.raises(RunFailed, match="alarm 17"):
         cmd_run.run(args)
     (run_dir,) = list((tmp_path / "runs").iterdir())
     header = replay(read_journal(run_dir / "journal.jsonl")).header
     assert drive_motion(header["simulation"]) == expected
     capsys.readouterr()
-    code = cmd_run.resume(argparse.Namespace(run_dir=str(run_dir), out=None, yes=False,
-                                             json=True, debug=False, sim_station_hook=keep))
+    code = cmd_run.resume(resumed(run_dir, hook=keep))
     assert code == 0 and json.loads(capsys.readouterr().out)["status"] == "ok"
     assert [st.machine.drive for st in stations] == [expected, expected]
     assert [st.out_of_stroke_count for st in stations] == [0, 0]

@@ -14,7 +14,7 @@ import pytest
 from drivers.axes import ModbusAxisController
 from drivers.sim.controller import SimController
 from drivers.sim.station import VirtualStation
-from station.cli import main
+from station.commands.cli import main
 from station.config import toml_text
 
 SHORT = {"cycles": 1, "readings": 2, "settle_s": 0.0, "verify": False}

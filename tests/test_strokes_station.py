@@ -3,7 +3,6 @@ simulated run (with a fault and a resume) through intermediate stops Π_i(s)."""
 
 from __future__ import annotations
 
-import argparse
 import copy
 import json
 import signal
@@ -13,13 +12,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from builders import simulated
 
 import orthocal
-from station import cmd_run
+from station.commands import run as cmd_run
 from station.config import parse_config
 from station.errors import BadInput
-from station.journal import read_journal
-from station.plan import Move, Read, build_plan, check_plan
+from station.plan.checker import check_plan
+from station.plan.steps import Move, Read, build_plan
+from station.rundir.journal import read_journal
 
 BASE = {
     "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],
@@ -111,10 +112,8 @@ def run_argv(out: Path) -> list[str]:
 def test_simulated_run_with_strokes(tmp_path: Path, capsys) -> None:
     """Every stroke in the deviations, the journal and the report; the offsets
     come back and the verification is at the noise level."""
-    args = argparse.Namespace(simulate=True, config=None, plan=False, seed=11,
-                              true_drho=TRUE_DRHO, true_dl=None, noise=0.002,
-                              out=str(tmp_path / "runs"), yes=False, json=True, debug=False,
-                              sim_procedure=FAST, mount_error=0.0)  # one write-back
+    args = simulated(tmp_path / "runs", seed=11, true_drho=TRUE_DRHO, procedure=FAST,
+                     mount_error=0.0)  # one write-back
     assert cmd_run.run(args) == 0
     result = json.loads(capsys.readouterr().out)
     keys = set(result["deviations"])
@@ -137,8 +136,8 @@ def test_simulated_run_with_strokes(tmp_path: Path, capsys) -> None:
 
 KILLER = r"""
 import json, os, signal, sys
-import station.journal as journal
-from station.cli import main
+import station.rundir.journal as journal
+from station.commands.cli import main
 
 real_append = journal.Journal.append
 seen = [0]

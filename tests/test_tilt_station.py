@@ -4,17 +4,18 @@ model auto that writes the right offsets and reports the tilts (issue 9)."""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from builders import resumed, simulated
 
 import orthocal
 from drivers.sim.machine import VirtualOrthoglide
-from station import cmd_run, report
-from station.cli import main
+from station import report
+from station.commands import run as cmd_run
+from station.commands.cli import main
 from station.config import ProcedureConfig
 
 G = orthocal.Geometry()
@@ -92,11 +93,9 @@ def test_identify_cli_refuses_auto_without_noise_and_full_tilt_naming_why(tmp_pa
 
 def test_simulated_tilted_run_with_auto_writes_offsets_within_4_um(tmp_path, capsys):
     true_drho = (1.3, -0.9, 2.1)
-    args = argparse.Namespace(
-        simulate=True, config=None, plan=False, seed=11, true_drho=true_drho, true_dl=None,
-        true_tilt=TILT, noise=0.001, out=str(tmp_path / "runs"), yes=True, json=True,
-        debug=False, sim_procedure={"settle_s": 0.0},
-        mount_error=0.0)  # stands exact: their misfit would blur the tilts (issue 10)
+    args = simulated(tmp_path / "runs", seed=11, true_drho=true_drho, true_tilt=TILT,
+                     noise=0.001, yes=True, procedure={"settle_s": 0.0},
+                     mount_error=0.0)  # stands exact: their misfit would blur the tilts (issue 10)
     assert cmd_run.run(args) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok" and result["model"] == "rho+tilt"
@@ -135,17 +134,14 @@ def test_a_tilted_simulated_run_resumes_on_the_same_tilted_machine(tmp_path, cap
         station.controller.faults.alarm_after_moves = 9  # in the second setup
 
     true_drho = (-0.6, 0.9, 1.1)
-    args = argparse.Namespace(
-        simulate=True, config=None, plan=False, seed=3, true_drho=true_drho, true_dl=None,
-        true_tilt=TILT, noise=0.001, out=str(tmp_path / "runs"), yes=True, json=True,
-        debug=False, sim_procedure={"settle_s": 0.0, "cycles": 2, "readings": 3},
-        sim_station_hook=alarm_soon)
+    args = simulated(tmp_path / "runs", seed=3, true_drho=true_drho, true_tilt=TILT,
+                     noise=0.001, yes=True, procedure={"settle_s": 0.0, "cycles": 2, "readings": 3},
+                     hook=alarm_soon)
     with pytest.raises(RunFailed):
         cmd_run.run(args)
     (run_dir,) = list((tmp_path / "runs").iterdir())
     capsys.readouterr()
-    code = cmd_run.resume(argparse.Namespace(run_dir=str(run_dir), out=None, yes=True,
-                                             json=True, debug=False))
+    code = cmd_run.resume(resumed(run_dir, yes=True))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     # the restarted virtual machine has the journal's tilts: auto finds them again

@@ -14,8 +14,8 @@ import pytest
 from drivers.axes import ModbusAxisController
 from drivers.errors import ReadbackMismatch
 from drivers.sim.station import VirtualStation
-from station.journal import Journal, read_journal, replay
-from station.writeback import BACKUP_NAME, rollback, write_back
+from station.engine.writeback import BACKUP_NAME, rollback, write_back
+from station.rundir.journal import Journal, read_journal, replay
 
 START = (0.25, -0.5, 1.0)
 

@@ -18,14 +18,14 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 # Each command lives in its own module, imported only when used, so that
 # `orthocal identify` does not pay for pymodbus and `orthocal --help` is instant.
 _COMMANDS = {
-    "run": "station.cmd_run:run",
-    "resume": "station.cmd_run:resume",
-    "rollback": "station.cmd_run:rollback",
-    "sim": "station.cmd_sim:main",
-    "identify": "station.cmd_identify:main",
-    "probe": "station.cmd_probe:main",
-    "init": "station.cmd_init:main",
-    "design": "station.cmd_design:main",
+    "run": "station.commands.run:run_command",
+    "resume": "station.commands.run:resume_command",
+    "rollback": "station.commands.run:rollback_command",
+    "sim": "station.commands.sim:main",
+    "identify": "station.commands.identify:main",
+    "probe": "station.commands.probe:main",
+    "init": "station.commands.init:main",
+    "design": "station.commands.design:main",
 }
 
 
@@ -97,7 +97,7 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
     )
     # The virtual drive's own behaviour, never written to the config it hands the
     # station: what a real drive does without saying (design.md, "Register map").
-    # Strings here, checked in station.simulation: a bad value is one line, exit 2.
+    # Strings here, checked in station.commands.simulation: a bad value is one line, exit 2.
     p.add_argument(
         "--drive-profile", metavar="SHAPE[,SHAPE,SHAPE]", default=None,
         help="the virtual drive's profile shape: trapezoid (default), scurve "

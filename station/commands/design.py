@@ -18,9 +18,9 @@ Two noise figures per parameter:
   (orthocal.design.run_std_errors); µrad per µm for the tilts.
 
 The run time is the physical floor of the plan as the station runs it: every
-move a rest-to-rest trapezoid over its longest axis at the configured speed and
-acceleration (drivers.axes.move_time, the same model that sets each move's
-deadline; an axis-by-axis profile takes as long, its longest axis governs),
+move (and each waypoint's sub-move) a rest-to-rest trapezoid over its longest axis
+at the configured speed and acceleration (drivers.profiles.move_time: axes that
+move together; a drive that moves one axis after another takes longer),
 the settle time at each stop, and each stop's readings at the gauges' line
 time (request + reply characters at their baud rate; the gauges of a stop are
 read in parallel). Operator mounting time is not included. bench/cycle.py
@@ -36,11 +36,13 @@ from typing import Any
 
 import numpy as np
 
+from orthocal import AXES
+from orthocal.numbers import finite
 from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
-from station.plan import Plan, Read, Settle, build_plan, check_plan, effective_limits
+from station.plan.checker import check_plan, effective_limits
+from station.plan.steps import Plan, Read, Settle, build_plan
 
-AXES = ("x", "y", "z")
 # No controller is contacted: "controller limits" wide open, narrowed by the config.
 _OPEN = ([-1e6] * 3, [1e6] * 3)
 OBJECTIVE = ("D-optimal: maximise det of the run's information matrix (the inverse of its "
@@ -125,7 +127,7 @@ def plan_keys(plan: Plan) -> tuple[list[tuple[str, str, str]], list[list[int]]]:
 
 def _line_time_s(config: StationConfig, name: str) -> float:
     """Seconds one reading occupies the line: request + reply at the gauge's baud."""
-    from drivers.indicators import make_protocol
+    from drivers.indicator_protocols import make_protocol
 
     ind = config.indicator(name)
     overrides = {target: getattr(ind, key) for key, target in (
@@ -147,22 +149,24 @@ def _line_time_s(config: StationConfig, name: str) -> float:
 def run_time(plan: Plan, config: StationConfig) -> dict[str, Any]:
     """Predicted seconds of the plan's measurement (and verification) phases, from
     Π0 on, at the configured cycles (no repeats, no adaptive early stop)."""
-    from drivers.axes import move_time
+    from drivers.profiles import move_time
 
     c = config.controller
     position: np.ndarray | None = None
     moves = settle = reading = 0.0
     n_moves = n_stops = 0
     line = {name: _line_time_s(config, name) for sp in plan.setups for name in sp.indicators}
-    for step in plan.steps("m"):
+    for step, via in plan.waypoints_of():
         if step.kind == "move":
-            target = np.asarray(step.targets)  # type: ignore[union-attr]
-            if position is not None:
-                distance = float(np.max(np.abs(target - position)))
-                if distance > 1e-3:  # the sequencer skips moves within a µm
-                    moves += move_time(distance, c.speed_mm_s, c.accel_mm_s2)
-                    n_moves += 1
-            position = target
+            # the waypoints the plan check put on the move: each a move of its own
+            for leg in [*via, step.targets]:  # type: ignore[union-attr]
+                target = np.asarray(leg)
+                if position is not None:
+                    distance = float(np.max(np.abs(target - position)))
+                    if distance > 1e-3:  # the sequencer skips moves within a µm
+                        moves += move_time(distance, c.speed_mm_s, c.accel_mm_s2)
+                        n_moves += 1
+                position = target
         elif isinstance(step, Settle):
             settle += step.seconds
         elif isinstance(step, Read):
@@ -191,8 +195,8 @@ def _figures(plan: Plan, config: StationConfig, model: str) -> dict[str, Any]:
         "strokes_mm": [float(stroke(p, geometry)) for p in plan.setups[0].order],
         "n_deviations": q.n_deviations, "parameters": list(q.names), "rank": q.rank,
         "identifiable": q.identifiable,
-        "condition_number": _num(q.condition_number),
-        "noise_gain": {n: _num(v) for n, v in q.noise_gain.items()},
+        "condition_number": finite(q.condition_number),
+        "noise_gain": {n: finite(v) for n, v in q.noise_gain.items()},
         "std_error_per_um": {n: None for n in q.names},
         # D and A of the whole run (per µm of indicator noise), filled in below
         "d_criterion_log_det": None, "a_criterion_trace_cov": None,
@@ -208,10 +212,6 @@ def _figures(plan: Plan, config: StationConfig, model: str) -> dict[str, Any]:
         out["d_criterion_log_det"] = float(-np.linalg.slogdet(cov)[1])
         out["a_criterion_trace_cov"] = float(np.trace(cov))
     return out
-
-
-def _num(v: float) -> float | None:
-    return float(v) if math.isfinite(v) else None
 
 
 def _feasible(config: StationConfig, limits: tuple[Any, Any]):

@@ -20,9 +20,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from station.cmd_probe import gather
-from station.config import _toml_value as v
+from station.commands.probe import gather
 from station.config import parse_config
+from station.config import toml_value as v
 from station.errors import BadInput
 
 NAMES = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"

@@ -1,7 +1,7 @@
 """``orthocal run``, ``orthocal resume`` and ``orthocal rollback``.
 
 The commands open what a run needs (config, virtual station, devices, run directory,
-journal) and hand it to station.procedure, which runs the flow; station.rundir says
+journal) and hand it to station.engine.procedure, which runs the flow; station.rundir.directory says
 what a run directory holds.
 
 Progress goes to stderr; stdout carries the summary or, with --json, one JSON
@@ -17,26 +17,36 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
-from station import simulation
-from station.cmd_design import design_summary, format_summary
+from station import report
+from station.commands import simulation
+from station.commands.design import design_summary, format_summary
+from station.commands.options import ResumeOptions, RunOptions
 from station.config import load_config, parse_config
-from station.devices import build_controller, open_devices
+from station.console.operator import ConsoleOperator, Operator, VirtualOperator
+from station.engine.devices import build_controller, open_devices
+from station.engine.procedure import Run, execute
+from station.engine.recovery import check_reference, drop_redone, home_if_needed
+from station.engine.results import AXES
+from station.engine.writeback import rollback as do_rollback
 from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
-from station.journal import JOURNAL_NAME, Journal, JournalState
-from station.lock import MachineLock, acquire, taken_over_message, update_run_dir
-from station.operator import ConsoleOperator, Operator, VirtualOperator
-from station.plan import build_plan, check_plan
-from station.procedure import Run, execute
-from station.recovery import check_reference, drop_redone, home_if_needed
-from station.results import AXES, print_result
-from station.rundir import NVRAM_NAME, new_run_dir, now_iso, reopen, version, write_run_files
-from station.writeback import rollback as do_rollback
+from station.plan.checker import check_plan
+from station.plan.steps import build_plan
+from station.rundir.directory import (
+    NVRAM_NAME,
+    new_run_dir,
+    now_iso,
+    reopen,
+    version,
+    write_run_files,
+)
+from station.rundir.journal import JOURNAL_NAME, Journal, JournalState
+from station.rundir.lock import MachineLock, acquire, taken_over_message, update_run_dir
 
 
-def _operator(args: argparse.Namespace, station: Any) -> Operator:
+def _operator(yes: bool, station: Any) -> Operator:
     if station is not None:
         return VirtualOperator(station.mount, station.unmount, say=say, place_fn=station.place)
-    return ConsoleOperator(yes=bool(args.yes))
+    return ConsoleOperator(yes=yes)
 
 
 def _lock(stack: ExitStack, config: Any, command: str, run_dir: Path | None) -> MachineLock:
@@ -50,20 +60,35 @@ def _lock(stack: ExitStack, config: Any, command: str, run_dir: Path | None) -> 
     return lock
 
 
-def run(args: argparse.Namespace) -> int:
+def run_command(args: argparse.Namespace) -> int:
+    return run(RunOptions.from_args(args))
+
+
+def resume_command(args: argparse.Namespace) -> int:
+    return resume(ResumeOptions.from_args(args))
+
+
+def rollback_command(args: argparse.Namespace) -> int:
+    return rollback(ResumeOptions.from_args(args))
+
+
+def run(options: RunOptions) -> int:
     with ExitStack() as stack:
         station = None
         sim = None
-        if args.simulate:
-            sim = simulation.sim_params_from_args(args)
+        if options.sim is not None:
+            sim = simulation.sim_params(options.sim)
             station = simulation.start_station(sim, None)
             stack.callback(station.close)
-            simulation.station_hook(args, station)
+            if options.sim.station_hook is not None:
+                options.sim.station_hook(station)
             config = parse_config(station.config(), "virtual station config")
         else:
-            config = load_config(args.config)
-            if not args.plan:
-                ConsoleOperator.require_tty_or_yes(bool(args.yes))
+            if options.config is None:
+                raise BadInput("run: give --config FILE or --simulate")
+            config = load_config(options.config)
+            if not options.plan:
+                ConsoleOperator.require_tty_or_yes(options.yes)
         plan = build_plan(config)
         journal_box: list[Journal] = []
 
@@ -71,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
             if journal_box:
                 journal_box[0].append({"type": "event", "event": event})
 
-        if args.plan:
+        if options.plan:
             # Listing needs the controller's soft limits, not the gauges.
             controller = build_controller(config, None)
             stack.callback(controller.close)
@@ -80,13 +105,13 @@ def run(args: argparse.Namespace) -> int:
             # The experiment's quality and time before anything moves (orthocal design).
             summary = design_summary(config, config.procedure.model,
                                      controller_limits=controller.soft_limits())
-            print(json.dumps({**plan.to_json(), "design": summary}) if args.json
+            print(json.dumps({**plan.to_json(), "design": summary}) if options.json
                   else plan.format() + "\n" + format_summary(summary))
             return 0
         lock = _lock(stack, config, "run", None)
         devices = open_devices(config, on_event, station)
         stack.callback(devices.close)
-        operator = _operator(args, station)
+        operator = _operator(options.yes, station)
         limits = devices.controller.soft_limits()
         check_plan(plan, config, limits)  # every posture, before anything moves
         # A controller that lost its reference (power cut before the run) counts
@@ -94,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
         home_if_needed(devices.controller, config, None, operator, say)
         check_plan(plan, config, limits, start=devices.controller.read_positions())
 
-        run_dir = new_run_dir(Path(args.out))
+        run_dir = new_run_dir(options.out)
         update_run_dir(lock, run_dir)
         try:
             if station is not None:
@@ -109,28 +134,43 @@ def run(args: argparse.Namespace) -> int:
                         "plan": plan.to_json(), "simulation": sim, "started": now_iso(),
                         "argv": sys.argv[1:]})
         say(f"orthocal: run directory {run_dir}")
-        ctx = Run(run_dir, config, plan, journal, devices, operator, sim, args,
+        ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
                   JournalState(), [], now_iso())
-        return execute(ctx)
+        return _report(options.json, *execute(ctx))
 
 
-def resume(args: argparse.Namespace) -> int:
-    run_dir, records, state = reopen(args)
+def print_result(as_json: bool, result: dict[str, Any]) -> None:
+    """One JSON document, or the summary, on stdout."""
+    if as_json:
+        print(json.dumps(report.jsonable_value(result), allow_nan=False))
+    else:
+        print(report.summary_text(result))
+
+
+def _report(as_json: bool, code: int, result: dict[str, Any]) -> int:
+    """The summary (or the JSON document) on stdout, and the exit status."""
+    print_result(as_json, result)
+    return code
+
+
+def resume(options: ResumeOptions) -> int:
+    run_dir, records, state = reopen(options.run_dir)
     if state.header is None:
         raise BadInput(f"{run_dir / JOURNAL_NAME}: no run header (not a run journal)")
     if state.finished is not None:
         result_path = run_dir / "result.json"
         result = json.loads(result_path.read_text()) if result_path.exists() else {}
         say(f"orthocal: {run_dir} already finished ({state.finished.get('status')})")
-        print_result(args, result)
+        print_result(options.json, result)
         return 0 if state.finished.get("status") == "ok" else 1
     config = load_config(run_dir / "config.toml")
     sim = state.header.get("simulation")
     records = drop_redone(records)
     with ExitStack() as stack:
-        station, config = simulation.restart_station(stack, args, sim, run_dir, config)
+        station, config = simulation.restart_station(stack, options.station_hook, sim,
+                                                     run_dir, config)
         if station is None:
-            ConsoleOperator.require_tty_or_yes(bool(args.yes))
+            ConsoleOperator.require_tty_or_yes(options.yes)
         _lock(stack, config, "resume", run_dir)
         plan = build_plan(config)
         journal = Journal(run_dir / JOURNAL_NAME)
@@ -147,7 +187,7 @@ def resume(args: argparse.Namespace) -> int:
         stack.callback(devices.close)
         check_plan(plan, config, devices.controller.soft_limits())
         say(f"orthocal: resuming {run_dir}")
-        operator = _operator(args, station)
+        operator = _operator(options.yes, station)
         try:
             if home_if_needed(devices.controller, config, journal, operator, say):
                 records = check_reference(devices.controller, devices.indicators, config,
@@ -156,9 +196,9 @@ def resume(args: argparse.Namespace) -> int:
             _stop_quietly(devices.controller)
             raise
         started = state.header.get("started") or now_iso()
-        ctx = Run(run_dir, config, plan, journal, devices, operator, sim, args,
+        ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
                   state, records, started)
-        return execute(ctx)
+        return _report(options.json, *execute(ctx))
 
 
 def _stop_quietly(controller: Any) -> None:
@@ -169,24 +209,25 @@ def _stop_quietly(controller: Any) -> None:
         pass  # the fault being raised says what went wrong
 
 
-def rollback(args: argparse.Namespace) -> int:
-    run_dir, _, state = reopen(args)
+def rollback(options: ResumeOptions) -> int:
+    run_dir, _, state = reopen(options.run_dir)
     config = load_config(run_dir / "config.toml")
     sim = state.header.get("simulation") if state.header else None
     with ExitStack() as stack:
-        station, config = simulation.restart_station(stack, args, sim, run_dir, config)
+        station, config = simulation.restart_station(stack, options.station_hook, sim,
+                                                     run_dir, config)
         _lock(stack, config, "rollback", run_dir)
         journal = Journal(run_dir / JOURNAL_NAME)
         stack.callback(journal.close)
         controller = build_controller(config, None)
         stack.callback(controller.close)
-        operator = _operator(args, station)
-        if station is None and not args.yes:
+        operator = _operator(options.yes, station)
+        if station is None and not options.yes:
             ConsoleOperator.require_tty_or_yes(False)
         if not operator.confirm(f"Restore the offsets saved in {run_dir}?"):
             raise RunFailed("rollback declined by the operator; offsets unchanged")
         restored = do_rollback(controller, run_dir, journal)
-    if args.json:
+    if options.json:
         print(json.dumps({"run_dir": str(run_dir), "status": "ok", "restored": restored}))
     else:
         print("orthocal rollback: offsets restored to " + ", ".join(

@@ -6,7 +6,7 @@ pseudo-terminal pair whose client end the config names), so
 ``orthocal run --config FILE`` can rehearse the real workflow from another
 terminal. A separate process cannot be told where the operator mounted the
 gauges, so six fixed indicators stand two per leg, all mounted at once.
-The drive moves as ``--motion`` and ``--drive-*`` say (station.simulation), and
+The drive moves as ``--motion`` and ``--drive-*`` say (station.commands.simulation), and
 the config it writes tells the station only what an integrator would: that the
 axes are coordinated, if they are, and the default acceleration.
 """
@@ -24,9 +24,10 @@ from pathlib import Path
 from typing import Any
 
 from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM, VirtualStation
+from station.commands.options import DriveOptions
+from station.commands.simulation import drive_motion, drive_params
 from station.config import dump_toml, parse_config
 from station.errors import BadInput
-from station.simulation import drive_motion, drive_params_from_args
 
 
 def main(args: argparse.Namespace) -> int:
@@ -44,7 +45,7 @@ def main(args: argparse.Namespace) -> int:
         raise BadInput(f"--mount-error: must be >= 0 mm, got {mount_error}")
     if args.speed is not None and not args.speed > 0:
         raise BadInput(f"--speed: must be > 0 mm/s, got {args.speed}")
-    drive = drive_params_from_args(args)
+    drive = drive_params(DriveOptions.from_args(args))
     kwargs: dict[str, Any] = {}
     if args.speed is not None:
         kwargs["speed_mm_s"] = args.speed

@@ -4,13 +4,12 @@ from the command line, starting it, and restarting it for resume and rollback.
 The drive's behaviour (``--motion`` and the ``--drive-*`` options: profile shape,
 own acceleration, start delays, one axis after another) goes into the simulated
 run's parameters as plain JSON values (the journal header keeps them), and
-:func:`drive_motion` rebuilds the same :class:`~drivers.sim.machine.DriveMotion`
+:func:`drive_motion` rebuilds the same :class:`~drivers.sim.motion.DriveMotion`
 from them for ``resume``; a journal from before these existed has none and gets
 the plain drive of its ``motion``."""
 
 from __future__ import annotations
 
-import argparse
 import math
 import secrets
 from contextlib import ExitStack
@@ -19,31 +18,33 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from station.commands.options import DriveOptions, SimOptions, StationHook
 from station.config import StationConfig, parse_config
 from station.errors import BadInput
-from station.rundir import NVRAM_NAME
+from station.rundir.directory import NVRAM_NAME
 
 if TYPE_CHECKING:
-    from drivers.sim.machine import DriveMotion
+    from drivers.sim.motion import DriveMotion
 
 DEFAULT_NOISE_MM = 0.002
 DEFAULT_SIM_DRHO_MM = 2.0  # random hidden Δρ are drawn uniform in ±this
 
 
-def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
-    seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
+def sim_params(options: SimOptions) -> dict[str, Any]:
+    """The simulated run's parameters as JSON values (the journal header keeps them,
+    so resume restarts the same virtual station); BadInput naming the option."""
+    seed = options.seed if options.seed is not None else secrets.randbelow(2**31)
     rng = np.random.default_rng(seed)
-    drho = list(args.true_drho) if args.true_drho is not None else \
+    drho = list(options.true_drho) if options.true_drho is not None else \
         [round(float(v), 4) for v in rng.uniform(-DEFAULT_SIM_DRHO_MM, DEFAULT_SIM_DRHO_MM, 3)]
-    dl = list(args.true_dl) if args.true_dl is not None else [0.0, 0.0, 0.0]
-    tilt = list(getattr(args, "true_tilt", None) or [0.0, 0.0, 0.0])
-    noise = args.noise if args.noise is not None else DEFAULT_NOISE_MM
+    dl = list(options.true_dl) if options.true_dl is not None else [0.0, 0.0, 0.0]
+    tilt = list(options.true_tilt or [0.0, 0.0, 0.0])
+    noise = options.noise if options.noise is not None else DEFAULT_NOISE_MM
     if not (math.isfinite(noise) and noise >= 0):
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
     from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
 
-    mount = getattr(args, "mount_error", None)
-    mount = DEFAULT_MOUNT_ERROR_MM if mount is None else mount
+    mount = DEFAULT_MOUNT_ERROR_MM if options.mount_error is None else options.mount_error
     if not (math.isfinite(mount) and mount >= 0):
         raise BadInput(f"--mount-error: must be >= 0 mm, got {mount}")
     return {
@@ -53,12 +54,13 @@ def sim_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "true_tilt": tilt,
         "noise_mm": noise,
         "mount_error_mm": mount,
-        **drive_params_from_args(args),
-        # Test hooks (not on the command line): the six-indicator style, a procedure.
-        "indicators": int(getattr(args, "sim_indicators", 2) or 2),
-        "procedure": getattr(args, "sim_procedure", None),
-        "writeback": getattr(args, "sim_writeback", None),
-        "speed_mm_s": getattr(args, "sim_speed", None),
+        **drive_params(options.drive),
+        # Not on the command line: the six-indicator style, procedure and write-back
+        # overrides, a faster machine (tests)
+        "indicators": int(options.indicators),
+        "procedure": None if options.procedure is None else dict(options.procedure),
+        "writeback": None if options.writeback is None else dict(options.writeback),
+        "speed_mm_s": options.speed_mm_s,
     }
 
 
@@ -101,17 +103,14 @@ def _numbers(option: str, text: str, counts: tuple[int, ...], unit: str,
     return values * 3 if len(values) == 1 else values
 
 
-def drive_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
+def drive_params(drive: DriveOptions) -> dict[str, Any]:
     """The virtual drive from ``--motion`` and ``--drive-*`` (BadInput naming the
     option), as JSON values: ``motion`` and ``drive_profile`` (3 shapes),
     ``drive_accel_mm_s2`` (3 values), ``drive_delays_s`` (3), ``drive_sequence``,
     each None when not given."""
-    from drivers.sim.machine import SHAPES
+    from drivers.sim.motion import SHAPES
 
-    profile = getattr(args, "drive_profile", None)
-    accel = getattr(args, "drive_accel", None)
-    delays = getattr(args, "drive_delays", None)
-    sequence = getattr(args, "drive_sequence", None)
+    profile, accel, delays, sequence = drive.profile, drive.accel, drive.delays, drive.sequence
     shapes: list[str] | None = None
     if profile is not None:
         shapes = [p.strip().lower() for p in str(profile).split(",")]
@@ -128,7 +127,7 @@ def drive_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
         if sorted(sequence) != ["x", "y", "z"]:
             raise BadInput(f"--drive-sequence: expected an order of x, y and z, each once "
                            f"(e.g. zyx), got {given_sequence!r}")
-    motion = getattr(args, "motion", None)
+    motion = drive.motion
     timed = delay_values is not None or sequence is not None
     if motion is None:
         # Delays and a sequence exist only on a drive that does not interpolate.
@@ -150,10 +149,10 @@ def drive_params_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def drive_motion(params: dict[str, Any]) -> DriveMotion:
-    """The :class:`~drivers.sim.machine.DriveMotion` of a simulated run's
-    parameters (from :func:`drive_params_from_args`, or a journal header: keys
+    """The :class:`~drivers.sim.motion.DriveMotion` of a simulated run's
+    parameters (from :func:`drive_params`, or a journal header: keys
     missing in older ones mean the plain drive of ``motion``)."""
-    from drivers.sim.machine import DriveMotion
+    from drivers.sim.motion import DriveMotion
 
     motion = params.get("motion") or "coordinated"
     shapes, accels = params.get("drive_profile"), params.get("drive_accel_mm_s2")
@@ -171,14 +170,6 @@ def drive_motion(params: dict[str, Any]) -> DriveMotion:
         raise BadInput(f"--motion/--drive-*: {exc}") from None
 
 
-def station_hook(args: argparse.Namespace, station: Any) -> None:
-    """Tests reach the running virtual station (to inject its faults) through
-    ``args.sim_station_hook``; the command line never sets it."""
-    hook = getattr(args, "sim_station_hook", None)
-    if hook is not None:
-        hook(station)
-
-
 def rebind(config: StationConfig, ports: dict[str, Any]) -> StationConfig:
     """The saved config of a simulated run, pointed at the restarted station's new ports."""
     data = config.model_dump(exclude_none=True)
@@ -190,7 +181,7 @@ def rebind(config: StationConfig, ports: dict[str, Any]) -> StationConfig:
 
 def restart_station(
     stack: ExitStack,
-    args: argparse.Namespace,
+    hook: StationHook | None,
     sim: dict[str, Any] | None,
     run_dir: Path,
     config: StationConfig,
@@ -202,5 +193,6 @@ def restart_station(
         return None, config
     station = start_station(sim, run_dir / NVRAM_NAME)
     stack.callback(station.close)
-    station_hook(args, station)
+    if hook is not None:
+        hook(station)
     return station, rebind(config, station.ports())

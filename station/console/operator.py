@@ -29,6 +29,12 @@ class Operator(Protocol):
 
     def confirm(self, question: str) -> bool: ...
 
+    def attach(self, say: Callable[[str], None],
+               pause: Callable[[], AbstractContextManager[None]]) -> None:
+        """The run's live display: ``say`` prints a line above it, ``pause`` takes it
+        off the screen while the operator is asked something."""
+        ...
+
 
 def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str, str],
                       all_names: Sequence[str]) -> str:
@@ -49,6 +55,11 @@ class ConsoleOperator:
         self.pause: Callable[[], AbstractContextManager[None]] = nullcontext
         self._in = stream_in if stream_in is not None else sys.stdin
         self._out = stream_out if stream_out is not None else sys.stderr
+
+    def attach(self, say: Callable[[str], None],
+               pause: Callable[[], AbstractContextManager[None]]) -> None:
+        del say  # a prompt is its own line: the bar steps aside for it instead
+        self.pause = pause
 
     @staticmethod
     def require_tty_or_yes(yes: bool) -> None:
@@ -135,3 +146,8 @@ class VirtualOperator:
         if self._say is not None:
             self._say(f"[virtual operator] {question} yes")
         return True
+
+    def attach(self, say: Callable[[str], None],
+               pause: Callable[[], AbstractContextManager[None]]) -> None:
+        del pause  # it asks nobody
+        self._say = say

@@ -1,19 +1,19 @@
-"""Run progress on stderr: the sequencer's events turned into station.console's live bar
+"""Run progress on stderr: the sequencer's events turned into station.console.terminal's live bar
 (on a terminal) or plain lines (in a log)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from station.plan import Plan, posture_label
+from station.plan.steps import Plan, posture_label
 
 
 class Progress:
-    """Run progress on stderr through station.console.RunProgress (a live bar on a
+    """Run progress on stderr through station.console.terminal.RunProgress (a live bar on a
     terminal, plain lines in a log); one step per stop read."""
 
     def __init__(self, plan: Plan, verify: bool, enabled: bool = True) -> None:
-        from station.console import RunProgress
+        from station.console.terminal import RunProgress
 
         self.plan = plan
         per_phase = sum(1 + (len(sp.order) + 1) * plan.cycles for sp in plan.setups)

@@ -2,7 +2,7 @@
 verify → (write → verify)… → finish (design.md, "Closed loop").
 
 :func:`next_step` is a pure function from what has happened so far
-(:class:`LoopState`) to what to do next. The executor (station.procedure)
+(:class:`LoopState`) to what to do next. The executor (station.engine.procedure)
 performs that step — or, on resume, replays it from the journal: a measurement
 whose cycles are journaled is rebuilt without motion, a write-back whose
 outcome is journaled is not redone — feeds the outcome back with
@@ -34,17 +34,10 @@ from typing import Literal
 
 StepKind = Literal["measure", "write", "finish"]
 
-#: Why the loop stopped: the first is success; the others say plainly what happened.
-STOP_REASONS = {
-    "converged": "the last verification found no significant correction",
-    "max_iterations": "max_iterations write-backs done and the last verification still "
-                      "finds a significant correction",
-    "refused": "a correction was refused",
-    "declined": "the operator declined a correction",
-    "failed": "a write-back failed (the previous offsets were restored)",
-    "skipped": "the model has no joint offsets to write",
-    "not-verified": "verification is off ([procedure] verify = false)",
-}
+#: Why the loop stopped (the run JSON's ``loop.stopped``): the first is success; the
+#: report says each in words (station.report.rounds.STOP_TEXT).
+STOP_REASONS: tuple[str, ...] = ("converged", "max_iterations", "refused", "declined",
+                                 "failed", "skipped", "not-verified")
 
 
 def phase_of(measurement: int) -> str:

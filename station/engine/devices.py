@@ -48,7 +48,8 @@ def build_controller(config: StationConfig, on_event: Callable[[dict], None] | N
 
 def build_indicators(config: StationConfig, names: list[str] | None,
                      on_event: Callable[[dict], None] | None) -> Any:
-    from drivers.indicators import IndicatorGroup, SerialIndicator, make_protocol
+    from drivers.indicator_protocols import make_protocol
+    from drivers.indicators import IndicatorGroup, SerialIndicator
 
     opened: list[Any] = []
     try:

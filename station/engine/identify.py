@@ -8,16 +8,11 @@ import math
 from typing import Any
 
 import orthocal
-from orthocal.selection import (
-    LEVEL,
-    lack_of_fit,
-    noise_from_cycles,
-    noise_from_readings,
-    with_measured_noise,
-)
+from orthocal.noise import noise_from_cycles, noise_from_readings
+from orthocal.selection import LEVEL, lack_of_fit, with_measured_noise
 from station.config import StationConfig
+from station.engine.statistics import Measurement
 from station.errors import RunFailed
-from station.sequencer import Measurement
 
 
 def measurement_noise(config: StationConfig, m: Measurement) -> tuple[float, float, str]:

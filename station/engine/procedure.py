@@ -2,13 +2,12 @@
 write back, verify, and again while the verification finds a significant correction
 (the closed loop); replaying from the journal what a resumed run already did.
 
-station.loop decides the next step from what happened so far (a pure state machine);
+station.engine.closed_loop decides the next step from what happened so far (a pure state machine);
 :class:`Flow` performs each step or, on resume, replays it from the journal.
 """
 
 from __future__ import annotations
 
-import argparse
 import threading
 import time
 from dataclasses import dataclass, field
@@ -21,26 +20,27 @@ from drivers.errors import DeviceError
 from orthocal import coverage_factor
 from orthocal.loop import WRITABLE, predicted_after_correction, significant_corrections
 from station.config import StationConfig
-from station.devices import Devices
-from station.errors import BadInput, RunFailed, say, storage_message
-from station.journal import JOURNAL_NAME, Journal, JournalState, read_journal
-from station.loop import LoopState, next_step
-from station.operator import ConsoleOperator, Operator, VirtualOperator
-from station.plan import MotionChecker, Plan
-from station.progress import Progress
-from station.recovery import resume_hint
-from station.results import (
+from station.console.operator import Operator
+from station.console.progress import Progress
+from station.engine.closed_loop import LoopState, next_step
+from station.engine.devices import Devices
+from station.engine.recovery import resume_hint
+from station.engine.results import (
     base_result,
     guard_fields,
     ident_json,
     measurement_fields,
     num,
-    print_result,
     writeback_fields,
 )
-from station.rundir import now_iso
-from station.sequencer import Measurement, Sequencer, split_key
-from station.writeback import WritebackOutcome, write_back
+from station.engine.sequencer import Sequencer
+from station.engine.statistics import Measurement, split_key
+from station.engine.writeback import WritebackOutcome, write_back
+from station.errors import BadInput, RunFailed, say, storage_message
+from station.plan.checker import MotionChecker
+from station.plan.steps import Plan
+from station.rundir.directory import now_iso
+from station.rundir.journal import JOURNAL_NAME, Journal, JournalState, read_journal
 
 
 @dataclass
@@ -52,7 +52,6 @@ class Run:
     devices: Devices
     operator: Operator
     sim: dict[str, Any] | None
-    args: argparse.Namespace
     state: JournalState
     records: list[dict[str, Any]]
     started_iso: str
@@ -80,7 +79,9 @@ def _import_plotting() -> None:
         pass  # the report says so itself when it cannot plot
 
 
-def execute(ctx: Run) -> int:
+def execute(ctx: Run) -> tuple[int, dict[str, Any]]:
+    """The whole flow of a run (or the rest of a resumed one): its exit status and
+    result document."""
     # The report's plots need matplotlib (~0.4 s of imports) and identification
     # scipy.optimize (~0.3 s), which would otherwise load after the last reading,
     # with the operator waiting; loaded now, they overlap the first moves, where
@@ -90,15 +91,11 @@ def execute(ctx: Run) -> int:
     warm.start()
     try:
         with Progress(ctx.plan, ctx.config.procedure.verify) as progress:
-            if isinstance(ctx.operator, VirtualOperator):
-                ctx.operator._say = progress.say
-            elif isinstance(ctx.operator, ConsoleOperator):
-                ctx.operator.pause = progress.bar.paused
+            ctx.operator.attach(progress.say, progress.bar.paused)
             code, result = _execute_with(ctx, progress)
     finally:
         warm.join()
-    print_result(ctx.args, result)
-    return code
+    return code, result
 
 
 def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
@@ -116,7 +113,7 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
     flow = Flow(ctx, seq, result)
     loop = LoopState(max_iterations=proc.max_iterations, verify=proc.verify)
     try:
-        # The whole flow: station.loop decides, Flow performs (or replays) the step.
+        # The whole flow: station.engine.closed_loop decides, Flow performs (or replays) the step.
         while (step := next_step(loop)).kind != "finish":
             if step.kind == "measure":
                 loop.measured(flow.measure(step.phase or "m"))
@@ -142,7 +139,7 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
 
 
 class Flow:
-    """The steps of station.loop against the devices, each one replayed from the
+    """The steps of station.engine.closed_loop against the devices, each one replayed from the
     journal when a resumed run already did it; fills the result as it goes."""
 
     def __init__(self, ctx: Run, seq: Sequencer, result: dict[str, Any]) -> None:
@@ -153,7 +150,7 @@ class Flow:
 
     def measure(self, phase: str) -> bool:
         """Measure (or replay) one phase and identify it; True if the correction it
-        asks for is significant (station.loop writes the first one regardless)."""
+        asks for is significant (station.engine.closed_loop writes the first one regardless)."""
         ctx = self.ctx
         n = len(self.idents)
         m = self.seq.measure(phase)
@@ -245,7 +242,7 @@ class Flow:
         self.result["identified"] = total
 
     def stopped(self, reason: str) -> None:
-        """Status, message and the loop's verdict once station.loop says finish."""
+        """Status, message and the loop's verdict once station.engine.closed_loop says finish."""
         proc = self.ctx.config.procedure
         first = self.outcomes[0] if self.outcomes else None
         last = self.outcomes[-1] if self.outcomes else None
@@ -318,7 +315,7 @@ def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
 
 
 def _identify(ctx: Run, m: Measurement) -> tuple[Any, dict[str, Any] | None]:
-    from station.models import identify_measurement
+    from station.engine.identify import identify_measurement
 
     return identify_measurement(ctx.config, m)
 

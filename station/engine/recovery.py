@@ -31,10 +31,11 @@ from typing import Any
 import numpy as np
 
 from station.config import StationConfig
+from station.console.operator import Operator
 from station.errors import RunFailed
-from station.journal import Journal
-from station.operator import Operator
-from station.plan import MotionChecker, Plan, stop_id
+from station.plan.checker import MotionChecker
+from station.plan.steps import Plan, stop_id
+from station.rundir.journal import Journal
 
 K_SIGMA = 4.0  # a false redo costs a setup; a kept bad setup costs the answer
 _CYCLE_RECORDS = ("cycle", "setup_done", "repeat")

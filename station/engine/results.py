@@ -3,8 +3,6 @@ measurement, an identification and a write-back, and its printing."""
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -12,11 +10,11 @@ from typing import Any
 import numpy as np
 
 import orthocal
+from orthocal import AXES
+from orthocal.numbers import finite
 from station.config import StationConfig
-from station.sequencer import Measurement, split_key
-from station.writeback import WritebackOutcome
-
-AXES = ("x", "y", "z")
+from station.engine.statistics import Measurement, split_key
+from station.engine.writeback import WritebackOutcome
 
 
 def ident_json(ident: Any) -> dict[str, Any]:
@@ -27,12 +25,7 @@ def ident_json(ident: Any) -> dict[str, Any]:
             "residual_rms_mm": num(ident.residual_rms)}
 
 
-def num(v: Any) -> float | None:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        return None
-    return f if math.isfinite(f) else None
+num = finite  # the result document's numbers: finite, or null
 
 
 def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dict[str, Any]:
@@ -124,14 +117,3 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
         "identified": {}, "std_errors": {}, "offsets_before": None, "offsets_written": None,
         "writeback": None, "verification": None,
     }
-
-
-def print_result(args: argparse.Namespace, result: dict[str, Any]) -> None:
-    if getattr(args, "json", False):
-        from station.report import _jsonable
-
-        print(json.dumps(_jsonable(result), allow_nan=False))
-    else:
-        from station import report
-
-        print(report.summary_text(result))

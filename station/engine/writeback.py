@@ -26,10 +26,11 @@ import numpy as np
 
 from drivers.base import AxisController
 from drivers.errors import DeviceError
-from station.journal import Journal, JournalState, write_durable
-from station.operator import Operator
+from drivers.files import write_atomic
+from orthocal import AXES
+from station.console.operator import Operator
+from station.rundir.journal import Journal, JournalState
 
-AXES = ("x", "y", "z")
 BACKUP_NAME = "offsets_backup.json"
 
 
@@ -50,7 +51,7 @@ def _axes(values: Any) -> dict[str, float]:
 
 def save_backup(run_dir: Path, offsets: dict[str, float], controller_name: str) -> Path:
     path = run_dir / BACKUP_NAME
-    write_durable(path, json.dumps({"controller": controller_name, "offsets_mm": offsets},
+    write_atomic(path, json.dumps({"controller": controller_name, "offsets_mm": offsets},
                                    indent=2) + "\n")
     return path
 

@@ -15,7 +15,7 @@ first Π0), + pushed in; the stroke spans −preload .. stroke − preload.
 Prediction while moving. Plunger travel = nominal travel + signal (measured −
 nominal; a smooth function of the joint positions). The guard models no drive:
 the nominal travel still ahead is bounded over every position the axes may
-pass through from where they are (station.motion: the box from here to the
+pass through from where they are (station.plan.motion: the box from here to the
 sub-move's target for independent axes, then the later sub-moves' boxes), the
 same bound the plan check used. At each poll the positions are read just
 before and just after the gauges; the signal is measured where the nominal
@@ -44,7 +44,8 @@ import numpy as np
 
 from station.config import StationConfig
 from station.errors import RunFailed
-from station.plan import MotionChecker, PathRefused, posture_label
+from station.plan.checker import MotionChecker, PathRefused
+from station.plan.steps import posture_label
 
 # Nominal travel change within one poll window below which the signal estimate is
 # taken as exact (the gauge's sampling instant no longer matters).

@@ -8,29 +8,29 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from drivers.files import write_atomic
 from orthocal import coverage_factor
-from station.report_io import _atomic_write
-from station.report_plots import _plot_deviations, _plot_parameters, _release_fonts
-from station.report_text import (
-    _MODEL_TEXT,
-    _STATUS_TEXT,
-    _WRITEBACK_TEXT,
+from station.report.format import (
     AXES,
+    MODEL_TEXT,
     PARAM_NAMES,
-    _dev_html,
-    _dev_keys,
-    _dict,
-    _duration,
-    _fmt,
-    _max_abs,
-    _num,
-    _param_html,
-    _params_of,
-    _truth,
-    _unit,
-    _when,
-    model_notes,
+    STATUS_TEXT,
+    WRITEBACK_TEXT,
+    as_dict,
+    dev_html,
+    dev_keys,
+    fmt,
+    format_duration,
+    format_when,
+    max_abs,
+    num,
+    param_html,
+    params_of,
+    true_value,
+    unit,
 )
+from station.report.plots import plot_deviations, plot_parameters, release_fonts
+from station.report.text import model_notes
 
 _CSS = """
 body{font-family:-apple-system,"Segoe UI",Roboto,"Helvetica Neue",Arial,sans-serif;
@@ -93,12 +93,12 @@ def _what_was_done(result: Mapping[str, Any]) -> str:
     if cycles:
         cyc = (f" ({cycles[0]} cycle{'s' if cycles[0] != 1 else ''} per leg)"
                if len(cycles) == 1 else f" ({cycles[0]}–{cycles[-1]} cycles per leg)")
-    model = _MODEL_TEXT.get(str(result.get("model")), str(result.get("model", "—")))
+    model = MODEL_TEXT.get(str(result.get("model")), str(result.get("model", "—")))
     method = {"linear": "the linearised calibration equations",
               "nonlinear": "the exact kinematic model (iterative least squares)"}.get(
         str(result.get("method")), str(result.get("method", "—")))
     # [procedure] strokes: intermediate stops Π_i(s) beside or instead of Π_i^±.
-    kinds = {k[:-2] for k in _dict(result.get("deviations"))} or {"+", "-"}
+    kinds = {k[:-2] for k in as_dict(result.get("deviations"))} or {"+", "-"}
     n_post = len(kinds)
     count = 3 * n_post * 2
     postures = ("the two test postures Π<sub>i</sub><sup>+</sup> and Π<sub>i</sub><sup>−</sup> "
@@ -136,8 +136,8 @@ def _what_was_done(result: Mapping[str, Any]) -> str:
 def _result_paragraph(result: Mapping[str, Any]) -> str:
     status = str(result.get("status"))
     parts: list[str] = []
-    names = _params_of(result)
-    ident, errs = _dict(result.get("identified")), _dict(result.get("std_errors"))
+    names = params_of(result)
+    ident, errs = as_dict(result.get("identified")), as_dict(result.get("std_errors"))
     if status in ("failed", "aborted"):
         msg = result.get("message") or "no reason recorded"
         parts.append(f"<b>The run did not complete</b>: {_e(msg)}. "
@@ -145,41 +145,41 @@ def _result_paragraph(result: Mapping[str, Any]) -> str:
                      "the controller's offsets were only changed if stated below.")
     if names:
         vals = "; ".join(
-            f"{_param_html(n)} = {_fmt(ident.get(n), signed=True)} ± {_fmt(errs.get(n))} "
-            f"{_unit(n)}" for n in names
+            f"{param_html(n)} = {fmt(ident.get(n), signed=True)} ± {fmt(errs.get(n))} "
+            f"{unit(n)}" for n in names
         )
         what = "joint offsets" if all(n.startswith("drho") for n in names) else "parameters"
         parts.append(f"The {what} were identified as {vals}.")
-        resid, noise = _num(result.get("residual_rms_mm")), _num(result.get("noise_mm"))
+        resid, noise = num(result.get("residual_rms_mm")), num(result.get("noise_mm"))
         if resid is not None:
-            s = f"The fitted model reproduces the measured deviations to {_fmt(resid)} mm RMS"
+            s = f"The fitted model reproduces the measured deviations to {fmt(resid)} mm RMS"
             if noise is not None:
-                s += f" (indicator noise: {_fmt(noise)} mm)"
+                s += f" (indicator noise: {fmt(noise)} mm)"
             parts.append(s + ".")
-        truths = [(n, _truth(result, n)) for n in names]
-        diffs = {u: [abs(_num(ident.get(n)) - t) for n, t in truths if _unit(n) == u
-                     and t is not None and _num(ident.get(n)) is not None]
+        truths = [(n, true_value(result, n)) for n in names]
+        diffs = {u: [abs(num(ident.get(n)) - t) for n, t in truths if unit(n) == u
+                     and t is not None and num(ident.get(n)) is not None]
                  for u in ("mm", "mrad")}
         if diffs["mm"] or diffs["mrad"]:
             parts.append("This was a simulated run; the identified values differ from the "
                          "virtual machine's hidden ones by at most " + " and ".join(
-                             f"{_fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
-    wb = _dict(result.get("writeback"))
+                             f"{fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
+    wb = as_dict(result.get("writeback"))
     if wb.get("status"):
-        text = _WRITEBACK_TEXT.get(str(wb["status"]), f"write-back: {wb['status']}")
+        text = WRITEBACK_TEXT.get(str(wb["status"]), f"write-back: {wb['status']}")
         reason = f" ({_e(wb['reason'])})" if wb.get("reason") else ""
         parts.append(f"{_e(text[0].upper() + text[1:])}{reason}.")
-    ver = _dict(result.get("verification"))
+    ver = as_dict(result.get("verification"))
     if ver:
-        after = _num(ver.get("deviations_rms_mm"))
-        worst = _max_abs(_dict(ver.get("deviations")))
+        after = num(ver.get("deviations_rms_mm"))
+        worst = max_abs(as_dict(ver.get("deviations")))
         s = ("A verification measurement shows the legs now parallel to within "
-             f"{_fmt(after)} mm RMS")
+             f"{fmt(after)} mm RMS")
         if worst is not None:
-            s += f" (largest deviation {_fmt(worst)} mm)"
-        before = _num(result.get("deviations_rms_mm"))
+            s += f" (largest deviation {fmt(worst)} mm)"
+        before = num(result.get("deviations_rms_mm"))
         if before is not None:
-            s += f", against {_fmt(before)} mm RMS before calibration"
+            s += f", against {fmt(before)} mm RMS before calibration"
         parts.append(s + ".")
     elif names and status == "ok":
         parts.append("No verification measurement was made.")
@@ -192,12 +192,12 @@ def _fit_box(result: Mapping[str, Any]) -> str:
     if result.get("residual_rms_mm") is None and not result.get("fit_note"):
         return ""
     rows = [
-        ("residual RMS (measured − model)", f"{_fmt(result.get('residual_rms_mm'))} mm"),
-        ("σ = √(RSS / (n − p))", f"{_fmt(result.get('sigma_mm'))} mm"),
-        ("indicator noise (spread of readings at a stop)", f"{_fmt(result.get('noise_mm'))} mm"),
+        ("residual RMS (measured − model)", f"{fmt(result.get('residual_rms_mm'))} mm"),
+        ("σ = √(RSS / (n − p))", f"{fmt(result.get('sigma_mm'))} mm"),
+        ("indicator noise (spread of readings at a stop)", f"{fmt(result.get('noise_mm'))} mm"),
         ("condition number (sensitivity of the fit to noise)",
-         _fmt(result.get("condition_number"), 2)),
-        ("deviations RMS before calibration", f"{_fmt(result.get('deviations_rms_mm'))} mm"),
+         fmt(result.get("condition_number"), 2)),
+        ("deviations RMS before calibration", f"{fmt(result.get('deviations_rms_mm'))} mm"),
     ]
     dl = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in rows)
     ok = result.get("fit_ok")
@@ -212,14 +212,14 @@ def _fit_box(result: Mapping[str, Any]) -> str:
 
 
 def _params_table(result: Mapping[str, Any]) -> str:
-    names = _params_of(result)
+    names = params_of(result)
     if not names:
         return "<p>No parameters were identified.</p>"
-    ident, errs = _dict(result.get("identified")), _dict(result.get("std_errors"))
-    ver = _dict(result.get("verification"))
-    v_ident, v_errs = _dict(ver.get("identified")), _dict(ver.get("std_errors"))
-    has_truth = any(_truth(result, n) is not None for n in names)
-    dof = _num(result.get("std_errors_dof"))
+    ident, errs = as_dict(result.get("identified")), as_dict(result.get("std_errors"))
+    ver = as_dict(result.get("verification"))
+    v_ident, v_errs = as_dict(ver.get("identified")), as_dict(ver.get("std_errors"))
+    has_truth = any(true_value(result, n) is not None for n in names)
+    dof = num(result.get("std_errors_dof"))
     k = coverage_factor(dof) if dof is not None and dof > 0 else coverage_factor(None)
     head = ["parameter", "unit", "identified", "σ",
             f"95 % interval (k = {k:.2f}" + (f", {dof:g} dof)" if dof is not None else ")")]
@@ -229,14 +229,14 @@ def _params_table(result: Mapping[str, Any]) -> str:
         head += ["after calibration", "σ after"]
     rows = []
     for n in names:
-        v, s = _num(ident.get(n)), _num(errs.get(n))
-        interval = (f"{_fmt(v - k * s, signed=True)} … {_fmt(v + k * s, signed=True)}"
+        v, s = num(ident.get(n)), num(errs.get(n))
+        interval = (f"{fmt(v - k * s, signed=True)} … {fmt(v + k * s, signed=True)}"
                     if v is not None and s is not None else "—")
-        row = [_param_html(n), _unit(n), _fmt(v, signed=True), _fmt(s), interval]
+        row = [param_html(n), unit(n), fmt(v, signed=True), fmt(s), interval]
         if has_truth:
-            row.append(_fmt(_truth(result, n), signed=True))
+            row.append(fmt(true_value(result, n), signed=True))
         if v_ident:
-            row += [_fmt(v_ident.get(n), signed=True), _fmt(v_errs.get(n))]
+            row += [fmt(v_ident.get(n), signed=True), fmt(v_errs.get(n))]
         rows.append(row)
     return _table(head, rows)
 
@@ -248,39 +248,39 @@ def _model_section(result: Mapping[str, Any]) -> str:
     if not notes:
         return ""
     out = "".join(f"<p>{_e(n)}</p>" for n in notes)
-    sel = _dict(result.get("model_selection"))
+    sel = as_dict(result.get("model_selection"))
     cands = [c for c in sel.get("candidates") or [] if isinstance(c, dict)]
     if cands:
         rows = [[_e(c.get("model")), "yes" if c.get("identifiable") else "no",
-                 _fmt(c.get("F"), 2), _e(", ".join(f"{d:g}" for d in c["dof"])
+                 fmt(c.get("F"), 2), _e(", ".join(f"{d:g}" for d in c["dof"])
                                          if isinstance(c.get("dof"), list) else "—"),
-                 (f"{c['p_value']:.2g}" if _num(c.get("p_value")) is not None else "—"),
-                 _fmt(c.get("residual_rms_mm"), 4),
+                 (f"{c['p_value']:.2g}" if num(c.get("p_value")) is not None else "—"),
+                 fmt(c.get("residual_rms_mm"), 4),
                  "chosen" if c.get("model") == result.get("model") else
                  ("rejected" if c.get("F") is not None else _e(c.get("note") or ""))]
                 for c in cands]
         out += _table(["candidate", "identifiable", "F", "dof", "p", "residual RMS (mm)",
                        "verdict"], rows, caption=(
             f"Lack-of-fit F test of each candidate against the noise measured in this run "
-            f"(σ = {_fmt(sel.get('noise_sigma_mm'), 5)} mm per deviation, "
+            f"(σ = {fmt(sel.get('noise_sigma_mm'), 5)} mm per deviation, "
             f"{_e(sel.get('noise_source'))}); the first with p ≥ {_e(sel.get('level'))} "
             "is used."))
     return out
 
 
 def _correlation_table(result: Mapping[str, Any]) -> str:
-    corr = _dict(result.get("correlation"))
+    corr = as_dict(result.get("correlation"))
     names, matrix = corr.get("names"), corr.get("matrix")
     if not isinstance(names, list) or not isinstance(matrix, list) or not names:
         return ""
-    head = "".join(f"<th>{_param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)}</th>"
+    head = "".join(f"<th>{param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)}</th>"
                    for n in names)
     rows = []
     for i, n in enumerate(names):
         row = matrix[i] if i < len(matrix) and isinstance(matrix[i], list) else []
         cells = []
         for j in range(len(names)):
-            r = _num(row[j]) if j < len(row) else None
+            r = num(row[j]) if j < len(row) else None
             # Shade by |r|: strongly correlated pairs (|r| near 1) are the ones the
             # measurement cannot tell apart, and should jump out at the reader.
             shade = "" if r is None or i == j else (
@@ -288,8 +288,8 @@ def _correlation_table(result: Mapping[str, Any]) -> str:
             # 0.9997 would print as "1.00", which reads as "identical" rather than
             # "almost inseparable"; give such values their digits.
             digits = 4 if r is not None and i != j and abs(r) >= 0.995 else 2
-            cells.append(f'<td class="num"{shade}>{_fmt(r, digits)}</td>')
-        label = _param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)
+            cells.append(f'<td class="num"{shade}>{fmt(r, digits)}</td>')
+        label = param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)
         rows.append(f'<tr><th class="l">{label}</th>{"".join(cells)}</tr>')
     return (f'<h3>Correlation of the estimates</h3><table><thead><tr><th></th>{head}</tr>'
             f'</thead><tbody>{"".join(rows)}</tbody></table>'
@@ -298,9 +298,9 @@ def _correlation_table(result: Mapping[str, Any]) -> str:
 
 
 def _deviations_table(result: Mapping[str, Any]) -> str:
-    before = _dict(result.get("deviations"))
-    after = _dict(_dict(result.get("verification")).get("deviations"))
-    keys = _dev_keys(before, after)
+    before = as_dict(result.get("deviations"))
+    after = as_dict(as_dict(result.get("verification")).get("deviations"))
+    keys = dev_keys(before, after)
     if not keys:
         return "<p>No deviations were measured.</p>"
     head = ["deviation", "measured (mm)", "std (mm)", "n", "model (mm)", "residual (mm)"]
@@ -308,15 +308,15 @@ def _deviations_table(result: Mapping[str, Any]) -> str:
         head += ["after: measured (mm)", "after: std (mm)"]
     rows = []
     for k in keys:
-        b, a = _dict(before.get(k)), _dict(after.get(k))
-        m, f = _num(b.get("mean")), _num(b.get("model"))
+        b, a = as_dict(before.get(k)), as_dict(after.get(k))
+        m, f = num(b.get("mean")), num(b.get("model"))
         resid = m - f if m is not None and f is not None else None
         n = b.get("n")
-        row = [_dev_html(k), _fmt(m, signed=True), _fmt(b.get("std")),
-               _e(n) if isinstance(n, int) else "—", _fmt(f, signed=True),
-               _fmt(resid, signed=True)]
+        row = [dev_html(k), fmt(m, signed=True), fmt(b.get("std")),
+               _e(n) if isinstance(n, int) else "—", fmt(f, signed=True),
+               fmt(resid, signed=True)]
         if after:
-            row += [_fmt(a.get("mean"), signed=True), _fmt(a.get("std"))]
+            row += [fmt(a.get("mean"), signed=True), fmt(a.get("std"))]
         rows.append(row)
     return _table(head, rows, caption=(
         "Π<sub>i</sub><sup>±</sup> along j: reading of the indicator touching leg i in "
@@ -330,14 +330,14 @@ def _setups_table(result: Mapping[str, Any]) -> str:
         return "<p>No setup was measured.</p>"
     rows = []
     for s in setups:
-        s = _dict(s)
-        inds = ", ".join(f"{_e(k)} → {_e(v)}" for k, v in _dict(s.get("indicators")).items())
+        s = as_dict(s)
+        inds = ", ".join(f"{_e(k)} → {_e(v)}" for k, v in as_dict(s.get("indicators")).items())
         cu, cm = s.get("cycles_used"), s.get("cycles_max")
         cycles = f"{_e(cu)} of {_e(cm)}" if cm is not None else _e(cu if cu is not None else "—")
         flagged = s.get("flagged")
         rows.append([
             f"leg {_e(s.get('leg', '—'))}", inds or "—", cycles, _e(s.get("repeats", "—")),
-            _fmt(s.get("spread_mm")),
+            fmt(s.get("spread_mm")),
             "<b>yes</b> — spread above the repeatability limit" if flagged else "no",
         ])
     return _table(["setup", "indicators (name → direction)", "cycles used", "repeats",
@@ -345,15 +345,15 @@ def _setups_table(result: Mapping[str, Any]) -> str:
 
 
 def _offsets_section(result: Mapping[str, Any]) -> str:
-    before = _dict(result.get("offsets_before"))
+    before = as_dict(result.get("offsets_before"))
     written = result.get("offsets_written")
     written = written if isinstance(written, dict) else {}
-    wb = _dict(result.get("writeback"))
+    wb = as_dict(result.get("writeback"))
     out = []
     if wb:
         status = str(wb.get("status", "—"))
         cls = "box" if status == "written" else "box warn"
-        text = _WRITEBACK_TEXT.get(status, status)
+        text = WRITEBACK_TEXT.get(status, status)
         reason = f"<br>Reason: {_e(wb['reason'])}" if wb.get("reason") else ""
         out.append(f'<div class="{cls}"><b>Write-back: {_e(status)}</b> — {_e(text)}.'
                    f"{reason}</div>")
@@ -362,10 +362,10 @@ def _offsets_section(result: Mapping[str, Any]) -> str:
         for a in AXES:
             if a not in before and a not in written:
                 continue
-            b, w = _num(before.get(a)), _num(written.get(a))
-            change = _fmt(w - b, signed=True) if b is not None and w is not None else "—"
-            rows.append([f"axis {a}", _fmt(b, signed=True),
-                         _fmt(w, signed=True) if written else "not written", change])
+            b, w = num(before.get(a)), num(written.get(a))
+            change = fmt(w - b, signed=True) if b is not None and w is not None else "—"
+            rows.append([f"axis {a}", fmt(b, signed=True),
+                         fmt(w, signed=True) if written else "not written", change])
         out.append(_table(["axis", "offset before (mm)", "offset written (mm)", "change (mm)"],
                           rows, caption=(
             "The controller's joint zero offset o<sub>i</sub>; the correction is "
@@ -375,68 +375,68 @@ def _offsets_section(result: Mapping[str, Any]) -> str:
 
 
 def _info_list(result: Mapping[str, Any]) -> str:
-    machine = _dict(result.get("machine"))
-    timing = _dict(result.get("timing"))
+    machine = as_dict(result.get("machine"))
+    timing = as_dict(result.get("timing"))
     rows = [
         ("run directory", f"<code>{_e(result.get('run_dir', '—'))}</code>"),
-        ("started", _e(_when(result.get("started")))),
-        ("finished", _e(_when(result.get("finished")))),
-        ("duration", _e(_duration(result.get("duration_s", timing.get("wall_s"))))),
+        ("started", _e(format_when(result.get("started")))),
+        ("finished", _e(format_when(result.get("finished")))),
+        ("duration", _e(format_duration(result.get("duration_s", timing.get("wall_s"))))),
         ("machine", _e(
-            f"leg length L = {_fmt(machine.get('leg_length'), 2)} mm, joint stroke "
-            f"ρmin = {_fmt(machine.get('rho_min'), 1)} mm … ρmax = "
-            f"{_fmt(machine.get('rho_max'), 1)} mm") if machine else "—"),
-        ("model", _e(f"{_MODEL_TEXT.get(str(result.get('model')), result.get('model', '—'))}"
+            f"leg length L = {fmt(machine.get('leg_length'), 2)} mm, joint stroke "
+            f"ρmin = {fmt(machine.get('rho_min'), 1)} mm … ρmax = "
+            f"{fmt(machine.get('rho_max'), 1)} mm") if machine else "—"),
+        ("model", _e(f"{MODEL_TEXT.get(str(result.get('model')), result.get('model', '—'))}"
                      f" ({result.get('method', '—')})")),
     ]
     if result.get("simulated"):
-        sim = _dict(result.get("simulation"))
+        sim = as_dict(result.get("simulation"))
         desc = "virtual machine (no hardware)"
         if sim:
             desc += (f"; seed {sim.get('seed') if sim.get('seed') is not None else 'random'}"
-                     f", indicator noise σ = {_fmt(sim.get('noise_mm'), 4)} mm")
+                     f", indicator noise σ = {fmt(sim.get('noise_mm'), 4)} mm")
         rows.append(("simulation", _e(desc)))
     else:
         rows.append(("devices", "as configured in the station config (config.toml)"))
     if timing:
         rows.append(("timing", _e(
-            f"wall {_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "
+            f"wall {format_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "
             f"{timing.get('readings', '—')} readings, retries: {timing.get('retries', '—')}")))
-    guard = _dict(result.get("plunger_guard"))
+    guard = as_dict(result.get("plunger_guard"))
     recovered = [r for r in guard.get("recovered") or [] if isinstance(r, dict)]
     if recovered:
         rows.append(("plunger guard", "<br>".join(_e(
             f"stopped the axes: indicator {r.get('indicator')} on {r.get('where')}, move to "
             f"{r.get('move')}; re-planned from where they stood via {r.get('waypoints')} "
-            f"waypoint(s) at {_fmt(r.get('speed_mm_s'), 1)} mm/s, the cycle taken again")
+            f"waypoint(s) at {fmt(r.get('speed_mm_s'), 1)} mm/s, the cycle taken again")
             for r in recovered)))
     return '<dl class="kv">' + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
 
 
 def _loop_section(result: Mapping[str, Any]) -> str:
-    """The closed loop's rounds (station.report_loop): plot and table."""
-    from station import report_loop
-    from station.report_plots import _pyplot, _svg
+    """The closed loop's rounds (station.report.rounds): plot and table."""
+    from station.report import rounds
+    from station.report.plots import pyplot, to_svg
 
     try:
-        plot = report_loop.plot_rounds(result, _pyplot, _svg)
+        plot = rounds.plot_rounds(result, pyplot, to_svg)
     except Exception:
         plot = None  # the table still tells the rounds
-    return report_loop.html_section(result, plot)
+    return rounds.html_section(result, plot)
 
 
 def render_html(result: dict) -> str:
     """The whole report as one HTML string (no external resources)."""
     status = str(result.get("status", "unknown"))
     title = "Calibration report"
-    when = _when(result.get("started"))
+    when = format_when(result.get("started"))
     try:
-        plot_dev = _plot_deviations(result)
-        plot_par = _plot_parameters(result)
+        plot_dev = plot_deviations(result)
+        plot_par = plot_parameters(result)
         loop_section = _loop_section(result)
     finally:
         if "matplotlib" in sys.modules:
-            _release_fonts()
+            release_fonts()
     figures = []
     if plot_dev:
         figures.append(
@@ -452,9 +452,9 @@ def render_html(result: dict) -> str:
             "and ±3σ (thin) error bars; after calibration the re-identified values should be "
             "near zero. In a simulated run the red bar marks the value hidden in the virtual "
             "machine.</figcaption></figure>")
-    status_cls = f"st-{status}" if status in _STATUS_TEXT else "st-failed"
+    status_cls = f"st-{status}" if status in STATUS_TEXT else "st-failed"
     sim_tag = " (simulated)" if result.get("simulated") else ""
-    badge = f'<span class="status {status_cls}">{_e(_STATUS_TEXT.get(status, status))}</span>'
+    badge = f'<span class="status {status_cls}">{_e(STATUS_TEXT.get(status, status))}</span>'
     body = f"""
 <h1>{_e(title)}{_e(sim_tag)}{badge}</h1>
 <p class="meta">Orthoglide-type parallel machine · leg-parallelism calibration · {_e(when)}</p>
@@ -487,5 +487,5 @@ def render_html(result: dict) -> str:
 def write_html(result: dict, run_dir: Path) -> Path:
     """Write ``run_dir/report.html``: self-contained, plots inline as SVG."""
     path = Path(run_dir) / "report.html"
-    _atomic_write(path, render_html(result))
+    write_atomic(path, render_html(result))
     return path

@@ -3,16 +3,15 @@ schema's key order, NaN and infinities as null."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from station.report_text import _dev_keys
+from drivers.files import write_atomic
+from station.report.format import dev_keys
 
 # Key order of result.json: the schema's order, so that a person opening the file
 # finds status and identified values at the top, not buried alphabetically.
@@ -29,13 +28,13 @@ _TOP_ORDER = (
 # --------------------------------------------------------------------------- json
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable_value(value: Any) -> Any:
     """Plain JSON types; NaN/inf become None because json.dumps would emit the
     invalid tokens NaN/Infinity that strict parsers (jq, JavaScript) reject."""
     if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable_value(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
+        return [jsonable_value(v) for v in value]
     if isinstance(value, bool) or value is None or isinstance(value, str | int):
         return value
     if isinstance(value, float):
@@ -44,7 +43,7 @@ def _jsonable(value: Any) -> Any:
         return os.fspath(value)
     # numpy scalars and arrays come from the identification; no numpy import needed.
     if hasattr(value, "tolist"):
-        return _jsonable(value.tolist())
+        return jsonable_value(value.tolist())
     if hasattr(value, "isoformat"):
         return value.isoformat()
     raise TypeError(f"result field of type {type(value).__name__} is not JSON-serialisable")
@@ -53,7 +52,7 @@ def _jsonable(value: Any) -> Any:
 def jsonable(result: Mapping[str, Any]) -> dict[str, Any]:
     """The result as written to result.json (schema key order, NaN → None), for
     callers that print it, e.g. ``--json``, so stdout and the file agree."""
-    return _jsonable(_ordered(result))
+    return jsonable_value(_ordered(result))
 
 
 def _ordered(result: Mapping[str, Any]) -> dict[str, Any]:
@@ -66,39 +65,13 @@ def _ordered(result: Mapping[str, Any]) -> dict[str, Any]:
     for section in (out, out.get("verification")):
         if isinstance(section, dict) and isinstance(section.get("deviations"), dict):
             devs = section["deviations"]
-            section["deviations"] = {k: devs[k] for k in _dev_keys(devs)}
+            section["deviations"] = {k: devs[k] for k in dev_keys(devs)}
     return out
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    """Write so that a crash leaves either the old file or the new one, never half."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            # mkstemp makes the file private (0600); a report is meant to be read by
-            # whoever looks after the machine, not only by the account that ran it.
-            os.fchmod(fh.fileno(), 0o644)
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    # The rename itself lives in the directory; without this a power cut can lose it.
-    with contextlib.suppress(OSError):
-        dir_fd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
 
 
 def write_result(result: dict, run_dir: Path) -> Path:
     """Write ``run_dir/result.json`` atomically; NaN and infinities become null."""
     path = Path(run_dir) / "result.json"
     data = jsonable(result)
-    _atomic_write(path, json.dumps(data, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
+    write_atomic(path, json.dumps(data, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
     return path

@@ -8,24 +8,24 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-from station.report_text import (
+from station.report.format import (
     AXES,
-    _dev_keys,
-    _dev_parts,
-    _dev_tex,
-    _dict,
-    _fmt,
-    _num,
-    _param_tex,
-    _params_of,
-    _truth,
-    _unit,
+    as_dict,
+    dev_keys,
+    dev_parts,
+    dev_tex,
+    fmt,
+    num,
+    param_tex,
+    params_of,
+    true_value,
+    unit,
 )
 
 # ---------------------------------------------------------------------- plots
 
 
-def _pyplot():
+def pyplot():
     # Imported on demand: matplotlib costs ~0.5 s, and `orthocal identify` or
     # summary_text must not pay for it. Agg first: the station has no display.
     import matplotlib
@@ -36,8 +36,8 @@ def _pyplot():
     return plt
 
 
-def _svg(fig) -> str:
-    plt = _pyplot()
+def to_svg(fig) -> str:
+    plt = pyplot()
     try:
         buf = io.StringIO()
         fig.savefig(buf, format="svg", bbox_inches="tight", metadata={"Date": None})
@@ -55,36 +55,36 @@ def _svg(fig) -> str:
 _C_BEFORE, _C_MODEL, _C_AFTER, _C_TRUTH = "#1f5fa8", "#e08a00", "#2e8b3d", "#c0392b"
 
 
-def _plot_deviations(result: Mapping[str, Any]) -> str | None:
-    before = _dict(result.get("deviations"))
-    ver = _dict(result.get("verification"))
-    after = _dict(ver.get("deviations"))
-    keys = _dev_keys(before, after)
+def plot_deviations(result: Mapping[str, Any]) -> str | None:
+    before = as_dict(result.get("deviations"))
+    ver = as_dict(result.get("verification"))
+    after = as_dict(ver.get("deviations"))
+    keys = dev_keys(before, after)
     if not keys:
         return None
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(10, 4.6))
     # A gap between legs so the three setups read as three groups.
     xs, leg_spans = [], {}
     for i, key in enumerate(keys):
-        parts = _dev_parts(key)
+        parts = dev_parts(key)
         group = AXES.index(parts[1]) if parts else 3
         x = i + 0.7 * group
         xs.append(x)
         leg_spans.setdefault(group, []).append(x)
 
     def series(table, field, offset):
-        pts = [(x + offset, _num(_dict(table.get(k)).get(field)))
+        pts = [(x + offset, num(as_dict(table.get(k)).get(field)))
                for x, k in zip(xs, keys, strict=True)]
         return [p for p in pts if p[1] is not None]
 
     def errs(table, offset):
         out = []
         for x, k in zip(xs, keys, strict=True):
-            row = _dict(table.get(k))
-            m = _num(row.get("mean"))
+            row = as_dict(table.get(k))
+            m = num(row.get("mean"))
             if m is not None:
-                out.append((x + offset, m, _num(row.get("std")) or 0.0))
+                out.append((x + offset, m, num(row.get("std")) or 0.0))
         return out
 
     handles = []
@@ -109,7 +109,7 @@ def _plot_deviations(result: Mapping[str, Any]) -> str | None:
             label="after: verification (mean ± std)",
         ))
     ax.axhline(0.0, color="#555", lw=0.8)
-    ax.set_xticks(xs, [_dev_tex(k) for k in keys], fontsize=9)
+    ax.set_xticks(xs, [dev_tex(k) for k in keys], fontsize=9)
     ax.set_ylabel("deviation (mm)")
     ax.set_xlim(min(xs) - 0.6, max(xs) + 0.6)
     for group, span in leg_spans.items():
@@ -124,18 +124,18 @@ def _plot_deviations(result: Mapping[str, Any]) -> str | None:
     if handles:
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.17),
                   ncol=len(handles), frameon=False, fontsize=9, columnspacing=1.2)
-    return _svg(fig)
+    return to_svg(fig)
 
 
-def _plot_parameters(result: Mapping[str, Any]) -> str | None:
-    names = _params_of(result)
+def plot_parameters(result: Mapping[str, Any]) -> str | None:
+    names = params_of(result)
     if not names:
         return None
-    ident = _dict(result.get("identified"))
-    errs = _dict(result.get("std_errors"))
-    ver = _dict(result.get("verification"))
-    v_ident, v_errs = _dict(ver.get("identified")), _dict(ver.get("std_errors"))
-    plt = _pyplot()
+    ident = as_dict(result.get("identified"))
+    errs = as_dict(result.get("std_errors"))
+    ver = as_dict(result.get("verification"))
+    v_ident, v_errs = as_dict(ver.get("identified")), as_dict(ver.get("std_errors"))
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(10, 3.8))
     xs = list(range(len(names)))
     handles = []
@@ -145,16 +145,16 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
     annotate = len(names) <= 3
 
     # Tilts are angles (mrad): on their own axis at the right, not on the mm scale.
-    ax_tilt = ax.twinx() if any(_unit(n) == "mrad" for n in names) else None
+    ax_tilt = ax.twinx() if any(unit(n) == "mrad" for n in names) else None
 
     def axis_of(n: str):
-        return ax_tilt if ax_tilt is not None and _unit(n) == "mrad" else ax
+        return ax_tilt if ax_tilt is not None and unit(n) == "mrad" else ax
 
     def draw(values, sigmas, offset, color, marker, label, above=True):
         drawn = False
         for x, n in zip(xs, names, strict=True):
             ax = axis_of(n)
-            v, s = _num(values.get(n)), _num(sigmas.get(n))
+            v, s = num(values.get(n)), num(sigmas.get(n))
             if v is None:
                 continue
             if s is not None:
@@ -170,7 +170,7 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
             drawn = True
             if not annotate:
                 continue
-            label_text = _fmt(v, signed=True) + (f" ± {_fmt(s)}" if s is not None else "")
+            label_text = fmt(v, signed=True) + (f" ± {fmt(s)}" if s is not None else "")
             # Beyond the end of the ±3σ bar on a white ground: beside the marker the
             # text would cross the truth bar, the zero line and the neighbouring series.
             # "before" goes above and "after" below, so the two never collide.
@@ -189,7 +189,7 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
         draw(v_ident, v_errs, 0.12, _C_AFTER, "s",
              "re-identified after calibration (Δρ should be ≈ 0)" if ax_tilt is not None
              else "re-identified after calibration (should be ≈ 0)", above=False)
-    truth = [(x, _truth(result, n), n) for x, n in zip(xs, names, strict=True)]
+    truth = [(x, true_value(result, n), n) for x, n in zip(xs, names, strict=True)]
     truth = [t for t in truth if t[1] is not None]
     for x, t, n in truth:
         line = axis_of(n).plot([x - (0.12 if v_ident else 0.0)], [t], "_", color=_C_TRUTH,
@@ -200,12 +200,12 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
     handles.append(ax.plot([], [], color="#777", lw=5, alpha=0.55, label="±1σ")[0])
     handles.append(ax.plot([], [], color="#777", lw=1.2, label="±3σ")[0])
     ax.axhline(0.0, color="#555", lw=0.8)
-    ax.set_xticks(xs, [_param_tex(n) for n in names], fontsize=11)
+    ax.set_xticks(xs, [param_tex(n) for n in names], fontsize=11)
     ax.set_xlim(-0.6, len(names) - 0.4)
     ax.margins(y=0.2)  # room for the value labels beyond the outermost bars
     ax.set_ylabel("value (mm)")
     if ax_tilt is not None:
-        first_tilt = next(x for x, n in zip(xs, names, strict=True) if _unit(n) == "mrad")
+        first_tilt = next(x for x, n in zip(xs, names, strict=True) if unit(n) == "mrad")
         ax.axvline(first_tilt - 0.5, color="#999", lw=0.8, ls=":")
         ax_tilt.axhline(0.0, color="#555", lw=0.8, ls=":")
         ax_tilt.margins(y=0.2)
@@ -214,13 +214,13 @@ def _plot_parameters(result: Mapping[str, Any]) -> str | None:
     ax.set_axisbelow(True)
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
               frameon=False, fontsize=9)
-    return _svg(fig)
+    return to_svg(fig)
 
 
 # ----------------------------------------------------------------------- html
 
 
-def _release_fonts() -> None:
+def release_fonts() -> None:
     """Close the font files matplotlib keeps open in its caches.
 
     Its font and mathtext caches hold every TrueType file open for the life of the

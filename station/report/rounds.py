@@ -13,19 +13,31 @@ from collections.abc import Mapping
 from typing import Any
 
 from orthocal.loop import WRITABLE
-from station.loop import STOP_REASONS
-from station.report_text import _num
+from station.report.format import num
+
+#: What each of the closed loop's stop reasons (the run JSON's ``loop.stopped``)
+#: says: the first is success; the others say plainly what happened.
+STOP_TEXT = {
+    "converged": "the last verification found no significant correction",
+    "max_iterations": "max_iterations write-backs done and the last verification still "
+                      "finds a significant correction",
+    "refused": "a correction was refused",
+    "declined": "the operator declined a correction",
+    "failed": "a write-back failed (the previous offsets were restored)",
+    "skipped": "the model has no joint offsets to write",
+    "not-verified": "verification is off ([procedure] verify = false)",
+}
 
 
 def _um(value: Any) -> str:
-    v = _num(value)
+    v = num(value)
     return "—" if v is None else f"{v * 1000:.2f} µm"
 
 
 def correction_mm(entry: Mapping[str, Any]) -> float | None:
     """The largest |Δρ| an identification asks to write (mm)."""
     ident = entry.get("identified") or {}
-    values = [abs(v) for n in WRITABLE if (v := _num(ident.get(n))) is not None]
+    values = [abs(v) for n in WRITABLE if (v := num(ident.get(n))) is not None]
     return max(values) if values else None
 
 
@@ -36,7 +48,7 @@ def _label(n: int, entry: Mapping[str, Any]) -> str:
 def stop_text(result: Mapping[str, Any]) -> str:
     loop = result.get("loop") or {}
     reason = loop.get("stopped")
-    text = STOP_REASONS.get(reason, str(reason))
+    text = STOP_TEXT.get(reason, str(reason))
     if loop.get("detail"):
         text += f" ({loop['detail']})"
     return text
@@ -46,7 +58,7 @@ def judged_line(result: Mapping[str, Any]) -> str | None:
     """With ΔL or tilts in the model the verification cannot go to zero: say what it
     was judged against (the model's prediction after writing Δρ)."""
     ver = result.get("verification") or {}
-    expected = _num(ver.get("expected_rms_mm"))
+    expected = num(ver.get("expected_rms_mm"))
     if expected is None or expected < 1e-4:
         return None
     return (f"verification judged against the model after correction: deviations RMS "
@@ -61,18 +73,18 @@ def remaining_text(result: Mapping[str, Any]) -> str | None:
     rem = result.get("remaining") or {}
     if not rem or not any(e.get("offsets_written") for e in result.get("iterations") or []):
         return None
-    k = _num(rem.get("coverage_factor_95"))
+    k = num(rem.get("coverage_factor_95"))
     est, ses = rem.get("estimate") or {}, rem.get("std_errors") or {}
     parts = []
     for n in WRITABLE:
-        v, se = _num(est.get(n)), _num(ses.get(n))
+        v, se = num(est.get(n)), num(ses.get(n))
         if v is None:
             continue
         band = f" ± {1000 * k * se:.2f}" if k is not None and se is not None else ""
         parts.append(f"Δρ_{n[-1]} {1000 * v:+.2f}{band}")
     if not parts:
         return None
-    dof = _num(rem.get("std_errors_dof"))
+    dof = num(rem.get("std_errors_dof"))
     how = (f" µm (95 %, k = {k:.2f} on {dof:g} dof)" if k is not None and dof is not None
            else " µm")
     return ", ".join(parts) + how
@@ -135,13 +147,13 @@ def plot_rounds(result: Mapping[str, Any], pyplot: Any, svg: Any) -> str | None:
                if v is not None and v > 0]
         return [p[0] for p in pts], [p[1] for p in pts]
 
-    dev = series([_num(e.get("deviations_rms_mm")) for e in iterations])
+    dev = series([num(e.get("deviations_rms_mm")) for e in iterations])
     cor = series([correction_mm(e) for e in iterations])
-    floor = series([_num(e.get("noise_floor_mm")) for e in iterations])
+    floor = series([num(e.get("noise_floor_mm")) for e in iterations])
     ax.plot(*dev, "o-", color="#1f5fa8", label="deviations RMS")
     ax.plot(*cor, "s-", color="#e08a00", label="correction max |Δρ|")
     ax.plot(*floor, "--", color="#777777", label="noise floor (scatter)")
-    converge = _num((result.get("loop") or {}).get("converge_mm"))
+    converge = num((result.get("loop") or {}).get("converge_mm"))
     if converge:
         ax.axhline(converge * 1000, color="#c0392b", lw=0.8, ls=":",
                    label="converge_mm")

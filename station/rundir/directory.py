@@ -10,7 +10,6 @@ controller_nvram.json (the virtual controller's non-volatile offsets).
 
 from __future__ import annotations
 
-import argparse
 import json
 from datetime import UTC, datetime
 from pathlib import Path
@@ -18,8 +17,8 @@ from typing import Any
 
 from station.config import StationConfig, dump_toml
 from station.errors import BadInput, RunFailed
-from station.journal import JOURNAL_NAME, JournalState, read_journal, replay
-from station.plan import Plan
+from station.plan.steps import Plan
+from station.rundir.journal import JOURNAL_NAME, JournalState, read_journal, replay
 
 SIM_NAME = "simulation.json"
 NVRAM_NAME = "controller_nvram.json"
@@ -61,9 +60,8 @@ def write_run_files(run_dir: Path, config: StationConfig, plan: Plan,
     (run_dir / "plan.json").write_text(json.dumps(plan.to_json(), indent=1) + "\n")
 
 
-def reopen(args: argparse.Namespace) -> tuple[Path, list[dict[str, Any]], JournalState]:
-    """The run directory named on the command line, its journal and replayed state."""
-    run_dir = Path(args.run_dir)
+def reopen(run_dir: Path) -> tuple[Path, list[dict[str, Any]], JournalState]:
+    """A run directory (named on the command line), its journal and replayed state."""
     if not run_dir.is_dir():
         raise BadInput(f"{run_dir}: no such run directory")
     records = read_journal(run_dir / JOURNAL_NAME)

@@ -8,7 +8,7 @@ Record types (field ``type``): ``header`` (config, plan, version, simulation),
 failed-restored; ``round`` k of the closed loop), ``verification`` (``round``
 k), ``fault``, ``aborted``, ``finished``, ``rollback``, and after a power cut
 ``homed``, ``reference-check`` (the Π0 check after homing) and ``setup-redo``
-(that setup's earlier cycles are void, see station.recovery). Driver events
+(that setup's earlier cycles are void, see station.engine.recovery). Driver events
 include ``retry``, ``reconnect`` / ``reconnected`` / ``reference-check``
 (controller) and ``reopen`` / ``reopened`` (a gauge's port).
 
@@ -33,29 +33,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from drivers.files import fsync_dir
 from station.errors import BadInput, StorageFull, storage_message
 
 JOURNAL_NAME = "journal.jsonl"
-
-
-def fsync_dir(path: Path) -> None:
-    """Make a new directory entry (file creation/rename) itself durable."""
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def write_durable(path: Path, text: str) -> None:
-    """Write a whole file atomically and durably (temp file, fsync, rename)."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    fsync_dir(path.parent)
 
 
 class Journal:

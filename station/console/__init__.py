@@ -1,0 +1,2 @@
+"""The operator: prompts, the live progress bar, and the virtual operator of a
+simulated run."""

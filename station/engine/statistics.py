@@ -1,0 +1,141 @@
+"""The statistics of a measurement: outlier rejection within a stop, the gauges'
+pooled noise, the standard error of a deviation over cycles that share their Π0
+stops, and the measurement a phase hands to the identification.
+
+Deviation of a cycle = mean at Π_i^s − mean of the two Π0 stops bracketing it
+(cancels linear drift of gauge and machine). Within a stop, a reading far from
+its siblings (median ± k·1.4826·MAD, floored at the gauge resolution) is
+rejected. With ``target_std_error_mm`` a setup stops as soon as its deviations'
+standard error reaches it (≥ 2 cycles; see :func:`cycle_std_error`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+MAD_SCALE = 1.4826  # MAD of a normal sample × this ≈ σ
+
+
+def split_key(key: str) -> tuple[str, str, str]:
+    """A JSON deviation key ("+xy", "+30xy", "-50.5zx") as (posture, leg, direction)."""
+    return key[:-2], key[-2], key[-1]
+
+
+def reject_outliers(
+    values: Sequence[float], k: float, floor: float, scale: float | None = None
+) -> list[bool]:
+    """Mask of kept readings: |r − median| ≤ max(k·1.4826·MAD, k·scale, floor).
+
+    ``scale`` is the gauge's pooled robust scatter about its stop medians over the
+    run so far (see :class:`NoiseScale`). With five readings per stop the stop's own
+    MAD is often near zero by chance (and exactly zero on quantised data), which
+    alone would reject a few percent of perfectly normal readings; the pooled
+    scale keeps the bound at k·σ while a knock of tenths of a mm still stands out.
+    """
+    v = np.asarray(values, dtype=float)
+    if v.size < 3:
+        return [True] * int(v.size)
+    med = float(np.median(v))
+    mad = float(np.median(np.abs(v - med)))
+    bound = max(k * MAD_SCALE * mad, k * (scale or 0.0), floor)
+    return [bool(abs(x - med) <= bound + 1e-12) for x in v]
+
+
+class NoiseScale:
+    """Robust σ of one gauge's readings, pooled over every stop so far:
+    1.4826 · median |r| with r the residuals about each stop's mean scaled by
+    sqrt(n/(n−1)) (unbiased for normal noise). Residuals about the stop *median*
+    would read low: one reading of every odd-sized stop is the median itself.
+    A knocked stop contributes n residuals to a pool of hundreds, so the median
+    ignores it."""
+
+    def __init__(self) -> None:
+        self._abs_dev: list[float] = []
+
+    def add(self, values: Sequence[float]) -> None:
+        v = np.asarray(values, dtype=float)
+        if v.size >= 3:
+            scale = math.sqrt(v.size / (v.size - 1))
+            self._abs_dev.extend((np.abs(v - v.mean()) * scale).tolist())
+
+    @property
+    def sigma(self) -> float | None:
+        return MAD_SCALE * float(np.median(self._abs_dev)) if self._abs_dev else None
+
+
+# Consecutive cycles share their Π0 stop: with independent noise at every stop,
+# a deviation P_k − (Z_{k−1} + Z_k)/2 has variance 1.5·s² and covariance s²/4
+# with the next cycle's, a lag-1 correlation of 1/6.
+SHARED_P0_CORRELATION = 1.0 / 6.0
+
+
+def cycle_std_error(cycles: Sequence[Mapping[str, float]]) -> float:
+    """Standard error of a deviation's mean over ``cycles`` (one setup's per-cycle
+    deviations, ≥ 2 cycles), from their scatter across cycles.
+
+    The variance is pooled over the setup's deviations (same gauges, same
+    machine): a per-deviation estimate has one degree of freedom at two cycles,
+    and requiring all four of them below a target stops late on the largest
+    draw. The shared Π0 makes the scatter understate the per-cycle variance by
+    (1 − 2ρ/c) while the mean's variance exceeds variance/c by (1 + 2ρ(c−1)/c);
+    uncorrected, a setup stops ~18 % above its target."""
+    c = len(cycles)
+    if c < 2:
+        return math.inf
+    var = float(np.mean([np.var([cy[k] for cy in cycles], ddof=1) for k in cycles[0]]))
+    rho = SHARED_P0_CORRELATION
+    factor = (c + 2.0 * (c - 1) * rho) / (c - 2.0 * rho)
+    return math.sqrt(var * factor / c)
+
+
+@dataclass
+class StopStat:
+    mean: float
+    std: float | None  # of the kept readings
+    kept: int
+    rejected: list[float]
+
+
+@dataclass
+class SetupOutcome:
+    index: int
+    leg: str
+    indicators: dict[str, str]
+    cycles_used: int
+    cycles_max: int
+    repeats: int
+    flagged: bool
+    spread_mm: float
+    cycles: list[int] = field(default_factory=list)
+
+
+@dataclass
+class Measurement:
+    phase: str
+    # key "+xy" -> per-cycle deviations (the used pass of its setup)
+    deviations: dict[str, list[float]]
+    setups: list[SetupOutcome]
+    within_std: list[float]  # std of the readings at each stop, for the noise estimate
+
+    def stats(self) -> dict[str, dict[str, Any]]:
+        out = {}
+        for key, vals in self.deviations.items():
+            arr = np.asarray(vals)
+            out[key] = {"mean": float(arr.mean()),
+                        "std": float(arr.std(ddof=1)) if arr.size > 1 else None,
+                        "n": int(arr.size)}
+        return out
+
+    @property
+    def noise_mm(self) -> float | None:
+        if not self.within_std:
+            return None
+        return float(math.sqrt(np.mean(np.square(self.within_std))))
+
+    def for_identify(self) -> dict[tuple[str, str, str], list[float]]:
+        return {split_key(k): list(v) for k, v in self.deviations.items()}

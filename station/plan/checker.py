@@ -1,0 +1,452 @@
+"""Path safety: every move checked over every joint position the controller may
+pass through, before anything moves (design.md, "Register map"; station.plan.motion
+says what is assumed of the drive), with the fewest waypoints that keep every
+mounted plunger within its stroke; the soft limits the plan uses.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+import orthocal
+from orthocal.measurement import reading_at
+from station.config import StationConfig
+from station.errors import BadInput
+from station.plan import motion
+from station.plan.steps import AXES, Move, Plan, Prompt, SetupPlan, route_key
+
+# Most waypoints put on one move to keep the plungers in their strokes; each is a
+# rest-to-rest sub-move (bench/cycle.py measures what they cost).
+MAX_WAYPOINTS = 16
+# A move that starts this close to the start of a route already found reuses its
+# waypoints (the first sub-move is checked again from the actual start).
+START_REUSE_MM = 0.05
+# Added on both sides of a measured signal (station.plan.guard) when a move is routed
+# with it: a reading's noise, the error of carrying it to a stop not yet read.
+SIGNAL_PAD_MM = 0.05
+# The signal is a smooth function of the joints, not of the progress along a move:
+# between two stops it may leave their straight ramp by this fraction of its change.
+SIGNAL_BULGE = 0.5
+
+
+def effective_limits(
+    config: StationConfig, controller_limits: tuple[Sequence[float], Sequence[float]]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The controller's soft limits, narrowed (never widened) by the config.
+
+    Where the controller cannot tell its limits (``controller_limits.source`` is
+    "absent" or "nonsense", drivers.limits.SoftLimits) they come from
+    ``[controller] soft_min`` / ``soft_max`` alone; with neither, BadInput names both
+    ways to provide them, before anything moves (design.md, "Register map").
+    """
+    c = config.controller
+    if getattr(controller_limits, "source", "registers") in ("absent", "nonsense"):
+        missing = [k for k in ("soft_min", "soft_max") if getattr(c, k) is None]
+        if missing:
+            reason = getattr(controller_limits, "reason", "") or "the controller has none"
+            raise BadInput(
+                f"soft limits: {reason}; give them as [controller] "
+                f"{' and '.join(missing)} (joint mm, x, y, z) in the config, or map the "
+                "controller's soft-limit registers in [controller.registers] (SOFT_MIN_X.. "
+                "SOFT_MAX_Z = address); nothing has moved")
+        return (np.asarray(c.soft_min, dtype=float).copy(),
+                np.asarray(c.soft_max, dtype=float).copy())
+    lo = np.asarray(controller_limits[0], dtype=float).copy()
+    hi = np.asarray(controller_limits[1], dtype=float).copy()
+    if c.soft_min is not None:
+        lo = np.maximum(lo, c.soft_min)
+    if c.soft_max is not None:
+        hi = np.minimum(hi, c.soft_max)
+    return lo, hi
+
+
+def limits_source(config: StationConfig, controller_limits: object) -> str:
+    """Where the limits the plan uses come from, in words for the listing."""
+    c = config.controller
+    if getattr(controller_limits, "source", "registers") in ("absent", "nonsense"):
+        return "from the config ([controller] soft_min/soft_max)"
+    if c.soft_min is not None or c.soft_max is not None:
+        return "the controller's, narrowed by the config"
+    return "the controller's"
+
+
+def motion_model(config: StationConfig) -> str:
+    """The path model of the controller: the config's ``[controller] motion``, else
+    what the register-map profile promises (design.md: COMMAND 1 promises no
+    interpolation unless the profile says the axes are coordinated)."""
+    if config.controller.motion is not None:
+        return config.controller.motion
+    from drivers.registers import PROFILES
+
+    profile = PROFILES.get(config.controller.profile)
+    if profile is None:
+        raise BadInput(f"controller.profile: unknown register map "
+                       f"{config.controller.profile!r}; built-in: {sorted(PROFILES)}")
+    return profile.motion
+
+
+class MotionChecker:
+    """Checks one move over every joint position the controller may pass through
+    (station.plan.motion: the joint-space box of the move's ends for independent axes,
+    the straight line for coordinated ones): soft limits, workspace, the leg
+    crossing each mounted indicator's plane and every plunger's travel. Where one
+    COMMAND 1 could take a plunger out of its stroke (or inside the guard's margin
+    of an end), the move is split by waypoints on the end point's straight line
+    (station.plan.motion.route), as few as make it hold. The plan check runs it over
+    every move of the plan; the sequencer runs it again before every physical
+    move, from the actual position (a resumed run starts anywhere), and the guard
+    after it stopped the axes, with the travel it measured (``signal``)."""
+
+    def __init__(self, config: StationConfig,
+                 controller_limits: tuple[Sequence[float], Sequence[float]]) -> None:
+        self.config = config
+        self.geometry = config.machine.geometry()
+        self.lo, self.hi = effective_limits(config, controller_limits)
+        self.motion = motion_model(config)
+        self.margin = config.procedure.plunger_margin_mm
+        self.travel: dict[str, tuple[float, float]] = {}
+        # Routes already found, by (target, mounting, setup): a start within
+        # START_REUSE_MM of a cached one reuses its waypoints where all still hold.
+        self._routes: dict[tuple, list[tuple[np.ndarray, list[np.ndarray]]]] = {}
+
+    def check(self, start: Sequence[float] | None, target: Sequence[float], label: str,
+              setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
+        self.route(start, target, label, setup, mounted)
+
+    def route(self, start: Sequence[float] | None, target: Sequence[float], label: str,
+              setup: SetupPlan | None = None, mounted: dict[str, str] | None = None,
+              signal: Mapping[str, tuple[float, float]] | None = None,
+              max_waypoints: int = MAX_WAYPOINTS, strict: bool = False,
+              margin: float | None = None) -> list[np.ndarray]:
+        """The targets of the sub-moves that reach ``target`` (waypoints, then the
+        target itself); raises BadInput when no route of up to ``max_waypoints``
+        holds. ``signal``: per mounted gauge, the travel beyond the nominal model
+        (measured by the guard) at the start and at the target, taken to change
+        linearly along the move, widened by SIGNAL_PAD_MM and, away from its ends,
+        by up to SIGNAL_BULGE × that change. A route keeps
+        out of the guard's margin where it can, else (unless ``strict``: the guard's
+        own re-plan) within the stroke, the guard watching what comes that close.
+        ``margin``: instead of plunger_margin_mm (a re-plan from where a plunger
+        already stands closer to its end: no closer than that)."""
+        keep = self.margin if margin is None else margin
+        target_v = np.asarray(target, dtype=float)
+        where = "" if setup is None else f"setup {setup.index + 1} (leg {setup.leg}), "
+        where += label if start is None else f"move to {label}"
+        if start is None:
+            self._limits(target_v[None, :], where)
+            return [target_v]
+        start_v = np.asarray(start, dtype=float)
+        self._limits(np.vstack([start_v, target_v]), where)
+        gauges = self._gauges(setup, mounted, signal, start_v, target_v)
+        # A route found before for this target and mounting, from (nearly) here, is
+        # reused when every sub-move of it holds now, with this signal and margin:
+        # a move repeated every cycle is routed once.
+        key = (tuple(round(float(v), 3) for v in target_v),
+               tuple(sorted((mounted or {}).items())), None if setup is None else setup.index)
+        reusable = [legs for cached_start, legs in self._routes.get(key, [])
+                    if np.max(np.abs(cached_start - start_v)) <= START_REUSE_MM
+                    and len(legs) - 1 <= max_waypoints]
+        for legs in sorted(reusable, key=len):
+            here = start_v
+            for leg in legs:
+                if not self._feasible(gauges, here, leg, keep, where):
+                    break
+                here = leg
+            else:
+                self._commit(self._route_travel(gauges, start_v, legs, where))
+                return [leg.copy() for leg in legs]
+        legs = None
+        for kept in (keep,) if strict else (keep, 0.0):
+            legs = motion.route(
+                lambda a, b, slack, m=kept: self._feasible(gauges, a, b, m + slack, where),
+                start_v, target_v, self.geometry, max_waypoints,
+                max_slack=self._room(gauges, kept))
+            if legs is not None:
+                break
+        if legs is None:
+            raise self._refusal(gauges, start_v, target_v, where, max_waypoints,
+                                keep if strict else 0.0)
+        if margin is None:  # a re-plan's route (its own margin) is no route to reuse
+            self._routes.setdefault(key, []).append(
+                (start_v.copy(), [leg.copy() for leg in legs]))
+        self._commit(self._route_travel(gauges, start_v, legs, where))
+        return legs
+
+    # --- one sub-move -----------------------------------------------------------------
+
+    def _gauges(self, setup: SetupPlan | None, mounted: dict[str, str] | None,
+                signal: Mapping[str, tuple[float, float]] | None,
+                start: np.ndarray | None = None, target: np.ndarray | None = None
+                ) -> _Gauges | None:
+        if setup is None or not mounted:
+            return None
+        names = list(mounted)
+        inds = [self.config.indicator(n) for n in names]
+        sig = signal or {}
+        return _Gauges(
+            setup, names, [mounted[n] for n in names],
+            low=np.array([-i.preload for i in inds]),
+            high=np.array([i.stroke_mm - i.preload for i in inds]),
+            sig0=np.array([sig.get(n, (0.0, 0.0))[0] for n in names]),
+            sig1=np.array([sig.get(n, (0.0, 0.0))[1] for n in names]),
+            pad=SIGNAL_PAD_MM if signal else 0.0,
+            chord=None if start is None or target is None or not signal else (start, target))
+
+    def _room(self, gauges: _Gauges | None, margin: float) -> float:
+        """The largest slack any route could have: half the stroke left inside the margin."""
+        if gauges is None:
+            return 0.0
+        return max(0.0, float(np.min(gauges.high - gauges.low)) / 2.0 - margin)
+
+    def _values(self, gauges: _Gauges | None, where: str) -> Callable[[np.ndarray], np.ndarray]:
+        """(n, 3) joints -> (n, m) nominal plunger travel of the mounted gauges; raises
+        ValueError outside the workspace and _NotCrossing when the leg leaves a plane."""
+        geometry = self.geometry
+
+        def values(points: np.ndarray) -> np.ndarray:
+            p = orthocal.forward(points, geometry)
+            if gauges is None:
+                return p
+            i = AXES.index(gauges.setup.leg)
+            mount = geometry.mount_plane
+            if not np.all((np.minimum(p[:, i], points[:, i]) <= mount)
+                          & (mount <= np.maximum(p[:, i], points[:, i]))):
+                raise _NotCrossing(where)
+            return np.stack([self.nominal_travel(gauges.setup, n, d, points, p)
+                             for n, d in zip(gauges.names, gauges.directions, strict=True)],
+                            axis=-1)
+
+        return values
+
+    def _bound(self, gauges: _Gauges | None, a: np.ndarray, b: np.ndarray, where: str,
+               margin: float | None) -> motion.Bound | None:
+        """Bound of the travel (signal included) over the sub-move; with ``margin``
+        None if it leaves the stroke less that margin. Without gauges, only the
+        workspace is checked (a coarse grid: the workspace ends far from the stops)."""
+        f = self._values(gauges, where)
+        if gauges is None:
+            try:
+                f(motion.reachable_points(a, b, self.motion))
+            except ValueError:
+                raise motion.OutsideWorkspace(where) from None
+            return motion.Bound(np.zeros(0), np.zeros(0))
+        # The signal over this sub-move: the ramp at the extremes of the progress any
+        # point of its set has along the move (the same pairing of worst nominal
+        # travel and worst signal as the guard makes ahead of the axes).
+        sig_lo, sig_hi = gauges.signal_range(motion.reachable_points(a, b, self.motion, n=2))
+        low = high = None
+        if margin is not None:
+            low = gauges.low + margin - sig_lo
+            high = gauges.high - margin - sig_hi
+        bound = motion.segment_bound(f, a, b, self.motion, low, high)
+        if bound is None:
+            return None
+        return motion.Bound(bound.lo + sig_lo, bound.hi + sig_hi)
+
+    def _feasible(self, gauges: _Gauges | None, a: np.ndarray, b: np.ndarray, margin: float,
+                  where: str) -> bool:
+        try:
+            return self._bound(gauges, a, b, where, margin) is not None
+        except (motion.OutsideWorkspace, _NotCrossing):
+            return False
+
+    def _route_travel(self, gauges: _Gauges | None, start: np.ndarray,
+                      legs: list[np.ndarray], where: str) -> dict[str, tuple[float, float]]:
+        travel: dict[str, tuple[float, float]] = {}
+        if gauges is None:
+            return travel
+        here = start
+        for leg in legs:
+            bound = self._bound(gauges, here, leg, where, None)
+            assert bound is not None
+            for k, name in enumerate(gauges.names):
+                key = f"{name} on leg {gauges.setup.leg} (setup {gauges.setup.index + 1})"
+                old = travel.get(key, (float(bound.lo[k]), float(bound.hi[k])))
+                travel[key] = (min(old[0], float(bound.lo[k])), max(old[1], float(bound.hi[k])))
+            here = leg
+        return travel
+
+    def travel_bound(self, sp: SetupPlan, mounted: Mapping[str, str], a: Sequence[float],
+                     b: Sequence[float]) -> dict[str, tuple[float, float]]:
+        """Nominal (min, max) travel of each mounted gauge over every position one
+        COMMAND 1 from a to b may pass through (the guard's look ahead)."""
+        gauges = self._gauges(sp, dict(mounted), None)
+        if gauges is None:
+            return {}
+        try:
+            bound = self._bound(gauges, np.asarray(a, dtype=float), np.asarray(b, dtype=float),
+                                "", None)
+        except (motion.OutsideWorkspace, _NotCrossing):
+            return {n: (-np.inf, np.inf) for n in gauges.names}
+        assert bound is not None
+        return {n: (float(bound.lo[k]), float(bound.hi[k]))
+                for k, n in enumerate(gauges.names)}
+
+    def _refusal(self, gauges: _Gauges | None, start: np.ndarray, target: np.ndarray,
+                 where: str, max_waypoints: int, margin: float) -> BadInput:
+        """Why no route holds, said of the worst sub-move of the most split one tried
+        (the even split into max_waypoints + 1 sub-moves)."""
+        at = motion.line_point(start, target, self.geometry)
+        cuts = np.linspace(0.0, 1.0, max_waypoints + 2)
+        legs = [at(float(t)) for t in cuts]
+        via = f" (even via {max_waypoints} waypoints)" if max_waypoints else ""
+        timing = ", for some timing of the axes" if self.motion == "independent" else ""
+        worst: tuple[float, str, str, bool] | None = None
+        for a, b in itertools.pairwise(legs):
+            try:
+                bound = self._bound(gauges, a, b, where, None)
+            except motion.OutsideWorkspace:
+                return BadInput(f"plan: {where}: the axes could leave the machine's workspace "
+                                f"on the way{via}; nothing has moved")
+            except _NotCrossing:
+                name = "" if gauges is None else f" of indicator {gauges.names[0]}"
+                return BadInput(f"plan: {where}: leg {gauges.setup.leg if gauges else '?'} "
+                                f"could leave the plane{name}{via}; nothing has moved")
+            if gauges is None or bound is None:
+                continue
+            for k, name in enumerate(gauges.names):
+                ind = self.config.indicator(name)
+                d = gauges.directions[k]
+                over = float(bound.hi[k] - (gauges.high[k] - margin))
+                under = float((gauges.low[k] + margin) - bound.lo[k])
+                within = f" (margin {margin:g} mm)" if margin else ""
+                if over > 0 and (worst is None or over > worst[0]):
+                    worst = (over, name, (
+                        f"indicator {name} ({d}) could be pushed {float(bound.hi[k]):.3f} mm "
+                        f"past its mounting point, beyond its stroke{within} "
+                        f"({ind.stroke_mm:g} mm, preload {ind.preload:g} mm)"), True)
+                if under > 0 and (worst is None or under > worst[0]):
+                    worst = (under, name, (
+                        f"the leg could lift off indicator {name} ({d}) by "
+                        f"{float(-bound.lo[k] - ind.preload):.3f} mm{within} (travel "
+                        f"{float(bound.lo[k]):.3f} mm, preload {ind.preload:g} mm)"), False)
+        if worst is None:
+            return PathRefused(f"plan: {where}: no route keeps every plunger in its stroke"
+                               f"{via}{timing}; nothing has moved", None, False, "")
+        detail = f"{worst[2]}{via}{timing}"
+        return PathRefused(f"plan: {where}: {detail}; nothing has moved", worst[1], worst[3],
+                           detail)
+
+    def _commit(self, travel: dict[str, tuple[float, float]]) -> None:
+        for key, (t_min, t_max) in travel.items():
+            old = self.travel.get(key, (0.0, 0.0))
+            self.travel[key] = (min(old[0], t_min), max(old[1], t_max))
+
+    def _limits(self, points: np.ndarray, where: str) -> None:
+        """The ends of a move within the soft limits: then so is every point of the
+        box (or line) between them, the limits being a box themselves."""
+        lo, hi = self.lo, self.hi
+        for i, axis in enumerate(AXES):
+            excess = np.maximum(lo[i] - points[:, i], points[:, i] - hi[i])
+            if np.any(excess > 1e-9):
+                value = float(points[np.argmax(excess), i])
+                raise BadInput(
+                    f"plan: {where}: ρ_{axis} = {value:.3f} mm is outside the soft "
+                    f"limits [{lo[i]:.3f}, {hi[i]:.3f}]; nothing has moved")
+        try:
+            orthocal.forward(points, self.geometry)
+        except ValueError:
+            raise BadInput(f"plan: {where}: outside the machine's workspace; "
+                           "nothing has moved") from None
+
+    def nominal_travel(self, sp: SetupPlan, name: str, direction: str,
+                       path: np.ndarray, end_points: np.ndarray | None = None) -> np.ndarray:
+        """Plunger travel (mm, + pushed in) of indicator ``name`` mounted on
+        ``sp``'s leg at Π0, at each joint position of ``path``: nominal model.
+        ``end_points``: the forward kinematics of ``path``, when the caller has it."""
+        sign = -1.0 if direction.startswith("-") else 1.0
+        i, j = AXES.index(sp.leg), AXES.index(direction.lstrip("-"))
+        path = np.asarray(path, dtype=float)
+        p = orthocal.forward(path, self.geometry) if end_points is None else end_points
+        rho0 = np.asarray(sp.postures["0"], dtype=float)
+        zero = float(reading_at(rho0, orthocal.forward(rho0, self.geometry), i, j,
+                                np.zeros(3), self.geometry.mount_plane))
+        return sign * (reading_at(path, p, i, j, np.zeros(3), self.geometry.mount_plane) - zero)
+
+
+class PathRefused(BadInput):
+    """No route keeps the plungers in their strokes: ``indicator`` (None: none in
+    particular), ``pushed`` (toward its stop, else lifted off), ``detail`` (why)."""
+
+    def __init__(self, message: str, indicator: str | None, pushed: bool,
+                 detail: str) -> None:
+        super().__init__(message)
+        self.indicator = indicator
+        self.pushed = pushed
+        self.detail = detail
+
+
+class _NotCrossing(ValueError):
+    """The leg under test leaves the plane of a mounted indicator."""
+
+
+@dataclass(frozen=True)
+class _Gauges:
+    """The gauges mounted on a setup's leg, as arrays over the gauges."""
+
+    setup: SetupPlan
+    names: list[str]
+    directions: list[str]
+    low: np.ndarray  # −preload
+    high: np.ndarray  # stroke − preload
+    # Travel beyond the nominal model (the signal) at the chord's start and end,
+    # linear in the progress along the chord in between, ± pad.
+    sig0: np.ndarray
+    sig1: np.ndarray
+    pad: float = 0.0
+    chord: tuple[np.ndarray, np.ndarray] | None = None
+
+    def signal_range(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(m,) lowest and highest signal over the progress that joint positions
+        ``points`` span along the chord: the ramp, ± the pad, ± SIGNAL_BULGE × the
+        ramp's change where the progress is away from both ends (4u(1 − u))."""
+        if self.chord is None:
+            zero = np.zeros(len(self.names))
+            return zero, zero
+        a, b = self.chord
+        d = b - a
+        norm = float(d @ d)
+        u = np.zeros(len(points)) if norm <= 0 else np.clip((points - a) @ d / norm, 0.0, 1.0)
+        lo_u, hi_u = float(u.min()), float(u.max())
+        ends = [self.sig0 + (self.sig1 - self.sig0) * v for v in (lo_u, hi_u)]
+        middle = 1.0 if lo_u <= 0.5 <= hi_u else max(4 * v * (1 - v) for v in (lo_u, hi_u))
+        widen = self.pad + SIGNAL_BULGE * np.abs(self.sig1 - self.sig0) * middle
+        return np.minimum(*ends) - widen, np.maximum(*ends) + widen
+
+
+def check_plan(
+    plan: Plan,
+    config: StationConfig,
+    controller_limits: tuple[Sequence[float], Sequence[float]],
+    start: Sequence[float] | None = None,
+) -> Plan:
+    """Refuse (BadInput) a plan that leaves the soft limits or the workspace, or
+    that would push a plunger past its stroke or lift it off the leg, anywhere
+    along any move; name the posture, setup and indicator. Fills plan.limits and
+    plan.travel. ``start``: the current joint positions, to check the first move."""
+    checker = MotionChecker(config, controller_limits)
+    plan.limits = (checker.lo.tolist(), checker.hi.tolist())
+    plan.limits_source = limits_source(config, controller_limits)
+    position = None if start is None else np.asarray(start, dtype=float)
+    for sp in plan.setups:
+        mounted: dict[str, str] = {}
+        # The listing's order plus one extra Π+ move, which follows a cycle's
+        # final Π0 when the next cycle (or a repeat) starts: all moves of a setup.
+        for step in sp.start_steps("m", 0, 0.0, 1) + sp.cycle_steps("m", 1, 0.0, 1) \
+                + sp.cycle_steps("m", 2, 0.0, 1)[:1]:
+            if isinstance(step, Prompt):
+                mounted = dict(step.indicators)
+            elif isinstance(step, Move):
+                legs = checker.route(position, step.targets, step.label, sp, mounted)
+                if position is not None and len(legs) > 1:
+                    plan.routes[route_key(position, step.targets)] = [
+                        tuple(float(v) for v in leg) for leg in legs[:-1]]
+                position = np.asarray(step.targets)
+    plan.travel = checker.travel
+    plan.motion = checker.motion
+    plan.start = None if start is None else tuple(float(v) for v in start)
+    return plan

@@ -1,0 +1,205 @@
+"""The report's vocabulary: parameter and deviation names in text, HTML and TeX,
+number, time and duration formatting, and the tolerant readers of a result
+(every section may be missing: a run that failed halfway), shared by the text
+summary, the plots and the page.
+"""
+
+
+from __future__ import annotations
+
+import html
+import math
+import re
+from collections.abc import Iterable, Mapping
+from datetime import datetime
+from typing import Any
+
+from orthocal import AXES, PARAM_NAMES
+from orthocal.numbers import finite
+
+# Grouped by leg, then posture, then direction: the order an operator measures in
+# (one setup per leg), so the plot and the tables read setup by setup.
+DEVIATION_KEYS = tuple(
+    f"{sign}{leg}{d}" for leg in AXES for sign in "+-" for d in AXES if d != leg
+)
+MODEL_TEXT = {
+    "rho": "joint offsets Δρ only",
+    "L": "leg-length errors ΔL only",
+    "full": "joint offsets Δρ and leg-length errors ΔL together",
+    "rho+tilt": "joint offsets Δρ and the tilts of the actuator axes",
+    "full+tilt": "joint offsets Δρ, leg-length errors ΔL and the tilts of the actuator axes",
+}
+# Only Δρ reaches a controller (its zero offsets); the rest is the machine's build.
+NOT_WRITTEN_TEXT = ("Axis tilts and leg-length errors cannot be written to a controller: "
+                    "only the joint offsets Δρ were corrected; the tilts stay in the machine "
+                    "(and in the verification's deviations) until it is re-squared mechanically.")
+STATUS_TEXT = {
+    "ok": "Completed",
+    "failed": "Failed",
+    "refused": "Write-back refused",
+    "aborted": "Aborted",
+}
+WRITEBACK_TEXT = {
+    "written": "the corrected offsets were written to the controller and read back",
+    "refused": "the corrections were NOT written: the station refused them",
+    "declined": "the corrections were NOT written: the operator declined",
+    "skipped": "the corrections were not written (write-back skipped)",
+    "failed-restored": "writing the corrections failed; the previous offsets were restored",
+}
+
+
+# ------------------------------------------------------------------- formatting
+
+
+num = finite  # the report's short name for it
+
+
+def fmt(value: Any, digits: int = 3, signed: bool = False) -> str:
+    v = num(value)
+    if v is None:
+        return "—"
+    text = f"{v:+.{digits}f}" if signed else f"{v:.{digits}f}"
+    # "−0.000" reads like a real negative value; it is rounding noise.
+    if float(text) == 0.0:
+        text = f"{0.0:.{digits}f}"
+    return text.replace("-", "−")
+
+
+_SYMBOL = {"drho": ("Δρ", r"\Delta\rho"), "dL": ("ΔL", r"\Delta L"), "tilt": ("tilt ", "t")}
+
+
+def unit(name: str) -> str:
+    """Tilts are angles in mrad (model.md); everything else is a length in mm."""
+    return "mrad" if name.startswith("tilt_") else "mm"
+
+
+def param_plain(name: str) -> str:
+    kind, axis = name.split("_", 1)
+    return _SYMBOL.get(kind, (kind + " ", ""))[0] + axis
+
+
+def param_html(name: str) -> str:
+    kind, axis = name.split("_", 1)
+    return _SYMBOL.get(kind, (kind + " ", ""))[0].strip() + f"<sub>{html.escape(axis)}</sub>"
+
+
+def param_tex(name: str) -> str:
+    kind, axis = name.split("_", 1)
+    return "$" + _SYMBOL.get(kind, ("", kind))[1] + "_{" + axis + "}$"
+
+
+def dev_parts(key: str) -> tuple[str, str, str] | None:
+    """(posture, leg, direction) of "+xy" or of a stroke key such as "+30xy"."""
+    if re.fullmatch(r"[+-](\d+(\.\d*)?|\.\d+)?[xyz][xyz]", key):
+        return key[:-2], key[-2], key[-1]
+    return None
+
+
+def posture_html(posture: str, leg: str) -> str:
+    if posture in ("+", "-"):
+        return f"Π<sub>{leg}</sub><sup>{'+' if posture == '+' else '−'}</sup>"
+    return f"Π<sub>{leg}</sub>({posture.replace('-', '−')} mm)"
+
+
+def dev_html(key: str) -> str:
+    parts = dev_parts(key)
+    if parts is None:
+        return html.escape(key)
+    sign, leg, d = parts
+    return f"{posture_html(sign, leg)} along {d}"
+
+
+def dev_tex(key: str) -> str:
+    parts = dev_parts(key)
+    if parts is None:
+        return key
+    sign, leg, d = parts
+    if sign not in ("+", "-"):
+        return rf"$\Pi_{leg}({sign})$" + f"\nalong {d}"
+    return rf"$\Pi_{leg}^{{{sign}}}$" + f"\nalong {d}"
+
+
+def true_value(result: Mapping[str, Any], name: str) -> float | None:
+    sim = result.get("simulation")
+    if not result.get("simulated") or not isinstance(sim, Mapping):
+        return None
+    kind, axis = name.split("_", 1)
+    if kind == "tilt":
+        table = sim.get("true_tilt")
+        return num(table.get(name)) if isinstance(table, Mapping) else None
+    table = sim.get("true_drho" if kind == "drho" else "true_dl")
+    if not isinstance(table, Mapping):
+        return None
+    return num(table.get(axis))
+
+
+def as_dict(value: Any) -> dict:
+    return value if isinstance(value, dict) else {}
+
+
+def params_of(result: Mapping[str, Any]) -> list[str]:
+    ident = as_dict(result.get("identified"))
+    names = [n for n in PARAM_NAMES if n in ident]
+    return names + sorted(n for n in ident if n not in PARAM_NAMES)
+
+
+def dev_keys(*tables: Mapping[str, Any]) -> list[str]:
+    present: set[str] = set()
+    for t in tables:
+        present.update(t)
+    return sorted(present, key=dev_order)
+
+
+def dev_order(key: str) -> tuple:
+    """Leg, then posture from ρmax down to ρmin ('+', '+30', '-50', '-'), then
+    direction: DEVIATION_KEYS' order, with intermediate strokes in their place."""
+    parts = dev_parts(key)
+    if parts is None:
+        return (1, key)
+    posture, leg, d = parts
+    s = {"+": math.inf, "-": -math.inf}.get(posture)
+    return (0, leg, -(float(posture) if s is None else s), d)
+
+
+def format_when(iso: Any) -> str:
+    if not isinstance(iso, str):
+        return "—"
+    try:
+        dt = datetime.fromisoformat(iso)
+    except ValueError:
+        return iso
+    text = dt.strftime("%Y-%m-%d %H:%M:%S")
+    if dt.utcoffset() is not None:
+        text += " " + (dt.strftime("%z") or "")
+    return text
+
+
+def format_duration(seconds: Any) -> str:
+    s = num(seconds)
+    if s is None:
+        return "—"
+    if s < 60:
+        return f"{s:.1f} s"
+    minutes, sec = divmod(round(s), 60)
+    if minutes < 60:
+        return f"{minutes} min {sec:02d} s"
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours} h {minutes:02d} min"
+
+
+def max_abs(devs: Mapping[str, Any]) -> float | None:
+    values = [num(as_dict(v).get("mean")) for v in devs.values()]
+    finite = [abs(v) for v in values if v is not None]
+    return max(finite) if finite else None
+
+
+# -------------------------------------------------------------------- summary
+
+
+def param_line(result: Mapping[str, Any], names: Iterable[str]) -> str:
+    ident = as_dict(result.get("identified"))
+    errs = as_dict(result.get("std_errors"))
+    return "   ".join(
+        f"{param_plain(n)} = {fmt(ident.get(n), signed=True)} ± {fmt(errs.get(n))} {unit(n)}"
+        for n in names
+    )

@@ -1,0 +1,2 @@
+"""The run directory: the journal (every reading fsynced before the machine moves
+on), what a run directory holds, and the lock that keeps one station per machine."""

@@ -1,0 +1,73 @@
+"""The house rules that import-linter does not check: a name used by another file
+is public (no ``from x import _y``, no ``module._y``), no file sets another
+object's private attribute, and every package says what lives in it."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("orthocal", "drivers", "station", "bench")
+
+
+def sources() -> list[Path]:
+    return sorted(p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py"))
+
+
+def project_module(name: str | None) -> bool:
+    return bool(name) and name.split(".")[0] in PACKAGES  # type: ignore[union-attr]
+
+
+def private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def violations(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    where = path.relative_to(ROOT)
+    out: list[str] = []
+    modules: set[str] = set()  # local names bound to project modules
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and project_module(node.module):
+            for alias in node.names:
+                if private(alias.name):
+                    out.append(f"{where}:{node.lineno}: imports {node.module}.{alias.name}")
+                modules.add(alias.asname or alias.name)
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if project_module(alias.name):
+                    modules.add((alias.asname or alias.name).split(".")[0])
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and private(node.attr) \
+                and isinstance(node.value, ast.Name) and node.value.id in modules:
+            out.append(f"{where}:{node.lineno}: uses {node.value.id}.{node.attr}")
+        if isinstance(node, ast.Assign | ast.AugAssign):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            for t in targets:
+                if isinstance(t, ast.Attribute) and private(t.attr) and not (
+                        isinstance(t.value, ast.Name) and t.value.id in ("self", "cls")):
+                    out.append(f"{where}:{node.lineno}: sets a foreign private attribute "
+                               f"{ast.unparse(t)}")
+    return out
+
+
+def test_no_private_name_is_used_outside_its_file() -> None:
+    found = [v for path in sources() for v in violations(path)]
+    assert not found, "\n".join(found)
+
+
+@pytest.mark.parametrize("package", [p.parent for p in sorted((ROOT / "station").rglob(
+    "__init__.py"))], ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_station_package_says_what_lives_in_it(package: Path) -> None:
+    doc = ast.get_docstring(ast.parse((package / "__init__.py").read_text()))
+    assert doc and len(doc) > 40, f"{package.relative_to(ROOT)}/__init__.py has no docstring"
+
+
+def test_a_file_holds_one_job() -> None:
+    # Past ~500 lines a file usually holds two jobs (the house's style).
+    long = [f"{p.relative_to(ROOT)}: {n} lines" for p in sources()
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > 560]
+    assert not long, "\n".join(long)
