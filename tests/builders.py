@@ -1,5 +1,6 @@
 """Builders shared by the tests: the options of a simulated run or resume, the
-short procedure most simulated runs use, and a small station config.
+short procedure most simulated runs use, a small station config, and the rig and
+outcome of the ``orthocal`` CLI fixture (conftest.py) with its fault trigger.
 
 Plain functions and constants (imported as ``from builders import ...``, like
 ``truth``); fixtures live in conftest.py.
@@ -8,11 +9,15 @@ Plain functions and constants (imported as ``from builders import ...``, like
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from drivers.sim.station import VirtualStation
 from station.commands.options import DriveOptions, ResumeOptions, RunOptions, SimOptions
 from station.config import StationConfig, parse_config
+from station.rundir.journal import read_journal
 
 #: A short simulated procedure: two cycles of three readings, no settling.
 FAST: dict[str, Any] = {"cycles": 2, "readings": 3, "settle_s": 0.0}
@@ -28,15 +33,21 @@ BASE: dict[str, Any] = {
 }
 
 
-def station_config(**sections: Any) -> StationConfig:
-    """BASE with each given section's keys merged in (``controller={...}`` etc.)."""
+def station_data(**sections: Any) -> dict[str, Any]:
+    """A fresh copy of BASE with each given section's keys merged in
+    (``controller={...}`` etc.): config as data, for a test to change further."""
     data = copy.deepcopy(BASE)
     for name, values in sections.items():
         if isinstance(values, dict) and isinstance(data.get(name), dict):
-            data[name].update(values)
+            data[name].update(copy.deepcopy(values))
         else:
             data[name] = copy.deepcopy(values)
-    return parse_config(data)
+    return data
+
+
+def station_config(**sections: Any) -> StationConfig:
+    """:func:`station_data`, parsed."""
+    return parse_config(station_data(**sections))
 
 
 def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
@@ -66,3 +77,64 @@ def resumed(run_dir: Path, *, yes: bool = False, json: bool = True,
     """``orthocal resume RUN_DIR`` (or rollback), ``hook`` given the restarted
     virtual station of a simulated run."""
     return ResumeOptions(run_dir=Path(run_dir), yes=yes, json=json, station_hook=hook)
+
+
+# --- the rig of the ``orthocal`` CLI fixture (conftest.py) -----------------------------
+
+
+@dataclass
+class Rig:
+    """The virtual stations the command started, and what they were asked to do."""
+
+    stations: list[VirtualStation] = field(default_factory=list)
+    writes: list[tuple[int, int]] = field(default_factory=list)  # (address, words)
+    # the first station's gauges (a closed station forgets them)
+    gauges: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def station(self) -> VirtualStation:
+        return self.stations[0]
+
+
+#: ``prepare(rig, station)``: given every virtual station the command starts.
+Prepare = Callable[[Rig, VirtualStation], None]
+
+
+@dataclass
+class CliOutcome:
+    """What one command of the ``orthocal`` fixture did."""
+
+    code: int
+    out: str
+    err: str
+    rig: Rig
+    out_dir: Path
+
+    @property
+    def run_dir(self) -> Path:
+        (run_dir,) = [p for p in self.out_dir.iterdir() if p.is_dir()]
+        return run_dir
+
+    @property
+    def journal(self) -> list[dict[str, Any]]:
+        return read_journal(self.run_dir / "journal.jsonl")
+
+    def failure_lines(self) -> list[str]:
+        return [ln for ln in self.err.splitlines() if ln.startswith("orthocal: failed")]
+
+
+def on_setup(station: VirtualStation, number: int, action: Callable[[], None]) -> None:
+    """Run ``action`` when the operator mounts the gauges of the ``number``-th setup
+    (1-based, counted across measurement and verification): a fault mid-run."""
+    mount = station.mount
+    seen: dict[str, Any] = {"leg": None, "setups": 0}
+
+    def wrapped(name: str, leg: str, direction: str) -> None:
+        if leg != seen["leg"]:
+            seen["leg"] = leg
+            seen["setups"] += 1
+            if seen["setups"] == number:
+                action()
+        mount(name, leg, direction)
+
+    station.mount = wrapped  # type: ignore[method-assign]

@@ -1,12 +1,56 @@
-"""Shared fixtures. Every test must leave no thread, pty or server behind."""
+"""Shared fixtures. Every test must leave no thread, pty or server behind.
+
+Time. Every virtual station of the tests (drivers.sim.station, in-process or in a
+subprocess: ``orthocal run --simulate``, ``orthocal sim``) runs on a clock
+:data:`SIM_TIME_SCALE` times faster than real time, its moves that many times
+shorter and its gauges' line time too: a whole calibration proves the same at
+any speed (the readings at the stops, the counts, the journal do not depend on
+it). A test whose subject is timing — the plunger guard polling while the axes
+move, a deadline, line time, the console — is marked ``real_time`` and gets the
+virtual station at real time. ``ORTHOCAL_SIM_TIME_SCALE=1 python -m pytest``
+runs the whole suite at real time.
+
+Builders (the options of a simulated run, the short procedure, a station config,
+the rig of the CLI fixture below) are plain functions in builders.py.
+"""
 
 from __future__ import annotations
 
 import os
 import threading
 import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
 
 import pytest
+from builders import CliOutcome, Prepare, Rig
+
+from drivers.sim.station import TIME_SCALE_ENV
+
+#: How much faster than real time the tests' virtual stations run (module docstring):
+#: moves of 1000 mm/s take a few milliseconds, a reading at 9600 baud under one.
+SIM_TIME_SCALE = "20"
+
+#: Device timeouts of the ``orthocal`` fixture's runs: each lost reply costs little
+#: (a reply takes ~15 ms at 9600 baud in real time).
+CLI_TIMEOUT_S = 0.25
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # A session default, so that module-scoped fixtures and subprocesses get it too;
+    # an ORTHOCAL_SIM_TIME_SCALE given to pytest wins.
+    os.environ.setdefault(TIME_SCALE_ENV, SIM_TIME_SCALE)
+    config.addinivalue_line(
+        "markers", "real_time: the virtual stations of this test run at real time "
+        "(its subject is timing: guard polls during moves, deadlines, line time)")
+
+
+@pytest.fixture(autouse=True)
+def sim_time(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A ``real_time`` test's virtual stations (and its subprocesses') at real time."""
+    if request.node.get_closest_marker("real_time") is not None:
+        monkeypatch.setenv(TIME_SCALE_ENV, "1")
 
 
 def _open_fds() -> set[int]:
@@ -49,3 +93,56 @@ def machine_locks_in_tmp(tmp_path_factory, monkeypatch):
     if "ORTHOCAL_STATE_DIR" not in os.environ:
         monkeypatch.setenv("ORTHOCAL_STATE_DIR", str(tmp_path_factory.mktemp("state")))
 
+
+@pytest.fixture
+def orthocal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+             capsys: pytest.CaptureFixture[str]) -> Iterator[Callable[..., CliOutcome]]:
+    """``orthocal(*argv, prepare=fn)`` runs the real command line in-process
+    (``station.commands.cli.main``); ``prepare(rig, station)`` gets every virtual
+    station the command starts (run, then resume or rollback), whose config gives
+    the devices :data:`CLI_TIMEOUT_S`, and the rig records every register write."""
+    from station.commands import simulation
+    from station.commands.cli import main
+
+    def invoke(*argv: str, prepare: Prepare | None = None, out_dir: Path | None = None,
+               rig: Rig | None = None) -> CliOutcome:
+        rig = rig if rig is not None else Rig()
+        real_start = simulation.start_station
+
+        def start(params: dict[str, Any], nvram: Path | None) -> Any:
+            station = real_start(params, nvram)
+            rig.stations.append(station)
+            if not rig.gauges:
+                rig.gauges = dict(station.indicators)
+            describe = station.config
+
+            def config() -> dict[str, Any]:
+                c = describe()
+                c["controller"]["timeout_s"] = CLI_TIMEOUT_S
+                for ind in c["indicators"]:
+                    ind["timeout_s"] = CLI_TIMEOUT_S
+                return c
+
+            station.config = config
+            write = station.controller._write
+
+            def record(start: int, address: int, values: list[int], registers: list[int]):
+                rig.writes.append((address, len(values)))
+                return write(start, address, values, registers)
+
+            station.controller._write = record
+            if prepare is not None:
+                prepare(rig, station)
+            return station
+
+        monkeypatch.setattr(simulation, "start_station", start)
+        out_dir = out_dir if out_dir is not None else tmp_path / "runs"
+        try:
+            code = main(list(argv))
+        except SystemExit as exc:  # argparse reports usage errors by exiting 2
+            code = exc.code if isinstance(exc.code, int) else 1
+        monkeypatch.setattr(simulation, "start_station", real_start)
+        out, err = capsys.readouterr()
+        return CliOutcome(code, out, err, rig, out_dir)
+
+    yield invoke

@@ -13,8 +13,13 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from drivers.sim.station import VirtualStation
 from station.config import toml_text
+
+# The console's live bar and its prompts in time: at real time (conftest).
+pytestmark = pytest.mark.real_time
 
 ANSI = re.compile(rb"\x1b\[[0-9;?]*[A-Za-z]")
 PROMPTS = (b"Press Enter when done", b"[y/N]")

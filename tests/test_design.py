@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import copy
 import json
 
 import numpy as np
 import pytest
+from builders import station_config, station_data
 
 import orthocal
 from orthocal import design
@@ -118,16 +118,11 @@ def test_search_respects_a_set_check_and_adds_stops_only_when_it_must() -> None:
     assert len(tilt.strokes) == 3 and tilt.quality.identifiable
 
 
-BASE = {
-    "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],
-    "setups": [{"leg": leg, "indicators": dict(zip("AB", [d for d in "xyz" if d != leg],
-                                                   strict=True))} for leg in "xyz"],
-    "procedure": {"cycles": 2, "readings": 3, "settle_s": 0.1},
-}
+PROCEDURE = {"cycles": 2, "readings": 3, "settle_s": 0.1}  # on the builders' station
 
 
 def test_summary_numbers_are_orthocal_s_and_the_plan_s() -> None:
-    cfg = parse_config(copy.deepcopy(BASE))
+    cfg = station_config(procedure=PROCEDURE)
     doc = design_summary(cfg, "rho")
     plan = build_plan(cfg)
     keys, _ = plan_keys(plan)
@@ -148,7 +143,7 @@ def test_summary_numbers_are_orthocal_s_and_the_plan_s() -> None:
 
 
 def test_search_never_leaves_the_config_soft_limits() -> None:
-    data = copy.deepcopy(BASE)
+    data = station_data(procedure=PROCEDURE)
     L = 310.25
     data["machine"] = {"rho_min": -80.0, "rho_max": 40.0}
     data["controller"] = {"soft_min": [L - 90] * 3, "soft_max": [L + 50] * 3}
@@ -165,7 +160,7 @@ def test_search_never_leaves_the_config_soft_limits() -> None:
 
 
 def test_more_strokes_cost_time() -> None:
-    cfg = parse_config(copy.deepcopy(BASE))
+    cfg = station_config(procedure=PROCEDURE)
     two = run_time(build_plan(cfg), cfg)
     four = run_time(build_plan(cfg, [60, 30, -50, -100]), cfg)
     assert four["stops"] > two["stops"] and four["total_s"] > two["total_s"]

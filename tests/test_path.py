@@ -5,21 +5,19 @@ keep the plungers in their strokes."""
 
 from __future__ import annotations
 
-import copy
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from builders import FAST, resumed, simulated
+from builders import FAST, resumed, simulated, station_config, station_data
 
 import orthocal
 from drivers.profiles import move_time
 from drivers.registers import GENERIC, IAI_PCON, load_map
 from drivers.sim.machine import VirtualOrthoglide
 from station.commands import run as cmd_run
-from station.commands.options import RunOptions
 from station.config import StationConfig, parse_config
 from station.errors import BadInput, RunFailed
 from station.plan.checker import MotionChecker, check_plan, motion_model
@@ -27,23 +25,14 @@ from station.plan.motion import reachable_points
 from station.plan.steps import build_plan
 from station.rundir.journal import read_journal
 
-BASE: dict[str, Any] = {
-    "controller": {"speed_mm_s": 100.0, "accel_mm_s2": 1000.0},
-    "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],
-    "setups": [
-        {"leg": "x", "indicators": {"A": "y", "B": "z"}},
-        {"leg": "y", "indicators": {"A": "x", "B": "-z"}},
-        {"leg": "z", "indicators": {"A": "x", "B": "y"}},
-    ],
-    "procedure": {"cycles": 2, "readings": 3},
-}
+# The builders' station on a slow controller, two cycles of three readings.
+CONTROLLER: dict[str, Any] = {"speed_mm_s": 100.0, "accel_mm_s2": 1000.0}
+PROCEDURE: dict[str, Any] = {"cycles": 2, "readings": 3}
 WIDE = ([0.0, 0.0, 0.0], [1000.0, 1000.0, 1000.0])
 
 
 def config(**controller: Any) -> StationConfig:
-    data = copy.deepcopy(BASE)
-    data["controller"].update(controller)
-    return parse_config(data)
+    return station_config(controller={**CONTROLLER, **controller}, procedure=PROCEDURE)
 
 
 class Clock:
@@ -210,7 +199,7 @@ def test_motion_comes_from_the_profile_unless_the_config_says() -> None:
     assert motion_model(config(profile="iai-pcon-direct")) == "independent"
     with pytest.raises(BadInput, match=r"controller\.profile"):
         motion_model(config(profile="nonesuch"))
-    data = copy.deepcopy(BASE)
+    data = station_data(controller=CONTROLLER, procedure=PROCEDURE)
     data["controller"]["motion"] = "interpolated"
     with pytest.raises(BadInput, match=r"controller\.motion"):
         parse_config(data)
@@ -230,7 +219,7 @@ def test_short_gauge_gets_as_many_waypoints_as_it_needs() -> None:
     # leaves a 1.48 mm swing (inside the stroke, but within the guard's 0.2 mm margin
     # of its end); one placed where the two halves swing alike leaves 1.17 mm: the
     # plan takes that one (and one on Π_x^− → Π0, whose 1.49 mm swing is as close).
-    data = copy.deepcopy(BASE)
+    data = station_data(controller=CONTROLLER, procedure=PROCEDURE)
     data["controller"]["motion"] = "coordinated"
     for ind in data["indicators"]:
         ind.update(stroke_mm=3.0, preload_mm=1.5)
@@ -257,10 +246,6 @@ def test_short_gauge_gets_as_many_waypoints_as_it_needs() -> None:
 
 
 
-def args_for(tmp_path: Path, **extra: Any) -> RunOptions:
-    return simulated(tmp_path / "runs", **extra)
-
-
 def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
         tmp_path: Path, capsys) -> None:
     true_drho = (0.7, -1.1, 0.5)
@@ -276,8 +261,8 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
         station.controller.faults.alarm_after_moves = 1
 
     with pytest.raises(RunFailed) as info:
-        cmd_run.run(args_for(tmp_path, true_drho=true_drho, motion="independent",
-                             hook=alarm))
+        cmd_run.run(simulated(tmp_path / "runs", true_drho=true_drho, motion="independent",
+                              hook=alarm))
     (run_dir,) = list((tmp_path / "runs").iterdir())
     assert "alarm 17" in str(info.value) and f"orthocal resume {run_dir}" in str(info.value)
     plan_text = (run_dir / "plan.txt").read_text()

@@ -4,11 +4,11 @@ naming the indicator, the setup and the posture."""
 
 from __future__ import annotations
 
-import copy
 import itertools
 
 import numpy as np
 import pytest
+from builders import station_config, station_data
 
 import orthocal
 from station.config import StationConfig, parse_config
@@ -16,23 +16,12 @@ from station.errors import BadInput
 from station.plan.checker import check_plan
 from station.plan.steps import Move, Prompt, Read, build_plan
 
-BASE = {
-    "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],
-    "setups": [
-        {"leg": "x", "indicators": {"A": "y", "B": "z"}},
-        {"leg": "y", "indicators": {"A": "x", "B": "-z"}},
-        {"leg": "z", "indicators": {"A": "x", "B": "y"}},
-    ],
-    "procedure": {"cycles": 2, "readings": 3},
-}
+PROCEDURE = {"cycles": 2, "readings": 3}  # the builders' station, two cycles of three
 WIDE = ([0.0, 0.0, 0.0], [1000.0, 1000.0, 1000.0])
 
 
-def config(**changes) -> StationConfig:
-    data = copy.deepcopy(BASE)
-    for key, value in changes.items():
-        data[key] = value
-    return parse_config(data)
+def config(**sections) -> StationConfig:
+    return station_config(procedure=PROCEDURE, **sections)
 
 
 def test_listing_has_every_stop_and_prompt() -> None:
@@ -76,7 +65,7 @@ def test_soft_limit_refusal_names_posture_and_axis() -> None:
 
 
 def test_config_narrows_the_controller_limits() -> None:
-    data = copy.deepcopy(BASE)
+    data = station_data(procedure=PROCEDURE)
     data["controller"] = {"soft_max": [400.0, 400.0, 360.0]}
     cfg = parse_config(data)
     with pytest.raises(BadInput, match=r"Π_z\^\+.*ρ_z"):
@@ -94,7 +83,7 @@ def test_stroke_refusal_names_indicator_setup_and_posture() -> None:
     # Going from Π_x^+ to Π_x^− swings leg x sideways on the way (it is parallel to
     # its axis only where the end point is on the x axis): a gauge already at its
     # stop (preload = stroke) cannot follow, whatever waypoints the plan puts in.
-    data = copy.deepcopy(BASE)
+    data = station_data(procedure=PROCEDURE)
     data["indicators"][1].update(stroke_mm=8.0, preload_mm=8.0)
     data["setups"][0]["indicators"]["B"] = "-z"  # reversed: the swing pushes it in
     cfg = parse_config(data)
@@ -107,7 +96,7 @@ def test_stroke_refusal_names_indicator_setup_and_posture() -> None:
 
 def test_lift_off_refusal_depends_on_mount_sign() -> None:
     # Same leg motion, seen from the other side: no preload lifts off instead.
-    data = copy.deepcopy(BASE)
+    data = station_data(procedure=PROCEDURE)
     data["controller"] = {"motion": "coordinated"}  # a path that swings one way only
     data["indicators"][0].update(stroke_mm=12.5, preload_mm=0.0)
     cfg = parse_config(data)

@@ -14,132 +14,24 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from builders import FAST, CliOutcome, Rig, on_setup
 
 from drivers.sim.station import VirtualStation
-from station.commands import simulation
-from station.commands.cli import main
 from station.engine import devices
 from station.rundir.journal import read_journal
 
 SEED = 11
 TRUE_DRHO = (0.7, -1.1, 0.35)
-PROCEDURE = {"cycles": 2, "readings": 3, "settle_s": 0.0}
 SPEED = "20000"  # mm/s: the virtual machine's moves stay physical but short
-# Short device timeouts keep each lost reply cheap; replies take ~15 ms (9600 baud).
-TIMEOUT_S = 0.25
 STOP = 2  # COMMAND code of a stop in orthocal-generic
 WRITABLE = ("COMMAND", "TARGET_X", "TARGET_Y", "TARGET_Z", "SPEED", "OFFSET_X", "OFFSET_Y",
             "OFFSET_Z")
-
-Prepare = Callable[["Rig", VirtualStation], None]
-
-
-@dataclass
-class Rig:
-    """The virtual stations the command started, and what they were asked to do."""
-
-    stations: list[VirtualStation] = field(default_factory=list)
-    writes: list[tuple[int, int]] = field(default_factory=list)  # (address, words)
-    # the first station's gauges (a closed station forgets them)
-    gauges: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def station(self) -> VirtualStation:
-        return self.stations[0]
-
-
-@dataclass
-class Outcome:
-    code: int
-    out: str
-    err: str
-    rig: Rig
-    out_dir: Path
-
-    @property
-    def run_dir(self) -> Path:
-        (run_dir,) = [p for p in self.out_dir.iterdir() if p.is_dir()]
-        return run_dir
-
-    @property
-    def journal(self) -> list[dict[str, Any]]:
-        return read_journal(self.run_dir / "journal.jsonl")
-
-    def failure_lines(self) -> list[str]:
-        return [ln for ln in self.err.splitlines() if ln.startswith("orthocal: failed")]
-
-
-def on_setup(station: VirtualStation, number: int, action: Callable[[], None]) -> None:
-    """Run ``action`` when the operator mounts the gauges of the ``number``-th setup
-    (1-based, counted across measurement and verification): a fault mid-run."""
-    mount = station.mount
-    seen: dict[str, Any] = {"leg": None, "setups": 0}
-
-    def wrapped(name: str, leg: str, direction: str) -> None:
-        if leg != seen["leg"]:
-            seen["leg"] = leg
-            seen["setups"] += 1
-            if seen["setups"] == number:
-                action()
-        mount(name, leg, direction)
-
-    station.mount = wrapped  # type: ignore[method-assign]
-
-
-@pytest.fixture
-def orthocal(tmp_path: Path, monkeypatch, capsys) -> Iterator[Callable[..., Outcome]]:
-    """``orthocal(*argv, prepare=fn)`` runs the CLI; ``prepare(rig, station)`` gets
-    every virtual station the command starts (run, then resume or rollback)."""
-
-    def invoke(*argv: str, prepare: Prepare | None = None, out_dir: Path | None = None,
-               rig: Rig | None = None) -> Outcome:
-        rig = rig if rig is not None else Rig()
-        real_start = simulation.start_station
-
-        def start(params: dict[str, Any], nvram: Path | None) -> VirtualStation:
-            station = real_start(params, nvram)
-            rig.stations.append(station)
-            if not rig.gauges:
-                rig.gauges = dict(station.indicators)
-            describe = station.config
-
-            def config() -> dict[str, Any]:
-                c = describe()
-                c["controller"]["timeout_s"] = TIMEOUT_S
-                for ind in c["indicators"]:
-                    ind["timeout_s"] = TIMEOUT_S
-                return c
-
-            station.config = config  # type: ignore[method-assign]
-            write = station.controller._write
-
-            def record(start: int, address: int, values: list[int], registers: list[int]):
-                rig.writes.append((address, len(values)))
-                return write(start, address, values, registers)
-
-            station.controller._write = record  # type: ignore[method-assign]
-            if prepare is not None:
-                prepare(rig, station)
-            return station
-
-        monkeypatch.setattr(simulation, "start_station", start)
-        out_dir = out_dir if out_dir is not None else tmp_path / "runs"
-        try:
-            code = main(list(argv))
-        except SystemExit as exc:  # argparse reports usage errors by exiting 2
-            code = exc.code if isinstance(exc.code, int) else 1
-        monkeypatch.setattr(simulation, "start_station", real_start)
-        out, err = capsys.readouterr()
-        return Outcome(code, out, err, rig, out_dir)
-
-    yield invoke
 
 
 def run_args(tmp_path: Path, *extra: str, procedure: dict[str, Any] | None = None,
@@ -149,7 +41,7 @@ def run_args(tmp_path: Path, *extra: str, procedure: dict[str, Any] | None = Non
     return ["run", "--simulate", "--seed", str(SEED), "--true-drho",
             ",".join(str(v) for v in drho), "--mount-error", "0",
             "--out", str(tmp_path / "runs"),
-            "--sim-speed", SPEED, "--sim-procedure", json.dumps(procedure or PROCEDURE),
+            "--sim-speed", SPEED, "--sim-procedure", json.dumps(procedure or FAST),
             *extra]
 
 
@@ -235,7 +127,7 @@ def test_transient_faults_are_retried_journaled_and_give_the_right_answer(
     assert errors_a.count("no reply") >= 2 and "gauge error" in errors_a
     assert len(errors_b) >= 3  # two garbled, one late
     assert result["timing"]["retries"] == len(retries)
-    assert lost_readings(records, PROCEDURE["readings"]) == 0
+    assert lost_readings(records, FAST["readings"]) == 0
     # nothing was written outside the register map's writable registers
     m = station.controller.map
     allowed = {a for name in WRITABLE
@@ -288,7 +180,10 @@ PERSISTENT = {
 }
 
 
-@pytest.mark.parametrize("name", list(PERSISTENT))
+# A deadline is the subject of "move too slow": its machine at real time (conftest).
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=pytest.mark.real_time) if n == "move too slow" else n
+    for n in PERSISTENT])
 def test_persistent_fault_stops_axes_keeps_journal_one_line_exit_1(
         tmp_path: Path, orthocal, name: str) -> None:
     inject, device, what, stop_reaches_drive = PERSISTENT[name]
@@ -320,8 +215,8 @@ def test_persistent_fault_stops_axes_keeps_journal_one_line_exit_1(
         assert any(r["type"] == "event" and r["event"].get("event") == "stop-failed"
                    for r in records)
     # the first setup's cycles were measured before the fault and are all kept
-    assert sum(1 for r in records if r["type"] == "cycle") >= PROCEDURE["cycles"]
-    assert lost_readings(records, PROCEDURE["readings"]) == 0
+    assert sum(1 for r in records if r["type"] == "cycle") >= FAST["cycles"]
+    assert lost_readings(records, FAST["readings"]) == 0
     assert json.loads((o.run_dir / "result.json").read_text())["status"] == "failed"
     assert not any(r["type"] == "writeback" for r in records)
 
@@ -340,7 +235,7 @@ def test_after_a_persistent_fault_resume_finishes(tmp_path: Path, orthocal, name
     assert result["status"] == "ok"
     assert_right_answer(result)
     assert (failed.run_dir / "journal.jsonl").read_bytes().startswith(before)
-    assert lost_readings(o.journal, PROCEDURE["readings"]) == 0
+    assert lost_readings(o.journal, FAST["readings"]) == 0
 
 
 # --- write-back ------------------------------------------------------------------------
@@ -489,7 +384,7 @@ def test_a_knock_on_the_stand_is_rejected_and_recorded(tmp_path: Path, orthocal)
 
     # The knocks are placed by counting the gauge's readings at stops: without the
     # plunger guard's readings during the first cycle's moves.
-    procedure = {**PROCEDURE, "cycles": 3, "readings": 5, "plunger_guard": False}
+    procedure = {**FAST, "cycles": 3, "readings": 5, "plunger_guard": False}
     o = orthocal(*run_args(tmp_path, "--json", procedure=procedure), prepare=prepare)
     assert o.code == 0, o.err
     result = json.loads(o.out)
@@ -557,7 +452,7 @@ def test_bad_arguments_exit_2_naming_them(tmp_path: Path, orthocal, argv: list[s
 # --- a torn journal, reopened ----------------------------------------------------------
 
 
-def _failed_run_with_torn_journal(tmp_path: Path, orthocal) -> tuple[Rig, Outcome, bytes]:
+def _failed_run_with_torn_journal(tmp_path: Path, orthocal) -> tuple[Rig, CliOutcome, bytes]:
     """A run stopped by an alarm, whose journal then gets half a record, as a
     kill -9 in the middle of a write leaves it."""
     rig = Rig()
@@ -587,7 +482,7 @@ def test_torn_journal_survives_a_retry_before_the_resume_is_journaled(
 def test_torn_journal_survives_a_rollback(tmp_path: Path, orthocal) -> None:
     rig = Rig()
     # killed as it journaled the end of the run: the last record is torn
-    done = orthocal(*run_args(tmp_path, procedure={**PROCEDURE, "verify": False}), rig=rig)
+    done = orthocal(*run_args(tmp_path, procedure={**FAST, "verify": False}), rig=rig)
     assert done.code == 0, done.err
     path = done.run_dir / "journal.jsonl"
     lines = path.read_bytes().splitlines(keepends=True)

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_reliability import Rig, on_setup, orthocal  # noqa: F401  (fixture)
+from builders import FAST, Rig, on_setup
 
 from drivers.sim.station import VirtualStation
 from station.config import dump_toml, parse_config
@@ -28,13 +28,12 @@ from station.rundir.journal import Journal, read_journal
 ROOT = Path(__file__).resolve().parent.parent
 SEED = 5
 TRUE_DRHO = "0.6,-0.9,0.4"
-PROCEDURE = {"cycles": 2, "readings": 3, "settle_s": 0.0}
 SPEED = "20000"
 
 
 def argv(out: Path, *extra: str) -> list[str]:
     return ["run", "--simulate", "--seed", str(SEED), "--true-drho", TRUE_DRHO, "--noise", "0",
-            "--out", str(out), "--sim-speed", SPEED, "--sim-procedure", json.dumps(PROCEDURE),
+            "--out", str(out), "--sim-speed", SPEED, "--sim-procedure", json.dumps(FAST),
             *extra]
 
 
@@ -85,7 +84,7 @@ def _cut_power(rig: Rig, station: VirtualStation, setup: int = 2, lose: bool = T
 
 
 def test_power_cut_ends_the_run_saying_home_then_resume_homes_and_gives_the_result(
-        tmp_path: Path, orthocal, reference) -> None:  # noqa: F811
+        tmp_path: Path, orthocal, reference) -> None:
     rig = Rig()
     o = orthocal(*argv(tmp_path / "runs"), rig=rig, prepare=_cut_power)
     assert o.code == 1, o.err
@@ -120,7 +119,7 @@ def test_power_cut_ends_the_run_saying_home_then_resume_homes_and_gives_the_resu
 
 
 def test_a_reference_moved_by_homing_redoes_the_interrupted_setup(
-        tmp_path: Path, orthocal) -> None:  # noqa: F811
+        tmp_path: Path, orthocal) -> None:
     rig = Rig()
     o = orthocal(*argv(tmp_path / "runs"), rig=rig, prepare=_cut_power)
     assert o.code == 1
@@ -143,12 +142,12 @@ def test_a_reference_moved_by_homing_redoes_the_interrupted_setup(
     i = records.index(redo)
     again = [x for x in records[i:] if x["type"] == "cycle" and x["setup"] == setup
              and x["phase"] == redo["phase"]]
-    assert [x["cycle"] for x in again][:PROCEDURE["cycles"]] == [1, 2]
+    assert [x["cycle"] for x in again][:FAST["cycles"]] == [1, 2]
     assert json.loads(r.out)["status"] == "ok"
 
 
 def test_a_network_drop_with_the_reference_kept_is_ridden_out(
-        tmp_path: Path, orthocal, reference) -> None:  # noqa: F811
+        tmp_path: Path, orthocal, reference) -> None:
     o = orthocal(*argv(tmp_path / "runs", "--json"),
                  prepare=lambda rig, st: _cut_power(rig, st, lose=False, off_s=0.5))
     assert o.code == 0, o.err
@@ -162,7 +161,7 @@ def test_a_network_drop_with_the_reference_kept_is_ridden_out(
 
 
 def test_a_gauge_pulled_and_plugged_back_is_reopened_and_the_run_goes_on(
-        tmp_path: Path, orthocal, reference) -> None:  # noqa: F811
+        tmp_path: Path, orthocal, reference) -> None:
     def pull(rig: Rig, station: VirtualStation) -> None:
         if len(rig.stations) == 1:
             on_setup(station, 2, lambda: station.indicators["A"].unplug_for(0.8))
@@ -178,7 +177,7 @@ def test_a_gauge_pulled_and_plugged_back_is_reopened_and_the_run_goes_on(
 
 
 def test_a_resume_started_while_the_port_is_gone_waits_for_it(
-        tmp_path: Path, orthocal, reference) -> None:  # noqa: F811
+        tmp_path: Path, orthocal, reference) -> None:
     rig = Rig()
     o = orthocal(*argv(tmp_path / "runs"), rig=rig, prepare=_cut_power)
     assert o.code == 1
@@ -241,6 +240,7 @@ def test_a_full_disk_stops_the_run_and_resume_finishes_it(tmp_path: Path, refere
 HOLDER = r"""
 import sys
 from station.rundir.lock import acquire
+
 lock = acquire("tcp", "127.0.0.1", int(sys.argv[1]), 1, command="run", run_dir=sys.argv[2])
 print("held", flush=True)
 sys.stdin.readline()
@@ -248,9 +248,9 @@ sys.stdin.readline()
 
 
 def test_a_second_station_on_the_same_machine_is_refused_at_once(
-        tmp_path: Path, orthocal) -> None:  # noqa: F811
+        tmp_path: Path, orthocal) -> None:
     with VirtualStation(true_drho=(0.3, 0.2, -0.1), noise_mm=0.0,
-                        procedure=PROCEDURE) as station:
+                        procedure=FAST) as station:
         config = parse_config(station.config(), "test")
         cfg = tmp_path / "station.toml"
         cfg.write_text(dump_toml(config))
@@ -292,7 +292,7 @@ def test_a_second_station_on_the_same_machine_is_refused_at_once(
 
 
 def test_a_run_on_a_controller_that_lost_its_reference_homes_it_first(
-        tmp_path: Path, orthocal, reference) -> None:  # noqa: F811
+        tmp_path: Path, orthocal, reference) -> None:
     def unhomed(rig: Rig, station: VirtualStation) -> None:
         # Power was lost before the run: the count restarted at 0 on every axis.
         station.machine.power_cycle([0.0, 0.0, 0.0])

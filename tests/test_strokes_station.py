@@ -3,7 +3,6 @@ simulated run (with a fault and a resume) through intermediate stops Π_i(s)."""
 
 from __future__ import annotations
 
-import copy
 import json
 import signal
 import subprocess
@@ -12,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from builders import simulated
+from builders import FAST, simulated, station_data
 
 import orthocal
 from station.commands import run as cmd_run
@@ -22,21 +21,12 @@ from station.plan.checker import check_plan
 from station.plan.steps import Move, Read, build_plan
 from station.rundir.journal import read_journal
 
-BASE = {
-    "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],
-    "setups": [
-        {"leg": "x", "indicators": {"A": "y", "B": "z"}},
-        {"leg": "y", "indicators": {"A": "x", "B": "-z"}},
-        {"leg": "z", "indicators": {"A": "x", "B": "y"}},
-    ],
-    "procedure": {"cycles": 2, "readings": 3},
-}
 WIDE = ([0.0, 0.0, 0.0], [1000.0, 1000.0, 1000.0])
 STROKES = [-50.0, 60.0, 30.0, -100.0]
 
 
 def config(strokes: list[float] | None = None, **machine: float):
-    data = copy.deepcopy(BASE)
+    data = station_data(procedure={"cycles": 2, "readings": 3})
     if strokes is not None:
         data["procedure"]["strokes"] = strokes
     if machine:
@@ -98,13 +88,13 @@ def test_plan_check_refuses_a_stroke_outside_the_soft_limits() -> None:
     assert "Π_z(-50)" in str(info.value) and "soft limits" in str(info.value)
 
 
-FAST = {"cycles": 2, "readings": 3, "settle_s": 0.0, "strokes": STROKES}
+PROCEDURE = {**FAST, "strokes": STROKES}
 TRUE_DRHO = (0.7, -1.1, 0.5)
 
 
 def run_argv(out: Path) -> list[str]:
     return ["run", "--simulate", "--seed", "11", "--true-drho", ",".join(map(str, TRUE_DRHO)),
-            "--noise", "0", "--sim-procedure", json.dumps(FAST), "--sim-speed", "20000",
+            "--noise", "0", "--sim-procedure", json.dumps(PROCEDURE), "--sim-speed", "20000",
             # stands exact: one write-back, the two phases counted below (issue 10)
             "--mount-error", "0", "--yes", "--json", "--out", str(out)]
 
@@ -112,7 +102,7 @@ def run_argv(out: Path) -> list[str]:
 def test_simulated_run_with_strokes(tmp_path: Path, capsys) -> None:
     """Every stroke in the deviations, the journal and the report; the offsets
     come back and the verification is at the noise level."""
-    args = simulated(tmp_path / "runs", seed=11, true_drho=TRUE_DRHO, procedure=FAST,
+    args = simulated(tmp_path / "runs", seed=11, true_drho=TRUE_DRHO, procedure=PROCEDURE,
                      mount_error=0.0)  # one write-back
     assert cmd_run.run(args) == 0
     result = json.loads(capsys.readouterr().out)

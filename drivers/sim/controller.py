@@ -417,7 +417,10 @@ class SimController(DriveRegisters):
                     self.faults.power_cut_after_moves = None
                     self._cut_moves_done = 0
                     f = self.faults
-                    self._spawn_cut(f.power_cut_s, f.power_cut_count_mm, duration_s / 2,
+                    # halfway in real seconds (the machine's clock may run faster);
+                    # power_cut_s is real time: how long the station cannot reach it
+                    self._spawn_cut(f.power_cut_s, f.power_cut_count_mm,
+                                    duration_s / 2 / m.time_scale,
                                     f.power_cut_loses_reference)
                 else:
                     self._cut_moves_done += 1

@@ -10,7 +10,10 @@ What a pty does not do, the simulator emulates:
 * line time: a pty delivers at memory speed whatever the baud rate, so with
   ``baud`` set a request counts as arrived only once its characters would
   have crossed the line, and the reply leaves one character per character
-  time (10 or 11 bit-times each, from the protocol's framing);
+  time (10 or 11 bit-times each, from the protocol's framing), divided by
+  ``time_scale`` for a gauge of a virtual station on a faster clock (late
+  replies, ``late_s``, and unplugging times stay real: they are measured
+  against the driver's real timeouts);
 * faults (:class:`IndicatorFaults`, changeable while running, drawn from a
   seeded RNG so a failing run can be replayed).
 
@@ -116,6 +119,7 @@ class SimIndicator:
         stroke_mm: float | None = None,
         preload_mm: float | None = None,
         link: str | os.PathLike[str] | None = None,
+        time_scale: float = 1.0,
     ) -> None:
         self.protocol = make_protocol(protocol) if isinstance(protocol, str) else protocol
         if self.protocol.reply_format is None:
@@ -126,6 +130,8 @@ class SimIndicator:
             raise ValueError("resolution_mm must be > 0 and noise_mm >= 0")
         if baud is not None and baud <= 0:
             raise ValueError("baud must be positive")
+        if not time_scale > 0:
+            raise ValueError("time_scale must be > 0")
         self.name = name
         self.noise_mm = noise_mm
         self.resolution_mm = resolution_mm
@@ -141,7 +147,8 @@ class SimIndicator:
         self.preload_mm = (stroke_mm / 2.0 if preload_mm is None and stroke_mm is not None
                            else preload_mm)
         self.clamped = 0
-        self._char_s = self.protocol.bits_per_char / baud if baud else 0.0
+        self.time_scale = float(time_scale)
+        self._char_s = self.protocol.bits_per_char / baud / self.time_scale if baud else 0.0
         self._rng = random.Random(seed)
         self._lock = threading.Lock()  # source/zero against the simulator thread
         self._source: Source | None = source

@@ -25,11 +25,15 @@ or its two names), run from :mod:`drivers.sim.motion`; everything the
 carriages do is handed to ``segment_listeners`` as
 :class:`~drivers.sim.motion.Segment` pieces as it ends.
 State is evaluated lazily from a clock, so the machine needs no thread of its
-own; every public method is thread-safe.
+own; every public method is thread-safe. The clock may run faster than real time
+(``time_scale``, :func:`scaled_clock`): a move then takes its duration in clock
+seconds and that divided by the scale in real ones, and nothing else changes —
+what the test of a whole calibration waits for, where real time proves nothing.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -55,6 +59,16 @@ from orthocal import Geometry
 ALARM_NOT_HOMED = 83
 
 
+def scaled_clock(scale: float) -> Callable[[], float]:
+    """time.monotonic(), from now on running ``scale`` times faster (1: itself)."""
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"time scale must be finite and > 0, got {scale}")
+    if scale == 1.0:
+        return time.monotonic
+    t0 = time.monotonic()
+    return lambda: t0 + (time.monotonic() - t0) * scale
+
+
 @dataclass(frozen=True)
 class MachineStatus:
     homed: bool
@@ -75,7 +89,11 @@ class VirtualOrthoglide:
     delivery (o_initial). ``start``: initial controller positions ρ (default Π0).
     ``motion``: a :class:`DriveMotion`, or "coordinated" / "independent"
     (:meth:`DriveMotion.named`); ``accel_mm_s2`` is the acceleration of every axis
-    the drive motion gives none for.
+    the drive motion gives none for. ``clock``: the machine's time (a stepped one
+    in tests that follow a move instant by instant); without one, real time
+    running ``time_scale`` times faster (:func:`scaled_clock`). ``time_scale``
+    stays readable: who turns the machine's durations into real waits (the
+    simulated controller's faults "halfway through a move") divides by it.
 
     ``segment_listeners`` are called with each :class:`Segment` as it ends and
     ``move_listeners`` with (move number, start time, duration) as a move starts,
@@ -98,8 +116,9 @@ class VirtualOrthoglide:
         home_position: Sequence[float] | None = None,
         homed: bool = True,
         in_position_band_mm: float = 0.001,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] | None = None,
         motion: str | DriveMotion = "coordinated",
+        time_scale: float = 1.0,
     ) -> None:
         self.geometry = geometry or Geometry()
         if true_params is not None:
@@ -117,7 +136,11 @@ class VirtualOrthoglide:
         self.drive = motion if isinstance(motion, DriveMotion) else DriveMotion.named(motion)
         self._speed = float(speed_mm_s)
         self._band = float(in_position_band_mm)
-        self._clock = clock
+        if not (math.isfinite(time_scale) and time_scale > 0):
+            raise ValueError(f"time_scale must be finite and > 0, got {time_scale}")
+        #: Clock seconds per real second (1 for a custom ``clock``, unless told).
+        self.time_scale = float(time_scale)
+        self._clock = clock if clock is not None else scaled_clock(self.time_scale)
         self._lock = threading.RLock()
         pi0 = orthocal.posture("0", None, self.geometry)
         rho0 = _vec(start, 3, "start") if start is not None else pi0

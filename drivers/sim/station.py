@@ -36,12 +36,23 @@ interpolates, nothing otherwise (the profile's default, any timing), and the
 Out of stroke (:attr:`VirtualStation.out_of_stroke`) is counted from the
 machine's trajectory, not only from the readings, and a stand can be knocked
 (:meth:`VirtualStation.knock`): :mod:`drivers.sim.strokes`.
+
+Time (``time_scale``): the whole station may run on a faster clock — the
+machine's moves take their durations in its clock's seconds, that divided by the
+scale in real ones, and the gauges' line time is as many times shorter — where
+real time proves nothing (a whole calibration in a test: the readings at the
+stops and every count do not depend on it). What is measured against the
+station's real timeouts stays real: late and dropped replies, unplugging, power
+cuts. Not given, it is ``ORTHOCAL_SIM_TIME_SCALE`` from the environment (default
+1, real time): how the tests run every virtual station at once, those of
+``orthocal run --simulate`` and ``orthocal sim`` in a subprocess included.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import tempfile
 import zlib
@@ -86,6 +97,22 @@ DEFAULT_PROCEDURE: dict[str, Any] = {
 
 
 MOUNTS_NAME = "sim_gauges.json"
+#: The environment's time scale for a station given none (module docstring, "Time").
+TIME_SCALE_ENV = "ORTHOCAL_SIM_TIME_SCALE"
+
+
+def default_time_scale() -> float:
+    """``ORTHOCAL_SIM_TIME_SCALE`` (a number > 0), 1 when unset or empty."""
+    text = os.environ.get(TIME_SCALE_ENV, "").strip()
+    if not text:
+        return 1.0
+    try:
+        scale = float(text)
+    except ValueError:
+        scale = math.nan
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"{TIME_SCALE_ENV} must be a number > 0, got {text!r}")
+    return scale
 
 
 class _PersistentMachine(VirtualOrthoglide):
@@ -127,7 +154,10 @@ class VirtualStation:
     (:class:`~drivers.sim.motion.DriveMotion` or its name); ``accel_mm_s2`` what
     the config tells the station, ``drive_accel_mm_s2`` what the drive does if it
     differs; ``clock``: the machine's clock (a stepped one in tests that follow a
-    move instant by instant)."""
+    move instant by instant); ``time_scale``: how many times faster than real time
+    the machine's clock runs (unless ``clock`` is given) and how many times shorter
+    the gauges' line time is (module docstring, "Time"; None: the environment's,
+    :func:`default_time_scale`)."""
 
     def __init__(
         self,
@@ -158,10 +188,15 @@ class VirtualStation:
         controller_options: dict[str, Any] | None = None,
         drive_accel_mm_s2: float | None = None,
         clock: Callable[[], float] | None = None,
+        time_scale: float | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
         self.geometry = geometry or Geometry()
+        scale = default_time_scale() if time_scale is None else float(time_scale)
+        if not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"time_scale must be finite and > 0, got {time_scale}")
+        self.time_scale = scale
         self.protocol = protocol
         self.speed_mm_s = speed_mm_s
         self.accel_mm_s2 = accel_mm_s2
@@ -185,7 +220,7 @@ class VirtualStation:
         self.machine = _PersistentMachine(
             self.geometry, true_drho, true_dl, true_tilt=true_tilt, speed_mm_s=speed_mm_s,
             accel_mm_s2=accel_mm_s2 if drive_accel_mm_s2 is None else drive_accel_mm_s2,
-            motion=motion, **({} if clock is None else {"clock": clock}))
+            motion=motion, clock=clock, time_scale=1.0 if clock is not None else scale)
         # Out-of-stroke accounting and knocks (drivers.sim.strokes).
         self._watch = StrokeWatch(self.machine, self.geometry, self._mounted_gauges)
         if nvram_path is not None:
@@ -218,7 +253,8 @@ class VirtualStation:
                                    seed=None if seed is None else seed * 101 + i, name=name,
                                    stroke_mm=self.strokes[name][0],
                                    preload_mm=self.strokes[name][1],
-                                   link=self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00")
+                                   link=self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00",
+                                   time_scale=scale)
                 sim.unmount()
                 self.indicators[name] = sim
                 sim.start()
