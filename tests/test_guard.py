@@ -16,17 +16,12 @@ from builders import simulated
 
 from drivers.sim.indicators import SimIndicator
 from station.commands import run as cmd_run
-from station.commands.options import RunOptions
 from station.config import parse_config
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker
-from station.plan.guard import PlungerGuard, PlungerGuardStop
+from station.plan.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.plan.steps import build_plan
 from station.rundir.journal import read_journal
-
-
-def args_for(tmp_path: Path, **extra: Any) -> RunOptions:
-    return simulated(tmp_path / "runs", **{"seed": 3, **extra})
 
 
 def test_simulated_gauge_clamps_at_the_ends_of_its_stroke() -> None:
@@ -43,6 +38,8 @@ def test_simulated_gauge_clamps_at_the_ends_of_its_stroke() -> None:
         SimIndicator("mitutoyo", lambda: 0.0, preload_mm=0.3)  # a preload needs a stroke
 
 
+# The guard reads the gauges while the axes move: its runs at real time (conftest).
+@pytest.mark.real_time
 def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -> None:
     # Gauge A is mounted with only 0.3 mm of preload on a machine with large offsets:
     # the signal on the way to Π_x^+ (-0.66 mm) would lift the leg off its plunger.
@@ -58,8 +55,8 @@ def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -
     with pytest.raises(RunFailed) as info:
         # at a real machine's speed (the tests' default virtual machine runs 10 times
         # faster, leaving the guard one or two polls per sub-move)
-        cmd_run.run(args_for(tmp_path, true_drho=(-2.0, -2.0, -2.0), speed=100.0,
-                             hook=short_preload))
+        cmd_run.run(simulated(tmp_path / "runs", seed=3, true_drho=(-2.0, -2.0, -2.0),
+                              speed=100.0, hook=short_preload))
     message = str(info.value)
     (run_dir,) = list((tmp_path / "runs").iterdir())
     assert "\n" not in message
@@ -80,8 +77,9 @@ def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -
     assert json.loads((run_dir / "result.json").read_text())["status"] == "failed"
 
 
+@pytest.mark.real_time
 def test_guard_leaves_a_normal_run_alone(tmp_path: Path, capsys) -> None:
-    code = cmd_run.run(args_for(tmp_path, true_drho=(1.5, -1.8, 1.2)))
+    code = cmd_run.run(simulated(tmp_path / "runs", seed=3, true_drho=(1.5, -1.8, 1.2)))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok"
@@ -196,3 +194,78 @@ def test_guard_poll_stops_on_a_drifting_signal_before_the_end() -> None:
     assert polls == 40 and stops == []
     polls, stops, travel = run(-1.5)
     assert stops == ["stop"] and polls < 40 and travel > -2.0 + 0.2
+
+
+def test_a_step_is_told_from_a_signal_back_where_the_move_began() -> None:
+    # Gauge A's stand slides 5 mm at a fifth of the move Π0 → Π_x^+. Carried along the
+    # move's progress as a signal, that step predicts the plunger far past its stop at
+    # the target, and the guard stops the axes. Back at rest at Π0 the gauge reads
+    # 5 mm more than it did there: same joint positions, so a step. The rest of the move
+    # is re-planned with the step held, not extrapolated (no path could satisfy that:
+    # the run stopped on CI's slower machine); a drifting signal with no step keeps
+    # what the trip predicted.
+    cfg = parse_config({"indicators": [{"name": "A", "port": "/dev/a"}],
+                        "setups": [{"leg": "x", "indicators": {"A": "y"}}],
+                        "controller": {"motion": "coordinated"}})
+    checker = MotionChecker(cfg, ([0, 0, 0], [1000, 1000, 1000]))
+    sp = build_plan(cfg).setups[0]
+    a, b = np.asarray(sp.postures["0"]), np.asarray(sp.postures["+"])
+    path = a + (b - a) * np.linspace(0, 1, 41)[:, None]
+
+    def nominal(p: np.ndarray) -> float:
+        return float(checker.nominal_travel(sp, "A", "y", p[None])[0])
+
+    def run(extra: Any) -> tuple[PlungerGuard, Any, Any, int]:
+        k = [0]
+
+        def read(names: list[str]) -> dict[str, list[float]]:
+            here = path[min(k[0], 40)]
+            value = 10.0 + nominal(here) + extra(min(k[0], 40) / 40)
+            k[0] += 1
+            return {"A": [value]}
+
+        guard = PlungerGuard(cfg, checker, lambda: path[min(k[0], 40)], read,
+                             lambda: None, lambda r: None)
+        guard.mount(sp, "m", {"A": "y"}, {"A": 10.0})
+        guard.at_rest(a, {"A": 10.0})  # Π0 read at rest: the move starts from a stop
+        guard.begin_move(a, [b])
+        poll = guard.watch(a, b, "Π_x^+")
+        assert poll is not None
+        with pytest.raises(PlungerGuardTrip):
+            for _ in range(60):
+                poll()
+        ahead = guard.signal_envelope("+")
+        routed = guard.routed()
+        guard.expect_stop("+")
+        stopped_at = k[0]
+        # the way back to Π0, at rest there: the gauge reads what ``extra`` says at Π0
+        guard.begin_move(path[stopped_at], [a], guard.retreat_signal())
+        guard.at_rest(a, {"A": 10.0 + nominal(a) + extra(stopped_at / 40, back=True)})
+        return guard, ahead, routed, stopped_at
+
+    def step(u: float, back: bool = False) -> float:
+        return 5.0 if back or u >= 0.2 else 0.0
+
+    guard, ahead, routed, _ = run(step)
+    assert ahead["A"][1] > 10.0  # the step, extrapolated: far past the stop (+6.25)
+    signal, shifts = guard.after_retreat("+", routed, ahead)
+    assert shifts == {"A": pytest.approx(5.0, abs=1e-9)}
+    assert signal["A"] == (pytest.approx(5.0, abs=1e-9), pytest.approx(5.0, abs=1e-9))
+    assert guard.stop_signal["+"]["A"] == pytest.approx(5.0, abs=1e-9)
+
+    def drift(u: float, back: bool = False) -> float:
+        return 0.0 if back else 12.0 * u  # a signal of the positions: none at Π0
+
+    guard, ahead, routed, _ = run(drift)
+    signal, shifts = guard.after_retreat("+", routed, ahead)
+    assert shifts == {}
+    assert signal["A"][1] == ahead["A"][1] and signal["A"][1] > 6.25
+    # a sub-move that began at a waypoint (no reading at rest there) has nothing exact
+    # to compare with: what the trip predicted stands
+    guard.begin_move(a, [path[10], b])
+    guard.watch(a, path[10], "Π_x^+ (waypoint 1/1)")
+    assert guard.routed() is not None  # from the stop read at rest
+    guard.watch(path[10], b, "Π_x^+")
+    assert guard.routed() is None
+    signal, shifts = guard.after_retreat("+", None, ahead)
+    assert shifts == {} and signal["A"][1] == ahead["A"][1]

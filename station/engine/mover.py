@@ -189,9 +189,12 @@ class Mover:
         target = np.asarray(step.targets, dtype=float)
         # what the trip predicted at the target, before the way back moves the guard on
         ahead = self.guard.signal_envelope(sign)
+        routed = self.guard.routed()
         self.guard.expect_stop(sign)
         back = self._leg_start
-        if back is not None and np.max(np.abs(back - here)) > 1e-3:
+        # at rest where the sub-move began: the trip came at once, or the way back held
+        returned = back is not None and np.max(np.abs(back - here)) <= 1e-3
+        if back is not None and not returned:
             try:
                 retreat = self._replan(here, back, step.label, self.guard.retreat_signal())
             except BadInput:
@@ -200,8 +203,16 @@ class Mover:
                 record["back_to"] = [float(v) for v in back]
                 self._sub_moves(step, retreat, watched=True)  # a trip here: caught by _move
                 here, means = self._at_rest_after_stop()
-        signal = {n: (now, ahead[n][1]) for n, (now, _) in
-                  self.guard.signal_envelope(sign).items()}
+                returned = True
+        if returned:
+            # Where the sub-move began, a gauge that reads otherwise than it did there
+            # had its zero moved; what the trip extrapolated from that step is dropped.
+            signal, shifts = self.guard.after_retreat(sign, routed, ahead)
+            if shifts:
+                record["zero_shift_mm"] = shifts
+        else:
+            signal = {n: (now, ahead[n][1]) for n, (now, _) in
+                      self.guard.signal_envelope(sign).items()}
         record["signal_mm"] = {n: list(v) for n, v in signal.items()}
         try:
             legs = self._replan(here, target, step.label, signal)

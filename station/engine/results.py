@@ -69,6 +69,9 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
         "not_identifiable": orthocal.cannot_identify(
             ident.keys, config.machine.geometry(), "full+tilt"),
         "deviations_rms_mm": float(np.sqrt(np.mean(means**2))) if means.size else None,
+        # Where each indicator stand was, mm off the leg's middle (L/2), when the
+        # stands were modelled (orthocal.stands): the operator learns where each stood.
+        "stands": {name: est.to_dict() for name, est in ident.stands.items()} or None,
         "setups": [{"leg": o.leg, "indicators": o.indicators, "cycles_used": o.cycles_used,
                     "cycles_max": o.cycles_max, "repeats": o.repeats, "flagged": o.flagged,
                     "spread_mm": o.spread_mm} for o in m.setups],
@@ -80,8 +83,10 @@ def guard_fields(records: list[dict[str, Any]]) -> dict[str, Any]:
     each time it stopped the axes, how the run went on, and the cycles taken again."""
     events = [r["event"] for r in records if r.get("type") == "event"
               and isinstance(r.get("event"), dict)]
+    # zero_shift_mm: only where the way back found a gauge's zero moved (a step)
     recovered = [{k: e.get(k) for k in ("where", "move", "indicator", "waypoints",
-                                        "speed_mm_s")}
+                                        "speed_mm_s", "zero_shift_mm") if k in e
+                  or k != "zero_shift_mm"}
                  for e in events if e.get("event") == "plunger-guard-recovery"
                  and e.get("result") == "recovered"]
     return {"stops": sum(1 for e in events if e.get("event") == "plunger-guard"),

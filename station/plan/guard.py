@@ -56,6 +56,10 @@ QUIET_MM = 0.05
 MIN_PROGRESS = 0.15
 # Positions within this of the sub-move's target: the axes have arrived.
 ARRIVED_MM = 0.002
+# A gauge whose signal, back where the interrupted sub-move began, differs from
+# what it was there by more than this (or the config's repeatability) had its zero
+# moved: the same joint positions, so the smooth part of the signal is the same.
+ZERO_STEP_MM = 0.01
 
 
 
@@ -85,6 +89,7 @@ class _Gauge:
     start_signal: float = 0.0  # at the stop the current move started from
     end_signal: float = 0.0  # predicted at the move's target by the last poll
     prior_slope: float = 0.0  # the signal's change over the move, as it was routed
+    leg_signal: float = 0.0  # where the sub-move in progress began
     rest_nominal: float = 0.0  # nominal travel where the last at_rest was taken
     samples: list[tuple[float, float]] = field(default_factory=list)  # (progress, Δsignal)
 
@@ -112,6 +117,8 @@ class PlungerGuard:
         self.margin = config.procedure.plunger_margin_mm
         self._move_margin = self.margin
         self._shifted = False
+        # the sub-move in progress began at a stop read at rest (its leg_signal exact)
+        self._at_rest = self._leg_exact = False
         self._checker = checker
         self._nominal = checker.nominal_travel  # (setup, name, direction, path) -> travel
         self._positions = positions
@@ -152,6 +159,8 @@ class PlungerGuard:
         self._shifted = False
         self.slack = np.inf
         self._move_margin = self.margin
+        # the mounting point is read at rest at Π0 (its signal 0 by definition)
+        self._at_rest, self._leg_exact = True, False
         self.watching = self.enabled and bool(self._gauges)
 
     @property
@@ -227,6 +236,11 @@ class PlungerGuard:
         names = list(self._gauges)
         mounting = self._mounting()
         arrived = [False]
+        for g in self._gauges.values():
+            g.leg_signal = g.signal
+        # Exact only where the sub-move starts from a stop read at rest (at_rest): at a
+        # waypoint it is the last poll's estimate, which may not have seen the arrival.
+        self._leg_exact, self._at_rest = self._at_rest, False
 
         def poll() -> None:
             if arrived[0]:
@@ -287,6 +301,46 @@ class PlungerGuard:
         return {name: (g.signal, known.get(name, g.end_signal))
                 for name, g in self._gauges.items()}
 
+    def routed(self) -> dict[str, tuple[float, float]] | None:
+        """Per gauge, before a trip's way back re-routes the guard: (the signal where
+        the interrupted sub-move began, the signal at the move's target it was routed
+        with); :meth:`after_retreat` compares the first with what the gauge shows
+        there again. None where the sub-move did not begin at a stop read at rest
+        (nothing exact to compare with)."""
+        if not self._leg_exact:
+            return None
+        return {name: (g.leg_signal, g.start_signal + g.prior_slope)
+                for name, g in self._gauges.items()}
+
+    def after_retreat(self, sign: str | None,
+                      routed: Mapping[str, tuple[float, float]] | None,
+                      ahead: Mapping[str, tuple[float, float]]
+                      ) -> tuple[dict[str, tuple[float, float]], dict[str, float]]:
+        """Back at rest where the interrupted sub-move began: the signal the rest of the
+        move is re-planned with, per gauge (now, at the target), and the zero shifts
+        found. At the same joint positions the smooth part of the signal is what it
+        was, so a difference is a step (a knocked stand, a slipped plunger): the
+        slope the trip extrapolated then mixed the step into the progress and says
+        nothing of the target; the target gets the signal the move was routed with
+        plus the step. A gauge with no step keeps what the trip predicted
+        (``ahead``: signal_envelope before the way back)."""
+        limit = max(ZERO_STEP_MM, self.config.procedure.repeatability_mm)
+        signal: dict[str, tuple[float, float]] = {}
+        shifts: dict[str, float] = {}
+        for name, g in self._gauges.items():
+            end = ahead[name][1]
+            if routed is not None and name in routed:
+                shift = g.signal - routed[name][0]
+                if abs(shift) > limit:
+                    shifts[name] = shift
+                    end = routed[name][1] + shift
+            signal[name] = (g.signal, end)
+        if shifts and sign is not None:
+            expected = self.stop_signal.setdefault(sign, {})
+            for name in shifts:
+                expected[name] = signal[name][1]
+        return signal, shifts
+
     def retreat_signal(self) -> dict[str, tuple[float, float]]:
         """Per gauge, the signal on the way back after a trip: (now, at the stop the
         interrupted move started from)."""
@@ -322,6 +376,7 @@ class PlungerGuard:
         routed with (route_signal)."""
         if not self.watching:
             return
+        self._at_rest = True
         here = np.asarray(position, dtype=float)[None, :]
         for name, g in self._gauges.items():
             if name in means:
