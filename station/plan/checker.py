@@ -25,6 +25,9 @@ MAX_WAYPOINTS = 16
 # A move that starts this close to the start of a route already found reuses its
 # waypoints (the first sub-move is checked again from the actual start).
 START_REUSE_MM = 0.05
+# Sub-move bounds a checker remembers before it starts afresh (a design search
+# bounds tens of thousands; each entry is a few hundred bytes).
+BOUND_CACHE_SIZE = 200_000
 # Added on both sides of a measured signal (station.plan.guard) when a move is routed
 # with it: a reading's noise, the error of carrying it to a stop not yet read.
 SIGNAL_PAD_MM = 0.05
@@ -102,8 +105,12 @@ class MotionChecker:
     after it stopped the axes, with the travel it measured (``signal``)."""
 
     def __init__(self, config: StationConfig,
-                 controller_limits: tuple[Sequence[float], Sequence[float]]) -> None:
+                 controller_limits: tuple[Sequence[float], Sequence[float]],
+                 spread: bool = True) -> None:
+        """``spread`` False: routes with the fewest waypoints as found, not spread for
+        the largest slack (a search that asks only whether a plan holds)."""
         self.config = config
+        self.spread = spread
         self.geometry = config.machine.geometry()
         self.lo, self.hi = effective_limits(config, controller_limits)
         self.motion = motion_model(config)
@@ -112,6 +119,8 @@ class MotionChecker:
         # Routes already found, by (target, mounting, setup): a start within
         # START_REUSE_MM of a cached one reuses its waypoints where all still hold.
         self._routes: dict[tuple, list[tuple[np.ndarray, list[np.ndarray]]]] = {}
+        # Nominal travel bounds of sub-moves already bounded (_segment_bound).
+        self._bounds: dict[tuple, motion.Bound | type[Exception] | None] = {}
 
     def check(self, start: Sequence[float] | None, target: Sequence[float], label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
@@ -164,7 +173,7 @@ class MotionChecker:
             legs = motion.route(
                 lambda a, b, slack, m=kept: self._feasible(gauges, a, b, m + slack, where),
                 start_v, target_v, self.geometry, max_waypoints,
-                max_slack=self._room(gauges, kept))
+                max_slack=self._room(gauges, kept) if self.spread else 0.0)
             if legs is not None:
                 break
         if legs is None:
@@ -242,10 +251,38 @@ class MotionChecker:
         if margin is not None:
             low = gauges.low + margin - sig_lo
             high = gauges.high - margin - sig_hi
-        bound = motion.segment_bound(f, a, b, self.motion, low, high)
+        bound = self._segment_bound(gauges, f, a, b, low, high, where)
         if bound is None:
             return None
         return motion.Bound(bound.lo + sig_lo, bound.hi + sig_hi)
+
+    def _segment_bound(self, gauges: _Gauges, f: Callable[[np.ndarray], np.ndarray],
+                       a: np.ndarray, b: np.ndarray, low: np.ndarray | None,
+                       high: np.ndarray | None, where: str) -> motion.Bound | None:
+        """motion.segment_bound, remembered: the nominal travel of a mounting over a
+        sub-move is a pure function of the leg, its Π0, the gauges and the two ends,
+        and the same sub-moves come back (every cycle, every re-check of a reused
+        route, every candidate of ``orthocal design``'s search)."""
+        def key_of(v: np.ndarray | None) -> bytes | None:
+            return None if v is None else np.asarray(v, dtype=float).tobytes()
+
+        key = (gauges.setup.leg, key_of(np.asarray(gauges.setup.postures["0"])),
+               tuple(gauges.names), tuple(gauges.directions),
+               key_of(a), key_of(b), key_of(low), key_of(high))
+        if key in self._bounds:
+            found = self._bounds[key]
+            if isinstance(found, type):  # it raised: again, for this move's words
+                raise found(where)
+            return found
+        if len(self._bounds) >= BOUND_CACHE_SIZE:
+            self._bounds.clear()
+        try:
+            bound = motion.segment_bound(f, a, b, self.motion, low, high)
+        except (motion.OutsideWorkspace, _NotCrossing) as exc:
+            self._bounds[key] = type(exc)
+            raise
+        self._bounds[key] = bound
+        return bound
 
     def _feasible(self, gauges: _Gauges | None, a: np.ndarray, b: np.ndarray, margin: float,
                   where: str) -> bool:
@@ -423,12 +460,15 @@ def check_plan(
     config: StationConfig,
     controller_limits: tuple[Sequence[float], Sequence[float]],
     start: Sequence[float] | None = None,
+    checker: MotionChecker | None = None,
 ) -> Plan:
     """Refuse (BadInput) a plan that leaves the soft limits or the workspace, or
     that would push a plunger past its stroke or lift it off the leg, anywhere
     along any move; name the posture, setup and indicator. Fills plan.limits and
-    plan.travel. ``start``: the current joint positions, to check the first move."""
-    checker = MotionChecker(config, controller_limits)
+    plan.travel. ``start``: the current joint positions, to check the first move.
+    ``checker``: one made for this config and these limits, shared by the checks of
+    many plans (its bounds remembered; plan.travel then spans all of them)."""
+    checker = checker or MotionChecker(config, controller_limits)
     plan.limits = (checker.lo.tolist(), checker.hi.tolist())
     plan.limits_source = limits_source(config, controller_limits)
     position = None if start is None else np.asarray(start, dtype=float)
