@@ -6,7 +6,10 @@ Only the joint offsets Δρ can be written to a controller. After o_i ← o_i �
 the machine behaves as if its parameters were the identified ones with Δρ
 zeroed: leg-length errors and axis tilts stay and still produce deviations.
 A verification is judged against those predicted deviations, not against zero.
-Works on parameter names, so it holds for any model (PARAM_NAMES).
+Where the offsets aim elsewhere than Δρ = 0 (``target``: the joint errors that
+leave the least tool-point error on a machine with tilted axes, orthocal.accuracy),
+the correction written is Δρ̂ − target and the machine behaves as if its Δρ were
+the target. Works on parameter names, so it holds for any model (PARAM_NAMES).
 """
 
 from __future__ import annotations
@@ -25,18 +28,32 @@ from orthocal.numbers import finite
 WRITABLE: tuple[str, ...] = tuple(f"drho_{a}" for a in AXES)
 
 
-def after_correction(parameters: Mapping[str, float]) -> dict[str, float]:
-    """The machine's parameters once the identified Δρ are written back: the same
-    parameters with every writable one zeroed."""
-    return {n: (0.0 if n in WRITABLE else float(v)) for n, v in parameters.items()}
+def after_correction(parameters: Mapping[str, float],
+                     target: Mapping[str, float] | None = None) -> dict[str, float]:
+    """The machine's parameters once the correction toward ``target`` is written
+    back: the same parameters with every writable one at its target (default 0)."""
+    aim = target or {}
+    return {n: (float(aim.get(n, 0.0)) if n in WRITABLE else float(v))
+            for n, v in parameters.items()}
+
+
+def correction(parameters: Mapping[str, float],
+               target: Mapping[str, float] | None = None) -> dict[str, float]:
+    """What is written for the identified ``parameters``: Δρ̂ − target for each
+    writable one (write-back sets o_i ← o_i − that)."""
+    aim = target or {}
+    return {n: float(v) - float(aim.get(n, 0.0)) for n, v in parameters.items()
+            if n in WRITABLE}
 
 
 def predicted_after_correction(keys: Sequence[Key], geometry: Geometry,
-                               parameters: Mapping[str, float]) -> np.ndarray:
+                               parameters: Mapping[str, float],
+                               target: Mapping[str, float] | None = None) -> np.ndarray:
     """Exact deviations (model (1), :func:`orthocal.deviations`) that a verification
-    should show after writing the Δρ of ``parameters``: zero for a Δρ-only model,
-    the signature of ΔL and tilts otherwise."""
-    return deviations(keys, geometry, params_vector(after_correction(parameters)))
+    should show after writing the correction of ``parameters`` toward ``target``:
+    zero for a Δρ-only model aimed at Δρ = 0, the signature of ΔL, tilts and a
+    non-zero target otherwise."""
+    return deviations(keys, geometry, params_vector(after_correction(parameters, target)))
 
 
 #: The loop's false-alarm rate per value: a machine the last round fixed is
@@ -51,7 +68,7 @@ def significant_corrections(parameters: Mapping[str, float],
                             converge_mm: float, k: float | None = None,
                             previous_std_errors: Mapping[str, float | None] | None = None,
                             dof: float | None = None, previous_dof: float | None = None,
-                            ) -> list[str]:
+                            target: Mapping[str, float] | None = None) -> list[str]:
     """Names of the writable parameters whose value is worth writing again: beyond
     ``k`` standard errors (not noise) AND beyond ``converge_mm`` (not too small to
     matter). A missing or infinite standard error never makes a value significant.
@@ -71,13 +88,15 @@ def significant_corrections(parameters: Mapping[str, float],
     ``previous_dof``, combined by Welch–Satterthwaite): 3.59 for a noise known
     exactly, 3.86 for two rounds of the default three cycles (24 + 24 dof), 4.18
     for two rounds of two cycles. The bias the loop is for (misplaced stands: 10-50
-    µm after one round) stands far beyond that.
+    µm after one round) stands far beyond that. ``target``: the Δρ the offsets aim
+    at (default 0): what counts is the distance from it.
     """
     out = []
+    aim = target or {}
     for name in WRITABLE:
         if name not in parameters:
             continue
-        value = abs(float(parameters[name]))
+        value = abs(float(parameters[name]) - float(aim.get(name, 0.0)))
         se = finite(std_errors.get(name))
         if se is None:
             continue

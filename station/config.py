@@ -37,6 +37,9 @@ class MachineConfig(_Strict):
     leg_length: float = Field(310.25, gt=0, allow_inf_nan=False)
     rho_min: float = Field(-100.0, lt=0, allow_inf_nan=False)
     rho_max: float = Field(60.0, gt=0, allow_inf_nan=False)
+    # The box [[xmin, xmax], [ymin, ymax], [zmin, zmax]] (mm, tool points) over which
+    # accuracy at the tool is stated; default the cube the test postures span.
+    workspace: list[list[float]] | None = Field(None, min_length=3, max_length=3)
 
     @model_validator(mode="after")
     def _within_leg(self) -> MachineConfig:
@@ -44,7 +47,17 @@ class MachineConfig(_Strict):
             raise ValueError("rho_min: must be > -leg_length")
         if self.rho_max >= self.leg_length:
             raise ValueError("rho_max: must be < leg_length")
+        for axis, pair in zip("xyz", self.workspace or [], strict=False):
+            if len(pair) != 2 or not all(math.isfinite(v) for v in pair) \
+                    or not pair[0] < pair[1]:
+                raise ValueError(f"workspace: the {axis} range must be [min, max] with "
+                                 f"min < max, got {pair}")
         return self
+
+    def workspace_box(self) -> list[list[float]]:
+        """The workspace box of accuracy at the tool (mm)."""
+        return [list(map(float, pair)) for pair in self.workspace] if self.workspace \
+            else [[self.rho_min, self.rho_max] for _ in range(3)]
 
     def geometry(self):  # -> orthocal.Geometry (imported lazily: config loads without numpy)
         from orthocal import Geometry
@@ -233,6 +246,10 @@ class ProcedureConfig(_Strict):
     # The stops Π_i(s) of each cycle, mm (model.md "Test postures"); absent: the
     # paper's two, ρmax and ρmin, and every plan, journal and JSON exactly as before.
     strokes: list[float] | None = Field(None, min_length=1, max_length=20)
+    # How far off the leg's middle an indicator stand may be set by eye (mm, uniform
+    # ±): misplaced stands are modelled (orthocal.Stands) so that they are not taken
+    # for tilted axes; 0: the stands are placed exactly, not modelled.
+    stand_tolerance_mm: float = Field(5.0, ge=0, le=50)
 
     @field_validator("strokes")
     @classmethod
@@ -249,6 +266,13 @@ class ProcedureConfig(_Strict):
 
 class WritebackConfig(_Strict):
     max_abs_offset_mm: float = Field(3.0, gt=0)
+    # What the offsets aim at: "joints", the paper's Δρ (legs parallel); "tool", the
+    # offsets that leave the least RMS tool-point error over the workspace in
+    # ``frame`` (design.md, "Accuracy at the tool").
+    objective: Literal["joints", "tool"] = "joints"
+    # How the tool-point error is stated: after fitting away a translation (the tool
+    # offset is set by touching off) or a rigid motion (parts aligned by probing).
+    frame: Literal["translation", "rigid"] = "translation"
 
 
 class StationConfig(_Strict):

@@ -16,13 +16,8 @@ from truth import TRUTH_COVERAGE, assert_truth, drho
 
 from orthocal import coverage_factor
 from station.commands import run as cmd_run
-from station.commands.options import RunOptions
 from station.errors import RunFailed
 from station.rundir.journal import read_journal
-
-
-def args_for(tmp_path: Path, **extra: Any) -> RunOptions:
-    return simulated(tmp_path / "runs", **{"mount_error": 0.0, **extra})
 
 
 def only_run_dir(tmp_path: Path) -> Path:
@@ -51,7 +46,11 @@ def check_recovered(result: dict, true_drho: tuple[float, float, float]) -> None
 @pytest.mark.parametrize("count", [2, 6])
 def test_simulated_run_recovers_hidden_offsets(tmp_path: Path, capsys, count: int) -> None:
     true_drho = (0.8, -1.3, 0.45)
-    code = cmd_run.run(args_for(tmp_path, true_drho=true_drho, indicators=count))
+    # stands exact, and the station told so (stand_tolerance_mm 0: at L/2): the 10 µm
+    # below is then the gauges' noise alone, not a stand's position the prior allows
+    code = cmd_run.run(simulated(tmp_path / "runs", true_drho=true_drho, indicators=count,
+                                 mount_error=0.0,
+                                 procedure={**FAST, "stand_tolerance_mm": 0}))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok" and result["writeback"]["status"] == "written"
@@ -92,8 +91,8 @@ def test_fault_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
     with pytest.raises(RunFailed) as info:
         # The plunger guard's readings during moves draw from the gauges' seeded noise
         # stream; with them this seed's verification lands at 3.5 standard errors.
-        cmd_run.run(args_for(tmp_path, true_drho=true_drho, hook=alarm_soon,
-                             procedure={**FAST, "plunger_guard": False}))
+        cmd_run.run(simulated(tmp_path / "runs", true_drho=true_drho, hook=alarm_soon,
+                              procedure={**FAST, "plunger_guard": False}, mount_error=0.0))
     message = str(info.value)
     run_dir = only_run_dir(tmp_path)
     assert "alarm 17" in message and f"orthocal resume {run_dir}" in message
@@ -127,9 +126,9 @@ def test_adaptive_cycles_stop_early_and_retries_are_journaled(tmp_path: Path, ca
     def flaky(station: Any) -> None:
         station.indicators["A"].faults.drop_next = 2  # two lost replies: retried
 
-    procedure = {"cycles": 4, "readings": 3, "settle_s": 0.0, "target_std_error_mm": 0.01}
-    code = cmd_run.run(args_for(tmp_path, true_drho=(0.3, 0.2, -0.4), procedure=procedure,
-                                hook=flaky))
+    procedure = {**FAST, "cycles": 4, "target_std_error_mm": 0.01}
+    code = cmd_run.run(simulated(tmp_path / "runs", true_drho=(0.3, 0.2, -0.4),
+                                 procedure=procedure, hook=flaky, mount_error=0.0))
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     # 0.01 mm is loose against 0.002 mm noise: two cycles (the minimum) suffice
@@ -158,7 +157,8 @@ def test_ctrl_c_stops_the_axes_and_says_how_to_resume(tmp_path: Path) -> None:
         station.mount = operator_hits_ctrl_c
 
     with pytest.raises(RunFailed) as info:
-        cmd_run.run(args_for(tmp_path, hook=interrupt_second_mount))
+        cmd_run.run(simulated(tmp_path / "runs", hook=interrupt_second_mount,
+                              mount_error=0.0))
     run_dir = only_run_dir(tmp_path)
     assert f"orthocal resume {run_dir}" in str(info.value)
     assert seen["station"].controller.stats.commands.get(2, 0) >= 1  # STOP was sent

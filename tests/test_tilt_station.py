@@ -94,8 +94,9 @@ def test_identify_cli_refuses_auto_without_noise_and_full_tilt_naming_why(tmp_pa
 def test_simulated_tilted_run_with_auto_writes_offsets_within_4_um(tmp_path, capsys):
     true_drho = (1.3, -0.9, 2.1)
     args = simulated(tmp_path / "runs", seed=11, true_drho=true_drho, true_tilt=TILT,
-                     noise=0.001, yes=True, procedure={"settle_s": 0.0},
+                     noise=0.001, yes=True, procedure={"settle_s": 0.0, "stand_tolerance_mm": 0},
                      mount_error=0.0)  # stands exact: their misfit would blur the tilts (issue 10)
+    # (and the station told so: stand_tolerance_mm 0 takes them at L/2, as the paper)
     assert cmd_run.run(args) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok" and result["model"] == "rho+tilt"
@@ -135,8 +136,7 @@ def test_a_tilted_simulated_run_resumes_on_the_same_tilted_machine(tmp_path, cap
 
     true_drho = (-0.6, 0.9, 1.1)
     args = simulated(tmp_path / "runs", seed=3, true_drho=true_drho, true_tilt=TILT,
-                     noise=0.001, yes=True, procedure={"settle_s": 0.0, "cycles": 2, "readings": 3},
-                     hook=alarm_soon)
+                     noise=0.001, yes=True, hook=alarm_soon)
     with pytest.raises(RunFailed):
         cmd_run.run(args)
     (run_dir,) = list((tmp_path / "runs").iterdir())

@@ -40,7 +40,7 @@ from orthocal import AXES
 from orthocal.numbers import finite
 from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
-from station.plan.checker import check_plan, effective_limits
+from station.plan.checker import MotionChecker, check_plan, effective_limits
 from station.plan.steps import Plan, Read, Settle, build_plan
 
 # No controller is contacted: "controller limits" wide open, narrowed by the config.
@@ -203,6 +203,7 @@ def _figures(plan: Plan, config: StationConfig, model: str) -> dict[str, Any]:
         "cannot_separate": [dict(c) for c in q.invisible],
         "in_words": design.describe(q),
         "run_time": run_time(plan, config),
+        "tool_rms_per_um": None,
     }
     if q.identifiable:
         J = design.design_matrix(keys, geometry, model)
@@ -211,15 +212,42 @@ def _figures(plan: Plan, config: StationConfig, model: str) -> dict[str, Any]:
         out["std_error_per_um"] = {n: float(v) for n, v in zip(q.names, se, strict=True)}
         out["d_criterion_log_det"] = float(-np.linalg.slogdet(cov)[1])
         out["a_criterion_trace_cov"] = float(np.trace(cov))
+        out["tool_rms_per_um"] = tool_rms_per_um(config, q.names, cov)
     return out
+
+
+def tool_rms_per_um(config: StationConfig, names: Any, cov: np.ndarray) -> float | None:
+    """What the identification's noise alone leaves at the tool: the expected RMS
+    over the workspace grid of the tool-point error (µm per µm of indicator noise)
+    on a square machine whose offsets were written (objective joints): the field's
+    linear response to the parameters' errors, with this plan's covariance.
+    None where the model has no joint offsets."""
+    from orthocal import PARAM_NAMES
+    from orthocal.accuracy import workspace_grid
+    from orthocal.tool_interval import field_jacobian
+
+    if not any(n.startswith("drho_") for n in names):
+        return None
+    geometry = config.machine.geometry()
+    points = workspace_grid(config.machine.workspace_box(), 7, geometry).points
+    columns = [PARAM_NAMES.index(n) for n in names]
+    G = field_jacobian(points, geometry, np.zeros(len(PARAM_NAMES)), np.zeros(3),
+                       config.writeback.frame, columns)
+    # E|δF|² summed over the grid's 3n components, per point: the mean squared error
+    return float(np.sqrt(np.trace(G @ cov @ G.T) / len(points)))
 
 
 def _feasible(config: StationConfig, limits: tuple[Any, Any]):
     """The plan check of ``orthocal run`` for a set of strokes: soft limits,
     workspace and plunger travel along every move of their plan."""
+    # One checker for every candidate (their plans share most sub-moves); whether a
+    # plan holds does not depend on where its waypoints are spread.
+    checker = MotionChecker(config, limits, spread=False)
+
     def check(strokes: Any) -> bool:
         try:
-            check_plan(build_plan(config, list(np.atleast_1d(strokes))), config, limits)
+            check_plan(build_plan(config, list(np.atleast_1d(strokes))), config, limits,
+                       checker=checker)
         except (BadInput, ValueError):
             return False
         return True
@@ -338,6 +366,9 @@ def format_summary(doc: dict[str, Any]) -> str:
         "  noise gain: SE per unit of deviation noise (orthocal's statistical floor); "
         "SE/µm run: µm (µrad for tilts) per µm of indicator noise for this plan",
         *(f"  {w}" for w in doc["in_words"]),
+        *([f"  at the tool: the identification's noise leaves {doc['tool_rms_per_um']:.2f} µm "
+           "RMS of tool-point error over the workspace per µm of indicator noise (a square "
+           "machine, objective joints)"] if doc.get("tool_rms_per_um") is not None else []),
         f"  predicted run time: {_time(doc['run_time'])}; operator mounting not included",
     ]
     s = doc.get("search")

@@ -63,14 +63,20 @@ def identify_measurement(config: StationConfig, m: Measurement,
             raise
         noise = None
     selection = None
+    # Misplaced stands are modelled so that they are not taken for tilted axes
+    # (orthocal.stands); the linearised system (7) has no stand effect.
+    stands = orthocal.Stands(tolerance=proc.stand_tolerance_mm) \
+        if proc.stand_tolerance_mm > 0 and proc.method == "nonlinear" else None
     try:
         if model != "auto":
-            ident = orthocal.identify(data, geometry, model=model, method=proc.method)
+            ident = orthocal.identify(data, geometry, model=model, method=proc.method,
+                                      sigma=noise[0] if noise and stands else None,
+                                      stands=stands if noise else None)
             test = lack_of_fit(ident, geometry, noise[0], noise[1]) if noise else None
         else:
             sigma, dof, source = noise  # type: ignore[misc]
             sel = orthocal.select_model(data, geometry, sigma, dof, method=proc.method,
-                                        noise_source=source)
+                                        noise_source=source, stands=stands)
             ident, selection = sel.identification, sel.to_dict()
             test = next(t for t in sel.tests if t.model == sel.model)
     except orthocal.IdentificationError as exc:

@@ -8,6 +8,7 @@ station.engine.closed_loop decides the next step from what happened so far (a pu
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from dataclasses import dataclass, field
@@ -17,11 +18,19 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import DeviceError
+from drivers.files import write_atomic
 from orthocal import coverage_factor
-from orthocal.loop import WRITABLE, predicted_after_correction, significant_corrections
+from orthocal.loop import (
+    WRITABLE,
+    correction,
+    predicted_after_correction,
+    significant_corrections,
+)
+from orthocal.numbers import finite
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.console.progress import Progress
+from station.engine import accuracy
 from station.engine.closed_loop import LoopState, next_step
 from station.engine.devices import Devices
 from station.engine.recovery import resume_hint
@@ -39,7 +48,8 @@ from station.engine.writeback import WritebackOutcome, write_back
 from station.errors import BadInput, RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan
-from station.rundir.directory import now_iso
+from station.report.io import jsonable_value
+from station.rundir.directory import MODEL_NAME, now_iso
 from station.rundir.journal import JOURNAL_NAME, Journal, JournalState, read_journal
 
 
@@ -145,6 +155,13 @@ class Flow:
     def __init__(self, ctx: Run, seq: Sequencer, result: dict[str, Any]) -> None:
         self.ctx, self.seq, self.result = ctx, seq, result
         self.idents: list[Any] = []  # identification of each measurement, in order
+        # each round's rho+tilt fit, for the tilts the run states (engine.accuracy)
+        self.tilt_rounds: list[accuracy.RoundTilts] = []
+        # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
+        # the joint errors that leave the least tool error (engine.accuracy)
+        self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
+        self._grid: Any = None
+        self.model: dict[str, Any] | None = None  # model.json, once the run stops
         self.outcomes: list[WritebackOutcome] = []
         self.iterations: list[dict[str, Any]] = result.setdefault("iterations", [])
 
@@ -162,12 +179,14 @@ class Flow:
         if n == 0 and selection is not None:
             self.result["model_selection"] = selection
         self.idents.append(ident)
+        self._tilts_of(phase, m, ident)
         fields = measurement_fields(ctx.config, m, ident)
         prev = self.idents[n - 1] if n else None
         sig = significant_corrections(
             ident.parameters, ident.std_errors, ctx.config.procedure.converge_mm,
             previous_std_errors=prev.std_errors if prev else None,
-            dof=ident.std_error_dof, previous_dof=prev.std_error_dof if prev else None)
+            dof=ident.std_error_dof, previous_dof=prev.std_error_dof if prev else None,
+            target=self.target if n else None)
         self.iterations.append({
             "phase": phase, "model": ident.model, "identified": fields["identified"],
             "std_errors": fields["std_errors"], "std_errors_dof": fields["std_errors_dof"],
@@ -193,7 +212,7 @@ class Flow:
         Δρ of ``before`` are written: ΔL and tilts cannot be, and still show."""
         geometry = self.ctx.config.machine.geometry()
         keys = [split_key(k) for k in fields["deviations"]]  # "+xy", "+30xy"
-        predicted = predicted_after_correction(keys, geometry, before.parameters)
+        predicted = predicted_after_correction(keys, geometry, before.parameters, self.target)
         deviations = {k: {**v, "expected": float(p)} for (k, v), p
                       in zip(fields["deviations"].items(), predicted, strict=True)}
         gaps = [v["mean"] - v["expected"] for v in deviations.values()]
@@ -214,14 +233,19 @@ class Flow:
         ctx = self.ctx
         ident = self.idents[round - 1]
         first = self.outcomes[0] if self.outcomes else None
+        self.target = self._aim()
+        note = self._objective_note(ident)
         outcome = write_back(
-            controller=ctx.devices.controller, identified=dict(ident.parameters),
+            controller=ctx.devices.controller,
+            identified=correction(ident.parameters, self.target), note=note,
             max_abs_offset_mm=ctx.config.writeback.max_abs_offset_mm, run_dir=ctx.run_dir,
             journal=ctx.journal, operator=ctx.operator, prior=ctx.state, round=round,
             offsets_at_start=first.before if first is not None else None)
         self.outcomes.append(outcome)
         self.iterations[round - 1]["offsets_written"] = outcome.written
         self.iterations[round - 1]["writeback"] = outcome.status
+        if ctx.config.writeback.objective != "joints":
+            self.iterations[round - 1]["target_drho"] = dict(self.target)
         if round == 1:
             writeback_fields(self.result, outcome, ctx.devices.controller)
         elif outcome.written is not None:
@@ -238,7 +262,9 @@ class Flow:
         if written:
             for name in WRITABLE:
                 if name in total:
-                    total[name] = sum(it["identified"].get(name, 0.0) for it in written)
+                    total[name] = sum(it["identified"].get(name, 0.0)
+                                      - it.get("target_drho", {}).get(name, 0.0)
+                                      for it in written)
         self.result["identified"] = total
 
     def stopped(self, reason: str) -> None:
@@ -267,7 +293,112 @@ class Flow:
             "max_iterations": proc.max_iterations, "converge_mm": proc.converge_mm,
         }
         self.result["remaining"] = self._remaining()
+        self._accuracy()
         self.result["status"], self.result["message"] = status, message
+
+    # --- accuracy at the tool ------------------------------------------------------
+
+    def _tilts_of(self, phase: str, m: Measurement, ident: Any) -> None:
+        """The round's tilts: from its own fit if it has them, else from a rho+tilt
+        fit of the same measurement (the tilts the run could not rule out)."""
+        tilts = accuracy.round_tilts(phase, ident)
+        if tilts is None and len(m.deviations):
+            try:
+                fit, _ = _identify(self.ctx, m, "rho+tilt")
+            except RunFailed:
+                fit = None  # too little data for the tilts: the statement says none
+            tilts = None if fit is None else accuracy.round_tilts(phase, fit)
+        if tilts is not None:
+            self.tilt_rounds.append(tilts)
+
+    def _points(self) -> Any:
+        if self._grid is None:
+            c = self.seq.checker
+            self._grid = accuracy.grid(self.ctx.config, (c.lo, c.hi)).points
+        return self._grid
+
+    def _aim(self) -> dict[str, float]:
+        """The Δρ the next write aims at (objective joints: 0)."""
+        if self.ctx.config.writeback.objective == "joints":
+            return dict.fromkeys(WRITABLE, 0.0)
+        return accuracy.tool_target(self.ctx.config, self._significant_tilts(),
+                                    self._points())
+
+    def _significant_tilts(self) -> accuracy.Tilts | None:
+        """The pooled tilts where the model chosen for the last round has them; else
+        None: aiming the offsets at tilts the data do not show would chase noise
+        (on a square machine objective tool then writes what objective joints does)."""
+        last = self.idents[-1] if self.idents else None
+        if last is None or not any(n in last.names for n in accuracy.TILT_NAMES):
+            return None
+        return accuracy.pool_tilts(self.tilt_rounds)
+
+    def _objective_note(self, ident: Any) -> str:
+        """What the write-back prompt says of the objective and what each buys."""
+        cfg = self.ctx.config
+        tilts = accuracy.pool_tilts(self.tilt_rounds)
+        tv = tilts.values if tilts is not None else np.zeros(3)
+        points, frame = self._points(), cfg.writeback.frame
+        geometry = cfg.machine.geometry()
+        figures = {}
+        for name, aim in (("joints", dict.fromkeys(WRITABLE, 0.0)),
+                          ("tool", accuracy.tool_target(cfg, self._significant_tilts(),
+                                                        points))):
+            fld = accuracy.error_field(points, geometry, accuracy.params(aim, tv),
+                                       np.zeros(3), frame)
+            figures[name] = 1000 * fld.rms_mm
+        what = {"joints": "the paper's Δρ, legs parallel", "tool": "the least tool error"}
+        chosen = cfg.writeback.objective
+        other = "tool" if chosen == "joints" else "joints"
+        return (f"objective {chosen} ({what[chosen]}): predicted tool error "
+                f"{figures[chosen]:.1f} µm RMS over the workspace ({frame} frame); "
+                f"objective {other} would leave {figures[other]:.1f} µm")
+
+    def _accuracy(self) -> None:
+        """The run's statement at the tool (result ``accuracy``) and model.json."""
+        if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
+            return
+        cfg = self.ctx.config
+        tilts = accuracy.pool_tilts(self.tilt_rounds)
+        last = self.idents[-1]
+        names = list(last.names)
+        idx = [names.index(n) for n in WRITABLE if n in names]
+        remaining = self.result.get("remaining")
+        start = (remaining or {}).get("total") or {
+            n: self.result["identified"].get(n, 0.0) for n in WRITABLE}
+        if remaining:
+            now = remaining["estimate"]
+        else:  # the last correction written and not verified: its aim, as predicted
+            now = dict(self.target)
+        now_cov = np.asarray(last.covariance)[np.ix_(idx, idx)] if len(idx) == 3 else None
+        tilts_in_model = any(n in names for n in accuracy.TILT_NAMES)
+        before = self.result.get("offsets_before")
+        target_tool = accuracy.tool_target(cfg, self._significant_tilts(), self._points())
+        try:
+            self.result["accuracy"] = accuracy.statement(
+                cfg, (self.seq.checker.lo, self.seq.checker.hi), drho_start=start,
+                drho_now=now, drho_now_cov=now_cov, dof=finite(last.std_error_dof),
+                tilts=tilts, model=last.model, tilts_in_model=tilts_in_model,
+                offsets_before=before, target_tool=target_tool)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            self.result["accuracy"] = {"error": f"not stated: {exc}"}
+            return
+        first = self.idents[0]
+        f_names = list(first.names)
+        f_idx = [f_names.index(n) for n in WRITABLE if n in f_names]
+        self.model = accuracy.model_export(
+            cfg, drho_start=start,
+            drho_start_cov=np.asarray(first.covariance)[np.ix_(f_idx, f_idx)]
+            if len(f_idx) == 3 else None,
+            drho_now=now, tilts=tilts, model=last.model, offsets_before=before,
+            offsets_written=self.result.get("offsets_written"),
+            dof=finite(first.std_error_dof))
+        try:
+            write_atomic(self.ctx.run_dir / MODEL_NAME,
+                         json.dumps(jsonable_value(self.model), indent=1,
+                                    allow_nan=False) + "\n")
+        except OSError as exc:  # a full disk: result.json says so too, if it can
+            say(f"orthocal: {MODEL_NAME} not written ({storage_message(self.ctx.run_dir, exc)})")
 
     def _remaining(self) -> dict[str, Any] | None:
         """What the last measurement says is left of Δρ on the machine as it now
@@ -314,10 +445,11 @@ def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
     return "failed", outcome.reason
 
 
-def _identify(ctx: Run, m: Measurement) -> tuple[Any, dict[str, Any] | None]:
+def _identify(ctx: Run, m: Measurement,
+              model: str | None = None) -> tuple[Any, dict[str, Any] | None]:
     from station.engine.identify import identify_measurement
 
-    return identify_measurement(ctx.config, m)
+    return identify_measurement(ctx.config, m, model)
 
 
 def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,

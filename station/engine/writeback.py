@@ -74,6 +74,7 @@ def write_back(
     prior: JournalState | None = None,
     round: int = 1,
     offsets_at_start: dict[str, float] | None = None,
+    note: str | None = None,
 ) -> WritebackOutcome:
     stages = prior.writebacks.get(round, {}) if prior is not None else {}
 
@@ -120,7 +121,8 @@ def write_back(
     if "intent" not in stages:
         what = "Write offsets " if round == 1 else f"Closed loop, round {round}: write offsets "
         question = what + ", ".join(
-            f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + " to the controller?"
+            f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + " to the controller?" \
+            + (f" ({note})" if note else "")
         if not operator.confirm(question):
             reason = "declined by the operator; offsets unchanged"
             log({"stage": "declined", "reason": reason, "before": before})

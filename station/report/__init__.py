@@ -6,8 +6,10 @@ everything reads with ``.get`` and shows "—" rather than raising: a report
 that crashes on the failed run is the one report the operator needed most.
 
 Split by job: io.py (result.json), format.py (names and formatting), text.py (the
-text summary), rounds.py (the closed loop's rounds), plots.py (figures), html.py
-(the page). The report reads the result document only, never the engine.
+text summary), tool.py (accuracy at the tool: the headline's clause, the summary's
+lines, the page's section, where the stands were), rounds.py (the closed loop's
+rounds), plots.py (figures), html.py (the page). The report reads the result
+document only, never the engine.
 """
 
 from __future__ import annotations

@@ -137,6 +137,18 @@ def as_dict(value: Any) -> dict:
     return value if isinstance(value, dict) else {}
 
 
+def machine_parameters(result: Mapping[str, Any]) -> dict:
+    """The identified parameters as the machine has them. ``identified`` holds the
+    total correction written; with objective "tool" that aims the joint errors at
+    a target instead of 0, so the machine's Δρ at the start is the run's statement
+    ``remaining.total`` (the correction written plus what is left from the aim)."""
+    ident = dict(as_dict(result.get("identified")))
+    total = as_dict(as_dict(result.get("remaining")).get("total"))
+    if as_dict(result.get("accuracy")).get("objective") == "tool" and total:
+        ident.update({n: v for n, v in total.items() if n in ident})
+    return ident
+
+
 def params_of(result: Mapping[str, Any]) -> list[str]:
     ident = as_dict(result.get("identified"))
     names = [n for n in PARAM_NAMES if n in ident]
@@ -197,9 +209,47 @@ def max_abs(devs: Mapping[str, Any]) -> float | None:
 
 
 def param_line(result: Mapping[str, Any], names: Iterable[str]) -> str:
-    ident = as_dict(result.get("identified"))
+    ident = machine_parameters(result)
     errs = as_dict(result.get("std_errors"))
     return "   ".join(
         f"{param_plain(n)} = {fmt(ident.get(n), signed=True)} ± {fmt(errs.get(n))} {unit(n)}"
         for n in names
     )
+
+
+# ------------------------------------------------------------ accuracy at the tool
+
+
+def um(value_mm: Any, digits: int = 1) -> str:
+    """A length given in mm, written in µm: the tool's error is tens of µm, and
+    "0.014 mm" hides the one digit the reader compares before and after."""
+    v = num(value_mm)
+    return "—" if v is None else fmt(1000.0 * v, digits)
+
+
+def um_interval(pair: Any, digits: int = 1) -> str | None:
+    """A 95 % interval [lo, hi] given in mm as "lo–hi" in µm (None: none given)."""
+    if not isinstance(pair, list | tuple) or len(pair) != 2:
+        return None
+    lo, hi = num(pair[0]), num(pair[1])
+    if lo is None or hi is None:
+        return None
+    return f"{um(lo, digits)}–{um(hi, digits)}"
+
+
+def box_text(box: Any) -> str:
+    """The workspace box [[xmin, xmax], ...] as "[−100, 60]³ mm" when it is a
+    cube, else axis by axis; "—" when the result has none."""
+    if not isinstance(box, list | tuple) or len(box) != 3:
+        return "—"
+    spans = []
+    for span in box:
+        if not isinstance(span, list | tuple) or len(span) != 2:
+            return "—"
+        lo, hi = num(span[0]), num(span[1])
+        if lo is None or hi is None:
+            return "—"
+        spans.append(f"[{lo:g}, {hi:g}]".replace("-", "−"))
+    if len(set(spans)) == 1:
+        return f"{spans[0]}³ mm"
+    return ", ".join(f"{a} {s}" for a, s in zip(AXES, spans, strict=True)) + " mm"

@@ -22,6 +22,7 @@ from station.report.format import (
     fmt,
     format_duration,
     format_when,
+    machine_parameters,
     max_abs,
     num,
     param_html,
@@ -29,8 +30,10 @@ from station.report.format import (
     true_value,
     unit,
 )
-from station.report.plots import plot_deviations, plot_parameters, release_fonts
+from station.report.plots import plot_deviations, plot_field, plot_parameters, release_fonts
 from station.report.text import model_notes
+from station.report.tool import html_section as tool_section
+from station.report.tool import stands_html, statement, tool_clause
 
 _CSS = """
 body{font-family:-apple-system,"Segoe UI",Roboto,"Helvetica Neue",Arial,sans-serif;
@@ -137,7 +140,7 @@ def _result_paragraph(result: Mapping[str, Any]) -> str:
     status = str(result.get("status"))
     parts: list[str] = []
     names = params_of(result)
-    ident, errs = as_dict(result.get("identified")), as_dict(result.get("std_errors"))
+    ident, errs = machine_parameters(result), as_dict(result.get("std_errors"))
     if status in ("failed", "aborted"):
         msg = result.get("message") or "no reason recorded"
         parts.append(f"<b>The run did not complete</b>: {_e(msg)}. "
@@ -170,6 +173,11 @@ def _result_paragraph(result: Mapping[str, Any]) -> str:
         reason = f" ({_e(wb['reason'])})" if wb.get("reason") else ""
         parts.append(f"{_e(text[0].upper() + text[1:])}{reason}.")
     ver = as_dict(result.get("verification"))
+    # Parallel legs are the method's means, not the tool's accuracy: whatever the
+    # verification shows, the same sentence says what the tool does (or that the
+    # run does not state it), so that one is never read for the other.
+    tool = tool_clause(result)
+    _, why_not = statement(result)
     if ver:
         after = num(ver.get("deviations_rms_mm"))
         worst = max_abs(as_dict(ver.get("deviations")))
@@ -180,9 +188,18 @@ def _result_paragraph(result: Mapping[str, Any]) -> str:
         before = num(result.get("deviations_rms_mm"))
         if before is not None:
             s += f", against {fmt(before)} mm RMS before calibration"
+        s += ": that is the legs' parallelism, the method's means, not the tool's accuracy"
+        if tool:
+            s += f"; {_e(tool)}"
+        else:
+            s += ("; accuracy at the tool is not stated"
+                  + (f" ({_e(why_not)})" if why_not else " by this result"))
         parts.append(s + ".")
-    elif names and status == "ok":
-        parts.append("No verification measurement was made.")
+    else:
+        if names and status == "ok":
+            parts.append("No verification measurement was made.")
+        if tool:
+            parts.append(f"{_e(tool[0].upper() + tool[1:])}.")
     if not parts:
         parts.append("No measurement results were recorded.")
     return "<p>" + " ".join(parts) + "</p>"
@@ -215,7 +232,7 @@ def _params_table(result: Mapping[str, Any]) -> str:
     names = params_of(result)
     if not names:
         return "<p>No parameters were identified.</p>"
-    ident, errs = as_dict(result.get("identified")), as_dict(result.get("std_errors"))
+    ident, errs = machine_parameters(result), as_dict(result.get("std_errors"))
     ver = as_dict(result.get("verification"))
     v_ident, v_errs = as_dict(ver.get("identified")), as_dict(ver.get("std_errors"))
     has_truth = any(true_value(result, n) is not None for n in names)
@@ -425,33 +442,50 @@ def _loop_section(result: Mapping[str, Any]) -> str:
     return rounds.html_section(result, plot)
 
 
+def _field_plot(result: Mapping[str, Any]) -> str | None:
+    """The error field at the tool (plots.plot_field), or None: a field the
+    figure cannot draw must not cost the operator the rest of the report."""
+    acc, _ = statement(result)
+    if acc is None:
+        return None
+    try:
+        return plot_field(acc)
+    except Exception:
+        return None  # the section's tables still state the figures
+
+
 def render_html(result: dict) -> str:
     """The whole report as one HTML string (no external resources)."""
     status = str(result.get("status", "unknown"))
     title = "Calibration report"
     when = format_when(result.get("started"))
     try:
+        plot_tool = _field_plot(result)
         plot_dev = plot_deviations(result)
         plot_par = plot_parameters(result)
         loop_section = _loop_section(result)
     finally:
         if "matplotlib" in sys.modules:
             release_fonts()
+    # Figures are numbered in page order: the error field at the tool, when the
+    # run states it, comes first.
+    number = iter(range(1, 4))
+    accuracy = tool_section(result, plot_tool, next(number) if plot_tool else None)
     figures = []
     if plot_dev:
         figures.append(
-            f"<figure>{plot_dev}<figcaption>Figure 1. The 12 leg deviations: how far each "
-            "indicator's reading in a test posture differs from its reading in "
+            f"<figure>{plot_dev}<figcaption>Figure {next(number)}. The 12 leg deviations: "
+            "how far each indicator's reading in a test posture differs from its reading in "
             "Π<sub>0</sub>. Before calibration: measured (blue; error bar = std over the "
             "cycles, often smaller than the marker) and as the fitted model explains them "
             "(orange). After calibration: the verification measurement (green), which "
             "should be close to zero.</figcaption></figure>")
     if plot_par:
         figures.append(
-            f"<figure>{plot_par}<figcaption>Figure 2. Identified parameters with ±1σ (thick) "
-            "and ±3σ (thin) error bars; after calibration the re-identified values should be "
-            "near zero. In a simulated run the red bar marks the value hidden in the virtual "
-            "machine.</figcaption></figure>")
+            f"<figure>{plot_par}<figcaption>Figure {next(number)}. Identified parameters "
+            "with ±1σ (thick) and ±3σ (thin) error bars; after calibration the re-identified "
+            "values should be near zero. In a simulated run the red bar marks the value "
+            "hidden in the virtual machine.</figcaption></figure>")
     status_cls = f"st-{status}" if status in STATUS_TEXT else "st-failed"
     sim_tag = " (simulated)" if result.get("simulated") else ""
     badge = f'<span class="status {status_cls}">{_e(STATUS_TEXT.get(status, status))}</span>'
@@ -463,12 +497,15 @@ def render_html(result: dict) -> str:
 {_what_was_done(result)}
 <h2>Result</h2>
 {_result_paragraph(result)}
+{accuracy}
+{"<h2>The measurement: the legs' parallelism</h2>" if accuracy else ""}
 {_fit_box(result)}
 {"".join(figures)}
 {loop_section}
 <h2>Identified parameters</h2>
 {_params_table(result)}
 {_model_section(result)}
+{stands_html(result)}
 {_correlation_table(result)}
 <h2>Deviations</h2>
 {_deviations_table(result)}

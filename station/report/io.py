@@ -20,8 +20,9 @@ _TOP_ORDER = (
     "simulation", "machine", "model", "method", "model_selection", "identified", "std_errors",
     "correlation", "residual_rms_mm", "sigma_mm", "condition_number", "noise_mm", "fit_ok",
     "fit_note",
-    "deviations", "deviations_rms_mm", "setups", "offsets_before", "offsets_written",
-    "writeback", "verification", "iterations", "converged", "loop", "timing",
+    "deviations", "deviations_rms_mm", "setups", "stands", "offsets_before", "offsets_written",
+    "writeback", "verification", "iterations", "converged", "loop", "remaining", "accuracy",
+    "timing",
 )
 
 

@@ -15,6 +15,7 @@ from station.report.format import (
     dev_parts,
     dev_tex,
     fmt,
+    machine_parameters,
     num,
     param_tex,
     params_of,
@@ -131,7 +132,7 @@ def plot_parameters(result: Mapping[str, Any]) -> str | None:
     names = params_of(result)
     if not names:
         return None
-    ident = as_dict(result.get("identified"))
+    ident = machine_parameters(result)
     errs = as_dict(result.get("std_errors"))
     ver = as_dict(result.get("verification"))
     v_ident, v_errs = as_dict(ver.get("identified")), as_dict(ver.get("std_errors"))
@@ -238,3 +239,119 @@ def release_fonts() -> None:
         if clear is not None:
             clear()
     gc.collect()
+
+
+# ------------------------------------------------------------ accuracy at the tool
+
+
+def _levels(values: Any) -> Any:
+    """Distinct grid levels (rounded to 1 µm: the result stores 4 decimals)."""
+    import numpy as np
+
+    return np.unique(np.round(values, 3))
+
+
+def _edges(levels: Any) -> Any:
+    """Cell edges midway between levels, half a spacing beyond the ends."""
+    import numpy as np
+
+    if len(levels) == 1:
+        return np.array([levels[0] - 0.5, levels[0] + 0.5])
+    mid = (levels[1:] + levels[:-1]) / 2
+    return np.concatenate([[2 * levels[0] - mid[0]], mid, [2 * levels[-1] - mid[-1]]])
+
+
+def _nice(value: float) -> float:
+    """1, 2 or 5 × 10ⁿ at most ``value``: the scale arrow's length in µm."""
+    import math
+
+    if value <= 0:
+        return 1.0
+    exp = math.floor(math.log10(value))
+    for step in (5, 2, 1):
+        if step * 10**exp <= value:
+            return float(step * 10**exp)
+    return float(10**exp)
+
+
+def plot_field(acc: Mapping[str, Any]) -> str | None:
+    """The tool-point error field over the workspace: three horizontal slices of
+    the grid (lowest, middle, highest z), before (top) and after (bottom); colour
+    |E| (µm, each row on its own scale: before is ten times after), arrows the x–y
+    part with a scale arrow. None when the result has no usable field."""
+    import numpy as np
+
+    field = as_dict(acc.get("field"))
+    try:
+        pts = np.asarray(field.get("points_mm"), dtype=float)
+        rows = [(label, np.asarray(field.get(key), dtype=float)) for key, label in
+                (("before_mm", "before"), ("after_mm", "after"))
+                if field.get(key) is not None]
+    except (TypeError, ValueError):
+        return None
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0 or not np.all(np.isfinite(pts)):
+        return None
+    rows = [(lbl, e) for lbl, e in rows if e.shape == pts.shape and np.all(np.isfinite(e))]
+    if not rows:
+        return None
+    zs = _levels(pts[:, 2])
+    slices = sorted({float(zs[0]), float(zs[len(zs) // 2]), float(zs[-1])})
+    xs, ys = _levels(pts[:, 0]), _levels(pts[:, 1])
+    xe, ye = _edges(xs), _edges(ys)
+    spacing = min(float(np.min(np.diff(xs))) if len(xs) > 1 else 1.0,
+                  float(np.min(np.diff(ys))) if len(ys) > 1 else 1.0)
+    ix = np.searchsorted(xs, np.round(pts[:, 0], 3))
+    iy = np.searchsorted(ys, np.round(pts[:, 1], 3))
+    iz = np.round(pts[:, 2], 3)
+    titles = {"before": "before calibration", "after": "after calibration"}
+
+    plt = pyplot()
+    from matplotlib import colormaps
+
+    # Ten steps: a reader matches a cell to the bar by eye, and the bar stays
+    # vector (matplotlib embeds a PNG for a bar of 50 colours or more).
+    cmap = colormaps["YlOrRd"].resampled(10)
+    n = len(slices)
+    # A fixed grid with a narrow colour-bar column: constrained layout would cost
+    # more than the rest of the figure together, with the operator waiting.
+    fig, grid_axes = plt.subplots(
+        len(rows), n + 1, figsize=(10, 3.2 * len(rows) + 0.2), squeeze=False,
+        gridspec_kw={"width_ratios": [1.0] * n + [0.05], "wspace": 0.08, "hspace": 0.3})
+    for r, (label, err) in enumerate(rows):
+        axes, cax = grid_axes[r][:n], grid_axes[r][n]
+        um_err = 1000.0 * err
+        mag = np.linalg.norm(um_err, axis=1)
+        xy = np.linalg.norm(um_err[:, :2], axis=1)
+        vmax = float(mag.max()) if mag.max() > 0 else 1.0
+        # The longest x–y arrow spans 0.9 cells: arrows of a row compare, and stay
+        # inside their neighbourhood.
+        longest = float(xy.max()) if xy.max() > 0 else 1.0
+        scale = longest / (0.9 * spacing)
+        mesh = q = None
+        for c, z in enumerate(slices):
+            ax = axes[c]
+            sel = np.isclose(iz, z)
+            cells = np.full((len(ys), len(xs)), np.nan)
+            cells[iy[sel], ix[sel]] = mag[sel]
+            mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(cells), cmap=cmap,
+                                 vmin=0.0, vmax=vmax, shading="flat")
+            q = ax.quiver(pts[sel, 0], pts[sel, 1], um_err[sel, 0], um_err[sel, 1],
+                          angles="xy", scale_units="xy", scale=scale, width=0.006,
+                          color="#1d2330", pivot="middle")
+            ax.set_xlim(xe[0], xe[-1])
+            ax.set_ylim(ye[0], ye[-1])
+            ax.set_aspect("equal", adjustable="box")
+            ax.set_title(f"z = {z:g} mm".replace("-", "−"), fontsize=10, loc="left")
+            ax.tick_params(labelsize=8)
+            ax.set_xlabel("x (mm)", fontsize=9)
+            if c == 0:
+                ax.set_ylabel(f"{titles[label]}\ny (mm)", fontsize=9)
+            else:
+                ax.tick_params(labelleft=False)
+        bar = fig.colorbar(mesh, cax=cax)
+        bar.set_label("|E| (µm)", fontsize=9)
+        cax.tick_params(labelsize=8)
+        key = _nice(longest)
+        axes[-1].quiverkey(q, 1.0, 1.06, key, f"arrow {key:g} µm (x–y)", labelpos="W",
+                           coordinates="axes", fontproperties={"size": 8})
+    return to_svg(fig)

@@ -34,10 +34,32 @@ def _um(value: Any) -> str:
     return "—" if v is None else f"{v * 1000:.2f} µm"
 
 
-def correction_mm(entry: Mapping[str, Any]) -> float | None:
-    """The largest |Δρ| an identification asks to write (mm)."""
+def aim_of(result: Mapping[str, Any], n: int) -> dict[str, float]:
+    """The Δρ the loop aimed at in measurement ``n`` (mm): 0 for objective joints;
+    for objective tool the round's ``target_drho``, and for a last round that
+    wrote nothing the aim the run states (``accuracy.objectives``). Without it a
+    tool run's intended Δρ of tens of µm would read as a correction left undone."""
+    iterations = result.get("iterations") or []
+    entry = iterations[n] if 0 <= n < len(iterations) else {}
+    target = entry.get("target_drho") if isinstance(entry, Mapping) else None
+    if not isinstance(target, Mapping) and n == len(iterations) - 1:
+        acc = result.get("accuracy")
+        if isinstance(acc, Mapping) and not acc.get("error"):
+            chosen = (acc.get("objectives") or {}).get(str(acc.get("objective")))
+            target = chosen.get("target_drho_mm") if isinstance(chosen, Mapping) else None
+    if not isinstance(target, Mapping):
+        return {}
+    return {k: v for k in WRITABLE if (v := num(target.get(k))) is not None}
+
+
+def correction_mm(entry: Mapping[str, Any],
+                  aim: Mapping[str, float] | None = None) -> float | None:
+    """The largest |Δρ − aim| an identification asks to write (mm); the aim is 0
+    unless objective tool set one (aim_of)."""
     ident = entry.get("identified") or {}
-    values = [abs(v) for n in WRITABLE if (v := num(ident.get(n))) is not None]
+    aim = aim or {}
+    values = [abs(v - aim.get(n, 0.0)) for n in WRITABLE
+              if (v := num(ident.get(n))) is not None]
     return max(values) if values else None
 
 
@@ -71,22 +93,27 @@ def remaining_text(result: Mapping[str, Any]) -> str | None:
     interval (k from Student's t on the noise's dof): how far the machine now is
     from the truth. None before any write-back or without a measurement after it."""
     rem = result.get("remaining") or {}
-    if not rem or not any(e.get("offsets_written") for e in result.get("iterations") or []):
+    iterations = result.get("iterations") or []
+    if not rem or not any(e.get("offsets_written") for e in iterations):
         return None
     k = num(rem.get("coverage_factor_95"))
     est, ses = rem.get("estimate") or {}, rem.get("std_errors") or {}
+    aim = aim_of(result, len(iterations) - 1)
     parts = []
     for n in WRITABLE:
         v, se = num(est.get(n)), num(ses.get(n))
         if v is None:
             continue
         band = f" ± {1000 * k * se:.2f}" if k is not None and se is not None else ""
-        parts.append(f"Δρ_{n[-1]} {1000 * v:+.2f}{band}")
+        parts.append(f"Δρ_{n[-1]} {1000 * (v - aim.get(n, 0.0)):+.2f}{band}")
     if not parts:
         return None
     dof = num(rem.get("std_errors_dof"))
     how = (f" µm (95 %, k = {k:.2f} on {dof:g} dof)" if k is not None and dof is not None
            else " µm")
+    if any(abs(a) > 0 for a in aim.values()):
+        how += (" from the aim of objective tool (Δρ "
+                + ", ".join(f"{n[-1]} {1000 * a:+.2f}" for n, a in aim.items()) + " µm)")
     return ", ".join(parts) + how
 
 
@@ -98,8 +125,9 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     lines += _round_lines(result)
     left = remaining_text(result)
     if left:
+        aim = " + the aim" if "from the aim" in left else ""
         lines.append(f"  left over     {left}: measured by the last verification, not "
-                     "written (the machine's Δρ is the correction applied + this)")
+                     f"written (the machine's Δρ is the correction applied{aim} + this)")
     return lines
 
 
@@ -123,7 +151,7 @@ def _round_lines(result: Mapping[str, Any]) -> list[str]:
         action = "written" if e.get("offsets_written") else (e.get("writeback") or "not written")
         lines.append(f"    {_label(n, e):<15} deviations RMS {_um(e.get('deviations_rms_mm'))}"
                      f" (floor {_um(e.get('noise_floor_mm'))}), correction max "
-                     f"{_um(correction_mm(e))} ({verdict}) → {action}")
+                     f"{_um(correction_mm(e, aim_of(result, n)))} ({verdict}) → {action}")
     if loop.get("max_iterations") is not None:
         lines.append(f"    (at most {loop['max_iterations']} write-backs, a correction counts "
                      f"beyond k σ, k from Student's t on the noise's dof for one false alarm "
@@ -133,8 +161,8 @@ def _round_lines(result: Mapping[str, Any]) -> list[str]:
 
 def plot_rounds(result: Mapping[str, Any], pyplot: Any, svg: Any) -> str | None:
     """Deviations RMS, correction and noise floor per measurement, log scale (µm).
-    None after a single write-back: Figure 1 already shows before and after, and a
-    figure costs ~0.2 s with the operator waiting at the end of the run."""
+    None after a single write-back: the deviations' figure already shows before and
+    after, and a figure costs ~0.2 s with the operator waiting at the end of the run."""
     iterations = result.get("iterations") or []
     if sum(1 for e in iterations if e.get("offsets_written")) < 2:
         return None
@@ -148,10 +176,12 @@ def plot_rounds(result: Mapping[str, Any], pyplot: Any, svg: Any) -> str | None:
         return [p[0] for p in pts], [p[1] for p in pts]
 
     dev = series([num(e.get("deviations_rms_mm")) for e in iterations])
-    cor = series([correction_mm(e) for e in iterations])
+    cor = series([correction_mm(e, aim_of(result, n)) for n, e in enumerate(iterations)])
     floor = series([num(e.get("noise_floor_mm")) for e in iterations])
     ax.plot(*dev, "o-", color="#1f5fa8", label="deviations RMS")
-    ax.plot(*cor, "s-", color="#e08a00", label="correction max |Δρ|")
+    aimed = any(any(abs(a) > 0 for a in aim_of(result, n).values()) for n in xs)
+    ax.plot(*cor, "s-", color="#e08a00",
+            label="correction max |Δρ − aim|" if aimed else "correction max |Δρ|")
     ax.plot(*floor, "--", color="#777777", label="noise floor (scatter)")
     converge = num((result.get("loop") or {}).get("converge_mm"))
     if converge:
@@ -190,8 +220,9 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
         parts.append(f"<p>Left over after the last write-back, as the last verification "
                      f"measured it and the loop did not write it (too small to be worth a "
                      f"round, or the loop stopped as said above): {e(left)}. The machine's "
-                     f"offsets are off by this much; its Δρ is the correction applied plus "
-                     f"it (the JSON's remaining.total).</p>")
+                     f"offsets are off {'from their aim ' if 'from the aim' in left else ''}"
+                     f"by this much; its Δρ is the correction applied plus what the last "
+                     f"verification measured (the JSON's remaining.total).</p>")
     rows = []
     for n, it in enumerate(iterations):
         written = it.get("offsets_written")
@@ -199,7 +230,8 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
             "<tr>" + "".join(f"<td>{c}</td>" for c in (
                 e(_label(n, it)), _um(it.get("deviations_rms_mm")),
                 _um(it.get("residual_rms_mm")), _um(it.get("noise_floor_mm")),
-                _um(correction_mm(it)), e(", ".join(it.get("significant") or []) or "—"),
+                _um(correction_mm(it, aim_of(result, n))),
+                e(", ".join(it.get("significant") or []) or "—"),
                 e(", ".join(f"{a} {v:+.4f}" for a, v in written.items()) if written
                   else str(it.get("writeback") or "—")),
             )) + "</tr>")

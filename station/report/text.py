@@ -1,5 +1,7 @@
 """The short text summary of a run (``summary_text``): what was identified and
-written, the verification, the closed loop's rounds, what the plunger guard did.
+written, the verification (the legs' parallelism), the accuracy at the tool and
+the squareness (station.report.tool), the closed loop's rounds, what the plunger
+guard did.
 
 Every section of the result may be missing (a run that failed halfway), so
 everything here reads with ``.get`` and shows "—" rather than raising.
@@ -11,6 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from station.report import tool
 from station.report.format import (
     AXES,
     NOT_WRITTEN_TEXT,
@@ -95,14 +98,18 @@ def summary_text(result: dict) -> str:
         lines.append(f"  offsets       not written ({wb.get('status')}{reason})")
     ver = result.get("verification")
     if isinstance(ver, dict) and ver:
+        # The verification measures the legs' parallelism (the method's means);
+        # the tool's accuracy is the "at the tool" line's, and the two differ.
         lines.append(
-            f"  verification  deviations RMS {fmt(result.get('deviations_rms_mm'))} → "
+            f"  verification  legs' parallelism (the method's means, not the tool's accuracy):"
+            f" deviations RMS {fmt(result.get('deviations_rms_mm'))} → "
             f"{fmt(ver.get('deviations_rms_mm'))} mm; re-identified "
             + "  ".join(
                 f"{param_plain(n)} = {fmt(v, signed=True)} {unit(n)}"
                 for n, v in as_dict(ver.get("identified")).items()
             )
         )
+    lines += tool.summary_lines(result)
     if names and result.get("not_identifiable"):
         two = any("ΔL cannot be separated" in str(n) for n in result["not_identifiable"])
         lines.append("  not identifiable  a rotation of the whole machine"

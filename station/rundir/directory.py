@@ -3,7 +3,8 @@ rollback.
 
 A run directory holds everything needed to understand and to continue a run:
 config.toml (the config it ran with), plan.txt / plan.json, journal.jsonl,
-offsets_backup.json, result.json and report.html and, for a simulated run,
+offsets_backup.json, result.json, report.html, model.json (the identified machine)
+and, for a simulated run,
 simulation.json (the hidden errors, to restart the virtual station on resume) and
 controller_nvram.json (the virtual controller's non-volatile offsets).
 """
@@ -22,6 +23,8 @@ from station.rundir.journal import JOURNAL_NAME, JournalState, read_journal, rep
 
 SIM_NAME = "simulation.json"
 NVRAM_NAME = "controller_nvram.json"
+#: The identified machine, for a controller or a tool that compensates kinematics.
+MODEL_NAME = "model.json"
 
 
 def version() -> str:
