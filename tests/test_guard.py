@@ -144,6 +144,29 @@ def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> No
     guard2.check_cycle(2)
 
 
+def test_a_move_replanned_after_a_stop_is_no_prediction_of_later_cycles() -> None:
+    # The same first cycle as above, but its moves re-planned after a stop (begun with
+    # the re-plan's own margin): their travel is of a path later cycles do not take,
+    # so the refusal "as the first cycle showed" does not come from them; the route
+    # check with the signal measured at the stops still refuses what it must.
+    journal: list[dict[str, Any]] = []
+    guard, _ = _guard(0.8, journal)
+    g = build_plan(parse_config({"indicators": [{"name": "A", "port": "/dev/a"}],
+                                 "setups": [{"leg": "x", "indicators": {"A": "y"}}]})
+                   ).setups[0].postures
+    path = [g["0"], g["+"], g["-"], g["0"]]
+    for a, b, label in zip(path, path[1:], ["Π_x^+", "Π_x^-", "Π0"], strict=False):
+        guard.begin_move(a, [b], margin=0.1)
+        guard.watch(a, b, label)
+    guard.learn({"+": {"A": 1.0 - 0.1, "B": 2.1}, "-": {"A": 1.0 - 0.65, "B": 2.2},
+                 "0": {"A": 1.0, "B": 2.0}})
+    assert guard.predicted == {}
+    with pytest.raises(PlungerGuardStop) as info:
+        guard.check_cycle(2)
+    assert "as the first cycle showed" not in str(info.value)
+    assert "with the travel the first cycle measured at the stops" in str(info.value)
+
+
 def test_guard_poll_stops_on_a_drifting_signal_before_the_end() -> None:
     # Positions follow the planned straight path Π0 → Π_x^+ sample by sample; gauge A
     # (preload 2 mm) reads the nominal travel (down to -0.88 mm on the way) plus a

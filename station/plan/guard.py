@@ -100,6 +100,9 @@ class _MoveRecord:
     travel: dict[str, tuple[float, float]] = field(default_factory=dict)
     nominal: dict[str, tuple[float, float]] = field(default_factory=dict)
     polls: int = 0
+    # re-planned after a stop, from where a plunger stood inside the margin (or the
+    # way back): a path later cycles do not take
+    replanned: bool = False
 
 
 class PlungerGuard:
@@ -119,6 +122,7 @@ class PlungerGuard:
         self._shifted = False
         # the sub-move in progress began at a stop read at rest (its leg_signal exact)
         self._at_rest = self._leg_exact = False
+        self._replanned = False  # the move in progress is a re-plan after a stop
         self._checker = checker
         self._nominal = checker.nominal_travel  # (setup, name, direction, path) -> travel
         self._positions = positions
@@ -195,6 +199,7 @@ class PlungerGuard:
         if not self.watching:
             return
         self._move_margin = self.margin if margin is None else margin
+        self._replanned = margin is not None
         a = np.asarray(start, dtype=float)
         b = np.asarray(legs[-1], dtype=float)
         self._route_a, self._route_d = a, b - a
@@ -231,7 +236,8 @@ class PlungerGuard:
         index = self._leg_index
         self._leg_index += 1
         target_v = np.asarray(target, dtype=float)
-        record = _MoveRecord(label, nominal=dict(self._route_bounds[index]))
+        record = _MoveRecord(label, nominal=dict(self._route_bounds[index]),
+                             replanned=self._replanned)
         self._moves.append(record)
         names = list(self._gauges)
         mounting = self._mounting()
@@ -444,7 +450,12 @@ class PlungerGuard:
         # nominal travel at a stop is 0: its travel is the signal there
         self.stop_signal = {sign: dict(values) for sign, values in stop_travel.items()}
         self._shifted = False
+        # What a later cycle's move will do, as this cycle's polls saw it: not from a
+        # move re-planned after a stop (its path was another; the route check below,
+        # check_cycle, holds the margin on the path later cycles take).
         for rec in self._moves:
+            if rec.replanned:
+                continue
             base = rec.label.split(" (waypoint")[0]  # the move's label: its target
             for name in self._gauges:
                 n_lo, n_hi = rec.nominal[name]
@@ -462,8 +473,9 @@ class PlungerGuard:
 
     def check_cycle(self, cycle: int) -> None:
         """Refuse a later cycle, before it moves, where a move came within the margin
-        in the first cycle, or where no route keeps the margin with the signal the
-        first cycle measured at its stops (the routes found are the checker's, so the
+        in the first cycle (a move re-planned after a stop aside: later cycles take
+        another path), or where no route keeps the margin with the signal the first
+        cycle measured at its stops (the routes found are the checker's, so the
         cycle then moves along them)."""
         if not self.enabled or not self._gauges:
             return
