@@ -334,6 +334,33 @@ def test_a_square_machine_is_said_to_be_square() -> None:
     assert "offsets cannot fix it" not in report.summary_text(result)
 
 
+def test_an_axis_leans_by_the_results_decision_not_by_its_95_interval(
+        sample: dict[str, Any]) -> None:
+    # A squareness beyond its 95 % half-width is one square machine in seven over the
+    # three axes: the result's squareness_decision says when an axis counts as leaning
+    # (k for one false alarm in a thousand, or none when the model test kept no tilt).
+    acc = sample["accuracy"]
+    se = acc["squareness_std_errors"]
+    k_beyond = 0.9 * min(abs(v) / se[p] for p, v in acc["squareness_mm_per_m"].items())
+    for decision, leans in ((None, True), ({"k": k_beyond, "rule": "r"}, True),
+                            ({"k": 1e6, "rule": "beyond 1e6 standard errors"}, False),
+                            ({"k": None, "rule": "the model test kept no tilt"}, False)):
+        result = copy.deepcopy(sample)
+        if decision is None:
+            result["accuracy"].pop("squareness_decision", None)
+        else:
+            result["accuracy"]["squareness_decision"] = decision
+        page = report.render_html(result)
+        part = section(page)[section(page).index("<h3>Squareness of the axes</h3>"):]
+        verdicts = {r[-1] for r in rows_of(part[:part.index("</table>")])}
+        assert verdicts == {"beyond its uncertainty" if leans else "within its uncertainty"}
+        text = report.summary_text(result)
+        assert ("offsets cannot fix it" in text) is leans
+        assert ("square within its uncertainty" in text) is not leans
+        if decision is not None:
+            assert html.escape(decision["rule"]) in part
+
+
 def test_offsets_not_written_say_the_after_figures_are_what_writing_would_give() -> None:
     result = synthetic()
     result["status"], result["offsets_written"] = "refused", None

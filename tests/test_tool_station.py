@@ -102,6 +102,15 @@ def test_objective_tool_beats_the_joints_and_nears_the_best_offsets(tilted) -> N
             assert abs(remaining[name] - aim) < 0.5 * abs(aim)
 
 
+def test_the_tilted_axes_are_told_to_be_shimmed(tilted) -> None:
+    acc = tilted["joints"]["accuracy"]
+    k = acc["squareness_decision"]["k"]
+    assert 3.0 < k < 6.0 and "one false alarm in a thousand" in \
+        acc["squareness_decision"]["rule"]
+    # 0.2, 0.1 and -0.15 mrad, each far beyond k standard errors
+    assert sum("shim its rail" in a for a in acc["squareness_advice"]) == 3
+
+
 def test_the_run_directory_exports_the_identified_machine(tilted) -> None:
     result = tilted["joints"]
     model = json.loads((Path(result["run_dir"]) / "model.json").read_text())
@@ -131,6 +140,9 @@ def test_a_square_machine_with_its_offsets_written_leaves_nothing_at_the_tool(
     assert result["model_selection"]["model"] == "rho" and result["model"] == "rho"
     assert acc["tilt_interval_95"] is not None
     assert any("not significant" in line for line in acc["assumes"])
+    # and no rail to shim: no axis counts as leaning when the model test kept no tilt
+    assert acc["squareness_decision"]["k"] is None
+    assert all("nothing to do" in a for a in acc["squareness_advice"])
     # where each stand was (default: placed by eye, up to 5 mm off)
     assert result["stands"] and all("observable" in s for s in result["stands"].values())
 

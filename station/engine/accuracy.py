@@ -27,6 +27,7 @@ import numpy as np
 import orthocal
 from orthocal import AXES, PARAM_NAMES, TILT_NAMES
 from orthocal.accuracy import error_field, optimal_offsets, squareness, workspace_grid
+from orthocal.loop import FALSE_ALARM
 from orthocal.numbers import finite
 from orthocal.tool_interval import after_interval, assumes
 from station.config import StationConfig
@@ -214,7 +215,8 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
         "alternative": {"objective": other, **objectives[other]},
         "squareness_mm_per_m": sq_values,
         "squareness_std_errors": sq_se,
-        "squareness_advice": squareness_advice(tilts, rail),
+        "squareness_decision": squareness_decision(tilts, tilts_in_model),
+        "squareness_advice": squareness_advice(tilts, rail, tilts_in_model),
         "tilts": None if tilts is None else tilts.as_dict(),
         "tilt_std_errors": None if tilts is None else tilts.std_errors(),
         "tilt_interval_95": None if tilt_interval is None else
@@ -229,21 +231,43 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
 _LEANS = {"tilt_yx": ("y", "x"), "tilt_zx": ("z", "x"), "tilt_zy": ("z", "y")}
 
 
-def squareness_advice(tilts: Tilts | None, rail_mm: float) -> list[str]:
-    """What to do about each axis that leans beyond its 95 % uncertainty (the
-    tilts, the axes' own: the squareness of the tool's motions also holds what
-    the offsets written shear them by): shim the rail (tilt × its travel) or
-    compensate in the controller's kinematics (model.json holds the machine)."""
+def squareness_decision(tilts: Tilts | None, tilts_in_model: bool) -> dict[str, Any] | None:
+    """When an axis counts as leaning (what the advice and the report judge by):
+    beyond k standard errors, k from Student's t on the tilts' dof for one false
+    alarm in a thousand square machines over the three axes (the closed loop's
+    rule, orthocal.loop.FALSE_ALARM), and only when the model test kept the tilts:
+    a 95 % interval would send one square machine in seven to shim a rail."""
+    if tilts is None:
+        return None
+    if not tilts_in_model:
+        return {"k": None, "rule": "the model test kept no tilt (none beyond the noise): "
+                                   "no axis counts as leaning"}
+    k = orthocal.coverage_factor(tilts.dof, 1.0 - FALSE_ALARM)
+    return {"k": k, "rule": f"an axis counts as leaning beyond {k:.2f} standard errors "
+                            f"(Student's t on "
+                            f"{tilts.dof:g} dof: one false alarm in a thousand square "
+                            "machines)"}
+
+
+def squareness_advice(tilts: Tilts | None, rail_mm: float, tilts_in_model: bool = True
+                      ) -> list[str]:
+    """What to do about each axis that leans (squareness_decision; the tilts, the
+    axes' own: the squareness of the tool's motions also holds what the offsets
+    written shear them by): shim the rail (tilt × its travel) or compensate in the
+    controller's kinematics (model.json holds the machine)."""
     if tilts is None:
         return ["the tilts were not identified: squareness not stated"]
     k = orthocal.coverage_factor(tilts.dof)
+    k_decide = squareness_decision(tilts, tilts_in_model)["k"]  # type: ignore[index]
     out = []
     for (name, value), se in zip(tilts.as_dict().items(), tilts.std_errors().values(),
                                  strict=True):
         axis, toward = _LEANS[name]
-        if abs(value) <= k * se:
-            out.append(f"axis {axis} toward {toward} ({name}): {value:+.3f} mm/m, within "
-                       f"its uncertainty (±{k * se:.3f}): nothing to do")
+        if k_decide is None or abs(value) <= k_decide * se:
+            why = "the model test kept no tilt" if k_decide is None else \
+                f"not beyond {k_decide:.2f} standard errors"
+            out.append(f"axis {axis} toward {toward} ({name}): {value:+.3f} ± {k * se:.3f} "
+                       f"mm/m (95 %), {why}: nothing to do")
             continue
         shim = abs(value) * rail_mm / 1000.0
         out.append(f"axis {axis} leans {'toward +' if value > 0 else 'away from +'}{toward} "

@@ -13,6 +13,7 @@ say "not stated", never raise.
 from __future__ import annotations
 
 import html
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -107,10 +108,14 @@ class Square:
     half: float | None
     k: float | None
     tilt: str
+    # beyond this |value| the axis counts as leaning (the result's
+    # squareness_decision); inf: the model test kept no tilt; None: the 95 % half
+    limit: float | None = None
 
     @property
     def significant(self) -> bool | None:
-        return None if self.half is None else abs(self.value) > self.half
+        limit = self.limit if self.limit is not None else self.half
+        return None if limit is None else abs(self.value) > limit
 
 
 def squareness(acc: Mapping[str, Any]) -> list[Square]:
@@ -122,6 +127,11 @@ def squareness(acc: Mapping[str, Any]) -> list[Square]:
     own = as_dict(acc.get("squareness_interval_95"))
     tilt_iv = as_dict(acc.get("tilt_interval_95"))
     tilt_se = as_dict(acc.get("tilt_std_errors"))
+    decision = acc.get("squareness_decision")
+    k_decide: float | None = None
+    if isinstance(decision, Mapping):
+        k_decide = num(decision.get("k"))
+        k_decide = math.inf if k_decide is None else k_decide
     out = []
     for pair, tilt in PAIRS:
         v = num(values.get(pair))
@@ -142,7 +152,8 @@ def squareness(acc: Mapping[str, Any]) -> list[Square]:
                     num(t_iv[0]) is not None and num(t_iv[1]) is not None:
                 k = (num(t_iv[1]) - num(t_iv[0])) / 2 / t_se
             half = k * se
-        out.append(Square(pair, v, se, half, k, tilt))
+        limit = None if k_decide is None or se is None else k_decide * se
+        out.append(Square(pair, v, se, half, k, tilt, limit))
     return out
 
 
@@ -152,8 +163,8 @@ def tilts_stated(acc: Mapping[str, Any]) -> bool:
 
 
 def square_state(acc: Mapping[str, Any]) -> bool | None:
-    """True: some squareness beyond its 95 % interval; False: all within; None:
-    not stated (no tilts, or no uncertainty to judge by)."""
+    """True: some axis leans (beyond the result's squareness_decision, else its 95 %
+    interval); False: none; None: not stated (no tilts, or no uncertainty)."""
     if not tilts_stated(acc):
         return None
     verdicts = [s.significant for s in squareness(acc)]
@@ -420,6 +431,9 @@ def _squareness_html(acc: Mapping[str, Any]) -> str:
                "x, y and z; to first order it equals the tilts of the actuator axes "
                "(1 mrad = 1 mm/m). The offsets written shear the motions a little, so the two "
                "columns differ by that. Offsets cannot fix squareness.</p>")
+    decision = acc.get("squareness_decision")
+    if isinstance(decision, Mapping) and decision.get("rule"):
+        out.append(f'<p class="small">Verdict: {_e(str(decision["rule"]))}.</p>')
     if advice:
         out.append("<p><b>What to do:</b></p><ul>"
                    + "".join(f"<li>{_e(a)}</li>" for a in advice) + "</ul>")
