@@ -167,6 +167,33 @@ def test_a_move_replanned_after_a_stop_is_no_prediction_of_later_cycles() -> Non
     assert "with the travel the first cycle measured at the stops" in str(info.value)
 
 
+def test_a_move_the_guard_stopped_is_no_prediction_of_later_cycles() -> None:
+    # A late poll (a loaded machine) sees gauge A already inside the margin as the
+    # guard stops the axes: that move's path is not the one later cycles take (they
+    # are routed with the signal measured at the stops), so it refuses none of them;
+    # the moves that ran to their end still predict.
+    cfg = parse_config({"indicators": [{"name": "A", "port": "/dev/a"}],
+                        "setups": [{"leg": "x", "indicators": {"A": "y"}}],
+                        "controller": {"motion": "coordinated"}})
+    checker = MotionChecker(cfg, ([0, 0, 0], [1000, 1000, 1000]))
+    sp = build_plan(cfg).setups[0]
+    a, b = np.asarray(sp.postures["0"]), np.asarray(sp.postures["+"])
+    reading = [10.0 + 6.1]  # travel +6.1 mm of a +6.25 mm stop, margin 0.2
+    guard = PlungerGuard(cfg, checker, lambda: a, lambda names: {"A": [reading[0]]},
+                         lambda: None, lambda r: None)
+    guard.mount(sp, "m", {"A": "y"}, {"A": 10.0})
+    guard.begin_move(a, [b])
+    poll = guard.watch(a, b, "Π_x^+")
+    assert poll is not None
+    with pytest.raises(PlungerGuardTrip):
+        poll()
+    guard.begin_move(b, [a])  # a move that runs to its end, near its mounting value
+    reading[0] = 10.0
+    guard.watch(b, a, "Π0")()
+    guard.learn({"+": {"A": 10.0}, "0": {"A": 10.0}})
+    assert ("Π_x^+", "A") not in guard.predicted and ("Π0", "A") in guard.predicted
+
+
 def test_guard_poll_stops_on_a_drifting_signal_before_the_end() -> None:
     # Positions follow the planned straight path Π0 → Π_x^+ sample by sample; gauge A
     # (preload 2 mm) reads the nominal travel (down to -0.88 mm on the way) plus a

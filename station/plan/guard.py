@@ -100,9 +100,9 @@ class _MoveRecord:
     travel: dict[str, tuple[float, float]] = field(default_factory=dict)
     nominal: dict[str, tuple[float, float]] = field(default_factory=dict)
     polls: int = 0
-    # re-planned after a stop, from where a plunger stood inside the margin (or the
-    # way back): a path later cycles do not take
-    replanned: bool = False
+    # stopped by the guard, or re-planned after a stop (from where a plunger stood
+    # inside the margin, or the way back): a path later cycles do not take
+    off_route: bool = False
 
 
 class PlungerGuard:
@@ -237,7 +237,7 @@ class PlungerGuard:
         self._leg_index += 1
         target_v = np.asarray(target, dtype=float)
         record = _MoveRecord(label, nominal=dict(self._route_bounds[index]),
-                             replanned=self._replanned)
+                             off_route=self._replanned)
         self._moves.append(record)
         names = list(self._gauges)
         mounting = self._mounting()
@@ -414,6 +414,8 @@ class PlungerGuard:
         return float(min(here)) if here else np.inf
 
     def _trip(self, g: _Gauge, label: str, travel: float, hi: float, lo: float) -> None:
+        if self._moves:
+            self._moves[-1].off_route = True
         try:
             self._stop()  # COMMAND 2 first; the sequencer's abort stops again and reports
         except Exception:
@@ -451,10 +453,11 @@ class PlungerGuard:
         self.stop_signal = {sign: dict(values) for sign, values in stop_travel.items()}
         self._shifted = False
         # What a later cycle's move will do, as this cycle's polls saw it: not from a
-        # move re-planned after a stop (its path was another; the route check below,
-        # check_cycle, holds the margin on the path later cycles take).
+        # move the guard stopped or one re-planned after a stop (a late poll may have
+        # seen the plunger inside the margin as it stopped; later cycles take another
+        # path, and check_cycle's route check holds the margin on it).
         for rec in self._moves:
-            if rec.replanned:
+            if rec.off_route:
                 continue
             base = rec.label.split(" (waypoint")[0]  # the move's label: its target
             for name in self._gauges:
@@ -473,8 +476,8 @@ class PlungerGuard:
 
     def check_cycle(self, cycle: int) -> None:
         """Refuse a later cycle, before it moves, where a move came within the margin
-        in the first cycle (a move re-planned after a stop aside: later cycles take
-        another path), or where no route keeps the margin with the signal the first
+        in the first cycle (a move the guard stopped or re-planned aside: later
+        cycles take another path), or where no route keeps the margin with the signal the first
         cycle measured at its stops (the routes found are the checker's, so the
         cycle then moves along them)."""
         if not self.enabled or not self._gauges:
