@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -299,38 +300,64 @@ def identify(
         # the tilt columns apart, so that models without tilt keep (7)'s numbers
         J_all = jacobian(keys, geometry, "full+tilt")
         model_values = J_all[:, :6] @ full[:6] + J_all[:, 6:] @ full[6:]
-    residuals = y - model_values
-    n, p = len(y), len(cols)
-    dof = n - p
-    rss = float(residuals @ residuals)
-    sigma_hat = float(np.sqrt(rss / dof)) if dof > 0 else float("nan")
-    scale = sigma if sigma is not None else sigma_hat
+    fit = _Fit.of(y, model_values, len(cols))
+    scale = sigma if sigma is not None else fit.sigma_hat
     jtj_inv = np.linalg.inv(J.T @ J)
-    covariance = scale**2 * jtj_inv
-    std = np.sqrt(np.diag(covariance))
     d = np.sqrt(np.diag(jtj_inv))
-    correlation = jtj_inv / np.outer(d, d)
-    predicted: dict[Key, float] = {}
-    for key, value in zip(keys, model_values, strict=True):
-        predicted.setdefault(key, float(value))
-    return Identification(
-        model=model,
-        method=method,
-        names=names,
-        parameters={nm: float(full[c]) for nm, c in zip(names, cols, strict=True)},
-        std_errors={nm: float(s) for nm, s in zip(names, std, strict=True)},
-        covariance=covariance,
-        correlation=correlation,
-        residual_rms=float(np.sqrt(rss / n)),
-        sigma=sigma_hat,
-        dof=dof,
-        condition_number=condition,
-        keys=tuple(keys),
-        values=y,
-        residuals=residuals,
-        predicted=predicted,
-        converged=converged,
-    )
+    return fit.identification(model, method, cols, full, keys, scale**2 * jtj_inv,
+                              jtj_inv / np.outer(d, d), condition, converged)
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """The residuals of a fit (:meth:`of`), and what they give."""
+
+    y: np.ndarray
+    model_values: np.ndarray
+    residuals: np.ndarray
+    rss: float
+    dof: int
+
+    @classmethod
+    def of(cls, y: np.ndarray, model_values: np.ndarray, p: int) -> _Fit:
+        """A fit of ``p`` parameters whose model gives ``model_values`` for ``y``."""
+        residuals = y - model_values
+        return cls(y, model_values, residuals, float(residuals @ residuals), len(y) - p)
+
+    @property
+    def sigma_hat(self) -> float:
+        """√(RSS/dof), the noise the residuals show (nan without dof)."""
+        return float(np.sqrt(self.rss / self.dof)) if self.dof > 0 else float("nan")
+
+    def identification(self, model: str, method: str, cols: Sequence[int], full: np.ndarray,
+                       keys: list[Key], covariance: np.ndarray, correlation: np.ndarray,
+                       condition: float, converged: bool, **extra: Any) -> Identification:
+        """The result, parameters ``full[cols]`` with the standard errors of
+        ``covariance``; ``extra``: the stands' fields."""
+        names = tuple(PARAM_NAMES[c] for c in cols)
+        std = np.sqrt(np.diag(covariance))
+        predicted: dict[Key, float] = {}
+        for key, value in zip(keys, self.model_values, strict=True):
+            predicted.setdefault(key, float(value))
+        return Identification(
+            model=model,
+            method=method,
+            names=names,
+            parameters={nm: float(full[c]) for nm, c in zip(names, cols, strict=True)},
+            std_errors={nm: float(s) for nm, s in zip(names, std, strict=True)},
+            covariance=covariance,
+            correlation=correlation,
+            residual_rms=float(np.sqrt(self.rss / len(self.y))),
+            sigma=self.sigma_hat,
+            dof=self.dof,
+            condition_number=condition,
+            keys=tuple(keys),
+            values=self.y,
+            residuals=self.residuals,
+            predicted=predicted,
+            converged=converged,
+            **extra,
+        )
 
 
 def _stand_sigma(deviations_in, sigma: float | None) -> tuple[float, float | None]:
@@ -362,7 +389,6 @@ def _identify_with_stands(
             "the linearised system (7) lacks: model the stands with method 'nonlinear'")
     sig, sig_dof = _stand_sigma(deviations_in, sigma)
     cols = list(MODELS[model])
-    names = tuple(PARAM_NAMES[c] for c in cols)
     p = len(cols)
     stand_names, S = incidence(keys, stands)
     k = len(stand_names)
@@ -410,39 +436,13 @@ def _identify_with_stands(
     full = full_of(theta)
     A = np.hstack([exact_jacobian(keys, geometry, full, model, S @ m),
                    stand_jacobian(keys, geometry, full, S)])
-    model_values = deviations(keys, geometry, full, S @ m)
-    residuals = y - model_values
-    n = len(y)
-    dof = n - p
-    rss = float(residuals @ residuals)
-    sigma_hat = float(np.sqrt(rss / dof)) if dof > 0 else float("nan")
-    cov_all = ridge_covariance(A, p, penalty, sig**2 * np.eye(n), stands.prior_sd**2)
+    fit = _Fit.of(y, deviations(keys, geometry, full, S @ m), p)
+    cov_all = ridge_covariance(A, p, penalty, sig**2 * np.eye(len(y)), stands.prior_sd**2)
     covariance = cov_all[:p, :p]
     std = np.sqrt(np.diag(covariance))
-    correlation = covariance / np.outer(std, std)
-    predicted: dict[Key, float] = {}
-    for key, value in zip(keys, model_values, strict=True):
-        predicted.setdefault(key, float(value))
     gauges = stand_gauges(stand_names, stands, keys)
-    return Identification(
-        model=model,
-        method=method,
-        names=names,
-        parameters={nm: float(full[c]) for nm, c in zip(names, cols, strict=True)},
-        std_errors={nm: float(s) for nm, s in zip(names, std, strict=True)},
-        covariance=covariance,
-        correlation=correlation,
-        residual_rms=float(np.sqrt(rss / n)),
-        sigma=sigma_hat,
-        dof=dof,
-        condition_number=condition,
-        keys=tuple(keys),
-        values=y,
-        residuals=residuals,
-        predicted=predicted,
-        converged=converged,
-        se_dof=sig_dof,
+    return fit.identification(
+        model, method, cols, full, keys, covariance, covariance / np.outer(std, std),
+        condition, converged, se_dof=sig_dof,
         stands=stand_estimates(stand_names, gauges, m, cov_all[p:, p:], stands),
-        stand_model=stands,
-        stand_sigma=sig,
-    )
+        stand_model=stands, stand_sigma=sig)

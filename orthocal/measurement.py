@@ -120,6 +120,21 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
             raise ValueError(f"mount_offsets needs one value per key ({len(keys)}), "
                              f"got shape {np.shape(mount_offsets)}")
         return _deviations_mounted(keys, geometry, drho, dL, tilt, offsets)
+    rows, legs, dirs, rho_s, rho_0, p_all, u = _solve(keys, geometry, drho, dL, tilt)
+    p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
+    m = geometry.mount_plane
+    reading_s = reading_at(rho_s, p_s, legs, dirs, drho, m, u)
+    dev = reading_s - reading_at(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m, u)
+    return dev[rows]
+
+
+def _solve(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray, dL: np.ndarray,
+           tilt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                      np.ndarray, np.ndarray, np.ndarray]:
+    """The end points of the distinct keys' test postures and of Π0 (its last row),
+    in one solve (Newton when tilted): (each key's row among the distinct ones,
+    their leg and direction indices, their joints, Π0's joints, the end points,
+    the axis directions)."""
     # Repeated keys (one per cycle) share one solve: the fit calls this per step.
     row_of: dict[Key, int] = {}
     rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
@@ -133,37 +148,19 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
         rho_s[n] = posture(sign, leg, geometry)
     rho_0 = posture("0", None, geometry)
     u = axis_directions(tilt)
-    # Π0 rides along as the last row: one solve (Newton when tilted) for all points
     p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u)
-    p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
-    m = geometry.mount_plane
-    reading_s = reading_at(rho_s, p_s, legs, dirs, drho, m, u)
-    dev = reading_s - reading_at(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m, u)
-    return dev[rows]
+    return np.asarray(rows), legs, dirs, rho_s, rho_0, p_all, u
 
 
 def _deviations_mounted(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray,
                         dL: np.ndarray, tilt: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """:func:`deviations` with one indicator plane per row, M = L/2 + offset: the
     same batched solves, the readings taken in each row's own plane."""
-    row_of: dict[Key, int] = {}
-    rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
-    distinct = list(row_of)
-    legs = np.empty(len(distinct), dtype=int)
-    dirs = np.empty(len(distinct), dtype=int)
-    rho_s = np.empty((len(distinct), 3))
-    for n, key in enumerate(distinct):
-        sign, leg, direction = check_key(key)
-        legs[n], dirs[n] = AXIS_INDEX[leg], AXIS_INDEX[direction]
-        rho_s[n] = posture(sign, leg, geometry)
-    rho_0 = posture("0", None, geometry)
-    u = axis_directions(tilt)
-    p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u)
-    rows_a = np.asarray(rows)
+    rows, legs, dirs, rho_s, rho_0, p_all, u = _solve(keys, geometry, drho, dL, tilt)
     # expand the distinct solves to the rows, each read in its own plane
-    p_s, rho_r = p_all[:-1][rows_a], rho_s[rows_a]
+    p_s, rho_r = p_all[:-1][rows], rho_s[rows]
     p_0 = np.broadcast_to(p_all[-1], rho_r.shape)
     m = geometry.mount_plane + offsets
-    li, di = legs[rows_a], dirs[rows_a]
+    li, di = legs[rows], dirs[rows]
     reading_s = reading_at(rho_r, p_s, li, di, drho, m, u)
     return reading_s - reading_at(np.broadcast_to(rho_0, rho_r.shape), p_0, li, di, drho, m, u)
