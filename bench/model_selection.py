@@ -48,7 +48,7 @@ class Case:
     wants_tilt: bool
 
 
-def _one_pair(size: float) -> Callable[[np.random.Generator], np.ndarray]:
+def one_pair(size: float) -> Callable[[np.random.Generator], np.ndarray]:
     def draw(rng: np.random.Generator) -> np.ndarray:
         t = np.zeros(3)
         t[rng.integers(3)] = size * rng.choice([-1.0, 1.0])
@@ -59,24 +59,31 @@ def _one_pair(size: float) -> Callable[[np.random.Generator], np.ndarray]:
 
 CASES = [
     Case("no tilt", lambda rng: np.zeros(3), wants_tilt=False),
-    Case("0.2 mrad on one pair of axes", _one_pair(0.2), wants_tilt=True),
+    Case("0.2 mrad on one pair of axes", one_pair(0.2), wants_tilt=True),
     Case("0.2 mrad on all three pairs", lambda rng: 0.2 * rng.choice([-1.0, 1.0], 3), True),
     Case("issue's machine 0.5, -0.5, 0.3 mrad", lambda rng: np.array([0.5, -0.5, 0.3]), True),
 ]
 
 
+GAUGES = [(i, j) for i in LEGS for j in LEGS if i != j]  # ALL_KEYS' gauges, in order
+GAUGE_OF_KEY = np.array([GAUGES.index((k[1], k[2])) for k in ALL_KEYS])
+
+
 def simulate_run(truth: np.ndarray, rng: np.random.Generator, noise: float, cycles: int,
-                 readings: int) -> tuple[dict, np.ndarray]:
-    """Per-cycle deviations (key → list) and the std of the readings at each stop."""
-    exact = dict(zip(ALL_KEYS, deviations(ALL_KEYS, G, truth), strict=True))
+                 readings: int, stands: np.ndarray | None = None
+                 ) -> tuple[dict, np.ndarray]:
+    """Per-cycle deviations (key → list) and the std of the readings at each stop;
+    ``stands``: each gauge's stand off L/2 (mm, GAUGES order), each gauge then
+    reading in its own plane (bench/stands.py)."""
+    planes = None if stands is None else stands[GAUGE_OF_KEY]
+    exact = dict(zip(ALL_KEYS, deviations(ALL_KEYS, G, truth, planes), strict=True))
     n_stops = 3 * cycles + 1  # Z0, P+1, P-1, Z1, P+2, ...
     # one (gauge, stop, reading) block per gauge: legs × two directions
     raw = rng.normal(0.0, noise, (6, n_stops, readings))
     means = raw.mean(axis=2)
     stop_std = raw.std(axis=2, ddof=1).ravel() if readings > 1 else np.empty(0)
     data: dict = {}
-    gauges = [(i, j) for i in LEGS for j in LEGS if i != j]
-    for g, (i, j) in enumerate(gauges):
+    for g, (i, j) in enumerate(GAUGES):
         for s, offset in (("+", 1), ("-", 2)):
             vals = []
             for k in range(1, cycles + 1):
@@ -136,7 +143,7 @@ def section_power(args: argparse.Namespace, rng: np.random.Generator) -> None:
     few = argparse.Namespace(**{**vars(args), "runs": runs})
     cells = []
     for size in (0.02, 0.05, 0.1):
-        r = selection_rates(Case(f"{size}", _one_pair(size), True), few, rng)
+        r = selection_rates(Case(f"{size}", one_pair(size), True), few, rng)
         cells.append(f"{size:g} mrad {100 * r['right']:.0f} %")
     print(f"  power (tilt model picked, one pair tilted, {runs} runs each): " + ", ".join(cells))
 

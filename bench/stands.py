@@ -29,40 +29,23 @@ import argparse
 import itertools
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
-from orthocal import Geometry, deviations, identify
+# bench/ is sys.path[0]: the cases and the station's deviations of the model-selection
+# bench, read here with each gauge in its own plane
+from model_selection import ALL_KEYS as KEYS
+from model_selection import GAUGE_OF_KEY, Case, G, one_pair
+from model_selection import simulate_run as selection_run
+
+from orthocal import deviations, identify
 from orthocal.noise import noise_from_cycles
 from orthocal.selection import LEVEL, lack_of_fit, select_model, with_measured_noise
 from orthocal.stands import GAUGES, Stands
 
-G = Geometry()
-KEYS = [(s, i, j) for i, j in GAUGES for s in "+-"]
-GAUGE_OF_KEY = np.array([GAUGES.index((k[1], k[2])) for k in KEYS])
-TILT_NAMES = ("tilt_yx", "tilt_zx", "tilt_zy")
-
-
-@dataclass(frozen=True)
-class Case:
-    name: str
-    tilt: Callable[[np.random.Generator], np.ndarray]  # mrad
-    wants_tilt: bool
-
-
-def _one_pair(size: float) -> Callable[[np.random.Generator], np.ndarray]:
-    def draw(rng: np.random.Generator) -> np.ndarray:
-        t = np.zeros(3)
-        t[rng.integers(3)] = size * rng.choice([-1.0, 1.0])
-        return t
-
-    return draw
-
-
 CASES = [
     Case("square", lambda rng: np.zeros(3), wants_tilt=False),
-    Case("0.2 mrad on one pair of axes", _one_pair(0.2), wants_tilt=True),
+    Case("0.2 mrad on one pair of axes", one_pair(0.2), wants_tilt=True),
     Case("±0.2 mrad on all three pairs", lambda rng: 0.2 * rng.choice([-1.0, 1.0], 3), True),
 ]
 
@@ -79,16 +62,7 @@ def draw_machine(case: Case, args: argparse.Namespace, rng: np.random.Generator
 def simulate_run(truth: np.ndarray, stand: np.ndarray, rng: np.random.Generator,
                  args: argparse.Namespace) -> dict:
     """Per-cycle deviations (key → list), each gauge reading in its own plane."""
-    exact = dict(zip(KEYS, deviations(KEYS, G, truth, stand[GAUGE_OF_KEY]), strict=True))
-    cycles = args.cycles
-    means = rng.normal(0.0, args.noise, (6, 3 * cycles + 1, args.readings)).mean(axis=2)
-    data: dict = {}
-    for g, (i, j) in enumerate(GAUGES):
-        for s, offset in (("+", 1), ("-", 2)):
-            data[(s, i, j)] = [exact[(s, i, j)] + means[g, 3 * (k - 1) + offset]
-                               - 0.5 * (means[g, 3 * (k - 1)] + means[g, 3 * k])
-                               for k in range(1, cycles + 1)]  # fmt: skip
-    return data
+    return selection_run(truth, rng, args.noise, args.cycles, args.readings, stand)[0]
 
 
 def _errors(ident, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -138,3 +138,33 @@ def on_setup(station: VirtualStation, number: int, action: Callable[[], None]) -
         mount(name, leg, direction)
 
     station.mount = wrapped  # type: ignore[method-assign]
+
+
+# --- deviations as the station forms them (the maths' tests) ------------------------
+
+
+def station_deviations(truth: Any, rng: Any, *, noise: float = 0.002, cycles: int = 3,
+                       readings: int = 5, stands: Any = None) -> tuple[dict, Any]:
+    """Per-cycle deviations as the station forms them, on the nominal geometry: stop
+    means of ``readings`` gaussian readings (σ ``noise``) per gauge, P − (Z_before +
+    Z_after)/2, consecutive cycles sharing their Π0; ``stands``: each gauge's stand
+    off L/2 (mm, orthocal.stands.GAUGES order), each gauge then reading in its own
+    plane. Also the std of the readings at each stop (6 gauges × 3·cycles + 1)."""
+    import numpy as np
+
+    from orthocal import Geometry, deviations
+    from orthocal.stands import GAUGES
+
+    keys = [(s, i, j) for i, j in GAUGES for s in "+-"]
+    planes = None if stands is None else \
+        np.asarray(stands)[[GAUGES.index((k[1], k[2])) for k in keys]]
+    exact = dict(zip(keys, deviations(keys, Geometry(), truth, planes), strict=True))
+    raw = rng.normal(0, noise, (6, 3 * cycles + 1, readings))
+    m = raw.mean(axis=2)
+    data = {}
+    for g, (i, j) in enumerate(GAUGES):
+        for s, off in (("+", 1), ("-", 2)):
+            data[(s, i, j)] = [exact[(s, i, j)] + m[g, 3 * (k - 1) + off]
+                               - 0.5 * (m[g, 3 * (k - 1)] + m[g, 3 * k])
+                               for k in range(1, cycles + 1)]  # fmt: skip
+    return data, raw.std(axis=2, ddof=1).ravel()

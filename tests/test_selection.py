@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from builders import station_deviations
 
-from orthocal import Geometry, IdentificationError, deviations
+from orthocal import Geometry, IdentificationError
 from orthocal.noise import means_covariance, noise_from_cycles, noise_from_readings
 from orthocal.selection import select_model
 
@@ -14,19 +15,8 @@ GAUGES = [(i, j) for i in "xyz" for j in "xyz" if i != j]
 
 
 def station_run(truth, rng, noise=0.002, cycles=3, readings=5):
-    """Per-cycle deviations as the station forms them: stop means of gaussian
-    readings, P − (Z_before + Z_after)/2, consecutive cycles sharing their Π0."""
-    keys = [(s, i, j) for i, j in GAUGES for s in "+-"]
-    exact = dict(zip(keys, deviations(keys, G, truth), strict=True))
-    raw = rng.normal(0, noise, (6, 3 * cycles + 1, readings))
-    m = raw.mean(axis=2)
-    data = {}
-    for g, (i, j) in enumerate(GAUGES):
-        for s, off in (("+", 1), ("-", 2)):
-            data[(s, i, j)] = [exact[(s, i, j)] + m[g, 3 * (k - 1) + off]
-                               - 0.5 * (m[g, 3 * (k - 1)] + m[g, 3 * k])
-                               for k in range(1, cycles + 1)]  # fmt: skip
-    return data, raw.std(axis=2, ddof=1).ravel()
+    """Per-cycle deviations as the station forms them, and each stop's readings' std."""
+    return station_deviations(truth, rng, noise=noise, cycles=cycles, readings=readings)
 
 
 def test_means_covariance_of_the_shared_zero_procedure():

@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from builders import station_deviations
 
 from orthocal import (
     Geometry,
@@ -29,17 +30,10 @@ STANDS = np.array([3.0, -4.0, 2.5, -1.0, 4.5, -2.0])  # mm off L/2, GAUGES order
 
 
 def station_run(truth, stand, rng, noise=0.002, cycles=3, readings=5):
-    """Per-cycle deviations as the station forms them (tests/test_selection.py),
-    each gauge reading in its own plane L/2 + stand."""
-    exact = dict(zip(KEYS, deviations(KEYS, G, truth, stand[GAUGE_OF_KEY]), strict=True))
-    m = rng.normal(0, noise, (6, 3 * cycles + 1, readings)).mean(axis=2)
-    data = {}
-    for g, (i, j) in enumerate(GAUGES):
-        for s, off in (("+", 1), ("-", 2)):
-            data[(s, i, j)] = [exact[(s, i, j)] + m[g, 3 * (k - 1) + off]
-                               - 0.5 * (m[g, 3 * (k - 1)] + m[g, 3 * k])
-                               for k in range(1, cycles + 1)]  # fmt: skip
-    return data
+    """Per-cycle deviations as the station forms them, each gauge reading in its own
+    plane L/2 + stand."""
+    return station_deviations(truth, rng, noise=noise, cycles=cycles, readings=readings,
+                              stands=stand)[0]
 
 
 def test_mount_offsets_are_the_exact_reading_in_each_plane():
