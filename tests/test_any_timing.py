@@ -130,6 +130,30 @@ def test_a_short_stroke_gauge_is_kept_in_its_stroke_on_any_drive(
     assert max(via) >= 3
 
 
+KNOCKED_DRHO = (0.4, -0.3, 0.2)
+
+
+def knocked_run(tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str,
+                at_fraction: float) -> dict[str, Any]:
+    """Gauge A's stand slides 5 mm toward the leg at ``at_fraction`` of the first move
+    (Π0 → Π_x^+) on a drive that moves z, y, x one after another; the run must finish
+    with no plunger past an end, and with the offsets right: the retaken cycle has the
+    knocked stand's readings only (a cycle mixing both would be off by tenths of a
+    millimetre)."""
+    def knock(station: Any) -> None:
+        station.knock("A", 5.0, on_move=station.machine.moves_started + 1,
+                      at_fraction=at_fraction)
+
+    result, stations = run(tmp_path, capsys, name, hook=knock, drive_sequence="zyx",
+                           true_drho=KNOCKED_DRHO)
+    (station,) = stations
+    assert result["status"] == "ok"
+    assert station.out_of_stroke_count == 0, station.out_of_stroke
+    for axis, true in zip("xyz", KNOCKED_DRHO, strict=True):
+        assert abs(result["identified"][f"drho_{axis}"] - true) < 0.005
+    return result
+
+
 @pytest.mark.real_time
 def test_a_knocked_stand_is_stopped_replanned_and_the_cycle_taken_again(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -142,14 +166,7 @@ def test_a_knocked_stand_is_stopped_replanned_and_the_cycle_taken_again(
     # and the run finishes without a plunger ever at its end. (At the end of the move,
     # not within it: which move the guard stops then does not depend on how many polls
     # a machine fits into a move; the next test knocks within one.)
-    def knock(station: Any) -> None:
-        station.knock("A", 5.0, on_move=station.machine.moves_started + 1, at_fraction=1.0)
-
-    result, stations = run(tmp_path, capsys, "knock", hook=knock,
-                           drive_sequence="zyx", true_drho=(0.4, -0.3, 0.2))
-    (station,) = stations
-    assert result["status"] == "ok"
-    assert station.out_of_stroke_count == 0, station.out_of_stroke
+    result = knocked_run(tmp_path, capsys, "knock", at_fraction=1.0)
     guard = result["plunger_guard"]
     assert guard["stops"] >= 1 and guard["retakes"] >= 1
     (first, *_) = guard["recovered"]
@@ -163,10 +180,6 @@ def test_a_knocked_stand_is_stopped_replanned_and_the_cycle_taken_again(
         < kinds.index("retake")
     retake = next(e for e in events if e["event"] == "retake")
     assert retake["phase"] == "m" and retake["setup"] == 0 and retake["cycle"] == 1
-    # the offsets still come out right: the retaken cycle has the knocked stand's
-    # readings only (a cycle mixing both would be off by tenths of a millimetre)
-    for axis, true in zip("xyz", (0.4, -0.3, 0.2), strict=True):
-        assert abs(result["identified"][f"drho_{axis}"] - true) < 0.005
     summary_lines = [ln for ln in _summary(result).splitlines() if "plunger guard" in ln]
     assert summary_lines and "recovered" in summary_lines[0]
     html = (Path(result["run_dir"]) / "report.html").read_text()
@@ -183,14 +196,7 @@ def test_a_stand_knocked_within_a_move_is_told_from_the_signal_by_the_way_back(
     # the move is re-planned with the step held (not the step extrapolated, which no
     # path could satisfy: the failure of CI on a slower machine), the cycle taken
     # again, the run finished right.
-    def knock(station: Any) -> None:
-        station.knock("A", 5.0, on_move=station.machine.moves_started + 1, at_fraction=0.5)
-
-    result, stations = run(tmp_path, capsys, "knock-within", hook=knock,
-                           drive_sequence="zyx", true_drho=(0.4, -0.3, 0.2))
-    (station,) = stations
-    assert result["status"] == "ok"
-    assert station.out_of_stroke_count == 0, station.out_of_stroke
+    result = knocked_run(tmp_path, capsys, "knock-within", at_fraction=0.5)
     guard = result["plunger_guard"]
     assert guard["retakes"] >= 1
     # Whether the guard stops the knock's own move or only the next one depends on how
@@ -200,8 +206,6 @@ def test_a_stand_knocked_within_a_move_is_told_from_the_signal_by_the_way_back(
         if "zero_shift_mm" in r:
             assert set(r["zero_shift_mm"]) == {"A"}
             assert abs(r["zero_shift_mm"]["A"] - 5.0) < 0.01
-    for axis, true in zip("xyz", (0.4, -0.3, 0.2), strict=True):
-        assert abs(result["identified"][f"drho_{axis}"] - true) < 0.005
 
 
 def _summary(result: dict[str, Any]) -> str:

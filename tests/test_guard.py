@@ -112,20 +112,28 @@ def _guard(preload: float, journal: list[dict[str, Any]]) -> tuple[PlungerGuard,
     return guard, sp
 
 
-def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> None:
-    journal: list[dict[str, Any]] = []
-    guard, _ = _guard(0.8, journal)
+def _first_cycle(guard: PlungerGuard, stop_means: dict[str, dict[str, float]],
+                 margin: float | None = None) -> None:
+    """Leg x's first cycle, Π0 → Π_x^+ → Π_x^− → Π0, watched (never polled: each
+    move's travel is its nominal bound), ended with ``stop_means``; ``margin``: the
+    moves begun as re-plans after a stop, with that margin."""
     g = build_plan(parse_config({"indicators": [{"name": "A", "port": "/dev/a"}],
                                  "setups": [{"leg": "x", "indicators": {"A": "y"}}]})
                    ).setups[0].postures
     path = [g["0"], g["+"], g["-"], g["0"]]
     for a, b, label in zip(path, path[1:], ["Π_x^+", "Π_x^-", "Π0"], strict=False):
-        guard.begin_move(a, [b])
+        guard.begin_move(a, [b], margin=margin)
         assert guard.watch(a, b, label) is not None
+    guard.learn(stop_means)
+
+
+def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> None:
+    journal: list[dict[str, Any]] = []
+    guard, _ = _guard(0.8, journal)
     # cycle 1 ended with A 0.65 mm lifted at Π_x^−: within 0.2 mm of its 0.8 mm preload
     # once the move's own nominal swing is added; B far from its ends
-    guard.learn({"+": {"A": 1.0 - 0.1, "B": 2.1}, "-": {"A": 1.0 - 0.65, "B": 2.2},
-                 "0": {"A": 1.0, "B": 2.0}})
+    _first_cycle(guard, {"+": {"A": 1.0 - 0.1, "B": 2.1}, "-": {"A": 1.0 - 0.65, "B": 2.2},
+                         "0": {"A": 1.0, "B": 2.0}})
     assert not guard.watching
     assert journal[-1]["event"]["event"] == "plunger-guard-learned"
     with pytest.raises(PlungerGuardStop) as info:
@@ -136,11 +144,8 @@ def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> No
     assert journal[-1]["event"]["event"] == "plunger-guard-refused"
     # the same cycle with a comfortable preload goes ahead
     guard2, _ = _guard(6.25, [])
-    for a, b, label in zip(path, path[1:], ["Π_x^+", "Π_x^-", "Π0"], strict=False):
-        guard2.begin_move(a, [b])
-        guard2.watch(a, b, label)
-    guard2.learn({"+": {"A": 0.9, "B": 2.1}, "-": {"A": 0.35, "B": 2.2},
-                  "0": {"A": 1.0, "B": 2.0}})
+    _first_cycle(guard2, {"+": {"A": 0.9, "B": 2.1}, "-": {"A": 0.35, "B": 2.2},
+                          "0": {"A": 1.0, "B": 2.0}})
     guard2.check_cycle(2)
 
 
@@ -149,17 +154,9 @@ def test_a_move_replanned_after_a_stop_is_no_prediction_of_later_cycles() -> Non
     # the re-plan's own margin): their travel is of a path later cycles do not take,
     # so the refusal "as the first cycle showed" does not come from them; the route
     # check with the signal measured at the stops still refuses what it must.
-    journal: list[dict[str, Any]] = []
-    guard, _ = _guard(0.8, journal)
-    g = build_plan(parse_config({"indicators": [{"name": "A", "port": "/dev/a"}],
-                                 "setups": [{"leg": "x", "indicators": {"A": "y"}}]})
-                   ).setups[0].postures
-    path = [g["0"], g["+"], g["-"], g["0"]]
-    for a, b, label in zip(path, path[1:], ["Π_x^+", "Π_x^-", "Π0"], strict=False):
-        guard.begin_move(a, [b], margin=0.1)
-        guard.watch(a, b, label)
-    guard.learn({"+": {"A": 1.0 - 0.1, "B": 2.1}, "-": {"A": 1.0 - 0.65, "B": 2.2},
-                 "0": {"A": 1.0, "B": 2.0}})
+    guard, _ = _guard(0.8, [])
+    _first_cycle(guard, {"+": {"A": 1.0 - 0.1, "B": 2.1}, "-": {"A": 1.0 - 0.65, "B": 2.2},
+                         "0": {"A": 1.0, "B": 2.0}}, margin=0.1)
     assert guard.predicted == {}
     with pytest.raises(PlungerGuardStop) as info:
         guard.check_cycle(2)
