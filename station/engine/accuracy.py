@@ -203,6 +203,7 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
                         "the intervals include them")
                      + (f"; left out: {'; '.join(tilts.dropped)}" if tilts.dropped else ""))
     rail = config.machine.rho_max - config.machine.rho_min
+    decision = squareness_decision(tilts, tilts_in_model)
     return {
         "workspace_mm": config.machine.workspace_box(),
         "grid": {"points_per_axis": GRID_POINTS, "points": len(points),
@@ -215,8 +216,8 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
         "alternative": {"objective": other, **objectives[other]},
         "squareness_mm_per_m": sq_values,
         "squareness_std_errors": sq_se,
-        "squareness_decision": squareness_decision(tilts, tilts_in_model),
-        "squareness_advice": squareness_advice(tilts, rail, tilts_in_model),
+        "squareness_decision": decision,
+        "squareness_advice": squareness_advice(tilts, rail, decision),
         "tilts": None if tilts is None else tilts.as_dict(),
         "tilt_std_errors": None if tilts is None else tilts.std_errors(),
         "tilt_interval_95": None if tilt_interval is None else
@@ -249,16 +250,16 @@ def squareness_decision(tilts: Tilts | None, tilts_in_model: bool) -> dict[str, 
                             "machines)"}
 
 
-def squareness_advice(tilts: Tilts | None, rail_mm: float, tilts_in_model: bool = True
-                      ) -> list[str]:
-    """What to do about each axis that leans (squareness_decision; the tilts, the
+def squareness_advice(tilts: Tilts | None, rail_mm: float,
+                      decision: Mapping[str, Any] | None) -> list[str]:
+    """What to do about each axis that leans (``decision``: squareness_decision's; the tilts, the
     axes' own: the squareness of the tool's motions also holds what the offsets
     written shear them by): shim the rail (tilt × its travel) or compensate in the
     controller's kinematics (model.json holds the machine)."""
     if tilts is None:
         return ["the tilts were not identified: squareness not stated"]
     k = orthocal.coverage_factor(tilts.dof)
-    k_decide = squareness_decision(tilts, tilts_in_model)["k"]  # type: ignore[index]
+    k_decide = None if decision is None else decision["k"]
     out = []
     for (name, value), se in zip(tilts.as_dict().items(), tilts.std_errors().values(),
                                  strict=True):

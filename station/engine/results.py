@@ -84,9 +84,9 @@ def guard_fields(records: list[dict[str, Any]]) -> dict[str, Any]:
     events = [r["event"] for r in records if r.get("type") == "event"
               and isinstance(r.get("event"), dict)]
     # zero_shift_mm: only where the way back found a gauge's zero moved (a step)
-    recovered = [{k: e.get(k) for k in ("where", "move", "indicator", "waypoints",
-                                        "speed_mm_s", "zero_shift_mm") if k in e
-                  or k != "zero_shift_mm"}
+    recovered = [{**{k: e.get(k) for k in ("where", "move", "indicator", "waypoints",
+                                           "speed_mm_s")},
+                  **({"zero_shift_mm": e["zero_shift_mm"]} if "zero_shift_mm" in e else {})}
                  for e in events if e.get("event") == "plunger-guard-recovery"
                  and e.get("result") == "recovered"]
     return {"stops": sum(1 for e in events if e.get("event") == "plunger-guard"),
