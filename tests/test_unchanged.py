@@ -3,6 +3,13 @@ simulated run (noise 0, so every reading is deterministic) gives the same
 result.json, the same journal and the same report.html as the code gave before
 station/ moved into its rooms (tests/data/golden_run/, made by that code).
 
+"The same" on any machine: floats within close.py's tolerance (relative 1e-6,
+absolute 1e-9, far below any figure printed, far above what another CPU's SIMD
+path or BLAS kernel changes), printed numbers within a unit of their last digit,
+everything else exactly. The run is also made once with numpy's CPU dispatch
+narrowed to its baseline and OpenBLAS on another kernel family, in a process of its
+own, and compared with the same files: a user's clone on another CPU.
+
 Only what cannot repeat is taken out before comparing: times, the run
 directory, the virtual station's ephemeral ports and pty paths, the wall time,
 what the plunger guard's polls saw while the axes moved (how many polls fit
@@ -14,12 +21,17 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
+import platform
 import re
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 from builders import FAST, simulated
+from close import assert_same, assert_same_text
 
 from station.commands import run as cmd_run
 
@@ -84,24 +96,72 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return seeded_run(tmp_path_factory.mktemp("seeded"))
 
 
-def test_the_result_document_is_unchanged(run_dir: Path) -> None:
+def assert_result_unchanged(run_dir: Path) -> None:
     now = normal_result(json.loads((run_dir / "result.json").read_text()))
     before = json.loads((GOLDEN / "result.json").read_text())
-    assert now == before
+    assert_same(now, before, "result.json")
 
 
-def test_the_journal_is_unchanged(run_dir: Path) -> None:
+def assert_journal_unchanged(run_dir: Path) -> None:
     now = normal_journal((run_dir / "journal.jsonl").read_text())
     before = [json.loads(line) for line in (GOLDEN / "journal.jsonl").read_text().splitlines()]
     assert [r["type"] for r in now] == [r["type"] for r in before]
-    for a, b in zip(now, before, strict=True):
-        assert a == b, (a["type"], a, b)
+    for i, (a, b) in enumerate(zip(now, before, strict=True)):
+        assert_same(a, b, f"journal record {i} ({a['type']})")
+
+
+def test_the_result_document_is_unchanged(run_dir: Path) -> None:
+    assert_result_unchanged(run_dir)
+
+
+def test_the_journal_is_unchanged(run_dir: Path) -> None:
+    assert_journal_unchanged(run_dir)
 
 
 def test_the_report_is_unchanged(run_dir: Path) -> None:
     now = normal_html((run_dir / "report.html").read_text(), str(run_dir))
-    assert now == (GOLDEN / "report.html").read_text()
+    assert_same_text(now, (GOLDEN / "report.html").read_text(), "report.html")
 
 
 def test_the_plan_is_unchanged(run_dir: Path) -> None:
-    assert (run_dir / "plan.txt").read_text() == (GOLDEN / "plan.txt").read_text()
+    assert_same_text((run_dir / "plan.txt").read_text(), (GOLDEN / "plan.txt").read_text(),
+                     "plan.txt")
+
+
+#: OpenBLAS kernels another CPU would take (OPENBLAS_CORETYPE): on x86-64 the SSE4.2
+#: family that every x86-64-v2 CPU runs; on 64-bit ARM the plain ARMv8 one.
+OTHER_BLAS_CORE = {"x86_64": "Nehalem", "AMD64": "Nehalem", "aarch64": "ARMV8",
+                   "arm64": "ARMV8"}
+
+_NARROWED_RUN = """
+import json, sys
+from pathlib import Path
+from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+sys.path.insert(0, sys.argv[1])
+from test_unchanged import seeded_run
+print(json.dumps({"dispatch_on": [f for f in __cpu_dispatch__ if __cpu_features__.get(f)],
+                  "run_dir": str(seeded_run(Path(sys.argv[2])))}))
+"""
+
+
+def test_the_run_is_unchanged_on_a_narrower_numerical_path(tmp_path: Path) -> None:
+    """The same seeded run with numpy's SIMD dispatch cut to its baseline and OpenBLAS
+    on another kernel family (another summation order, no FMA): within the tolerance
+    of the golden files, as on a user's clone on another CPU."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__
+
+    env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(__cpu_dispatch__)}
+    core = OTHER_BLAS_CORE.get(platform.machine())
+    if core is not None:
+        env["OPENBLAS_CORETYPE"] = core
+    proc = subprocess.run(
+        [sys.executable, "-c", _NARROWED_RUN, str(Path(__file__).parent), str(tmp_path)],
+        env=env, capture_output=True, text=True, timeout=110)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["dispatch_on"] == []  # numpy took its baseline path only
+    run_dir = Path(out["run_dir"])
+    assert_result_unchanged(run_dir)
+    assert_journal_unchanged(run_dir)
+    assert_same_text(normal_html((run_dir / "report.html").read_text(), str(run_dir)),
+                     (GOLDEN / "report.html").read_text(), "report.html")
