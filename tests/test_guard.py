@@ -127,6 +127,22 @@ def _first_cycle(guard: PlungerGuard, stop_means: dict[str, dict[str, float]],
     guard.learn(stop_means)
 
 
+def test_a_first_cycle_no_poll_saw_is_journaled_all_the_same(tmp_path: Path) -> None:
+    # Moves shorter than a poll (a fast drive, a loaded machine): the guard never
+    # measured a slack while the axes moved. What it learned at the stops is still
+    # a record of the run, saved like any other (it once carried an infinite slack,
+    # which the journal refused and a forgiving append dropped without a word).
+    from station.rundir.journal import Journal, read_journal
+
+    with Journal(tmp_path / "journal.jsonl") as journal:
+        guard, _ = _guard(6.25, journal)  # type: ignore[arg-type]
+        _first_cycle(guard, {"+": {"A": 0.9, "B": 2.1}, "-": {"A": 0.35, "B": 2.2},
+                             "0": {"A": 1.0, "B": 2.0}})
+    (record,) = read_journal(tmp_path / "journal.jsonl")
+    assert record["event"]["event"] == "plunger-guard-learned"
+    assert record["event"]["polls"] == 0 and record["event"]["min_slack_mm"] is None
+
+
 def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> None:
     journal: list[dict[str, Any]] = []
     guard, _ = _guard(0.8, journal)

@@ -119,9 +119,11 @@ class Sequencer:
         self._stops: dict[str, dict[str, StopStat]] = {}
         self._all_names = [ind.name for ind in config.indicators]
         self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
+        # The guard's records are the run's like any other: one that cannot be saved
+        # stops the run (a swallowed error once lost a record that had an infinity).
         self.guard = PlungerGuard(
             config, checker, controller.read_positions,
-            lambda names: indicators.read(1, names), controller.stop, self._journal_safe)
+            lambda names: indicators.read(1, names), controller.stop, journal.append)
         # The guard arms at a mounting's first Π0 reading and watches the cycle after it.
         self._guard_pending = False
         self._guard_cycle: int | None = None

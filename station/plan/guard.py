@@ -468,7 +468,8 @@ class PlungerGuard:
         self._journal({"type": "event", "event": {
             "event": "plunger-guard-learned", "where": self._where,
             "polls": sum(r.polls for r in self._moves),
-            "min_slack_mm": round(float(self.slack), 4),
+            # None: no poll came while the axes moved (a move shorter than a poll)
+            "min_slack_mm": round(float(self.slack), 4) if np.isfinite(self.slack) else None,
             "stop_signal_mm": {sign: {n: round(v, 4) for n, v in values.items()}
                                for sign, values in self.stop_signal.items()},
             "predicted_mm": {f"{name} {label}": [round(lo, 4), round(hi, 4)]
