@@ -18,8 +18,6 @@ from pathlib import Path
 from typing import Any
 
 from station import report
-from station.commands import simulation
-from station.commands.design import design_summary, format_summary
 from station.commands.options import ResumeOptions, RunOptions
 from station.config import load_config, parse_config
 from station.console.operator import ConsoleOperator, Operator, VirtualOperator
@@ -29,7 +27,7 @@ from station.engine.recovery import check_reference, drop_redone, home_if_needed
 from station.engine.results import AXES
 from station.engine.writeback import rollback as do_rollback
 from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
-from station.plan.checker import check_plan
+from station.plan.checker import MotionChecker, check_plan
 from station.plan.steps import build_plan
 from station.rundir.directory import (
     NVRAM_NAME,
@@ -77,6 +75,10 @@ def run(options: RunOptions) -> int:
         station = None
         sim = None
         if options.sim is not None:
+            # The virtual station (a Modbus server, pseudo-terminals: ~0.3 s of imports)
+            # only where one runs; a run against real devices never loads it.
+            from station.commands import simulation
+
             sim = simulation.sim_params(options.sim)
             station = simulation.start_station(sim, None)
             stack.callback(station.close)
@@ -103,6 +105,8 @@ def run(options: RunOptions) -> int:
             check_plan(plan, config, controller.soft_limits(),
                        start=controller.read_positions())
             # The experiment's quality and time before anything moves (orthocal design).
+            from station.commands.design import design_summary, format_summary
+
             summary = design_summary(config, config.procedure.model,
                                      controller_limits=controller.soft_limits())
             print(json.dumps({**plan.to_json(), "design": summary}) if options.json
@@ -113,11 +117,14 @@ def run(options: RunOptions) -> int:
         stack.callback(devices.close)
         operator = _operator(options.yes, station)
         limits = devices.controller.soft_limits()
-        check_plan(plan, config, limits)  # every posture, before anything moves
+        # One checker for both checks: the second finds the first's routes and bounds.
+        checker = MotionChecker(config, limits)
+        check_plan(plan, config, limits, checker=checker)  # every posture, before anything moves
         # A controller that lost its reference (power cut before the run) counts
         # positions from nowhere: home it first, with the operator's consent.
         home_if_needed(devices.controller, config, None, operator, say)
-        check_plan(plan, config, limits, start=devices.controller.read_positions())
+        check_plan(plan, config, limits, start=devices.controller.read_positions(),
+                   checker=checker)
 
         run_dir = new_run_dir(options.out)
         update_run_dir(lock, run_dir)
@@ -135,7 +142,7 @@ def run(options: RunOptions) -> int:
                         "argv": sys.argv[1:]})
         say(f"orthocal: run directory {run_dir}")
         ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
-                  JournalState(), [], now_iso())
+                  JournalState(), [], now_iso(), checker=checker)
         return _report(options.json, *execute(ctx))
 
 
@@ -167,8 +174,7 @@ def resume(options: ResumeOptions) -> int:
     sim = state.header.get("simulation")
     records = drop_redone(records)
     with ExitStack() as stack:
-        station, config = simulation.restart_station(stack, options.station_hook, sim,
-                                                     run_dir, config)
+        station, config = _restart_station(stack, options, sim, run_dir, config)
         if station is None:
             ConsoleOperator.require_tty_or_yes(options.yes)
         _lock(stack, config, "resume", run_dir)
@@ -185,7 +191,8 @@ def resume(options: ResumeOptions) -> int:
 
         devices = open_devices(config, on_event, station)
         stack.callback(devices.close)
-        check_plan(plan, config, devices.controller.soft_limits())
+        checker = MotionChecker(config, devices.controller.soft_limits())
+        check_plan(plan, config, devices.controller.soft_limits(), checker=checker)
         say(f"orthocal: resuming {run_dir}")
         operator = _operator(options.yes, station)
         try:
@@ -197,8 +204,19 @@ def resume(options: ResumeOptions) -> int:
             raise
         started = state.header.get("started") or now_iso()
         ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
-                  state, records, started)
+                  state, records, started, checker=checker)
         return _report(options.json, *execute(ctx))
+
+
+def _restart_station(stack: ExitStack, options: ResumeOptions, sim: dict[str, Any] | None,
+                     run_dir: Path, config: Any) -> tuple[Any, Any]:
+    """The virtual station of a simulated run, started again (None and the config
+    unchanged for a run on real devices, which never loads the simulator)."""
+    if sim is None:
+        return None, config
+    from station.commands import simulation
+
+    return simulation.restart_station(stack, options.station_hook, sim, run_dir, config)
 
 
 def _stop_quietly(controller: Any) -> None:
@@ -214,8 +232,7 @@ def rollback(options: ResumeOptions) -> int:
     config = load_config(run_dir / "config.toml")
     sim = state.header.get("simulation") if state.header else None
     with ExitStack() as stack:
-        station, config = simulation.restart_station(stack, options.station_hook, sim,
-                                                     run_dir, config)
+        station, config = _restart_station(stack, options, sim, run_dir, config)
         _lock(stack, config, "rollback", run_dir)
         journal = Journal(run_dir / JOURNAL_NAME)
         stack.callback(journal.close)

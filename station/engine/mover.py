@@ -97,7 +97,8 @@ class Mover:
         strict = bool(self.mounted) and self.guard.enabled and not self.guard.watching
         try:
             legs = self.checker.route(self.position, target, step.label, self.setup,
-                                      self.mounted, signal=signal, strict=strict)
+                                      self.mounted, signal=signal, strict=strict,
+                                      travel=False)
         except PathRefused as exc:
             if not (self.mounted and signal is not None):
                 raise  # the plan's own check, from where the machine stands: bad input
@@ -252,7 +253,7 @@ class Mover:
                            "of its stroke")
         legs = self.checker.route(here, target, label, self.setup, self.mounted,
                                   signal=signal, strict=True, margin=margin,
-                                  max_waypoints=RECOVERY_WAYPOINTS)
+                                  max_waypoints=RECOVERY_WAYPOINTS, travel=False)
         self.guard.begin_move(here, legs, signal, margin=margin)
         return legs
 

@@ -65,6 +65,7 @@ class Run:
     state: JournalState
     records: list[dict[str, Any]]
     started_iso: str
+    checker: MotionChecker | None = None
     t0: float = field(default_factory=time.monotonic)
     result: dict[str, Any] = field(default_factory=dict)
 
@@ -109,7 +110,9 @@ def execute(ctx: Run) -> tuple[int, dict[str, Any]]:
 
 
 def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
-    checker = MotionChecker(ctx.config, ctx.devices.controller.soft_limits())
+    # The plan check's checker, where the command made one: its routes and bounds
+    # are the first cycle's (each sub-move decided again from where the axes stand).
+    checker = ctx.checker or MotionChecker(ctx.config, ctx.devices.controller.soft_limits())
     seq = Sequencer(
         config=ctx.config, plan=ctx.plan, controller=ctx.devices.controller,
         indicators=ctx.devices.indicators, journal=ctx.journal, operator=ctx.operator,

@@ -120,7 +120,7 @@ class MotionChecker:
         # START_REUSE_MM of a cached one reuses its waypoints where all still hold.
         self._routes: dict[tuple, list[tuple[np.ndarray, list[np.ndarray]]]] = {}
         # Nominal travel bounds of sub-moves already bounded (_segment_bound).
-        self._bounds: dict[tuple, motion.Bound | type[Exception] | None] = {}
+        self._bounds: dict[tuple, motion.Bound | type[Exception]] = {}
 
     def check(self, start: Sequence[float] | None, target: Sequence[float], label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
@@ -130,7 +130,7 @@ class MotionChecker:
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None,
               signal: Mapping[str, tuple[float, float]] | None = None,
               max_waypoints: int = MAX_WAYPOINTS, strict: bool = False,
-              margin: float | None = None) -> list[np.ndarray]:
+              margin: float | None = None, travel: bool = True) -> list[np.ndarray]:
         """The targets of the sub-moves that reach ``target`` (waypoints, then the
         target itself); raises BadInput when no route of up to ``max_waypoints``
         holds. ``signal``: per mounted gauge, the travel beyond the nominal model
@@ -140,7 +140,10 @@ class MotionChecker:
         out of the guard's margin where it can, else (unless ``strict``: the guard's
         own re-plan) within the stroke, the guard watching what comes that close.
         ``margin``: instead of plunger_margin_mm (a re-plan from where a plunger
-        already stands closer to its end: no closer than that)."""
+        already stands closer to its end: no closer than that). ``travel``: the
+        route's plunger travel goes into ``travel`` (the plan listing's); a run's
+        moves need only the decision (a sharp bound of every sub-move from wherever
+        the axes stand costs tens of ms)."""
         keep = self.margin if margin is None else margin
         target_v = np.asarray(target, dtype=float)
         where = "" if setup is None else f"setup {setup.index + 1} (leg {setup.leg}), "
@@ -166,7 +169,8 @@ class MotionChecker:
                     break
                 here = leg
             else:
-                self._commit(self._route_travel(gauges, start_v, legs, where))
+                if travel:
+                    self._commit(self._route_travel(gauges, start_v, legs, where))
                 return [leg.copy() for leg in legs]
         legs = None
         for kept in (keep,) if strict else (keep, 0.0):
@@ -182,7 +186,8 @@ class MotionChecker:
         if margin is None:  # a re-plan's route (its own margin) is no route to reuse
             self._routes.setdefault(key, []).append(
                 (start_v.copy(), [leg.copy() for leg in legs]))
-        self._commit(self._route_travel(gauges, start_v, legs, where))
+        if travel:
+            self._commit(self._route_travel(gauges, start_v, legs, where))
         return legs
 
     # --- one sub-move -----------------------------------------------------------------
@@ -234,8 +239,9 @@ class MotionChecker:
     def _bound(self, gauges: _Gauges | None, a: np.ndarray, b: np.ndarray, where: str,
                margin: float | None) -> motion.Bound | None:
         """Bound of the travel (signal included) over the sub-move; with ``margin``
-        None if it leaves the stroke less that margin. Without gauges, only the
-        workspace is checked (a coarse grid: the workspace ends far from the stops)."""
+        None if it leaves the stroke less that margin (a decision: as sharp as it
+        needs, motion.segment_bound). Without gauges, only the workspace is checked
+        (a coarse grid: the workspace ends far from the stops)."""
         f = self._values(gauges, where)
         if gauges is None:
             try:
@@ -252,35 +258,44 @@ class MotionChecker:
             low = gauges.low + margin - sig_lo
             high = gauges.high - margin - sig_hi
         bound = self._segment_bound(gauges, f, a, b, low, high, where)
-        if bound is None:
+        if not bound.within(low, high):
             return None
         return motion.Bound(bound.lo + sig_lo, bound.hi + sig_hi)
 
     def _segment_bound(self, gauges: _Gauges, f: Callable[[np.ndarray], np.ndarray],
                        a: np.ndarray, b: np.ndarray, low: np.ndarray | None,
-                       high: np.ndarray | None, where: str) -> motion.Bound | None:
+                       high: np.ndarray | None, where: str,
+                       max_depth: int = motion.MAX_DEPTH) -> motion.Bound:
         """motion.segment_bound, remembered: the nominal travel of a mounting over a
         sub-move is a pure function of the leg, its Π0, the gauges and the two ends,
         and the same sub-moves come back (every cycle, every re-check of a reused
-        route, every candidate of ``orthocal design``'s search)."""
+        route, the waypoint search trying slack after slack, every candidate of
+        ``orthocal design``'s search). What one search learned (a bound, values
+        attained) answers a later decision against other limits where it can; where
+        it cannot, the set is searched again and both are kept (Bound.merge)."""
         def key_of(v: np.ndarray | None) -> bytes | None:
             return None if v is None else np.asarray(v, dtype=float).tobytes()
 
         key = (gauges.setup.leg, key_of(np.asarray(gauges.setup.postures["0"])),
-               tuple(gauges.names), tuple(gauges.directions),
-               key_of(a), key_of(b), key_of(low), key_of(high))
-        if key in self._bounds:
-            found = self._bounds[key]
-            if isinstance(found, type):  # it raised: again, for this move's words
-                raise found(where)
-            return found
+               tuple(gauges.names), tuple(gauges.directions), key_of(a), key_of(b),
+               max_depth)
+        known = self._bounds.get(key)
+        if isinstance(known, type):  # it raised: again, for this move's words
+            raise known(where)
+        if known is not None:
+            deciding = low is not None or high is not None
+            if known.sharp or (deciding and (known.within(low, high)
+                                             or known.refutes(low, high))):
+                return known
         if len(self._bounds) >= BOUND_CACHE_SIZE:
             self._bounds.clear()
         try:
-            bound = motion.segment_bound(f, a, b, self.motion, low, high)
+            found = motion.segment_bound(f, a, b, self.motion, low, high,
+                                         max_depth=max_depth)
         except (motion.OutsideWorkspace, _NotCrossing) as exc:
             self._bounds[key] = type(exc)
             raise
+        bound = found if known is None else known.merge(found)
         self._bounds[key] = bound
         return bound
 
@@ -308,18 +323,41 @@ class MotionChecker:
         return travel
 
     def travel_bound(self, sp: SetupPlan, mounted: Mapping[str, str], a: Sequence[float],
-                     b: Sequence[float]) -> dict[str, tuple[float, float]]:
+                     b: Sequence[float], coarse: bool = False) -> dict[str, tuple[float, float]]:
         """Nominal (min, max) travel of each mounted gauge over every position one
-        COMMAND 1 from a to b may pass through (the guard's look ahead)."""
+        COMMAND 1 from a to b may pass through (the guard's look ahead). ``coarse``:
+        one round of the branch and bound (for a set of a few mm, such as a poll's
+        window spans, exact to microns)."""
+        found = self._travel(sp, mounted, a, b, None, 1 if coarse else motion.MAX_DEPTH)
+        if found is None:  # outside the workspace: nothing is bounded
+            return {n: (-np.inf, np.inf) for n in mounted}
+        return found
+
+    def travel_keeps(self, sp: SetupPlan, mounted: Mapping[str, str], a: Sequence[float],
+                     b: Sequence[float], within: Mapping[str, tuple[float, float]]
+                     ) -> dict[str, tuple[float, float]] | None:
+        """Whether the nominal travel of each mounted gauge keeps within its (low,
+        high) of ``within`` over every position one COMMAND 1 from a to b may pass
+        through: its bound, as sharp as that decision needed, or None where it may
+        not (or the set leaves the workspace)."""
+        return self._travel(sp, mounted, a, b, within, motion.MAX_DEPTH)
+
+    def _travel(self, sp: SetupPlan, mounted: Mapping[str, str], a: Sequence[float],
+                b: Sequence[float], within: Mapping[str, tuple[float, float]] | None,
+                max_depth: int) -> dict[str, tuple[float, float]] | None:
         gauges = self._gauges(sp, dict(mounted), None)
         if gauges is None:
             return {}
+        low = None if within is None else np.array([within[n][0] for n in gauges.names])
+        high = None if within is None else np.array([within[n][1] for n in gauges.names])
         try:
-            bound = self._bound(gauges, np.asarray(a, dtype=float), np.asarray(b, dtype=float),
-                                "", None)
+            bound = self._segment_bound(
+                gauges, self._values(gauges, ""), np.asarray(a, dtype=float),
+                np.asarray(b, dtype=float), low, high, "", max_depth)
         except (motion.OutsideWorkspace, _NotCrossing):
-            return {n: (-np.inf, np.inf) for n in gauges.names}
-        assert bound is not None
+            return None
+        if not bound.within(low, high):
+            return None
         return {n: (float(bound.lo[k]), float(bound.hi[k]))
                 for k, n in enumerate(gauges.names)}
 

@@ -254,6 +254,11 @@ class PlungerGuard:
                 # the drive is about to report it; a poll now would only delay that.
                 return
             before = np.asarray(self._positions(), dtype=float)
+            if np.all(np.abs(before - target_v) <= ARRIVED_MM):
+                # At the target: the stop is read at rest next; a reading now costs a
+                # line time and tells nothing the plan did not check there.
+                arrived[0] = True
+                return
             values = self._read(names)
             after = np.asarray(self._positions(), dtype=float)
             arrived[0] = bool(np.all(np.abs(after - target_v) <= ARRIVED_MM))
@@ -262,12 +267,15 @@ class PlungerGuard:
             ends = np.vstack([before, after])
             u = float(np.mean(self._progress(ends)))
             # The gauge sampled somewhere between the two positions: the nominal travel
-            # over their box says whether that instant matters.
-            window = self._checker.travel_bound(self._setup, mounting, before, after)
-            # What is still ahead: from here to this sub-move's target, then the rest.
-            here_bounds = self._checker.travel_bound(self._setup, mounting, after, target_v)
+            # over their box (a poll's few mm: one round of the bound is exact to
+            # microns) says whether that instant matters.
+            window = self._checker.travel_bound(self._setup, mounting, before, after,
+                                                coarse=True)
+            travels, slopes, within = {}, {}, {}
+            u1 = self._route_u[index][1]
             for name, g in self._gauges.items():
                 travel = float(values[name][0]) - g.baseline
+                travels[name] = travel
                 g.seen = (min(g.seen[0], travel), max(g.seen[1], travel))
                 lo_hi = record.travel.get(name, (travel, travel))
                 record.travel[name] = (min(lo_hi[0], travel), max(lo_hi[1], travel))
@@ -280,14 +288,26 @@ class PlungerGuard:
                     # Only an interval is known: kept consistent with it (a knocked
                     # stand moves the signal at once, a swing does not).
                     g.signal = min(max(g.signal, travel - w_hi), travel - w_lo)
-                slope = self._slope(g)
+                slopes[name] = slope = self._slope(g)
                 g.end_signal = g.signal + slope * (1.0 - u)
+                s0, s1 = g.signal, g.signal + slope * (u1 - u)
+                within[name] = (g.low + self._move_margin - min(s0, s1),
+                                g.high - self._move_margin - max(s0, s1))
+            # What is still ahead: from here to this sub-move's target (decided: a
+            # bound only as sharp as telling it keeps the margin needs), then the rest.
+            here_bounds = self._checker.travel_keeps(self._setup, mounting, after, target_v,
+                                                     within)
+            if here_bounds is None:  # it may not: the full bound, for the trip's figures
+                here_bounds = self._checker.travel_bound(self._setup, mounting, after,
+                                                         target_v)
+            for name, g in self._gauges.items():
+                travel, slope = travels[name], slopes[name]
                 lo, hi = travel, travel
-                ahead = [(here_bounds[name], (u, self._route_u[index][1]))] + [
+                ahead = [(here_bounds[name], (u, u1))] + [
                     (self._route_bounds[k][name], self._route_u[k])
                     for k in range(index + 1, len(self._route_bounds))]
-                for (n_lo, n_hi), (u0, u1) in ahead:
-                    s0, s1 = (g.signal + slope * (v - u) for v in (u0, u1))
+                for (n_lo, n_hi), (v0, v1) in ahead:
+                    s0, s1 = (g.signal + slope * (v - u) for v in (v0, v1))
                     lo = min(lo, n_lo + min(s0, s1))
                     hi = max(hi, n_hi + max(s0, s1))
                 slack = min(g.high - self._move_margin - hi, lo - g.low - self._move_margin)
@@ -500,7 +520,7 @@ class PlungerGuard:
             try:
                 self._checker.route(sp.postures[a], sp.postures[b], label, sp,
                                     self._mounting(), signal=self.route_signal(a, b),
-                                    strict=True)
+                                    strict=True, travel=False)
             except PathRefused as exc:
                 g = self._gauges.get(exc.indicator or "")
                 if g is None:

@@ -68,8 +68,11 @@ MAX_SAMPLES = 20000
 # the largest second difference the grid shows (smooth functions on a grid fine
 # enough that the widening is below the tolerance: their curvature varies slowly).
 CURVATURE_SAFETY = 2.0
-# Bisection steps of the greedy waypoint placement (fraction of the move: 1/4096).
-BISECTION_STEPS = 12
+# Bisection steps of the greedy waypoint placement (fraction of the move: 1/512, a
+# third of a mm on the paper's longest move; each step a decision at the plan check),
+# and of the slack the waypoints are then spread for (1/64 of the room there is).
+BISECTION_STEPS = 9
+SPREAD_STEPS = 6
 
 
 class OutsideWorkspace(ValueError):
@@ -78,10 +81,35 @@ class OutsideWorkspace(ValueError):
 
 @dataclass(frozen=True)
 class Bound:
-    """Lower and upper bound of each column of a function over a move's set."""
+    """Lower and upper bound of each column of a function over a move's set, and
+    the extremes of the values sampled there (attained: a limit they pass is
+    crossed for certain). ``sharp``: refined to the tolerance (not only as far as
+    a decision against limits needed)."""
 
     lo: np.ndarray
     hi: np.ndarray
+    seen_lo: np.ndarray | None = None
+    seen_hi: np.ndarray | None = None
+    sharp: bool = True
+
+    def within(self, low: np.ndarray | None, high: np.ndarray | None) -> bool:
+        """The bound proves every value within the limits."""
+        return not _outside(self.lo, self.hi, low, high)
+
+    def refutes(self, low: np.ndarray | None, high: np.ndarray | None) -> bool:
+        """A value sampled lies beyond a limit."""
+        if self.seen_lo is None or self.seen_hi is None:
+            return False
+        return _outside(self.seen_lo, self.seen_hi, low, high)
+
+    def merge(self, other: Bound) -> Bound:
+        """What two searches of the same set know: the tighter bound of the two (each
+        holds), the extremes of all values sampled."""
+        seen = [b for b in (self, other) if b.seen_lo is not None and b.seen_hi is not None]
+        return Bound(np.maximum(self.lo, other.lo), np.minimum(self.hi, other.hi),
+                     np.min([b.seen_lo for b in seen], axis=0) if seen else None,
+                     np.max([b.seen_hi for b in seen], axis=0) if seen else None,
+                     self.sharp or other.sharp)
 
 
 Values = Callable[[np.ndarray], np.ndarray]  # (n, 3) joints -> (n, m) values
@@ -162,21 +190,28 @@ def cell_bounds(values: np.ndarray, dims: tuple[int, ...]) -> tuple[np.ndarray, 
 
 def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str,
                   low: np.ndarray | None = None, high: np.ndarray | None = None,
-                  tolerance: float = TOLERANCE_MM) -> Bound | None:
+                  tolerance: float = TOLERANCE_MM, max_depth: int = MAX_DEPTH
+                  ) -> Bound:
     """Bound of each column of ``f`` over the set a move from a to b can pass
     through (module docstring), by branch and bound: every cell is sampled on a
     3-point grid per dimension and bounded (:func:`cell_bounds`); a cell whose
     bound lies more than ``tolerance`` beyond the best value found so far is split
     in two along every dimension, until none is (or the depth or cell budget is
-    spent: the bound then stays as wide as the cells left). ``low``/``high``: a
-    sample beyond them ends the search at once with None (the move is refused
-    before its bound is sharp), as does a bound beyond them. Raises
-    OutsideWorkspace when ``f`` does (the set leaves the machine's workspace)."""
+    spent: the bound then stays as wide as the cells left). ``low``/``high``: the
+    search only has to decide whether the values keep within them (Bound.within,
+    Bound.refutes): a sample beyond them ends it at once (the bound then unknown,
+    ±inf), and a cell whose bound lies within them is not refined further (its
+    bound already proves it safe), so the Bound is as sharp as that decision
+    needed, not within ``tolerance`` (``sharp`` False). ``max_depth``: rounds of splitting
+    at most (1: the cell bounds of one 3-point grid, for a set so small that its
+    curvature widens them by microns). Raises OutsideWorkspace when ``f`` does (the
+    set leaves the machine's workspace)."""
     a_v, b_v = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     d, joints = _space(a_v, b_v, motion)
     if d == 0:
         v = _evaluate(f, a_v[None, :])[0]
-        return None if _outside(v, v, low, high) else Bound(v, v)
+        return Bound(v, v, v, v)
+    deciding = low is not None or high is not None
     offsets = np.stack([m.ravel() for m in np.meshgrid(*[np.array([0.0, 0.5, 1.0])] * d,
                                                        indexing="ij")], axis=-1)  # (3^d, d)
     corners = np.stack([m.ravel() for m in np.meshgrid(*[np.array([0.0, 0.5])] * d,
@@ -186,16 +221,16 @@ def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str
     final_lo: list[np.ndarray] = []
     final_hi: list[np.ndarray] = []
     dims = tuple(range(1, d + 1))
-    for depth in range(MAX_DEPTH):
+    for depth in range(max_depth):
         u = c0[:, None, :] + size[:, None, :] * offsets[None, :, :]  # (B, 3^d, d)
         values = _evaluate(f, joints(u.reshape(-1, d)))
         m = values.shape[-1]
         flat = values.reshape(-1, m)
         lo_now, hi_now = flat.min(axis=0), flat.max(axis=0)
-        if _outside(lo_now, hi_now, low, high):
-            return None
         best_lo = lo_now if best_lo is None else np.minimum(best_lo, lo_now)
         best_hi = hi_now if best_hi is None else np.maximum(best_hi, hi_now)
+        if _outside(lo_now, hi_now, low, high):  # refuted: no bound needed
+            return Bound(np.full(m, -np.inf), np.full(m, np.inf), best_lo, best_hi, False)
         grid = values.reshape(len(c0), *([3] * d), m)
         sub_lo, sub_hi = cell_bounds(grid, dims)
         sub_lo, sub_hi = sub_lo.reshape(-1, m), sub_hi.reshape(-1, m)  # (B·2^d, m)
@@ -203,7 +238,10 @@ def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str
         sub_size = np.repeat(size / 2.0, len(corners), axis=0)
         split = np.any(sub_lo < best_lo - tolerance, axis=1) | \
             np.any(sub_hi > best_hi + tolerance, axis=1)
-        if depth == MAX_DEPTH - 1 or np.count_nonzero(split) * len(offsets) > MAX_SAMPLES:
+        if deciding:
+            # A decision: only a cell that may cross a limit needs a sharper bound.
+            split &= _crosses(sub_lo, sub_hi, low, high)
+        if depth == max_depth - 1 or np.count_nonzero(split) * len(offsets) > MAX_SAMPLES:
             split[:] = False  # the budget is spent: these bounds stand as they are
         final_lo.append(sub_lo[~split].min(axis=0, initial=np.inf))
         final_hi.append(sub_hi[~split].max(axis=0, initial=-np.inf))
@@ -211,9 +249,9 @@ def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str
             break
         c0, size = sub_c0[split], sub_size[split]
     lo, hi = np.min(final_lo, axis=0), np.max(final_hi, axis=0)
-    if _outside(lo, hi, low, high):
-        return None
-    return Bound(lo, hi)
+    assert best_lo is not None and best_hi is not None
+    return Bound(np.minimum(lo, best_lo), np.maximum(hi, best_hi), best_lo, best_hi,
+                 not deciding)
 
 
 def _evaluate(f: Values, points: np.ndarray) -> np.ndarray:
@@ -222,6 +260,17 @@ def _evaluate(f: Values, points: np.ndarray) -> np.ndarray:
     except ValueError as exc:
         raise OutsideWorkspace(str(exc)) from None
     return values.reshape(len(points), -1)
+
+
+def _crosses(lo: np.ndarray, hi: np.ndarray, low: np.ndarray | None,
+             high: np.ndarray | None) -> np.ndarray:
+    """Per cell (rows of lo/hi), whether its bound reaches beyond a limit."""
+    out = np.zeros(len(lo), dtype=bool)
+    if low is not None:
+        out |= np.any(lo < low - 1e-9, axis=1)
+    if high is not None:
+        out |= np.any(hi > high + 1e-9, axis=1)
+    return out
 
 
 def _outside(lo: np.ndarray, hi: np.ndarray, low: np.ndarray | None,
@@ -298,7 +347,7 @@ def route(feasible: Feasible, a: Sequence[float], b: Sequence[float], geometry: 
         # The largest slack that the same number of waypoints still achieves.
         count = len(cuts)
         lo, hi = 0.0, max_slack
-        for _ in range(8):
+        for _ in range(SPREAD_STEPS):
             mid = 0.5 * (lo + hi)
             spread = _greedy(feasible, at, mid, count)
             if spread is None:
