@@ -267,6 +267,12 @@ class ModbusAxisController(ModbusLink):
             raise self._unsupported("offsets")
         return self.read_mm(self.map.axis_registers("OFFSET"), "read offsets")
 
+    def offset_resolution_mm(self) -> float:
+        """One count of the OFFSET registers (of TARGET without them: where the
+        station holds the offsets, the target carries them), the coarsest axis's."""
+        role = "OFFSET" if self.map.has_role("OFFSET") else "TARGET"
+        return max(1.0 / reg.scale for reg in self.map.axis_registers(role))
+
     def write_offsets(self, offsets: Sequence[float]) -> np.ndarray:
         """Write o in one request, read it back, raise ReadbackMismatch unless every
         axis reads back the written count. Returns what was read back (mm)."""

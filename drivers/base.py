@@ -82,6 +82,12 @@ class AxisController(Protocol):
         resolution. Returns what was read back."""
         ...
 
+    def offset_resolution_mm(self) -> float:
+        """The step in which an offset takes effect (mm): the controller's count.
+        A correction is rounded to it, so no verification can show the joint zero
+        closer than half of it."""
+        ...
+
     def close(self) -> None: ...
 
 

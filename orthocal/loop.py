@@ -114,6 +114,34 @@ def significant_corrections(parameters: Mapping[str, float],
     return out
 
 
+def shown_within(parameters: Mapping[str, float], std_errors: Mapping[str, float | None],
+                 dof: float | None, target: Mapping[str, float] | None = None,
+                 level: float = 0.95, sign: bool = False) -> dict[str, float]:
+    """Per writable parameter, how far from ``target`` (default 0) the machine's Δρ can
+    be at ``level`` (two-sided): |Δρ̂ − target| + k·se, k from Student's t on ``dof``
+    (the normal's without). A missing or infinite standard error bounds nothing
+    (inf). ``sign``: instead, how far it is at least, |Δρ̂ − target| − k·se (> 0:
+    the interval excludes the target, a correction seen at that level; −inf
+    without a standard error). The closed loop says "converged" only where every bound is within
+    converge_mm and half the drive's count (a correction is rounded to it, so no
+    offset can be set closer): the promise the word makes (design.md, "Closed
+    loop"). The verification measures the machine as the drive holds its offsets,
+    rounded, so the rounding is inside the bound."""
+    aim = target or {}
+    k = coverage_factor(dof, level)
+    out = {}
+    for name in WRITABLE:
+        if name not in parameters:
+            continue
+        se = finite(std_errors.get(name))
+        value = abs(float(parameters[name]) - float(aim.get(name, 0.0)))
+        if se is None:
+            out[name] = -math.inf if sign else math.inf
+        else:
+            out[name] = value - k * se if sign else value + k * se
+    return out
+
+
 def _welch(a: float, nu_a: float | None, b: float, nu_b: float | None) -> float | None:
     """Welch–Satterthwaite dof of a² + b² (None: a term's dof unknown, the normal)."""
     if nu_a is None or nu_b is None:

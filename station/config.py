@@ -241,8 +241,13 @@ class ProcedureConfig(_Strict):
     verify: bool = True
     # Closed loop (design.md): write-backs at most, each verified; 1 = one round, no loop.
     max_iterations: int = Field(3, ge=1, le=10)
-    # A significant correction smaller than this is not worth another round (mm).
+    # "Converged" means the remaining Δρ is shown within ±converge_mm at 95 % on every
+    # axis (mm); a significant correction smaller than this is not worth another round.
     converge_mm: float = Field(0.002, ge=0)
+    # Where a verification's noise cannot show that yet, it is measured again (a
+    # further pass of every setup, pooled with it) at most this many times; then the
+    # loop ends "not-converged", saying why.
+    max_extra_passes: int = Field(2, ge=0, le=10)
     # The stops Π_i(s) of each cycle, mm (model.md "Test postures"); absent: the
     # paper's two, ρmax and ρmin, and every plan, journal and JSON exactly as before.
     strokes: list[float] | None = Field(None, min_length=1, max_length=20)

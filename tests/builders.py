@@ -19,8 +19,11 @@ from station.commands.options import DriveOptions, ResumeOptions, RunOptions, Si
 from station.config import StationConfig, parse_config
 from station.rundir.journal import read_journal
 
-#: A short simulated procedure: two cycles of three readings, no settling.
-FAST: dict[str, Any] = {"cycles": 2, "readings": 3, "settle_s": 0.0}
+#: A short simulated procedure: two cycles of three readings, no settling, and a
+#: verification never measured again (two cycles of the tests' 2 µm gauges cannot
+#: show ±converge_mm, and such a run ends "not-converged", saying so; the tests of
+#: that rule, in test_closed_loop_run and test_interrupt, allow further passes).
+FAST: dict[str, Any] = {"cycles": 2, "readings": 3, "settle_s": 0.0, "max_extra_passes": 0}
 
 #: A station of two gauges moved from leg to leg (config as data).
 BASE: dict[str, Any] = {

@@ -81,7 +81,8 @@ def _lines(raw: bytes) -> list[bytes]:
 
 
 def test_prompts_never_share_a_line_with_the_live_bar(tmp_path: Path) -> None:
-    procedure = {"cycles": 1, "readings": 2, "settle_s": 0.05, "verify": True}
+    procedure = {"cycles": 1, "readings": 2, "settle_s": 0.05, "verify": True,
+                 "max_extra_passes": 0}  # one verification: six prompts
     with VirtualStation(seed=7, true_drho=(0.2, -0.1, 0.3), mount_all=True,
                         indicator_count=6, procedure=procedure, speed_mm_s=400.0) as station:
         config = tmp_path / "station.toml"

@@ -145,6 +145,70 @@ def test_a_write_that_does_not_happen_stops_the_loop(status: str, reason: str) -
     assert sum(1 for s in steps if s.kind == "measure") == 2
 
 
+def walk_verdicts(max_extra: int, verdicts: list[str]) -> list[Step]:
+    """next_step with a verdict per measurement: a round's first pass or, when the
+    step says extra, a further pass of it; every write-back succeeds."""
+    state = LoopState(3, True, max_extra_passes=max_extra)
+    steps: list[Step] = []
+    it = iter(verdicts)
+    while (step := next_step(state)).kind != "finish":
+        steps.append(step)
+        if step.kind == "write":
+            state.wrote("written")
+        elif step.extra:
+            state.extended(next(it))
+        else:
+            state.measured(next(it))
+    return [*steps, step]
+
+
+def test_an_unproven_verification_is_measured_again_until_it_decides() -> None:
+    # The first verification can tell neither a correction nor convergence: it is
+    # measured again (v+1), pooled; then it shows the machine within converge_mm.
+    steps = walk_verdicts(2, ["significant", "unproven", "converged"])
+    assert [(s.kind, s.phase, s.extra) for s in steps[:-1]] == [
+        ("measure", "m", 0), ("write", None, 0), ("measure", "v", 0), ("measure", "v+1", 1)]
+    assert steps[-1].reason == "converged"
+    # or the pooled passes find a correction after all: written, then verified afresh
+    steps = walk_verdicts(2, ["significant", "unproven", "significant", "converged"])
+    assert [s.phase for s in steps if s.kind == "measure"] == ["m", "v", "v+1", "v2"]
+    assert [s.round for s in steps if s.kind == "write"] == [1, 2]
+    assert steps[-1].reason == "converged"
+
+
+def test_a_correction_seen_but_not_beyond_the_noise_is_never_written() -> None:
+    # suspected: what is left is seen at 95 % yet not beyond both rounds' noise; the
+    # further passes may make it significant (then written), else the loop says so
+    steps = walk_verdicts(1, ["significant", "suspected", "significant", "converged"])
+    assert [(s.kind, s.phase or s.round) for s in steps[:-1]] == [
+        ("measure", "m"), ("write", 1), ("measure", "v"), ("measure", "v+1"),
+        ("write", 2), ("measure", "v2")]
+    steps = walk_verdicts(1, ["significant", "suspected", "suspected"])
+    assert steps[-1].reason == "not-converged" and sum(s.kind == "write" for s in steps) == 1
+
+
+def test_a_verification_that_cannot_show_convergence_ends_not_converged() -> None:
+    steps = walk_verdicts(2, ["significant", "unproven", "unproven", "unproven"])
+    assert [s.phase for s in steps if s.kind == "measure"] == ["m", "v", "v+1", "v+2"]
+    assert steps[-1] == Step("finish", reason="not-converged")
+    assert walk_verdicts(0, ["significant", "unproven"])[-1].reason == "not-converged"
+    # a later round's passes are its own: v2+1 after v2
+    steps = walk_verdicts(1, ["significant", "significant", "unproven", "converged"])
+    assert [s.phase for s in steps if s.kind == "measure"] == ["m", "v", "v2", "v2+1"]
+
+
+def test_shown_within_is_the_95_percent_bound_of_what_is_left() -> None:
+    from orthocal.loop import shown_within
+
+    se = {"drho_x": 0.0005, "drho_y": None, "drho_z": 0.001}
+    shown = shown_within({"drho_x": -0.001, "drho_y": 0.0, "drho_z": 0.0005}, se, dof=None)
+    assert shown["drho_x"] == pytest.approx(0.001 + 1.959964 * 0.0005, rel=1e-6)
+    assert shown["drho_y"] == float("inf")  # no standard error: nothing is shown
+    # Student's t on few dof widens it; the aim of objective tool is where it counts from
+    t12 = shown_within({"drho_z": 0.0005}, se, dof=12, target={"drho_z": 0.0015})
+    assert t12["drho_z"] == pytest.approx(0.001 + 2.178813 * 0.001, rel=1e-6)
+
+
 def test_no_verification_means_one_write() -> None:
     steps = walk(3, False, [True], ["written"])
     assert [s.kind for s in steps] == ["measure", "write", "finish"]

@@ -26,7 +26,11 @@ from station.rundir.directory import NVRAM_NAME
 if TYPE_CHECKING:
     from drivers.sim.motion import DriveMotion
 
-DEFAULT_NOISE_MM = 0.002
+# The virtual gauges' noise unless --noise says otherwise: a 1 µm digital indicator
+# flickering by about a digit. With such gauges the default procedure's verification
+# shows ±converge_mm (2 µm) in one or two passes; at 2 µm it often cannot in three, and
+# the run says so ("not-converged").
+DEFAULT_NOISE_MM = 0.001
 DEFAULT_SIM_DRHO_MM = 2.0  # random hidden Δρ are drawn uniform in ±this
 
 

@@ -38,9 +38,13 @@ class Progress:
 
     def _event(self, event: str, info: dict[str, Any]) -> None:
         code = info.get("phase", "")
-        # "v2", "v3": the closed loop's later verifications.
-        phase = {"m": "measure", "v": "verify"}.get(code) or (
-            f"verify {code[1:]}" if code.startswith("v") else "")
+        # "v2", "v3": the closed loop's later verifications; "v+1", "v2+1": one
+        # measured again.
+        base, _, again = code.partition("+")
+        phase = {"m": "measure", "v": "verify"}.get(base) or (
+            f"verify {base[1:]}" if base.startswith("v") else "")
+        if again:
+            phase += f", again ({again})"
         if event == "read":
             self.steps += 1
             sp = self.plan.setups[info["setup"]]

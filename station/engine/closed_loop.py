@@ -6,18 +6,33 @@ verify → (write → verify)… → finish (design.md, "Closed loop").
 performs that step — or, on resume, replays it from the journal: a measurement
 whose cycles are journaled is rebuilt without motion, a write-back whose
 outcome is journaled is not redone — feeds the outcome back with
-:meth:`LoopState.measured` / :meth:`LoopState.wrote`, and asks again. Because
-replayed outcomes are the recorded ones, a resumed run walks the same states
-and lands where the kill left it, and each correction is written exactly once.
+:meth:`LoopState.measured` / :meth:`LoopState.extended` / :meth:`LoopState.wrote`,
+and asks again. Because replayed outcomes are the recorded ones, a resumed run
+walks the same states and lands where the kill left it, and each correction is
+written exactly once.
 
-States (``len(measurements)``, ``len(writes)``):
+A measurement ends in a verdict: "significant" (a correction beyond the noise of
+both rounds and beyond converge_mm: write it), "converged" (the remaining Δρ is
+shown within ±converge_mm at 95 % on every axis: orthocal.loop.shown_within), or
+neither: "suspected" (a correction the round sees at 95 % but not beyond the noise
+of both rounds) or "unproven" (the round's noise hides whatever is left). Either
+is measured again, a further pass of the same verification pooled with it (phase
+"v+1", "v2+1"…), up to ``max_extra_passes``: what is left beyond the noise then
+shows as significant and is written, a machine within converge_mm shows as
+converged. Still undecided, the loop ends "not-converged", saying why; it never
+writes what does not stand out of both rounds' noise (that would trade one noise
+for another, and a machine one round fixed would be written again).
+
+States (``len(verdicts)``, ``len(writes)``):
 
     (0, 0)          → measure "m"
-    (k, k-1)        → the k-th measurement is decided:
+    (k, k-1)        → the k-th round is decided:
                         k = 1: write round 1 (the first correction is always written)
-                        k > 1 and significant and k-1 < max_iterations → write round k
-                        k > 1 and significant, max reached → finish "max_iterations"
-                        k > 1 and not significant → finish "converged"
+                        significant, k-1 < max_iterations → write round k
+                        significant, max reached → finish "max_iterations"
+                        converged → finish "converged"
+                        suspected/unproven, passes left → the round's next pass
+                        suspected/unproven, none left → finish "not-converged"
     (k, k)          → the k-th write's outcome:
                         written and verify → measure the verification of round k
                         written, no verify → finish "not verified"
@@ -33,19 +48,25 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 StepKind = Literal["measure", "write", "finish"]
+Verdict = Literal["significant", "converged", "suspected", "unproven"]
 
 #: Why the loop stopped (the run JSON's ``loop.stopped``): the first is success; the
 #: report says each in words (station.report.rounds.STOP_TEXT).
-STOP_REASONS: tuple[str, ...] = ("converged", "max_iterations", "refused", "declined",
-                                 "failed", "skipped", "not-verified")
+STOP_REASONS: tuple[str, ...] = ("converged", "max_iterations", "not-converged", "refused",
+                                 "declined", "failed", "skipped", "not-verified")
 
 
-def phase_of(measurement: int) -> str:
+def phase_of(measurement: int, extra: int = 0) -> str:
     """Journal phase of the n-th measurement (0-based): "m", then "v" for the
-    verification of round 1 (as before the loop existed), "v2", "v3"… after."""
-    if measurement == 0:
-        return "m"
-    return "v" if measurement == 1 else f"v{measurement}"
+    verification of round 1 (as before the loop existed), "v2", "v3"… after;
+    ``extra``: a further pass of that verification ("v+1", "v2+1")."""
+    base = "m" if measurement == 0 else ("v" if measurement == 1 else f"v{measurement}")
+    return base if extra == 0 else f"{base}+{extra}"
+
+
+def round_phase(phase: str) -> str:
+    """The phase of the round a pass belongs to ("v2+1" → "v2")."""
+    return phase.split("+", 1)[0]
 
 
 @dataclass(frozen=True)
@@ -54,20 +75,32 @@ class Step:
     phase: str | None = None  # measure: which phase
     round: int = 0  # write: the write-back number (1-based)
     reason: str | None = None  # finish: a key of STOP_REASONS
+    extra: int = 0  # measure: a further pass of the last round (1, 2…), 0: a new round
 
 
 @dataclass
 class LoopState:
-    """What happened so far: one entry per measurement (was its correction
-    significant?) and one per write-back (its outcome status)."""
+    """What happened so far: one verdict per measured round (its last pass decides)
+    with the further passes it took, and one entry per write-back (its status)."""
 
     max_iterations: int
     verify: bool
-    significant: list[bool] = field(default_factory=list)
+    max_extra_passes: int = 0
+    verdicts: list[str] = field(default_factory=list)  # Verdict
+    extra: list[int] = field(default_factory=list)
     writes: list[str] = field(default_factory=list)  # WritebackOutcome.status
 
-    def measured(self, significant: bool) -> None:
-        self.significant.append(bool(significant))
+    def measured(self, verdict: str | bool) -> None:
+        """A new round's first pass (a bool: significant or not, and then shown)."""
+        if isinstance(verdict, bool):
+            verdict = "significant" if verdict else "converged"
+        self.verdicts.append(verdict)
+        self.extra.append(0)
+
+    def extended(self, verdict: str) -> None:
+        """A further pass of the last round: its verdict on all passes pooled."""
+        self.verdicts[-1] = verdict
+        self.extra[-1] += 1
 
     def wrote(self, status: str) -> None:
         self.writes.append(status)
@@ -79,14 +112,20 @@ class LoopState:
 
 def next_step(state: LoopState) -> Step:
     """The next step of the run from what has happened (see the module's table)."""
-    k, w = len(state.significant), len(state.writes)
+    k, w = len(state.verdicts), len(state.writes)
     if k == 0:
         return Step("measure", phase=phase_of(0))
     if w == k - 1:  # the last measurement waits for its decision
         if k == 1:
             return Step("write", round=1)
-        if not state.significant[-1]:
+        verdict = state.verdicts[-1]
+        if verdict == "converged":
             return Step("finish", reason="converged")
+        if verdict in ("suspected", "unproven"):
+            if state.extra[-1] < state.max_extra_passes:
+                extra = state.extra[-1] + 1
+                return Step("measure", phase=phase_of(k - 1, extra), extra=extra)
+            return Step("finish", reason="not-converged")
         if state.written >= state.max_iterations:
             return Step("finish", reason="max_iterations")
         return Step("write", round=w + 1)

@@ -9,6 +9,7 @@ station.engine.closed_loop decides the next step from what happened so far (a pu
 from __future__ import annotations
 
 import json
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from orthocal.loop import (
     WRITABLE,
     correction,
     predicted_after_correction,
+    shown_within,
     significant_corrections,
 )
 from orthocal.numbers import finite
@@ -31,7 +33,7 @@ from station.config import StationConfig
 from station.console.operator import Operator
 from station.console.progress import Progress
 from station.engine import accuracy
-from station.engine.closed_loop import LoopState, next_step
+from station.engine.closed_loop import LoopState, next_step, round_phase
 from station.engine.devices import Devices
 from station.engine.recovery import resume_hint
 from station.engine.results import (
@@ -43,7 +45,7 @@ from station.engine.results import (
     writeback_fields,
 )
 from station.engine.sequencer import Sequencer
-from station.engine.statistics import Measurement, split_key
+from station.engine.statistics import Measurement, pooled, split_key
 from station.engine.writeback import WritebackOutcome, write_back
 from station.errors import BadInput, RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
@@ -124,11 +126,14 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
     ctx.result = result
     proc = ctx.config.procedure
     flow = Flow(ctx, seq, result)
-    loop = LoopState(max_iterations=proc.max_iterations, verify=proc.verify)
+    loop = LoopState(max_iterations=proc.max_iterations, verify=proc.verify,
+                     max_extra_passes=proc.max_extra_passes)
     try:
         # The whole flow: station.engine.closed_loop decides, Flow performs (or replays) the step.
         while (step := next_step(loop)).kind != "finish":
-            if step.kind == "measure":
+            if step.kind == "measure" and step.extra:
+                loop.extended(flow.extend(step.phase or "v"))
+            elif step.kind == "measure":
                 loop.measured(flow.measure(step.phase or "m"))
             else:
                 loop.wrote(flow.write(step.round))
@@ -157,7 +162,8 @@ class Flow:
 
     def __init__(self, ctx: Run, seq: Sequencer, result: dict[str, Any]) -> None:
         self.ctx, self.seq, self.result = ctx, seq, result
-        self.idents: list[Any] = []  # identification of each measurement, in order
+        self.idents: list[Any] = []  # identification of each round, in order
+        self.measurements: list[Measurement] = []  # each round's, its passes pooled
         # each round's rho+tilt fit, for the tilts the run states (engine.accuracy)
         self.tilt_rounds: list[accuracy.RoundTilts] = []
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
@@ -168,12 +174,29 @@ class Flow:
         self.outcomes: list[WritebackOutcome] = []
         self.iterations: list[dict[str, Any]] = result.setdefault("iterations", [])
 
-    def measure(self, phase: str) -> bool:
-        """Measure (or replay) one phase and identify it; True if the correction it
-        asks for is significant (station.engine.closed_loop writes the first one regardless)."""
-        ctx = self.ctx
-        n = len(self.idents)
+    def measure(self, phase: str) -> str:
+        """Measure (or replay) a round's first pass and identify it: its verdict
+        (station.engine.closed_loop; the first round's correction is written
+        regardless)."""
         m = self.seq.measure(phase)
+        self.measurements.append(m)
+        return self._identify_round(m, [phase])
+
+    def extend(self, phase: str) -> str:
+        """A further pass of the last round's verification (its noise could not show
+        the machine converged, nor a correction worth writing): measured (or
+        replayed) and pooled with the round's passes, identified again, decided
+        again."""
+        m = pooled(self.measurements[-1], self.seq.measure(phase))
+        self.measurements[-1] = m
+        return self._identify_round(m, [*self.iterations[-1].get("passes", [
+            self.iterations[-1]["phase"]]), phase])
+
+    def _identify_round(self, m: Measurement, passes: list[str]) -> str:
+        ctx = self.ctx
+        again = len(passes) > 1
+        n = len(self.idents) - 1 if again else len(self.idents)  # the round's index
+        phase = round_phase(passes[0])
         # With auto, every round chooses its model again: misplaced stands bias the
         # first round by (stand error × leg tilt), a misfit no model explains that
         # can push the choice to a tilt model on a square machine; it vanishes with
@@ -181,34 +204,58 @@ class Flow:
         ident, selection = _identify(ctx, m)
         if n == 0 and selection is not None:
             self.result["model_selection"] = selection
-        self.idents.append(ident)
+        if again:
+            self.idents[-1] = ident
+        else:
+            self.idents.append(ident)
         self._tilts_of(phase, m, ident)
         fields = measurement_fields(ctx.config, m, ident)
         prev = self.idents[n - 1] if n else None
+        proc = ctx.config.procedure
         sig = significant_corrections(
-            ident.parameters, ident.std_errors, ctx.config.procedure.converge_mm,
+            ident.parameters, ident.std_errors, proc.converge_mm,
             previous_std_errors=prev.std_errors if prev else None,
             dof=ident.std_error_dof, previous_dof=prev.std_error_dof if prev else None,
             target=self.target if n else None)
-        self.iterations.append({
+        entry: dict[str, Any] = {
             "phase": phase, "model": ident.model, "identified": fields["identified"],
             "std_errors": fields["std_errors"], "std_errors_dof": fields["std_errors_dof"],
             "offsets_written": None, "writeback": None,
             "deviations_rms_mm": fields["deviations_rms_mm"],
             "residual_rms_mm": fields["residual_rms_mm"],
-            "noise_floor_mm": fields["noise_floor_mm"], "significant": sig})
+            "noise_floor_mm": fields["noise_floor_mm"], "significant": sig}
+        verdict = "significant" if sig else "converged"
+        if n:
+            # What "converged" promises: every axis within ±converge_mm at 95 %, the
+            # drive's rounding of the offsets (half its count) allowed beside it.
+            shown = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
+                                 target=self.target)
+            if not sig and any(v > self._converge_limit() for v in shown.values()):
+                # Seen at 95 % on some axis (what is left, not zero), or hidden by noise.
+                seen = shown_within(ident.parameters, ident.std_errors,
+                                    ident.std_error_dof, target=self.target, sign=True)
+                verdict = "suspected" if any(v > 0 for v in seen.values()) else "unproven"
+            entry.update(shown_within_95_mm={k: num(v) for k, v in shown.items()},
+                         verdict=verdict)
+        if again:
+            entry["passes"] = passes
+            self.iterations[-1] = entry
+        else:
+            self.iterations.append(entry)
         if n == 0:
             self.result.update(fields)
             if ctx.state.identification is None:
                 ctx.journal.append({"type": "identification", **ident_json(ident)})
-            return bool(sig)
+            return verdict
         self.result["verification"] = self._verification(fields, self.idents[n - 1])
-        if n not in ctx.state.verifications:
+        journaled = ctx.state.verifications.get(n)
+        if journaled is None or len(journaled.get("passes", [phase])) < len(passes):
             ctx.journal.append({"type": "verification", "round": n, "phase": phase,
+                                **({"passes": passes} if again else {}),
                                 **ident_json(ident),
                                 "deviations_rms_mm": fields["deviations_rms_mm"],
-                                "significant": sig})
-        return bool(sig)
+                                "significant": sig, "verdict": verdict})
+        return verdict
 
     def _verification(self, fields: dict[str, Any], before: Any) -> dict[str, Any]:
         """The verification block, judged against what the model predicts once the
@@ -284,26 +331,64 @@ class Flow:
                 message = (f"closed loop stopped before round {len(self.outcomes)}: "
                            f"write-back {last.reason}")
         converged = reason == "converged"
+        detail = last.reason if last is not None and not converged \
+            and reason in ("refused", "declined", "failed") else None
         if reason == "max_iterations":
             message = (f"closed loop did not converge: {proc.max_iterations} write-back(s) "
                        "done and the last verification still finds a significant "
                        "correction; run again or look for errors outside the model")
+        if reason == "not-converged":
+            detail = self._unproven(proc.converge_mm)
+            message = f"closed loop did not converge: {detail}"
         self.result["converged"] = converged
         self.result["loop"] = {
-            "stopped": reason, "detail": last.reason if last is not None and not converged
-            and reason in ("refused", "declined", "failed") else None,
+            "stopped": reason, "detail": detail,
             "write_backs": sum(1 for o in self.outcomes if o.status == "written"),
             "max_iterations": proc.max_iterations, "converge_mm": proc.converge_mm,
+            "converged_within_mm": self._converge_limit(),
+            "extra_passes": sum(len(it.get("passes", ())) - 1 for it in self.iterations
+                                if it.get("passes")),
+            "max_extra_passes": proc.max_extra_passes,
         }
         self.result["remaining"] = self._remaining()
         self._accuracy()
         self.result["status"], self.result["message"] = status, message
 
+    def _converge_limit(self) -> float:
+        """converge_mm plus half a count of the drive's offsets: "converged" claims
+        each joint zero within this at 95 %."""
+        step = self.ctx.devices.controller.offset_resolution_mm()
+        return self.ctx.config.procedure.converge_mm + 0.5 * step
+
+    def _unproven(self, converge_mm: float) -> str:
+        """Why the last verification could not show the machine converged, in words:
+        how far each axis may still be off, and what to change."""
+        last = self.iterations[-1]
+        shown = {k: v for k, v in (last.get("shown_within_95_mm") or {}).items()}
+        passes = len(last.get("passes", [last["phase"]]))
+        worst = max(shown, key=lambda k: math.inf if shown[k] is None else shown[k])
+        bound = shown[worst]
+        how = "by an unknown amount (no standard error)" if bound is None else \
+            f"by up to {1000 * bound:.1f} µm"
+        ses = [v for k, v in last["std_errors"].items() if k in WRITABLE and v is not None]
+        noise = f" (standard error {1000 * max(ses):.1f} µm)" if ses else ""
+        seen = "a correction is seen at 95 % but does not stand out of both rounds' " \
+            "noise" if last.get("verdict") == "suspected" else \
+            "no correction stands out of the noise"
+        half = 0.5 * self.ctx.devices.controller.offset_resolution_mm()
+        return (f"after {passes} pass(es) of its last verification, Δρ_{worst[-1]} may "
+                f"still be off {how} at 95 %, more than converge_mm = "
+                f"{1000 * converge_mm:g} µm + half the drive's count "
+                f"({1000 * half:g} µm), and {seen}{noise}; measure with more cycles or "
+                "readings, quieter gauges, or a larger converge_mm")
+
     # --- accuracy at the tool ------------------------------------------------------
 
     def _tilts_of(self, phase: str, m: Measurement, ident: Any) -> None:
         """The round's tilts: from its own fit if it has them, else from a rho+tilt
-        fit of the same measurement (the tilts the run could not rule out)."""
+        fit of the same measurement (the tilts the run could not rule out); a round
+        measured again replaces what its earlier passes gave."""
+        self.tilt_rounds = [t for t in self.tilt_rounds if t.phase != phase]
         tilts = accuracy.round_tilts(phase, ident)
         if tilts is None and len(m.deviations):
             try:

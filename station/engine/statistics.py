@@ -139,3 +139,15 @@ class Measurement:
 
     def for_identify(self) -> dict[tuple[str, str, str], list[float]]:
         return {split_key(k): list(v) for k, v in self.deviations.items()}
+
+
+def pooled(first: Measurement, more: Measurement) -> Measurement:
+    """One round's passes as one measurement (the same machine, the same offsets):
+    every deviation's cycles of both, every setup's outcome, every stop's scatter.
+    Each cycle's deviation is referenced to its own bracketing Π0 stops, so cycles
+    of another mounting join without a common zero."""
+    keys = list(first.deviations) + [k for k in more.deviations if k not in first.deviations]
+    return Measurement(
+        first.phase,
+        {k: [*first.deviations.get(k, []), *more.deviations.get(k, [])] for k in keys},
+        [*first.setups, *more.setups], [*first.within_std, *more.within_std])

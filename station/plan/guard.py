@@ -149,7 +149,7 @@ class PlungerGuard:
               baseline: Mapping[str, float]) -> None:
         """Start watching a new mounting; ``baseline``: each gauge's Π0 reading."""
         self._setup = setup
-        self._where = f"{'verification' if phase == 'v' else 'measurement'} setup " \
+        self._where = f"{'verification' if phase.startswith('v') else 'measurement'} setup " \
                       f"{setup.index + 1} (leg {setup.leg})"
         self._gauges = {}
         for name, direction in mounted.items():

@@ -18,14 +18,27 @@ from station.report.format import num
 #: What each of the closed loop's stop reasons (the run JSON's ``loop.stopped``)
 #: says: the first is success; the others say plainly what happened.
 STOP_TEXT = {
-    "converged": "the last verification found no significant correction",
+    "converged": "the last verification shows every joint offset within ±converge_mm "
+                 "(and half the drive's count) at 95 %",
     "max_iterations": "max_iterations write-backs done and the last verification still "
                       "finds a significant correction",
+    "not-converged": "the last verification could not show every joint offset within "
+                     "±converge_mm (and half the drive's count) at 95 %, even measured "
+                     "again, nor a correction beyond its noise",
     "refused": "a correction was refused",
     "declined": "the operator declined a correction",
     "failed": "a write-back failed (the previous offsets were restored)",
     "skipped": "the model has no joint offsets to write",
     "not-verified": "verification is off ([procedure] verify = false)",
+}
+
+
+#: A verification's verdict (the iterations' ``verdict``, station.engine.closed_loop).
+VERDICT_TEXT = {
+    "significant": "significant",
+    "converged": "shown converged",
+    "suspected": "seen at 95 %, not beyond the noise of both rounds",
+    "unproven": "hidden in its noise",
 }
 
 
@@ -147,15 +160,27 @@ def _round_lines(result: Mapping[str, Any]) -> list[str]:
     lines = [head]
     for n, e in enumerate(iterations):
         sig = e.get("significant") or []
-        verdict = ("significant" if sig else "noise") if n else "first identification"
+        verdict = VERDICT_TEXT.get(str(e.get("verdict")), "significant" if sig else "noise") \
+            if n else "first identification"
         action = "written" if e.get("offsets_written") else (e.get("writeback") or "not written")
+        shown = [v for v in (e.get("shown_within_95_mm") or {}).values()]
+        within = "" if not n or sig or not shown else \
+            (", within " + ("an unknown bound" if None in shown else _um(max(shown)))
+             + " at 95 %")
+        passes = e.get("passes") or []
+        again = f", {len(passes)} passes pooled" if len(passes) > 1 else ""
         lines.append(f"    {_label(n, e):<15} deviations RMS {_um(e.get('deviations_rms_mm'))}"
-                     f" (floor {_um(e.get('noise_floor_mm'))}), correction max "
-                     f"{_um(correction_mm(e, aim_of(result, n)))} ({verdict}) → {action}")
+                     f" (floor {_um(e.get('noise_floor_mm'))}{again}), correction max "
+                     f"{_um(correction_mm(e, aim_of(result, n)))} ({verdict}{within}) → "
+                     f"{action}")
     if loop.get("max_iterations") is not None:
         lines.append(f"    (at most {loop['max_iterations']} write-backs, a correction counts "
                      f"beyond k σ, k from Student's t on the noise's dof for one false alarm "
-                     f"in a thousand runs, and beyond {_um(loop.get('converge_mm'))})")
+                     f"in a thousand runs, and beyond {_um(loop.get('converge_mm'))}; "
+                     f"converged: every axis shown within "
+                     f"{_um(loop.get('converged_within_mm') or loop.get('converge_mm'))} at "
+                     f"95 %, a verification measured again up to "
+                     f"{loop.get('max_extra_passes', 0)} more time(s) to show it)")
     return lines
 
 
