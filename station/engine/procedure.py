@@ -9,7 +9,6 @@ station.engine.closed_loop decides the next step from what happened so far (a pu
 from __future__ import annotations
 
 import json
-import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -20,19 +19,12 @@ import numpy as np
 
 from drivers.errors import DeviceError
 from drivers.files import write_atomic
-from orthocal import coverage_factor
-from orthocal.loop import (
-    WRITABLE,
-    correction,
-    predicted_after_correction,
-    shown_within,
-    significant_corrections,
-)
+from orthocal.loop import WRITABLE, correction
 from orthocal.numbers import finite
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.console.progress import Progress
-from station.engine import accuracy
+from station.engine import accuracy, verdict
 from station.engine.closed_loop import LoopState, next_step, round_phase
 from station.engine.devices import Devices
 from station.engine.recovery import resume_hint
@@ -41,11 +33,12 @@ from station.engine.results import (
     guard_fields,
     ident_json,
     measurement_fields,
-    num,
+    remaining_fields,
+    verification_fields,
     writeback_fields,
 )
 from station.engine.sequencer import Sequencer
-from station.engine.statistics import Measurement, pooled, split_key
+from station.engine.statistics import Measurement, pooled
 from station.engine.writeback import WritebackOutcome, write_back
 from station.errors import BadInput, RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
@@ -212,31 +205,18 @@ class Flow:
         fields = measurement_fields(ctx.config, m, ident)
         prev = self.idents[n - 1] if n else None
         proc = ctx.config.procedure
-        sig = significant_corrections(
-            ident.parameters, ident.std_errors, proc.converge_mm,
-            previous_std_errors=prev.std_errors if prev else None,
-            dof=ident.std_error_dof, previous_dof=prev.std_error_dof if prev else None,
-            target=self.target if n else None)
+        count = ctx.devices.controller.offset_resolution_mm()
+        judged = verdict.judge(ident, prev, proc.converge_mm,
+                               verdict.converge_limit(proc.converge_mm, count), self.target)
+        sig = judged.significant
         entry: dict[str, Any] = {
             "phase": phase, "model": ident.model, "identified": fields["identified"],
             "std_errors": fields["std_errors"], "std_errors_dof": fields["std_errors_dof"],
             "offsets_written": None, "writeback": None,
             "deviations_rms_mm": fields["deviations_rms_mm"],
             "residual_rms_mm": fields["residual_rms_mm"],
-            "noise_floor_mm": fields["noise_floor_mm"], "significant": sig}
-        verdict = "significant" if sig else "converged"
-        if n:
-            # What "converged" promises: every axis within ±converge_mm at 95 %, the
-            # drive's rounding of the offsets (half its count) allowed beside it.
-            shown = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
-                                 target=self.target)
-            if not sig and any(v > self._converge_limit() for v in shown.values()):
-                # Seen at 95 % on some axis (what is left, not zero), or hidden by noise.
-                seen = shown_within(ident.parameters, ident.std_errors,
-                                    ident.std_error_dof, target=self.target, sign=True)
-                verdict = "suspected" if any(v > 0 for v in seen.values()) else "unproven"
-            entry.update(shown_within_95_mm={k: num(v) for k, v in shown.items()},
-                         verdict=verdict)
+            "noise_floor_mm": fields["noise_floor_mm"], "significant": sig,
+            **(judged.fields() if n else {})}
         if again:
             entry["passes"] = passes
             self.iterations[-1] = entry
@@ -246,37 +226,17 @@ class Flow:
             self.result.update(fields)
             if ctx.state.identification is None:
                 ctx.journal.append({"type": "identification", **ident_json(ident)})
-            return verdict
-        self.result["verification"] = self._verification(fields, self.idents[n - 1])
+            return judged.verdict
+        self.result["verification"] = verification_fields(
+            ctx.config, fields, self.idents[n - 1], self.target)
         journaled = ctx.state.verifications.get(n)
         if journaled is None or len(journaled.get("passes", [phase])) < len(passes):
             ctx.journal.append({"type": "verification", "round": n, "phase": phase,
                                 **({"passes": passes} if again else {}),
                                 **ident_json(ident),
                                 "deviations_rms_mm": fields["deviations_rms_mm"],
-                                "significant": sig, "verdict": verdict})
-        return verdict
-
-    def _verification(self, fields: dict[str, Any], before: Any) -> dict[str, Any]:
-        """The verification block, judged against what the model predicts once the
-        Δρ of ``before`` are written: ΔL and tilts cannot be, and still show."""
-        geometry = self.ctx.config.machine.geometry()
-        keys = [split_key(k) for k in fields["deviations"]]  # "+xy", "+30xy"
-        predicted = predicted_after_correction(keys, geometry, before.parameters, self.target)
-        deviations = {k: {**v, "expected": float(p)} for (k, v), p
-                      in zip(fields["deviations"].items(), predicted, strict=True)}
-        gaps = [v["mean"] - v["expected"] for v in deviations.values()]
-        return {
-            "identified": fields["identified"], "std_errors": fields["std_errors"],
-            "std_errors_dof": fields["std_errors_dof"],
-            "residual_rms_mm": fields["residual_rms_mm"],
-            "deviations_rms_mm": fields["deviations_rms_mm"],
-            "expected_rms_mm": float(np.sqrt(np.mean(np.square(predicted))))
-            if len(keys) else None,
-            "vs_expected_rms_mm": float(np.sqrt(np.mean(np.square(gaps)))) if gaps else None,
-            "noise_floor_mm": fields["noise_floor_mm"],
-            "deviations": deviations, "setups": fields["setups"],
-        }
+                                "significant": sig, "verdict": judged.verdict})
+        return judged.verdict
 
     def write(self, round: int) -> str:
         """Write-back ``round`` (1-based) of the correction the last measurement found."""
@@ -337,50 +297,23 @@ class Flow:
             message = (f"closed loop did not converge: {proc.max_iterations} write-back(s) "
                        "done and the last verification still finds a significant "
                        "correction; run again or look for errors outside the model")
+        count = self.ctx.devices.controller.offset_resolution_mm()
         if reason == "not-converged":
-            detail = self._unproven(proc.converge_mm)
+            detail = verdict.not_converged(self.iterations[-1], proc.converge_mm, count)
             message = f"closed loop did not converge: {detail}"
         self.result["converged"] = converged
         self.result["loop"] = {
             "stopped": reason, "detail": detail,
             "write_backs": sum(1 for o in self.outcomes if o.status == "written"),
             "max_iterations": proc.max_iterations, "converge_mm": proc.converge_mm,
-            "converged_within_mm": self._converge_limit(),
+            "converged_within_mm": verdict.converge_limit(proc.converge_mm, count),
             "extra_passes": sum(len(it.get("passes", ())) - 1 for it in self.iterations
                                 if it.get("passes")),
             "max_extra_passes": proc.max_extra_passes,
         }
-        self.result["remaining"] = self._remaining()
+        self.result["remaining"] = remaining_fields(self.iterations, self.result)
         self._accuracy()
         self.result["status"], self.result["message"] = status, message
-
-    def _converge_limit(self) -> float:
-        """converge_mm plus half a count of the drive's offsets: "converged" claims
-        each joint zero within this at 95 %."""
-        step = self.ctx.devices.controller.offset_resolution_mm()
-        return self.ctx.config.procedure.converge_mm + 0.5 * step
-
-    def _unproven(self, converge_mm: float) -> str:
-        """Why the last verification could not show the machine converged, in words:
-        how far each axis may still be off, and what to change."""
-        last = self.iterations[-1]
-        shown = {k: v for k, v in (last.get("shown_within_95_mm") or {}).items()}
-        passes = len(last.get("passes", [last["phase"]]))
-        worst = max(shown, key=lambda k: math.inf if shown[k] is None else shown[k])
-        bound = shown[worst]
-        how = "by an unknown amount (no standard error)" if bound is None else \
-            f"by up to {1000 * bound:.1f} µm"
-        ses = [v for k, v in last["std_errors"].items() if k in WRITABLE and v is not None]
-        noise = f" (standard error {1000 * max(ses):.1f} µm)" if ses else ""
-        seen = "a correction is seen at 95 % but does not stand out of both rounds' " \
-            "noise" if last.get("verdict") == "suspected" else \
-            "no correction stands out of the noise"
-        half = 0.5 * self.ctx.devices.controller.offset_resolution_mm()
-        return (f"after {passes} pass(es) of its last verification, Δρ_{worst[-1]} may "
-                f"still be off {how} at 95 %, more than converge_mm = "
-                f"{1000 * converge_mm:g} µm + half the drive's count "
-                f"({1000 * half:g} µm), and {seen}{noise}; measure with more cycles or "
-                "readings, quieter gauges, or a larger converge_mm")
 
     # --- accuracy at the tool ------------------------------------------------------
 
@@ -487,32 +420,6 @@ class Flow:
                                     allow_nan=False) + "\n")
         except OSError as exc:  # a full disk: result.json says so too, if it can
             say(f"orthocal: {MODEL_NAME} not written ({storage_message(self.ctx.run_dir, exc)})")
-
-    def _remaining(self) -> dict[str, Any] | None:
-        """What the last measurement says is left of Δρ on the machine as it now
-        stands, not written (below k standard errors or converge_mm, the loop's
-        limit, or a write-back refused). The loop stops on a correction too small
-        to be worth a round, not on none at all. ``total``: the machine's Δρ at the
-        start of the run as the whole run measured it, the correction the
-        controller really holds (offsets read back, rounded to its count) plus what
-        is left; the truth lies within k95 of its standard errors. None when the
-        last correction was written and nothing measured after it (verify off)."""
-        if not self.iterations or self.iterations[-1]["offsets_written"] is not None:
-            return None
-        last = self.iterations[-1]
-        names = [n for n in WRITABLE if n in last["identified"]]
-        before, now = self.result.get("offsets_before"), self.result.get("offsets_written")
-        applied = {f"drho_{a}": before[a] - now[a] for a in before} \
-            if isinstance(before, dict) and isinstance(now, dict) else {}
-        dof = last.get("std_errors_dof")
-        return {
-            "phase": last["phase"], "round": len(self.iterations),
-            "estimate": {n: last["identified"][n] for n in names},
-            "total": {n: applied.get(n, 0.0) + last["identified"][n] for n in names},
-            "std_errors": {n: last["std_errors"].get(n) for n in names},
-            "std_errors_dof": dof,
-            "coverage_factor_95": num(coverage_factor(dof)) if dof else None,
-        }
 
 
 def _stopped(seq: Sequencer) -> str:

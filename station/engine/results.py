@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 import orthocal
-from orthocal import AXES
+from orthocal import AXES, coverage_factor
+from orthocal.loop import WRITABLE, predicted_after_correction
 from orthocal.numbers import finite
 from station.config import StationConfig
 from station.engine.statistics import Measurement, split_key
@@ -75,6 +76,59 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
         "setups": [{"leg": o.leg, "indicators": o.indicators, "cycles_used": o.cycles_used,
                     "cycles_max": o.cycles_max, "repeats": o.repeats, "flagged": o.flagged,
                     "spread_mm": o.spread_mm} for o in m.setups],
+    }
+
+
+def verification_fields(config: StationConfig, fields: dict[str, Any], before: Any,
+                        target: dict[str, float]) -> dict[str, Any]:
+    """The verification block of a round's ``fields`` (measurement_fields), judged
+    against what the model predicts once the Δρ of ``before`` (the identification
+    whose correction it verifies) are written toward ``target``: ΔL and tilts cannot
+    be, and still show."""
+    geometry = config.machine.geometry()
+    keys = [split_key(k) for k in fields["deviations"]]  # "+xy", "+30xy"
+    predicted = predicted_after_correction(keys, geometry, before.parameters, target)
+    deviations = {k: {**v, "expected": float(p)} for (k, v), p
+                  in zip(fields["deviations"].items(), predicted, strict=True)}
+    gaps = [v["mean"] - v["expected"] for v in deviations.values()]
+    return {
+        "identified": fields["identified"], "std_errors": fields["std_errors"],
+        "std_errors_dof": fields["std_errors_dof"],
+        "residual_rms_mm": fields["residual_rms_mm"],
+        "deviations_rms_mm": fields["deviations_rms_mm"],
+        "expected_rms_mm": float(np.sqrt(np.mean(np.square(predicted))))
+        if len(keys) else None,
+        "vs_expected_rms_mm": float(np.sqrt(np.mean(np.square(gaps)))) if gaps else None,
+        "noise_floor_mm": fields["noise_floor_mm"],
+        "deviations": deviations, "setups": fields["setups"],
+    }
+
+
+def remaining_fields(iterations: list[dict[str, Any]],
+                     result: dict[str, Any]) -> dict[str, Any] | None:
+    """What the last measurement says is left of Δρ on the machine as it now stands,
+    not written (below k standard errors or converge_mm, the loop's limit, or a
+    write-back refused). The loop stops on a correction too small to be worth a
+    round, not on none at all. ``total``: the machine's Δρ at the start of the run
+    as the whole run measured it, the correction the controller really holds
+    (offsets read back, rounded to its count) plus what is left; the truth lies
+    within k95 of its standard errors. None when the last correction was written
+    and nothing measured after it (verify off)."""
+    if not iterations or iterations[-1]["offsets_written"] is not None:
+        return None
+    last = iterations[-1]
+    names = [n for n in WRITABLE if n in last["identified"]]
+    before, now = result.get("offsets_before"), result.get("offsets_written")
+    applied = {f"drho_{a}": before[a] - now[a] for a in before} \
+        if isinstance(before, dict) and isinstance(now, dict) else {}
+    dof = last.get("std_errors_dof")
+    return {
+        "phase": last["phase"], "round": len(iterations),
+        "estimate": {n: last["identified"][n] for n in names},
+        "total": {n: applied.get(n, 0.0) + last["identified"][n] for n in names},
+        "std_errors": {n: last["std_errors"].get(n) for n in names},
+        "std_errors_dof": dof,
+        "coverage_factor_95": num(coverage_factor(dof)) if dof else None,
     }
 
 
