@@ -23,10 +23,19 @@ The stops come from the run's journal, the postures from its plan.json. The
 moves the simulator actually started are timed too ("machine moves"): if they
 exceed the floor's moves, the station moved more than its stops needed.
 
+On a drive the station is not told about (``--drive-profile``: its own profile
+shape, the plan for any axis timing) the floor that counts is the drive's own:
+every move the controller actually made, waypoints included, at the duration its
+own profile gave it, plus the same settle and line time ("drive floor"); wall over
+it is the time the station spends between and around the moves.
+
     python bench/cycle.py [--cycles 3] [--target-se MM] [--noise 0.005] [--seed 1]
     python bench/cycle.py --compare --target-se 0.002 --cycles 6   # adaptive vs fixed
     python bench/cycle.py --profile /tmp/run.prof                  # cProfile the station
     python bench/cycle.py --strokes 60,30,-50,-100                 # four stops per leg
+    python bench/cycle.py --drive-profile cosine --readings 3 --cycles 2 --repeat 2
+                                          # a drive of its own timing: wall over the
+                                          # drive floor (issue 20's held-out controller)
     python bench/cycle.py --path-cost     # the plan for any axis timing against a
                                           # coordinated controller, on drives of every
                                           # kind, and what the plunger guard costs
@@ -102,10 +111,23 @@ class Outcome:
     # against the same stop of later cycles, and how many stops it averages: the
     # plunger guard's cost, paired within one run (same load, same moves).
     first_cycle_extra: tuple[float, int] = (0.0, 0)
+    # The drive idle between the end of one move and the start of the next (s):
+    # after a move to a stop (settle and the readings included) and after a waypoint.
+    idle_after_stop: list[float] | None = None
+    idle_after_waypoint: list[float] | None = None
 
     @property
     def ratio(self) -> float:
         return self.wall_s / self.floor_s
+
+    @property
+    def drive_floor_s(self) -> float:
+        """Every move the drive made at its own timing, plus settle and line time."""
+        return self.machine_moves_s + self.floor_settle_s + self.floor_line_s
+
+    @property
+    def drive_ratio(self) -> float:
+        return self.wall_s / self.drive_floor_s
 
     @property
     def errors_um(self) -> list[float]:
@@ -225,10 +247,12 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
                         ) as station:
         machine = station.machine
         started: list[float] = []
+        began: list[float] = []
         targets_of: list[np.ndarray] = []
         move_to = machine.move_to
 
         def recording_move_to(targets: Any) -> float:
+            began.append(machine.now())
             duration = move_to(targets)
             started.append(duration)
             targets_of.append(np.asarray(targets, dtype=float))
@@ -262,9 +286,27 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
     timeline = {"header": records[0]["t"] - spawned, "first reading": readings[0] - spawned,
                 "last reading": readings[-1] - spawned, "exit": wall}
     first_cycle_extra = first_cycle_extra_s(records)
+    postures = [np.asarray(v, dtype=float) for sp in
+                json.loads((run_dir / "plan.json").read_text())["setups"]
+                for v in sp["postures"].values()]
+    after_stop, after_waypoint = idle_between_moves(began, started, targets_of, postures)
     return Outcome(wall, moves + settle + line, moves, settle, line, float(sum(started)),
                    sum(1 for d in started if d > 0), stops, result, drho, timeline, clamped,
-                   out_of_stroke, foreign, first_cycle_extra)
+                   out_of_stroke, foreign, first_cycle_extra, after_stop, after_waypoint)
+
+
+def idle_between_moves(began: list[float], durations: list[float],
+                       targets: list[np.ndarray], postures: list[np.ndarray]
+                       ) -> tuple[list[float], list[float]]:
+    """The drive's idle time from the end of each move to the start of the next
+    (machine clock), split by what the move went to: a stop of the plan (settle
+    and readings follow) or a waypoint (the next sub-move could start at once)."""
+    after_stop, after_waypoint = [], []
+    for k in range(len(began) - 1):
+        idle = began[k + 1] - (began[k] + durations[k])
+        at_stop = any(np.max(np.abs(targets[k] - p)) <= 1e-3 for p in postures)
+        (after_stop if at_stop else after_waypoint).append(idle)
+    return after_stop, after_waypoint
 
 
 def leg_under_test(target: np.ndarray) -> str | None:
@@ -295,11 +337,18 @@ def report(label: str, o: Outcome) -> None:
     print(f"{label}: wall {o.wall_s:.2f} s, floor {o.floor_s:.2f} s "
           f"(moves {o.floor_moves_s:.2f} + settle {o.floor_settle_s:.2f} + "
           f"line {o.floor_line_s:.2f}; {o.stops} stops), ratio {o.ratio:.3f}")
+    print(f"    drive floor (every move the drive made at its own timing + settle + "
+          f"line) {o.drive_floor_s:.2f} s: ratio {o.drive_ratio:.3f}")
     print(f"    machine moves: {o.machine_moves} started, {o.machine_moves_s:.2f} s "
           f"(floor's moves {o.floor_moves_s:.2f} s); station's own wall_s "
           f"{t.get('wall_s')} s; readings at a stroke end {o.clamped}, moves past a stroke "
           f"end {o.out_of_stroke} (and {o.foreign_out_of_stroke} of the other legs' gauges, "
           "mounted only because all six are)")
+    for what, idle in (("stop", o.idle_after_stop), ("waypoint", o.idle_after_waypoint)):
+        if idle:
+            print(f"    drive idle after a {what}: median {1000 * np.median(idle):.0f} ms, "
+                  f"mean {1000 * np.mean(idle):.0f} ms, total {sum(idle):.2f} s "
+                  f"({len(idle)} moves)")
     extra, n = o.first_cycle_extra
     print(f"    first cycle after mounting: {1000 * extra:+.1f} ms per stop against later "
           f"cycles ({n} stops)")
@@ -341,6 +390,10 @@ def main() -> None:
                         help="[procedure] strokes (stops per leg, mm)")
     parser.add_argument("--motion", choices=["coordinated", "independent"],
                         default="coordinated", help="how the virtual controller moves")
+    parser.add_argument("--drive-profile", choices=["trapezoid", "scurve", "cosine"],
+                        default=None,
+                        help="the drive's own profile shape, axes independent (the station "
+                             "is told nothing: its plan holds for any axis timing)")
     parser.add_argument("--no-guard", action="store_true",
                         help="procedure.plunger_guard = false")
     parser.add_argument("--path-cost", action="store_true",
@@ -348,8 +401,10 @@ def main() -> None:
                              ": the plan for any axis timing against a coordinated "
                              "controller, and coordinated without the plunger guard")
     args = parser.parse_args()
+    motion: str | DriveMotion = args.motion if args.drive_profile is None else \
+        DriveMotion(shape=args.drive_profile)
     timing = Timing(speed_mm_s=args.speed, accel_mm_s2=args.accel, settle_s=args.settle,
-                    readings=args.readings, motion=args.motion, guard=not args.no_guard)
+                    readings=args.readings, motion=motion, guard=not args.no_guard)
     print(f"timing: {timing.speed_mm_s:g} mm/s, {timing.accel_mm_s2:g} mm/s², "
           f"{timing.protocol} at {timing.baud} baud "
           f"({1000 * line_time_per_reading(timing.protocol, timing.baud):.2f} ms per reading), "
@@ -361,7 +416,7 @@ def main() -> None:
             path_cost(args, timing, out)
             return
         if not args.compare:
-            ratios = []
+            ratios, drive_ratios = [], []
             for k in range(args.repeat):
                 o = run_once(seed=args.seed + k, noise_mm=args.noise, cycles=args.cycles,
                              target_se=args.target_se, timing=timing, out=out,
@@ -369,9 +424,12 @@ def main() -> None:
                              mount_error_mm=args.mount_error, strokes=args.strokes)
                 report(f"seed {args.seed + k}", o)
                 ratios.append(o.ratio)
+                drive_ratios.append(o.drive_ratio)
             if len(ratios) > 1:
                 print(f"ratio wall/floor: median {np.median(ratios):.3f}, "
                       f"max {max(ratios):.3f} over {len(ratios)} runs")
+                print(f"ratio wall/drive floor: median {np.median(drive_ratios):.3f}, "
+                      f"max {max(drive_ratios):.3f} over {len(drive_ratios)} runs")
             return
         if args.target_se is None:
             parser.error("--compare needs --target-se")
