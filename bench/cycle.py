@@ -160,11 +160,13 @@ def physical_floor(run_dir: Path, start_m: np.ndarray, timing: Timing
     before = np.array([result["offsets_before"][a] for a in AXES])
     written = result.get("offsets_written")
     after = before if not written else np.array([written[a] for a in AXES])
-    # Closed loop: each phase runs on the offsets the write-back before it left.
+    # Closed loop: each phase runs on the offsets the write-back before it left, and
+    # a verification measured again (v+1, v2+1) on its round's.
     offsets_of = {"m": before}
     current = before
     for it in result.get("iterations") or []:
-        offsets_of[it["phase"]] = current
+        for phase in it.get("passes") or [it["phase"]]:
+            offsets_of[phase] = current
         if it.get("offsets_written"):
             current = np.array([it["offsets_written"][a] for a in AXES])
     # Stops in the order they were read, with the most readings any gauge took there.
@@ -346,9 +348,10 @@ def report(label: str, o: Outcome) -> None:
           "mounted only because all six are)")
     for what, idle in (("stop", o.idle_after_stop), ("waypoint", o.idle_after_waypoint)):
         if idle:
+            longest = ", ".join(f"{1000 * v:.0f}" for v in sorted(idle)[::-1][:6])
             print(f"    drive idle after a {what}: median {1000 * np.median(idle):.0f} ms, "
                   f"mean {1000 * np.mean(idle):.0f} ms, total {sum(idle):.2f} s "
-                  f"({len(idle)} moves)")
+                  f"({len(idle)} moves; longest {longest} ms)")
     extra, n = o.first_cycle_extra
     print(f"    first cycle after mounting: {1000 * extra:+.1f} ms per stop against later "
           f"cycles ({n} stops)")

@@ -86,6 +86,7 @@ class ModbusAxisController(ModbusLink):
             lo, hi = (_vec3(v, "soft_limits") for v in soft_limits)
             self._given_limits = (lo, hi)
         self._speed: float | None = None
+        self._speed_written: tuple[float, int] | None = None  # (mm/s, at reconnect count)
 
     def _unsupported(self, what: str) -> ControllerError:
         reason = self.map.unsupported.get(what, f"profile {self.map.name!r} has no {what}")
@@ -133,8 +134,14 @@ class ModbusAxisController(ModbusLink):
         items = [(reg, reg.encode(speed_mm_s)) for reg in regs]
         if any(reg.decode(words) <= 0 for reg, words in items):
             raise ValueError(f"speed {speed_mm_s} mm/s rounds to 0 at the register resolution")
+        speed = items[0][0].decode(items[0][1])
+        # Written already since the connection last came up: a request per move saved
+        # (a drive that lost power may have reset it, so a reconnect writes it again).
+        if self._speed_written == (speed, self.reconnects):
+            return
         self.write_words(items, "write speed")
-        self._speed = items[0][0].decode(items[0][1])
+        self._speed = speed
+        self._speed_written = (speed, self.reconnects)
 
     def _current_speed(self) -> float:
         if self._speed is None:

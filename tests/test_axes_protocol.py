@@ -221,6 +221,24 @@ def test_tcp_move_writes_speed_targets_then_command(mocker: MockerFixture) -> No
         ctl.move([370.25, 293.6846, 293.6854], speed_mm_s=25)  # rounded, not truncated
 
 
+def test_tcp_speed_is_written_once_while_it_does_not_change(mocker: MockerFixture) -> None:
+    # a request per move saved: the same speed twice is written once, a new one again
+    targets = b"".join(i32_words(v) for v in (370250, 293685, 293685))
+    pairs = [
+        (mbap(1, 1, write_single(40, 25)), mbap(1, 1, write_single(40, 25))),
+        (mbap(2, 1, write_multi_req(10, targets)), mbap(2, 1, write_multi_rsp(10, 6))),
+        (mbap(3, 1, write_single(0, 1)), mbap(3, 1, write_single(0, 1))),
+        (mbap(4, 1, write_multi_req(10, targets)), mbap(4, 1, write_multi_rsp(10, 6))),
+        (mbap(5, 1, write_single(0, 1)), mbap(5, 1, write_single(0, 1))),
+        (mbap(6, 1, write_single(40, 13)), mbap(6, 1, write_single(40, 13))),  # rounded
+        (mbap(7, 1, write_multi_req(10, targets)), mbap(7, 1, write_multi_rsp(10, 6))),
+        (mbap(8, 1, write_single(0, 1)), mbap(8, 1, write_single(0, 1))),
+    ]
+    with expected_protocol(mocker, "tcp", pairs) as ctl:
+        for speed in (25, 25, 12.5):
+            ctl.move([370.25, 293.6846, 293.6854], speed_mm_s=speed)
+
+
 def test_tcp_write_offsets_reads_back(mocker: MockerFixture) -> None:
     offsets = b"".join(i32_words(v) for v in (-480, 490, -1670))
     pairs = [
