@@ -74,7 +74,7 @@ def _import_plotting() -> None:
     try:
         # The nonlinear identification's optimiser and the model test's and the loop's
         # distributions (~0.6 and ~0.5 s of imports), likewise.
-        import scipy.optimize  # noqa: F401
+        import scipy.optimize
         import scipy.stats  # noqa: F401
     except Exception:
         pass  # identification imports them again and reports any failure itself
