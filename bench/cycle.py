@@ -84,6 +84,7 @@ class Timing:
     motion: str | DriveMotion = "coordinated"
     drive_accel: float | None = None
     guard: bool = True  # procedure.plunger_guard
+    approach: str | None = None  # procedure.approach (None: the station's default)
 
 
 @dataclass
@@ -219,6 +220,8 @@ def station_config(station: VirtualStation, timing: Timing, cycles: int,
     config["controller"].update(speed_mm_s=timing.speed_mm_s, accel_mm_s2=timing.accel_mm_s2)
     config["procedure"].update(cycles=cycles, readings=timing.readings,
                                settle_s=timing.settle_s, plunger_guard=timing.guard)
+    if timing.approach is not None:
+        config["procedure"]["approach"] = timing.approach
     if strokes:
         config["procedure"]["strokes"] = strokes
     if target_se is not None:
@@ -397,6 +400,8 @@ def main() -> None:
                         default=None,
                         help="the drive's own profile shape, axes independent (the station "
                              "is told nothing: its plan holds for any axis timing)")
+    parser.add_argument("--approach", choices=["below", "above", "as-planned"], default=None,
+                        help="[procedure] approach (default: the station's, below)")
     parser.add_argument("--no-guard", action="store_true",
                         help="procedure.plunger_guard = false")
     parser.add_argument("--path-cost", action="store_true",
@@ -407,7 +412,8 @@ def main() -> None:
     motion: str | DriveMotion = args.motion if args.drive_profile is None else \
         DriveMotion(shape=args.drive_profile)
     timing = Timing(speed_mm_s=args.speed, accel_mm_s2=args.accel, settle_s=args.settle,
-                    readings=args.readings, motion=motion, guard=not args.no_guard)
+                    readings=args.readings, motion=motion, guard=not args.no_guard,
+                    approach=args.approach)
     print(f"timing: {timing.speed_mm_s:g} mm/s, {timing.accel_mm_s2:g} mm/s², "
           f"{timing.protocol} at {timing.baud} baud "
           f"({1000 * line_time_per_reading(timing.protocol, timing.baud):.2f} ms per reading), "

@@ -251,6 +251,14 @@ class ProcedureConfig(_Strict):
     # The stops Π_i(s) of each cycle, mm (model.md "Test postures"); absent: the
     # paper's two, ρmax and ρmin, and every plan, journal and JSON exactly as before.
     strokes: list[float] | None = Field(None, min_length=1, max_length=20)
+    # Lost motion (ISO 230-2): every stop whose readings enter an identification is
+    # approached by every joint from this side, its last short leg after an overrun
+    # of approach_overrun_mm (more than any real joint's reversal, with margin), so
+    # that a joint's dead band shifts every stop alike and is stated, not taken for
+    # tilt or offset; "as-planned": the paper's order, joints arriving from either
+    # side. Each cycle also reads Π0 approached from the other side: the reversal.
+    approach: Literal["below", "above", "as-planned"] = "below"
+    approach_overrun_mm: float = Field(0.05, gt=0, le=5)
     # How far off the leg's middle an indicator stand may be set by eye (mm, uniform
     # ±): misplaced stands are modelled (orthocal.Stands) so that they are not taken
     # for tilted axes; 0: the stands are placed exactly, not modelled.

@@ -24,6 +24,14 @@ Motion: the drive's (``motion``, a :class:`~drivers.sim.motion.DriveMotion`
 or its two names), run from :mod:`drivers.sim.motion`; everything the
 carriages do is handed to ``segment_listeners`` as
 :class:`~drivers.sim.motion.Segment` pieces as it ends.
+
+Lost motion (``backlash``, mm per joint: ISO 230-2's reversal value B): the
+drive counts its motor; the carriage follows it through a dead band of width
+B, a play operator (model.md, "Lost motion"): after a move up it sits B/2 below
+where the count puts the band's middle, after a move down B/2 above. Within a
+move each axis is monotone, so the carriage is clamp(c_start, m − B/2, m + B/2).
+The controller reports the count; the legs, the gauges and the end point see
+the carriage.
 State is evaluated lazily from a clock, so the machine needs no thread of its
 own; every public method is thread-safe. The clock may run faster than real time
 (``time_scale``, :func:`scaled_clock`): a move then takes its duration in clock
@@ -119,6 +127,7 @@ class VirtualOrthoglide:
         clock: Callable[[], float] | None = None,
         motion: str | DriveMotion = "coordinated",
         time_scale: float = 1.0,
+        backlash: Sequence[float] | None = None,
     ) -> None:
         self.geometry = geometry or Geometry()
         if true_params is not None:
@@ -146,7 +155,14 @@ class VirtualOrthoglide:
         rho0 = _vec(start, 3, "start") if start is not None else pi0
         home_rho = _vec(home_position, 3, "home_position") if home_position is not None else pi0
         self._o = self.offsets_initial.copy()
-        self._rest = rho0 + self._o  # machine-scale carriage positions at rest
+        self._rest = rho0 + self._o  # machine-scale motor positions at rest (the count)
+        b = _vec(backlash if backlash is not None else (0, 0, 0), 3, "backlash")
+        if np.any(b < 0):
+            raise ValueError(f"backlash must be >= 0 mm, got {backlash!r}")
+        #: Each joint's lost motion B (mm): the carriage lags the motor by up to B/2.
+        self.backlash = b
+        self._half_band = 0.5 * b
+        self._carriage_rest = self._rest.copy()  # where the carriages stand at rest
         self._target_m = self._rest.copy()
         self._home_m = home_rho + self.offsets_initial  # the home switches do not move
         self._motion: Motion | None = None
@@ -181,9 +197,22 @@ class VirtualOrthoglide:
             self._close_segment(self._motion.t0 + self._motion.duration)
             if self._motion.homing:
                 self._set_homed()
+            self._carriage_rest = self._play(pos)
             self._rest = pos
             self._motion = None
         return pos
+
+    def _play(self, motor: np.ndarray) -> np.ndarray:
+        """Where the carriages are with the motors at ``motor`` (machine scale, (3,)
+        or (n, 3) within the motion in progress): through each joint's dead band
+        from where they stood as the motion began (at rest: where they stand)."""
+        c0 = self._carriage_rest if self._motion is None or self._motion.carriage0 is None \
+            else self._motion.carriage0
+        return np.clip(c0, motor - self._half_band, motor + self._half_band)
+
+    def _carriage(self, now: float) -> np.ndarray:
+        """Machine-scale carriage positions at ``now``."""
+        return self._play(self._advance(now))
 
     def _freeze(self, t: float) -> None:
         if self._motion is not None:
@@ -191,6 +220,7 @@ class VirtualOrthoglide:
             self._close_segment(min(t, self._motion.t0 + self._motion.duration))
             if done and self._motion.homing:
                 self._set_homed()
+            self._carriage_rest = self._play(pos)
             self._rest = pos
             self._motion = None
 
@@ -232,7 +262,10 @@ class VirtualOrthoglide:
         """(times, joint values (n, 3)) of ``segment`` sampled densely (as
         :meth:`Segment.sample`), the joints as :func:`orthocal.leg_reading` takes
         them with ``drho=self.true_drho`` (ρ from the delivered offsets, see "Frames")."""
-        times, carriage = segment.sample(max_dt_s, min_samples, extra_times)
+        times, motor = segment.sample(max_dt_s, min_samples, extra_times)
+        c0 = segment.motion.carriage0
+        carriage = motor if c0 is None else \
+            np.clip(c0, motor - self._half_band, motor + self._half_band)
         return times, carriage - self.offsets_initial
 
     def _accels(self) -> tuple[float, float, float]:
@@ -245,11 +278,14 @@ class VirtualOrthoglide:
     def _start(self, target_m: np.ndarray, now: float, homing: bool = False,
                move: int | None = None) -> float:
         start = self._advance(now)
+        carriage = self._play(start)  # where the carriages are as this motion begins
         self._close_segment(now)  # a move in progress is replaced
         delta = target_m - start
         dist = float(np.max(np.abs(delta)))
         self._target_m = target_m.copy()
         if dist <= EPS:
+            self._carriage_rest = np.clip(carriage, target_m - self._half_band,
+                                          target_m + self._half_band)
             self._rest = target_m.copy()
             self._motion = None
             if homing:
@@ -269,7 +305,8 @@ class VirtualOrthoglide:
                         for sh, d, a in zip(drive.shapes, delta, accels, strict=True)]
             scale = np.where(delta < 0, -1.0, 1.0)
             offsets = start_offsets(drive, profiles)
-        self._motion = Motion(now, start, scale, profiles, target_m.copy(), homing, offsets)
+        self._motion = Motion(now, start, scale, profiles, target_m.copy(), homing, offsets,
+                              carriage0=carriage)
         self._open_segment("home" if homing else "move", now, move)
         return self._motion.duration
 
@@ -391,7 +428,9 @@ class VirtualOrthoglide:
             accels = self._accels()
             if self.drive.coordinated:
                 accels = (min(accels),) * 3
+            carriage = self._play(self._advance(now))
             self._motion = self._motion.braking(now, accels)
+            self._motion.carriage0 = carriage
             self._open_segment("brake", now, move)
 
     def reset_alarm(self) -> bool:
@@ -431,12 +470,12 @@ class VirtualOrthoglide:
     # --- what the indicators see --------------------------------------------------------
 
     def joint_values(self) -> np.ndarray:
-        """Kinematic joint values q (model (1)) at this instant."""
+        """Kinematic joint values q (model (1)) at this instant: the carriages'."""
         with self._lock:
-            return self._advance(self._clock()) - self.offsets_initial + self.true_drho
+            return self._carriage(self._clock()) - self.offsets_initial + self.true_drho
 
     def _rho_kin(self) -> np.ndarray:
-        return self._advance(self._clock()) - self.offsets_initial
+        return self._carriage(self._clock()) - self.offsets_initial
 
     def leg_reading(self, leg: str, direction: str, mount: float | None = None) -> float:
         """What a dial indicator on ``leg`` measuring along ``direction`` reads (mm):

@@ -282,6 +282,10 @@ class Motion:
     end: np.ndarray
     homing: bool = False
     offsets: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: Where the carriages (the load, behind a joint's lost motion) were as the
+    #: motion began; each axis is monotone within a motion, so they follow the
+    #: motor through their dead band from there (VirtualOrthoglide's backlash).
+    carriage0: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -314,7 +318,8 @@ class Motion:
         brakes = [_brake(p, tau - off, a)
                   for off, p, a in zip(self.offsets, self.profiles, accels, strict=True)]
         end = self.start + self.scale * np.array([b.length for b in brakes])
-        return Motion(now, self.start, self.scale, list(brakes), end, homing=False)
+        return Motion(now, self.start, self.scale, list(brakes), end, homing=False,
+                      carriage0=self.carriage0)
 
 
 @dataclass(frozen=True)

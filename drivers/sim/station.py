@@ -189,6 +189,7 @@ class VirtualStation:
         drive_accel_mm_s2: float | None = None,
         clock: Callable[[], float] | None = None,
         time_scale: float | None = None,
+        backlash: Sequence[float] = (0.0, 0.0, 0.0),
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
@@ -220,7 +221,8 @@ class VirtualStation:
         self.machine = _PersistentMachine(
             self.geometry, true_drho, true_dl, true_tilt=true_tilt, speed_mm_s=speed_mm_s,
             accel_mm_s2=accel_mm_s2 if drive_accel_mm_s2 is None else drive_accel_mm_s2,
-            motion=motion, clock=clock, time_scale=1.0 if clock is not None else scale)
+            motion=motion, clock=clock, time_scale=1.0 if clock is not None else scale,
+            backlash=backlash)
         # Out-of-stroke accounting and knocks (drivers.sim.strokes).
         self._watch = StrokeWatch(self.machine, self.geometry, self._mounted_gauges)
         if nvram_path is not None:

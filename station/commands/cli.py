@@ -84,6 +84,12 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
     )
     p.add_argument(
+        "--backlash", type=str, default=None, metavar="X,Y,Z",
+        help="lost motion of each joint (mm, ISO 230-2's reversal value: the carriage "
+             "follows the counted position through a dead band this wide; one value for "
+             "all or x,y,z; default 0)",
+    )
+    p.add_argument(
         "--mount-error", type=float, default=None, metavar="MM",
         help="indicator stands placed by eye: each mounting is off the leg's middle by a "
              "hidden random amount uniform in +-MM (default 5; 0: perfectly placed)",

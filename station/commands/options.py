@@ -47,6 +47,7 @@ class SimOptions:
     true_tilt: Triple | None = None
     noise: float | None = None
     mount_error: float | None = None
+    backlash: str | None = None  # "X,Y,Z" or one value, mm
     drive: DriveOptions = field(default_factory=DriveOptions)
     indicators: int = 2
     procedure: Mapping[str, Any] | None = None
@@ -60,7 +61,7 @@ class SimOptions:
         # command line in a subprocess (Ctrl-C, kill -9) and need a short run
         return cls(seed=args.seed, true_drho=args.true_drho, true_dl=args.true_dl,
                    true_tilt=args.true_tilt, noise=args.noise, mount_error=args.mount_error,
-                   drive=DriveOptions.from_args(args),
+                   backlash=args.backlash, drive=DriveOptions.from_args(args),
                    procedure=getattr(args, "sim_procedure", None),
                    speed_mm_s=getattr(args, "sim_speed", None))
 

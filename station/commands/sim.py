@@ -25,7 +25,7 @@ from typing import Any
 
 from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM, VirtualStation
 from station.commands.options import DriveOptions
-from station.commands.simulation import drive_motion, drive_params
+from station.commands.simulation import backlash_mm, drive_motion, drive_params
 from station.config import dump_toml, parse_config
 from station.errors import BadInput
 
@@ -46,6 +46,7 @@ def main(args: argparse.Namespace) -> int:
     if args.speed is not None and not args.speed > 0:
         raise BadInput(f"--speed: must be > 0 mm/s, got {args.speed}")
     drive = drive_params(DriveOptions.from_args(args))
+    backlash = backlash_mm(args.backlash)
     kwargs: dict[str, Any] = {}
     if args.speed is not None:
         kwargs["speed_mm_s"] = args.speed
@@ -64,13 +65,14 @@ def main(args: argparse.Namespace) -> int:
                                      mount_error_mm=mount_error,
                                      motion=drive_motion(drive),
                                      controller_options={"transport": args.transport},
-                                     true_tilt=tilt, **kwargs)
+                                     true_tilt=tilt, backlash=backlash, **kwargs)
         except OSError as exc:
             raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
         with station:
             header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, hidden Δρ = {drho} mm, "
                       f"ΔL = {dl} mm, tilts = {tilt} mrad, noise {noise} mm, stands off by "
-                      f"up to {mount_error} mm, drive {_describe(drive)}\n"
+                      f"up to {mount_error} mm, lost motion {backlash} mm, drive "
+                      f"{_describe(drive)}\n"
                       f"Use: orthocal run --config {out}")
             # Validated like any operator's config: what we hand out must load.
             config = parse_config(station.config(), "orthocal sim")

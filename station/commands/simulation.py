@@ -51,6 +51,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
     mount = DEFAULT_MOUNT_ERROR_MM if options.mount_error is None else options.mount_error
     if not (math.isfinite(mount) and mount >= 0):
         raise BadInput(f"--mount-error: must be >= 0 mm, got {mount}")
+    backlash = backlash_mm(options.backlash)
     return {
         "seed": seed,
         "true_drho": drho,
@@ -58,6 +59,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         "true_tilt": tilt,
         "noise_mm": noise,
         "mount_error_mm": mount,
+        "backlash_mm": backlash,
         **drive_params(options.drive),
         # Not on the command line: the six-indicator style, procedure and write-back
         # overrides, a faster machine (tests)
@@ -85,7 +87,16 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         # Journals from before stand misplacement existed ran with perfect stands.
         mount_error_mm=params.get("mount_error_mm", 0.0),
         motion=drive_motion(params),
+        # ... and those from before lost motion, with none.
+        backlash=params.get("backlash_mm") or (0.0, 0.0, 0.0),
     )
+
+
+def backlash_mm(text: str | None) -> list[float]:
+    """``--backlash X,Y,Z`` (or one value for all joints), mm; BadInput naming it."""
+    if text is None:
+        return [0.0, 0.0, 0.0]
+    return _numbers("--backlash", str(text), (1, 3), "mm", positive=False)
 
 
 def _numbers(option: str, text: str, counts: tuple[int, ...], unit: str,

@@ -61,6 +61,10 @@ class Mover:
         self._journal, self._journal_safe, self.progress = journal, journal_safe, progress
         self.position: np.ndarray | None = None
         self.at: str | None = None
+        # The approach the axes last arrived with (Move.approach relative to its
+        # target; None: straight, or not known): a stop the axes stand at already is
+        # only skipped when they arrived there from the side it asks for.
+        self._arrived_from: tuple[float, ...] | None = None
         self.setup: SetupPlan | None = None
         self.mounted: dict[str, str] = {}
         self.touched = False
@@ -85,9 +89,10 @@ class Mover:
         # Always ask the drive: a write-back shifts the counted position of a carriage
         # that has not moved, and a resumed run starts wherever the machine stopped.
         self.position = np.asarray(self.controller.read_positions(), dtype=float)
-        if np.allclose(self.position, target, atol=1e-3):
+        side = _side(step)
+        if np.allclose(self.position, target, atol=1e-3) and side == self._arrived_from:
             self.at = sign
-            return  # already there: consecutive setups share Π0
+            return  # already there, from that side: consecutive setups share Π0
         # The plan was checked from nominal postures; the actual start may differ
         # (first move, resumed run, new offsets), so the move is checked again from
         # here and its waypoints (if any) derived from here; once the guard has
@@ -98,7 +103,7 @@ class Mover:
         try:
             legs = self.checker.route(self.position, target, step.label, self.setup,
                                       self.mounted, signal=signal, strict=strict,
-                                      travel=False)
+                                      travel=False, approach=step.approach)
         except PathRefused as exc:
             if not (self.mounted and signal is not None):
                 raise  # the plan's own check, from where the machine stands: bad input
@@ -109,6 +114,7 @@ class Mover:
             ) from None
         self.progress("move", label=step.label, targets=step.targets)
         self.at = None
+        self._arrived_from = None
         self.guard.begin_move(self.position, legs, signal)
         touched = False
         trip: PlungerGuardTrip | None = None
@@ -122,6 +128,7 @@ class Mover:
             except PlungerGuardTrip as exc:
                 trip, touched = exc, True
         self.at = sign
+        self._arrived_from = side
         if touched:
             self.touched = True
 
@@ -216,7 +223,7 @@ class Mover:
                       self.guard.signal_envelope(sign).items()}
         record["signal_mm"] = {n: list(v) for n, v in signal.items()}
         try:
-            legs = self._replan(here, target, step.label, signal)
+            legs = self._replan(here, target, step.label, signal, step.approach)
         except BadInput as exc:
             record["result"] = f"no safe path: {exc}"
             self._journal_safe({"type": "event", "event": record})
@@ -243,17 +250,20 @@ class Mover:
         return here, means
 
     def _replan(self, here: np.ndarray, target: np.ndarray, label: str,
-                signal: dict[str, tuple[float, float]]) -> list[np.ndarray]:
+                signal: dict[str, tuple[float, float]],
+                approach: tuple[float, float, float] | None = None) -> list[np.ndarray]:
         """A route from where a plunger may stand inside the margin: it may come no
         closer to its end than it is (less a reading's pad), never past it; the guard
-        watches it with that margin. Raises BadInput when none holds."""
+        watches it with that margin; the move's approach kept (its last leg from one
+        side). Raises BadInput when none holds."""
         margin = min(self.guard.margin, self.guard.slack_now() - SIGNAL_PAD_MM)
         if margin < 0:
             raise BadInput(f"plan: a plunger stands within {SIGNAL_PAD_MM:g} mm of the end "
                            "of its stroke")
         legs = self.checker.route(here, target, label, self.setup, self.mounted,
                                   signal=signal, strict=True, margin=margin,
-                                  max_waypoints=RECOVERY_WAYPOINTS, travel=False)
+                                  max_waypoints=RECOVERY_WAYPOINTS, travel=False,
+                                  approach=approach)
         self.guard.begin_move(here, legs, signal, margin=margin)
         return legs
 
@@ -268,3 +278,11 @@ class Mover:
                 raise RunFailed(f"plunger guard: the axes still move {STOP_TIMEOUT_S:g} s "
                                 "after the stop; check the drive")
             time.sleep(0.01)
+
+
+def _side(step: Move) -> tuple[float, ...] | None:
+    """The approach of ``step`` relative to its target (None: straight)."""
+    if step.approach is None:
+        return None
+    return tuple(round(float(a) - float(t), 6)
+                 for a, t in zip(step.approach, step.targets, strict=True))

@@ -20,11 +20,12 @@ import numpy as np
 from drivers.errors import DeviceError
 from drivers.files import write_atomic
 from orthocal.loop import WRITABLE, correction
+from orthocal.lost_motion import band_middle, edge_of
 from orthocal.numbers import finite
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.console.progress import Progress
-from station.engine import accuracy, verdict
+from station.engine import accuracy, reversal, verdict
 from station.engine.closed_loop import LoopState, next_step, round_phase
 from station.engine.devices import Devices
 from station.engine.recovery import resume_hint
@@ -159,6 +160,7 @@ class Flow:
         self.ctx, self.seq, self.result = ctx, seq, result
         self.idents: list[Any] = []  # identification of each round, in order
         self.measurements: list[Measurement] = []  # each round's, its passes pooled
+        self.reversal: Any = None  # the joints' lost motion (orthocal.lost_motion)
         # each round's rho+tilt fit, for the tilts the run states (engine.accuracy)
         self.tilt_rounds: list[accuracy.RoundTilts] = []
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
@@ -199,6 +201,14 @@ class Flow:
         ident, selection = _identify(ctx, m)
         if n == 0 and selection is not None:
             self.result["model_selection"] = selection
+        # Lost motion: the joints' reversal from every round so far; every stop was
+        # approached from one side, so the fit found Δρ at that edge of each band:
+        # what is stated and written is its middle.
+        rev = reversal.estimate(ctx.config, self.measurements)
+        self.result["reversal"] = reversal.fields(ctx.config, rev)
+        reversal.check_overrun(ctx.config, rev)
+        self.reversal = rev
+        ident = band_middle(ident, rev, ctx.config.procedure.approach)
         if again:
             self.idents[-1] = ident
         else:
@@ -230,7 +240,8 @@ class Flow:
                 ctx.journal.append({"type": "identification", **ident_json(ident)})
             return judged.verdict
         self.result["verification"] = verification_fields(
-            ctx.config, fields, self.idents[n - 1], self.target)
+            ctx.config, fields, self.idents[n - 1], self.target,
+            edge=edge_of(rev, ctx.config.procedure.approach))
         journaled = ctx.state.verifications.get(n)
         if journaled is None or len(journaled.get("passes", [phase])) < len(passes):
             ctx.journal.append({"type": "verification", "round": n, "phase": phase,
@@ -406,6 +417,9 @@ class Flow:
         except (ValueError, np.linalg.LinAlgError) as exc:
             self.result["accuracy"] = {"error": f"not stated: {exc}"}
             return
+        if self.reversal is not None:
+            self.result["accuracy"]["reversal"] = reversal.at_the_tool(
+                cfg, self.reversal, self._points())
         first = self.idents[0]
         f_names = list(first.names)
         f_idx = [f_names.index(n) for n in WRITABLE if n in f_names]

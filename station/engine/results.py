@@ -80,14 +80,17 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
 
 
 def verification_fields(config: StationConfig, fields: dict[str, Any], before: Any,
-                        target: dict[str, float]) -> dict[str, Any]:
+                        target: dict[str, float],
+                        edge: dict[str, float] | None = None) -> dict[str, Any]:
     """The verification block of a round's ``fields`` (measurement_fields), judged
     against what the model predicts once the Δρ of ``before`` (the identification
     whose correction it verifies) are written toward ``target``: ΔL and tilts cannot
-    be, and still show."""
+    be, and still show; nor the lost motion (``edge``: where every stop's one
+    approach puts each joint against the middle of its band, ±B/2)."""
     geometry = config.machine.geometry()
     keys = [split_key(k) for k in fields["deviations"]]  # "+xy", "+30xy"
-    predicted = predicted_after_correction(keys, geometry, before.parameters, target)
+    aim = {n: target.get(n, 0.0) + (edge or {}).get(n, 0.0) for n in WRITABLE}
+    predicted = predicted_after_correction(keys, geometry, before.parameters, aim)
     deviations = {k: {**v, "expected": float(p)} for (k, v), p
                   in zip(fields["deviations"].items(), predicted, strict=True)}
     gaps = [v["mean"] - v["expected"] for v in deviations.values()]
@@ -170,7 +173,10 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
                                   sim.get("true_tilt") or (0.0, 0.0, 0.0), strict=True)),
             "noise_mm": sim["noise_mm"],
             # Stands placed by eye: each mounting off the leg's middle by up to this.
-            "mount_error_mm": sim.get("mount_error_mm", 0.0)},
+            "mount_error_mm": sim.get("mount_error_mm", 0.0),
+            # Each joint's lost motion (ISO 230-2's reversal value), mm.
+            "backlash_mm": dict(zip(AXES, sim.get("backlash_mm") or (0.0, 0.0, 0.0),
+                                    strict=True))},
         "machine": {"leg_length": m.leg_length, "rho_min": m.rho_min, "rho_max": m.rho_max},
         "model": config.procedure.model, "method": config.procedure.method,
         "identified": {}, "std_errors": {}, "offsets_before": None, "offsets_written": None,

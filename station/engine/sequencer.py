@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from drivers.base import AxisController
+from orthocal.lost_motion import reversal_gain
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine.mover import Mover, ReadingSource
@@ -45,6 +46,7 @@ from station.errors import RunFailed
 from station.plan.checker import MotionChecker
 from station.plan.guard import PlungerGuard
 from station.plan.steps import (
+    REVERSAL,
     Checkpoint,
     Move,
     Plan,
@@ -119,6 +121,7 @@ class Sequencer:
         self._stops: dict[str, dict[str, StopStat]] = {}
         self._all_names = [ind.name for ind in config.indicators]
         self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
+        self._gains: dict[tuple[str, str], float] = {}  # (leg, axis) -> reversal gain
         # The guard's records are the run's like any other: one that cannot be saved
         # stops the run (a swallowed error once lost a record that had an infinity).
         self.guard = PlungerGuard(
@@ -167,15 +170,19 @@ class Sequencer:
         deviations: dict[str, list[float]] = {}
         outcomes: list[SetupOutcome] = []
         within: list[float] = []
+        reversal: dict[str, list[float]] = {}
         for sp in self.plan.setups:
-            outcome, devs, w = self._run_setup(phase, sp)
+            outcome, devs, w, rev = self._run_setup(phase, sp)
             outcomes.append(outcome)
             deviations.update(devs)
             within.extend(w)
-        return Measurement(phase, deviations, outcomes, within)
+            for axis, values in rev.items():
+                reversal.setdefault(axis, []).extend(values)
+        return Measurement(phase, deviations, outcomes, within, reversal)
 
     def _run_setup(self, phase: str, sp: SetupPlan
-                   ) -> tuple[SetupOutcome, dict[str, list[float]], list[float]]:
+                   ) -> tuple[SetupOutcome, dict[str, list[float]], list[float],
+                              dict[str, list[float]]]:
         proc = self.config.procedure
         self._setup = sp
         self._live_setup = False
@@ -185,17 +192,17 @@ class Sequencer:
         self._guard_pending, self._guard_cycle = False, None
         cycle = 0
         repeats = 0
-        passes: list[list[tuple[int, dict[str, float], list[float]]]] = []
+        passes: list[list[tuple[int, dict[str, float], list[float], dict[str, float]]]] = []
         while True:
-            this_pass: list[tuple[int, dict[str, float], list[float]]] = []
+            this_pass: list[tuple[int, dict[str, float], list[float], dict[str, float]]] = []
             for _ in range(proc.cycles):
                 cycle += 1
-                devs, w = self._cycle(phase, sp, cycle)
-                this_pass.append((cycle, devs, w))
-                if self._converged([d for _, d, _ in this_pass]):
+                devs, w, rev = self._cycle(phase, sp, cycle)
+                this_pass.append((cycle, devs, w, rev))
+                if self._converged([d for _, d, _, _ in this_pass]):
                     break
             passes.append(this_pass)
-            spread = self._spread([d for _, d, _ in this_pass])
+            spread = self._spread([d for _, d, _, _ in this_pass])
             if spread <= proc.repeatability_mm or repeats >= proc.max_repeats:
                 break
             repeats += 1
@@ -204,21 +211,25 @@ class Sequencer:
                                      "spread_mm": spread, "repeat": repeats})
             self.progress("repeat", phase=phase, setup=sp.index, spread=spread)
         used = passes[-1]
-        spread = self._spread([d for _, d, _ in used])
+        spread = self._spread([d for _, d, _, _ in used])
         keys = list(used[0][1])
-        devs_by_key = {k: [d[k] for _, d, _ in used] for k in keys}
-        within = [s for _, _, w in used for s in w]
+        devs_by_key = {k: [d[k] for _, d, _, _ in used] for k in keys}
+        within = [s for _, _, w, _ in used for s in w]
+        reversal: dict[str, list[float]] = {}
+        for *_, rev in used:
+            for axis, value in rev.items():
+                reversal.setdefault(axis, []).append(value)
         outcome = SetupOutcome(
             index=sp.index, leg=sp.leg, indicators=dict(sp.indicators),
             cycles_used=len(used), cycles_max=proc.cycles, repeats=repeats,
             flagged=spread > proc.repeatability_mm, spread_mm=spread,
-            cycles=[c for c, _, _ in used])
+            cycles=[c for c, *_ in used])
         if (phase, sp.index) not in self.done_setups:
             self.journal.append({"type": "setup_done", "phase": phase, "setup": sp.index,
                                  "cycles": outcome.cycles, "repeats": repeats,
                                  "spread_mm": spread, "flagged": outcome.flagged})
         self.progress("setup_done", phase=phase, setup=sp.index, outcome=outcome)
-        return outcome, devs_by_key, within
+        return outcome, devs_by_key, within, reversal
 
     def _converged(self, cycles: list[dict[str, float]]) -> bool:
         target = self.config.procedure.target_std_error_mm
@@ -235,11 +246,12 @@ class Sequencer:
     # --- one cycle ---------------------------------------------------------------------
 
     def _cycle(self, phase: str, sp: SetupPlan, cycle: int
-               ) -> tuple[dict[str, float], list[float]]:
+               ) -> tuple[dict[str, float], list[float], dict[str, float]]:
         done = self.done_cycles.get((phase, sp.index, cycle))
         if done is not None:
             self.progress("cycle_replayed", phase=phase, setup=sp.index, cycle=cycle)
-            return dict(done["deviations"]), list(done.get("within_std", []))
+            return (dict(done["deviations"]), list(done.get("within_std", [])),
+                    dict(done.get("reversal_mm", {})))
         if not self._live_setup:
             # Going live in this setup: mount (or remount after a resume) at Π0 and
             # read the Π0 that opens this cycle under the current mounting.
@@ -287,7 +299,7 @@ class Sequencer:
         gauge's zero moved are taken again (a cycle must not mix readings from
         before and after a knock)."""
         stops = [stop_id(phase, sp.index, cycle - 1, "0")] + [
-            stop_id(phase, sp.index, cycle, p) for p in (*sp.order, "0")]
+            stop_id(phase, sp.index, cycle, p) for p in sp.signs]
         self.journal.append({"type": "event", "event": {
             "event": "retake", "phase": phase, "setup": sp.index, "cycle": cycle,
             "stops": stops, "why": why}})
@@ -302,7 +314,7 @@ class Sequencer:
             self._execute(phase, step)
 
     def _finish_cycle(self, phase: str, sp: SetupPlan, cycle: int
-                      ) -> tuple[dict[str, float], list[float]]:
+                      ) -> tuple[dict[str, float], list[float], dict[str, float]]:
         start = self._stops[stop_id(phase, sp.index, cycle - 1, "0")]
         tests = [(p, self._stops[stop_id(phase, sp.index, cycle, p)]) for p in sp.order]
         end = self._stops[stop_id(phase, sp.index, cycle, "0")]
@@ -320,10 +332,36 @@ class Sequencer:
             for st in (*(stop[name] for _, stop in tests), end[name]):
                 if st.std is not None:
                     within.append(st.std)
+        reversal = self._reversal(phase, sp, cycle, end)
         self.journal.append({"type": "cycle", "phase": phase, "setup": sp.index,
-                             "cycle": cycle, "deviations": devs, "within_std": within})
+                             "cycle": cycle, "deviations": devs, "within_std": within,
+                             **({"reversal_mm": reversal} if reversal else {})})
         self.progress("cycle", phase=phase, setup=sp.index, cycle=cycle, deviations=devs)
-        return devs, within
+        return devs, within, reversal
+
+    def _reversal(self, phase: str, sp: SetupPlan, cycle: int,
+                  end: Mapping[str, StopStat]) -> dict[str, float]:
+        """This cycle's measurement of each joint's reversal (mm), from its reversal
+        stop (Π0 from the other side) against its closing Π0: the gauge along j
+        sees joint j's shift through the leg (orthocal.lost_motion)."""
+        if sp.reversal_overrun is None:
+            return {}
+        other = self._stops.get(stop_id(phase, sp.index, cycle, REVERSAL))
+        if other is None:
+            return {}
+        side = 1.0 if sp.reversal_overrun > 0 else -1.0  # the reversal stop from above
+        out = {}
+        for name, direction in sp.indicators.items():
+            sign = -1.0 if direction.startswith("-") else 1.0
+            axis = direction.lstrip("-")
+            gain = self._gain(sp.leg, axis)
+            out[axis] = side * sign * (other[name].mean - end[name].mean) / gain
+        return out
+
+    def _gain(self, leg: str, axis: str) -> float:
+        if (leg, axis) not in self._gains:
+            self._gains[(leg, axis)] = reversal_gain(leg, axis, self.config.machine.geometry())
+        return self._gains[(leg, axis)]
 
     # --- steps -------------------------------------------------------------------------
 

@@ -121,6 +121,8 @@ class Measurement:
     deviations: dict[str, list[float]]
     setups: list[SetupOutcome]
     within_std: list[float]  # std of the readings at each stop, for the noise estimate
+    # joint axis -> each cycle's measurement of its reversal (mm; orthocal.lost_motion)
+    reversal: dict[str, list[float]] = field(default_factory=dict)
 
     def stats(self) -> dict[str, dict[str, Any]]:
         out = {}
@@ -147,7 +149,9 @@ def pooled(first: Measurement, more: Measurement) -> Measurement:
     Each cycle's deviation is referenced to its own bracketing Π0 stops, so cycles
     of another mounting join without a common zero."""
     keys = list(first.deviations) + [k for k in more.deviations if k not in first.deviations]
+    axes = list(first.reversal) + [a for a in more.reversal if a not in first.reversal]
     return Measurement(
         first.phase,
         {k: [*first.deviations.get(k, []), *more.deviations.get(k, [])] for k in keys},
-        [*first.setups, *more.setups], [*first.within_std, *more.within_std])
+        [*first.setups, *more.setups], [*first.within_std, *more.within_std],
+        {a: [*first.reversal.get(a, []), *more.reversal.get(a, [])] for a in axes})

@@ -130,7 +130,8 @@ class MotionChecker:
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None,
               signal: Mapping[str, tuple[float, float]] | None = None,
               max_waypoints: int = MAX_WAYPOINTS, strict: bool = False,
-              margin: float | None = None, travel: bool = True) -> list[np.ndarray]:
+              margin: float | None = None, travel: bool = True,
+              approach: Sequence[float] | None = None) -> list[np.ndarray]:
         """The targets of the sub-moves that reach ``target`` (waypoints, then the
         target itself); raises BadInput when no route of up to ``max_waypoints``
         holds. ``signal``: per mounted gauge, the travel beyond the nominal model
@@ -143,7 +144,15 @@ class MotionChecker:
         already stands closer to its end: no closer than that). ``travel``: the
         route's plunger travel goes into ``travel`` (the plan listing's); a run's
         moves need only the decision (a sharp bound of every sub-move from wherever
-        the axes stand costs tens of ms)."""
+        the axes stand costs tens of ms). ``approach``: the point the last short leg
+        starts from ([procedure] approach: every joint runs from there toward its
+        target from one side): the route goes to it, then to the target, both
+        checked alike."""
+        if approach is not None:
+            head = self.route(start, approach, label, setup, mounted, signal, max_waypoints,
+                              strict, margin, travel)
+            return [*head, self._last_leg(head[-1], target, label, setup, mounted, signal,
+                                          strict, margin, travel)]
         keep = self.margin if margin is None else margin
         target_v = np.asarray(target, dtype=float)
         where = "" if setup is None else f"setup {setup.index + 1} (leg {setup.leg}), "
@@ -189,6 +198,16 @@ class MotionChecker:
         if travel:
             self._commit(self._route_travel(gauges, start_v, legs, where))
         return legs
+
+    def _last_leg(self, approach: np.ndarray, target: Sequence[float], label: str,
+                  setup: SetupPlan | None, mounted: dict[str, str] | None,
+                  signal: Mapping[str, tuple[float, float]] | None, strict: bool,
+                  margin: float | None, travel: bool) -> np.ndarray:
+        """The approach's last short leg, from ``approach`` to ``target``: one COMMAND 1
+        (a fraction of a mm), checked as any sub-move is."""
+        legs = self.route(approach, target, f"{label} (its last leg)", setup, mounted,
+                          signal, 0, strict, margin, travel)
+        return legs[-1]
 
     # --- one sub-move -----------------------------------------------------------------
 
@@ -519,7 +538,8 @@ def check_plan(
             if isinstance(step, Prompt):
                 mounted = dict(step.indicators)
             elif isinstance(step, Move):
-                legs = checker.route(position, step.targets, step.label, sp, mounted)
+                legs = checker.route(position, step.targets, step.label, sp, mounted,
+                                     approach=step.approach)
                 if position is not None and len(legs) > 1:
                     plan.routes[route_key(position, step.targets)] = [
                         tuple(float(v) for v in leg) for leg in legs[:-1]]

@@ -45,7 +45,7 @@ import numpy as np
 from station.config import StationConfig
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker, PathRefused
-from station.plan.steps import posture_label
+from station.plan.steps import REVERSAL, posture_label
 
 # Nominal travel change within one poll window below which the signal estimate is
 # taken as exact (the gauge's sampling instant no longer matters).
@@ -377,9 +377,9 @@ class PlungerGuard:
         """The signal a later cycle's move from posture ``start_sign`` to
         ``target_sign`` adds (at its start, at its target), from what the first
         cycle measured at both stops (None: not learned yet, or a stop it did not
-        see)."""
-        a = self.stop_signal.get(start_sign or "")
-        b = self.stop_signal.get(target_sign or "")
+        see). The reversal stop is Π0's (the same joints but for their play)."""
+        a = self.stop_signal.get(_stop(start_sign))
+        b = self.stop_signal.get(_stop(target_sign))
         if a is not None and b is None and self._shifted:
             b = a
         if a is None or b is None:
@@ -514,13 +514,14 @@ class PlungerGuard:
                     f"margin {self.margin:g} mm), as the first cycle showed"),
                     {"predicted_mm": value, "end_mm": end})
         sp = self._setup
-        signs = ["0", *sp.order, "0"]
+        signs = [sp.signs[-1], *sp.signs]  # from where the cycle before ended
         for a, b in itertools.pairwise(signs):
             label = posture_label(b, sp.leg)
+            move = sp.move(b)
             try:
-                self._checker.route(sp.postures[a], sp.postures[b], label, sp,
+                self._checker.route(sp.move(a).targets, move.targets, label, sp,
                                     self._mounting(), signal=self.route_signal(a, b),
-                                    strict=True, travel=False)
+                                    strict=True, travel=False, approach=move.approach)
             except PathRefused as exc:
                 g = self._gauges.get(exc.indicator or "")
                 if g is None:
@@ -539,3 +540,9 @@ class PlungerGuard:
             f"plunger guard: indicator {g.name} ({g.direction}) on {self._where}: cycle "
             f"{cycle}'s move to {label} {what}; nothing has moved. Re-mount it with "
             f"{'less' if pushed else 'more'} preload or use a longer stroke")
+
+
+def _stop(sign: str | None) -> str:
+    """The stop whose signal a posture's is: the reversal stop is Π0 (the same joints,
+    but for their play)."""
+    return "0" if sign == REVERSAL else (sign or "")

@@ -8,6 +8,13 @@ straight to Π_i^−, so no axis travels further than the postures require. With
 ``[procedure] strokes`` a cycle visits Π_i(s) for every stroke, in the order of
 :func:`orthocal.postures.stop_order` (out along +, back through to −, home).
 
+Lost motion (``[procedure] approach``): every move to a stop ends with a short leg
+that every joint runs in the chosen direction, from ``approach_overrun_mm``
+beyond the target (``Move.approach``, the point it starts from); and every
+cycle ends with one more stop, Π0 approached from the other side (posture
+``"r"``), whose readings against the cycle's closing Π0 give the joints'
+reversal (orthocal.lost_motion), and enter no deviation.
+
 Stop ids are ``"{phase}:{setup}:{cycle}:{posture}"`` (phase ``m`` measurement,
 ``v`` verification; cycle 0 holds only the first Π0). The sequencer generates
 the same steps with the same functions, so the listing and the check cover
@@ -28,9 +35,16 @@ from station.plan import motion
 PHASES = {"m": "measurement", "v": "verification"}
 
 
+#: The posture of a cycle's last stop: Π0 approached from the other side, for the
+#: joints' reversal.
+REVERSAL = "r"
+
+
 def posture_label(sign: str, leg: str | None) -> str:
     if sign == "0":
         return "Π0"
+    if sign == REVERSAL:
+        return "Π0 (other side)"
     return f"Π_{leg}^{sign}" if sign in ("+", "-") else f"Π_{leg}({sign})"
 
 
@@ -62,6 +76,9 @@ class Move:
     targets: tuple[float, float, float]
     label: str
     kind: str = "move"
+    # Where the move's last short leg starts (every joint then runs toward its target
+    # from one side: [procedure] approach); None: as planned, straight to the target.
+    approach: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -99,9 +116,22 @@ class SetupPlan:
     indicators: dict[str, str]  # name -> "y" or "-y"
     postures: dict[str, tuple[float, float, float]]  # "0", "+", "-", "+30" -> joint targets
     order: tuple[str, ...] = ("+", "-")  # the test postures of a cycle, in order
+    # The signed overrun each stop is approached from (mm: −o from below, +o from
+    # above; None: as planned), and the reversal stop's ("r": from the other side).
+    overrun: float | None = None
+    reversal_overrun: float | None = None
 
     def move(self, sign: str) -> Move:
-        return Move(self.postures[sign], posture_label(sign, self.leg))
+        """The move to posture ``sign`` ("r": Π0 from the side opposite the stops')."""
+        targets = self.postures["0" if sign == REVERSAL else sign]
+        over = self.reversal_overrun if sign == REVERSAL else self.overrun
+        approach = None if over is None else tuple(float(v) + over for v in targets)
+        return Move(targets, posture_label(sign, self.leg), approach=approach)  # type: ignore[arg-type]
+
+    @property
+    def signs(self) -> tuple[str, ...]:
+        """The stops of a cycle, in order: its test postures, Π0, the reversal stop."""
+        return (*self.order, "0", *((REVERSAL,) if self.reversal_overrun is not None else ()))
 
     def start_steps(self, phase: str, cycle: int, settle_s: float, n: int) -> list[Step]:
         """Mount at Π0 and take the Π0 reading that opens cycle ``cycle + 1`` (0 in a
@@ -117,7 +147,7 @@ class SetupPlan:
     def cycle_steps(self, phase: str, cycle: int, settle_s: float, n: int) -> list[Step]:
         names = tuple(self.indicators)
         steps: list[Step] = []
-        for sign in (*self.order, "0"):
+        for sign in self.signs:
             steps += [
                 self.move(sign),
                 Settle(settle_s),
@@ -201,15 +231,25 @@ class Plan:
             lines.append(f"controller path: {self.motion} axes: {motion.GUARANTEE[self.motion]}"
                          "; a move that could take a plunger out of its stroke goes via "
                          "waypoints, one COMMAND 1 each")
+        sp0 = self.setups[0]
+        if sp0.overrun is not None or sp0.reversal_overrun is not None:
+            lines.append(approach_words(sp0.overrun, sp0.reversal_overrun))
         number = 0
         for step, via in self.waypoints_of():
             number += 1
             if isinstance(step, Move):
                 text = f"move {step.label:<7} ρ = (" + ", ".join(
                     f"{t:.3f}" for t in step.targets) + ")"
+                if step.approach is not None and via and \
+                        max(abs(a - b) for a, b in zip(via[-1], step.approach,
+                                                       strict=True)) < 1e-6:
+                    via = via[:-1]  # the approach point is said below, not a waypoint
                 if via:
                     text += f" via {len(via)} waypoint(s): " + "; ".join(
                         "(" + ", ".join(f"{t:.3f}" for t in w) + ")" for w in via)
+                if step.approach is not None:
+                    side = "below" if step.approach[0] < step.targets[0] else "above"
+                    text += f", from {side}"
             elif isinstance(step, Prompt):
                 lines.append(f"setup {step.setup + 1}: leg {step.leg}")
                 text = ("prompt: mount " + ", ".join(f"{n} ({d})" for n, d in step.indicators)
@@ -231,6 +271,20 @@ class Plan:
         return "\n".join(lines)
 
 
+def approach_words(overrun: float | None, reversal: float | None) -> str:
+    """The listing's line on how the stops are approached."""
+    if overrun is None:
+        head = "approach: as planned (the joints reach the stops from either side)"
+    else:
+        head = (f"approach: every stop from {'below' if overrun < 0 else 'above'}, every "
+                f"joint's last leg from {abs(overrun):.3f} mm beyond (lost motion shifts "
+                "every stop alike)")
+    if reversal is None:
+        return head
+    return (head + f"; each cycle ends with Π0 from {'above' if reversal > 0 else 'below'}"
+            " as well: the joints' reversal, in no deviation")
+
+
 def route_key(start: Sequence[float], target: Sequence[float]) -> tuple:
     """Routes are keyed by their ends (to the µm): a move with gauges mounted
     joins two postures of one leg, so it belongs to one setup."""
@@ -250,5 +304,17 @@ def build_plan(config: StationConfig, strokes: Sequence[float] | None = None) ->
             for s in ("0", *order)
         }
         setups.append(SetupPlan(idx, setup.leg, dict(setup.indicators), targets,  # type: ignore[arg-type]
-                                order))
+                                order, *approach_overruns(config)))
     return Plan(setups, proc.cycles, proc.readings, proc.settle_s)
+
+
+def approach_overruns(config: StationConfig) -> tuple[float | None, float]:
+    """(the signed overrun the stops are approached from, the reversal stop's): from
+    below −o, then the reversal from above +o; from above the other way round; as
+    planned no approach leg, and the reversal from above (in the paper's order every
+    joint reaches the cycle's closing Π0 from below)."""
+    proc = config.procedure
+    o = proc.approach_overrun_mm
+    if proc.approach == "above":
+        return o, -o
+    return (-o if proc.approach == "below" else None), o

@@ -97,8 +97,9 @@ def judged_line(result: Mapping[str, Any]) -> str | None:
     if expected is None or expected < 1e-4:
         return None
     return (f"verification judged against the model after correction: deviations RMS "
-            f"{_um(ver.get('deviations_rms_mm'))}, predicted {_um(expected)} (ΔL and tilts "
-            f"cannot be written), measured − predicted {_um(ver.get('vs_expected_rms_mm'))}")
+            f"{_um(ver.get('deviations_rms_mm'))}, predicted {_um(expected)} (ΔL, tilts "
+            f"and the joints' lost motion cannot be written), measured − predicted "
+            f"{_um(ver.get('vs_expected_rms_mm'))}")
 
 
 def remaining_text(result: Mapping[str, Any]) -> str | None:
@@ -122,7 +123,7 @@ def remaining_text(result: Mapping[str, Any]) -> str | None:
     if not parts:
         return None
     dof = num(rem.get("std_errors_dof"))
-    how = (f" µm (95 %, k = {k:.2f} on {dof:g} dof)" if k is not None and dof is not None
+    how = (f" µm (95 %, k = {k:.2f} on {dof:.3g} dof)" if k is not None and dof is not None
            else " µm")
     if any(abs(a) > 0 for a in aim.values()):
         how += (" from the aim of objective tool (Δρ "
