@@ -129,10 +129,10 @@ def check_reference(controller: Any, indicators: Any, config: StationConfig, pla
         journal.append({"type": "reference-check", "phase": phase, "setup": index,
                         "result": "no Π0 reading journaled"})
         return records
-    target = sp.move("0").targets
+    move = sp.move("0")  # approached as the journaled Π0 stops were
     start = np.asarray(controller.read_positions(), dtype=float)
     legs = MotionChecker(config, controller.soft_limits()).route(
-        start, target, "Π0 (reference check)", sp, mounted)
+        start, move.targets, "Π0 (reference check)", sp, mounted, approach=move.approach)
     here = start
     for leg in legs:  # waypoints where a single COMMAND 1 could take a plunger too far
         here = controller.move_and_wait(list(leg), speed_mm_s=config.controller.speed_mm_s,
