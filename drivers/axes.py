@@ -40,7 +40,7 @@ class ModbusAxisController(ModbusLink):
 
     ``port`` is the TCP port for ``transport="tcp"`` or the serial device for
     ``"rtu"``. ``profile``/``overrides`` select the register map
-    (:func:`drivers.registers.load_map`). ``acceleration_mm_s2`` is what the
+    (:func:`drivers.map_files.load_map`). ``acceleration_mm_s2`` is what the
     station assumes when it derives move deadlines; ``soft_limits`` supplies
     limits for maps that cannot read them. Use as a context manager, or call
     ``connect()`` / ``close()``.

@@ -54,7 +54,8 @@ from drivers.errors import (
     ExceptionResponse,
     TargetRefused,
 )
-from drivers.registers import Register, RegisterMap, contiguous_runs, load_map
+from drivers.map_files import load_map
+from drivers.registers import Register, RegisterMap, contiguous_runs, encode_int
 
 _pymodbus_log = logging.getLogger("pymodbus")
 if _pymodbus_log.level == logging.NOTSET:
@@ -87,7 +88,7 @@ class ModbusLink:
     """One Modbus controller (or one device per axis) behind ``port``: the TCP port
     for ``transport="tcp"`` or the serial device for ``"rtu"``.
     ``profile``/``overrides`` select the register map
-    (:func:`drivers.registers.load_map`). Use as a context manager, or call
+    (:func:`drivers.map_files.load_map`). Use as a context manager, or call
     ``connect()`` / ``close()``.
     """
 
@@ -375,7 +376,9 @@ class ModbusLink:
         "reset_alarm"): a drive may need more than one register written."""
         for step in self.map.commands[command]:
             reg = self.map[step.reg]
-            self.write_words([(reg, [step.value])], command)
+            words = [step.value] if reg.is_bit else encode_int(step.value, reg.type,
+                                                               reg.word_order)
+            self.write_words([(reg, words)], command)
 
     # --- what the reference check reads, and what it is told ------------------------------
 

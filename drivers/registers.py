@@ -17,20 +17,21 @@ Conventions every map follows:
 * a map without a role lists the reason in ``unsupported`` (e.g. a drive with no
   Modbus-writable zero offset), and the driver raises that reason verbatim.
 
-Built-in profiles: :data:`GENERIC` ("orthocal-generic", what the simulator
-serves) and :data:`IAI_PCON` ("iai-pcon-direct"). ``load_map(profile,
-overrides)`` applies the single-entry overrides of the config table
-``[controller.registers]``.
+The map the simulator serves by default is :data:`GENERIC` ("orthocal-generic",
+design.md's table), defined here; every other built-in map is a file of
+drivers/maps/, and a user's drive is a file of its own: drivers.map_files reads
+and writes them, resolves a profile's name or path, and applies the single-entry
+overrides of the config table ``[controller.registers]`` (``load_map``).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, model_validator
 
 AXES: tuple[str, str, str] = ("X", "Y", "Z")
 ROLES_REQUIRED = ("TARGET", "ACTUAL")
@@ -198,12 +199,13 @@ class StatusBit(BaseModel):
 
 
 class CommandStep(BaseModel):
-    """Write ``value`` to register ``reg`` (coils: 0 = OFF, 1 = ON/FF00)."""
+    """Write ``value`` (counts, encoded by the register's type and word order) to
+    register ``reg`` (coils: 0 = OFF, 1 = ON/FF00). The map checks that it fits."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     reg: str
-    value: int = Field(ge=0, le=0xFFFF)
+    value: int
 
 
 class RegisterMap(BaseModel):
@@ -262,8 +264,18 @@ class RegisterMap(BaseModel):
                 raise ValueError(f"reference to unknown register {n}")
         for steps in self.commands.values():
             for step in steps:
-                if by_name[step.reg].access == "R":
+                reg = by_name[step.reg]
+                if reg.access == "R":
                     raise ValueError(f"command writes read-only register {step.reg}")
+                if reg.is_bit:
+                    if step.value not in (0, 1):
+                        raise ValueError(f"command writes {step.value} to the bit "
+                                         f"{step.reg} (0 or 1)")
+                else:
+                    try:
+                        encode_int(step.value, reg.type, reg.word_order)
+                    except ValueError as exc:
+                        raise ValueError(f"command value for {step.reg}: {exc}") from None
         self._check_overlaps()
         return self
 
@@ -368,149 +380,6 @@ GENERIC = RegisterMap(
     # map is planned as independent axes unless its config says coordinated.
     motion="independent",
 )
-
-
-def _iai_axis(role: str, address: int, **kw: Any) -> list[Register]:
-    # IAI addresses each axis as its own slave: "axis number + 1".
-    return [Register(name=f"{role}_{ax}", address=address, device_id=i + 1, **kw)
-            for i, ax in enumerate(AXES)]
-
-
-_IAI_POS = {"type": "i32", "scale": 100.0, "unit": "mm"}
-
-IAI_PCON = RegisterMap(
-    name="iai-pcon-direct",
-    description="""IAI ROBO Cylinder PCON/ACON (RC controllers), Modbus RTU, "direct
-numeric" movement: one Modbus slave per axis (slave address = axis number + 1,
-so X, Y, Z are devices 1, 2, 3), coils (FC05) for commands.
-
-Confirmed from IAI's "ROBO Cylinder Series Modbus" manual (chapters 4-5, as
-published on azmanual.top / manualsdir.com, pages 51-60, 77-87, 118-160):
-  * 0x9000 PNOW current position, 2 registers, 0.01 mm, signed (FC03);
-  * 0x9002 ALMC present alarm code (0 = none);
-  * 0x9005 DSS1 device status 1: bit15 EMGS (e-stop), bit12 SV (servo on),
-    bit10 ALMH (major alarm), bit4 HEND (home done), bit3 PEND (position complete);
-  * 0x9007 DSSE expansion status: bit5 MOVE (moving signal);
-  * 0x9900 PCMD target position, 2 registers, 0.01 mm, signed, two's complement:
-    writing it starts the move ("can be set in one message" with 0x9902 INP,
-    0x9904 VCMD speed in 0.01 mm/s (2 registers), 0x9906 ACMD 0.01 G,
-    0x9907 PPOW, 0x9908 CTLF), so "move" needs no separate command;
-  * coils 0x0403 servo ON, 0x0407 alarm reset (edge: FF00 then 0000),
-    0x040B home return (rising edge: 0000 then FF00), 0x042C deceleration stop
-    (FF00, the controller resets it), 0x040A pause.
-
-Not confirmed (treat as assumptions to check on the bench):
-  * word order of the 2-register values: assumed high word at the lower address,
-    as the manual lists PCMD at 9900 before 9901 and reads PNOW as "data 1,
-    data 2"; its wording ("the lower word ... address 9900") is ambiguous;
-  * soft limits: they are user parameters (No. 3/4) and we found no documented
-    Modbus register to read them, so this profile has none; give them to the
-    driver (``soft_limits=``) from the machine's documentation. Note the drive
-    does not refuse a target beyond its soft limit, it clamps it 0.2 mm inside;
-  * zero offset: the home offset is a user parameter (No. 22) with no documented
-    direct-numeric register, so offsets are unsupported (see ``unsupported``);
-  * the drive must be servo-on (coil 0x0403) before it moves; this profile does
-    not switch the servo on by itself;
-  * Modbus TCP works only through a gateway; only RTU is documented per axis.""",
-    registers=[
-        *_iai_axis("TARGET", 0x9900, access="RW", description="PCMD", **_IAI_POS),
-        *_iai_axis("SPEED", 0x9904, type="u32", scale=100.0, unit="mm/s", access="RW",
-                   description="VCMD"),
-        *_iai_axis("ACTUAL", 0x9000, description="PNOW", **_IAI_POS),
-        *_iai_axis("ALMC", 0x9002, description="present alarm code"),
-        *_iai_axis("DSS1", 0x9005, description="device status register 1"),
-        *_iai_axis("DSSE", 0x9007, description="expansion device status register"),
-        *_iai_axis("HOME", 0x040B, table="coil", access="W", description="home return"),
-        *_iai_axis("ALARM_RESET", 0x0407, table="coil", access="W", description="alarm reset"),
-        *_iai_axis("STOP", 0x042C, table="coil", access="W", description="deceleration stop"),
-        *_iai_axis("SERVO_ON", 0x0403, table="coil", access="RW", description="servo ON"),
-    ],
-    status={
-        "homed": StatusBit(registers=["DSS1_X", "DSS1_Y", "DSS1_Z"], bit=4, combine="all"),
-        "moving": StatusBit(registers=["DSSE_X", "DSSE_Y", "DSSE_Z"], bit=5, combine="any"),
-        "in_position": StatusBit(registers=["DSS1_X", "DSS1_Y", "DSS1_Z"], bit=3,
-                                 combine="all"),
-        "alarm": StatusBit(registers=["DSS1_X", "DSS1_Y", "DSS1_Z"], bit=10, combine="any"),
-        "estop": StatusBit(registers=["DSS1_X", "DSS1_Y", "DSS1_Z"], bit=15, combine="any"),
-    },
-    alarm_code=["ALMC_X", "ALMC_Y", "ALMC_Z"],
-    commands={
-        "move": [],  # writing PCMD starts the move
-        "stop": [CommandStep(reg=f"STOP_{ax}", value=1) for ax in AXES],
-        "home": [*(CommandStep(reg=f"HOME_{ax}", value=0) for ax in AXES),
-                 *(CommandStep(reg=f"HOME_{ax}", value=1) for ax in AXES)],
-        "reset_alarm": [*(CommandStep(reg=f"ALARM_RESET_{ax}", value=1) for ax in AXES),
-                        *(CommandStep(reg=f"ALARM_RESET_{ax}", value=0) for ax in AXES)],
-    },
-    # Each axis is its own slave and starts on its own PCMD write.
-    motion="independent",
-    unsupported={
-        "offsets": "the IAI PCON/ACON direct-numeric map has no Modbus-writable zero offset "
-                   "(the home offset is user parameter No. 22, set with IAI's tools); "
-                   "apply the identified offsets to the targets instead",
-        "soft_limits": "the IAI PCON/ACON soft limits are user parameters with no documented "
-                       "Modbus register; pass soft_limits= from the machine's documentation",
-    },
-)
-
-PROFILES: dict[str, RegisterMap] = {m.name: m for m in (GENERIC, IAI_PCON)}
-
-_OVERRIDE_TABLE = "[controller.registers]"
-
-
-def load_map(profile: str | RegisterMap = "orthocal-generic",
-             overrides: Mapping[str, Mapping[str, Any]] | None = None) -> RegisterMap:
-    """The built-in ``profile`` with single-entry ``overrides`` applied.
-
-    ``overrides`` is the config table ``[controller.registers]``, e.g.
-    ``{"OFFSET_X": {"address": 130}}``: each key names an existing register and
-    its value replaces some of that entry's fields. Raises RegisterMapError naming
-    the bad entry (unknown profile, unknown register, bad field or value, or a
-    result that overlaps another register).
-    """
-    if isinstance(profile, RegisterMap):
-        base = profile
-    else:
-        try:
-            base = PROFILES[profile]
-        except KeyError:
-            raise RegisterMapError(
-                f"profile {profile!r}", f"unknown register map; built-in: {sorted(PROFILES)}"
-            ) from None
-    if not overrides:
-        return base
-    if not isinstance(overrides, Mapping):
-        raise RegisterMapError(_OVERRIDE_TABLE, "must be a table of register name -> fields")
-    registers = {r.name: r for r in base.registers}
-    for name, fields in overrides.items():
-        entry = f"{_OVERRIDE_TABLE} {name}"
-        if name not in registers:
-            raise RegisterMapError(entry, f"no such register in profile {base.name!r}; "
-                                          f"known: {', '.join(registers)}")
-        if not isinstance(fields, Mapping):
-            raise RegisterMapError(entry, "must be a table of fields, e.g. {address = 130}")
-        if "name" in fields and fields["name"] != name:
-            raise RegisterMapError(entry, "cannot rename a register")
-        merged = registers[name].model_dump() | dict(fields)
-        try:
-            registers[name] = Register.model_validate(merged)
-        except ValidationError as exc:
-            raise RegisterMapError(entry, _first_error(exc)) from None
-    try:
-        return RegisterMap.model_validate(
-            base.model_dump() | {"registers": [r.model_dump() for r in registers.values()]}
-        )
-    except ValidationError as exc:
-        raise RegisterMapError(_OVERRIDE_TABLE, _first_error(exc)) from None
-
-
-def _first_error(exc: ValidationError) -> str:
-    parts = []
-    for err in exc.errors():
-        loc = ".".join(str(x) for x in err["loc"])
-        msg = err["msg"].removeprefix("Value error, ")
-        parts.append(f"{loc}: {msg}" if loc else msg)
-    return "; ".join(parts)
 
 
 def contiguous_runs(regs: Iterable[Register], max_gap: int = 0

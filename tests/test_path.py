@@ -14,8 +14,9 @@ import pytest
 from builders import FAST, resumed, simulated, station_config, station_data
 
 import orthocal
+from drivers.map_files import builtin_maps, load_map
 from drivers.profiles import move_time
-from drivers.registers import GENERIC, IAI_PCON, load_map
+from drivers.registers import GENERIC
 from drivers.sim.machine import VirtualOrthoglide
 from station.commands import run as cmd_run
 from station.config import StationConfig, parse_config
@@ -24,6 +25,8 @@ from station.plan.checker import MotionChecker, check_plan, motion_model
 from station.plan.motion import reachable_points
 from station.plan.steps import build_plan
 from station.rundir.journal import read_journal
+
+IAI_PCON = builtin_maps()["iai-pcon-direct"]
 
 # The builders' station on a slow controller, two cycles of three readings.
 CONTROLLER: dict[str, Any] = {"speed_mm_s": 100.0, "accel_mm_s2": 1000.0}

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from drivers.map_files import builtin_maps, load_map
 from drivers.registers import (
     GENERIC,
-    IAI_PCON,
-    PROFILES,
     RegisterMap,
     RegisterMapError,
     contiguous_runs,
@@ -15,11 +14,12 @@ from drivers.registers import (
     decode_int,
     encode_i32,
     encode_int,
-    load_map,
     mm_to_um,
     to_counts,
     um_to_mm,
 )
+
+IAI_PCON = builtin_maps()["iai-pcon-direct"]
 
 # design.md's table, written out independently of the code under test.
 DESIGN_TABLE = {
@@ -67,7 +67,9 @@ def test_iai_profile_one_device_per_axis_and_no_offsets() -> None:
 
 
 def test_builtin_profiles_are_listed() -> None:
-    assert set(PROFILES) == {"orthocal-generic", "iai-pcon-direct"}
+    maps = builtin_maps()
+    assert {"orthocal-generic", "iai-pcon-direct"} <= set(maps)
+    assert all(name == m.name for name, m in maps.items())
     assert load_map(GENERIC) is GENERIC and load_map(IAI_PCON) is IAI_PCON
 
 

@@ -83,13 +83,13 @@ def motion_model(config: StationConfig) -> str:
     interpolation unless the profile says the axes are coordinated)."""
     if config.controller.motion is not None:
         return config.controller.motion
-    from drivers.registers import PROFILES
+    from drivers.map_files import resolve_map
+    from drivers.registers import RegisterMapError
 
-    profile = PROFILES.get(config.controller.profile)
-    if profile is None:
-        raise BadInput(f"controller.profile: unknown register map "
-                       f"{config.controller.profile!r}; built-in: {sorted(PROFILES)}")
-    return profile.motion
+    try:
+        return resolve_map(config.controller.profile).motion
+    except RegisterMapError as exc:
+        raise BadInput(f"controller.profile: {exc}") from None
 
 
 class MotionChecker:
