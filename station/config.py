@@ -71,7 +71,13 @@ class ControllerConfig(_Strict):
     # A TCP port number, or the serial device of an RTU link.
     port: int | str = 502
     device_id: int = Field(1, ge=0, le=247)
+    # A built-in register map, or a map file (design.md, "Register-map files"), a path
+    # relative to the config's folder (made absolute when the config is loaded).
     profile: str = "orthocal-generic"
+    # The zero offsets the station holds where the drive has no Modbus-writable ones
+    # (the map's unsupported.offsets), mm: what the last run ended with (its
+    # result.json offsets_final). Absent: none (or --offsets-from RUN_DIR).
+    offsets: list[float] | None = Field(None, min_length=3, max_length=3)
     # Single register entries overriding the profile's map: name -> address.
     registers: dict[str, int] = Field(default_factory=dict)
     timeout_s: float = Field(2.0, gt=0, le=60)
@@ -375,6 +381,9 @@ def parse_config(data: dict[str, Any], source: str = "config") -> StationConfig:
 
 
 def load_config(path: str | Path) -> StationConfig:
+    """The config file at ``path``; a register-map file its profile names is read
+    from the config's folder (and checked here: a map's errors exit 2 before
+    anything moves, naming the file and the entry)."""
     path = Path(path)
     source = str(path)
     text = read_input(path)
@@ -383,7 +392,29 @@ def load_config(path: str | Path) -> StationConfig:
     except tomllib.TOMLDecodeError as exc:
         # tomllib's message carries "(at line N, column M)".
         raise BadInput(f"{source}: not valid TOML: {exc}") from None
-    return parse_config(data, source)
+    config = parse_config(data, source)
+    return with_map_file(config, path.parent, source)
+
+
+def with_map_file(config: StationConfig, base_dir: Path, source: str = "config"
+                  ) -> StationConfig:
+    """``config`` with a map file its profile names made an absolute path (relative
+    paths are the config's folder's), the map checked: BadInput naming the file and
+    the entry."""
+    from drivers.map_files import is_map_file, load_map
+    from drivers.registers import RegisterMapError
+
+    c = config.controller
+    profile = c.profile
+    if is_map_file(profile) and not Path(profile).is_absolute():
+        profile = str((base_dir / profile).resolve())
+    try:
+        load_map(profile, {k: {"address": v} for k, v in c.registers.items()})
+    except RegisterMapError as exc:
+        raise BadInput(f"{source}: controller.profile: {exc}") from None
+    if profile == c.profile:
+        return config
+    return config.model_copy(update={"controller": c.model_copy(update={"profile": profile})})
 
 
 # --- writing (the run directory keeps the config it ran with) --------------------------

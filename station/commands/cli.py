@@ -84,6 +84,13 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
     )
     p.add_argument(
+        "--profile", metavar="MAP", default=None,
+        help="the register map the virtual drive serves, a built-in name or a .toml file "
+             "(design.md, Register-map files): its addresses, types, word order, scale, "
+             "tables, devices and command sequences, as a drive of that layout would; the "
+             "config it hands the station names it (default orthocal-generic)",
+    )
+    p.add_argument(
         "--backlash", type=str, default=None, metavar="X,Y,Z",
         help="lost motion of each joint (mm, ISO 230-2's reversal value: the carriage "
              "follows the counted position through a dead band this wide; one value for "
@@ -131,6 +138,9 @@ def _probe_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controller", metavar="HOST:PORT",
                    help="Modbus TCP controller to probe (or a serial device: Modbus RTU)")
     p.add_argument("--device-id", type=int, default=1, help="Modbus device id (default 1)")
+    p.add_argument("--profile", metavar="MAP", default=None,
+                   help="the controller's register map: a built-in name or a .toml file "
+                        "(design.md, Register-map files; default orthocal-generic)")
     p.add_argument("--baudrate", type=int, default=19200, help="RTU line speed (default 19200)")
     p.add_argument("--timeout", type=float, default=0.5, metavar="S",
                    help="wait per protocol tried on a port (default 0.5 s)")
@@ -150,6 +160,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     src.add_argument("--config", metavar="FILE", help="station config (TOML)")
     run.add_argument("--plan", action="store_true", help="print the checked plan and exit")
+    run.add_argument("--offsets-from", metavar="RUN_DIR", default=None,
+                     help="a drive whose offsets the station holds: start from the offsets "
+                          "that run ended with")
     _sim_options(run)
     # Hidden: the [procedure] of the virtual station as a JSON table and its axis
     # speed (mm/s), so that tests driving the real command line in a subprocess

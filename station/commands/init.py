@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from station.commands.probe import gather
-from station.config import parse_config
+from station.config import parse_config, with_map_file
 from station.config import toml_value as v
 from station.errors import BadInput
 
@@ -58,8 +58,7 @@ def _controller_lines(found: dict[str, Any] | None, args: argparse.Namespace) ->
                   'host = "192.168.0.10"          # EDIT: no controller was probed '
                   "(orthocal init --controller HOST:PORT)",
                   "port = 502"]
-    lines += [f"device_id = {args.device_id}",
-              'profile = "orthocal-generic"   # built-in register map (design.md)',
+    lines += [f"device_id = {args.device_id}", _profile_line(args),
               "timeout_s = 2.0                # per Modbus request",
               "speed_mm_s = 50.0              # axis speed of the test moves"]
     limits = (found or {}).get("soft_limits_mm") or {}
@@ -83,6 +82,26 @@ def _controller_lines(found: dict[str, Any] | None, args: argparse.Namespace) ->
                   "soft-limit registers",
                   "# soft_max = [375.0, 375.0, 375.0]"]
     return lines
+
+
+def _profile_line(args: argparse.Namespace) -> str:
+    """The profile: the built-in map, or the map file of ``--profile`` as a path from
+    the config's folder (where the station looks for it)."""
+    from drivers.map_files import is_map_file
+
+    profile = getattr(args, "profile", None)
+    if not profile:
+        return 'profile = "orthocal-generic"   # built-in register map (design.md)'
+    if not is_map_file(profile):
+        return f"profile = {v(profile)}   # built-in register map"
+    here = Path(args.out).resolve().parent
+    path = Path(profile).resolve()
+    try:
+        shown = str(path.relative_to(here))
+    except ValueError:
+        shown = str(path)
+    return (f"profile = {v(shown)}   # the drive's register map file (from this config's "
+            "folder)")
 
 
 def render(found: dict[str, Any], args: argparse.Namespace) -> str:
@@ -154,8 +173,9 @@ def main(args: argparse.Namespace) -> int:
                        "(choose another name or remove it)")
     found = gather(args)
     text = render(found, args)
-    # What init hands out must load as it stands.
-    parse_config(tomllib.loads(text), f"{out} (as generated)")
+    # What init hands out must load as it stands (its map file too, from its folder).
+    with_map_file(parse_config(tomllib.loads(text), f"{out} (as generated)"),
+                  out.resolve().parent, f"{out} (as generated)")
     try:
         with open(out, "x", encoding="utf-8") as fh:
             fh.write(text)

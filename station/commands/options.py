@@ -48,6 +48,7 @@ class SimOptions:
     noise: float | None = None
     mount_error: float | None = None
     backlash: str | None = None  # "X,Y,Z" or one value, mm
+    profile: str | None = None  # the register map the virtual drive serves
     drive: DriveOptions = field(default_factory=DriveOptions)
     indicators: int = 2
     procedure: Mapping[str, Any] | None = None
@@ -61,7 +62,8 @@ class SimOptions:
         # command line in a subprocess (Ctrl-C, kill -9) and need a short run
         return cls(seed=args.seed, true_drho=args.true_drho, true_dl=args.true_dl,
                    true_tilt=args.true_tilt, noise=args.noise, mount_error=args.mount_error,
-                   backlash=args.backlash, drive=DriveOptions.from_args(args),
+                   backlash=args.backlash, profile=args.profile,
+                   drive=DriveOptions.from_args(args),
                    procedure=getattr(args, "sim_procedure", None),
                    speed_mm_s=getattr(args, "sim_speed", None))
 
@@ -74,6 +76,7 @@ class RunOptions:
     config: Path | None = None
     sim: SimOptions | None = None
     plan: bool = False
+    offsets_from: Path | None = None  # --offsets-from RUN_DIR
     out: Path = Path("runs")
     yes: bool = False
     json: bool = False
@@ -83,7 +86,9 @@ class RunOptions:
         return cls(config=None if args.config is None else Path(args.config),
                    sim=SimOptions.from_args(args) if args.simulate else None,
                    plan=bool(args.plan), out=Path(args.out), yes=bool(args.yes),
-                   json=bool(args.json))
+                   json=bool(args.json),
+                   offsets_from=None if getattr(args, "offsets_from", None) is None
+                   else Path(args.offsets_from))
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 from station.errors import BadInput
@@ -43,15 +44,29 @@ def controller_from_args(args: argparse.Namespace, config: Any) -> Any:
         except ValueError as exc:
             raise BadInput(f"controller: {exc}") from None
     spec = args.controller
-    if spec.startswith(("/", "COM")):
-        return ModbusAxisController(transport="rtu", port=spec, device_id=args.device_id,
-                                    baudrate=args.baudrate, timeout_s=1.0, retries=1)
-    host, sep, port = spec.rpartition(":")
-    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
-        raise BadInput(f"--controller: expected HOST:PORT (or a serial device for RTU), "
-                       f"got {spec!r}")
-    return ModbusAxisController(transport="tcp", host=host, port=int(port),
-                                device_id=args.device_id, timeout_s=1.0, retries=1)
+    profile = _profile(args)
+    try:
+        if spec.startswith(("/", "COM")):
+            return ModbusAxisController(transport="rtu", port=spec, device_id=args.device_id,
+                                        baudrate=args.baudrate, timeout_s=1.0, retries=1,
+                                        profile=profile)
+        host, sep, port = spec.rpartition(":")
+        if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+            raise BadInput(f"--controller: expected HOST:PORT (or a serial device for RTU), "
+                           f"got {spec!r}")
+        return ModbusAxisController(transport="tcp", host=host, port=int(port),
+                                    device_id=args.device_id, timeout_s=1.0, retries=1,
+                                    profile=profile)
+    except ValueError as exc:
+        raise BadInput(f"--profile: {exc}") from None
+
+
+def _profile(args: argparse.Namespace) -> str:
+    """``--profile``: a built-in map, or a map file (an absolute path here)."""
+    from drivers.map_files import is_map_file
+
+    profile = getattr(args, "profile", None) or "orthocal-generic"
+    return str(Path(profile).resolve()) if is_map_file(profile) else profile
 
 
 def default_ports(config: Any) -> list[str]:

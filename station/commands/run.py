@@ -25,6 +25,7 @@ from station.engine.devices import build_controller, open_devices
 from station.engine.procedure import Run, execute
 from station.engine.recovery import check_reference, drop_redone, home_if_needed
 from station.engine.results import AXES
+from station.engine.writeback import held_after
 from station.engine.writeback import rollback as do_rollback
 from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
 from station.plan.checker import MotionChecker, check_plan
@@ -89,6 +90,8 @@ def run(options: RunOptions) -> int:
             if options.config is None:
                 raise BadInput("run: give --config FILE or --simulate")
             config = load_config(options.config)
+            if options.offsets_from is not None:
+                config = offsets_from(config, options.offsets_from)
             if not options.plan:
                 ConsoleOperator.require_tty_or_yes(options.yes)
         plan = build_plan(config)
@@ -170,7 +173,7 @@ def resume(options: ResumeOptions) -> int:
         say(f"orthocal: {run_dir} already finished ({state.finished.get('status')})")
         print_result(options.json, result)
         return 0 if state.finished.get("status") == "ok" else 1
-    config = load_config(run_dir / "config.toml")
+    config = _held_offsets(load_config(run_dir / "config.toml"), records)
     sim = state.header.get("simulation")
     records = drop_redone(records)
     with ExitStack() as stack:
@@ -208,6 +211,39 @@ def resume(options: ResumeOptions) -> int:
         return _report(options.json, *execute(ctx))
 
 
+def _held_offsets(config: Any, records: list[dict[str, Any]]) -> Any:
+    """Where the station holds the offsets (a map without OFFSET registers), a resumed
+    run or a rollback starts from what its journal says they are."""
+    from drivers.map_files import load_map
+
+    if load_map(config.controller.profile).has_role("OFFSET"):
+        return config
+    held = held_after(records, config.controller.offsets)
+    if held is None:
+        return config
+    return config.model_copy(update={
+        "controller": config.controller.model_copy(update={"offsets": held})})
+
+
+def offsets_from(config: Any, run_dir: Path) -> Any:
+    """``--offsets-from RUN_DIR``: start from the offsets that run ended with (a station
+    holding them); BadInput where there are none to take or the drive holds its own."""
+    from drivers.map_files import load_map
+
+    if load_map(config.controller.profile).has_role("OFFSET"):
+        raise BadInput(f"--offsets-from: the drive holds its own zero offsets (map "
+                       f"{config.controller.profile!r} has OFFSET registers)")
+    done, records, state = reopen(Path(run_dir))
+    start = ((state.header or {}).get("config") or {}).get("controller", {}).get("offsets")
+    held = held_after(records, start)
+    if held is None:
+        raise BadInput(f"--offsets-from: {done} wrote no offsets")
+    say(f"orthocal: starting from the offsets {done} ended with: "
+        + ", ".join(f"{a} {v:+.4f}" for a, v in zip(AXES, held, strict=True)) + " mm")
+    return config.model_copy(update={
+        "controller": config.controller.model_copy(update={"offsets": held})})
+
+
 def _restart_station(stack: ExitStack, options: ResumeOptions, sim: dict[str, Any] | None,
                      run_dir: Path, config: Any) -> tuple[Any, Any]:
     """The virtual station of a simulated run, started again (None and the config
@@ -228,8 +264,8 @@ def _stop_quietly(controller: Any) -> None:
 
 
 def rollback(options: ResumeOptions) -> int:
-    run_dir, _, state = reopen(options.run_dir)
-    config = load_config(run_dir / "config.toml")
+    run_dir, records, state = reopen(options.run_dir)
+    config = _held_offsets(load_config(run_dir / "config.toml"), records)
     sim = state.header.get("simulation") if state.header else None
     with ExitStack() as stack:
         station, config = _restart_station(stack, options, sim, run_dir, config)

@@ -25,7 +25,13 @@ from typing import Any
 
 from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM, VirtualStation
 from station.commands.options import DriveOptions
-from station.commands.simulation import backlash_mm, drive_motion, drive_params
+from station.commands.simulation import (
+    backlash_mm,
+    drive_motion,
+    drive_params,
+    map_profile,
+    served_map,
+)
 from station.config import dump_toml, parse_config
 from station.errors import BadInput
 
@@ -47,7 +53,7 @@ def main(args: argparse.Namespace) -> int:
         raise BadInput(f"--speed: must be > 0 mm/s, got {args.speed}")
     drive = drive_params(DriveOptions.from_args(args))
     backlash = backlash_mm(args.backlash)
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = served_map(map_profile(args.profile))
     if args.speed is not None:
         kwargs["speed_mm_s"] = args.speed
     out = Path(args.config_out)

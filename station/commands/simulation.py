@@ -21,7 +21,7 @@ import numpy as np
 from station.commands.options import DriveOptions, SimOptions, StationHook
 from station.config import StationConfig, parse_config
 from station.errors import BadInput
-from station.rundir.directory import NVRAM_NAME
+from station.rundir.directory import MAP_NAME, NVRAM_NAME
 
 if TYPE_CHECKING:
     from drivers.sim.motion import DriveMotion
@@ -52,6 +52,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
     if not (math.isfinite(mount) and mount >= 0):
         raise BadInput(f"--mount-error: must be >= 0 mm, got {mount}")
     backlash = backlash_mm(options.backlash)
+    profile = map_profile(options.profile)
     return {
         "seed": seed,
         "true_drho": drho,
@@ -60,6 +61,9 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         "noise_mm": noise,
         "mount_error_mm": mount,
         "backlash_mm": backlash,
+        # the register map the virtual drive serves (a built-in name or a file's
+        # absolute path), kept for resume
+        "profile": profile,
         **drive_params(options.drive),
         # Not on the command line: the six-indicator style, procedure and write-back
         # overrides, a faster machine (tests)
@@ -89,7 +93,33 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         motion=drive_motion(params),
         # ... and those from before lost motion, with none.
         backlash=params.get("backlash_mm") or (0.0, 0.0, 0.0),
+        **served_map(params.get("profile")),
     )
+
+
+def map_profile(profile: str | None) -> str | None:
+    """``--profile``: a built-in map's name, or a map file made an absolute path
+    (checked here: BadInput naming the file and the entry)."""
+    if profile is None:
+        return None
+    from drivers.map_files import is_map_file, resolve_map
+    from drivers.registers import RegisterMapError
+
+    name = str(Path(profile).resolve()) if is_map_file(profile) else profile
+    try:
+        resolve_map(name)
+    except RegisterMapError as exc:
+        raise BadInput(f"--profile: {exc}") from None
+    return name
+
+
+def served_map(profile: str | None) -> dict[str, Any]:
+    """The virtual station's register map for ``profile`` (nothing: the generic)."""
+    if profile is None:
+        return {}
+    from drivers.map_files import resolve_map
+
+    return {"register_map": resolve_map(profile), "profile": profile}
 
 
 def backlash_mm(text: str | None) -> list[float]:
@@ -206,6 +236,11 @@ def restart_station(
     rebound to its new ports; for a real one, nothing to start."""
     if sim is None:
         return None, config
+    from drivers.map_files import is_map_file
+
+    copy = run_dir / MAP_NAME
+    if sim.get("profile") and is_map_file(sim["profile"]) and copy.exists():
+        sim = {**sim, "profile": str(copy)}  # the run's own copy of its map file
     station = start_station(sim, run_dir / NVRAM_NAME)
     stack.callback(station.close)
     if hook is not None:

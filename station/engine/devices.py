@@ -43,7 +43,16 @@ def build_controller(config: StationConfig, on_event: Callable[[dict], None] | N
             on_event=on_event, acceleration_mm_s2=c.accel_mm_s2, reconnect_s=c.reconnect_s)
     except ValueError as exc:  # an unknown profile or a bad register override
         raise BadInput(f"controller: {exc}") from None
-    return controller.connect()
+    if controller.map.has_role("OFFSET"):
+        if c.offsets is not None:
+            controller.close()
+            raise BadInput(f"controller.offsets: the drive holds its own zero offsets (map "
+                           f"{controller.map.name!r} has OFFSET registers): remove the line")
+        return controller.connect()
+    # No Modbus-writable zero offset: the station holds them (drivers.held_offsets).
+    from drivers.held_offsets import HeldOffsets
+
+    return HeldOffsets(controller.connect(), c.offsets)
 
 
 def build_indicators(config: StationConfig, names: list[str] | None,

@@ -34,6 +34,7 @@ from station.engine.results import (
     guard_fields,
     ident_json,
     measurement_fields,
+    offsets_fields,
     remaining_fields,
     verification_fields,
     writeback_fields,
@@ -481,6 +482,7 @@ def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
                         "readings": seq.counters.readings, "retries": retries,
                         "outliers_rejected": seq.counters.rejected}
     result["plunger_guard"] = guard_fields(records)
+    result.update(offsets_fields(ctx.devices.controller, result, records))
     if final:
         ctx.journal.append({"type": "finished", "status": status, "message": message})
     else:

@@ -152,6 +152,35 @@ def guard_fields(records: list[dict[str, Any]]) -> dict[str, Any]:
             "refused": sum(1 for e in events if e.get("event") == "plunger-guard-refused")}
 
 
+def offsets_fields(controller: Any, result: dict[str, Any],
+                   records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Where the offsets live and what they are when the run stops (design.md,
+    "Offsets held by the station"): ``offsets_held_by`` "controller" | "station",
+    ``offsets_final`` (the journal's last write-back or rollback, else the offsets
+    before), and for a station that holds them what to do with them."""
+    from station.engine.writeback import held_after
+
+    held_by = getattr(controller, "held_by", "controller")
+    before = result.get("offsets_before")
+    start = [before[a] for a in AXES] if isinstance(before, dict) else None
+    final = held_after(records, start)
+    out: dict[str, Any] = {"offsets_held_by": held_by,
+                           "offsets_final": None if final is None else
+                           {a: float(v) for a, v in zip(AXES, final, strict=True)}}
+    if held_by == "station":
+        reg_map = getattr(controller, "map", None)
+        why = (getattr(reg_map, "unsupported", {}) or {}).get("offsets", "")
+        line = "" if final is None else ", ".join(f"{v:.4f}" for v in final)
+        out["offsets_note"] = (
+            "the drive holds no zero offset it can be told over Modbus, so these offsets "
+            "live in this station run only: "
+            + (f"{why}; " if why else "enter them in the drive's own home-offset "
+               "parameter; ")
+            + f"a later run starts from them with [controller] offsets = [{line}] or "
+            f"--offsets-from {result.get('run_dir')}")
+    return out
+
+
 def writeback_fields(result: dict[str, Any], outcome: WritebackOutcome, controller: Any) -> None:
     result["writeback"] = outcome.to_json()
     result["offsets_before"] = outcome.before if outcome.before is not None else \

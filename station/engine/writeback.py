@@ -18,6 +18,7 @@ the run) beyond max_abs_offset_mm.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -162,6 +163,24 @@ def write_back(
         return WritebackOutcome("failed-restored", reason, before, None)
     log({"stage": "done", "before": before, "written": readback})
     return WritebackOutcome("written", None, before, readback)
+
+
+def held_after(records: list[dict[str, Any]], start: Sequence[float] | None
+               ) -> list[float] | None:
+    """The offsets a station holding them holds once the journal's write-backs and
+    rollbacks are done (``start``: what the run began with, None for zeros): what a
+    resumed run, a rollback or ``--offsets-from`` starts from. None when the journal
+    shows none of its own (the start stands)."""
+    held = None if start is None else [float(v) for v in start]
+    for rec in records:
+        kind, stage = rec.get("type"), rec.get("stage")
+        if kind == "writeback" and stage == "done":
+            held = [float(rec["written"][a]) for a in AXES]
+        elif kind == "writeback" and stage in ("interrupted-restored", "failed-restored"):
+            held = [float(rec["before"][a]) for a in AXES]
+        elif kind == "rollback" and stage == "done":
+            held = [float(rec["restored"][a]) for a in AXES]
+    return held
 
 
 def rollback(controller: AxisController, run_dir: Path, journal: Journal) -> dict[str, float]:

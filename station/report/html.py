@@ -389,6 +389,9 @@ def _offsets_section(result: Mapping[str, Any]) -> str:
             "The controller's joint zero offset o<sub>i</sub>; the correction is "
             "o<sub>i</sub> ← o<sub>i</sub> − Δρ<sub>i</sub>. The old values are saved in "
             "the run directory, so <code>orthocal rollback</code> can restore them.")))
+    if result.get("offsets_held_by") == "station":
+        out.append(f'<div class="box warn"><b>Offsets held by the station</b> — '
+                   f"{_e(result.get('offsets_note', ''))}.</div>")
     return "".join(out) or "<p>The controller's offsets were not read.</p>"
 
 

@@ -96,6 +96,8 @@ def summary_text(result: dict) -> str:
     elif wb:
         reason = f": {wb['reason']}" if wb.get("reason") else ""
         lines.append(f"  offsets       not written ({wb.get('status')}{reason})")
+    if result.get("offsets_held_by") == "station":
+        lines.append(f"  offsets held  by the station: {result.get('offsets_note', '')}")
     ver = result.get("verification")
     if isinstance(ver, dict) and ver:
         # The verification measures the legs' parallelism (the method's means);

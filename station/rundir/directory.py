@@ -53,11 +53,27 @@ def new_run_dir(out: Path) -> Path:
     raise RunFailed(f"cannot create a run directory under {out}")
 
 
+#: A run directory's copy of the register-map file its config's profile names.
+MAP_NAME = "register_map.toml"
+
+
 def write_run_files(run_dir: Path, config: StationConfig, plan: Plan,
                     sim: dict[str, Any] | None) -> None:
-    """What a run directory holds before the first record of its journal."""
+    """What a run directory holds before the first record of its journal: a register
+    map the profile names as a file is copied in (MAP_NAME) and the run's config
+    names the copy, so the run resumes and rolls back as it ran whatever becomes of
+    the file."""
+    from drivers.map_files import is_map_file, map_to_toml, resolve_map
+
     if sim is not None:
         (run_dir / SIM_NAME).write_text(json.dumps(sim, indent=2) + "\n")
+    profile = config.controller.profile
+    if is_map_file(profile) and Path(profile).name != MAP_NAME:
+        (run_dir / MAP_NAME).write_text(map_to_toml(resolve_map(profile),
+                                                    f"the register map of this run, "
+                                                    f"copied from {profile}"))
+        config = config.model_copy(update={"controller": config.controller.model_copy(
+            update={"profile": MAP_NAME})})
     (run_dir / "config.toml").write_text(dump_toml(config))
     (run_dir / "plan.txt").write_text(plan.format() + "\n")
     (run_dir / "plan.json").write_text(json.dumps(plan.to_json(), indent=1) + "\n")
