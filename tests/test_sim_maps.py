@@ -26,6 +26,7 @@ from drivers.axes import ModbusAxisController
 from drivers.errors import AlarmError, ControllerError, MoveTimeout, TargetRefused
 from drivers.registers import (
     AXES,
+    GENERIC,
     IAI_PCON,
     CommandStep,
     Register,
@@ -34,6 +35,7 @@ from drivers.registers import (
 )
 from drivers.sim.controller import Faults, SimController
 from drivers.sim.machine import VirtualOrthoglide
+from drivers.sim.station import VirtualStation
 
 GEOMETRY = orthocal.Geometry()
 PI0 = orthocal.posture("0", None, GEOMETRY)
@@ -268,6 +270,22 @@ def test_iai_home_needs_the_rising_edge() -> None:
         assert sim.stats.commands == {3: 1}
         rr = c.read_coils(0x040B, count=1, device_id=1)
         assert rr.bits[0] is True  # plain storage: what was written
+
+
+def test_virtual_station_serves_the_map_and_says_so() -> None:
+    with VirtualStation(noise_mm=0.0, register_map=IAI_PCON) as vs:
+        c = vs.config()["controller"]
+        assert (c["profile"], c["device_id"]) == ("iai-pcon-direct", 1)
+        assert (c["soft_min"], c["soft_max"]) == LIMITS  # the map has no soft-limit registers
+        keys = ("transport", "host", "port", "device_id", "profile")
+        with ModbusAxisController(**{k: c[k] for k in keys}, timeout_s=1.0) as ctl:
+            np.testing.assert_allclose(ctl.read_positions(), PI0, atol=0.01)
+    with VirtualStation(noise_mm=0.0, register_map=GATEWAY, profile="bench-gateway") as vs:
+        assert vs.config()["controller"]["profile"] == "bench-gateway"
+        assert vs.controller.client_kwargs()["profile"] is GATEWAY  # not a built-in
+    with VirtualStation(noise_mm=0.0) as vs:
+        c = vs.config()["controller"]
+        assert c["profile"] == GENERIC.name and "soft_min" not in c
 
 
 # --- a map never seen before ------------------------------------------------------------------
