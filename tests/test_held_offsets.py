@@ -101,7 +101,7 @@ def test_the_journal_says_what_the_station_holds() -> None:
     records += [_wb("done", written=second)]
     assert held_after(records, None) == [0.12, 0.18, 0.32]
     # a write-back cut and restored, or a rollback, leaves the backed-up offsets
-    assert held_after(records + [_wb("interrupted-restored", before=first)], None) == \
+    assert held_after([*records, _wb("interrupted-restored", before=first)], None) == \
         [0.11, 0.19, 0.31]
     rollback = {"type": "rollback", "stage": "done", "restored": before}
-    assert held_after(records + [rollback], None) == [0.1, 0.2, 0.3]
+    assert held_after([*records, rollback], None) == [0.1, 0.2, 0.3]

@@ -1,30 +1,32 @@
-"""A simulated axis controller: a real pymodbus server serving the register map
-"orthocal-generic" (design.md) for a :class:`~drivers.sim.machine.VirtualOrthoglide`,
-with fault injection. What the registers do (COMMAND, TARGET, the exception
-2/3 rules) is the drive's, :class:`~drivers.sim.drive.DriveRegisters`, which
-:class:`SimController` extends with the transport and the faults.
+"""A simulated axis controller: a real pymodbus server serving a register map
+(``register_map``, default "orthocal-generic", design.md) for a
+:class:`~drivers.sim.machine.VirtualOrthoglide`, with fault injection. What the
+registers do (targets, commands, the exception 2/3 rules) is the drive's,
+:class:`~drivers.sim.drive.DriveRegisters`, which :class:`SimController` extends
+with the transport and the faults.
 
 Transports: Modbus TCP on 127.0.0.1 (port 0 picks a free port, reported by
 :attr:`SimController.port`) or Modbus RTU on a pseudo-terminal null-modem
 (:class:`~drivers.sim.ptypair.PtyPair`; the client opens
 :attr:`SimController.serial_port`). The server runs in a background thread with
 its own asyncio loop; ``start()``/``close()`` (or ``with``) leave no thread,
-task, socket or pty behind. Requests for another device id get no reply on RTU
-and exception 0x0B (gateway: no response) on TCP.
+task, socket or pty behind. It answers as every unit id of its map (``device_id``
+for registers without one); requests for another get no reply on RTU and
+exception 0x0B (gateway: no response) on TCP.
 
 A power cut (``Faults.power_cut_*`` or :meth:`SimController.power_cut`) makes
 the controller unreachable for a while (TCP: open connections closed, new ones
 refused, as a drive that is off; RTU: silent), then it serves again with HOMED
 clear and its counted position lost (the ACTUAL registers jump); a move before
-homing (COMMAND 3) faults with alarm 83, as IAI drives do.
+homing (the map's home command) faults with alarm 83, as IAI drives do.
 
 Fault injection: :class:`Faults`, a dataclass whose fields may be changed while
 the server runs (``sim.faults.drop_next = 2``); random faults draw from an RNG
 seeded with ``seed`` so a run is reproducible. The datastore is pymodbus 3.16's
-``SimDevice`` with an ``action`` hook (called before a write is applied, it can
-veto it with an exception code); faults that a datastore cannot express (lost,
-late, garbled replies, silence, busy) live in a thin subclass of pymodbus's
-request handler.
+``SimDevice``, one per unit id, with an ``action`` hook (called before a write is
+applied, it can veto it with an exception code); what it cannot express (lost,
+late, garbled replies, silence, busy; exception 2 judged from the whole request)
+lives in a thin subclass of pymodbus's request handler.
 """
 
 from __future__ import annotations
@@ -46,8 +48,9 @@ from pymodbus.framer import FramerType
 from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
-from pymodbus.simulator import SimDevice
 
+from drivers.map_files import builtin_maps
+from drivers.registers import GENERIC, RegisterMap
 from drivers.sim.drive import DriveRegisters
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.ptypair import PtyPair
@@ -112,8 +115,8 @@ class SimStats:
     disconnects: int = 0
     refused: int = 0
     power_cuts: int = 0
+    #: commands taken, by the generic map's code (1 move, 2 stop, 3 home, 4 reset alarm)
     commands: dict[int, int] = field(default_factory=dict)
-
 
 
 class _Handler(ServerRequestHandler):
@@ -130,12 +133,19 @@ class _Handler(ServerRequestHandler):
             return
         if verdict in ("busy", "gateway"):
             code = ExcCodes.DEVICE_BUSY if verdict == "busy" else ExcCodes.GATEWAY_NO_RESPONSE
-            response = ExceptionResponse(pdu.function_code, code)
-            response.transaction_id = pdu.transaction_id
-            response.dev_id = pdu.dev_id
-            self.server_send(response, self.last_addr)
+            self._exception(pdu, code)
+            return
+        # Outside the map (device, table, address): exception 2 before the datastore.
+        if (code := self.sim.refusal(pdu.dev_id, pdu)) is not None:
+            self._exception(pdu, code)
             return
         await super().handle_request()
+
+    def _exception(self, pdu: ModbusPDU, code: ExcCodes) -> None:
+        response = ExceptionResponse(pdu.function_code, code)
+        response.transaction_id = pdu.transaction_id
+        response.dev_id = pdu.dev_id
+        self.server_send(response, self.last_addr)
 
     def server_send(self, pdu: ModbusPDU | None, addr: tuple | None) -> None:
         if not pdu:
@@ -184,9 +194,9 @@ class _SimSerialServer(_SimConnections, ModbusSerialServer):
 class SimController(DriveRegisters):
     """A Modbus server for a virtual Orthoglide.
 
-    ``SimController(machine, transport="tcp")`` then ``start()``; connect a client
-    to ``("127.0.0.1", sim.port)`` (TCP) or ``sim.serial_port`` (RTU), or pass
-    ``**sim.client_kwargs()`` to :class:`drivers.axes.ModbusAxisController`.
+    ``SimController(machine, transport="tcp", register_map=GENERIC)`` then ``start()``;
+    connect a client to ``("127.0.0.1", sim.port)`` (TCP) or ``sim.serial_port``
+    (RTU), or pass ``**sim.client_kwargs()`` to :class:`drivers.axes.ModbusAxisController`.
     """
 
     def __init__(
@@ -203,14 +213,15 @@ class SimController(DriveRegisters):
         max_offset_mm: float = 50.0,
         baudrate: int = 115200,
         soft_limit_registers: bool | tuple[Sequence[float], Sequence[float]] = True,
+        register_map: RegisterMap = GENERIC,
     ) -> None:
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"transport must be 'tcp' or 'rtu', got {transport!r}")
-        super().__init__(machine, soft_limits=soft_limits, max_offset_mm=max_offset_mm,
-                         soft_limit_registers=soft_limit_registers)
+        super().__init__(machine, register_map, soft_limits=soft_limits,
+                         max_offset_mm=max_offset_mm,
+                         soft_limit_registers=soft_limit_registers, device_id=device_id)
         self.transport = transport
         self.host = host
-        self.device_id = device_id
         self.faults = faults or Faults()
         self.stats = SimStats()
         self.baudrate = baudrate
@@ -289,10 +300,13 @@ class SimController(DriveRegisters):
         return f"{self.host}:{self.port}" if self.transport == "tcp" else self.serial_port
 
     def client_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of ModbusAxisController / the [controller] config table."""
+        """Keyword arguments of ModbusAxisController / the [controller] config table
+        (``profile``: the map's name if it is a built-in profile, else the map)."""
         port: int | str = self.port if self.transport == "tcp" else self.serial_port
+        builtin = builtin_maps().get(self.map.name) == self.map
         kw: dict[str, Any] = {"transport": self.transport, "host": self.host, "port": port,
-                              "device_id": self.device_id, "profile": self.map.name}
+                              "device_id": self.device_id,
+                              "profile": self.map.name if builtin else self.map}
         if self.transport == "rtu":
             kw["baudrate"] = self.baudrate
         return kw
@@ -306,13 +320,13 @@ class SimController(DriveRegisters):
             self._ready.set()
 
     def _new_server(self, port: int) -> _SimTcpServer | _SimSerialServer:
-        device = SimDevice(id=self.device_id, simdata=self.simdata(), action=self.action)
+        devices = self.sim_devices()
         server: _SimTcpServer | _SimSerialServer
         if self.transport == "tcp":
-            server = _SimTcpServer(device, address=(self.host, port))
+            server = _SimTcpServer(devices, address=(self.host, port))
         else:
             assert self._pty is not None
-            server = _SimSerialServer(device, framer=FramerType.RTU, port=self._pty.path_a,
+            server = _SimSerialServer(devices, framer=FramerType.RTU, port=self._pty.path_a,
                                       baudrate=self.baudrate, timeout=1.0, reconnect_delay=0.0)
         server.sim = self
         return server
@@ -440,7 +454,7 @@ class SimController(DriveRegisters):
             if f.silent or not self._powered:
                 self.stats.ignored += 1
                 return "ignore"
-            if pdu.dev_id != self.device_id:
+            if pdu.dev_id not in self.devices:
                 self.stats.ignored += 1
                 return "ignore" if self.transport == "rtu" else "gateway"
             if f.busy_next > 0 or (f.busy_rate > 0 and self._rng.random() < f.busy_rate):

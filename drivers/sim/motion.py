@@ -171,8 +171,10 @@ def _brake(profile: Profile1D, tau: float, accel: float) -> AccelProfile:
     """Constant deceleration at ``accel`` from where ``profile`` is at τ. Any
     rest-to-rest profile whose deceleration stays within ``accel`` has at least
     v²/(2·accel) left to its end, so the brake never passes the target; a
-    rounding error that says otherwise brakes the little harder it takes."""
-    if tau <= 0:
+    rounding error that says otherwise brakes the little harder it takes. At τ = 0
+    the profile is where it starts (a brake braked again at once: where it brakes
+    from, not the start of the move it braked)."""
+    if tau < 0:
         return AccelProfile.braking(0.0, 0.0, accel)  # not started: it stays
     s, v = profile.at(tau)
     left = profile.length - s

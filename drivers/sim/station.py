@@ -4,6 +4,12 @@ looking at one :class:`~drivers.sim.machine.VirtualOrthoglide` with hidden
 errors. ``config()`` describes it as a station config (a plain dict in the
 shape of station.toml, so drivers does not import station).
 
+The drive serves any register map (``register_map``, default "orthocal-generic"),
+as a drive of that layout would (:mod:`drivers.sim.drive`), so a new map can be
+rehearsed before the machine is touched: ``config()`` then names it ``profile``
+(or the map's name), gives the map's default unit id, and, for a map without
+soft-limit registers, the limits the drive enforces as ``soft_min``/``soft_max``.
+
 Two setup styles: ``indicator_count=2`` (A and B moved from leg to leg; the
 operator — here :meth:`mount` — re-mounts them before each setup) and
 ``indicator_count=6`` (A..F, two per leg; one of them mounted reversed to
@@ -64,6 +70,7 @@ import numpy as np
 
 from drivers.files import write_atomic
 from drivers.indicator_protocols import make_protocol
+from drivers.registers import RegisterMap
 from drivers.sim.controller import Faults, SimController
 from drivers.sim.indicators import IndicatorFaults, SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
@@ -157,7 +164,8 @@ class VirtualStation:
     move instant by instant); ``time_scale``: how many times faster than real time
     the machine's clock runs (unless ``clock`` is given) and how many times shorter
     the gauges' line time is (module docstring, "Time"; None: the environment's,
-    :func:`default_time_scale`)."""
+    :func:`default_time_scale`); ``register_map``: what the drive serves (None: the
+    generic map) and ``profile`` the name ``config()`` gives it (None: the map's)."""
 
     def __init__(
         self,
@@ -190,6 +198,8 @@ class VirtualStation:
         clock: Callable[[], float] | None = None,
         time_scale: float | None = None,
         backlash: Sequence[float] = (0.0, 0.0, 0.0),
+        register_map: RegisterMap | None = None,
+        profile: str | None = None,
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
@@ -242,8 +252,13 @@ class VirtualStation:
         self._link_dir = Path(tempfile.mkdtemp(prefix="orthocal-serial-by-id-"))
         # controller_options: further SimController keywords (transport,
         # soft_limit_registers, ...) for a station that differs from the default drive.
+        options = dict(controller_options or {})
+        if register_map is not None:
+            options["register_map"] = register_map
+        #: the profile name config() gives the station (None: the map's name)
+        self.profile = profile
         self.controller = SimController(self.machine, port=port, faults=controller_faults,
-                                        seed=seed, **(controller_options or {}))
+                                        seed=seed, **options)
         self.indicators: dict[str, SimIndicator] = {}
         try:
             self.controller.start()
@@ -391,10 +406,17 @@ class VirtualStation:
     def config(self) -> dict[str, Any]:
         """A station config (station.toml's shape) pointing at this station."""
         g = self.geometry
+        ctl = self.controller
+        # A map without soft-limit registers: the config tells the station the limits
+        # the drive enforces, so that it can plan.
+        limits = {} if ctl.map.has_role("SOFT_MIN") else {
+            "soft_min": [float(v) for v in ctl.soft_min],
+            "soft_max": [float(v) for v in ctl.soft_max]}
         return {
             "machine": {"leg_length": g.leg_length, "rho_min": g.rho_min, "rho_max": g.rho_max},
             # TCP: host and port; RTU: the pty the client opens and its baud rate.
-            "controller": {**self.controller.client_kwargs(), "timeout_s": 1.0,
+            "controller": {**ctl.client_kwargs(), "profile": self.profile or ctl.map.name,
+                           "device_id": ctl.device_id, **limits, "timeout_s": 1.0,
                            "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2,
                            # What an integrator would write: that the drive interpolates,
                            # if it does; else nothing (the profile's default: any timing).
