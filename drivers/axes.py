@@ -125,6 +125,12 @@ class ModbusAxisController(ModbusLink):
         self.note_target(rho)
         self.send_command("move")
 
+    def as_commanded(self, targets: Sequence[float]) -> np.ndarray:
+        """The targets as the drive holds them: rounded to its TARGET registers'
+        count (IAI: 0.01 mm), where its carriages go and the arrival is judged."""
+        return np.array([reg.decode(reg.encode(float(v))) for reg, v in
+                         zip(self.map.axis_registers("TARGET"), targets, strict=True)])
+
     def _write_speed(self, speed_mm_s: float) -> None:
         if not (math.isfinite(speed_mm_s) and speed_mm_s > 0):
             raise ValueError(f"speed must be > 0 mm/s, got {speed_mm_s}")
@@ -176,7 +182,7 @@ class ModbusAxisController(ModbusLink):
         axes move (it may take a while: the poll waits that much less); whatever
         it raises ends the wait (the caller stops the axes).
         """
-        rho = _vec3(targets, "targets")
+        rho = self.as_commanded(_vec3(targets, "targets"))
         if not (math.isfinite(timeout_s) and timeout_s > 0):
             raise ValueError(f"timeout_s must be finite and > 0, got {timeout_s}")
         started = time.monotonic()

@@ -90,10 +90,10 @@ def run(options: RunOptions) -> int:
             if options.config is None:
                 raise BadInput("run: give --config FILE or --simulate")
             config = load_config(options.config)
-            if options.offsets_from is not None:
-                config = offsets_from(config, options.offsets_from)
             if not options.plan:
                 ConsoleOperator.require_tty_or_yes(options.yes)
+        if options.offsets_from is not None:
+            config = offsets_from(config, options.offsets_from)
         plan = build_plan(config)
         journal_box: list[Journal] = []
 

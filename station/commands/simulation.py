@@ -64,7 +64,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         # the register map the virtual drive serves (a built-in name or a file's
         # absolute path), kept for resume
         "profile": profile,
-        **drive_params(options.drive),
+        **drive_params(options.drive, separate_drives=separate_drives(profile)),
         # Not on the command line: the six-indicator style, procedure and write-back
         # overrides, a faster machine (tests)
         "indicators": int(options.indicators),
@@ -113,6 +113,16 @@ def map_profile(profile: str | None) -> str | None:
     return name
 
 
+def separate_drives(profile: str | None) -> bool:
+    """Whether the map ``profile`` puts the three targets on different unit ids."""
+    if profile is None:
+        return False
+    from drivers.map_files import resolve_map
+
+    targets = resolve_map(profile).axis_registers("TARGET")
+    return len({reg.device_id for reg in targets}) > 1
+
+
 def served_map(profile: str | None) -> dict[str, Any]:
     """The virtual station's register map for ``profile`` (nothing: the generic)."""
     if profile is None:
@@ -148,11 +158,13 @@ def _numbers(option: str, text: str, counts: tuple[int, ...], unit: str,
     return values * 3 if len(values) == 1 else values
 
 
-def drive_params(drive: DriveOptions) -> dict[str, Any]:
+def drive_params(drive: DriveOptions, separate_drives: bool = False) -> dict[str, Any]:
     """The virtual drive from ``--motion`` and ``--drive-*`` (BadInput naming the
     option), as JSON values: ``motion`` and ``drive_profile`` (3 shapes),
     ``drive_accel_mm_s2`` (3 values), ``drive_delays_s`` (3), ``drive_sequence``,
-    each None when not given."""
+    each None when not given. ``separate_drives``: the map puts the axes on
+    different unit ids, each taking its target in its own request, so they cannot
+    move on one line: independent, and --motion coordinated is refused."""
     from drivers.sim.motion import SHAPES
 
     profile, accel, delays, sequence = drive.profile, drive.accel, drive.delays, drive.sequence
@@ -176,7 +188,11 @@ def drive_params(drive: DriveOptions) -> dict[str, Any]:
     timed = delay_values is not None or sequence is not None
     if motion is None:
         # Delays and a sequence exist only on a drive that does not interpolate.
-        motion = "independent" if timed else "coordinated"
+        motion = "independent" if timed or separate_drives else "coordinated"
+    elif motion == "coordinated" and separate_drives:
+        raise BadInput("--motion coordinated: the register map puts the axes on separate "
+                       "drives (unit ids), which take their targets one request after "
+                       "another and cannot move on one line; leave --motion out")
     if motion == "coordinated":
         for option, given in (("--drive-delays", delay_values is not None),
                               ("--drive-sequence", sequence is not None)):
