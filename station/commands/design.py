@@ -158,8 +158,10 @@ def run_time(plan: Plan, config: StationConfig) -> dict[str, Any]:
     line = {name: _line_time_s(config, name) for sp in plan.setups for name in sp.indicators}
     for step, via in plan.waypoints_of():
         if step.kind == "move":
-            # the waypoints the plan check put on the move: each a move of its own
-            for leg in [*via, step.targets]:  # type: ignore[union-attr]
+            # the waypoints the plan check put on the move and its approach point: each
+            # a move of its own
+            approach = [step.approach] if step.approach is not None else []  # type: ignore[union-attr]
+            for leg in [*via, *approach, step.targets]:  # type: ignore[union-attr]
                 target = np.asarray(leg)
                 if position is not None:
                     distance = float(np.max(np.abs(target - position)))

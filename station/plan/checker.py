@@ -149,10 +149,8 @@ class MotionChecker:
         target from one side): the route goes to it, then to the target, both
         checked alike."""
         if approach is not None:
-            head = self.route(start, approach, label, setup, mounted, signal, max_waypoints,
-                              strict, margin, travel)
-            return [*head, self._last_leg(head[-1], target, label, setup, mounted, signal,
-                                          strict, margin, travel)]
+            return self._approached(start, target, approach, label, setup, mounted, signal,
+                                    max_waypoints, strict, margin, travel)
         keep = self.margin if margin is None else margin
         target_v = np.asarray(target, dtype=float)
         where = "" if setup is None else f"setup {setup.index + 1} (leg {setup.leg}), "
@@ -199,15 +197,35 @@ class MotionChecker:
             self._commit(self._route_travel(gauges, start_v, legs, where))
         return legs
 
-    def _last_leg(self, approach: np.ndarray, target: Sequence[float], label: str,
-                  setup: SetupPlan | None, mounted: dict[str, str] | None,
-                  signal: Mapping[str, tuple[float, float]] | None, strict: bool,
-                  margin: float | None, travel: bool) -> np.ndarray:
-        """The approach's last short leg, from ``approach`` to ``target``: one COMMAND 1
-        (a fraction of a mm), checked as any sub-move is."""
-        legs = self.route(approach, target, f"{label} (its last leg)", setup, mounted,
-                          signal, 0, strict, margin, travel)
-        return legs[-1]
+    def _approached(self, start: Sequence[float] | None, target: Sequence[float],
+                    approach: Sequence[float], label: str, setup: SetupPlan | None,
+                    mounted: dict[str, str] | None,
+                    signal: Mapping[str, tuple[float, float]] | None, max_waypoints: int,
+                    strict: bool, margin: float | None, travel: bool) -> list[np.ndarray]:
+        """The route to ``target`` whose last short leg starts at ``approach``: the
+        waypoints of the route to the target (on the end point's line to it, where the
+        leg is parallel), then the approach point instead of the target, then the
+        target; both short sub-moves checked as any is. Where the last waypoint cannot
+        reach the approach point in one COMMAND 1, the route goes to it instead."""
+        p = np.asarray(approach, dtype=float)
+        legs = self.route(start, target, label, setup, mounted, signal, max_waypoints,
+                          strict, margin, travel)
+        before = legs[-2] if len(legs) > 1 else start
+        short = f"{label} (its approach)"
+        # Near the target the signal is the target's: the short legs carry it flat (the
+        # move's ramp would be read along their own chords, from their starts).
+        near = None if signal is None else \
+            {n: (s1, s1) for n, (_s0, s1) in signal.items()}
+        try:
+            to_p = self.route(before, p, short, setup, mounted,
+                              near if len(legs) > 1 else signal, 0, strict, margin, travel)
+        except BadInput:
+            to_p = self.route(start, p, short, setup, mounted, signal, max_waypoints, strict,
+                              margin, travel)
+            before = None  # the route to the approach point replaces the target's
+        head = (legs[:-1] if before is not None else []) + to_p
+        return [*head, self.route(p, target, short, setup, mounted, near, 0, strict,
+                                  margin, travel)[-1]]
 
     # --- one sub-move -----------------------------------------------------------------
 
@@ -540,9 +558,12 @@ def check_plan(
             elif isinstance(step, Move):
                 legs = checker.route(position, step.targets, step.label, sp, mounted,
                                      approach=step.approach)
-                if position is not None and len(legs) > 1:
+                # the waypoints: the sub-moves' targets before the target (and before
+                # the approach point, which the move itself names)
+                via = legs[:-2] if step.approach is not None else legs[:-1]
+                if position is not None and via:
                     plan.routes[route_key(position, step.targets)] = [
-                        tuple(float(v) for v in leg) for leg in legs[:-1]]
+                        tuple(float(v) for v in leg) for leg in via]
                 position = np.asarray(step.targets)
     plan.travel = checker.travel
     plan.motion = checker.motion
