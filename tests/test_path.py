@@ -20,7 +20,8 @@ from drivers.sim.machine import VirtualOrthoglide
 from station.commands import run as cmd_run
 from station.config import StationConfig, parse_config
 from station.errors import BadInput, RunFailed
-from station.plan.checker import MotionChecker, check_plan, motion_model
+from station.plan.checker import MotionChecker, check_plan
+from station.plan.limits import motion_model
 from station.plan.motion import reachable_points
 from station.plan.steps import build_plan
 from station.rundir.journal import read_journal

@@ -40,7 +40,8 @@ from orthocal import AXES
 from orthocal.numbers import finite
 from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
-from station.plan.checker import MotionChecker, check_plan, effective_limits
+from station.plan.checker import MotionChecker, check_plan
+from station.plan.limits import effective_limits
 from station.plan.steps import Plan, Read, Settle, build_plan
 
 # No controller is contacted: "controller limits" wide open, narrowed by the config.
