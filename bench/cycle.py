@@ -13,7 +13,8 @@ The floor is what the physics of the run that actually happened costs:
   independent, a move lasts as long as a rest-to-rest trapezoid over its
   longest axis), in the machine's own scale, so the move that a write-back's
   new offsets cause is counted; waypoints are not part of the floor, they are
-  what independent axes cost;
+  what independent axes cost; nor are the approach's overruns and the reversal
+  stop's trip beyond Π0 and back (issue 21: ``--approach as-planned`` runs without);
 * the settle time at every stop;
 * at every stop, the serial line time of its readings: readings × (request +
   reply characters) × bits per character / baud; the gauges of a stop are read
@@ -179,7 +180,10 @@ def physical_floor(run_dir: Path, start_m: np.ndarray, timing: Timing
     moves = 0.0
     for stop in stops:
         phase, setup, _cycle, sign = stop.split(":")
-        rho = np.array(plan["setups"][int(setup)]["postures"][sign], dtype=float)
+        # The reversal stop is Π0 reached from the other side: its trip there and the
+        # approach's overruns are what lost motion costs, not in the floor.
+        posture = "0" if sign == "r" else sign
+        rho = np.array(plan["setups"][int(setup)]["postures"][posture], dtype=float)
         # machine scale: the offsets the phase ran on
         target = rho + offsets_of.get(phase, before if phase == "m" else after)
         distance = float(np.max(np.abs(target - position)))

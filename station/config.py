@@ -265,6 +265,9 @@ class ProcedureConfig(_Strict):
     # side. Each cycle also reads Π0 approached from the other side: the reversal.
     approach: Literal["below", "above", "as-planned"] = "below"
     approach_overrun_mm: float = Field(0.05, gt=0, le=5)
+    # The reversal stop of every cycle; false for joints with none to measure (a
+    # linear scale on the carriage): the run then states no reversal, assumes none.
+    measure_reversal: bool = True
     # How far off the leg's middle an indicator stand may be set by eye (mm, uniform
     # ±): misplaced stands are modelled (orthocal.Stands) so that they are not taken
     # for tilted axes; 0: the stands are placed exactly, not modelled.

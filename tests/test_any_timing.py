@@ -141,7 +141,9 @@ def knocked_run(tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str,
     knocked stand's readings only (a cycle mixing both would be off by tenths of a
     millimetre)."""
     def knock(station: Any) -> None:
-        station.knock("A", 5.0, on_move=station.machine.moves_started + 1,
+        # the third move: Π0 is reached first (its approach point, then its last leg),
+        # then Π0 → Π_x^+ runs to Π_x^+'s approach point
+        station.knock("A", 5.0, on_move=station.machine.moves_started + 3,
                       at_fraction=at_fraction)
 
     result, stations = run(tmp_path, capsys, name, hook=knock, drive_sequence="zyx",

@@ -193,7 +193,10 @@ def test_dropped_reply_is_retried(transport: str) -> None:
 
 
 def test_random_drops_are_reproducible_and_survived(transport: str) -> None:
-    with station(transport, faults=Faults(drop_rate=0.3), retries=6) as (sim, ctl, events):
+    # A reply that is only late (a loaded machine) must not pass for a drop: the
+    # timeout here is far above any turnaround, so every retry is one the sim made.
+    with station(transport, faults=Faults(drop_rate=0.3), retries=6, timeout_s=1.0) as (
+            sim, ctl, events):
         for _ in range(6):
             ctl.read_status()
         assert sim.stats.dropped == len(events) > 0

@@ -32,8 +32,8 @@ def writes(result: dict[str, Any]) -> int:
     return sum(1 for it in result["iterations"] if it["offsets_written"] is not None)
 
 
-def test_misplaced_stands_take_a_second_round_that_removes_the_bias(tmp_path: Path,
-                                                                     capsys) -> None:
+def test_a_first_round_that_leaves_more_than_converge_mm_takes_a_second(tmp_path: Path,
+                                                                        capsys) -> None:
     true = (2.5, -2.9, 2.2)
     # the verification measured again where it cannot yet show ±converge_mm: a bias
     # of several µm left by the first round is then written, whatever the noise drew
@@ -50,7 +50,10 @@ def test_misplaced_stands_take_a_second_round_that_removes_the_bias(tmp_path: Pa
     assert its[-1]["offsets_written"] is None and its[-1]["significant"] == []
     first_error = max(abs(its[0]["identified"][f"drho_{a}"] - t)
                       for a, t in zip("xyz", true, strict=True))
-    assert first_error > 0.005  # the first round alone is biased by the stands
+    # The stands are modelled, so the first round is not biased by them but uncertain
+    # (one cycle of 1 µm gauges with the stands' terms: ~6 µm standard error): it leaves
+    # more than converge_mm, which the second round removes.
+    assert first_error > result["loop"]["converge_mm"]
     # the total written plus what the last round found left is the truth within the
     # last round's uncertainty; what is left is no more than that round resolves
     assert_truth(result, drho(true))

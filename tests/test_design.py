@@ -129,17 +129,18 @@ def test_summary_numbers_are_orthocal_s_and_the_plan_s() -> None:
     floor = orthocal.statistical_floor(keys, G, "rho", 1.0)
     assert list(doc["noise_gain"].values()) == pytest.approx(list(floor), rel=1e-12)
     t = doc["run_time"]
-    stops = sum(1 + 3 * 2 for _ in plan.setups)  # opening Π0 + 3 stops per cycle
+    # opening Π0 + 4 stops per cycle (Π+, Π−, Π0 and Π0 from the other side)
+    stops = sum(1 + 4 * 2 for _ in plan.setups)
     assert t["stops"] == stops and t["settle_s"] == pytest.approx(0.1 * stops)
     assert t["total_s"] == pytest.approx(2 * (t["moves_s"] + t["settle_s"] + t["readings_s"]))
-    # Π0 is shared between setups: a move fewer than stops minus the first position;
-    # and each waypoint the plan check put on a move (independent axes, the profile's
-    # default: any timing) is a move of its own
+    # every stop is reached by two moves (to its approach point, then its last leg),
+    # but the first, whose start nobody knows; and each waypoint the plan check put on
+    # a move (independent axes, the profile's default: any timing) is a move of its own
     # (no controller asked: only the config limits the plan, as in design_summary)
     checked = check_plan(build_plan(cfg), cfg, ([-1e6] * 3, [1e6] * 3))
     waypoints = sum(len(via) for _, via in checked.waypoints_of())
     assert waypoints > 0
-    assert t["moves"] == stops - 1 - (len(plan.setups) - 1) + waypoints
+    assert t["moves"] == 2 * stops - 1 + waypoints
 
 
 def test_search_never_leaves_the_config_soft_limits() -> None:

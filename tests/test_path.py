@@ -21,7 +21,8 @@ from drivers.sim.machine import VirtualOrthoglide
 from station.commands import run as cmd_run
 from station.config import StationConfig, parse_config
 from station.errors import BadInput, RunFailed
-from station.plan.checker import MotionChecker, check_plan, motion_model
+from station.plan.checker import MotionChecker, check_plan
+from station.plan.limits import motion_model
 from station.plan.motion import reachable_points
 from station.plan.steps import build_plan
 from station.rundir.journal import read_journal
@@ -73,14 +74,16 @@ def travel_on_machine(cfg: StationConfig, legs_of_move: list[list[np.ndarray]],
 
 def planned_moves(plan_json: dict, setup: int) -> list[list[np.ndarray]]:
     """The moves of one setup's first cycle as the plan lists them: each move's
-    waypoints ("via", absent when the move is a single COMMAND 1), then its target."""
+    waypoints ("via", absent when the move is a single COMMAND 1), its approach
+    point (the last leg's start), then its target."""
     moves = []
     current = -1
     for step in plan_json["steps"]:
         if step["kind"] == "prompt":
             current = step["setup"]
         elif step["kind"] == "move" and current == setup:
-            moves.append([np.asarray(w) for w in step.get("via", [])]
+            approach = [] if step.get("approach") is None else [np.asarray(step["approach"])]
+            moves.append([np.asarray(w) for w in step.get("via", [])] + approach
                          + [np.asarray(step["targets"])])
         if step["kind"] == "checkpoint" and current == setup:
             break
@@ -100,8 +103,9 @@ def test_issue_figure_independent_axes_keep_plungers_in_stroke() -> None:
     assert min(lo for lo, _ in single.values()) < -8.5  # the figure, reproduced
     plan = check_plan(build_plan(cfg), cfg, WIDE, start=orthocal.posture("0", None, g))
     moves = planned_moves(plan.to_json(), 0)
-    # one waypoint on Π_x^+ → Π_x^− and one on Π_x^− → Π0: safe for any axis timing
-    assert [len(m) for m in moves] == [1, 2, 2]
+    # one waypoint on Π_x^+ → Π_x^− and one on Π_x^− → Π0: safe for any axis timing;
+    # each move's last leg from its approach point; then the reversal stop's move
+    assert [len(m) for m in moves] == [2, 3, 3, 2]
     for name, (lo, hi) in travel_on_machine(cfg, moves).items():
         ind = cfg.indicator(name)
         assert -ind.preload < lo and hi < ind.stroke_mm - ind.preload, (name, lo, hi)
@@ -230,12 +234,12 @@ def test_short_gauge_gets_as_many_waypoints_as_it_needs() -> None:
     g = cfg.machine.geometry()
     plan = check_plan(build_plan(cfg), cfg, WIDE, start=orthocal.posture("0", None, g))
     moves = planned_moves(plan.to_json(), 0)
-    assert [len(m) for m in moves] == [1, 2, 2]
+    assert [len(m) for m in moves] == [2, 3, 3, 2]  # with the approach points, as above
     lo, hi = plan.travel["A on leg x (setup 1)"]
     assert -1.5 + 0.2 < lo < -0.8 and hi < 1.5 - 0.2  # 0.88 on Π0 → Π_x^+
     assert "via 1 waypoint(s)" in plan.format()
     # the waypoints put the end point on the x axis: leg x parallel, gauges at zero
-    for w in moves[1][:-1]:
+    for w in moves[1][:-2]:  # (the last two: the approach point and the target)
         p = orthocal.forward(w, g)
         assert abs(p[1]) < 1e-9 and abs(p[2]) < 1e-9
     checker = MotionChecker(cfg, WIDE)
@@ -260,8 +264,9 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
 
     def alarm(station: Any) -> None:
         keep(station)
-        # the second move is the first half of Π_x^+ → Π_x^− (a waypoint move)
-        station.controller.faults.alarm_after_moves = 1
+        # the fifth move is the first part of Π_x^+ → Π_x^− (a waypoint move): before
+        # it, Π0 and Π_x^+, each from its approach point
+        station.controller.faults.alarm_after_moves = 4
 
     with pytest.raises(RunFailed) as info:
         cmd_run.run(simulated(tmp_path / "runs", true_drho=true_drho, motion="independent",
@@ -287,7 +292,8 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
     stops = [r["stop"] for r in records if r["type"] == "reading" and r["indicator"] == "A"]
     # (every phase the closed loop measured: a second write-back adds one)
     phases = len(result["iterations"])
-    assert len(set(stops)) == phases * 3 * (1 + 3 * FAST["cycles"])
+    # (four stops per cycle: the test postures, Π0, and Π0 from the other side)
+    assert len(set(stops)) == phases * 3 * (1 + 4 * FAST["cycles"])
     assert sorted(s for s in set(stops) if stops.count(s) > 1) == ["m:0:0:0", "m:0:1:+"]
     # moves: 3 per cycle + 1 waypoint on each Π_i^+ → Π_i^−
     assert result["timing"]["moves"] >= phases * 3 * 4 * FAST["cycles"] - 4

@@ -31,8 +31,10 @@ def test_listing_has_every_stop_and_prompt() -> None:
     prompts = [s for s in steps if isinstance(s, Prompt)]
     reads = [s for s in steps if isinstance(s, Read)]
     assert [p.leg for p in prompts] == ["x", "y", "z"]
-    # per setup: the opening Π0 and three stops per cycle (consecutive cycles share Π0)
-    assert len(reads) == 3 * (1 + 3 * 2)
+    # per setup: the opening Π0 and four stops per cycle (consecutive cycles share Π0;
+    # the fourth is Π0 from the other side, the joints' reversal)
+    assert len(reads) == 3 * (1 + 4 * 2)
+    assert sum(1 for r in reads if r.sign == "r") == 3 * 2
     assert all(r.n == 3 and r.indicators == ("A", "B") for r in reads)
     assert len({r.stop for r in reads}) == len(reads)
     text = plan.format()
@@ -50,9 +52,10 @@ def test_moves_are_the_test_postures_and_prompts_come_at_pi0() -> None:
     moves = {m.label: m.targets for m in steps if isinstance(m, Move)}
     np.testing.assert_allclose(moves["Π_x^-"], orthocal.posture("-", "x", g))
     np.testing.assert_allclose(moves["Π_z^+"], orthocal.posture("+", "z", g))
-    # Π+ goes straight to Π−: no axis travels back through Π0 in between.
+    # Π+ goes straight to Π−: no axis travels back through Π0 in between; each cycle
+    # ends with Π0 from the other side (the reversal stop)
     labels = [m.label for m in steps if isinstance(m, Move)]
-    assert labels[:5] == ["Π0", "Π_x^+", "Π_x^-", "Π0", "Π_x^+"]
+    assert labels[:6] == ["Π0", "Π_x^+", "Π_x^-", "Π0", "Π0 (other side)", "Π_x^+"]
 
 
 def test_soft_limit_refusal_names_posture_and_axis() -> None:
@@ -98,6 +101,9 @@ def test_lift_off_refusal_depends_on_mount_sign() -> None:
     # Same leg motion, seen from the other side: no preload lifts off instead.
     data = station_data(procedure=PROCEDURE)
     data["controller"] = {"motion": "coordinated"}  # a path that swings one way only
+    # No preload at all, the stops as planned and no reversal stop: the approach's
+    # overrun beyond a stop would lift such a gauge by itself.
+    data["procedure"] = {**PROCEDURE, "approach": "as-planned", "measure_reversal": False}
     data["indicators"][0].update(stroke_mm=12.5, preload_mm=0.0)
     cfg = parse_config(data)
     with pytest.raises(BadInput) as info:
@@ -115,7 +121,11 @@ def test_lift_off_refusal_depends_on_mount_sign() -> None:
 
 
 def test_travel_of_a_mounted_indicator_matches_the_model() -> None:
-    cfg = config(controller={"motion": "coordinated"})
+    # the straight path between the stops, as planned (an approach's last leg would
+    # add its overrun's share to the extremes)
+    cfg = station_config(controller={"motion": "coordinated"},
+                         procedure={**PROCEDURE, "approach": "as-planned",
+                                    "measure_reversal": False})
     plan = check_plan(build_plan(cfg), cfg, WIDE)
     lo, hi = plan.travel["A on leg x (setup 1)"]
     g = cfg.machine.geometry()

@@ -76,10 +76,11 @@ def _cut_power(rig: Rig, station: VirtualStation, setup: int = 2, lose: bool = T
     f = station.controller.faults
 
     def arm() -> None:
-        # halfway through the fifth move after the gauges of this setup are on: in
-        # its second cycle, with the first one journaled
+        # halfway through the eleventh move after the gauges of this setup are on
+        # (each stop from its approach point: two moves, four stops a cycle): the
+        # long move to Π^− of its second cycle, with the first one journaled
         f.power_cut_s, f.power_cut_loses_reference = off_s, lose
-        f.power_cut_after_moves = 4
+        f.power_cut_after_moves = 10
 
     on_setup(station, setup, arm)
 
@@ -214,7 +215,7 @@ def test_a_full_disk_stops_the_run_and_resume_finishes_it(tmp_path: Path, refere
     env = {**os.environ, "ORTHOCAL_STATE_DIR": str(tmp_path / "state")}
     full = subprocess.run([sys.executable, "-m", "station", *argv(out)], capture_output=True,
                           text=True, cwd=ROOT, timeout=300, env=env,
-                          preexec_fn=_limited(12_000))
+                          preexec_fn=_limited(20_000))  # plan.json: 13 kB
     assert full.returncode == 1, full.stderr
     assert "Traceback" not in full.stderr and "internal error" not in full.stderr
     (run_dir,) = out.iterdir()

@@ -75,7 +75,8 @@ def test_simulated_run_recovers_hidden_offsets(tmp_path: Path, capsys, count: in
     assert kinds[0] == "header" and kinds[-1] == "finished"
     # every phase the closed loop measured (noise can ask for a second write-back)
     phases = len(result["iterations"])
-    assert kinds.count("reading") == 2 * 3 * (1 + 3 * FAST["cycles"]) * phases
+    # per setup the opening Π0, then per cycle Π+, Π−, Π0 and Π0 from the other side
+    assert kinds.count("reading") == 2 * 3 * (1 + 4 * FAST["cycles"]) * phases
     stages = [r["stage"] for r in read_journal(run_dir / "journal.jsonl")
               if r["type"] == "writeback"]
     rounds = sum(1 for it in result["iterations"] if it["offsets_written"] is not None)
@@ -86,7 +87,9 @@ def test_fault_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
     true_drho = (-0.6, 0.9, 1.1)
 
     def alarm_soon(station: Any) -> None:
-        station.controller.faults.alarm_after_moves = 9  # in the second setup
+        # in the second setup: the first takes 18 moves (every stop from its approach
+        # point, and Π0 from the other side after each cycle)
+        station.controller.faults.alarm_after_moves = 22
 
     with pytest.raises(RunFailed) as info:
         # The plunger guard's readings during moves draw from the gauges' seeded noise

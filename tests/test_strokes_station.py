@@ -69,12 +69,14 @@ def test_strokes_plan_sweeps_out_and_back_through_every_stop() -> None:
     assert plan.to_json()["test_postures"] == ["+30", "+", "-50", "-"]
     steps = list(plan.steps())
     labels = [m.label for m in steps if isinstance(m, Move)]
-    assert labels[:7] == ["Π0", "Π_x(+30)", "Π_x^+", "Π_x(-50)", "Π_x^-", "Π0", "Π_x(+30)"]
+    assert labels[:8] == ["Π0", "Π_x(+30)", "Π_x^+", "Π_x(-50)", "Π_x^-", "Π0",
+                          "Π0 (other side)", "Π_x(+30)"]
     moves = {m.label: m.targets for m in steps if isinstance(m, Move)}
     np.testing.assert_allclose(moves["Π_y(-50)"], orthocal.posture("-50", "y", g))
     reads = [s for s in steps if isinstance(s, Read)]
     # per setup: the opening Π0 and five stops per cycle
-    assert len(reads) == 3 * (1 + 5 * 2) and len({r.stop for r in reads}) == len(reads)
+    # per cycle the four strokes, Π0, and Π0 from the other side (the reversal)
+    assert len(reads) == 3 * (1 + 6 * 2) and len({r.stop for r in reads}) == len(reads)
     assert "m:1:2:-50" in {r.stop for r in reads}
     assert "(Π0 → Π_i(+30) → Π_i^+ → Π_i(-50) → Π_i^- → Π0)" in plan.format()
 
@@ -119,7 +121,7 @@ def test_simulated_run_with_strokes(tmp_path: Path, capsys) -> None:
     assert set(cycles[0]["deviations"]) == {"+30xy", "+xy", "-50xy", "-xy",
                                             "+30xz", "+xz", "-50xz", "-xz"}
     phases = len(result["iterations"])  # every phase the closed loop measured
-    assert sum(1 for r in records if r["type"] == "reading") == 2 * 3 * (1 + 5 * 2) * phases
+    assert sum(1 for r in records if r["type"] == "reading") == 2 * 3 * (1 + 6 * 2) * phases
     report = (run_dir / "report.html").read_text()
     assert "Π<sub>x</sub>(+30 mm) along y" in report and "Π<sub>y</sub>(−50 mm)" in report
     assert "4 test postures Π<sub>i</sub>(s)" in report and "the 24 differences" in report

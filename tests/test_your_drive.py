@@ -175,3 +175,17 @@ def test_probe_reads_every_register_of_the_unseen_layout(
         np.testing.assert_allclose([regs[f"ACTUAL_{a}"]["value"] for a in "XYZ"],
                                    np.round(vs.machine.actual() * 4000), atol=0)
         assert vs.controller.stats.writes == 0 and vs.controller.stats.commands == {}
+
+
+def test_coordinated_is_refused_for_axes_on_separate_drives() -> None:
+    from builders import station_config
+
+    from station.errors import BadInput
+    from station.plan.limits import motion_model
+
+    config = station_config(controller={"profile": str(GATEWAY), "motion": "coordinated"})
+    with pytest.raises(BadInput, match=r"controller.motion: .*unit ids 1, 2, 3"):
+        motion_model(config)
+    assert motion_model(station_config(controller={"profile": str(GATEWAY)})) == "independent"
+    # one drive for all three axes may well interpolate: the config is taken at its word
+    assert motion_model(station_config(controller={"motion": "coordinated"})) == "coordinated"

@@ -40,7 +40,8 @@ from orthocal import AXES
 from orthocal.numbers import finite
 from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
-from station.plan.checker import MotionChecker, check_plan, effective_limits
+from station.plan.checker import MotionChecker, check_plan
+from station.plan.limits import effective_limits
 from station.plan.steps import Plan, Read, Settle, build_plan
 
 # No controller is contacted: "controller limits" wide open, narrowed by the config.
@@ -158,8 +159,10 @@ def run_time(plan: Plan, config: StationConfig) -> dict[str, Any]:
     line = {name: _line_time_s(config, name) for sp in plan.setups for name in sp.indicators}
     for step, via in plan.waypoints_of():
         if step.kind == "move":
-            # the waypoints the plan check put on the move: each a move of its own
-            for leg in [*via, step.targets]:  # type: ignore[union-attr]
+            # the waypoints the plan check put on the move and its approach point: each
+            # a move of its own
+            approach = [step.approach] if step.approach is not None else []  # type: ignore[union-attr]
+            for leg in [*via, *approach, step.targets]:  # type: ignore[union-attr]
                 target = np.asarray(leg)
                 if position is not None:
                     distance = float(np.max(np.abs(target - position)))

@@ -82,13 +82,22 @@ def fields(config: StationConfig, rev: Reversal) -> dict[str, Any]:
         "std_errors_dof": finite(rev.dof), "n": dict(rev.n),
         "approach": proc.approach, "approach_overrun_mm": proc.approach_overrun_mm,
         "method": METHOD.format(gain=gain(config)),
-        "stated": ("Δρ for the middle of each joint's band (ISO 230-2's mean "
-                   f"bidirectional position): every stop approached {side}, the fits "
-                   f"found the band's {'lower' if proc.approach == 'below' else 'upper'} "
-                   "edge, shifted by half the reversal") if side else
-                  ("as planned: the joints reach the stops from either side, their "
-                   "reversal enters the deviations and Δρ is not corrected for it"),
+        "stated": _stated(proc.approach, side, rev),
     }
+
+
+def _stated(approach: str, side: str | None, rev: Reversal) -> str:
+    if side is None:
+        return ("as planned: the joints reach the stops from either side, their "
+                "reversal enters the deviations and Δρ is not corrected for it")
+    edge = "lower" if approach == "below" else "upper"
+    if all(v is None for v in rev.value.values()):
+        return (f"every stop approached {side}: Δρ is the band's {edge} edge, off its "
+                "middle by half each joint's reversal, which this run did not measure "
+                "([procedure] measure_reversal = false)")
+    return ("Δρ for the middle of each joint's band (ISO 230-2's mean bidirectional "
+            f"position): every stop approached {side}, the fits found the band's {edge} "
+            "edge, shifted by half the reversal")
 
 
 def at_the_tool(config: StationConfig, rev: Reversal, points: np.ndarray) -> dict[str, Any]:

@@ -17,6 +17,7 @@ from orthocal.measurement import reading_at
 from station.config import StationConfig
 from station.errors import BadInput
 from station.plan import motion
+from station.plan.limits import effective_limits, limits_source, motion_model
 from station.plan.steps import AXES, Move, Plan, Prompt, SetupPlan, route_key
 
 # Most waypoints put on one move to keep the plungers in their strokes; each is a
@@ -34,62 +35,6 @@ SIGNAL_PAD_MM = 0.05
 # The signal is a smooth function of the joints, not of the progress along a move:
 # between two stops it may leave their straight ramp by this fraction of its change.
 SIGNAL_BULGE = 0.5
-
-
-def effective_limits(
-    config: StationConfig, controller_limits: tuple[Sequence[float], Sequence[float]]
-) -> tuple[np.ndarray, np.ndarray]:
-    """The controller's soft limits, narrowed (never widened) by the config.
-
-    Where the controller cannot tell its limits (``controller_limits.source`` is
-    "absent" or "nonsense", drivers.limits.SoftLimits) they come from
-    ``[controller] soft_min`` / ``soft_max`` alone; with neither, BadInput names both
-    ways to provide them, before anything moves (design.md, "Register map").
-    """
-    c = config.controller
-    if getattr(controller_limits, "source", "registers") in ("absent", "nonsense"):
-        missing = [k for k in ("soft_min", "soft_max") if getattr(c, k) is None]
-        if missing:
-            reason = getattr(controller_limits, "reason", "") or "the controller has none"
-            raise BadInput(
-                f"soft limits: {reason}; give them as [controller] "
-                f"{' and '.join(missing)} (joint mm, x, y, z) in the config, or map the "
-                "controller's soft-limit registers in [controller.registers] (SOFT_MIN_X.. "
-                "SOFT_MAX_Z = address); nothing has moved")
-        return (np.asarray(c.soft_min, dtype=float).copy(),
-                np.asarray(c.soft_max, dtype=float).copy())
-    lo = np.asarray(controller_limits[0], dtype=float).copy()
-    hi = np.asarray(controller_limits[1], dtype=float).copy()
-    if c.soft_min is not None:
-        lo = np.maximum(lo, c.soft_min)
-    if c.soft_max is not None:
-        hi = np.minimum(hi, c.soft_max)
-    return lo, hi
-
-
-def limits_source(config: StationConfig, controller_limits: object) -> str:
-    """Where the limits the plan uses come from, in words for the listing."""
-    c = config.controller
-    if getattr(controller_limits, "source", "registers") in ("absent", "nonsense"):
-        return "from the config ([controller] soft_min/soft_max)"
-    if c.soft_min is not None or c.soft_max is not None:
-        return "the controller's, narrowed by the config"
-    return "the controller's"
-
-
-def motion_model(config: StationConfig) -> str:
-    """The path model of the controller: the config's ``[controller] motion``, else
-    what the register-map profile promises (design.md: COMMAND 1 promises no
-    interpolation unless the profile says the axes are coordinated)."""
-    if config.controller.motion is not None:
-        return config.controller.motion
-    from drivers.map_files import resolve_map
-    from drivers.registers import RegisterMapError
-
-    try:
-        return resolve_map(config.controller.profile).motion
-    except RegisterMapError as exc:
-        raise BadInput(f"controller.profile: {exc}") from None
 
 
 class MotionChecker:
@@ -149,10 +94,8 @@ class MotionChecker:
         target from one side): the route goes to it, then to the target, both
         checked alike."""
         if approach is not None:
-            head = self.route(start, approach, label, setup, mounted, signal, max_waypoints,
-                              strict, margin, travel)
-            return [*head, self._last_leg(head[-1], target, label, setup, mounted, signal,
-                                          strict, margin, travel)]
+            return self._approached(start, target, approach, label, setup, mounted, signal,
+                                    max_waypoints, strict, margin, travel)
         keep = self.margin if margin is None else margin
         target_v = np.asarray(target, dtype=float)
         where = "" if setup is None else f"setup {setup.index + 1} (leg {setup.leg}), "
@@ -199,15 +142,35 @@ class MotionChecker:
             self._commit(self._route_travel(gauges, start_v, legs, where))
         return legs
 
-    def _last_leg(self, approach: np.ndarray, target: Sequence[float], label: str,
-                  setup: SetupPlan | None, mounted: dict[str, str] | None,
-                  signal: Mapping[str, tuple[float, float]] | None, strict: bool,
-                  margin: float | None, travel: bool) -> np.ndarray:
-        """The approach's last short leg, from ``approach`` to ``target``: one COMMAND 1
-        (a fraction of a mm), checked as any sub-move is."""
-        legs = self.route(approach, target, f"{label} (its last leg)", setup, mounted,
-                          signal, 0, strict, margin, travel)
-        return legs[-1]
+    def _approached(self, start: Sequence[float] | None, target: Sequence[float],
+                    approach: Sequence[float], label: str, setup: SetupPlan | None,
+                    mounted: dict[str, str] | None,
+                    signal: Mapping[str, tuple[float, float]] | None, max_waypoints: int,
+                    strict: bool, margin: float | None, travel: bool) -> list[np.ndarray]:
+        """The route to ``target`` whose last short leg starts at ``approach``: the
+        waypoints of the route to the target (on the end point's line to it, where the
+        leg is parallel), then the approach point instead of the target, then the
+        target; both short sub-moves checked as any is. Where the last waypoint cannot
+        reach the approach point in one COMMAND 1, the route goes to it instead."""
+        p = np.asarray(approach, dtype=float)
+        legs = self.route(start, target, label, setup, mounted, signal, max_waypoints,
+                          strict, margin, travel)
+        before = legs[-2] if len(legs) > 1 else start
+        short = f"{label} (its approach)"
+        # Near the target the signal is the target's: the short legs carry it flat (the
+        # move's ramp would be read along their own chords, from their starts).
+        near = None if signal is None else \
+            {n: (s1, s1) for n, (_s0, s1) in signal.items()}
+        try:
+            to_p = self.route(before, p, short, setup, mounted,
+                              near if len(legs) > 1 else signal, 0, strict, margin, travel)
+        except BadInput:
+            to_p = self.route(start, p, short, setup, mounted, signal, max_waypoints, strict,
+                              margin, travel)
+            before = None  # the route to the approach point replaces the target's
+        head = (legs[:-1] if before is not None else []) + to_p
+        return [*head, self.route(p, target, short, setup, mounted, near, 0, strict,
+                                  margin, travel)[-1]]
 
     # --- one sub-move -----------------------------------------------------------------
 
@@ -540,9 +503,12 @@ def check_plan(
             elif isinstance(step, Move):
                 legs = checker.route(position, step.targets, step.label, sp, mounted,
                                      approach=step.approach)
-                if position is not None and len(legs) > 1:
+                # the waypoints: the sub-moves' targets before the target (and before
+                # the approach point, which the move itself names)
+                via = legs[:-2] if step.approach is not None else legs[:-1]
+                if position is not None and via:
                     plan.routes[route_key(position, step.targets)] = [
-                        tuple(float(v) for v in leg) for leg in legs[:-1]]
+                        tuple(float(v) for v in leg) for leg in via]
                 position = np.asarray(step.targets)
     plan.travel = checker.travel
     plan.motion = checker.motion

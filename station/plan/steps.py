@@ -174,7 +174,8 @@ class Plan:
     start: tuple[float, ...] | None = None
 
     def waypoints_of(self) -> Iterator[tuple[Step, list[tuple[float, float, float]]]]:
-        """Each step of the measurement phase with the waypoints of its move."""
+        """Each step of the measurement phase with the waypoints of its move (its
+        approach point, where it has one, is the move's own: Move.approach)."""
         position = self.start
         for step in self.steps("m"):
             via: list[tuple[float, float, float]] = []
@@ -240,10 +241,6 @@ class Plan:
             if isinstance(step, Move):
                 text = f"move {step.label:<7} ρ = (" + ", ".join(
                     f"{t:.3f}" for t in step.targets) + ")"
-                if step.approach is not None and via and \
-                        max(abs(a - b) for a, b in zip(via[-1], step.approach,
-                                                       strict=True)) < 1e-6:
-                    via = via[:-1]  # the approach point is said below, not a waypoint
                 if via:
                     text += f" via {len(via)} waypoint(s): " + "; ".join(
                         "(" + ", ".join(f"{t:.3f}" for t in w) + ")" for w in via)
@@ -308,13 +305,14 @@ def build_plan(config: StationConfig, strokes: Sequence[float] | None = None) ->
     return Plan(setups, proc.cycles, proc.readings, proc.settle_s)
 
 
-def approach_overruns(config: StationConfig) -> tuple[float | None, float]:
+def approach_overruns(config: StationConfig) -> tuple[float | None, float | None]:
     """(the signed overrun the stops are approached from, the reversal stop's): from
     below −o, then the reversal from above +o; from above the other way round; as
     planned no approach leg, and the reversal from above (in the paper's order every
-    joint reaches the cycle's closing Π0 from below)."""
+    joint reaches the cycle's closing Π0 from below); no reversal stop without
+    ``measure_reversal``."""
     proc = config.procedure
     o = proc.approach_overrun_mm
-    if proc.approach == "above":
-        return o, -o
-    return (-o if proc.approach == "below" else None), o
+    stops, other = (o, -o) if proc.approach == "above" else \
+        ((-o if proc.approach == "below" else None), o)
+    return stops, (other if proc.measure_reversal else None)
