@@ -163,7 +163,14 @@ def probe_controller(ctl: Any) -> dict[str, Any]:
 
     attempt("status", status)
     attempt("positions_mm", lambda: axes(ctl.read_positions()))
-    attempt("offsets_mm", lambda: axes(ctl.read_offsets()))
+    if ctl.map.has_role("OFFSET"):
+        attempt("offsets_mm", lambda: axes(ctl.read_offsets()))
+    else:
+        # No fault: the drive has none over Modbus, the station holds them (its map
+        # says why and where they live in the drive).
+        out["offsets_mm"] = None
+        out["offsets_held_by"] = "station"
+        out["offsets_note"] = ctl.map.unsupported.get("offsets", "")
     attempt("soft_limits_mm", limits)
     registers: dict[str, Any] = {}
     for reg in ctl.map.registers:

@@ -124,6 +124,7 @@ def _mm(values: dict[str, float] | None) -> str:
 
 def print_human(found: dict[str, Any], stream: Any = None) -> None:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     console = Console(file=stream or sys.stdout, highlight=False, soft_wrap=False)
@@ -162,10 +163,15 @@ def print_human(found: dict[str, Any], stream: Any = None) -> None:
     table.add_column("value", overflow="fold")
     table.add_row("status", flags)
     table.add_row("positions (mm)", _mm(c.get("positions_mm")))
-    table.add_row("offsets (mm)", _mm(c.get("offsets_mm")))
-    table.add_row("soft limits (mm)", lim)
-    for key, error in (c.get("errors") or {}).items():
-        table.add_row(f"{key}: error", error)
+    errors = dict(c.get("errors") or {})
+    table.add_row("offsets (mm)", _mm(c.get("offsets_mm"))
+                  if c.get("offsets_held_by") != "station" else escape(
+                      "none the drive takes over Modbus; the station holds them"
+                      + (f" ({c['offsets_note']})" if c.get("offsets_note") else "")))
+    # Texts from the map and the drive are not rich markup ("[controller] soft_min").
+    table.add_row("soft limits (mm)", escape(lim))
+    for key, error in errors.items():
+        table.add_row(f"{key}: error", escape(str(error)))
     regs = c["registers"]
     answer = [n for n, r in regs.items() if r["state"] == "ok"]
     absent = [n for n, r in regs.items() if r["state"] == "absent"]

@@ -174,8 +174,8 @@ def offsets_fields(controller: Any, result: dict[str, Any],
         out["offsets_note"] = (
             "the drive holds no zero offset it can be told over Modbus, so these offsets "
             "live in this station run only: "
-            + (f"{why}; " if why else "enter them in the drive's own home-offset "
-               "parameter; ")
+            + (f"{why.rstrip().rstrip('.')}; " if why else "enter them in the drive's own "
+               "home-offset parameter; ")
             + f"a later run starts from them with [controller] offsets = [{line}] or "
             f"--offsets-from {result.get('run_dir')}")
     return out

@@ -92,7 +92,10 @@ def summary_text(result: dict) -> str:
         pairs = ", ".join(
             f"{a} {fmt(before.get(a))} → {fmt(written.get(a))}" for a in AXES if a in written
         )
-        lines.append(f"  offsets       {pairs} mm ({wb.get('status', 'written')})")
+        status = wb.get("status", "written")
+        if result.get("offsets_held_by") == "station" and status == "written":
+            status = "held by the station"
+        lines.append(f"  offsets       {pairs} mm ({status})")
     elif wb:
         reason = f": {wb['reason']}" if wb.get("reason") else ""
         lines.append(f"  offsets       not written ({wb.get('status')}{reason})")
