@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 from builders import FAST, resumed, simulated, station_config, station_data
+from truth import assert_truth, drho
 
 import orthocal
 from drivers.map_files import builtin_maps, load_map
@@ -281,8 +282,9 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok"
-    for axis, true in zip("xyz", true_drho, strict=True):
-        assert abs(result["identified"][f"drho_{axis}"] - true) < 0.01
+    # the truth within the run's own statement (2 µm gauges, two cycles, stands
+    # modelled: a standard error of ~6 µm; a fixed 10 µm failed one draw in a few)
+    assert_truth(result, drho(true_drho))
     # no gauge ever read at an end of its stroke: not at the stops, not in the guard's polls
     assert len(stations) == 2
     assert all(sim.clamped == 0 for _, sims in stations for sim in sims.values())
