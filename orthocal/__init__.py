@@ -17,6 +17,17 @@ from orthocal.accuracy import (
     tool_error,
     workspace_grid,
 )
+from orthocal.budget import (
+    ExpectedLackOfFit,
+    Source,
+    budget_sources,
+    combine,
+    expected_lack_of_fit,
+    form_vector,
+    key_sensitivity,
+    propagation,
+    sensitivity,
+)
 from orthocal.calibration import (
     coefficients,
     jacobian,
@@ -28,7 +39,7 @@ from orthocal.geometry import AXES, MODELS, PARAM_NAMES, TILT_NAMES, Geometry
 from orthocal.identification import Identification, cannot_identify, exact_jacobian, identify
 from orthocal.inputs import IdentificationError
 from orthocal.kinematics import axis_directions, forward, inverse
-from orthocal.measurement import deviation, deviations, leg_reading
+from orthocal.measurement import bow_at, contact_fraction, deviation, deviations, leg_reading
 from orthocal.noise import coverage_factor
 from orthocal.postures import posture, posture_point
 from orthocal.selection import ModelSelection, select_model
@@ -43,40 +54,51 @@ __all__ = [
     "TILT_NAMES",
     "AfterInterval",
     "ErrorField",
+    "ExpectedLackOfFit",
     "Geometry",
     "Grid",
     "Identification",
     "IdentificationError",
     "ModelSelection",
     "OptimalOffsets",
+    "Source",
     "Squareness",
     "StandEstimate",
     "Stands",
     "after_interval",
     "assumes",
     "axis_directions",
+    "bow_at",
+    "budget_sources",
     "cannot_identify",
     "coefficients",
+    "combine",
+    "contact_fraction",
     "covariance_matrix",
     "coverage_factor",
     "deviation",
     "deviations",
     "error_field",
     "exact_jacobian",
+    "expected_lack_of_fit",
     "field_jacobian",
     "field_stats",
     "fit_frame",
+    "form_vector",
     "forward",
     "identify",
     "inverse",
     "jacobian",
+    "key_sensitivity",
     "leg_reading",
     "linear_deviations",
     "optimal_offsets",
     "posture",
     "posture_point",
+    "propagation",
     "rigid_fit",
     "select_model",
+    "sensitivity",
     "squareness",
     "statistical_floor",
     "tilt_coefficient",

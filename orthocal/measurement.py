@@ -11,7 +11,7 @@ the nonlinear identification both use these functions.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from orthocal.kinematics import axis_directions, forward, forward_on_axes
 from orthocal.postures import check_posture, posture
 
 Key = tuple[str, str, str]  # (posture: "+", "-" or a signed stroke "+30"; leg i; direction j)
+Bows = Mapping[tuple[str, str], float]  # gauge (leg i, direction j) → sagitta h of its plane, mm
 
 
 def check_key(key: Key) -> Key:
@@ -38,6 +39,25 @@ def check_key(key: Key) -> Key:
     return key
 
 
+def _pick(a: np.ndarray, k) -> np.ndarray:
+    """``a[..., k]``: one index for every point, or one per row of a (n, 3) array."""
+    return a[..., k] if np.ndim(k) == 0 else a[np.arange(a.shape[0]), k]
+
+
+def fraction_at(
+    rho: np.ndarray, p: np.ndarray, i, drho: np.ndarray, mount, u: np.ndarray | None = None,
+) -> np.ndarray:
+    """The fraction t = (A_i − M)/(A_i − p_i) from the carriage A toward P at which
+    leg i's axis crosses the base-fixed plane x_i = ``mount`` (arguments as for
+    :func:`reading_at`): where the plunger touches the leg. Nominally 1/2 at Π0
+    and 1/2 + sin α at Π_i^s (model.md, μ of system (7))."""
+    q_i = _pick(rho, i) + drho[i]
+    if u is None:
+        return (q_i - mount) / (q_i - _pick(p, i))
+    a_i = q_i * u[i, i]
+    return (a_i - mount) / (a_i - _pick(p, i))
+
+
 def reading_at(
     rho: np.ndarray, p: np.ndarray, i, j, drho: np.ndarray, mount: float,
     u: np.ndarray | None = None,
@@ -50,19 +70,33 @@ def reading_at(
     The indicator plane x_i = M is fixed to the base; the carriage
     A = q_i·u_i (q = ρ + Δρ) leaves the coordinate axis when u_i is tilted, so the
     leg's axis A → P crosses the plane at the fraction t = (A_i − M)/(A_i − p_i)
-    from A, where its j-coordinate is A_j + t·(p_j − A_j). With u_i = e_i
-    (A_i = q_i, A_j = 0) this is the paper's t·p_j, bit for bit.
+    from A (:func:`fraction_at`), where its j-coordinate is A_j + t·(p_j − A_j).
+    With u_i = e_i (A_i = q_i, A_j = 0) this is the paper's t·p_j, bit for bit.
     """
-
-    def pick(a: np.ndarray, k) -> np.ndarray:
-        # one index for every point, or one per row of a (n, 3) array
-        return a[..., k] if np.ndim(k) == 0 else a[np.arange(a.shape[0]), k]
-
-    q_i = pick(rho, i) + drho[i]
+    t = fraction_at(rho, p, i, drho, mount, u)
     if u is None:
-        return (q_i - mount) / (q_i - pick(p, i)) * pick(p, j)
-    a_i, a_j = q_i * u[i, i], q_i * u[i, j]
-    return a_j + (a_i - mount) / (a_i - pick(p, i)) * (pick(p, j) - a_j)
+        return t * _pick(p, j)
+    a_j = (_pick(rho, i) + drho[i]) * u[i, j]
+    return a_j + t * (_pick(p, j) - a_j)
+
+
+def bow_at(t, h) -> np.ndarray:
+    """What a bow of the leg's surface adds to a reading taken at the fraction ``t``
+    along the leg (from the carriage): the parabola through both ends of the leg
+    with sagitta ``h`` (mm) at its middle, w(t) = 4·h·t·(1 − t) (issue 23). A
+    straight leg (h = 0) adds nothing; a deviation sees w(t_s) − w(t_0)."""
+    t = np.asarray(t, dtype=float)
+    return 4.0 * np.asarray(h, dtype=float) * t * (1.0 - t)
+
+
+def _leg_solve(rho, geometry: Geometry, drho, dL, mount, tilt
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray | None]:
+    """(ρ, P, Δρ, M, u) of :func:`leg_reading` and :func:`contact_fraction`."""
+    drho_v = np.zeros(3) if drho is None else np.asarray(drho, dtype=float)
+    rho = np.asarray(rho, dtype=float)
+    p = forward(rho, geometry, drho_v, dL, tilt)
+    m = geometry.mount_plane if mount is None else mount
+    return rho, p, drho_v, m, axis_directions(tilt)
 
 
 def leg_reading(
@@ -74,6 +108,7 @@ def leg_reading(
     dL=None,
     mount: float | None = None,
     tilt=None,
+    bow: float | None = None,
 ) -> np.ndarray:
     """Coordinate along ``direction`` of leg ``leg``'s axis in the base-fixed plane
     x_leg = M (model.md, "Where the indicator plane is").
@@ -82,13 +117,34 @@ def leg_reading(
     ``tilt`` (mrad) tilts the axes) to P and crosses x_i = M at the fraction
     t = (A_i − M)/(A_i − p_i) from A, where its j-coordinate is
     A_j + t·(p_j − A_j). ``rho`` has shape (..., 3).
+
+    ``bow``: the sagitta h (mm) of the leg's surface that this gauge sees, its
+    bow w(t) = 4·h·t·(1 − t) (:func:`bow_at`) added to the reading; None (the
+    default): a straight leg, the reading bit for bit as without the argument.
     """
-    drho_v = np.zeros(3) if drho is None else np.asarray(drho, dtype=float)
-    rho = np.asarray(rho, dtype=float)
-    p = forward(rho, geometry, drho_v, dL, tilt)
-    m = geometry.mount_plane if mount is None else mount
-    return reading_at(rho, p, AXIS_INDEX[leg], AXIS_INDEX[direction], drho_v, m,
-                    axis_directions(tilt))
+    rho, p, drho_v, m, u = _leg_solve(rho, geometry, drho, dL, mount, tilt)
+    i = AXIS_INDEX[leg]
+    reading = reading_at(rho, p, i, AXIS_INDEX[direction], drho_v, m, u)
+    if bow is None:
+        return reading
+    return reading + bow_at(fraction_at(rho, p, i, drho_v, m, u), bow)
+
+
+def contact_fraction(
+    rho,
+    leg: str,
+    geometry: Geometry,
+    drho=None,
+    dL=None,
+    mount: float | None = None,
+    tilt=None,
+) -> np.ndarray:
+    """The fraction t along leg ``leg`` (from the carriage A toward P) at which the
+    gauges of the plane x_leg = M touch it at the joints ``rho`` (..., 3):
+    t = (A_i − M)/(A_i − p_i), exact (:func:`fraction_at`; arguments as for
+    :func:`leg_reading`). ≈ 1/2 at Π0, 1/2 + ρmax/L at Π_i^+, 1/2 + ρmin/L at Π_i^−."""
+    rho, p, drho_v, m, u = _leg_solve(rho, geometry, drho, dL, mount, tilt)
+    return fraction_at(rho, p, AXIS_INDEX[leg], drho_v, m, u)
 
 
 def deviation(key: Key, geometry: Geometry, params=None) -> float:
@@ -98,7 +154,7 @@ def deviation(key: Key, geometry: Geometry, params=None) -> float:
 
 
 def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
-               mount_offsets=None) -> np.ndarray:
+               mount_offsets=None, bow: Bows | None = None) -> np.ndarray:
     """Exact deviations for many keys at once (repeated keys allowed).
 
     ``mount_offsets``: None (every indicator in the nominal plane x_i = L/2), or
@@ -107,6 +163,12 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
     it is taken against uses the same plane. With None the result is bit for bit
     the one without the argument.
 
+    ``bow``: the legs' form as the gauges see it, gauge (leg, direction) → the
+    sagitta h (mm) of the leg's surface in that gauge's plane (gauges not named:
+    straight); each row's deviation gains w(t_s) − w(t_0), w(t) = 4·h·t·(1 − t)
+    (:func:`bow_at`) at the contact fractions of its test posture and of Π0.
+    None: straight legs, bit for bit as without the argument.
+
     Vectorised: one batched forward solve for the test postures of all ``keys``
     and one for Π0 (per-row leg and direction indices), because the nonlinear
     identification evaluates this hundreds of times.
@@ -114,18 +176,32 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
     drho, dL, tilt = split_params(params)
     if len(keys) == 0:
         return np.empty(0)
-    if mount_offsets is not None:
-        offsets = np.asarray(mount_offsets, dtype=float).reshape(-1)
+    if mount_offsets is not None or bow is not None:
+        offsets = np.zeros(len(keys)) if mount_offsets is None else \
+            np.asarray(mount_offsets, dtype=float).reshape(-1)
         if offsets.shape != (len(keys),):
             raise ValueError(f"mount_offsets needs one value per key ({len(keys)}), "
                              f"got shape {np.shape(mount_offsets)}")
-        return _deviations_mounted(keys, geometry, drho, dL, tilt, offsets)
+        return _deviations_mounted(keys, geometry, drho, dL, tilt, offsets,
+                                   None if bow is None else _row_bows(keys, bow))
     rows, legs, dirs, rho_s, rho_0, p_all, u = _solve(keys, geometry, drho, dL, tilt)
     p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
     m = geometry.mount_plane
     reading_s = reading_at(rho_s, p_s, legs, dirs, drho, m, u)
     dev = reading_s - reading_at(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m, u)
     return dev[rows]
+
+
+def _row_bows(keys: Sequence[Key], bow: Bows) -> np.ndarray:
+    """The sagitta of each row's gauge plane from a gauge → sagitta mapping."""
+    for gauge, h in bow.items():
+        if not (isinstance(gauge, tuple) and len(gauge) == 2 and gauge[0] in AXIS_INDEX
+                and gauge[1] in AXIS_INDEX and gauge[0] != gauge[1]):
+            raise ValueError(f"a bow's gauge is (leg, direction), two different axes, "
+                             f"got {gauge!r}")
+        if not np.isfinite(h):
+            raise ValueError(f"the bow of gauge {gauge!r} is not a finite number: {h!r}")
+    return np.array([float(bow.get((k[1], k[2]), 0.0)) for k in keys])
 
 
 def _solve(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray, dL: np.ndarray,
@@ -153,14 +229,22 @@ def _solve(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray, dL: np.nda
 
 
 def _deviations_mounted(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray,
-                        dL: np.ndarray, tilt: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """:func:`deviations` with one indicator plane per row, M = L/2 + offset: the
-    same batched solves, the readings taken in each row's own plane."""
+                        dL: np.ndarray, tilt: np.ndarray, offsets: np.ndarray,
+                        bows: np.ndarray | None = None) -> np.ndarray:
+    """:func:`deviations` with one indicator plane per row, M = L/2 + offset, and
+    (``bows``, one sagitta per row, or None) each row's leg bowed: the same batched
+    solves, the readings taken in each row's own plane."""
     rows, legs, dirs, rho_s, rho_0, p_all, u = _solve(keys, geometry, drho, dL, tilt)
     # expand the distinct solves to the rows, each read in its own plane
     p_s, rho_r = p_all[:-1][rows], rho_s[rows]
+    rho_0r = np.broadcast_to(rho_0, rho_r.shape)
     p_0 = np.broadcast_to(p_all[-1], rho_r.shape)
     m = geometry.mount_plane + offsets
     li, di = legs[rows], dirs[rows]
     reading_s = reading_at(rho_r, p_s, li, di, drho, m, u)
-    return reading_s - reading_at(np.broadcast_to(rho_0, rho_r.shape), p_0, li, di, drho, m, u)
+    dev = reading_s - reading_at(rho_0r, p_0, li, di, drho, m, u)
+    if bows is None:
+        return dev
+    t_s = fraction_at(rho_r, p_s, li, drho, m, u)
+    t_0 = fraction_at(rho_0r, p_0, li, drho, m, u)
+    return dev + (bow_at(t_s, bows) - bow_at(t_0, bows))

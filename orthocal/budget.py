@@ -1,0 +1,536 @@
+"""The uncertainty budget of an identification: Type B inputs propagated through
+the identification's own sensitivity and combined with its Type A part (GUM,
+JCGM 100:2008; design.md, "Uncertainty budget"; issue 23).
+
+At the solution the identification is, to first order, linear in the data:
+δθ = K·δΔ (:func:`sensitivity`; GUM 5.1.3, the sensitivity coefficients as a
+matrix). Each Type B source states the covariance Σ_s it puts on the distinct
+deviations (systematic: the same error in every cycle of a deviation, so not
+divided by the number of cycles) and contributes u_s(θ_p) = sqrt((K·Σ_s·Kᵀ)_pp)
+(GUM 5.2, correlated inputs). Sources independent of one another and of the
+Type A part combine in quadrature (GUM 5.1.2), with Welch–Satterthwaite's
+effective dof, Type B at ∞ (GUM G.4.1), and U = k·u_c, k from Student's t (G.3).
+The sources (:func:`budget_sources`): leg straightness (each gauge plane bowed,
+:func:`form_vector`), gauge MPE, gauge resolution, plunger angle (cosine error)
+and a temperature step; each builder's docstring gives its model.
+
+Pure functions, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from orthocal.calibration import jacobian
+from orthocal.geometry import AXES, PARAM_NAMES, Geometry, split_params
+from orthocal.identification import Identification, exact_jacobian
+from orthocal.measurement import Key, bow_at, contact_fraction, deviations
+from orthocal.noise import coverage_factor, row_correlation
+from orthocal.numbers import finite
+from orthocal.postures import posture
+from orthocal.stands import incidence, prior_penalty, stand_jacobian
+
+Gauge = tuple[str, str]  # (leg i, direction j): one dial indicator, one gauge plane
+#: Linear expansion of steel, 1/K (issue 23).
+STEEL_ALPHA = 11.5e-6
+#: The travel over which a gauge's MPE is stated (mm): about what a first round's
+#: deviations span (issue 23: "the few tenths of a millimetre a deviation spans").
+MPE_SPAN_MM = 0.2
+#: The coverage probability of ``expanded_95_mm``.
+COVERAGE = 0.95
+# How far (mm) the geometry given may reproduce an identification's model values off.
+_GEOMETRY_TOL = 1e-9
+
+
+# --- sensitivity ----------------------------------------------------------------------
+
+
+def _check_geometry(ident: Identification, geometry: Geometry) -> None:
+    """Refuse a geometry that does not reproduce the identification's model values:
+    the sensitivity would be that of another machine."""
+    keys = list(ident.keys)
+    if ident.method == "nonlinear":
+        again = deviations(keys, geometry, ident.vector, ident.mount_offsets)
+    else:
+        J_all = jacobian(keys, geometry, "full+tilt")
+        again = J_all[:, :6] @ ident.vector[:6] + J_all[:, 6:] @ ident.vector[6:]
+    model_values = np.asarray(ident.values) - np.asarray(ident.residuals)
+    if not np.allclose(again, model_values, rtol=0.0, atol=_GEOMETRY_TOL):
+        raise ValueError("this geometry does not reproduce the identification's model values: "
+                         "give the geometry it was identified with")
+
+
+def _design(ident: Identification, geometry: Geometry
+            ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """(J_θ, J_M, Λ, C) of the identification at its solution: the Jacobian of its
+    parameters (rows its ``keys``), and with stands their exact columns, their
+    prior's penalty σ²/σ_M² (orthocal.stands) and the residual's curvature
+    term (:func:`_stand_curvature`), else None, None, None."""
+    keys = list(ident.keys)
+    if ident.method != "nonlinear":
+        return jacobian(keys, geometry, ident.model), None, None, None
+    J_t = exact_jacobian(keys, geometry, ident.vector, ident.model, ident.mount_offsets)
+    if ident.stand_model is None:
+        return J_t, None, None, None
+    assert ident.stand_sigma is not None
+    _, S = incidence(keys, ident.stand_model)  # columns in the order of ident.stands
+    J_m = stand_jacobian(keys, geometry, ident.vector, S)
+    lam = prior_penalty(ident.stand_sigma, ident.stand_model, S.shape[1])
+    return J_t, J_m, lam, _stand_curvature(ident, geometry)
+
+
+def _gain(J_t: np.ndarray, J_m: np.ndarray | None, lam: np.ndarray | None,
+          curvature: np.ndarray | None = None) -> np.ndarray:
+    """The full linear map from the rows to the estimates (θ, then the stands)."""
+    if J_m is None or lam is None:
+        return np.linalg.pinv(J_t)
+    A = np.hstack([J_t, J_m])
+    p = J_t.shape[1]
+    hessian = A.T @ A
+    hessian[p:, p:] += lam
+    if curvature is not None:
+        hessian = hessian + curvature
+    return np.linalg.solve(hessian, A.T)
+
+
+def _stand_curvature(ident: Identification, geometry: Geometry) -> np.ndarray:
+    """Σ_k r_k·∇²f_k over x = (θ, m) of a fit with stands, r = f − y at the
+    solution: the residual's term of the objective's Hessian. Central differences
+    of A = [J_θ, J_M] with steps of 1e-3 (mm, mrad; A is linear in m, smooth in θ)."""
+    assert ident.stand_model is not None
+    keys = list(ident.keys)
+    _, S = incidence(keys, ident.stand_model)
+    cols = [PARAM_NAMES.index(n) for n in ident.names]
+    x0 = np.concatenate([ident.vector[cols], ident.stand_offsets])
+
+    def A_at(x: np.ndarray) -> np.ndarray:
+        full = np.zeros(len(PARAM_NAMES))
+        full[cols] = x[: len(cols)]
+        return np.hstack([exact_jacobian(keys, geometry, full, ident.model, S @ x[len(cols):]),
+                          stand_jacobian(keys, geometry, full, S)])
+
+    f_minus_y, h = -np.asarray(ident.residuals), 1e-3
+    steps = h * np.eye(len(x0))
+    C = np.column_stack([(A_at(x0 + d) - A_at(x0 - d)).T @ f_minus_y / (2 * h) for d in steps])
+    return 0.5 * (C + C.T)
+
+
+def sensitivity(ident: Identification, geometry: Geometry | None = None) -> np.ndarray:
+    """K (n_params × n_rows, rows ``ident.keys``): δθ = K·δΔ, the change of the
+    identified parameters per change of each measured deviation, at the solution
+    (GUM 5.1.3, the sensitivity coefficients).
+
+    The identification's own Jacobian J (orthocal.identification.exact_jacobian
+    at the solution; (7) for the linear method), pseudo-inverted: K = J⁺. With
+    the stands modelled (orthocal.stands) the estimate minimises
+    |f(θ, m) − y|² + mᵀΛm, A = [J_θ, J_M], Λ = σ²/σ_M² on the stands, and
+    K is the parameters' rows of (AᵀA + Λ + C)⁻¹Aᵀ, the stands taking their
+    share of a deviation error as the fit does; C = Σ r_k·∇²f_k is the
+    residual's curvature term, kept here because the stands' block of AᵀA is
+    weak (~1e-5: the stands act through the offsets' small slopes) and the
+    residual times the cross-curvature ∂J_M/∂θ (~1e-6) moves K by ~0.5 %;
+    without stands it moves K by < 1e-4 and is left out.
+
+    ``geometry``: the one identified with (None: the default Geometry); one that
+    does not reproduce the identification's model values raises ValueError.
+    """
+    geometry = geometry or Geometry()
+    _check_geometry(ident, geometry)
+    return _gain(*_design(ident, geometry))[: len(ident.names)]
+
+
+def key_sensitivity(ident: Identification, geometry: Geometry | None = None
+                    ) -> tuple[list[Key], np.ndarray]:
+    """(distinct keys, K_d): the sensitivity to a systematic error of each distinct
+    deviation, the same in all its cycles: K_d[:, d] = Σ_rows of key d K[:, r]."""
+    keys = list(ident.keys)
+    distinct = list(dict.fromkeys(keys))
+    return distinct, sensitivity(ident, geometry) @ _rows_of(keys, distinct)
+
+
+def _rows_of(keys: Sequence[Key], distinct: Sequence[Key]) -> np.ndarray:
+    """P (n_rows × n_distinct): P[r, d] = 1 when row r measures key d."""
+    index = {k: n for n, k in enumerate(distinct)}
+    P = np.zeros((len(keys), len(distinct)))
+    P[np.arange(len(keys)), [index[k] for k in keys]] = 1.0
+    return P
+
+
+# --- the form of the legs ----------------------------------------------------------------
+
+
+def form_vector(keys: Sequence[Key], geometry: Geometry, params=None,
+                mount_offsets=None) -> np.ndarray:
+    """g_k per deviation key: the change of the deviation per unit sagitta of its
+    gauge plane, g_k = w(t_k) − w(t_0) with w(t) = 4·t(1 − t)
+    (orthocal.measurement.bow_at), t_k the contact fraction at the key's test
+    posture Π_i^s and t_0 at Π0, both exact (orthocal.measurement.contact_fraction)
+    at ``params`` (9- or 6-vector, None: nominal) in the planes L/2 +
+    ``mount_offsets`` (one per key, None: L/2). A bow of sagitta h in that plane
+    changes the deviation by exactly h·g_k (the fractions do not depend on h);
+    nominally g = −4·(s/L)², −0.150 at Π^+ and −0.416 at Π^− on the paper's machine."""
+    drho, dL, tilt = split_params(params)
+    offsets = np.zeros(len(keys)) if mount_offsets is None else \
+        np.asarray(mount_offsets, dtype=float).reshape(-1)
+    if offsets.shape != (len(keys),):
+        raise ValueError(f"mount_offsets needs one value per key ({len(keys)}), "
+                         f"got shape {np.shape(mount_offsets)}")
+    rho_0 = posture("0", None, geometry)
+    g = np.empty(len(keys))
+    for n, (sign, leg, _) in enumerate(keys):
+        m = geometry.mount_plane + offsets[n]
+        t_k = contact_fraction(posture(sign, leg, geometry), leg, geometry, drho, dL, m, tilt)
+        t_0 = contact_fraction(rho_0, leg, geometry, drho, dL, m, tilt)
+        g[n] = float(bow_at(t_k, 1.0) - bow_at(t_0, 1.0))
+    return g
+
+
+def sagitta_from_straightness(straightness: float, span: float) -> float:
+    """The sagitta h over the whole leg of the bow w = 4h·t(1 − t) that deviates by
+    ``straightness`` from its chord over a fraction ``span`` of the leg: h =
+    straightness/span². The plunger slides over span ≈ (ρmax − ρmin)/L = 0.516
+    of the paper's legs: a straightness over that slide is a 3.76 times larger h."""
+    if not (0.0 < span <= 1.0):
+        raise ValueError(f"span must be a fraction of the leg in (0, 1], got {span!r}")
+    return float(straightness) / span**2
+
+
+# --- sources ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Propagation:
+    """What every source is propagated with (:func:`propagation`): the parameters'
+    ``names``, the distinct deviation ``keys``, the sensitivity ``K`` to their
+    systematic errors (n_params × n_keys), the identified ``params`` (9-vector),
+    each key's plane offset off L/2 (``mount_offsets``), the ``measured``
+    deviations (the mean of each key's cycles) and the ``geometry``."""
+
+    names: tuple[str, ...]
+    keys: tuple[Key, ...]
+    K: np.ndarray
+    params: np.ndarray
+    mount_offsets: np.ndarray
+    measured: np.ndarray
+    geometry: Geometry
+
+    def contributions(self, covariance: np.ndarray) -> dict[str, float]:
+        """u(θ_p) = sqrt((K·Σ·Kᵀ)_pp) of a deviation covariance Σ (GUM 5.2.2)."""
+        var = np.einsum("pk,kl,pl->p", self.K, covariance, self.K)
+        return {n: float(math.sqrt(max(v, 0.0))) for n, v in zip(self.names, var, strict=True)}
+
+    def mask(self, gauge: Gauge) -> np.ndarray:
+        """1.0 on the keys of ``gauge`` (leg, direction), else 0."""
+        return np.array([float((k[1], k[2]) == gauge) for k in self.keys])
+
+    @property
+    def gauges(self) -> list[Gauge]:
+        """The gauges measured, in the order their keys first appear."""
+        return list(dict.fromkeys((k[1], k[2]) for k in self.keys))
+
+
+def propagation(ident: Identification, geometry: Geometry | None = None) -> Propagation:
+    """:class:`Propagation` of an identification (``geometry`` as for :func:`sensitivity`)."""
+    geometry = geometry or Geometry()
+    keys = list(ident.keys)
+    distinct, K = key_sensitivity(ident, geometry)
+    P = _rows_of(keys, distinct)
+    offsets = np.zeros(len(keys)) if ident.mount_offsets is None else ident.mount_offsets
+    return Propagation(names=tuple(ident.names), keys=tuple(distinct), K=K, params=ident.vector,
+                       mount_offsets=np.asarray(offsets)[[keys.index(k) for k in distinct]],
+                       measured=(P.T @ np.asarray(ident.values)) / P.sum(axis=0),
+                       geometry=geometry)
+
+
+@dataclass(frozen=True)
+class Source:
+    """One input of the budget: ``value_mm`` the half-width of the error it puts on
+    one deviation (None when not a length: see ``inputs``), ``u_mm`` its standard
+    uncertainty, ``contributions`` u(θ_p) in mm (GUM 5.1.3, 5.2.2), ``dof`` ∞ for
+    Type B (GUM G.4.2), ``covariance`` the one it puts on the distinct deviations
+    ``keys`` (mm²; for :func:`expected_lack_of_fit`)."""
+
+    name: str
+    distribution: str
+    value_mm: float | None
+    u_mm: float | None
+    contributions: dict[str, float]
+    type: str = "B"
+    dof: float = math.inf
+    inputs: dict[str, float] = field(default_factory=dict)
+    keys: tuple[Key, ...] = ()
+    covariance: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """design.md's ``uncertainty_budget.sources`` entry (JSON-ready)."""
+        out: dict[str, Any] = {
+            "source": self.name, "type": self.type, "distribution": self.distribution,
+            "value_mm": finite(self.value_mm), "u_mm": finite(self.u_mm),
+            "contributions_mm": {n: finite(v) for n, v in self.contributions.items()}}
+        if self.type == "A":
+            out["dof"] = finite(self.dof)
+        if self.inputs:
+            out["inputs"] = {n: finite(v) for n, v in self.inputs.items()}
+        return out
+
+
+def _source(prop: Propagation, name: str, distribution: str, value: float | None,
+            u: float | None, covariance: np.ndarray, **inputs: float) -> Source:
+    return Source(name, distribution, value, u, prop.contributions(covariance),
+                  inputs=dict(inputs), keys=prop.keys, covariance=covariance)
+
+
+def _non_negative(value: float, what: str) -> float:
+    v = float(value)
+    if not (math.isfinite(v) and v >= 0.0):
+        raise ValueError(f"{what} must be a finite number ≥ 0, got {value!r}")
+    return v
+
+
+def _per(value, names: Sequence, what: str) -> dict:
+    """One value ≥ 0 per name from a number or a mapping name → number."""
+    if not isinstance(value, Mapping):
+        return dict.fromkeys(names, _non_negative(value, what))
+    missing = [n for n in names if n not in value]
+    if missing:
+        raise ValueError(f"{what}: no value for {missing}")
+    return {n: _non_negative(value[n], what) for n in names}
+
+
+def straightness_sources(prop: Propagation, straightness) -> list[Source]:
+    """Leg straightness (issue 23 (a)), one source per measured leg: each gauge
+    plane (leg, direction) of the leg bowed independently with a sagitta uniform
+    in ±s (u = s/√3); the bow h adds h·g_plane to the plane's deviations
+    (:func:`form_vector` restricted to its keys), so the plane contributes
+    |K_p·g_plane|·u and the leg the quadrature over its planes. ``straightness``:
+    s in mm, one value, [x, y, z] or leg → s; the sagitta of the bow over the
+    whole leg (:func:`sagitta_from_straightness` for one over the plunger's slide)."""
+    legs = list(dict.fromkeys(g[0] for g in prop.gauges))
+    if isinstance(straightness, Sequence):
+        if len(straightness) != len(AXES):
+            raise ValueError(f"leg straightness: one value or [x, y, z], got {straightness!r}")
+        straightness = dict(zip(AXES, straightness, strict=True))
+    s_of = _per(straightness, legs, "leg straightness")
+    g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
+    out = []
+    for leg in legs:
+        u = s_of[leg] / math.sqrt(3.0)
+        cov = sum(u**2 * np.outer(g * prop.mask(gg), g * prop.mask(gg))
+                  for gg in prop.gauges if gg[0] == leg)
+        out.append(_source(prop, f"leg straightness {leg}", "rectangular", s_of[leg], u, cov))
+    return out
+
+
+def _per_deviation(prop: Propagation, name: str, distribution: str, value_of: dict,
+                   divisor: float) -> list[Source]:
+    """One source per gauge: each of its deviations off independently by ±value
+    (standard uncertainty value/divisor)."""
+    return [_source(prop, f"{name} {''.join(gauge)}", distribution, value, value / divisor,
+                    np.diag((value / divisor) ** 2 * prop.mask(gauge)))
+            for gauge, value in value_of.items()]
+
+
+def mpe_sources(prop: Propagation, mpe, span_mm: float | None = MPE_SPAN_MM) -> list[Source]:
+    """Gauge MPE (issue 23 (b)), one source per gauge: each deviation it measures
+    off by a rectangular ±e_k, independent per deviation and systematic (the same
+    in every cycle): u = e_k/√3, contribution sqrt(Σ_k K_pk²·u_k²). e_k is the MPE
+    e over the travel a deviation spans: e for a deviation of ``span_mm`` or more,
+    in proportion below (a gauge's error is a smooth function of its plunger's
+    position: over a few µm of travel, as a converged machine's deviations are, it
+    changes by a few µm × its slope); ``span_mm`` None: e on every deviation.
+    ``mpe``: mm, one value or gauge (leg, direction) → e."""
+    values = _per(mpe, prop.gauges, "gauge MPE")
+    scale = np.ones(len(prop.keys)) if span_mm is None else \
+        np.minimum(1.0, np.abs(prop.measured) / span_mm)
+    return [_source(prop, f"gauge MPE {''.join(gauge)}", "rectangular", e, e / math.sqrt(3.0),
+                    np.diag((e * scale / math.sqrt(3.0)) ** 2 * prop.mask(gauge)),
+                    span_mm=span_mm if span_mm is not None else math.nan)
+            for gauge, e in values.items()]
+
+
+def resolution_sources(prop: Propagation, resolution) -> list[Source]:
+    """Gauge resolution (issue 23 (c)), one source per gauge: a deviation is the
+    difference of two readings each quantised by ±r/2 (rectangular), i.e.
+    triangular ±r, u = r/√6 (GUM 4.3.9 and F.2.2.1); like :func:`mpe_sources`
+    otherwise. ``resolution``: the gauge's step r, mm, one value or gauge → r."""
+    return _per_deviation(prop, "gauge resolution", "triangular",
+                          _per(resolution, prop.gauges, "gauge resolution"), math.sqrt(6.0))
+
+
+def plunger_angle_source(prop: Propagation, angle_deg: float) -> Source:
+    """Plunger angle (issue 23 (d)): a plunger θ off the direction it should measure
+    reads cos θ of the travel, a relative scale error of all the gauge's
+    deviations; taken as rectangular over ±c, c = 1 − cos θmax (conservative:
+    the real error is one-sided), common to the gauge's deviations and
+    independent between gauges: the gauge contributes |K_p·(c·Δ_gauge)|/√3,
+    Δ_gauge its measured deviations, the source the quadrature over the gauges."""
+    theta = _non_negative(angle_deg, "plunger angle")
+    c = 1.0 - math.cos(math.radians(theta))
+    cov = sum(np.outer(c * prop.measured * prop.mask(gg), c * prop.measured * prop.mask(gg))
+              for gg in prop.gauges) / 3.0
+    return _source(prop, "plunger angle", "rectangular", None, None, cov,
+                   plunger_angle_deg=theta, scale_error=c)
+
+
+def temperature_source(prop: Propagation, temperature_change: float,
+                       alpha: float = STEEL_ALPHA) -> Source:
+    """Temperature change (issue 23 (e)): a leg of length L grows by α·ΔT·L; as a
+    step at an unknown time between the Π0 stops that bracket a reading, their
+    mean does not remove it: each deviation off by a rectangular ±α·ΔT·L/2,
+    independent per deviation. ``temperature_change``: ΔT in K (or °C)."""
+    dt = _non_negative(temperature_change, "temperature change")
+    half = alpha * dt * prop.geometry.leg_length / 2.0
+    u = half / math.sqrt(3.0)
+    return _source(prop, "temperature", "rectangular", half, u, u**2 * np.eye(len(prop.keys)),
+                   temperature_change_k=dt, alpha_per_k=alpha,
+                   leg_length_mm=prop.geometry.leg_length)
+
+
+def budget_sources(ident: Identification, geometry: Geometry | None = None, *,
+                   straightness=None, mpe=None, resolution=None,
+                   plunger_angle_deg: float | None = None,
+                   temperature_change: float | None = None,
+                   alpha: float = STEEL_ALPHA,
+                   mpe_span_mm: float | None = MPE_SPAN_MM) -> list[Source]:
+    """The standard Type B sources of those inputs that are given (None: left
+    out), all propagated through one :func:`propagation` of ``ident``."""
+    prop = propagation(ident, geometry)
+    out: list[Source] = []
+    if straightness is not None:
+        out += straightness_sources(prop, straightness)
+    if mpe is not None:
+        out += mpe_sources(prop, mpe, mpe_span_mm)
+    if resolution is not None:
+        out += resolution_sources(prop, resolution)
+    if plunger_angle_deg is not None:
+        out.append(plunger_angle_source(prop, plunger_angle_deg))
+    if temperature_change is not None:
+        out.append(temperature_source(prop, temperature_change, alpha))
+    return out
+
+
+# --- combination -----------------------------------------------------------------------
+
+
+def welch_satterthwaite(parts: Sequence[tuple[float, float]]) -> float:
+    """ν_eff = u_c⁴ / Σ u_i⁴/ν_i over (u_i, ν_i) (GUM G.4.1, eq. G.2b); parts with
+    ν_i = ∞ add to u_c only. ∞ when no part with finite dof contributes."""
+    uc2 = sum(u * u for u, _ in parts)
+    denom = sum(u**4 / nu for u, nu in parts if math.isfinite(nu) and u > 0.0)
+    if denom == 0.0:
+        return math.inf
+    return uc2**2 / denom
+
+
+def combine(type_a_se: Mapping[str, float], type_a_dof: float | None,
+            sources: Sequence[Source], coverage: float = COVERAGE,
+            type_a_name: str = "repeatability") -> dict[str, Any]:
+    """design.md's ``uncertainty_budget`` (JSON-ready): per parameter of
+    ``type_a_se`` (the identification's standard errors, resting on
+    ``type_a_dof`` degrees of freedom, None: ∞), the combined standard
+    uncertainty u_c = sqrt(u_A² + Σ u_s²) (GUM 5.1.2, independent sources), the
+    effective dof (:func:`welch_satterthwaite`, Type B with ∞), the coverage
+    factor k of Student's t at ν_eff (orthocal.noise.coverage_factor; the
+    normal's at ∞) and U = k·u_c. The Type A part leads ``sources`` (type "A",
+    normal, its dof). Infinite dof are stated as null."""
+    names = list(type_a_se)
+    for s in sources:
+        missing = [n for n in names if n not in s.contributions]
+        if missing:
+            raise ValueError(f"source {s.name!r} has no contribution to {missing}")
+    nu_a = math.inf if type_a_dof is None else float(type_a_dof)
+    if not nu_a > 0:
+        raise ValueError(f"type A dof must be > 0, got {type_a_dof!r}")
+    type_a = Source(type_a_name, "normal", None, None,
+                    {n: float(type_a_se[n]) for n in names}, type="A", dof=nu_a)
+    every = [type_a, *sources]
+    combined, dof, k, expanded = {}, {}, {}, {}
+    for n in names:
+        parts = [(s.contributions[n], s.dof) for s in every]
+        uc = math.sqrt(sum(u * u for u, _ in parts))
+        nu = welch_satterthwaite(parts)
+        kk = coverage_factor(None if math.isinf(nu) else nu, coverage)
+        combined[n], dof[n], k[n], expanded[n] = uc, nu, kk, kk * uc
+    return {
+        "sources": [s.to_dict() for s in every],
+        "combined_mm": {n: finite(v) for n, v in combined.items()},
+        "effective_dof": {n: finite(v) for n, v in dof.items()},
+        "coverage_factor": {n: finite(v) for n, v in k.items()},
+        f"expanded_{round(100 * coverage)}_mm": {n: finite(v) for n, v in expanded.items()},
+    }
+
+
+# --- what the budget lets the residual be ------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ExpectedLackOfFit:
+    """The residual sum of squares (mm², over the fit's rows) the fit leaves and
+    what noise and the budget's sources let it be (:func:`expected_lack_of_fit`)."""
+
+    observed: float
+    noise: float
+    sources: dict[str, float]
+    stands: float
+
+    @property
+    def expected(self) -> float:
+        """E[rᵀr] from noise, the stands' prior and every source."""
+        return self.noise + self.stands + sum(self.sources.values())
+
+    @property
+    def ratio(self) -> float:
+        """observed / expected: ≫ 1 when noise and the stated errors cannot explain
+        the residual (a model error), ≈ 1 or less when they can."""
+        return self.observed / self.expected if self.expected > 0 else math.inf
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"observed_rss_mm2": finite(self.observed), "noise_rss_mm2": finite(self.noise),
+                "stands_rss_mm2": finite(self.stands), "expected_rss_mm2": finite(self.expected),
+                "sources_rss_mm2": {n: finite(v) for n, v in self.sources.items()},
+                "ratio": finite(self.ratio)}
+
+
+def expected_lack_of_fit(ident: Identification, sources: Sequence[Source], sigma: float,
+                         geometry: Geometry | None = None,
+                         shared_zero: bool = True) -> ExpectedLackOfFit:
+    """E[rᵀr] = trace((I − H)·Σ·(I − H)ᵀ) of the fit's residual r (rows
+    ``ident.keys``), H = J·K its hat matrix (:func:`sensitivity`; (I − H) is the
+    projector of ordinary least squares, where this is trace((I − H)Σ_B) +
+    dof·σ²), Σ the rows' covariance: noise σ² (one per-cycle deviation;
+    ``shared_zero``: the station's shared Π0 stops correlate the rows,
+    orthocal.noise.row_correlation), each source's Σ_s expanded to the rows
+    (systematic: the same in every cycle) and, with stands modelled, their prior
+    J_M·σ_M²·J_Mᵀ. Each part stated apart, beside the observed rᵀr."""
+    geometry = geometry or Geometry()
+    _check_geometry(ident, geometry)
+    keys = list(ident.keys)
+    J_t, J_m, lam, curvature = _design(ident, geometry)
+    gain = _gain(J_t, J_m, lam, curvature)
+    A = J_t if J_m is None else np.hstack([J_t, J_m])
+    R = np.eye(len(keys)) - A @ gain  # r = R·(error of the data)
+
+    def part(cov: np.ndarray) -> float:
+        return float(np.einsum("rk,kl,rl->", R, cov, R))
+
+    distinct = list(dict.fromkeys(keys))
+    P = _rows_of(keys, distinct)
+    by_source: dict[str, float] = {}
+    for s in sources:
+        if s.covariance is None:
+            raise ValueError(f"source {s.name!r} states no deviation covariance")
+        if list(s.keys) != distinct:
+            raise ValueError(f"source {s.name!r} was built for other deviations")
+        by_source[s.name] = part(P @ s.covariance @ P.T)
+    stands = 0.0
+    if J_m is not None and ident.stand_model is not None:
+        stands = part(ident.stand_model.prior_sd**2 * (J_m @ J_m.T))
+    r = np.asarray(ident.residuals)
+    return ExpectedLackOfFit(observed=float(r @ r),
+                             noise=part(sigma**2 * row_correlation(keys, shared_zero)),
+                             sources=by_source, stands=stands)
