@@ -61,13 +61,15 @@ def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
               drive_accel: str | None = None, drive_delays: str | None = None,
               drive_sequence: str | None = None, indicators: int = 2,
               writeback: dict[str, Any] | None = None, speed: float | None = None,
-              backlash: str | None = None, profile: str | None = None) -> RunOptions:
+              backlash: str | None = None, profile: str | None = None,
+              leg_bow: str | None = None, gauge_scale: str | None = None) -> RunOptions:
     """``orthocal run --simulate`` into ``out``, with the test knobs the command
     line does not offer: ``hook`` (given the running virtual station), ``procedure``
     and ``writeback`` overrides, ``indicators`` (2 or 6), ``speed`` (mm/s)."""
     sim = SimOptions(
         seed=seed, true_drho=true_drho, true_dl=true_dl, true_tilt=true_tilt, noise=noise,
-        mount_error=mount_error, backlash=backlash, profile=profile,
+        mount_error=mount_error, backlash=backlash, leg_bow=leg_bow,
+        gauge_scale=gauge_scale, profile=profile,
         drive=DriveOptions(motion=motion, profile=drive_profile, accel=drive_accel,
                            delays=drive_delays, sequence=drive_sequence),
         indicators=indicators, procedure=procedure, writeback=writeback, speed_mm_s=speed,

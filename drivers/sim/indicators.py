@@ -29,6 +29,11 @@ link can open it again.
 An unmounted indicator (``unmount()``) answers as a gauge lying on the bench
 does: a constant reading (``unmounted_mm``) plus noise.
 
+A scale error (``scale_error`` S, relative): the gauge shows (1 + S) times its
+plunger's travel from where it was zeroed, as a gauge whose scale is off by
+S·100 % does (issue 23); its noise and its digits come on top, as on a real
+one. The stroke and its clamp are the plunger's, so they stay in true mm.
+
 A finite plunger (``stroke_mm``, mounted pushed in by ``preload_mm``, default
 half the stroke): the reading is the plunger's travel from where it was
 mounted (+ pushed in), so it clamps at −preload (the leg has left the fully
@@ -42,6 +47,7 @@ gauge's own :meth:`SimIndicator.travel_mm` and :meth:`SimIndicator.stroke_limits
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import random
 import select
@@ -95,7 +101,7 @@ class IndicatorFaults:
 class SimIndicator:
     """A virtual dial indicator on a pseudo-terminal.
 
-    Reading = ``sign * (source() - zero) + noise``, quantised to
+    Reading = ``(1 + scale_error) * sign * (source() - zero) + noise``, quantised to
     ``resolution_mm`` and written in the protocol's ``reply_format``. ``zero``
     is ``zero_mm`` if given, else ``source()`` at construction / :meth:`mount`
     / :meth:`zero` (the gauge's ZERO button). ``source`` is called from the
@@ -120,6 +126,7 @@ class SimIndicator:
         preload_mm: float | None = None,
         link: str | os.PathLike[str] | None = None,
         time_scale: float = 1.0,
+        scale_error: float = 0.0,
     ) -> None:
         self.protocol = make_protocol(protocol) if isinstance(protocol, str) else protocol
         if self.protocol.reply_format is None:
@@ -132,6 +139,11 @@ class SimIndicator:
             raise ValueError("baud must be positive")
         if not time_scale > 0:
             raise ValueError("time_scale must be > 0")
+        if not (math.isfinite(scale_error) and abs(scale_error) < 1.0):
+            raise ValueError(f"scale_error must be a relative error within ±1, "
+                             f"got {scale_error}")
+        #: The gauge's relative scale error S: it shows (1 + S)·travel.
+        self.scale_error = float(scale_error)
         self.name = name
         self.noise_mm = noise_mm
         self.resolution_mm = resolution_mm
@@ -250,6 +262,8 @@ class SimIndicator:
             if not low < raw < high:
                 self.clamped += 1
                 raw = min(max(raw, low), high)
+        if source is not None:
+            raw *= 1.0 + self.scale_error  # the scale is the display's: after the stop
         if self.noise_mm > 0:
             raw += self._rng.gauss(0.0, self.noise_mm)
         # + 0.0 turns -0.0 into 0.0: a gauge shows +0.000, not -0.000.

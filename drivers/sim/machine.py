@@ -32,6 +32,12 @@ where the count puts the band's middle, after a move down B/2 above. Within a
 move each axis is monotone, so the carriage is clamp(c_start, m − B/2, m + B/2).
 The controller reports the count; the legs, the gauges and the end point see
 the carriage.
+
+Bowed legs (``leg_bow``, mm per leg: the sagitta h of each leg's surface at its
+middle, :mod:`drivers.sim.form`): a gauge's coordinate gets 4·h·t·(1 − t), t
+being where along the leg its plane touches it; the end point does not move
+(the bow is the leg's form, not its length).
+
 State is evaluated lazily from a clock, so the machine needs no thread of its
 own; every public method is thread-safe. The clock may run faster than real time
 (``time_scale``, :func:`scaled_clock`): a move then takes its duration in clock
@@ -50,6 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import orthocal
+from drivers.sim import form
 from drivers.sim.motion import (
     EPS,
     SAMPLE_DT_S,
@@ -93,7 +100,8 @@ class VirtualOrthoglide:
     ``true_drho``/``true_dl``: hidden joint offsets Δρ and leg-length errors ΔL
     (mm, 3-vectors); ``true_tilt``: hidden actuator axis tilts (tilt_yx, tilt_zx,
     tilt_zy, mrad; model.md "Extended model"); or pass ``true_params`` as the 6- or
-    9-vector of :data:`orthocal.PARAM_NAMES`. ``offsets``: the controller's zero offsets at
+    9-vector of :data:`orthocal.PARAM_NAMES`; ``leg_bow``: each leg's hidden bow
+    (mm, module docstring). ``offsets``: the controller's zero offsets at
     delivery (o_initial). ``start``: initial controller positions ρ (default Π0).
     ``motion``: a :class:`DriveMotion`, or "coordinated" / "independent"
     (:meth:`DriveMotion.named`); ``accel_mm_s2`` is the acceleration of every axis
@@ -128,6 +136,7 @@ class VirtualOrthoglide:
         motion: str | DriveMotion = "coordinated",
         time_scale: float = 1.0,
         backlash: Sequence[float] | None = None,
+        leg_bow: Sequence[float] | None = None,
     ) -> None:
         self.geometry = geometry or Geometry()
         if true_params is not None:
@@ -162,6 +171,8 @@ class VirtualOrthoglide:
         #: Each joint's lost motion B (mm): the carriage lags the motor by up to B/2.
         self.backlash = b
         self._half_band = 0.5 * b
+        #: Each leg's bow: the sagitta of its surface at its middle (mm, x, y, z).
+        self.leg_bow = _vec(leg_bow if leg_bow is not None else (0, 0, 0), 3, "leg_bow")
         self._carriage_rest = self._rest.copy()  # where the carriages stand at rest
         self._target_m = self._rest.copy()
         self._home_m = home_rho + self.offsets_initial  # the home switches do not move
@@ -479,13 +490,28 @@ class VirtualOrthoglide:
 
     def leg_reading(self, leg: str, direction: str, mount: float | None = None) -> float:
         """What a dial indicator on ``leg`` measuring along ``direction`` reads (mm):
-        :func:`orthocal.leg_reading` at the instantaneous joint values, true ΔL, its
-        stand in the plane x_leg = ``mount`` (default: the nominal L/2)."""
+        :meth:`readings` at the instantaneous joint values."""
         with self._lock:
             rho = self._rho_kin()
-        return float(orthocal.leg_reading(rho, leg, direction, self.geometry,
-                                          self.true_drho, self.true_dl, mount=mount,
-                                          tilt=self.true_tilt))
+        return float(self.readings(rho, leg, direction, mount))
+
+    def readings(self, rho: np.ndarray, leg: str, direction: str,
+                 mount: float | None = None) -> np.ndarray:
+        """The coordinate along ``direction`` of leg ``leg`` in the plane x_leg =
+        ``mount`` (default: the nominal L/2) at joints ``rho`` ((..., 3), as
+        :meth:`sample_segment` gives them): :func:`orthocal.leg_reading` with the
+        true errors, plus the leg's bow where the plane touches it
+        (:mod:`drivers.sim.form`; nothing computed for a straight leg, so its
+        readings stay those of the maths to the bit)."""
+        reading = orthocal.leg_reading(rho, leg, direction, self.geometry, self.true_drho,
+                                       self.true_dl, mount=mount, tilt=self.true_tilt)
+        h = float(self.leg_bow[orthocal.AXES.index(leg)])
+        if h == 0.0:
+            return reading
+        plane = self.geometry.mount_plane if mount is None else mount
+        t = form.contact_fraction(rho, leg, self.geometry, self.true_drho, self.true_dl,
+                                  self.true_tilt, plane)
+        return reading + form.bow_mm(t, h)
 
     def source(self, leg: str, direction: str,
                mount: float | None = None) -> Callable[[], float]:

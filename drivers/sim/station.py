@@ -39,6 +39,13 @@ what an integrator would write: ``motion = "coordinated"`` for a drive that
 interpolates, nothing otherwise (the profile's default, any timing), and the
 ``accel_mm_s2`` the station was given, not the drive's.
 
+Form and scale (issue 23): ``leg_bow`` bows each leg (the sagitta of its
+surface at its middle, mm, :mod:`drivers.sim.form`), so that a gauge's plunger,
+touching the leg at another point of it at each posture, sees the curve;
+``gauge_scale`` gives the gauges a relative scale error (one for all, or one per
+gauge in the order of ``config()``'s indicators, or by name): each shows
+(1 + S) times its plunger's travel (:class:`~drivers.sim.indicators.SimIndicator`).
+
 Out of stroke (:attr:`VirtualStation.out_of_stroke`) is counted from the
 machine's trajectory, not only from the readings, and a stand can be knocked
 (:meth:`VirtualStation.knock`): :mod:`drivers.sim.strokes`.
@@ -62,7 +69,7 @@ import os
 import shutil
 import tempfile
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -120,6 +127,26 @@ def default_time_scale() -> float:
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"{TIME_SCALE_ENV} must be a number > 0, got {text!r}")
     return scale
+
+
+def _per_gauge(values: float | Sequence[float] | Mapping[str, float],
+               names: list[str]) -> dict[str, float]:
+    """One value per gauge of ``names`` from one for all, one per name in order, or
+    a mapping by name (those it leaves out: 0)."""
+    if isinstance(values, Mapping):
+        unknown = sorted(set(values) - set(names))
+        if unknown:
+            raise ValueError(f"no gauge {', '.join(unknown)} (have {', '.join(names)})")
+        return {n: float(values.get(n, 0.0)) for n in names}
+    if isinstance(values, (int, float)):
+        return {n: float(values) for n in names}
+    listed = [float(v) for v in values]
+    if len(listed) == 1:
+        listed *= len(names)
+    if len(listed) != len(names):
+        raise ValueError(f"expected one value or {len(names)} (one per gauge, "
+                         f"{', '.join(names)}), got {len(listed)}")
+    return dict(zip(names, listed, strict=True))
 
 
 class _PersistentMachine(VirtualOrthoglide):
@@ -200,6 +227,8 @@ class VirtualStation:
         backlash: Sequence[float] = (0.0, 0.0, 0.0),
         register_map: RegisterMap | None = None,
         profile: str | None = None,
+        leg_bow: Sequence[float] = (0.0, 0.0, 0.0),
+        gauge_scale: float | Sequence[float] | Mapping[str, float] = 0.0,
     ) -> None:
         if indicator_count not in (2, 6):
             raise ValueError("indicator_count must be 2 (moved leg to leg) or 6 (two per leg)")
@@ -232,7 +261,7 @@ class VirtualStation:
             self.geometry, true_drho, true_dl, true_tilt=true_tilt, speed_mm_s=speed_mm_s,
             accel_mm_s2=accel_mm_s2 if drive_accel_mm_s2 is None else drive_accel_mm_s2,
             motion=motion, clock=clock, time_scale=1.0 if clock is not None else scale,
-            backlash=backlash)
+            backlash=backlash, leg_bow=leg_bow)
         # Out-of-stroke accounting and knocks (drivers.sim.strokes).
         self._watch = StrokeWatch(self.machine, self.geometry, self._mounted_gauges)
         if nvram_path is not None:
@@ -243,6 +272,8 @@ class VirtualStation:
         self.mounts_path: Path | None = None
         self._mounts: dict[str, dict[str, Any]] = {}
         names = sorted({n for s in self.setups for n in s["indicators"]})
+        #: Each gauge's relative scale error (name -> S).
+        self.gauge_scale = _per_gauge(gauge_scale, names)
         # (stroke, preload) per gauge: standard 12.5 mm gauges pushed in by half unless
         # given (the config's defaults).
         self.strokes = {n: (STANDARD_STROKE_MM, STANDARD_STROKE_MM / 2) for n in names}
@@ -271,7 +302,7 @@ class VirtualStation:
                                    stroke_mm=self.strokes[name][0],
                                    preload_mm=self.strokes[name][1],
                                    link=self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00",
-                                   time_scale=scale)
+                                   time_scale=scale, scale_error=self.gauge_scale[name])
                 sim.unmount()
                 self.indicators[name] = sim
                 sim.start()

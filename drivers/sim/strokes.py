@@ -9,7 +9,8 @@ therefore also follows the machine's trajectory itself: every motion segment (a
 move, a homing, the braking after a stop, cut where it ends or where a gauge is
 mounted or taken off) is sampled densely in time and each mounted gauge's
 plunger travel evaluated there from the geometry (:func:`orthocal.leg_reading`
-at the true joint values, the stand's plane, the true errors); one
+at the true joint values, the stand's plane, the true errors, and a bowed leg's
+form: :meth:`~drivers.sim.machine.VirtualOrthoglide.readings`); one
 :class:`OutOfStroke` per segment and gauge whose travel left
 [−preload, stroke − preload]. A knocked stand
 (:meth:`~drivers.sim.station.VirtualStation.knock`) shifts a gauge's travel
@@ -29,7 +30,7 @@ import numpy as np
 from drivers.sim.indicators import SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.motion import Segment
-from orthocal import Geometry, leg_reading
+from orthocal import Geometry
 
 # Closed segments wait for the next look at them (a mounting, out_of_stroke) up to
 # this many; beyond, the oldest is evaluated as each new one closes (under the
@@ -182,8 +183,8 @@ class StrokeWatch:
             direction: str = mount["direction"]
             sign = -1.0 if direction.startswith("-") else 1.0
             plane = self.geometry.mount_plane + float(mount.get("stand_error_mm", 0.0))
-            reading = leg_reading(rho, mount["leg"], direction.lstrip("-"), self.geometry,
-                                  m.true_drho, m.true_dl, mount=plane, tilt=m.true_tilt)
+            # the machine's own readings: a bowed leg pushes the plunger too
+            reading = m.readings(rho, mount["leg"], direction.lstrip("-"), mount=plane)
             travel = gauge.travel_mm(sign * np.asarray(reading, dtype=float))
             for t, shift in knocks[name]:
                 travel = travel + np.where(times >= t, shift, 0.0)

@@ -97,6 +97,18 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
              "all or x,y,z; default 0)",
     )
     p.add_argument(
+        "--leg-bow", type=str, default=None, metavar="X,Y,Z",
+        help="form error of each leg (mm): the sagitta of its surface at its middle, "
+             "seen by a gauge's plunger where it touches the leg (4h·t(1-t) at the "
+             "fraction t along it); one value for all legs or x,y,z; default 0",
+    )
+    p.add_argument(
+        "--gauge-scale", type=str, default=None, metavar="S[,S...]",
+        help="scale error of the gauges, relative (0.002: each reads 0.2%% too much of "
+             "its plunger's travel); one value for all or one per gauge in the order "
+             "of the config's indicators; default 0",
+    )
+    p.add_argument(
         "--mount-error", type=float, default=None, metavar="MM",
         help="indicator stands placed by eye: each mounting is off the leg's middle by a "
              "hidden random amount uniform in +-MM (default 5; 0: perfectly placed)",

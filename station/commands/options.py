@@ -37,9 +37,10 @@ class DriveOptions:
 @dataclass(frozen=True)
 class SimOptions:
     """The virtual station of ``run --simulate``: its hidden errors (None: random
-    offsets, no leg-length error, no tilt), noise, stands and drive; and what the
-    command line does not offer: the six-indicator style, procedure and write-back
-    overrides, a faster machine, and a hook that reaches the running station."""
+    offsets, no leg-length error, no tilt, straight legs, true gauges), noise,
+    stands and drive; and what the command line does not offer: the six-indicator
+    style, procedure and write-back overrides, a faster machine, and a hook that
+    reaches the running station."""
 
     seed: int | None = None
     true_drho: Triple | None = None
@@ -48,6 +49,8 @@ class SimOptions:
     noise: float | None = None
     mount_error: float | None = None
     backlash: str | None = None  # "X,Y,Z" or one value, mm
+    leg_bow: str | None = None  # "X,Y,Z" or one value, mm: each leg's sagitta
+    gauge_scale: str | None = None  # one relative error for all gauges, or one each
     profile: str | None = None  # the register map the virtual drive serves
     drive: DriveOptions = field(default_factory=DriveOptions)
     indicators: int = 2
@@ -62,7 +65,8 @@ class SimOptions:
         # command line in a subprocess (Ctrl-C, kill -9) and need a short run
         return cls(seed=args.seed, true_drho=args.true_drho, true_dl=args.true_dl,
                    true_tilt=args.true_tilt, noise=args.noise, mount_error=args.mount_error,
-                   backlash=args.backlash, profile=args.profile,
+                   backlash=args.backlash, leg_bow=args.leg_bow,
+                   gauge_scale=args.gauge_scale, profile=args.profile,
                    drive=DriveOptions.from_args(args),
                    procedure=getattr(args, "sim_procedure", None),
                    speed_mm_s=getattr(args, "sim_speed", None))

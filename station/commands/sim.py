@@ -29,11 +29,15 @@ from station.commands.simulation import (
     backlash_mm,
     drive_motion,
     drive_params,
+    gauge_scales,
+    leg_bow_mm,
     map_profile,
     served_map,
 )
 from station.config import dump_toml, parse_config
 from station.errors import BadInput
+
+SIX_GAUGES = 6  # A..F, two per leg: what a separate process mounts (module docstring)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -53,6 +57,8 @@ def main(args: argparse.Namespace) -> int:
         raise BadInput(f"--speed: must be > 0 mm/s, got {args.speed}")
     drive = drive_params(DriveOptions.from_args(args))
     backlash = backlash_mm(args.backlash)
+    bow = leg_bow_mm(args.leg_bow)
+    scale = gauge_scales(args.gauge_scale, SIX_GAUGES)
     kwargs: dict[str, Any] = served_map(map_profile(args.profile))
     if args.speed is not None:
         kwargs["speed_mm_s"] = args.speed
@@ -67,18 +73,19 @@ def main(args: argparse.Namespace) -> int:
     try:
         try:
             station = VirtualStation(drho, dl, noise, seed, protocol=args.protocol,
-                                     indicator_count=6, port=args.port, mount_all=True,
+                                     indicator_count=SIX_GAUGES, port=args.port, mount_all=True,
                                      mount_error_mm=mount_error,
                                      motion=drive_motion(drive),
                                      controller_options={"transport": args.transport},
-                                     true_tilt=tilt, backlash=backlash, **kwargs)
+                                     true_tilt=tilt, backlash=backlash, leg_bow=bow,
+                                     gauge_scale=scale, **kwargs)
         except OSError as exc:
             raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
         with station:
             header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, hidden Δρ = {drho} mm, "
                       f"ΔL = {dl} mm, tilts = {tilt} mrad, noise {noise} mm, stands off by "
-                      f"up to {mount_error} mm, lost motion {backlash} mm, drive "
-                      f"{_describe(drive)}\n"
+                      f"up to {mount_error} mm, lost motion {backlash} mm, legs bowed "
+                      f"{bow} mm, gauge scale errors {scale}, drive {_describe(drive)}\n"
                       f"Use: orthocal run --config {out}")
             # Validated like any operator's config: what we hand out must load.
             config = parse_config(station.config(), "orthocal sim")

@@ -6,7 +6,9 @@ own acceleration, start delays, one axis after another) goes into the simulated
 run's parameters as plain JSON values (the journal header keeps them), and
 :func:`drive_motion` rebuilds the same :class:`~drivers.sim.motion.DriveMotion`
 from them for ``resume``; a journal from before these existed has none and gets
-the plain drive of its ``motion``."""
+the plain drive of its ``motion``. So with the legs' form and the gauges' scale
+(``--leg-bow``, ``--gauge-scale``, issue 23): kept in the header, absent from
+older journals, whose runs had straight legs and true gauges."""
 
 from __future__ import annotations
 
@@ -32,6 +34,10 @@ if TYPE_CHECKING:
 # the run says so ("not-converged").
 DEFAULT_NOISE_MM = 0.001
 DEFAULT_SIM_DRHO_MM = 2.0  # random hidden Δρ are drawn uniform in ±this
+# Beyond these, the value is a slip of the unit, not an error of a machine: 8 for
+# 8 µm is an 8 mm bow; 0.2 for 0.2 % a gauge reading a fifth too much.
+MAX_LEG_BOW_MM = 1.0
+MAX_GAUGE_SCALE = 0.1
 
 
 def sim_params(options: SimOptions) -> dict[str, Any]:
@@ -52,6 +58,8 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
     if not (math.isfinite(mount) and mount >= 0):
         raise BadInput(f"--mount-error: must be >= 0 mm, got {mount}")
     backlash = backlash_mm(options.backlash)
+    bow = leg_bow_mm(options.leg_bow)
+    scale = gauge_scales(options.gauge_scale, int(options.indicators))
     profile = map_profile(options.profile)
     return {
         "seed": seed,
@@ -61,6 +69,10 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         "noise_mm": noise,
         "mount_error_mm": mount,
         "backlash_mm": backlash,
+        # the legs' form (each one's sagitta, mm) and the gauges' scale errors (one per
+        # gauge, in the config's order), kept for resume
+        "leg_bow_mm": bow,
+        "gauge_scale": scale,
         # the register map the virtual drive serves (a built-in name or a file's
         # absolute path), kept for resume
         "profile": profile,
@@ -93,6 +105,9 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         motion=drive_motion(params),
         # ... and those from before lost motion, with none.
         backlash=params.get("backlash_mm") or (0.0, 0.0, 0.0),
+        # ... and those from before form errors, with straight legs and true gauges.
+        leg_bow=params.get("leg_bow_mm") or (0.0, 0.0, 0.0),
+        gauge_scale=params.get("gauge_scale") or 0.0,
         **served_map(params.get("profile")),
     )
 
@@ -139,18 +154,52 @@ def backlash_mm(text: str | None) -> list[float]:
     return _numbers("--backlash", str(text), (1, 3), "mm", positive=False)
 
 
-def _numbers(option: str, text: str, counts: tuple[int, ...], unit: str,
-             positive: bool) -> list[float]:
-    """``text`` as comma-separated finite numbers, as many as one of ``counts``,
-    each > 0 (``positive``) or >= 0; repeated to three."""
+def leg_bow_mm(text: str | None) -> list[float]:
+    """``--leg-bow X,Y,Z`` (or one value for all legs), mm, either sign (toward +j
+    of each gauge plane or away), each within ±MAX_LEG_BOW_MM; BadInput naming it."""
+    if text is None:
+        return [0.0, 0.0, 0.0]
+    values = _floats("--leg-bow", str(text), (1, 3), "mm")
+    if not all(abs(v) <= MAX_LEG_BOW_MM for v in values):  # nan included
+        raise BadInput(f"--leg-bow: a leg's form error is within ±{MAX_LEG_BOW_MM:g} mm "
+                       f"(0.008 is 8 µm), got {text!r}")
+    return values * 3 if len(values) == 1 else values
+
+
+def gauge_scales(text: str | None, gauges: int) -> list[float]:
+    """``--gauge-scale S`` (one for all gauges, or one per gauge in the order of the
+    config's indicators), relative, each within ±MAX_GAUGE_SCALE; one per gauge."""
+    if text is None:
+        return [0.0] * gauges
+    values = _floats("--gauge-scale", str(text), (1, gauges), "relative", per_gauge=True)
+    if not all(abs(v) < MAX_GAUGE_SCALE for v in values):  # nan included
+        raise BadInput(f"--gauge-scale: a relative error (0.002 = 0.2 %) within "
+                       f"±{MAX_GAUGE_SCALE:g}, got {text!r}")
+    return values * gauges if len(values) == 1 else values
+
+
+def _floats(option: str, text: str, counts: tuple[int, ...], unit: str,
+            per_gauge: bool = False) -> list[float]:
+    """``text`` as comma-separated numbers, as many as one of ``counts``
+    (``per_gauge``: the last count is one per gauge, not x,y,z); their range is
+    the caller's to check."""
     try:
         values = [float(p) for p in text.split(",")]
     except ValueError:
         raise BadInput(f"{option}: expected numbers ({unit}) separated by commas, "
                        f"got {text!r}") from None
     if len(values) not in counts:
-        what = " or ".join({1: "one value", 3: "three values x,y,z"}[c] for c in counts)
+        many = f"{counts[-1]} values, one per gauge" if per_gauge else "three values x,y,z"
+        what = " or ".join("one value" if c == 1 else many for c in dict.fromkeys(counts))
         raise BadInput(f"{option}: expected {what}, got {text!r}")
+    return values
+
+
+def _numbers(option: str, text: str, counts: tuple[int, ...], unit: str,
+             positive: bool) -> list[float]:
+    """``text`` as comma-separated finite numbers, as many as one of ``counts``,
+    each > 0 (``positive``) or >= 0; repeated to three."""
+    values = _floats(option, text, counts, unit)
     for v in values:
         if not math.isfinite(v) or v < 0 or (positive and v == 0):
             raise BadInput(f"{option}: must be {'>' if positive else '>='} 0 {unit}, "

@@ -205,6 +205,12 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
             "mount_error_mm": sim.get("mount_error_mm", 0.0),
             # Each joint's lost motion (ISO 230-2's reversal value), mm.
             "backlash_mm": dict(zip(AXES, sim.get("backlash_mm") or (0.0, 0.0, 0.0),
+                                    strict=True)),
+            # Each leg's bow (sagitta at its middle, mm) and each gauge's scale error.
+            "leg_bow_mm": dict(zip(AXES, sim.get("leg_bow_mm") or (0.0, 0.0, 0.0),
+                                   strict=True)),
+            "gauge_scale": dict(zip([i.name for i in config.indicators],
+                                    sim.get("gauge_scale") or [0.0] * len(config.indicators),
                                     strict=True))},
         "machine": {"leg_length": m.leg_length, "rho_min": m.rho_min, "rho_max": m.rho_max},
         "model": config.procedure.model, "method": config.procedure.method,
