@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -304,10 +304,11 @@ def _per(value, names: Sequence, what: str) -> dict:
 
 def straightness_sources(prop: Propagation, straightness) -> list[Source]:
     """Leg straightness (issue 23 (a)), one source per measured leg: each gauge
-    plane (leg, direction) of the leg bowed independently with a sagitta uniform
-    in ±s (u = s/√3); the bow h adds h·g_plane to the plane's deviations
+    plane (leg, direction) of the leg bowed with a sagitta uniform in ±s
+    (u = s/√3); the bow h adds h·g_plane to the plane's deviations
     (:func:`form_vector` restricted to its keys), so the plane contributes
-    |K_p·g_plane|·u and the leg the quadrature over its planes. ``straightness``:
+    |K_p·g_plane|·u and the leg the sum over its planes (one bow of unknown
+    direction: the worst sign); legs are independent parts. ``straightness``:
     s in mm, one value, [x, y, z] or leg → s; the sagitta of the bow over the
     whole leg (:func:`sagitta_from_straightness` for one over the plunger's slide)."""
     legs = list(dict.fromkeys(g[0] for g in prop.gauges))
@@ -320,9 +321,15 @@ def straightness_sources(prop: Propagation, straightness) -> list[Source]:
     out = []
     for leg in legs:
         u = s_of[leg] / math.sqrt(3.0)
-        cov = sum(u**2 * np.outer(g * prop.mask(gg), g * prop.mask(gg))
-                  for gg in prop.gauges if gg[0] == leg)
-        out.append(_source(prop, f"leg straightness {leg}", "rectangular", s_of[leg], u, cov))
+        planes = [gg for gg in prop.gauges if gg[0] == leg]
+        cov = sum(u**2 * np.outer(g * prop.mask(gg), g * prop.mask(gg)) for gg in planes)
+        src = _source(prop, f"leg straightness {leg}", "rectangular", s_of[leg], u, cov)
+        # A leg is one part: its two gauge planes see one bow, in an unknown direction
+        # and with unknown sign, so their parts add with the worst sign (GUM 5.2.2
+        # with r = ±1), not in quadrature; the expected lack of fit keeps ``cov``.
+        worst = sum(np.abs(prop.K @ (g * prop.mask(gg))) for gg in planes) * u
+        out.append(replace(src, contributions={
+            n: float(v) for n, v in zip(prop.names, worst, strict=True)}))
     return out
 
 
