@@ -403,6 +403,12 @@ class ModbusLink:
             bits = [bool(counts[n] >> spec.bit & 1) == spec.active_high for n in spec.registers]
             flags[flag] = all(bits) if spec.combine == "all" else any(bits)
         code = next((counts[n] for n in self.map.alarm_code if counts[n]), 0)
+        if flags.get("alarm") and not code and self.map.alarm_code:
+            # On a drive per axis the code and the status bit come in requests of
+            # their own: the code read first may predate the alarm the bit shows.
+            again = self.read_counts([self.map[n] for n in self.map.alarm_code],
+                                     "read alarm code")
+            code = next((again[n] for n in self.map.alarm_code if again[n]), 0)
         return AxisStatus(alarm_code=code, **flags)
 
     def read_raw(self, name: str) -> int:
