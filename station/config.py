@@ -165,6 +165,12 @@ class IndicatorConfig(_Strict):
     # for unit mm, um, in. A negative scale suits a gauge that counts the other way.
     unit: Literal["mm", "um", "in"] | None = None
     scale: float | None = None
+    # The gauge's maximum permissible error over a deviation's span (its data sheet or
+    # calibration certificate; design.md "Uncertainty budget"). Absent: the budget
+    # takes its family's typical figure and says so.
+    mpe_mm: float | None = Field(None, gt=0, le=1)
+    # For the certificate: the instrument's serial number.
+    serial: str | None = Field(None, min_length=1, max_length=64)
 
     @field_validator("pattern")
     @classmethod
@@ -297,6 +303,32 @@ class WritebackConfig(_Strict):
     frame: Literal["translation", "rigid"] = "translation"
 
 
+class UncertaintyConfig(_Strict):
+    """Type B inputs of the uncertainty budget (design.md "Uncertainty budget"); each
+    absent one is taken at the default the budget names (station.engine.budget),
+    never silently as zero."""
+
+    # The legs' straightness over the length the plunger slides along them: the
+    # largest sagitta of their surface (one value, or [x, y, z]), mm.
+    leg_straightness_mm: float | list[float] | None = None
+    # The temperature change during the run (K).
+    temperature_change_c: float | None = Field(None, ge=0, le=50)
+    # How far a plunger may be set off the leg's normal (degrees).
+    plunger_angle_deg: float | None = Field(None, ge=0, le=30)
+
+    @field_validator("leg_straightness_mm")
+    @classmethod
+    def _straightness(cls, value: float | list[float] | None) -> float | list[float] | None:
+        values = [value] if isinstance(value, (int, float)) else value
+        if values is None:
+            return value
+        if len(values) not in (1, 3):
+            raise ValueError("one value, or three: [x, y, z]")
+        if any(not (0 <= v <= 1) for v in values):
+            raise ValueError("must be between 0 and 1 mm")
+        return value
+
+
 class StationConfig(_Strict):
     machine: MachineConfig = Field(default_factory=MachineConfig)
     controller: ControllerConfig = Field(default_factory=ControllerConfig)
@@ -304,6 +336,7 @@ class StationConfig(_Strict):
     setups: list[SetupConfig] = Field(min_length=1)
     procedure: ProcedureConfig = Field(default_factory=ProcedureConfig)
     writeback: WritebackConfig = Field(default_factory=WritebackConfig)
+    uncertainty: UncertaintyConfig = Field(default_factory=UncertaintyConfig)
 
     @model_validator(mode="after")
     def _references(self) -> StationConfig:
@@ -472,8 +505,9 @@ def toml_text(data: dict[str, Any], header: str = "") -> str:
     for array in ("indicators", "setups"):
         for item in data.get(array) or ():
             table(f"[[{array}]]", item)
-    for section in ("procedure", "writeback"):
-        if data.get(section) is not None:
+    for section in ("procedure", "writeback", "uncertainty"):
+        # an empty [uncertainty] (every input at its default) is left out
+        if data.get(section) is not None and (section != "uncertainty" or data[section]):
             table(f"[{section}]", data[section])
     return "\n".join(lines)
 
