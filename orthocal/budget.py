@@ -303,12 +303,12 @@ def _per(value, names: Sequence, what: str) -> dict:
 
 
 def straightness_sources(prop: Propagation, straightness) -> list[Source]:
-    """Leg straightness (issue 23 (a)), one source per measured leg: each gauge
+    """Leg straightness (issue 23 (a)), one source: each gauge
     plane (leg, direction) of the leg bowed with a sagitta uniform in ±s
     (u = s/√3); the bow h adds h·g_plane to the plane's deviations
     (:func:`form_vector` restricted to its keys), so the plane contributes
-    |K_p·g_plane|·u and the leg the sum over its planes (one bow of unknown
-    direction: the worst sign); legs are independent parts. ``straightness``:
+    |K_p·g_plane|·u and the source the sum over every plane (the worst sign: a
+    leg's planes see one bow, and the legs of one machine may bow alike). ``straightness``:
     s in mm, one value, [x, y, z] or leg → s; the sagitta of the bow over the
     whole leg (:func:`sagitta_from_straightness` for one over the plunger's slide)."""
     legs = list(dict.fromkeys(g[0] for g in prop.gauges))
@@ -318,19 +318,19 @@ def straightness_sources(prop: Propagation, straightness) -> list[Source]:
         straightness = dict(zip(AXES, straightness, strict=True))
     s_of = _per(straightness, legs, "leg straightness")
     g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
-    out = []
-    for leg in legs:
-        u = s_of[leg] / math.sqrt(3.0)
-        planes = [gg for gg in prop.gauges if gg[0] == leg]
-        cov = sum(u**2 * np.outer(g * prop.mask(gg), g * prop.mask(gg)) for gg in planes)
-        src = _source(prop, f"leg straightness {leg}", "rectangular", s_of[leg], u, cov)
-        # A leg is one part: its two gauge planes see one bow, in an unknown direction
-        # and with unknown sign, so their parts add with the worst sign (GUM 5.2.2
-        # with r = ±1), not in quadrature; the expected lack of fit keeps ``cov``.
-        worst = sum(np.abs(prop.K @ (g * prop.mask(gg))) for gg in planes) * u
-        out.append(replace(src, contributions={
-            n: float(v) for n, v in zip(prop.names, worst, strict=True)}))
-    return out
+    # The legs of one machine are made alike and may bow alike: every plane's part
+    # adds with the worst sign (GUM 5.2.2 with r = ±1 where the correlation is not
+    # known), one source; the expected lack of fit keeps independent planes' ``cov``.
+    u_of = {leg: s_of[leg] / math.sqrt(3.0) for leg in legs}
+    planes = [gg for gg in prop.gauges if gg[0] in u_of]
+    cov = sum(u_of[gg[0]] ** 2 * np.outer(g * prop.mask(gg), g * prop.mask(gg))
+              for gg in planes)
+    worst = sum(np.abs(prop.K @ (g * prop.mask(gg))) * u_of[gg[0]] for gg in planes)
+    value = max(s_of.values())
+    src = _source(prop, "leg straightness", "rectangular", value, value / math.sqrt(3.0),
+                  cov, **{f"straightness_{leg}_mm": s_of[leg] for leg in legs})
+    return [replace(src, contributions={
+        n: float(v) for n, v in zip(prop.names, worst, strict=True)})]
 
 
 def _per_deviation(prop: Propagation, name: str, distribution: str, value_of: dict,
