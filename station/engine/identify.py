@@ -75,12 +75,26 @@ def identify_measurement(config: StationConfig, m: Measurement,
             test = lack_of_fit(ident, geometry, noise[0], noise[1]) if noise else None
         else:
             sigma, dof, source = noise  # type: ignore[misc]
-            sel = orthocal.select_model(data, geometry, sigma, dof, method=proc.method,
-                                        noise_source=source, stands=stands)
+            # The model test allows for the misfit the stated leg form and gauge
+            # errors can leave (issue 23): a bowed leg does not buy tilts.
+            from station.engine.budget import form_noise
+
+            sigma_test, dof_test, allowed = form_noise(config, data, sigma, dof)
+            sel = orthocal.select_model(data, geometry, sigma_test, dof_test,
+                                        method=proc.method, stands=stands,
+                                        noise_source=source if allowed is None else
+                                        source + " and the uncertainty budget's form and "
+                                        "gauge errors")
             ident, selection = sel.identification, sel.to_dict()
+            if allowed is not None:
+                selection["budget"] = allowed
+                if "tilt" in sel.model:
+                    ident = _unless_form(config, data, ident, selection, sigma_test, stands)
             test = next(t for t in sel.tests if t.model == sel.model)
     except orthocal.IdentificationError as exc:
         raise RunFailed(f"identification failed: {exc}") from None
+    if noise is not None and selection is not None and selection.get("budget"):
+        test = next((t for t in sel.tests if t.model == ident.model), test)
     if noise is not None:
         rejected = (test is not None and test.F is not None and test.p_value is not None
                     and test.p_value < LEVEL and test.F > 1.0)
@@ -88,3 +102,31 @@ def identify_measurement(config: StationConfig, m: Measurement,
                                     inflate=math.sqrt(test.F) if rejected else 1.0,
                                     noise_dof=noise[1])
     return ident, selection
+
+
+def _unless_form(config: StationConfig, data: Any, ident: Any, selection: dict[str, Any],
+                 sigma: float, stands: Any) -> Any:
+    """The tilt model auto chose, unless none of its tilts stands out of what the
+    stated leg form and gauge errors could make of them: then the model without
+    the tilts, and the selection says so and what would tell them apart."""
+    from station.engine.budget import tilts_beyond_form
+
+    try:
+        check = tilts_beyond_form(config, ident)
+    except ValueError:
+        return ident
+    selection["budget"]["tilts"] = check
+    if check["told_apart"]:
+        return ident
+    smaller = ident.model.replace("+tilt", "")
+    fit = orthocal.identify(data, config.machine.geometry(), model=smaller,
+                            method=config.procedure.method,
+                            sigma=sigma if stands else None, stands=stands)
+    selection["model"] = smaller
+    selection["reason"] = (
+        f"{smaller}: {ident.model} fits better, but none of its tilts stands out of what "
+        f"the stated leg form and gauge errors could make of them (each within "
+        f"{check['coverage_factor']:.2f} of its combined uncertainty, uncertainty "
+        "budget): the tilts are not told apart from the legs' form; intermediate "
+        "strokes ([procedure] strokes) separate them. " + selection.get("reason", ""))
+    return fit

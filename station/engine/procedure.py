@@ -25,7 +25,7 @@ from orthocal.numbers import finite
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.console.progress import Progress
-from station.engine import accuracy, reversal, verdict
+from station.engine import accuracy, budget, reversal, verdict
 from station.engine.closed_loop import LoopState, next_step, round_phase
 from station.engine.devices import Devices
 from station.engine.recovery import resume_hint
@@ -326,6 +326,8 @@ class Flow:
             "max_extra_passes": proc.max_extra_passes,
         }
         self.result["remaining"] = remaining_fields(self.iterations, self.result)
+        self.result["uncertainty_budget"] = budget.of_run(self.ctx.config, self.idents,
+                                                          self.result)
         self._accuracy()
         self.result["status"], self.result["message"] = status, message
 

@@ -1,0 +1,206 @@
+"""The run's uncertainty budget (design.md, "Uncertainty budget"; issue 23): the
+config's Type B inputs, each absent one at a default named here, propagated by
+orthocal.budget through the last round's identification to the run's statement,
+combined with its Type A part (the scatter), and the noise the model test is to
+allow for them."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+import orthocal
+from orthocal import budget as gum
+from station.config import StationConfig
+
+# Defaults where the config says nothing, each named in the budget as assumed.
+# A ground steel leg straight to 10 µm over its length: good practice, not a given.
+DEFAULT_LEG_STRAIGHTNESS_MM = 0.010
+# Typical MPE of a 12.5 mm digital indicator with 1 µm steps (Mitutoyo ID-C, Sylvac
+# S_Dial, Mahr MarCator data sheets: 3 µm); a gauge of unknown make: 5 µm.
+DEFAULT_MPE_MM = {"mitutoyo": 0.003, "sylvac": 0.003, "mahr": 0.003, "generic": 0.005}
+# A temperature change during a run of some minutes in a workshop, and a plunger set
+# by eye against the leg's normal.
+DEFAULT_TEMPERATURE_CHANGE_C = 0.5
+DEFAULT_PLUNGER_ANGLE_DEG = 2.0
+
+
+def inputs(config: StationConfig) -> dict[str, Any]:
+    """Every Type B input with its value and whether the config gave it (else the
+    default above): what the budget assumed, in its own words."""
+    u = config.uncertainty
+    gauges = {ind.name: ind for ind in config.indicators}
+
+    def entry(value: Any, default: Any, why: str) -> dict[str, Any]:
+        given = value is not None
+        return {"value": value if given else default, "given": given,
+                **({} if given else {"assumed": why})}
+
+    return {
+        "leg_straightness_mm": entry(
+            u.leg_straightness_mm, DEFAULT_LEG_STRAIGHTNESS_MM,
+            "good practice for a ground leg over its length, not measured "
+            "([uncertainty] leg_straightness_mm)"),
+        "temperature_change_c": entry(
+            u.temperature_change_c, DEFAULT_TEMPERATURE_CHANGE_C,
+            "a workshop over a run of minutes ([uncertainty] temperature_change_c)"),
+        "plunger_angle_deg": entry(
+            u.plunger_angle_deg, DEFAULT_PLUNGER_ANGLE_DEG,
+            "plungers set by eye ([uncertainty] plunger_angle_deg)"),
+        "mpe_mm": {name: entry(g.mpe_mm, DEFAULT_MPE_MM[g.protocol],
+                               f"typical of a {g.protocol} digital indicator "
+                               "([[indicators]] mpe_mm)")
+                   for name, g in gauges.items()},
+        "resolution_mm": {name: {"value": g.resolution_mm, "given": True}
+                          for name, g in gauges.items()},
+    }
+
+
+def _gauge_names(config: StationConfig) -> dict[tuple[str, str], str]:
+    """(leg, direction) → the indicator mounted there (its setup's)."""
+    return {(sp.leg, d.lstrip("-")): name for sp in config.setups
+            for name, d in sp.indicators.items()}
+
+
+def _at_its_parameters(ident: Any, geometry: orthocal.Geometry) -> Any:
+    """``ident`` with its residuals those of its own parameters: a fit moved to the
+    middle of the joints' lost-motion bands (orthocal.lost_motion.band_middle) keeps
+    the residuals of the band's edge, µm away, where its sensitivity is the same."""
+    if ident.method != "nonlinear":
+        return ident
+    model = orthocal.deviations(list(ident.keys), geometry, ident.vector, ident.mount_offsets)
+    return replace(ident, residuals=np.asarray(ident.values) - model)
+
+
+def sources(config: StationConfig, ident: Any) -> list[gum.Source]:
+    """The Type B sources of ``ident`` (a round's identification), named by the
+    indicators (not by their gauge planes) where they are a gauge's."""
+    ident = _at_its_parameters(ident, config.machine.geometry())
+    given = inputs(config)
+    names = _gauge_names(config)
+    planes = {plane: name for plane, name in names.items()
+              if any((k[1], k[2]) == plane for k in ident.keys)}
+
+    def per_plane(key: str) -> dict[tuple[str, str], float]:
+        return {plane: float(given[key][name]["value"]) for plane, name in planes.items()}
+
+    out = gum.budget_sources(
+        ident, config.machine.geometry(),
+        straightness=given["leg_straightness_mm"]["value"],
+        mpe=per_plane("mpe_mm"), resolution=per_plane("resolution_mm"),
+        plunger_angle_deg=float(given["plunger_angle_deg"]["value"]),
+        temperature_change=float(given["temperature_change_c"]["value"]))
+    renamed = []
+    for s in out:
+        plane = s.name[-2:]
+        if s.name.startswith("gauge ") and (plane[0], plane[1]) in planes:
+            name = planes[(plane[0], plane[1])]
+            s = replace(s, name=f"{s.name[:-3]} {name} (leg {plane[0]}, along {plane[1]})")
+        renamed.append(s)
+    return renamed
+
+
+def fields(config: StationConfig, ident: Any, type_a_se: dict[str, float],
+           type_a_dof: float | None, statement: str) -> dict[str, Any] | None:
+    """The run JSON's ``uncertainty_budget`` for the Δρ of ``statement`` (where the
+    run states them: "remaining.total" or "identified"), from the identification
+    of the round that measured them; None where the model has no Δρ."""
+    names = [n for n in type_a_se if n.startswith("drho_") and type_a_se[n] is not None]
+    if not names:
+        return None
+    try:
+        srcs = sources(config, ident)
+    except ValueError as exc:
+        return {"error": f"not stated: {exc}"}
+    # the budget states the Δρ; the tilts and ΔL of the model are propagated too
+    trimmed = [replace(s, contributions={n: s.contributions[n] for n in names})
+               for s in srcs]
+    doc = gum.combine({n: float(type_a_se[n]) for n in names}, type_a_dof, trimmed)
+    doc["sources"] = [doc["sources"][0], *sorted(
+        doc["sources"][1:], key=lambda s: -max(v or 0.0 for v in s["contributions_mm"].values()))]
+    given = inputs(config)
+    assumed = [f"{k}: {v['value']} ({v['assumed']})" for k, v in given.items()
+               if isinstance(v, dict) and "given" in v and not v["given"]]
+    assumed += [f"mpe_mm of {n}: {v['value']} ({v['assumed']})"
+                for n, v in given["mpe_mm"].items() if not v["given"]]
+    instruments = [{"name": g.name, "protocol": g.protocol, "port": g.port,
+                    "serial": g.serial, "resolution_mm": g.resolution_mm,
+                    "mpe_mm": given["mpe_mm"][g.name]["value"]} for g in config.indicators]
+    return {"statement": statement, **doc, "inputs": given, "assumed": assumed,
+            "instruments": instruments,
+            "method": ("GUM (JCGM 100:2008): each input through the sensitivity of the "
+                       "round's identification (stands and model included), combined in "
+                       "quadrature with the scatter, Welch-Satterthwaite dof, Student's "
+                       "k for 95 %; the legs' form as independent bows of each gauge "
+                       "plane (rectangular, ±straightness), the gauge MPE over the travel "
+                       "a deviation spans (0.2 mm, in proportion below)")}
+
+
+def form_noise(config: StationConfig, data: Any, sigma: float, dof: float
+               ) -> tuple[float, float, dict[str, Any] | None]:
+    """(σ, dof) the model test should compare a lack of fit with: the measured
+    noise plus the misfit the stated form and gauge errors let a rho fit leave
+    (E[rᵀr] of orthocal.budget.expected_lack_of_fit, per residual dof), so that a
+    misfit the budget explains does not buy tilts; dof by Welch-Satterthwaite
+    (the budget's part exact). The third item says so for the selection's JSON
+    (None when the budget cannot be formed)."""
+    geometry = config.machine.geometry()
+    try:
+        fit = orthocal.identify(data, geometry, model="rho", method="nonlinear")
+        srcs = sources(config, fit)
+        elf = gum.expected_lack_of_fit(fit, srcs, sigma, geometry)
+    except (ValueError, orthocal.IdentificationError):
+        return sigma, dof, None
+    resid_dof = max(fit.dof, 1)
+    extra = sum(elf.sources.values()) / resid_dof
+    sigma_eff = math.sqrt(sigma**2 + extra)
+    dof_eff = dof * (sigma_eff / sigma) ** 4 if sigma > 0 else dof
+    return sigma_eff, float(dof_eff), {
+        "noise_mm": sigma, "noise_dof": dof, "with_budget_mm": sigma_eff,
+        "with_budget_dof": float(dof_eff),
+        "form_and_gauges_rms_mm": float(np.sqrt(extra)),
+        "note": ("the lack of fit is compared with the noise and the misfit the stated "
+                 "leg form and gauge errors can leave (uncertainty budget): a misfit "
+                 "they explain does not buy tilts")}
+
+
+def of_run(config: StationConfig, idents: list[Any], result: dict[str, Any]
+           ) -> dict[str, Any] | None:
+    """``uncertainty_budget`` of the run's statement: the last verification's
+    (``remaining.total``: its Type A part the remaining's standard errors) when the
+    loop measured after its last write-back, else the last identification's."""
+    if not idents:
+        return None
+    remaining = result.get("remaining")
+    if remaining:
+        return fields(config, idents[-1], remaining["std_errors"],
+                      remaining.get("std_errors_dof"), "remaining.total")
+    return fields(config, idents[-1], dict(idents[-1].std_errors),
+                  idents[-1].std_error_dof, "identified")
+
+
+TILTS = ("tilt_yx", "tilt_zx", "tilt_zy")
+
+
+def tilts_beyond_form(config: StationConfig, ident: Any) -> dict[str, Any]:
+    """Whether a fit's tilts stand out of what the stated form and gauge errors
+    could make of them (issue 23: a bowed leg with its square reads as a tilt with
+    two postures per leg): each tilt against k·sqrt(u_A² + u_B²), u_B its budget
+    contribution through this very fit. ``told_apart``: the tilts beyond it."""
+    srcs = sources(config, ident)
+    dof = ident.std_error_dof
+    k = orthocal.coverage_factor(dof) if dof else 1.96
+    out: dict[str, Any] = {"coverage_factor": k, "tilts": {}}
+    for n in TILTS:
+        if n not in ident.parameters:
+            continue
+        u_b = math.sqrt(sum(s.contributions.get(n, 0.0) ** 2 for s in srcs))
+        u_c = math.hypot(float(ident.std_errors[n]), u_b)
+        out["tilts"][n] = {"value_mrad": float(ident.parameters[n]), "u_form_mrad": u_b,
+                           "u_combined_mrad": u_c,
+                           "beyond": abs(float(ident.parameters[n])) > k * u_c}
+    out["told_apart"] = [n for n, t in out["tilts"].items() if t["beyond"]]
+    return out
