@@ -70,7 +70,7 @@ def test_without_uncertainty_the_run_says_what_it_assumed(
     for what in ("leg_straightness_mm: 0.01", "temperature_change_c: 0.5",
                  "plunger_angle_deg: 2.0", "mpe_mm of A: 0.003", "mpe_mm of B: 0.003"):
         assert what in assumed
-    assert [s["type"] for s in b["sources"]][0] == "A"
+    assert b["sources"][0]["type"] == "A"
     for n, u in b["expanded_95_mm"].items():
         assert u == pytest.approx(b["coverage_factor"][n] * b["combined_mm"][n], rel=1e-9)
         assert u > b["combined_mm"][n] > result["remaining"]["std_errors"][n]
