@@ -62,10 +62,23 @@ def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
               drive_sequence: str | None = None, indicators: int = 2,
               writeback: dict[str, Any] | None = None, speed: float | None = None,
               backlash: str | None = None, profile: str | None = None,
-              leg_bow: str | None = None, gauge_scale: str | None = None) -> RunOptions:
+              leg_bow: str | None = None, gauge_scale: str | None = None,
+              uncertainty: dict[str, Any] | None = None) -> RunOptions:
     """``orthocal run --simulate`` into ``out``, with the test knobs the command
     line does not offer: ``hook`` (given the running virtual station), ``procedure``
-    and ``writeback`` overrides, ``indicators`` (2 or 6), ``speed`` (mm/s)."""
+    and ``writeback`` overrides, ``indicators`` (2 or 6), ``speed`` (mm/s),
+    ``uncertainty`` (the config's [uncertainty])."""
+    if uncertainty is not None:
+        # what a user writes in the config's [uncertainty] (the simulated legs and
+        # gauges are as the test makes them)
+        inner = hook
+
+        def hook(station: Any) -> None:
+            config = station.config
+            station.config = lambda: {**config(), "uncertainty": uncertainty}
+            if inner is not None:
+                inner(station)
+
     sim = SimOptions(
         seed=seed, true_drho=true_drho, true_dl=true_dl, true_tilt=true_tilt, noise=noise,
         mount_error=mount_error, backlash=backlash, leg_bow=leg_bow,

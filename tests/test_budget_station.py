@@ -22,15 +22,9 @@ PROCEDURE = {**FAST, "cycles": 3, "model": "auto", "max_extra_passes": 2}
 
 def run(tmp_path: Path, capsys: pytest.CaptureFixture[str], uncertainty: dict | None = None,
         **extra: Any) -> dict[str, Any]:
-    def state(station: Any) -> None:
-        # what a user writes in the config's [uncertainty]
-        if uncertainty is not None:
-            config = station.config
-            station.config = lambda: {**config(), "uncertainty": uncertainty}
-
     code = cmd_run.run(simulated(tmp_path / "runs", **{
         "seed": 5, "noise": 0.001, "true_drho": TRUE, "procedure": PROCEDURE,
-        "hook": state, **extra}))
+        "uncertainty": uncertainty, **extra}))
     result = json.loads(capsys.readouterr().out)
     assert code == 0, result.get("message")
     return result

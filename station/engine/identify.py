@@ -89,12 +89,17 @@ def identify_measurement(config: StationConfig, m: Measurement,
             if allowed is not None:
                 selection["budget"] = allowed
                 if "tilt" in sel.model:
-                    ident = _unless_form(config, data, ident, selection, sigma_test, stands)
+                    ident = _unless_form(config, data, ident, selection, sigma, stands)
+                # The budget decides the model, not the fit's weights: the chosen
+                # model is fitted against the measured noise, as a named one is.
+                ident = orthocal.identify(data, geometry, model=ident.model,
+                                          method=proc.method, sigma=sigma if stands else None,
+                                          stands=stands)
             test = next(t for t in sel.tests if t.model == sel.model)
     except orthocal.IdentificationError as exc:
         raise RunFailed(f"identification failed: {exc}") from None
     if noise is not None and selection is not None and selection.get("budget"):
-        test = next((t for t in sel.tests if t.model == ident.model), test)
+        test = lack_of_fit(ident, geometry, noise[0], noise[1])
     if noise is not None:
         rejected = (test is not None and test.F is not None and test.p_value is not None
                     and test.p_value < LEVEL and test.F > 1.0)
