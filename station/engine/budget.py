@@ -119,15 +119,17 @@ def fields(config: StationConfig, ident: Any, type_a_se: dict[str, float],
     trimmed = [replace(s, contributions={n: s.contributions[n] for n in names})
                for s in srcs]
     doc = gum.combine({n: float(type_a_se[n]) for n in names}, type_a_dof, trimmed)
-    doc["sources"] = [doc["sources"][0], *sorted(
-        doc["sources"][1:], key=lambda s: -max(v or 0.0 for v in s["contributions_mm"].values()))]
+    # largest first; ties (to a nanometre: within another CPU's last bits) by name
+    doc["sources"] = [doc["sources"][0], *sorted(doc["sources"][1:], key=lambda s: (
+        -round(1e6 * max(v or 0.0 for v in s["contributions_mm"].values())), s["source"]))]
     given = inputs(config)
     assumed = [f"{k}: {v['value']} ({v['assumed']})" for k, v in given.items()
                if isinstance(v, dict) and "given" in v and not v["given"]]
     assumed += [f"mpe_mm of {n}: {v['value']} ({v['assumed']})"
                 for n, v in given["mpe_mm"].items() if not v["given"]]
-    instruments = [{"name": g.name, "protocol": g.protocol, "port": g.port,
-                    "serial": g.serial, "resolution_mm": g.resolution_mm,
+    # named by what identifies an instrument (its serial), not by its port
+    instruments = [{"name": g.name, "protocol": g.protocol, "serial": g.serial,
+                    "resolution_mm": g.resolution_mm,
                     "mpe_mm": given["mpe_mm"][g.name]["value"]} for g in config.indicators]
     return {"statement": statement, **doc, "inputs": given, "assumed": assumed,
             "instruments": instruments,

@@ -19,10 +19,11 @@ def _um(v: Any) -> str:
     return "—" if x is None else f"{1000 * x:.1f}"
 
 
-def _largest(source: Mapping[str, Any]) -> float:
-    """Sort key: the source's largest contribution first."""
-    return -max((num(v) or 0.0 for v in as_dict(source.get("contributions_mm")).values()),
-                default=0.0)
+def _largest(source: Mapping[str, Any]) -> tuple[float, str]:
+    """Sort key: the source's largest contribution first (to a nanometre), then name."""
+    top = max((num(v) or 0.0 for v in as_dict(source.get("contributions_mm")).values()),
+              default=0.0)
+    return -round(1e6 * top), str(source.get("source"))
 
 
 def _statement(result: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, float | None]:
@@ -99,7 +100,7 @@ def _certificate(result: Mapping[str, Any], b: Mapping[str, Any], names: list[st
     values = _statement(result, b)
     inst = "".join(
         f"<li>{html.escape(str(i.get('name')))}: {html.escape(str(i.get('protocol')))} dial "
-        f"indicator on {html.escape(str(i.get('port')))}, serial "
+        f"indicator, serial "
         f"{html.escape(str(i.get('serial') or 'not given'))}, resolution "
         f"{_um(i.get('resolution_mm'))} µm, MPE {_um(i.get('mpe_mm'))} µm</li>"
         for i in b.get("instruments") or [] if isinstance(i, dict))
