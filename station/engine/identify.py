@@ -88,11 +88,11 @@ def identify_measurement(config: StationConfig, m: Measurement,
             ident, selection = sel.identification, sel.to_dict()
             if allowed is not None:
                 selection["budget"] = allowed
-                if "tilt" in sel.model:
-                    ident = _unless_form(config, data, ident, selection, sigma, stands)
+                chosen = _unless_form(config, ident, selection) if "tilt" in sel.model \
+                    else ident.model
                 # The budget decides the model, not the fit's weights: the chosen
                 # model is fitted against the measured noise, as a named one is.
-                ident = orthocal.identify(data, geometry, model=ident.model,
+                ident = orthocal.identify(data, geometry, model=chosen,
                                           method=proc.method, sigma=sigma if stands else None,
                                           stands=stands)
             test = next(t for t in sel.tests if t.model == sel.model)
@@ -109,8 +109,7 @@ def identify_measurement(config: StationConfig, m: Measurement,
     return ident, selection
 
 
-def _unless_form(config: StationConfig, data: Any, ident: Any, selection: dict[str, Any],
-                 sigma: float, stands: Any) -> Any:
+def _unless_form(config: StationConfig, ident: Any, selection: dict[str, Any]) -> str:
     """The tilt model auto chose, unless none of its tilts stands out of what the
     stated leg form and gauge errors could make of them: then the model without
     the tilts, and the selection says so and what would tell them apart."""
@@ -119,14 +118,11 @@ def _unless_form(config: StationConfig, data: Any, ident: Any, selection: dict[s
     try:
         check = tilts_beyond_form(config, ident)
     except ValueError:
-        return ident
+        return ident.model
     selection["budget"]["tilts"] = check
     if check["told_apart"]:
-        return ident
+        return ident.model
     smaller = ident.model.replace("+tilt", "")
-    fit = orthocal.identify(data, config.machine.geometry(), model=smaller,
-                            method=config.procedure.method,
-                            sigma=sigma if stands else None, stands=stands)
     selection["model"] = smaller
     selection["reason"] = (
         f"{smaller}: {ident.model} fits better, but none of its tilts stands out of what "
@@ -134,4 +130,4 @@ def _unless_form(config: StationConfig, data: Any, ident: Any, selection: dict[s
         f"{check['coverage_factor']:.2f} of its combined uncertainty, uncertainty "
         "budget): the tilts are not told apart from the legs' form; intermediate "
         "strokes ([procedure] strokes) separate them. " + selection.get("reason", ""))
-    return fit
+    return smaller
