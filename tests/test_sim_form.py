@@ -331,3 +331,26 @@ def test_a_whole_simulated_run_with_bowed_legs_completes(
     header = replay(read_journal(run_dir / "journal.jsonl")).header
     assert header["simulation"]["leg_bow_mm"] == [0.008] * 3
     assert header["simulation"]["gauge_scale"] == [0.001] * 2
+
+
+def test_the_simulators_bow_is_the_maths_bow() -> None:
+    # drivers/sim/form.py is computed from the end point alone, apart from
+    # orthocal.measurement's bow, so that each checks the other: tilted axes, leg
+    # errors, a misplaced plane, joints at and around the test postures.
+    from drivers.sim.form import bow_mm
+
+    rng = np.random.default_rng(23)
+    g = orthocal.Geometry()
+    postures = np.array([orthocal.posture(s, i, g) for s, i in
+                         [("0", None), *((s, i) for i in "xyz" for s in "+-")]])
+    for _ in range(20):
+        drho, dl = rng.uniform(-1.5, 1.5, 3), rng.uniform(-0.5, 0.5, 3)
+        tilt = rng.uniform(-0.5, 0.5, 3)
+        rho = postures + rng.uniform(-2, 2, postures.shape)
+        mount = g.mount_plane + rng.uniform(-5, 5)
+        for leg in "xyz":
+            t_sim = contact_fraction(rho, leg, g, drho, dl, tilt, mount)
+            t_maths = orthocal.contact_fraction(rho, leg, g, drho, dl, mount, tilt)
+            np.testing.assert_allclose(t_sim, t_maths, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(bow_mm(t_sim, 0.008), orthocal.bow_at(t_maths, 0.008),
+                                       rtol=0, atol=1e-15)
