@@ -37,7 +37,7 @@ from orthocal.geometry import (
     params_vector,
     split_params,
 )
-from orthocal.kinematics import axis_directions, forward, inverse
+from orthocal.kinematics import axis_directions, axis_origins, carriages, forward, inverse
 
 FRAMES: tuple[str, str] = ("translation", "rigid")
 SQUARENESS_NAMES: tuple[str, str, str] = ("xy", "xz", "yz")
@@ -50,7 +50,8 @@ DIFF_STEP = 1e-4
 
 
 def parameter_vector(params) -> np.ndarray:
-    """9-vector of PARAM_NAMES from a 9- or 6-vector, a dict by name, or None (zero)."""
+    """12-vector of PARAM_NAMES from a 12-, 9- or 6-vector, a dict by name, or None
+    (zero)."""
     if isinstance(params, Mapping):
         return params_vector(dict(params))
     return full_params(params).astype(float)
@@ -68,10 +69,11 @@ def offset_vector(offsets) -> np.ndarray:
 
 
 def covariance_matrix(covariance, names: Sequence[str] | None = None) -> np.ndarray:
-    """The 9×9 covariance over PARAM_NAMES (zero rows/columns for parameters not
+    """The 12×12 covariance over PARAM_NAMES (zero rows/columns for parameters not
     estimated) from any of:
 
-    - a 9×9 array (returned as is);
+    - a 12×12 array (returned as is), or a 9×9 one over the first nine names
+      (axes that meet: the gaps' rows and columns zero);
     - a k×k array together with ``names``, the k parameter names of its rows
       (an ``Identification``'s ``covariance`` and ``names``);
     - a nested dict ``{name: {name: covariance}}``;
@@ -99,9 +101,12 @@ def covariance_matrix(covariance, names: Sequence[str] | None = None) -> np.ndar
         return out
     c = np.asarray(covariance, dtype=float)
     if names is None:
-        if c.shape != (n, n):
+        if c.shape == (9, 9):
+            names = PARAM_NAMES[:9]
+        elif c.shape != (n, n):
             raise ValueError(f"expected a {n}×{n} covariance (or names), got shape {c.shape}")
-        return c.copy()
+        else:
+            return c.copy()
     cols = [index[nm] for nm in names]
     if c.shape != (len(cols), len(cols)):
         raise ValueError(f"covariance of shape {c.shape} does not match {len(cols)} names")
@@ -161,14 +166,15 @@ def workspace_grid(box=None, n: int = 7, geometry: Geometry | None = None,
 
 def tool_error(points, geometry: Geometry, params, offsets) -> np.ndarray:
     """E = P − p (n, 3) mm at commanded tool points ``points`` (n, 3) mm, for the
-    machine of parameters ``params`` (9- or 6-vector of PARAM_NAMES, or a dict by
-    name) with the offset registers changed by ``offsets`` o (3, mm; None: 0)
-    since delivery: P = forward(IK_nominal(p) + o, geometry, Δρ, ΔL, tilt)
-    (model.md, "Accuracy at the tool")."""
+    machine of parameters ``params`` (12-, 9- or 6-vector of PARAM_NAMES, or a dict
+    by name) with the offset registers changed by ``offsets`` o (3, mm; None: 0)
+    since delivery: P = forward(IK_nominal(p) + o, geometry, Δρ, ΔL, tilt, gap)
+    (model.md, "Accuracy at the tool"; the axes may pass each other: "Axes that do
+    not meet")."""
     p = np.asarray(points, dtype=float)
-    drho, dL, tilt = split_params(parameter_vector(params))
+    drho, dL, tilt, gap = split_params(parameter_vector(params))
     rho = inverse(p, geometry)
-    return forward(rho + offset_vector(offsets), geometry, drho, dL, tilt) - p
+    return forward(rho + offset_vector(offsets), geometry, drho, dL, tilt, gap) - p
 
 
 def rigid_fit(points, landed) -> tuple[np.ndarray, np.ndarray]:
@@ -313,14 +319,13 @@ class Squareness:
 
 def _motion_jacobian_at_zero(geometry: Geometry, theta: np.ndarray, o: np.ndarray) -> np.ndarray:
     """dP/dp at the commanded Π0 (p = 0): dIK_nominal/dp = I there (every leg along
-    its axis), and implicit differentiation of |P − q_i·u_i|² = L_i² gives
-    D·dP = diag(d_i·u_i)·dq with rows d_i = P − q_i·u_i."""
-    drho, dL, tilt = split_params(theta)
+    its axis), and implicit differentiation of |P − c_i − q_i·u_i|² = L_i² gives
+    D·dP = diag(d_i·u_i)·dq with rows d_i = P − c_i − q_i·u_i."""
+    drho, dL, tilt, gap = split_params(theta)
     rho0 = np.full(3, geometry.leg_length) + o
-    P = forward(rho0, geometry, drho, dL, tilt)
+    P = forward(rho0, geometry, drho, dL, tilt, gap)
     u = axis_directions(tilt)
-    u = np.eye(3) if u is None else u
-    d = P[None, :] - (rho0 + drho)[:, None] * u
+    d = P[None, :] - carriages(rho0 + drho, u, axis_origins(gap))
     return np.linalg.solve(d, np.diag(np.einsum("ij,ij->i", d, u)))
 
 

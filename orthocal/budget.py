@@ -57,7 +57,7 @@ def _check_geometry(ident: Identification, geometry: Geometry) -> None:
     if ident.method == "nonlinear":
         again = deviations(keys, geometry, ident.vector, ident.mount_offsets)
     else:
-        J_all = jacobian(keys, geometry, "full+tilt")
+        J_all = jacobian(keys, geometry, "full+tilt+gap")
         again = J_all[:, :6] @ ident.vector[:6] + J_all[:, 6:] @ ident.vector[6:]
     model_values = np.asarray(ident.values) - np.asarray(ident.residuals)
     if not np.allclose(again, model_values, rtol=0.0, atol=_GEOMETRY_TOL):
@@ -174,7 +174,7 @@ def form_vector(keys: Sequence[Key], geometry: Geometry, params=None,
     ``mount_offsets`` (one per key, None: L/2). A bow of sagitta h in that plane
     changes the deviation by exactly h·g_k (the fractions do not depend on h);
     nominally g = −4·(s/L)², −0.150 at Π^+ and −0.416 at Π^− on the paper's machine."""
-    drho, dL, tilt = split_params(params)
+    drho, dL, tilt, gap = split_params(params)
     offsets = np.zeros(len(keys)) if mount_offsets is None else \
         np.asarray(mount_offsets, dtype=float).reshape(-1)
     if offsets.shape != (len(keys),):
@@ -184,8 +184,9 @@ def form_vector(keys: Sequence[Key], geometry: Geometry, params=None,
     g = np.empty(len(keys))
     for n, (sign, leg, _) in enumerate(keys):
         m = geometry.mount_plane + offsets[n]
-        t_k = contact_fraction(posture(sign, leg, geometry), leg, geometry, drho, dL, m, tilt)
-        t_0 = contact_fraction(rho_0, leg, geometry, drho, dL, m, tilt)
+        t_k = contact_fraction(posture(sign, leg, geometry), leg, geometry, drho, dL, m, tilt,
+                               gap)
+        t_0 = contact_fraction(rho_0, leg, geometry, drho, dL, m, tilt, gap)
         g[n] = float(bow_at(t_k, 1.0) - bow_at(t_0, 1.0))
     return g
 

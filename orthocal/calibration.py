@@ -20,6 +20,21 @@ so the reading changes by (1 − μ)(L + s)(δu_i)_j − μ·s·(δu_j)_i, and t
 reading by 0.5·L·(δu_i)_j. The difference is −L·sin α·μ·((δu_i)_j + (δu_j)_i):
 only the symmetric part, the change of the angle between the two axes, shows.
 A rotation of the whole machine (antisymmetric δu) shows in no deviation.
+
+Axes that do not meet (model.md, "Axes that do not meet"): the carriage of axis i
+sits at c_i + q_i·u_i, c_i the point of its line nearest the origin. One more
+pair of terms per row:
+
+    Δ^s_{i,j} = (7') − a·c_{i,j} − b·c_{j,i}                                   (7'')
+
+with a, b of (7) and c_{i,j} = (c_i)_j: c_{x,y} = g_xz/2, c_{x,z} = g_xy/2,
+c_{y,x} = g_yz/2, c_{y,z} = −g_xy/2, c_{z,x} = −g_yz/2, c_{z,y} = −g_xz/2.
+Derivation: at Π_i^s leg i's carriage moves by c_i, so the reading gains
+(1 − μ)·c_{i,j} from the joint end; leg j's sphere equation, (s·e_i − L·cos α·e_j)
+·(δP − c_j) = 0, moves P along j by −tan α·c_{j,i}, which the plane sees as μ
+times that; at Π0 the reading gains c_{i,j}/2 and P does not move (c_i has no
+i-component). The difference is (1/2 − μ)·c_{i,j} − μ·tan α·c_{j,i}, i.e. −a·c_{i,j}
+− b·c_{j,i}: a gap acts on a deviation as Δρ does, through the same a and b.
 """
 
 from __future__ import annotations
@@ -56,10 +71,18 @@ def tilt_coefficient(sign: str, geometry: Geometry) -> float:
     return float(-geometry.leg_length * a * (0.5 + a) * MRAD)
 
 
+# c_{i,j} = (c_i)_j of (7'') as ±gap/2: (i, j) → (the gap's column in PARAM_NAMES, ±1).
+GAP_OF_ORIGIN: dict[tuple[str, str], tuple[int, float]] = {
+    ("x", "y"): (10, 1.0), ("x", "z"): (9, 1.0), ("y", "x"): (11, 1.0),
+    ("y", "z"): (9, -1.0), ("z", "x"): (11, -1.0), ("z", "y"): (10, -1.0),
+}  # fmt: skip
+
+
 def jacobian(keys: Sequence[Key], geometry: Geometry, model: str = "full") -> np.ndarray:
-    """Rows of system (7) (and (7') for tilts) for ``keys``, columns the parameters
-    of ``model`` in PARAM_NAMES order ('rho': Δρ; 'L': ΔL; 'full': Δρ then ΔL;
-    'rho+tilt', 'full+tilt': then the tilts, per mrad), shape (len(keys), p)."""
+    """Rows of system (7) (and (7') for tilts, (7'') for gaps) for ``keys``, columns
+    the parameters of ``model`` in PARAM_NAMES order ('rho': Δρ; 'L': ΔL; 'full':
+    Δρ then ΔL; '…+tilt': then the tilts, per mrad; '…+gap': then the gaps, per
+    mm), shape (len(keys), p)."""
     full = np.zeros((len(keys), len(PARAM_NAMES)))
     coef: dict[str, tuple[float, float, float, float]] = {}
     for row, key in enumerate(keys):
@@ -73,13 +96,17 @@ def jacobian(keys: Sequence[Key], geometry: Geometry, model: str = "full") -> np
         full[row, 3 + i] -= b
         full[row, 3 + j] -= c
         full[row, TILT_PAIRS[frozenset((leg, direction))]] += d
+        col_ij, sign_ij = GAP_OF_ORIGIN[(leg, direction)]
+        col_ji, sign_ji = GAP_OF_ORIGIN[(direction, leg)]
+        full[row, col_ij] -= a * sign_ij / 2.0
+        full[row, col_ji] -= b * sign_ji / 2.0
     return full[:, list(MODELS[model])]
 
 
 def linear_deviations(keys: Sequence[Key], geometry: Geometry, params) -> np.ndarray:
-    """Deviations predicted by (7') for ``params`` (9-vector in PARAM_NAMES order,
-    or a 6-vector without tilts)."""
-    return jacobian(keys, geometry, "full+tilt") @ full_params(params)
+    """Deviations predicted by (7'') for ``params`` (12-vector in PARAM_NAMES order,
+    a 9-vector without gaps or a 6-vector without tilts either)."""
+    return jacobian(keys, geometry, "full+tilt+gap") @ full_params(params)
 
 
 def statistical_floor(

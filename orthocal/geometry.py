@@ -10,8 +10,11 @@ AXES: tuple[str, str, str] = ("x", "y", "z")
 AXIS_INDEX = {a: i for i, a in enumerate(AXES)}
 PARAM_NAMES: tuple[str, ...] = (
     "drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z", "tilt_yx", "tilt_zx", "tilt_zy",
+    "gap_xy", "gap_xz", "gap_yz",
 )  # fmt: skip
 TILT_NAMES: tuple[str, str, str] = ("tilt_yx", "tilt_zx", "tilt_zy")
+# How far the actuator axes pass each other (mm; model.md, "Axes that do not meet").
+GAP_NAMES: tuple[str, str, str] = ("gap_xy", "gap_xz", "gap_yz")
 # The tilts are named and reported in mrad (model.md, "Extended model"); the
 # kinematics works in radians.
 MRAD = 1e-3
@@ -22,6 +25,10 @@ MODELS: dict[str, tuple[int, ...]] = {
     "full": (0, 1, 2, 3, 4, 5),
     "rho+tilt": (0, 1, 2, 6, 7, 8),
     "full+tilt": (0, 1, 2, 3, 4, 5, 6, 7, 8),
+    "rho+gap": (0, 1, 2, 9, 10, 11),
+    "rho+tilt+gap": (0, 1, 2, 6, 7, 8, 9, 10, 11),
+    # the whole rigid geometry: needs more than two stops per leg
+    "full+tilt+gap": tuple(range(12)),
 }
 # The pair of axes {i, j} whose angle each tilt changes: tilt_yx leans y toward x, etc.
 TILT_PAIRS: dict[frozenset[str], int] = {
@@ -57,27 +64,30 @@ class Geometry:
 
 
 def full_params(params) -> np.ndarray:
-    """The 9-vector of PARAM_NAMES from ``params``: None (all zero), a 9-vector,
-    or a 6-vector (Δρ, ΔL) of the paper's model, whose tilts are zero."""
+    """The 12-vector of PARAM_NAMES from ``params``: None (all zero), a 12-vector,
+    a 9-vector (Δρ, ΔL, tilts: axes that meet) or a 6-vector (Δρ, ΔL) of the
+    paper's model, whose tilts and gaps are zero."""
+    n = len(PARAM_NAMES)
     if params is None:
-        return np.zeros(len(PARAM_NAMES))
+        return np.zeros(n)
     params = np.asarray(params, dtype=float)
-    if params.shape == (6,):
-        return np.concatenate([params, np.zeros(3)])
-    if params.shape != (len(PARAM_NAMES),):
-        raise ValueError(f"expected 6 or 9 parameters {PARAM_NAMES}, got shape {params.shape}")
+    if params.shape in ((6,), (9,)):
+        return np.concatenate([params, np.zeros(n - params.shape[0])])
+    if params.shape != (n,):
+        raise ValueError(f"expected 6, 9 or 12 parameters {PARAM_NAMES}, got shape "
+                         f"{params.shape}")
     return params
 
 
-def split_params(params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(Δρ, ΔL, tilts in mrad) from a 9- or 6-vector ordered as PARAM_NAMES
-    (None: all zero)."""
+def split_params(params) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(Δρ, ΔL, tilts in mrad, gaps in mm) from a 12-, 9- or 6-vector ordered as
+    PARAM_NAMES (None: all zero)."""
     v = full_params(params)
-    return v[:3], v[3:6], v[6:]
+    return v[:3], v[3:6], v[6:9], v[9:]
 
 
 def params_vector(values: dict[str, float]) -> np.ndarray:
-    """9-vector from a dict by PARAM_NAMES; missing names are zero."""
+    """12-vector from a dict by PARAM_NAMES; missing names are zero."""
     unknown = set(values) - set(PARAM_NAMES)
     if unknown:
         raise ValueError(f"unknown parameter name(s): {sorted(unknown)}")

@@ -98,7 +98,7 @@ class Identification:
 
     @property
     def vector(self) -> np.ndarray:
-        """All nine parameters in PARAM_NAMES order (those not in the model are 0)."""
+        """All twelve parameters in PARAM_NAMES order (those not in the model are 0)."""
         return np.array([self.parameters.get(n, 0.0) for n in PARAM_NAMES])
 
     def to_dict(self) -> dict:
@@ -298,7 +298,7 @@ def identify(
         model_values = deviations(keys, geometry, full)
     else:
         # the tilt columns apart, so that models without tilt keep (7)'s numbers
-        J_all = jacobian(keys, geometry, "full+tilt")
+        J_all = jacobian(keys, geometry, "full+tilt+gap")
         model_values = J_all[:, :6] @ full[:6] + J_all[:, 6:] @ full[6:]
     fit = _Fit.of(y, model_values, len(cols))
     scale = sigma if sigma is not None else fit.sigma_hat

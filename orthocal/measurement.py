@@ -12,11 +12,12 @@ the nonlinear identification both use these functions.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from orthocal.geometry import AXIS_INDEX, Geometry, split_params
-from orthocal.kinematics import axis_directions, forward, forward_on_axes
+from orthocal.kinematics import axis_directions, axis_origins, forward_on_axes
 from orthocal.postures import check_posture, posture
 
 Key = tuple[str, str, str]  # (posture: "+", "-" or a signed stroke "+30"; leg i; direction j)
@@ -44,39 +45,52 @@ def _pick(a: np.ndarray, k) -> np.ndarray:
     return a[..., k] if np.ndim(k) == 0 else a[np.arange(a.shape[0]), k]
 
 
+def _carriage(rho: np.ndarray, i, j, drho: np.ndarray, u: np.ndarray | None,
+              c: np.ndarray | None) -> np.ndarray:
+    """Coordinate j of carriage i, A_i = c_i + q_i·u_i (q = ρ + Δρ; ``i``, ``j``
+    scalars or one per row as for :func:`reading_at`)."""
+    q_i = _pick(rho, i) + drho[i]
+    a = q_i * (np.asarray(i == j, dtype=float) if u is None else u[i, j])
+    return a if c is None else a + c[i, j]
+
+
 def fraction_at(
     rho: np.ndarray, p: np.ndarray, i, drho: np.ndarray, mount, u: np.ndarray | None = None,
+    c: np.ndarray | None = None,
 ) -> np.ndarray:
     """The fraction t = (A_i − M)/(A_i − p_i) from the carriage A toward P at which
     leg i's axis crosses the base-fixed plane x_i = ``mount`` (arguments as for
     :func:`reading_at`): where the plunger touches the leg. Nominally 1/2 at Π0
     and 1/2 + sin α at Π_i^s (model.md, μ of system (7))."""
-    q_i = _pick(rho, i) + drho[i]
-    if u is None:
+    if u is None and c is None:
+        q_i = _pick(rho, i) + drho[i]
         return (q_i - mount) / (q_i - _pick(p, i))
-    a_i = q_i * u[i, i]
+    a_i = _carriage(rho, i, i, drho, u, c)
     return (a_i - mount) / (a_i - _pick(p, i))
 
 
 def reading_at(
     rho: np.ndarray, p: np.ndarray, i, j, drho: np.ndarray, mount: float,
-    u: np.ndarray | None = None,
+    u: np.ndarray | None = None, c: np.ndarray | None = None,
 ) -> np.ndarray:
     """The reading of leg i along j given the joints ``rho`` and the end point ``p``
     (both (..., 3)); ``i`` and ``j`` are axis indices: scalars, or one per row
     when ``rho`` and ``p`` are (n, 3). ``u``: the axis directions (rows), None for
-    e_x, e_y, e_z. The forward solve stays with the caller, who may share it.
+    e_x, e_y, e_z; ``c``: the points of the axes' lines (rows), None for the
+    origin (axes that meet). The forward solve stays with the caller, who may
+    share it.
 
     The indicator plane x_i = M is fixed to the base; the carriage
-    A = q_i·u_i (q = ρ + Δρ) leaves the coordinate axis when u_i is tilted, so the
-    leg's axis A → P crosses the plane at the fraction t = (A_i − M)/(A_i − p_i)
-    from A (:func:`fraction_at`), where its j-coordinate is A_j + t·(p_j − A_j).
-    With u_i = e_i (A_i = q_i, A_j = 0) this is the paper's t·p_j, bit for bit.
+    A = c_i + q_i·u_i (q = ρ + Δρ) leaves the coordinate axis when u_i is tilted
+    or the axes do not meet, so the leg's axis A → P crosses the plane at the
+    fraction t = (A_i − M)/(A_i − p_i) from A (:func:`fraction_at`), where its
+    j-coordinate is A_j + t·(p_j − A_j). With u_i = e_i, c_i = 0 (A_i = q_i,
+    A_j = 0) this is the paper's t·p_j, bit for bit.
     """
-    t = fraction_at(rho, p, i, drho, mount, u)
-    if u is None:
+    t = fraction_at(rho, p, i, drho, mount, u, c)
+    if u is None and c is None:
         return t * _pick(p, j)
-    a_j = (_pick(rho, i) + drho[i]) * u[i, j]
+    a_j = _carriage(rho, i, j, drho, u, c)
     return a_j + t * (_pick(p, j) - a_j)
 
 
@@ -89,14 +103,14 @@ def bow_at(t, h) -> np.ndarray:
     return 4.0 * np.asarray(h, dtype=float) * t * (1.0 - t)
 
 
-def _leg_solve(rho, geometry: Geometry, drho, dL, mount, tilt
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray | None]:
-    """(ρ, P, Δρ, M, u) of :func:`leg_reading` and :func:`contact_fraction`."""
+def _leg_solve(rho, geometry: Geometry, drho, dL, mount, tilt, gap) -> tuple[Any, ...]:
+    """(ρ, P, Δρ, M, u, c) of :func:`leg_reading` and :func:`contact_fraction`."""
     drho_v = np.zeros(3) if drho is None else np.asarray(drho, dtype=float)
     rho = np.asarray(rho, dtype=float)
-    p = forward(rho, geometry, drho_v, dL, tilt)
+    u, c = axis_directions(tilt), axis_origins(gap)
+    p = forward_on_axes(rho, geometry, drho_v, dL, u, c)
     m = geometry.mount_plane if mount is None else mount
-    return rho, p, drho_v, m, axis_directions(tilt)
+    return rho, p, drho_v, m, u, c
 
 
 def leg_reading(
@@ -109,12 +123,14 @@ def leg_reading(
     mount: float | None = None,
     tilt=None,
     bow: float | None = None,
+    gap=None,
 ) -> np.ndarray:
     """Coordinate along ``direction`` of leg ``leg``'s axis in the base-fixed plane
     x_leg = M (model.md, "Where the indicator plane is").
 
-    The leg runs from the carriage A = q_i·u_i (q = ρ + Δρ; u_i = e_i unless
-    ``tilt`` (mrad) tilts the axes) to P and crosses x_i = M at the fraction
+    The leg runs from the carriage A = c_i + q_i·u_i (q = ρ + Δρ; u_i = e_i unless
+    ``tilt`` (mrad) tilts the axes, c_i = 0 unless ``gap`` (mm) says the axes do not
+    meet) to P and crosses x_i = M at the fraction
     t = (A_i − M)/(A_i − p_i) from A, where its j-coordinate is
     A_j + t·(p_j − A_j). ``rho`` has shape (..., 3).
 
@@ -122,12 +138,12 @@ def leg_reading(
     bow w(t) = 4·h·t·(1 − t) (:func:`bow_at`) added to the reading; None (the
     default): a straight leg, the reading bit for bit as without the argument.
     """
-    rho, p, drho_v, m, u = _leg_solve(rho, geometry, drho, dL, mount, tilt)
+    rho, p, drho_v, m, u, c = _leg_solve(rho, geometry, drho, dL, mount, tilt, gap)
     i = AXIS_INDEX[leg]
-    reading = reading_at(rho, p, i, AXIS_INDEX[direction], drho_v, m, u)
+    reading = reading_at(rho, p, i, AXIS_INDEX[direction], drho_v, m, u, c)
     if bow is None:
         return reading
-    return reading + bow_at(fraction_at(rho, p, i, drho_v, m, u), bow)
+    return reading + bow_at(fraction_at(rho, p, i, drho_v, m, u, c), bow)
 
 
 def contact_fraction(
@@ -138,18 +154,20 @@ def contact_fraction(
     dL=None,
     mount: float | None = None,
     tilt=None,
+    gap=None,
 ) -> np.ndarray:
     """The fraction t along leg ``leg`` (from the carriage A toward P) at which the
     gauges of the plane x_leg = M touch it at the joints ``rho`` (..., 3):
     t = (A_i − M)/(A_i − p_i), exact (:func:`fraction_at`; arguments as for
     :func:`leg_reading`). ≈ 1/2 at Π0, 1/2 + ρmax/L at Π_i^+, 1/2 + ρmin/L at Π_i^−."""
-    rho, p, drho_v, m, u = _leg_solve(rho, geometry, drho, dL, mount, tilt)
-    return fraction_at(rho, p, AXIS_INDEX[leg], drho_v, m, u)
+    rho, p, drho_v, m, u, c = _leg_solve(rho, geometry, drho, dL, mount, tilt, gap)
+    return fraction_at(rho, p, AXIS_INDEX[leg], drho_v, m, u, c)
 
 
 def deviation(key: Key, geometry: Geometry, params=None) -> float:
     """Exact Δ^s_{i,j} = reading at Π_i^s − reading at Π0 for the parameter
-    9-vector ``params`` (PARAM_NAMES order; a 6-vector means zero tilts)."""
+    vector ``params`` (PARAM_NAMES order; a 9-vector means no gaps, a 6-vector
+    no tilts either)."""
     return float(deviations([key], geometry, params)[0])
 
 
@@ -173,7 +191,7 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
     and one for Π0 (per-row leg and direction indices), because the nonlinear
     identification evaluates this hundreds of times.
     """
-    drho, dL, tilt = split_params(params)
+    drho, dL, tilt, gap = split_params(params)
     if len(keys) == 0:
         return np.empty(0)
     if mount_offsets is not None or bow is not None:
@@ -182,13 +200,14 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
         if offsets.shape != (len(keys),):
             raise ValueError(f"mount_offsets needs one value per key ({len(keys)}), "
                              f"got shape {np.shape(mount_offsets)}")
-        return _deviations_mounted(keys, geometry, drho, dL, tilt, offsets,
+        return _deviations_mounted(keys, geometry, drho, dL, tilt, gap, offsets,
                                    None if bow is None else _row_bows(keys, bow))
-    rows, legs, dirs, rho_s, rho_0, p_all, u = _solve(keys, geometry, drho, dL, tilt)
+    rows, legs, dirs, rho_s, rho_0, p_all, u, c = _solve(keys, geometry, drho, dL, tilt, gap)
     p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
     m = geometry.mount_plane
-    reading_s = reading_at(rho_s, p_s, legs, dirs, drho, m, u)
-    dev = reading_s - reading_at(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m, u)
+    reading_s = reading_at(rho_s, p_s, legs, dirs, drho, m, u, c)
+    dev = reading_s - reading_at(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m,
+                                 u, c)
     return dev[rows]
 
 
@@ -205,12 +224,11 @@ def _row_bows(keys: Sequence[Key], bow: Bows) -> np.ndarray:
 
 
 def _solve(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray, dL: np.ndarray,
-           tilt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                      np.ndarray, np.ndarray, np.ndarray]:
+           tilt: np.ndarray, gap: np.ndarray) -> tuple[Any, ...]:
     """The end points of the distinct keys' test postures and of Π0 (its last row),
-    in one solve (Newton when tilted): (each key's row among the distinct ones,
-    their leg and direction indices, their joints, Π0's joints, the end points,
-    the axis directions)."""
+    in one solve (Newton when tilted or the axes do not meet): (each key's row
+    among the distinct ones, their leg and direction indices, their joints, Π0's
+    joints, the end points, the axis directions, the axes' points)."""
     # Repeated keys (one per cycle) share one solve: the fit calls this per step.
     row_of: dict[Key, int] = {}
     rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
@@ -223,28 +241,28 @@ def _solve(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray, dL: np.nda
         legs[n], dirs[n] = AXIS_INDEX[leg], AXIS_INDEX[direction]
         rho_s[n] = posture(sign, leg, geometry)
     rho_0 = posture("0", None, geometry)
-    u = axis_directions(tilt)
-    p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u)
-    return np.asarray(rows), legs, dirs, rho_s, rho_0, p_all, u
+    u, c = axis_directions(tilt), axis_origins(gap)
+    p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u, c)
+    return np.asarray(rows), legs, dirs, rho_s, rho_0, p_all, u, c
 
 
 def _deviations_mounted(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray,
-                        dL: np.ndarray, tilt: np.ndarray, offsets: np.ndarray,
-                        bows: np.ndarray | None = None) -> np.ndarray:
+                        dL: np.ndarray, tilt: np.ndarray, gap: np.ndarray,
+                        offsets: np.ndarray, bows: np.ndarray | None = None) -> np.ndarray:
     """:func:`deviations` with one indicator plane per row, M = L/2 + offset, and
     (``bows``, one sagitta per row, or None) each row's leg bowed: the same batched
     solves, the readings taken in each row's own plane."""
-    rows, legs, dirs, rho_s, rho_0, p_all, u = _solve(keys, geometry, drho, dL, tilt)
+    rows, legs, dirs, rho_s, rho_0, p_all, u, c = _solve(keys, geometry, drho, dL, tilt, gap)
     # expand the distinct solves to the rows, each read in its own plane
     p_s, rho_r = p_all[:-1][rows], rho_s[rows]
     rho_0r = np.broadcast_to(rho_0, rho_r.shape)
     p_0 = np.broadcast_to(p_all[-1], rho_r.shape)
     m = geometry.mount_plane + offsets
     li, di = legs[rows], dirs[rows]
-    reading_s = reading_at(rho_r, p_s, li, di, drho, m, u)
-    dev = reading_s - reading_at(rho_0r, p_0, li, di, drho, m, u)
+    reading_s = reading_at(rho_r, p_s, li, di, drho, m, u, c)
+    dev = reading_s - reading_at(rho_0r, p_0, li, di, drho, m, u, c)
     if bows is None:
         return dev
-    t_s = fraction_at(rho_r, p_s, li, drho, m, u)
-    t_0 = fraction_at(rho_0r, p_0, li, drho, m, u)
+    t_s = fraction_at(rho_r, p_s, li, drho, m, u, c)
+    t_0 = fraction_at(rho_0r, p_0, li, drho, m, u, c)
     return dev + (bow_at(t_s, bows) - bow_at(t_0, bows))

@@ -86,7 +86,7 @@ def test_identify_with_four_strokes_recovers_noiseless_offsets(model) -> None:
     if model.startswith("full"):
         truth[3:6] = [0.6, -0.3, 0.45]
     if model.endswith("tilt"):
-        truth[6:] = [0.5, -0.8, 0.3]  # mrad
+        truth[6:9] = [0.5, -0.8, 0.3]  # mrad
     keys = keys_for(["+", "+30", "-50", "-"])
     data = dict(zip(keys, orthocal.deviations(keys, G, truth), strict=True))
     result = orthocal.identify(data, G, model=model, method="nonlinear")

@@ -32,14 +32,17 @@ from orthocal import AXES, Geometry, axis_directions, forward
 
 
 def contact_fraction(rho: np.ndarray, leg: str, geometry: Geometry, drho: np.ndarray,
-                     dl: np.ndarray, tilt: np.ndarray, mount: float) -> np.ndarray:
+                     dl: np.ndarray, tilt: np.ndarray, mount: float,
+                     gap: np.ndarray | None = None) -> np.ndarray:
     """t: where along leg ``leg`` (0 at the carriage A, 1 at the end point P) the
     base-fixed plane x_leg = ``mount`` crosses its axis, at joints ``rho`` ((..., 3),
     controller counts from the delivered offsets, as orthocal.leg_reading takes
-    them) of a machine with the true errors ``drho``, ``dl``, ``tilt``."""
+    them) of a machine with the true errors ``drho``, ``dl``, ``tilt``, ``gap``
+    (a gap moves the carriage across its axis, never along it: A_i's own
+    coordinate is the untilted one)."""
     rho = np.asarray(rho, dtype=float)
     i = AXES.index(leg)
-    p = forward(rho, geometry, drho, dl, tilt)
+    p = forward(rho, geometry, drho, dl, tilt, gap)
     u = axis_directions(tilt)
     a_i = (rho[..., i] + drho[i]) * (1.0 if u is None else u[i, i])
     return (a_i - mount) / (a_i - p[..., i])

@@ -99,8 +99,10 @@ class VirtualOrthoglide:
 
     ``true_drho``/``true_dl``: hidden joint offsets Δρ and leg-length errors ΔL
     (mm, 3-vectors); ``true_tilt``: hidden actuator axis tilts (tilt_yx, tilt_zx,
-    tilt_zy, mrad; model.md "Extended model"); or pass ``true_params`` as the 6- or
-    9-vector of :data:`orthocal.PARAM_NAMES`; ``leg_bow``: each leg's hidden bow
+    tilt_zy, mrad; model.md "Extended model"); ``true_gap``: how far the axes pass
+    each other (gap_xy, gap_xz, gap_yz, mm; model.md "Axes that do not meet"); or
+    pass ``true_params`` as the 6-, 9- or 12-vector of :data:`orthocal.PARAM_NAMES`;
+    ``leg_bow``: each leg's hidden bow
     (mm, module docstring). ``offsets``: the controller's zero offsets at
     delivery (o_initial). ``start``: initial controller positions ρ (default Π0).
     ``motion``: a :class:`DriveMotion`, or "coordinated" / "independent"
@@ -125,6 +127,7 @@ class VirtualOrthoglide:
         *,
         true_params: Sequence[float] | None = None,
         true_tilt: Sequence[float] | None = None,
+        true_gap: Sequence[float] | None = None,
         offsets: Sequence[float] = (0.0, 0.0, 0.0),
         speed_mm_s: float = 50.0,
         accel_mm_s2: float = 500.0,
@@ -140,13 +143,15 @@ class VirtualOrthoglide:
     ) -> None:
         self.geometry = geometry or Geometry()
         if true_params is not None:
-            if true_drho is not None or true_dl is not None or true_tilt is not None:
-                raise ValueError("give true_params or true_drho/true_dl/true_tilt, not both")
+            if any(v is not None for v in (true_drho, true_dl, true_tilt, true_gap)):
+                raise ValueError("give true_params or true_drho/true_dl/true_tilt/true_gap, "
+                                 "not both")
             p = orthocal.geometry.full_params(np.asarray(true_params, dtype=float))
-            true_drho, true_dl, true_tilt = p[:3], p[3:6], p[6:]
+            true_drho, true_dl, true_tilt, true_gap = p[:3], p[3:6], p[6:9], p[9:]
         self.true_drho = _vec(true_drho if true_drho is not None else (0, 0, 0), 3, "true_drho")
         self.true_dl = _vec(true_dl if true_dl is not None else (0, 0, 0), 3, "true_dl")
         self.true_tilt = _vec(true_tilt if true_tilt is not None else (0, 0, 0), 3, "true_tilt")
+        self.true_gap = _vec(true_gap if true_gap is not None else (0, 0, 0), 3, "true_gap")
         self.offsets_initial = _vec(offsets, 3, "offsets")
         if speed_mm_s <= 0 or accel_mm_s2 <= 0:
             raise ValueError("speed and acceleration must be > 0")
@@ -504,13 +509,14 @@ class VirtualOrthoglide:
         (:mod:`drivers.sim.form`; nothing computed for a straight leg, so its
         readings stay those of the maths to the bit)."""
         reading = orthocal.leg_reading(rho, leg, direction, self.geometry, self.true_drho,
-                                       self.true_dl, mount=mount, tilt=self.true_tilt)
+                                       self.true_dl, mount=mount, tilt=self.true_tilt,
+                                       gap=self.true_gap)
         h = float(self.leg_bow[orthocal.AXES.index(leg)])
         if h == 0.0:
             return reading
         plane = self.geometry.mount_plane if mount is None else mount
         t = form.contact_fraction(rho, leg, self.geometry, self.true_drho, self.true_dl,
-                                  self.true_tilt, plane)
+                                  self.true_tilt, plane, self.true_gap)
         return reading + form.bow_mm(t, h)
 
     def source(self, leg: str, direction: str,
@@ -522,7 +528,8 @@ class VirtualOrthoglide:
         """The end point P (mm) at this instant."""
         with self._lock:
             rho = self._rho_kin()
-        return orthocal.forward(rho, self.geometry, self.true_drho, self.true_dl, self.true_tilt)
+        return orthocal.forward(rho, self.geometry, self.true_drho, self.true_dl, self.true_tilt,
+                                self.true_gap)
 
 
 
