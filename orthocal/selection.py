@@ -1,10 +1,14 @@
 """Model selection (``auto``): the smallest model the data supports.
 
-The candidates are nested, each extending the one before: ``rho`` (Δρ),
-``rho+tilt`` (Δρ and the axis tilts), ``full+tilt`` (Δρ, ΔL, tilts; only with
-more than two postures per leg). ``L`` and ``full`` are not candidates: ΔL and
-Δρ act almost alike (condition 62), so the data cannot prefer one to the
-other, and only Δρ can be written to a controller.
+The candidates form a lattice (docs/model.md, "Axes that do not meet"): ``rho``
+(Δρ); ``rho+gap`` and ``rho+tilt`` (Δρ and the gaps between the axes, or their
+tilts); ``rho+tilt+gap`` and ``full+tilt`` (Δρ, ΔL, tilts; only with more than
+two postures per leg); ``full+tilt+gap`` (the whole rigid geometry, four stops
+per leg). They are tried by size, smallest first; among the candidates of one
+size that pass, the one the data fit best (largest p-value) is chosen. ``L``
+and ``full`` are not candidates: ΔL and Δρ act almost alike (condition 62), so
+the data cannot prefer one to the other, and only Δρ can be written to a
+controller.
 
 The test, for each candidate in turn, is the lack-of-fit F test against the
 indicator noise measured in the same run:
@@ -21,7 +25,12 @@ level 0.001 a machine the smaller model describes is kept with probability
 0.999, while a tilt of 0.2 mrad (deviations of ~8 µm) is rejected for ``rho``
 far above indicator noise of a few µm (bench/model_selection.py measures both).
 
-Indicator stands (option ``stands``, orthocal.stands; issue 17): misplaced
+Stated form and gauge errors (option ``allowance``, orthocal.misfit): the lack
+of fit is the smallest that errors within the stated bounds, each with the
+shape it makes, can leave; so a bowed leg does not buy tilts, and a misfit of
+another shape (gaps) is not excused by it.
+
+Indicator stands (option ``stands``, orthocal.stands): misplaced
 stands leave deviations (stand error × leg slope, the legs sloping with Δρ)
 that look like tilt. With the option every candidate is fitted with the stands
 as random effects of prior SD tolerance/√3, and
@@ -48,10 +57,11 @@ from typing import Any
 import numpy as np
 
 from orthocal.calibration import jacobian
-from orthocal.geometry import Geometry
+from orthocal.geometry import MODELS, Geometry
 from orthocal.identification import Identification, exact_jacobian, identify
 from orthocal.inputs import IdentificationError
 from orthocal.measurement import Key
+from orthocal.misfit import Allowance, bounded_rss, columns
 from orthocal.noise import (
     means_covariance,
     noise_from_cycles,
@@ -67,7 +77,8 @@ from orthocal.stands import (
     stand_jacobian,
 )
 
-CANDIDATES: tuple[str, ...] = ("rho", "rho+tilt", "full+tilt")
+CANDIDATES: tuple[str, ...] = ("rho", "rho+gap", "rho+tilt", "rho+tilt+gap", "full+tilt",
+                               "full+tilt+gap")
 LEVEL = 0.001
 @dataclass(frozen=True)
 class ModelTest:
@@ -89,12 +100,16 @@ class ModelTest:
     F_next: float | None = None
     dof_next: int | None = None
     p_next: float | None = None
+    #: With an allowance (orthocal.misfit): what the stated errors took of the misfit.
+    allowance: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out = {"model": self.model, "identifiable": self.identifiable, "F": self.F,
                "dof": [self.dof_model, self.dof_noise] if self.F is not None else None,
                "p_value": self.p_value, "passed": self.passed,
                "residual_rms_mm": self.residual_rms, "note": self.note or None}
+        if self.allowance is not None:
+            out["allowance"] = self.allowance
         if self.against is not None:
             out["against_next"] = {"model": self.against, "F": self.F_next,
                                    "dof": [self.dof_next, self.dof_noise],
@@ -211,14 +226,44 @@ def _with_measured_noise_stands(result: Identification, geometry: Geometry, nois
                    se_dof=None if noise_dof is None else float(noise_dof), stands=estimates)
 
 
+def _means(result: Identification, distinct: Sequence[Key]) -> tuple[np.ndarray, np.ndarray]:
+    """(the deviation means, the fit's residual at them) per distinct key."""
+    keys = list(result.keys)
+    rows = [[k == d for k in keys] for d in distinct]
+    return (np.array([np.mean(np.asarray(result.values)[r]) for r in rows]),
+            np.array([np.mean(result.residuals[r]) for r in rows]))
+
+
+def _allowed_rss(result: Identification, geometry: Geometry, noise_sigma: float,
+                 shared_zero: bool, allowance: Allowance) -> tuple[float, dict[str, Any]]:
+    """The generalised residual of ``result`` that errors within ``allowance`` can
+    leave, at the least (orthocal.misfit; with the stands' prior in the
+    covariance where they are modelled), and what they took."""
+    keys = list(result.keys)
+    distinct, C = means_covariance(keys, shared_zero)
+    means, r = _means(result, distinct)
+    if result.stand_model is not None:
+        J, J_m, m = _stand_design(result, geometry, distinct)
+        r = r + J_m @ m
+        V = C + (result.stand_model.prior_sd / noise_sigma) ** 2 * (J_m @ J_m.T)
+    else:
+        J, V = exact_jacobian(distinct, geometry, result.vector, result.model), C
+    cols = columns(allowance, distinct, means, geometry, result.vector)
+    fit = bounded_rss(r, V, J, cols)
+    return fit.rss, fit.to_dict()
+
+
 def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
-                noise_dof: float, shared_zero: bool = True) -> ModelTest:
+                noise_dof: float, shared_zero: bool = True,
+                allowance: Allowance | None = None) -> ModelTest:
     """The lack-of-fit F test of one identification (see the module docstring).
 
     The fit's residuals at the deviation means are re-weighted by the inverse
     covariance of the means (a Gauss–Newton step of generalised least squares
     from the ordinary fit, exact to second order in the small residual), so F
-    follows F(K − p, ν) whatever the number of cycles per deviation."""
+    follows F(K − p, ν) whatever the number of cycles per deviation.
+    ``allowance``: the stated errors the misfit may be excused by, within their
+    bounds and with their shapes (orthocal.misfit)."""
     from scipy.stats import f as f_dist  # imported on demand, as scipy.optimize
 
     keys = list(result.keys)
@@ -227,7 +272,10 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
     dof_model = len(distinct) - p
     if dof_model <= 0:
         return ModelTest(result.model, True, note="as many parameters as deviations: no test")
-    if result.stand_model is not None:
+    took = None
+    if allowance is not None:
+        rss, took = _allowed_rss(result, geometry, noise_sigma, shared_zero, allowance)
+    elif result.stand_model is not None:
         rss = _marginal_rss(result, geometry, noise_sigma, shared_zero)
     else:
         mean_res = np.array([np.mean(result.residuals[[k == d for k in keys]])
@@ -240,7 +288,7 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
     p_value = float(f_dist.sf(F, dof_model, noise_dof))
     return ModelTest(result.model, True, F=float(F), dof_model=dof_model,
                      dof_noise=float(noise_dof), p_value=p_value, passed=False,
-                     residual_rms=float(result.residual_rms))
+                     residual_rms=float(result.residual_rms), allowance=took)
 
 
 def _marginal_rss(result: Identification, geometry: Geometry, noise_sigma: float,
@@ -266,23 +314,58 @@ def _marginal_rss(result: Identification, geometry: Geometry, noise_sigma: float
 
 
 def nested_test(small: Identification, big: Identification, geometry: Geometry,
-                noise_sigma: float, noise_dof: float,
-                shared_zero: bool = True) -> tuple[float, int, float] | None:
+                noise_sigma: float, noise_dof: float, shared_zero: bool = True,
+                allowance: Allowance | None = None) -> tuple[float, int, float] | None:
     """(F, dof, p) of the drop of the generalised residual (:func:`_marginal_rss`)
     from ``small`` to ``big``, the larger model with the same stands: F =
     [(RSS_small − RSS_big)/(p_big − p_small)]/σ̂², F(p_big − p_small, ν) when
     ``small`` is right. None when ``big`` has no more parameters. For fits with
     stands (orthocal.stands): the likelihood-ratio test that sees a tilt where
-    the lack of fit, spread over K − p dof, weighs it against the stands."""
+    the lack of fit, spread over K − p dof, weighs it against the stands.
+    ``allowance``: both residuals those the stated errors can leave, at the least
+    (:func:`lack_of_fit`)."""
     from scipy.stats import f as f_dist
 
     extra = len(big.names) - len(small.names)
     if extra <= 0 or small.stand_model is None or big.stand_model is None:
         return None
-    drop = (_marginal_rss(small, geometry, noise_sigma, shared_zero)
-            - _marginal_rss(big, geometry, noise_sigma, shared_zero))
+    if allowance is not None:
+        drop = (_allowed_rss(small, geometry, noise_sigma, shared_zero, allowance)[0]
+                - _allowed_rss(big, geometry, noise_sigma, shared_zero, allowance)[0])
+    else:
+        drop = (_marginal_rss(small, geometry, noise_sigma, shared_zero)
+                - _marginal_rss(big, geometry, noise_sigma, shared_zero))
     F = max(drop, 0.0) / extra / noise_sigma**2
     return float(F), extra, float(f_dist.sf(F, extra, noise_dof))
+
+
+def lattice_levels(candidates: Sequence[str]) -> list[list[str]]:
+    """The candidates grouped by their number of parameters, smallest first (the
+    lattice's levels), each group in the order given."""
+    sizes = sorted({len(MODELS[m]) for m in candidates})
+    return [[m for m in candidates if len(MODELS[m]) == n] for n in sizes]
+
+
+def _p(test: ModelTest) -> float:
+    """How well a passing candidate fits: its smaller p-value (lack of fit, and
+    against the next candidate where tested); inf where it could not be tested."""
+    ps = [p for p in (test.p_value, test.p_next) if p is not None]
+    return min(ps) if ps else math.inf
+
+
+def _best(tests: Sequence[ModelTest]) -> ModelTest | None:
+    """The passing candidate the data fit best (the first of equals)."""
+    passing = [t for t in tests if t.passed]
+    return max(passing, key=_p, default=None)
+
+
+def _also(chosen: ModelTest, tests: Sequence[ModelTest]) -> str:
+    """A note naming the other candidates of the chosen one's size that pass too."""
+    others = [t for t in tests if t.passed and t.model != chosen.model]
+    if not others:
+        return ""
+    return "; " + ", ".join(f"{t.model} passes too (p = {_p(t):.3f})" for t in others) + \
+        f", {chosen.model} fits best"
 
 
 def select_model(
@@ -296,9 +379,11 @@ def select_model(
     shared_zero: bool = True,
     noise_source: str = "given",
     stands: Stands | None = None,
+    allowance: Allowance | None = None,
 ) -> ModelSelection:
-    """The smallest of ``candidates`` (in the order given, smallest first) whose
-    lack of fit the measured noise explains at ``level`` (module docstring).
+    """The smallest of ``candidates`` (by their number of parameters; among those
+    of one size that pass, the best fit) whose lack of fit the measured noise
+    explains at ``level`` (module docstring).
 
     ``deviations_in`` as for :func:`orthocal.identify`, a key's repeats being its
     cycles in order; ``noise_sigma`` (mm), ``noise_dof``: the noise of one
@@ -312,6 +397,8 @@ def select_model(
     gauges share a stand, their placement tolerance) as the module docstring
     says; the reason then says so and the identification's ``stands`` holds
     their estimates. None (the default): as without the option, bit for bit.
+    ``allowance``: the stated form and gauge errors a misfit may be excused by,
+    within their bounds and with their shapes (orthocal.misfit); None: none.
     """
     geometry = geometry or Geometry()
     if not (0.0 < level < 1.0):
@@ -329,26 +416,28 @@ def select_model(
     if stands is not None:
         return _select_with_stands(deviations_in, geometry, float(noise_sigma),
                                    float(noise_dof), candidates, level, method, shared_zero,
-                                   noise_source, stands)
+                                   noise_source, stands, allowance)
+    if isinstance(deviations_in, Iterable) and not isinstance(deviations_in, Mapping):
+        deviations_in = list(deviations_in)  # read more than once
     tests: list[ModelTest] = []
     fits: dict[str, Identification] = {}
-    for model in candidates:
-        try:
-            fit = identify(deviations_in, geometry, model=model, method=method)
-        except IdentificationError as exc:
-            tests.append(ModelTest(model, False, note=str(exc)))
-            continue
-        test = lack_of_fit(fit, geometry, noise_sigma, noise_dof, shared_zero)
-        passed = test.p_value is None or test.p_value >= level
-        test = ModelTest(**{**test.__dict__, "passed": passed})
-        tests.append(test)
-        fits[model] = fit
-        if passed:
+    for group in lattice_levels(candidates):
+        for model in group:
+            try:
+                fit = identify(deviations_in, geometry, model=model, method=method)
+            except IdentificationError as exc:
+                tests.append(ModelTest(model, False, note=str(exc)))
+                continue
+            test = lack_of_fit(fit, geometry, noise_sigma, noise_dof, shared_zero, allowance)
+            passed = test.p_value is None or test.p_value >= level
+            tests.append(replace(test, passed=passed))
+            fits[model] = fit
+        if any(t.passed for t in tests):
             break
     if not fits:
         raise IdentificationError("auto: no candidate model can be identified from these "
                                   "deviations: " + "; ".join(t.note for t in tests))
-    chosen = next((t for t in tests if t.passed), None)
+    chosen = _best(tests)
     noise_txt = (f"noise {1000 * noise_sigma:.2f} µm per deviation ({noise_source}, "
                  f"{noise_dof:g} dof)")
     rejected = [t for t in tests if t.F is not None and not t.passed]
@@ -360,7 +449,7 @@ def select_model(
                   + (f"F = {chosen.F:.2f} on ({chosen.dof_model}, {chosen.dof_noise:g}) dof, "
                      f"p = {chosen.p_value:.3f} ≥ {level:g}" if chosen.F is not None
                      else chosen.note)
-                  + f"; {noise_txt})" + (f"; {why_not}" if why_not else ""))
+                  + f"; {noise_txt})" + _also(chosen, tests) + (f"; {why_not}" if why_not else ""))
         return ModelSelection(chosen.model, fits[chosen.model], tuple(tests), level,
                               float(noise_sigma), float(noise_dof), noise_source, reason)
     largest = list(fits)[-1]
@@ -374,10 +463,34 @@ def select_model(
                           float(noise_dof), noise_source, reason, supported=False)
 
 
+def _against_next(test: ModelTest, fit: Identification, larger: Sequence[Sequence[str]],
+                  fit_of: Any, geometry: Geometry, noise_sigma: float, noise_dof: float,
+                  shared_zero: bool, allowance: Allowance | None) -> ModelTest:
+    """``test`` with its test against the candidates of the next size that contain
+    it and can be identified (:func:`nested_test`): the one that explains the
+    most (smallest p) is named."""
+    mine = set(MODELS[fit.model])
+    for group in larger:
+        bigger = [m for m in group if mine < set(MODELS[m]) and fit_of(m) is not None]
+        if not bigger:
+            continue
+        worst = None
+        for m in bigger:
+            nested = nested_test(fit, fit_of(m), geometry, noise_sigma, noise_dof, shared_zero,
+                                 allowance)
+            if nested is not None and (worst is None or nested[2] < worst[1][2]):
+                worst = (m, nested)
+        if worst is None:
+            return test
+        m, (F, dof, p) = worst
+        return replace(test, against=m, F_next=F, dof_next=dof, p_next=p)
+    return test
+
+
 def _select_with_stands(
     deviations_in: Mapping | Iterable, geometry: Geometry, noise_sigma: float, noise_dof: float,
     candidates: Sequence[str], level: float, method: str, shared_zero: bool,
-    noise_source: str, stands: Stands,
+    noise_source: str, stands: Stands, allowance: Allowance | None = None,
 ) -> ModelSelection:
     """:func:`select_model` with the stands modelled (module docstring): a
     candidate passes when its lack of fit passes and the next identifiable
@@ -396,33 +509,28 @@ def _select_with_stands(
                 notes[model] = str(exc)
         return fits.get(model)
 
-    order = list(candidates)
+    levels = lattice_levels(candidates)
     tests: list[ModelTest] = []
-    for n, model in enumerate(order):
-        fit = fit_of(model)
-        if fit is None:
-            tests.append(ModelTest(model, False, note=notes[model]))
-            continue
-        test = lack_of_fit(fit, geometry, noise_sigma, noise_dof, shared_zero)
-        passed = test.p_value is None or test.p_value >= level
-        nested = None
-        if passed:  # only then does the next candidate decide
-            nxt = next((m for m in order[n + 1:] if fit_of(m) is not None), None)
-            if nxt is not None:
-                nested = nested_test(fit, fits[nxt], geometry, noise_sigma, noise_dof,
-                                     shared_zero)
-            if nested is not None:
-                passed = nested[2] >= level
-                test = replace(test, against=nxt, F_next=nested[0], dof_next=nested[1],
-                               p_next=nested[2])
-        tests.append(replace(test, passed=passed))
-        if passed:
+    for n, group in enumerate(levels):
+        for model in group:
+            fit = fit_of(model)
+            if fit is None:
+                tests.append(ModelTest(model, False, note=notes[model]))
+                continue
+            test = lack_of_fit(fit, geometry, noise_sigma, noise_dof, shared_zero, allowance)
+            passed = test.p_value is None or test.p_value >= level
+            if passed:  # only then do the next candidates decide
+                test = _against_next(test, fit, levels[n + 1:], fit_of, geometry, noise_sigma,
+                                     noise_dof, shared_zero, allowance)
+                passed = test.p_next is None or test.p_next >= level
+            tests.append(replace(test, passed=passed))
+        if any(t.passed for t in tests):
             break
     tested = [t for t in tests if t.identifiable]
     if not tested:
         raise IdentificationError("auto: no candidate model can be identified from these "
                                   "deviations: " + "; ".join(t.note for t in tests))
-    chosen = next((t for t in tests if t.passed), None)
+    chosen = _best(tests)
     noise_txt = (f"noise {1000 * noise_sigma:.2f} µm per deviation ({noise_source}, "
                  f"{noise_dof:g} dof)")
 
@@ -445,7 +553,7 @@ def _select_with_stands(
                f"; {chosen.against} explains no significantly more (F = {chosen.F_next:.2f} "
                f"on ({chosen.dof_next}, {chosen.dof_noise:g}) dof, p = {chosen.p_next:.3f})")
         reason = (f"{chosen.model}: the smallest model whose residual the measured noise and "
-                  f"the stands explain ({lof}{nxt}; {noise_txt})"
+                  f"the stands explain ({lof}{nxt}; {noise_txt})" + _also(chosen, tests)
                   + (f"; {why_not}" if why_not else "")
                   + f"; {describe_stands(ident.stands, stands)}")
         return ModelSelection(chosen.model, ident, tuple(tests), level, noise_sigma, noise_dof,

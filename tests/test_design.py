@@ -198,10 +198,10 @@ def test_cli_design_bad_input_exits_2_with_one_line(capsys, argv, expected) -> N
 
 def test_cli_design_auto_shows_the_largest_model_the_postures_identify(capsys) -> None:
     code, out, _ = run_cli(capsys, "design", "--model", "auto", "--json")
-    assert code == 0 and json.loads(out)["model"] == "rho+tilt"
+    assert code == 0 and json.loads(out)["model"] == "rho+tilt+gap"
     code, out, _ = run_cli(capsys, "design", "--model", "auto", "--strokes", "60,30,-50,-100",
                            "--json")
-    assert code == 0 and json.loads(out)["model"] == "full+tilt"
+    assert code == 0 and json.loads(out)["model"] == "full+tilt+gap"
 
 
 def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
@@ -223,10 +223,10 @@ def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
         doc = json.loads(out)
     s = doc["design"]["search"]
     assert "controller" in s["bounds_from"]
-    # the default model is auto: shown for rho+tilt, the largest two stops identify
-    assert doc["design"]["model"] == "rho+tilt" and "auto" in doc["design"]
+    # the default model is auto: shown for rho+tilt+gap, the largest two stops identify
+    assert doc["design"]["model"] == "rho+tilt+gap" and "auto" in doc["design"]
     keys = design.keys_for([60, -100], LEGS, G)
-    floor = orthocal.statistical_floor(keys, G, "rho+tilt", 1.0)
+    floor = orthocal.statistical_floor(keys, G, "rho+tilt+gap", 1.0)
     assert list(doc["design"]["noise_gain"].values()) == pytest.approx(list(floor), rel=1e-9)
     cfg = load_config(path)
     lo, hi = doc["soft_limits"]["lower"], doc["soft_limits"]["upper"]

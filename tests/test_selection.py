@@ -68,7 +68,9 @@ def test_untilted_machine_keeps_rho_and_a_tilted_one_gets_tilts():
         assert abs(ident.parameters[n] - truth) < 5 * ident.std_errors[n]
     doc = sel.to_dict()
     assert doc["model"] == "rho+tilt" and doc["level"] == 0.001
-    assert [c["model"] for c in doc["candidates"]] == ["rho", "rho+tilt"]
+    # the lattice's second level: both of its candidates were tried, rho+tilt passed
+    assert [c["model"] for c in doc["candidates"]] == ["rho", "rho+gap", "rho+tilt"]
+    assert [c["passed"] for c in doc["candidates"]] == [False, False, True]
 
 
 def test_the_f_statistic_follows_its_distribution_on_untilted_machines():
@@ -89,10 +91,10 @@ def test_nothing_explains_the_data_uses_the_largest_and_says_so():
     data, _ = station_run(np.zeros(9), rng)
     data[("+", "x", "y")] = [v + 0.05 for v in data[("+", "x", "y")]]  # a loose indicator
     sel = select_model(data, G)
-    assert not sel.supported and sel.model == "rho+tilt"
+    assert not sel.supported and sel.model == "rho+tilt+gap"
     assert "no candidate explains the data" in sel.reason
-    full_tilt = sel.tests[-1]
-    assert full_tilt.model == "full+tilt" and not full_tilt.identifiable
+    unable = {t.model: t for t in sel.tests if not t.identifiable}
+    assert set(unable) == {"full+tilt", "full+tilt+gap"}
     assert "ΔL cannot be separated from the tilts" in full_tilt.note
 
 
