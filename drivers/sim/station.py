@@ -202,6 +202,7 @@ class VirtualStation:
         seed: int | None = 0,
         *,
         true_tilt: Sequence[float] = (0.0, 0.0, 0.0),
+        true_gap: Sequence[float] = (0.0, 0.0, 0.0),
         geometry: Geometry | None = None,
         speed_mm_s: float = SIM_SPEED_MM_S,
         accel_mm_s2: float = SIM_ACCEL_MM_S2,
@@ -258,7 +259,8 @@ class VirtualStation:
         # The drive's own acceleration where it differs from what config() tells
         # the station (accel_mm_s2).
         self.machine = _PersistentMachine(
-            self.geometry, true_drho, true_dl, true_tilt=true_tilt, speed_mm_s=speed_mm_s,
+            self.geometry, true_drho, true_dl, true_tilt=true_tilt, true_gap=true_gap,
+            speed_mm_s=speed_mm_s,
             accel_mm_s2=accel_mm_s2 if drive_accel_mm_s2 is None else drive_accel_mm_s2,
             motion=motion, clock=clock, time_scale=1.0 if clock is not None else scale,
             backlash=backlash, leg_bow=leg_bow)

@@ -80,6 +80,17 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         help="hidden actuator axis tilts tilt_yx, tilt_zx, tilt_zy of the virtual machine "
         "(mrad; zero if absent)",
     )
+    # A string, checked in station.commands.simulation.gaps_mm: a bad value is one
+    # line naming the option, exit 2 (argparse's own error would print the usage too).
+    p.add_argument(
+        "--true-gap",
+        type=str,
+        default=None,
+        metavar="X,Y,Z",
+        help="hidden gaps gap_xy, gap_xz, gap_yz of the virtual machine's actuator axes "
+        "(mm, either sign; zero if absent): how far axis x passes axis y along +z, x "
+        "passes z along +y, y passes z along +x",
+    )
     p.add_argument(
         "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
     )

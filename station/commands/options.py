@@ -37,15 +37,17 @@ class DriveOptions:
 @dataclass(frozen=True)
 class SimOptions:
     """The virtual station of ``run --simulate``: its hidden errors (None: random
-    offsets, no leg-length error, no tilt, straight legs, true gauges), noise,
-    stands and drive; and what the command line does not offer: the six-indicator
-    style, procedure and write-back overrides, a faster machine, and a hook that
-    reaches the running station."""
+    offsets, no leg-length error, no tilt, axes that meet, straight legs, true
+    gauges), noise, stands and drive; and what the command line does not offer: the
+    six-indicator style, procedure and write-back overrides, a faster machine, and a
+    hook that reaches the running station."""
 
     seed: int | None = None
     true_drho: Triple | None = None
     true_dl: Triple | None = None
     true_tilt: Triple | None = None
+    # "X,Y,Z" as given on the command line, or three values: gap_xy, gap_xz, gap_yz, mm
+    true_gap: str | Triple | None = None
     noise: float | None = None
     mount_error: float | None = None
     backlash: str | None = None  # "X,Y,Z" or one value, mm
@@ -64,7 +66,8 @@ class SimOptions:
         # --sim-procedure and --sim-speed: hidden, for tests that drive the real
         # command line in a subprocess (Ctrl-C, kill -9) and need a short run
         return cls(seed=args.seed, true_drho=args.true_drho, true_dl=args.true_dl,
-                   true_tilt=args.true_tilt, noise=args.noise, mount_error=args.mount_error,
+                   true_tilt=args.true_tilt, true_gap=args.true_gap,
+                   noise=args.noise, mount_error=args.mount_error,
                    backlash=args.backlash, leg_bow=args.leg_bow,
                    gauge_scale=args.gauge_scale, profile=args.profile,
                    drive=DriveOptions.from_args(args),

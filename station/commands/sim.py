@@ -29,6 +29,7 @@ from station.commands.simulation import (
     backlash_mm,
     drive_motion,
     drive_params,
+    gaps_mm,
     gauge_scales,
     leg_bow_mm,
     map_profile,
@@ -47,6 +48,7 @@ def main(args: argparse.Namespace) -> int:
         [round(rng.uniform(-2.0, 2.0), 4) for _ in range(3)]
     dl = list(args.true_dl) if args.true_dl is not None else [0.0, 0.0, 0.0]
     tilt = list(args.true_tilt) if args.true_tilt is not None else [0.0, 0.0, 0.0]
+    gap = gaps_mm(args.true_gap)
     noise = 0.002 if args.noise is None else args.noise
     if noise < 0:
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
@@ -77,15 +79,16 @@ def main(args: argparse.Namespace) -> int:
                                      mount_error_mm=mount_error,
                                      motion=drive_motion(drive),
                                      controller_options={"transport": args.transport},
-                                     true_tilt=tilt, backlash=backlash, leg_bow=bow,
-                                     gauge_scale=scale, **kwargs)
+                                     true_tilt=tilt, true_gap=gap, backlash=backlash,
+                                     leg_bow=bow, gauge_scale=scale, **kwargs)
         except OSError as exc:
             raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
         with station:
             header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, hidden Δρ = {drho} mm, "
-                      f"ΔL = {dl} mm, tilts = {tilt} mrad, noise {noise} mm, stands off by "
-                      f"up to {mount_error} mm, lost motion {backlash} mm, legs bowed "
-                      f"{bow} mm, gauge scale errors {scale}, drive {_describe(drive)}\n"
+                      f"ΔL = {dl} mm, tilts = {tilt} mrad, axis gaps = {gap} mm, noise "
+                      f"{noise} mm, stands off by up to {mount_error} mm, lost motion "
+                      f"{backlash} mm, legs bowed {bow} mm, gauge scale errors {scale}, "
+                      f"drive {_describe(drive)}\n"
                       f"Use: orthocal run --config {out}")
             # Validated like any operator's config: what we hand out must load.
             config = parse_config(station.config(), "orthocal sim")
@@ -97,8 +100,9 @@ def main(args: argparse.Namespace) -> int:
             print(f"orthocal sim: {link}, "
                   f"{len(station.indicators)} indicators ({args.protocol}); "
                   f"config written to {out}", file=sys.stderr, flush=True)
-            print(f"orthocal sim: hidden Δρ = {drho} mm, tilts = {tilt} mrad; stop with Ctrl-C",
-                  file=sys.stderr, flush=True)
+            gaps = f", axis gaps = {gap} mm" if any(gap) else ""
+            print(f"orthocal sim: hidden Δρ = {drho} mm, tilts = {tilt} mrad{gaps}; "
+                  "stop with Ctrl-C", file=sys.stderr, flush=True)
             while not stop.wait(0.5):
                 pass
     finally:

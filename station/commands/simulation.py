@@ -8,12 +8,15 @@ run's parameters as plain JSON values (the journal header keeps them), and
 from them for ``resume``; a journal from before these existed has none and gets
 the plain drive of its ``motion``. So with the legs' form and the gauges' scale
 (``--leg-bow``, ``--gauge-scale``, issue 23): kept in the header, absent from
-older journals, whose runs had straight legs and true gauges."""
+older journals, whose runs had straight legs and true gauges. And with the axes'
+gaps (``--true-gap``, gap_xy, gap_xz, gap_yz in mm): absent from journals of runs
+before them, whose machines' axes met."""
 
 from __future__ import annotations
 
 import math
 import secrets
+from collections.abc import Sequence
 from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -49,6 +52,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         [round(float(v), 4) for v in rng.uniform(-DEFAULT_SIM_DRHO_MM, DEFAULT_SIM_DRHO_MM, 3)]
     dl = list(options.true_dl) if options.true_dl is not None else [0.0, 0.0, 0.0]
     tilt = list(options.true_tilt or [0.0, 0.0, 0.0])
+    gap = gaps_mm(options.true_gap)
     noise = options.noise if options.noise is not None else DEFAULT_NOISE_MM
     if not (math.isfinite(noise) and noise >= 0):
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
@@ -66,6 +70,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         "true_drho": drho,
         "true_dl": dl,
         "true_tilt": tilt,
+        "true_gap": gap,
         "noise_mm": noise,
         "mount_error_mm": mount,
         "backlash_mm": backlash,
@@ -96,6 +101,8 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         true_drho=params["true_drho"], true_dl=params["true_dl"],
         # journals of runs before the tilts existed have none: an orthogonal machine
         true_tilt=params.get("true_tilt") or (0.0, 0.0, 0.0),
+        # ... and those of runs before the gaps, none: axes that meet
+        true_gap=params.get("true_gap") or (0.0, 0.0, 0.0),
         noise_mm=params["noise_mm"], seed=params["seed"],
         indicator_count=params["indicators"], nvram_path=nvram,
         procedure=params.get("procedure"), writeback=params.get("writeback"),
@@ -145,6 +152,27 @@ def served_map(profile: str | None) -> dict[str, Any]:
     from drivers.map_files import resolve_map
 
     return {"register_map": resolve_map(profile), "profile": profile}
+
+
+def gaps_mm(value: str | Sequence[float] | None) -> list[float]:
+    """``--true-gap X,Y,Z``: how far the virtual machine's actuator axes pass each
+    other, gap_xy, gap_xz, gap_yz (mm, either sign; model.md, "Axes that do not
+    meet"), as the command line's text or three numbers; none given, zeros;
+    BadInput naming the option."""
+    if value is None:
+        return [0.0, 0.0, 0.0]
+    if isinstance(value, str):
+        values = _floats("--true-gap", value, (3,), "mm")
+    else:
+        try:
+            values = [float(v) for v in value]
+        except (TypeError, ValueError):
+            raise BadInput(f"--true-gap: expected three numbers (mm), got {value!r}") from None
+        if len(values) != 3:
+            raise BadInput(f"--true-gap: expected three values x,y,z, got {value!r}")
+    if not all(math.isfinite(v) for v in values):
+        raise BadInput(f"--true-gap: must be finite (mm), got {value!r}")
+    return values
 
 
 def backlash_mm(text: str | None) -> list[float]:

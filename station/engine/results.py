@@ -200,6 +200,9 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
             "true_dl": dict(zip(AXES, sim["true_dl"], strict=True)),
             "true_tilt": dict(zip(("tilt_yx", "tilt_zx", "tilt_zy"),
                                   sim.get("true_tilt") or (0.0, 0.0, 0.0), strict=True)),
+            # How far the axes pass each other (mm); none in journals from before.
+            "true_gap": dict(zip(("gap_xy", "gap_xz", "gap_yz"),
+                                 sim.get("true_gap") or (0.0, 0.0, 0.0), strict=True)),
             "noise_mm": sim["noise_mm"],
             # Stands placed by eye: each mounting off the leg's middle by up to this.
             "mount_error_mm": sim.get("mount_error_mm", 0.0),

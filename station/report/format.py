@@ -124,8 +124,9 @@ def true_value(result: Mapping[str, Any], name: str) -> float | None:
     if not result.get("simulated") or not isinstance(sim, Mapping):
         return None
     kind, axis = name.split("_", 1)
-    if kind == "tilt":
-        table = sim.get("true_tilt")
+    if kind in ("tilt", "gap"):
+        # Tables by full name; a result from before the gaps has none: no truth shown.
+        table = sim.get(f"true_{kind}")
         return num(table.get(name)) if isinstance(table, Mapping) else None
     table = sim.get("true_drho" if kind == "drho" else "true_dl")
     if not isinstance(table, Mapping):
