@@ -35,11 +35,12 @@ from orthocal.calibration import (
     statistical_floor,
     tilt_coefficient,
 )
-from orthocal.geometry import AXES, MODELS, PARAM_NAMES, TILT_NAMES, Geometry
+from orthocal.geometry import AXES, GAP_NAMES, MODELS, PARAM_NAMES, TILT_NAMES, Geometry
 from orthocal.identification import Identification, cannot_identify, exact_jacobian, identify
 from orthocal.inputs import IdentificationError
-from orthocal.kinematics import axis_directions, forward, inverse
+from orthocal.kinematics import axis_directions, axis_origins, forward, inverse
 from orthocal.measurement import bow_at, contact_fraction, deviation, deviations, leg_reading
+from orthocal.misfit import Allowance
 from orthocal.noise import coverage_factor
 from orthocal.postures import posture, posture_point
 from orthocal.selection import ModelSelection, select_model
@@ -49,10 +50,12 @@ from orthocal.tool_interval import AfterInterval, after_interval, assumes, field
 __all__ = [
     "AXES",
     "FRAMES",
+    "GAP_NAMES",
     "MODELS",
     "PARAM_NAMES",
     "TILT_NAMES",
     "AfterInterval",
+    "Allowance",
     "ErrorField",
     "ExpectedLackOfFit",
     "Geometry",
@@ -68,6 +71,7 @@ __all__ = [
     "after_interval",
     "assumes",
     "axis_directions",
+    "axis_origins",
     "bow_at",
     "budget_sources",
     "cannot_identify",

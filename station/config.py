@@ -248,7 +248,8 @@ class ProcedureConfig(_Strict):
     # auto: the smallest model the run's own noise supports (orthocal.select_model);
     # the default, because on a square machine it keeps rho (≥ 99 % of runs) and on
     # one 0.2 mrad off square it finds the tilts rho alone turns into Δρ errors.
-    model: Literal["rho", "L", "full", "rho+tilt", "full+tilt", "auto"] = "auto"
+    model: Literal["rho", "L", "full", "rho+tilt", "full+tilt", "rho+gap", "rho+tilt+gap",
+                   "full+tilt+gap", "auto"] = "auto"
     method: Literal["linear", "nonlinear"] = "nonlinear"
     verify: bool = True
     # Closed loop (design.md): write-backs at most, each verified; 1 = one round, no loop.

@@ -194,3 +194,13 @@ def test_the_simulated_machine_reads_model_mds_check_values():
     # and the end point it reports is the maths' forward kinematics with the gaps
     assert machine.end_point() == pytest.approx(forward(np.full(3, G.leg_length), G, DRHO,
                                                         None, None, GAPS), abs=1e-12)
+
+
+def test_every_model_is_named_wherever_a_model_is_named():
+    from typing import get_args
+
+    from station.commands.cli import MODEL_NAMES
+    from station.config import ProcedureConfig
+
+    assert set(MODEL_NAMES) == set(MODELS)
+    assert set(get_args(ProcedureConfig.model_fields["model"].annotation)) == {*MODELS, "auto"}

@@ -13,6 +13,11 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+# orthocal.MODELS, spelled out: the command line is parsed before numpy is loaded
+# (tests/test_gaps.py checks that the two agree).
+MODEL_NAMES = ("rho", "L", "full", "rho+tilt", "full+tilt", "rho+gap", "rho+tilt+gap",
+               "full+tilt+gap")
+
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
 # Each command lives in its own module, imported only when used, so that
@@ -242,7 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
     ident = sub.add_parser("identify", help="identify parameters from a READINGS.csv")
     ident.add_argument("csv", metavar="READINGS.csv")
     ident.add_argument(
-        "--model", choices=["rho", "L", "full", "rho+tilt", "full+tilt", "auto"], default="rho",
+        "--model", choices=[*MODEL_NAMES, "auto"], default="rho",
         help="parameters to identify; auto: the smallest model the data's cycle scatter "
         "supports (needs a cycle column)")
     ident.add_argument("--method", choices=["linear", "nonlinear"], default="nonlinear")

@@ -6,7 +6,6 @@ allow for them."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any
 
@@ -141,32 +140,22 @@ def fields(config: StationConfig, ident: Any, type_a_se: dict[str, float],
                        "a deviation spans (0.2 mm, in proportion below)")}
 
 
-def form_noise(config: StationConfig, data: Any, sigma: float, dof: float
-               ) -> tuple[float, float, dict[str, Any] | None]:
-    """(σ, dof) the model test should compare a lack of fit with: the measured
-    noise plus the misfit the stated form and gauge errors let a rho fit leave
-    (E[rᵀr] of orthocal.budget.expected_lack_of_fit, per residual dof), so that a
-    misfit the budget explains does not buy tilts; dof by Welch-Satterthwaite
-    (the budget's part exact). The third item says so for the selection's JSON
-    (None when the budget cannot be formed)."""
-    geometry = config.machine.geometry()
-    try:
-        fit = orthocal.identify(data, geometry, model="rho", method="nonlinear")
-        srcs = sources(config, fit)
-        elf = gum.expected_lack_of_fit(fit, srcs, sigma, geometry)
-    except (ValueError, orthocal.IdentificationError):
-        return sigma, dof, None
-    resid_dof = max(fit.dof, 1)
-    extra = sum(elf.sources.values()) / resid_dof
-    sigma_eff = math.sqrt(sigma**2 + extra)
-    dof_eff = dof * (sigma_eff / sigma) ** 4 if sigma > 0 else dof
-    return sigma_eff, float(dof_eff), {
-        "noise_mm": sigma, "noise_dof": dof, "with_budget_mm": sigma_eff,
-        "with_budget_dof": float(dof_eff),
-        "form_and_gauges_rms_mm": float(np.sqrt(extra)),
-        "note": ("the lack of fit is compared with the noise and the misfit the stated "
-                 "leg form and gauge errors can leave (uncertainty budget): a misfit "
-                 "they explain does not buy tilts")}
+def allowance(config: StationConfig) -> orthocal.Allowance:
+    """What the model test may excuse a misfit by (orthocal.misfit): the stated (or
+    assumed) straightness as each gauge plane's bow, each gauge's MPE as a scale
+    error over its travel, the plunger angle and the temperature change; the same
+    inputs as the budget's, so the model test and the statement agree on them."""
+    given = inputs(config)
+    value = given["leg_straightness_mm"]["value"]
+    per_leg = dict(zip(orthocal.AXES, value if isinstance(value, list) and len(value) == 3
+                       else [value[0] if isinstance(value, list) else value] * 3,
+                       strict=True))
+    planes = _gauge_names(config)
+    return orthocal.Allowance(
+        straightness={plane: float(per_leg[plane[0]]) for plane in planes},
+        mpe={plane: float(given["mpe_mm"][name]["value"]) for plane, name in planes.items()},
+        plunger_angle_deg=float(given["plunger_angle_deg"]["value"]),
+        temperature_change=float(given["temperature_change_c"]["value"]))
 
 
 def of_run(config: StationConfig, idents: list[Any], result: dict[str, Any]
@@ -183,26 +172,3 @@ def of_run(config: StationConfig, idents: list[Any], result: dict[str, Any]
     return fields(config, idents[-1], dict(idents[-1].std_errors),
                   idents[-1].std_error_dof, "identified")
 
-
-TILTS = ("tilt_yx", "tilt_zx", "tilt_zy")
-
-
-def tilts_beyond_form(config: StationConfig, ident: Any) -> dict[str, Any]:
-    """Whether a fit's tilts stand out of what the stated form and gauge errors
-    could make of them (issue 23: a bowed leg with its square reads as a tilt with
-    two postures per leg): each tilt against k·sqrt(u_A² + u_B²), u_B its budget
-    contribution through this very fit. ``told_apart``: the tilts beyond it."""
-    srcs = sources(config, ident)
-    dof = ident.std_error_dof
-    k = orthocal.coverage_factor(dof) if dof else 1.96
-    out: dict[str, Any] = {"coverage_factor": k, "tilts": {}}
-    for n in TILTS:
-        if n not in ident.parameters:
-            continue
-        u_b = math.sqrt(sum(s.contributions.get(n, 0.0) ** 2 for s in srcs))
-        u_c = math.hypot(float(ident.std_errors[n]), u_b)
-        out["tilts"][n] = {"value_mrad": float(ident.parameters[n]), "u_form_mrad": u_b,
-                           "u_combined_mrad": u_c,
-                           "beyond": abs(float(ident.parameters[n])) > k * u_c}
-    out["told_apart"] = [n for n, t in out["tilts"].items() if t["beyond"]]
-    return out

@@ -75,30 +75,26 @@ def identify_measurement(config: StationConfig, m: Measurement,
             test = lack_of_fit(ident, geometry, noise[0], noise[1]) if noise else None
         else:
             sigma, dof, source = noise  # type: ignore[misc]
-            # The model test allows for the misfit the stated leg form and gauge
-            # errors can leave (issue 23): a bowed leg does not buy tilts.
-            from station.engine.budget import form_noise
+            # The model test excuses what the stated leg form and gauge errors can
+            # make, within their bounds and with their shapes (orthocal.misfit): a
+            # bowed leg does not buy tilts, and a gap is not taken for a bow.
+            from station.engine.budget import allowance
 
-            sigma_test, dof_test, allowed = form_noise(config, data, sigma, dof)
-            sel = orthocal.select_model(data, geometry, sigma_test, dof_test,
-                                        method=proc.method, stands=stands,
-                                        noise_source=source if allowed is None else
-                                        source + " and the uncertainty budget's form and "
-                                        "gauge errors")
+            allowed = allowance(config)
+            sel = orthocal.select_model(data, geometry, sigma, dof, method=proc.method,
+                                        stands=stands, noise_source=source,
+                                        allowance=allowed)
             ident, selection = sel.identification, sel.to_dict()
-            if allowed is not None:
-                selection["budget"] = allowed
-                chosen = _unless_form(config, ident, selection) if "tilt" in sel.model \
-                    else ident.model
-                # The budget decides the model, not the fit's weights: the chosen
-                # model is fitted against the measured noise, as a named one is.
-                ident = orthocal.identify(data, geometry, model=chosen,
-                                          method=proc.method, sigma=sigma if stands else None,
-                                          stands=stands)
-            test = next(t for t in sel.tests if t.model == sel.model)
+            selection["allowance"] = {
+                **allowed.to_dict(),
+                "note": ("a misfit is excused only by what the stated leg form (a bow per "
+                         "gauge plane within the straightness), gauge errors (a scale "
+                         "within the MPE) and temperature can make, with the shape each "
+                         "makes; the test keeps the measured noise's degrees of freedom")}
     except orthocal.IdentificationError as exc:
         raise RunFailed(f"identification failed: {exc}") from None
-    if noise is not None and selection is not None and selection.get("budget"):
+    if noise is not None and selection is not None:
+        # the statement's inflation: the misfit beyond the noise alone
         test = lack_of_fit(ident, geometry, noise[0], noise[1])
     if noise is not None:
         rejected = (test is not None and test.F is not None and test.p_value is not None
@@ -108,26 +104,3 @@ def identify_measurement(config: StationConfig, m: Measurement,
                                     noise_dof=noise[1])
     return ident, selection
 
-
-def _unless_form(config: StationConfig, ident: Any, selection: dict[str, Any]) -> str:
-    """The tilt model auto chose, unless none of its tilts stands out of what the
-    stated leg form and gauge errors could make of them: then the model without
-    the tilts, and the selection says so and what would tell them apart."""
-    from station.engine.budget import tilts_beyond_form
-
-    try:
-        check = tilts_beyond_form(config, ident)
-    except ValueError:
-        return ident.model
-    selection["budget"]["tilts"] = check
-    if check["told_apart"]:
-        return ident.model
-    smaller = ident.model.replace("+tilt", "")
-    selection["model"] = smaller
-    selection["reason"] = (
-        f"{smaller}: {ident.model} fits better, but none of its tilts stands out of what "
-        f"the stated leg form and gauge errors could make of them (each within "
-        f"{check['coverage_factor']:.2f} of its combined uncertainty, uncertainty "
-        "budget): the tilts are not told apart from the legs' form; intermediate "
-        "strokes ([procedure] strokes) separate them. " + selection.get("reason", ""))
-    return smaller

@@ -19,6 +19,7 @@ import numpy as np
 
 from drivers.errors import DeviceError
 from drivers.files import write_atomic
+from orthocal import carry
 from orthocal.loop import WRITABLE, correction
 from orthocal.lost_motion import band_middle, edge_of
 from orthocal.numbers import finite
@@ -163,7 +164,7 @@ class Flow:
         self.measurements: list[Measurement] = []  # each round's, its passes pooled
         self.reversal: Any = None  # the joints' lost motion (orthocal.lost_motion)
         # each round's rho+tilt fit, for the tilts the run states (engine.accuracy)
-        self.tilt_rounds: list[accuracy.RoundTilts] = []
+        self.layout_rounds: list[accuracy.RoundLayout] = []
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
         # the joint errors that leave the least tool error (engine.accuracy)
         self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
@@ -209,12 +210,14 @@ class Flow:
         self.result["reversal"] = reversal.fields(ctx.config, rev)
         reversal.check_overrun(ctx.config, rev)
         self.reversal = rev
+        self._layout_of(phase, m, ident)
+        if n:
+            ident = self._carried(phase, ident)
         ident = band_middle(ident, rev, ctx.config.procedure.approach)
         if again:
             self.idents[-1] = ident
         else:
             self.idents.append(ident)
-        self._tilts_of(phase, m, ident)
         fields = measurement_fields(ctx.config, m, ident)
         prev = self.idents[n - 1] if n else None
         proc = ctx.config.procedure
@@ -333,20 +336,38 @@ class Flow:
 
     # --- accuracy at the tool ------------------------------------------------------
 
-    def _tilts_of(self, phase: str, m: Measurement, ident: Any) -> None:
-        """The round's tilts: from its own fit if it has them, else from a rho+tilt
-        fit of the same measurement (the tilts the run could not rule out); a round
-        measured again replaces what its earlier passes gave."""
-        self.tilt_rounds = [t for t in self.tilt_rounds if t.phase != phase]
-        tilts = accuracy.round_tilts(phase, ident)
-        if tilts is None and len(m.deviations):
+    def _layout_of(self, phase: str, m: Measurement, ident: Any) -> None:
+        """The round's axes layout (tilts and gaps): from its own fit if it has them
+        all, else from a rho+tilt+gap fit of the same measurement (what the run could
+        not rule out; rho+tilt where the gaps cannot be told); a round measured again
+        replaces what its earlier passes gave."""
+        self.layout_rounds = [t for t in self.layout_rounds if t.phase != phase]
+        layout = accuracy.round_layout(phase, ident)
+        whole = layout is not None and len(layout.names) == len(accuracy.LAYOUT_NAMES)
+        for model in () if whole or not len(m.deviations) else accuracy.LAYOUT_MODELS:
             try:
-                fit, _ = _identify(self.ctx, m, "rho+tilt")
+                fit, _ = _identify(self.ctx, m, model)
             except RunFailed:
-                fit = None  # too little data for the tilts: the statement says none
-            tilts = None if fit is None else accuracy.round_tilts(phase, fit)
-        if tilts is not None:
-            self.tilt_rounds.append(tilts)
+                continue  # too little data for this layout: try the smaller one
+            layout = accuracy.round_layout(phase, fit) or layout
+            break
+        if layout is not None:
+            self.layout_rounds.append(layout)
+
+    def _carried(self, phase: str, ident: Any) -> Any:
+        """A verification's identification joined with the axes' layout (tilts, gaps)
+        the earlier rounds measured, which no offset changed (orthocal.carry): its Δρ
+        gains, never loses. Without an earlier layout of its model's names: as it is."""
+        held = [n for n in accuracy.LAYOUT_NAMES if n in ident.names]
+        prior = accuracy.pool_layout([r for r in self.layout_rounds if r.phase != phase])
+        if not held or prior is None or not set(held) <= set(prior.names):
+            return ident
+        idx = [prior.names.index(n) for n in held]
+        try:
+            return carry.carried(ident, self.ctx.config.machine.geometry(), held,
+                                 prior.values[idx], prior.covariance[np.ix_(idx, idx)])
+        except (ValueError, np.linalg.LinAlgError):
+            return ident  # the round's own fit stands
 
     def _points(self) -> Any:
         if self._grid is None:
@@ -358,29 +379,27 @@ class Flow:
         """The Δρ the next write aims at (objective joints: 0)."""
         if self.ctx.config.writeback.objective == "joints":
             return dict.fromkeys(WRITABLE, 0.0)
-        return accuracy.tool_target(self.ctx.config, self._significant_tilts(),
-                                    self._points())
+        return self._tool_target()
 
-    def _significant_tilts(self) -> accuracy.Tilts | None:
-        """The pooled tilts where the model chosen for the last round has them; else
-        None: aiming the offsets at tilts the data do not show would chase noise
-        (on a square machine objective tool then writes what objective joints does)."""
+    def _tool_target(self) -> dict[str, float]:
+        """Objective tool's Δρ for the pooled layout, only as far as the model chosen
+        for the last round has it: aiming the offsets at tilts or gaps the data do
+        not show would chase noise (on a square machine whose axes meet, objective
+        tool then writes what objective joints does)."""
         last = self.idents[-1] if self.idents else None
-        if last is None or not any(n in last.names for n in accuracy.TILT_NAMES):
-            return None
-        return accuracy.pool_tilts(self.tilt_rounds)
+        return accuracy.tool_target(self.ctx.config, accuracy.pool_layout(self.layout_rounds),
+                                    self._points(), () if last is None else last.names)
 
     def _objective_note(self, ident: Any) -> str:
         """What the write-back prompt says of the objective and what each buys."""
         cfg = self.ctx.config
-        tilts = accuracy.pool_tilts(self.tilt_rounds)
-        tv = tilts.values if tilts is not None else np.zeros(3)
+        layout = accuracy.pool_layout(self.layout_rounds)
+        tv = layout.vector() if layout is not None else np.zeros(6)
         points, frame = self._points(), cfg.writeback.frame
         geometry = cfg.machine.geometry()
         figures = {}
         for name, aim in (("joints", dict.fromkeys(WRITABLE, 0.0)),
-                          ("tool", accuracy.tool_target(cfg, self._significant_tilts(),
-                                                        points))):
+                          ("tool", self._tool_target())):
             fld = accuracy.error_field(points, geometry, accuracy.params(aim, tv),
                                        np.zeros(3), frame)
             figures[name] = 1000 * fld.rms_mm
@@ -396,7 +415,7 @@ class Flow:
         if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
             return
         cfg = self.ctx.config
-        tilts = accuracy.pool_tilts(self.tilt_rounds)
+        layout = accuracy.pool_layout(self.layout_rounds)
         last = self.idents[-1]
         names = list(last.names)
         idx = [names.index(n) for n in WRITABLE if n in names]
@@ -408,15 +427,13 @@ class Flow:
         else:  # the last correction written and not verified: its aim, as predicted
             now = dict(self.target)
         now_cov = np.asarray(last.covariance)[np.ix_(idx, idx)] if len(idx) == 3 else None
-        tilts_in_model = any(n in names for n in accuracy.TILT_NAMES)
         before = self.result.get("offsets_before")
-        target_tool = accuracy.tool_target(cfg, self._significant_tilts(), self._points())
         try:
             self.result["accuracy"] = accuracy.statement(
                 cfg, (self.seq.checker.lo, self.seq.checker.hi), drho_start=start,
                 drho_now=now, drho_now_cov=now_cov, dof=finite(last.std_error_dof),
-                tilts=tilts, model=last.model, tilts_in_model=tilts_in_model,
-                offsets_before=before, target_tool=target_tool)
+                layout=layout, model=last.model, in_model=names, offsets_before=before,
+                target_tool=self._tool_target())
         except (ValueError, np.linalg.LinAlgError) as exc:
             self.result["accuracy"] = {"error": f"not stated: {exc}"}
             return
@@ -430,7 +447,7 @@ class Flow:
             cfg, drho_start=start,
             drho_start_cov=np.asarray(first.covariance)[np.ix_(f_idx, f_idx)]
             if len(f_idx) == 3 else None,
-            drho_now=now, tilts=tilts, model=last.model, offsets_before=before,
+            drho_now=now, tilts=layout, model=last.model, offsets_before=before,
             offsets_written=self.result.get("offsets_written"),
             dof=finite(first.std_error_dof))
         try:

@@ -68,7 +68,7 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
         "deviations": deviations,
         # said in every report, never silently fixed (issue 9)
         "not_identifiable": orthocal.cannot_identify(
-            ident.keys, config.machine.geometry(), "full+tilt"),
+            ident.keys, config.machine.geometry(), "full+tilt+gap"),
         "deviations_rms_mm": float(np.sqrt(np.mean(means**2))) if means.size else None,
         # Where each indicator stand was, mm off the leg's middle (L/2), when the
         # stands were modelled (orthocal.stands): the operator learns where each stood.

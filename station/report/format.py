@@ -28,11 +28,17 @@ MODEL_TEXT = {
     "full": "joint offsets Δρ and leg-length errors ΔL together",
     "rho+tilt": "joint offsets Δρ and the tilts of the actuator axes",
     "full+tilt": "joint offsets Δρ, leg-length errors ΔL and the tilts of the actuator axes",
+    "rho+gap": "joint offsets Δρ and the gaps between the actuator axes",
+    "rho+tilt+gap": "joint offsets Δρ, the tilts of the actuator axes and the gaps between them",
+    "full+tilt+gap": ("the whole rigid geometry: joint offsets Δρ, leg-length errors ΔL, "
+                      "the tilts of the actuator axes and the gaps between them"),
 }
 # Only Δρ reaches a controller (its zero offsets); the rest is the machine's build.
-NOT_WRITTEN_TEXT = ("Axis tilts and leg-length errors cannot be written to a controller: "
-                    "only the joint offsets Δρ were corrected; the tilts stay in the machine "
-                    "(and in the verification's deviations) until it is re-squared mechanically.")
+NOT_WRITTEN_TEXT = ("Axis tilts, gaps between the axes and leg-length errors cannot be written "
+                    "to a controller's offsets: only the joint offsets Δρ were corrected; the "
+                    "rest stays in the machine (and in the verification's deviations) until "
+                    "the controller's kinematics takes it (model.json) or the axes are "
+                    "re-squared and re-aligned mechanically.")
 STATUS_TEXT = {
     "ok": "Completed",
     "failed": "Failed",
