@@ -270,3 +270,36 @@ def search_strokes(
     strokes = tuple(sorted((grid[k] for k in best), reverse=True))
     return Search(strokes, quality(keys_for(strokes, legs, geometry), geometry, model),
                   len(grid))
+
+
+#: Where a second gauge plane may stand on each leg, as the fraction of the leg
+#: from its joint end at Π0 (the middle is 1/2): docs/model.md, "Leg form against
+#: tilts and gaps".
+SECOND_PLANES: tuple[float, ...] = (0.25, 0.75)
+
+
+def form_separation(keys: Sequence[Key], geometry: Geometry, model: str = "rho+tilt",
+                    second: Sequence[float] = SECOND_PLANES) -> dict[str, float]:
+    """How well ``model`` and one bow per leg (a uniform form of its surface, the
+    sagitta h of w = 4h·t(1 − t)) are told apart: the condition number of their
+    joint Jacobian at the nominal machine, with the gauges of ``keys`` in the legs'
+    middles alone (key "middle"; inf where a uniform bow is exactly a tilt, as it
+    is with any strokes), and with the same gauges in a second plane at each
+    fraction of ``second`` from the joint end (keys "0.25", …)."""
+    from orthocal.budget import form_vector
+    from orthocal.identification import exact_jacobian
+
+    params = np.zeros(len(PARAM_NAMES))
+    out: dict[str, float] = {}
+    for mu in (None, *second):
+        rows = list(keys) + ([] if mu is None else list(keys))
+        offsets = [0.0] * len(keys) + ([] if mu is None else
+                                       [geometry.leg_length * (0.5 - mu)] * len(keys))
+        J = exact_jacobian(rows, geometry, params, model, offsets)
+        g = form_vector(rows, geometry, params, offsets)
+        bows = np.column_stack([np.where([k[1] == leg for k in rows], g, 0.0) for leg in "xyz"])
+        s = np.linalg.svd(np.hstack([J, bows]), compute_uv=False)
+        # a uniform bow is exactly a tilt with the middles alone: s[-1] is rounding
+        cond = float(s[0] / s[-1]) if s[-1] > 1e-6 * s[0] else float("inf")
+        out["middle" if mu is None else f"{mu:g}"] = cond
+    return out

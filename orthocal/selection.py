@@ -60,6 +60,7 @@ from orthocal.calibration import jacobian
 from orthocal.geometry import MODELS, Geometry
 from orthocal.identification import Identification, exact_jacobian, identify
 from orthocal.inputs import IdentificationError
+from orthocal.lattice import ModelTest, also_passing, best_passing, excused_note, lattice_levels
 from orthocal.measurement import Key
 from orthocal.misfit import Allowance, bounded_rss, columns
 from orthocal.noise import (
@@ -80,43 +81,6 @@ from orthocal.stands import (
 CANDIDATES: tuple[str, ...] = ("rho", "rho+gap", "rho+tilt", "rho+tilt+gap", "full+tilt",
                                "full+tilt+gap")
 LEVEL = 0.001
-@dataclass(frozen=True)
-class ModelTest:
-    """The lack-of-fit test of one candidate (``F`` None when it was not tested)."""
-
-    model: str
-    identifiable: bool
-    F: float | None = None
-    dof_model: int | None = None
-    dof_noise: float | None = None
-    p_value: float | None = None
-    passed: bool = False
-    residual_rms: float | None = None
-    note: str = ""
-    #: With the stands modelled: the test against the next candidate (``against``),
-    #: F of the drop of the residual when its parameters join, on
-    #: (``dof_next``, ``dof_noise``) dof, and its p-value (:func:`nested_test`).
-    against: str | None = None
-    F_next: float | None = None
-    dof_next: int | None = None
-    p_next: float | None = None
-    #: With an allowance (orthocal.misfit): what the stated errors took of the misfit.
-    allowance: dict[str, Any] | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        out = {"model": self.model, "identifiable": self.identifiable, "F": self.F,
-               "dof": [self.dof_model, self.dof_noise] if self.F is not None else None,
-               "p_value": self.p_value, "passed": self.passed,
-               "residual_rms_mm": self.residual_rms, "note": self.note or None}
-        if self.allowance is not None:
-            out["allowance"] = self.allowance
-        if self.against is not None:
-            out["against_next"] = {"model": self.against, "F": self.F_next,
-                                   "dof": [self.dof_next, self.dof_noise],
-                                   "p_value": self.p_next}
-        return out
-
-
 @dataclass(frozen=True)
 class ModelSelection:
     """Result of :func:`select_model`: the model chosen, its identification, the
@@ -286,6 +250,10 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
         rss = float(mean_res @ W @ mean_res - g @ np.linalg.solve(J.T @ W @ J, g))
     F = max(rss, 0.0) / dof_model / noise_sigma**2
     p_value = float(f_dist.sf(F, dof_model, noise_dof))
+    if took is not None:  # what the noise alone would have said
+        took["p_without_allowance"] = float(f_dist.sf(
+            took["rss_without_allowance_mm2"] / dof_model / noise_sigma**2, dof_model,
+            noise_dof))
     return ModelTest(result.model, True, F=float(F), dof_model=dof_model,
                      dof_noise=float(noise_dof), p_value=p_value, passed=False,
                      residual_rms=float(result.residual_rms), allowance=took)
@@ -337,35 +305,6 @@ def nested_test(small: Identification, big: Identification, geometry: Geometry,
                 - _marginal_rss(big, geometry, noise_sigma, shared_zero))
     F = max(drop, 0.0) / extra / noise_sigma**2
     return float(F), extra, float(f_dist.sf(F, extra, noise_dof))
-
-
-def lattice_levels(candidates: Sequence[str]) -> list[list[str]]:
-    """The candidates grouped by their number of parameters, smallest first (the
-    lattice's levels), each group in the order given."""
-    sizes = sorted({len(MODELS[m]) for m in candidates})
-    return [[m for m in candidates if len(MODELS[m]) == n] for n in sizes]
-
-
-def _p(test: ModelTest) -> float:
-    """How well a passing candidate fits: its smaller p-value (lack of fit, and
-    against the next candidate where tested); inf where it could not be tested."""
-    ps = [p for p in (test.p_value, test.p_next) if p is not None]
-    return min(ps) if ps else math.inf
-
-
-def _best(tests: Sequence[ModelTest]) -> ModelTest | None:
-    """The passing candidate the data fit best (the first of equals)."""
-    passing = [t for t in tests if t.passed]
-    return max(passing, key=_p, default=None)
-
-
-def _also(chosen: ModelTest, tests: Sequence[ModelTest]) -> str:
-    """A note naming the other candidates of the chosen one's size that pass too."""
-    others = [t for t in tests if t.passed and t.model != chosen.model]
-    if not others:
-        return ""
-    return "; " + ", ".join(f"{t.model} passes too (p = {_p(t):.3f})" for t in others) + \
-        f", {chosen.model} fits best"
 
 
 def select_model(
@@ -437,7 +376,7 @@ def select_model(
     if not fits:
         raise IdentificationError("auto: no candidate model can be identified from these "
                                   "deviations: " + "; ".join(t.note for t in tests))
-    chosen = _best(tests)
+    chosen = best_passing(tests)
     noise_txt = (f"noise {1000 * noise_sigma:.2f} µm per deviation ({noise_source}, "
                  f"{noise_dof:g} dof)")
     rejected = [t for t in tests if t.F is not None and not t.passed]
@@ -449,7 +388,8 @@ def select_model(
                   + (f"F = {chosen.F:.2f} on ({chosen.dof_model}, {chosen.dof_noise:g}) dof, "
                      f"p = {chosen.p_value:.3f} ≥ {level:g}" if chosen.F is not None
                      else chosen.note)
-                  + f"; {noise_txt})" + _also(chosen, tests) + (f"; {why_not}" if why_not else ""))
+                  + f"; {noise_txt})" + also_passing(chosen, tests)
+                  + (f"; {why_not}" if why_not else "") + excused_note(chosen, level))
         return ModelSelection(chosen.model, fits[chosen.model], tuple(tests), level,
                               float(noise_sigma), float(noise_dof), noise_source, reason)
     largest = list(fits)[-1]
@@ -530,7 +470,7 @@ def _select_with_stands(
     if not tested:
         raise IdentificationError("auto: no candidate model can be identified from these "
                                   "deviations: " + "; ".join(t.note for t in tests))
-    chosen = _best(tests)
+    chosen = best_passing(tests)
     noise_txt = (f"noise {1000 * noise_sigma:.2f} µm per deviation ({noise_source}, "
                  f"{noise_dof:g} dof)")
 
@@ -553,8 +493,8 @@ def _select_with_stands(
                f"; {chosen.against} explains no significantly more (F = {chosen.F_next:.2f} "
                f"on ({chosen.dof_next}, {chosen.dof_noise:g}) dof, p = {chosen.p_next:.3f})")
         reason = (f"{chosen.model}: the smallest model whose residual the measured noise and "
-                  f"the stands explain ({lof}{nxt}; {noise_txt})" + _also(chosen, tests)
-                  + (f"; {why_not}" if why_not else "")
+                  f"the stands explain ({lof}{nxt}; {noise_txt})" + also_passing(chosen, tests)
+                  + (f"; {why_not}" if why_not else "") + excused_note(chosen, level)
                   + f"; {describe_stands(ident.stands, stands)}")
         return ModelSelection(chosen.model, ident, tuple(tests), level, noise_sigma, noise_dof,
                               noise_source, reason, stands=stands)

@@ -95,7 +95,7 @@ def test_nothing_explains_the_data_uses_the_largest_and_says_so():
     assert "no candidate explains the data" in sel.reason
     unable = {t.model: t for t in sel.tests if not t.identifiable}
     assert set(unable) == {"full+tilt", "full+tilt+gap"}
-    assert "ΔL cannot be separated from the tilts" in full_tilt.note
+    assert "ΔL cannot be separated from the tilts" in unable["full+tilt"].note
 
 
 def test_auto_without_noise_information_is_refused():

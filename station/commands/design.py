@@ -108,6 +108,40 @@ def _resolve_auto(plan: Plan, config: StationConfig) -> str:
     return able[-1] if able else CANDIDATES[0]
 
 
+def _separation(plan: Plan, config: StationConfig) -> dict[str, Any]:
+    """What these stops can tell apart: each model ``auto`` may keep (the lattice,
+    orthocal.selection.CANDIDATES) with its condition number and largest noise
+    gain per kind of parameter, or what it cannot separate; and the legs' form
+    against the tilts (orthocal.design.form_separation), with what does separate
+    them."""
+    from orthocal import design
+    from orthocal.selection import CANDIDATES
+
+    keys, _ = plan_keys(plan)
+    geometry = config.machine.geometry()
+    lattice = []
+    for name in CANDIDATES:
+        q = design.quality(keys, geometry, name)
+        kinds = {kind: max((g for n, g in q.noise_gain.items() if n.startswith(kind)),
+                           default=None) for kind in ("drho", "dL", "tilt", "gap")}
+        lattice.append({
+            "model": name, "identifiable": q.identifiable,
+            "condition_number": q.condition_number if q.identifiable else None,
+            "noise_gain_max": {k: v for k, v in kinds.items()
+                               if v is not None and q.identifiable},
+            **({} if q.identifiable else {"cannot_separate": design.describe(q)})})
+    form = design.form_separation(keys, geometry)
+    finite_form = {k: (v if math.isfinite(v) else None) for k, v in form.items()}
+    tells = "cannot tell" if form["middle"] == math.inf else "hardly tells"
+    words = (f"one gauge plane per leg (the middles) {tells} "
+             "a uniform bow of the legs from the tilts, whatever the strokes; what does: a "
+             "second gauge plane on each leg at a quarter of its length from the joint "
+             f"(condition {form['0.25']:.0f}) or three quarters ({form['0.75']:.0f}), or "
+             "the legs' straightness measured and stated ([uncertainty] leg_straightness_mm)")
+    return {"lattice": lattice, "leg_form": {"model": "rho+tilt and one bow per leg",
+                                             "condition_number": finite_form, "note": words}}
+
+
 # --- what the plan measures ------------------------------------------------------------
 
 
@@ -298,6 +332,7 @@ def design_summary(config: StationConfig, model: str, search: bool = True,
         "machine": {"leg_length": m.leg_length, "rho_min": m.rho_min, "rho_max": m.rho_max},
         "cycles": plan.cycles, "readings": plan.readings,
         **_figures(plan, config, model),
+        **_separation(plan, config),
     }
     if not search:
         return doc
@@ -349,6 +384,24 @@ def _table(doc: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _lattice_lines(doc: dict[str, Any]) -> list[str]:
+    """The models auto may keep, what each costs or why it cannot be had; the form."""
+    if "lattice" not in doc:
+        return []
+    lines = ["  what these stops separate (the models auto may keep; largest noise gain per "
+             "kind, tilts in mrad per mm):"]
+    for row in doc["lattice"]:
+        if row["identifiable"]:
+            gains = ", ".join(f"{k} {v:.2f}" for k, v in row["noise_gain_max"].items())
+            lines.append(f"    {row['model']:<14} condition {row['condition_number']:8.1f}; "
+                         f"{gains}")
+        else:
+            lines.append(f"    {row['model']:<14} not identifiable: "
+                         + " ".join(row["cannot_separate"]))
+    lines.append(f"  legs' form: {doc['leg_form']['note']}")
+    return lines
+
+
 def _time(t: dict[str, Any]) -> str:
     return (f"{t['total_s']:.1f} s ({t['measurement_s']:.1f} s per phase: moves "
             f"{t['moves_s']:.1f} + settle {t['settle_s']:.1f} + readings "
@@ -368,6 +421,7 @@ def format_summary(doc: dict[str, Any]) -> str:
         *_table(doc),
         "  noise gain: SE per unit of deviation noise (orthocal's statistical floor); "
         "SE/µm run: µm (µrad for tilts) per µm of indicator noise for this plan",
+        *_lattice_lines(doc),
         *(f"  {w}" for w in doc["in_words"]),
         *([f"  at the tool: the identification's noise leaves {doc['tool_rms_per_um']:.2f} µm "
            "RMS of tool-point error over the workspace per µm of indicator noise (a square "

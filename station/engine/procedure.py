@@ -231,7 +231,8 @@ class Flow:
             "offsets_written": None, "writeback": None,
             "deviations_rms_mm": fields["deviations_rms_mm"],
             "residual_rms_mm": fields["residual_rms_mm"],
-            "noise_floor_mm": fields["noise_floor_mm"], "significant": sig,
+            "noise_floor_mm": fields["noise_floor_mm"], "fit_ok": fields["fit_ok"],
+            "significant": sig,
             **(judged.fields() if n else {})}
         if again:
             entry["passes"] = passes

@@ -68,7 +68,17 @@ def not_converged(entry: dict[str, Any], converge_mm: float, offset_count_mm: fl
     noise = f" (standard error {1000 * max(ses):.1f} µm)" if ses else ""
     seen = "a correction is seen at 95 % but does not stand out of both rounds' noise" \
         if entry.get("verdict") == "suspected" else "no correction stands out of the noise"
-    return (f"after {passes} pass(es) of its last verification, Δρ_{worst[-1]} may still "
+    said = (f"after {passes} pass(es) of its last verification, Δρ_{worst[-1]} may still "
             f"be off {how} at 95 %, more than converge_mm = {1000 * converge_mm:g} µm + "
-            f"half the drive's count ({500 * offset_count_mm:g} µm), and {seen}{noise}; "
-            "measure with more cycles or readings, quieter gauges, or a larger converge_mm")
+            f"half the drive's count ({500 * offset_count_mm:g} µm), and {seen}{noise}")
+    if entry.get("fit_ok") is False:
+        # the noise is not the cause: more of the same measurement cannot help
+        return (f"{said}; the cause is the model, not the noise: model {entry.get('model')} "
+                f"leaves {1000 * (entry.get('residual_rms_mm') or 0.0):.1f} µm RMS of "
+                "residual against the scatter's "
+                f"{1000 * (entry.get('noise_floor_mm') or 0.0):.1f} µm, so more cycles or "
+                "quieter gauges will not help; look for what the model lacks (a loose "
+                "gauge or stand, lost motion, legs bowed beyond [uncertainty] "
+                "leg_straightness_mm) or name a larger model")
+    return (f"{said}; measure with more cycles or readings, quieter gauges, or a larger "
+            "converge_mm")

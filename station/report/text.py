@@ -122,7 +122,8 @@ def summary_text(result: dict) -> str:
         lines.append("  not identifiable  a rotation of the whole machine"
                      + ("; ΔL beside the tilts (two postures per leg)" if two else ""))
     if any(not n.startswith("drho_") for n in names):
-        lines.append("  not written   tilts and ΔL (a controller takes only Δρ)")
+        lines.append("  not written   tilts, gaps and ΔL (a controller's offsets take only Δρ; "
+                     "its kinematics can take the rest, model.json)")
     lines += guard_lines(result)
     from station.report import rounds
 

@@ -18,6 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from station.report import gaps
 from station.report.format import (
     AXES,
     as_dict,
@@ -266,7 +267,7 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     if alt_name and alt_after:
         line += (f"; objective {alt_name} would leave {um(alt_after.get('rms_mm'))} µm RMS "
                  f"(max {um(alt_after.get('max_mm'))} µm)")
-    return [line, _squareness_line(acc)]
+    return [line, _squareness_line(acc), *gaps.summary_lines(result)]
 
 
 def _squareness_line(acc: Mapping[str, Any]) -> str:
@@ -317,7 +318,7 @@ def html_section(result: Mapping[str, Any], figure: str | None = None,
                 f"for this run: {_e(why_not)}. The legs' parallelism reported here is the "
                 "method's means and does not say where the tool goes.</p></div>")
     parts = [head, _intro(result, acc), _before_after(result, acc), _objectives(result, acc),
-             _squareness_html(acc)]
+             _squareness_html(acc), gaps.html_section(acc)]
     if figure:
         label = f"Figure {number}. " if number is not None else ""
         parts.append(f"<figure>{figure}<figcaption>{label}{_field_caption(acc)}</figcaption>"
@@ -327,9 +328,9 @@ def html_section(result: Mapping[str, Any], figure: str | None = None,
         parts.append("<h3>What these figures assume</h3><ul>"
                      + "".join(f"<li>{_e(a)}</li>" for a in assumes) + "</ul>")
     parts.append("<p>The run directory holds <code>model.json</code>: the identified machine "
-                 "(Δρ, ΔL and the tilts, with standard errors, covariance, conventions and "
-                 "units), for a controller that compensates kinematics, which can correct the "
-                 "squareness that offsets cannot.</p>")
+                 "(Δρ, ΔL, the tilts and the gaps, with standard errors, covariance, "
+                 "conventions and units), for a controller that compensates kinematics, which "
+                 "can correct the squareness and the gaps that offsets cannot.</p>")
     return "\n".join(parts)
 
 
