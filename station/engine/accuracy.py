@@ -370,8 +370,8 @@ def gap_advice(layout: Layout | None, decision: Mapping[str, Any] | None) -> lis
         if k_decide is None or abs(value) <= k_decide * se[name]:
             why = "the model test kept no gap" if k_decide is None else \
                 f"not beyond {k_decide:.2f} standard errors"
-            out.append(f"axes {a} and {b} ({name}): {1000 * value:+.0f} ± {1000 * k * se[name]:.0f}"
-                       f" µm (95 %), {why}: nothing to do")
+            out.append(f"axes {a} and {b} ({name}): {1000 * value:+.1f} ± "
+                       f"{1000 * k * se[name]:.1f} µm (95 %), {why}: nothing to do")
             continue
         out.append(f"axis {a} passes axis {b} {1000 * abs(value):.0f} ± "
                    f"{1000 * k * se[name]:.0f} µm {'above' if value > 0 else 'below'} it "
