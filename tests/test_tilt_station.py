@@ -72,7 +72,9 @@ def test_identify_cli_auto_uses_the_cycle_scatter(tmp_path, capsys):
     assert doc["parameters"]["tilt_yx"] == pytest.approx(0.5, abs=0.05)
     sel = doc["model_selection"]
     assert sel["noise_source"] == "cycle-to-cycle scatter" and sel["level"] == 0.001
-    assert [c["model"] for c in sel["candidates"]] == ["rho", "rho+tilt"]
+    # the lattice's second level: rho+gap tried beside rho+tilt, and rejected
+    assert [c["model"] for c in sel["candidates"]] == ["rho", "rho+gap", "rho+tilt"]
+    assert [c["passed"] for c in sel["candidates"]] == [False, False, True]
     assert main(["identify", str(path), "--model", "auto"]) == 0
     out = capsys.readouterr().out
     assert "tilt_zy" in out and "mrad" in out and "model chosen by auto" in out

@@ -118,15 +118,19 @@ def test_the_tilted_axes_are_told_to_be_shimmed(tilted) -> None:
 def test_the_run_directory_exports_the_identified_machine(tilted) -> None:
     result = tilted["joints"]
     model = json.loads((Path(result["run_dir"]) / "model.json").read_text())
-    assert model["units"] == {"drho": "mm", "dL": "mm", "tilt": "mrad"}
-    assert set(model["estimated"]) == {"drho_x", "drho_y", "drho_z",
-                                       "tilt_yx", "tilt_zx", "tilt_zy"}
+    assert model["units"] == {"drho": "mm", "dL": "mm", "tilt": "mrad", "gap": "mm"}
+    # the gaps too: the run's rho+tilt+gap fits measured them (near 0 on this machine)
+    assert set(model["estimated"]) == {"drho_x", "drho_y", "drho_z", "tilt_yx", "tilt_zx",
+                                       "tilt_zy", "gap_xy", "gap_xz", "gap_yz"}
+    assert "gap_xy" in model["conventions"]["gaps"]
+    for n in ("gap_xy", "gap_xz", "gap_yz"):
+        assert abs(model["parameters"][n]) < 4 * model["std_errors"][n] + 0.002
     for axis, true in zip(AXES, DRHO, strict=True):
         assert model["parameters"][f"drho_{axis}"] == pytest.approx(true, abs=0.005)
     for name, true in zip(("tilt_yx", "tilt_zx", "tilt_zy"), TILT, strict=True):
         assert model["parameters"][name] == pytest.approx(true, abs=0.04)
     cov = np.asarray(model["covariance"]["matrix"])
-    assert cov.shape == (6, 6) and np.allclose(cov, cov.T)
+    assert cov.shape == (9, 9) and np.allclose(cov, cov.T)
     assert np.all(np.linalg.eigvalsh(cov) > 0)
     assert "dL_x" in model["not_estimated"]
 
