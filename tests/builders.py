@@ -90,6 +90,13 @@ def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
     return RunOptions(sim=sim, plan=plan, out=Path(out), yes=yes, json=json)
 
 
+def parsed_simulate(*argv: str) -> Any:
+    """``orthocal run --simulate --seed 5 ARGV`` as the command line parses it."""
+    from station.commands import cli
+
+    return cli.build_parser().parse_args(["run", "--simulate", "--seed", "5", *argv])
+
+
 def resumed(run_dir: Path, *, yes: bool = False, json: bool = True,
             hook: Any = None) -> ResumeOptions:
     """``orthocal resume RUN_DIR`` (or rollback), ``hook`` given the restarted

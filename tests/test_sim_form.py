@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from builders import FAST, resumed, simulated
+from builders import FAST, parsed_simulate, resumed, simulated
 
 import orthocal
 from drivers.indicators import SerialIndicator
@@ -214,22 +214,18 @@ def test_the_station_gives_each_gauge_its_scale_in_the_configs_order() -> None:
 # --- the command line, the journal, resume ---------------------------------------------
 
 
-def run_args(*argv: str) -> Any:
-    return cli.build_parser().parse_args(["run", "--simulate", "--seed", "5", *argv])
-
-
 def test_both_options_survive_the_journal_round_trip() -> None:
-    params = sim_params(SimOptions.from_args(run_args("--leg-bow", "0.01,-0.02,0.03",
+    params = sim_params(SimOptions.from_args(parsed_simulate("--leg-bow", "0.01,-0.02,0.03",
                                                       "--gauge-scale", "0.001,-0.002")))
     saved = json.loads(json.dumps(params))  # the journal header is JSON
     assert saved["leg_bow_mm"] == [0.01, -0.02, 0.03]
     assert saved["gauge_scale"] == [0.001, -0.002]
-    one = sim_params(SimOptions.from_args(run_args("--leg-bow", "0.008", "--gauge-scale",
+    one = sim_params(SimOptions.from_args(parsed_simulate("--leg-bow", "0.008", "--gauge-scale",
                                                    "0.002")))
     assert one["leg_bow_mm"] == [0.008] * 3 and one["gauge_scale"] == [0.002] * 2
     six = sim_params(SimOptions(seed=1, gauge_scale="0.001", indicators=6))
     assert six["gauge_scale"] == [0.001] * 6
-    plain = sim_params(SimOptions.from_args(run_args()))
+    plain = sim_params(SimOptions.from_args(parsed_simulate()))
     assert plain["leg_bow_mm"] == [0.0] * 3 and plain["gauge_scale"] == [0.0] * 2
     old = {k: v for k, v in saved.items() if k not in ("leg_bow_mm", "gauge_scale")}
     for header, bow, scale in ((saved, [0.01, -0.02, 0.03], {"A": 0.001, "B": -0.002}),
@@ -262,7 +258,7 @@ def test_bad_values_are_one_line_naming_the_option_and_exit_2(
         argv: list[str], option: str, tmp_path: Path,
         capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(BadInput, match=f"^{option}: "):
-        sim_params(SimOptions.from_args(run_args(*argv)))
+        sim_params(SimOptions.from_args(parsed_simulate(*argv)))
     code = cli.main(["run", "--simulate", "--seed", "5", "--out", str(tmp_path / "runs"), *argv])
     err = capsys.readouterr().err
     assert code == 2

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from builders import parsed_simulate
 
 import orthocal
 from drivers.indicators import SerialIndicator
@@ -137,18 +138,14 @@ def test_the_station_hands_its_gaps_to_the_machine() -> None:
 # --- the command line, the journal, the result ---------------------------------------------
 
 
-def run_args(*argv: str) -> Any:
-    return cli.build_parser().parse_args(["run", "--simulate", "--seed", "5", *argv])
-
-
 def test_the_option_survives_the_journal_round_trip() -> None:
-    params = sim_params(SimOptions.from_args(run_args("--true-gap", "0.3,-0.2,0.25",
+    params = sim_params(SimOptions.from_args(parsed_simulate("--true-gap", "0.3,-0.2,0.25",
                                                       "--true-tilt", "0.1,0,-0.1")))
     saved = json.loads(json.dumps(params))  # the journal header is JSON
     assert saved["true_gap"] == list(GAP)
     assert saved["true_tilt"] == [0.1, 0.0, -0.1]
     # not given: axes that meet; given as numbers (benches, tests): the same as text
-    assert sim_params(SimOptions.from_args(run_args()))["true_gap"] == [0.0, 0.0, 0.0]
+    assert sim_params(SimOptions.from_args(parsed_simulate()))["true_gap"] == [0.0, 0.0, 0.0]
     assert sim_params(SimOptions(seed=1, true_gap=GAP))["true_gap"] == list(GAP)
     # a journal from before the gaps has none: it resumes with axes that meet
     old = {k: v for k, v in saved.items() if k != "true_gap"}
@@ -187,7 +184,7 @@ BAD = [
 def test_bad_values_are_one_line_naming_the_option_and_exit_2(
         argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(BadInput, match=r"^--true-gap: "):
-        sim_params(SimOptions.from_args(run_args(*argv)))
+        sim_params(SimOptions.from_args(parsed_simulate(*argv)))
     code = cli.main(["run", "--simulate", "--seed", "5", "--out", str(tmp_path / "runs"), *argv])
     err = capsys.readouterr().err
     assert code == 2
