@@ -201,3 +201,15 @@ def test_a_tilted_machine_is_verified_against_the_tilts_it_keeps(tmp_path: Path,
     assert ver["vs_expected_rms_mm"] < 0.002
     assert result["converged"] is True and writes(result) == 1
     assert "judged against the model after correction" in report.summary_text(result)
+
+
+def test_a_calibrated_machine_is_left_alone(tmp_path: Path, capsys) -> None:
+    # its offsets exactly right: a recheck writes nothing and says so
+    result = run(tmp_path, capsys, true_drho=(0.0, 0.0, 0.0),
+                 procedure={**PROCEDURE, "cycles": 3, "readings": 5, "max_extra_passes": 2})
+    assert result["loop"]["stopped"] == "converged" and result["converged"] is True
+    assert writes(result) == 0 and result["loop"]["write_backs"] == 0
+    assert result["message"].startswith("within tolerance, nothing written")
+    records = read_journal(Path(result["run_dir"]) / "journal.jsonl")
+    assert not any(r["type"] == "writeback" for r in records)
+    assert result["iterations"][0]["verdict"] == "converged"

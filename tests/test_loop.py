@@ -261,3 +261,20 @@ def test_the_report_says_every_reason_the_loop_can_stop() -> None:
 
     assert set(STOP_TEXT) == set(STOP_REASONS)
     assert all(STOP_TEXT[r] for r in STOP_REASONS)
+
+
+def test_a_first_measurement_writes_only_what_stands_out_of_its_noise() -> None:
+    # a machine within tolerance: the first measurement shows it, nothing is written
+    steps = walk_verdicts(2, ["converged"])
+    assert [s.kind for s in steps] == ["measure", "finish"]
+    assert steps[-1].reason == "converged"
+    # undecided: measured again in the same mounting's phase (m+1), then decided
+    steps = walk_verdicts(2, ["unproven", "converged"])
+    assert [s.phase for s in steps if s.kind == "measure"] == ["m", "m+1"]
+    assert not any(s.kind == "write" for s in steps)
+    steps = walk_verdicts(1, ["suspected", "significant", "converged"])
+    assert [(s.kind, s.phase or s.round) for s in steps[:-1]] == [
+        ("measure", "m"), ("measure", "m+1"), ("write", 1), ("measure", "v")]
+    # never decided: not converged, and nothing written
+    steps = walk_verdicts(1, ["unproven", "unproven"])
+    assert steps[-1].reason == "not-converged" and not any(s.kind == "write" for s in steps)

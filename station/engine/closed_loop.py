@@ -27,8 +27,9 @@ States (``len(verdicts)``, ``len(writes)``):
 
     (0, 0)          → measure "m"
     (k, k-1)        → the k-th round is decided:
-                        k = 1: write round 1 (the first correction is always written)
                         significant, k-1 < max_iterations → write round k
+                          (the first measurement's too: a machine within
+                          tolerance is not written to, a recheck moves nothing)
                         significant, max reached → finish "max_iterations"
                         converged → finish "converged"
                         suspected/unproven, passes left → the round's next pass
@@ -116,8 +117,6 @@ def next_step(state: LoopState) -> Step:
     if k == 0:
         return Step("measure", phase=phase_of(0))
     if w == k - 1:  # the last measurement waits for its decision
-        if k == 1:
-            return Step("write", round=1)
         verdict = state.verdicts[-1]
         if verdict == "converged":
             return Step("finish", reason="converged")

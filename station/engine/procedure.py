@@ -175,8 +175,8 @@ class Flow:
 
     def measure(self, phase: str) -> str:
         """Measure (or replay) a round's first pass and identify it: its verdict
-        (station.engine.closed_loop; the first round's correction is written
-        regardless)."""
+        (station.engine.closed_loop; the first round's correction is written only
+        where it stands out of the noise, as every round's)."""
         m = self.seq.measure(phase)
         self.measurements.append(m)
         return self._identify_round(m, [phase])
@@ -232,8 +232,7 @@ class Flow:
             "deviations_rms_mm": fields["deviations_rms_mm"],
             "residual_rms_mm": fields["residual_rms_mm"],
             "noise_floor_mm": fields["noise_floor_mm"], "fit_ok": fields["fit_ok"],
-            "significant": sig,
-            **(judged.fields() if n else {})}
+            "significant": sig, **judged.fields()}
         if again:
             entry["passes"] = passes
             self.iterations[-1] = entry
@@ -241,8 +240,11 @@ class Flow:
             self.iterations.append(entry)
         if n == 0:
             self.result.update(fields)
-            if ctx.state.identification is None:
-                ctx.journal.append({"type": "identification", **ident_json(ident)})
+            journaled = ctx.state.identification
+            if journaled is None or len(journaled.get("passes", ["m"])) < len(passes):
+                ctx.journal.append({"type": "identification", **ident_json(ident),
+                                    **({"passes": passes} if again else {})})
+                ctx.state.identification = {"passes": passes}
             return judged.verdict
         self.result["verification"] = verification_fields(
             ctx.config, fields, self.idents[n - 1], self.target,
@@ -319,6 +321,11 @@ class Flow:
         if reason == "not-converged":
             detail = verdict.not_converged(self.iterations[-1], proc.converge_mm, count)
             message = f"closed loop did not converge: {detail}"
+        if converged and last is None:
+            limit = verdict.converge_limit(proc.converge_mm, count)
+            message = (f"within tolerance, nothing written: every joint offset is shown within "
+                       f"{1000 * limit:.1f} µm at 95 % and no correction stands out of the "
+                       "noise")
         self.result["converged"] = converged
         self.result["loop"] = {
             "stopped": reason, "detail": detail,

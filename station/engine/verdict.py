@@ -33,18 +33,18 @@ def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
 def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
           target: dict[str, float] | None) -> Verdict:
     """The verdict on round ``ident`` (``previous``: the identification whose
-    correction it verifies; None for the first measurement, whose correction is
-    written regardless). Significant: beyond k standard errors of both rounds and
-    beyond converge_mm (orthocal.loop.significant_corrections). Converged: every
-    axis shown within ``limit`` at 95 % (orthocal.loop.shown_within). Otherwise
-    suspected (the 95 % interval excludes the aim on some axis) or unproven."""
+    correction it verifies; None for the first measurement, judged against its
+    own noise alone). Significant: beyond k standard errors of both rounds (of
+    the first alone) and beyond converge_mm (orthocal.loop.significant_corrections).
+    Converged: every axis shown within ``limit`` at 95 % (orthocal.loop.shown_within):
+    for a first measurement, a machine within tolerance that nothing is written
+    to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
+    unproven."""
     sig = significant_corrections(
         ident.parameters, ident.std_errors, converge_mm,
         previous_std_errors=previous.std_errors if previous else None,
         dof=ident.std_error_dof, previous_dof=previous.std_error_dof if previous else None,
         target=target if previous else None)
-    if previous is None:
-        return Verdict("significant" if sig else "converged", sig, {})
     shown = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
                          target=target)
     verdict = "significant" if sig else "converged"
