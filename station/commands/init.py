@@ -1,5 +1,5 @@
-"""``orthocal init --out FILE [PORT ...] [--controller HOST:PORT]``: a commented
-starter config from what ``orthocal probe`` finds.
+"""``orthocal init --out FILE [PORT ...] [--controller HOST:PORT | --config FILE]``: a
+commented starter config from what ``orthocal probe`` finds.
 
 Every gauge that answered becomes an ``[[indicators]]`` entry at its protocol;
 setups are proposed for the gauges found (six: two per leg; fewer: two moved
@@ -10,6 +10,15 @@ the ``[controller]`` table; one without readable soft limits gets commented
 knows the machine's limits. The text is loaded back through the config's own
 validation before it is written, so ``orthocal run --config FILE --plan``
 accepts it as written. An existing file is never overwritten.
+
+``--config FILE`` probes what ``orthocal probe --config FILE`` probes (the same
+code: :func:`station.commands.probe.gather`), and the starter config points at
+that controller (its connection, map and ``[controller.registers]``) and keeps
+what only the operator knows and that config already says: the machine's
+geometry, the soft limits and the offsets the station holds.
+
+Every other value is the default of station.config (the documented one), read
+from there rather than written again here.
 """
 
 from __future__ import annotations
@@ -18,14 +27,43 @@ import argparse
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
+
+from pydantic import BaseModel
 
 from station.commands.probe import gather
-from station.config import parse_config, with_map_file
+from station.config import (
+    ControllerConfig,
+    IndicatorConfig,
+    MachineConfig,
+    ProcedureConfig,
+    StationConfig,
+    WritebackConfig,
+    load_config,
+    parse_config,
+    with_map_file,
+)
 from station.config import toml_value as v
 from station.errors import BadInput
 
 NAMES = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+COMMENT_COLUMN = 31  # where the comments of the key lines start
+
+
+def _default(table: type[BaseModel], key: str) -> Any:
+    """The documented default of ``key`` in a table of station.config."""
+    return table.model_fields[key].default
+
+
+def _line(key: str, value: Any, comment: str = "") -> str:
+    """``key = value`` as TOML, with its comment aligned."""
+    text = f"{key} = {v(value)}"
+    return f"{text.ljust(COMMENT_COLUMN - 1)} # {comment}" if comment else text
+
+
+def _defaults(table: type[BaseModel], *keys: tuple[str, str]) -> list[str]:
+    """The lines of ``keys`` ((key, comment) pairs) at their defaults."""
+    return [_line(key, _default(table, key), comment) for key, comment in keys]
 
 
 def propose_setups(names: list[str]) -> list[tuple[str, dict[str, str]]]:
@@ -41,11 +79,22 @@ def propose_setups(names: list[str]) -> list[tuple[str, dict[str, str]]]:
     return [(leg, {a: d}) for leg in "xyz" for d in "xyz" if d != leg]
 
 
-def _controller_lines(found: dict[str, Any] | None, args: argparse.Namespace) -> list[str]:
+def _controller_lines(found: dict[str, Any] | None, args: argparse.Namespace,
+                      config: StationConfig | None = None) -> list[str]:
     lines = ["[controller]"]
     answered = found is not None and "error" not in found
     spec = args.controller
-    if spec and spec.startswith(("/", "COM")):
+    given = config.controller if config is not None else None
+    if given is not None:
+        lines.append(f"# The controller of {args.config}")
+        if given.transport == "rtu":
+            lines += ['transport = "rtu"', _line("port", given.port,
+                                                 "the serial device of the RTU link"),
+                      f"baudrate = {given.baudrate}"]
+        else:
+            lines += [_line("transport", "tcp", '"tcp" or "rtu"'), f"host = {v(given.host)}",
+                      f"port = {given.port}"]
+    elif spec and spec.startswith(("/", "COM")):
         lines += ['transport = "rtu"',
                   f"port = {v(spec)}                # the serial device of the RTU link",
                   f"baudrate = {args.baudrate}"]
@@ -58,16 +107,28 @@ def _controller_lines(found: dict[str, Any] | None, args: argparse.Namespace) ->
                   'host = "192.168.0.10"          # EDIT: no controller was probed '
                   "(orthocal init --controller HOST:PORT)",
                   "port = 502"]
-    lines += [f"device_id = {args.device_id}", _profile_line(args),
-              "timeout_s = 2.0                # per Modbus request",
-              "speed_mm_s = 50.0              # axis speed of the test moves"]
+    device_id = given.device_id if given is not None else args.device_id
+    profile = given.profile if given is not None else getattr(args, "profile", None)
+    lines += [f"device_id = {device_id}", _profile_line(profile, Path(args.out)),
+              *_defaults(ControllerConfig, ("timeout_s", "per Modbus request"),
+                         ("speed_mm_s", "axis speed of the test moves"))]
+    if given is not None and given.offsets is not None:
+        lines.append(_line("offsets", given.offsets, "the offsets the station holds"))
     limits = (found or {}).get("soft_limits_mm") or {}
+    # soft_min/soft_max the config gives: the operator's, kept as they are.
+    kept = [] if given is None else [_line(key, getattr(given, key))
+                                     for key in ("soft_min", "soft_max")
+                                     if getattr(given, key) is not None]
     if answered and limits.get("lower") is not None:
         lines += ["# The controller reports its soft limits (mm): "
                   + "; ".join(f"{a} [{limits['lower'][a]:.3f}, {limits['upper'][a]:.3f}]"
-                              for a in "xyz"),
-                  "# soft_min = [..., ..., ...]   # narrow them (never widens)",
-                  "# soft_max = [..., ..., ...]"]
+                              for a in "xyz")]
+        lines += kept or ["# soft_min = [..., ..., ...]   # narrow them (never widens)",
+                          "# soft_max = [..., ..., ...]"]
+    elif kept:
+        why = limits.get("reason") if answered else (found or {}).get("error")
+        lines += [f"# The controller's soft limits are unknown ({why or 'not probed'}); "
+                  f"those of {args.config}:", *kept]
     elif answered:
         lines += ["# REQUIRED: the controller does not tell its soft limits: "
                   f"{limits.get('reason') or 'unknown'}.",
@@ -81,20 +142,24 @@ def _controller_lines(found: dict[str, Any] | None, args: argparse.Namespace) ->
                   "# soft_min = [205.0, 205.0, 205.0]   # needed when the controller has no "
                   "soft-limit registers",
                   "# soft_max = [375.0, 375.0, 375.0]"]
+    if given is not None and given.registers:
+        lines += ["", "[controller.registers]         # single addresses overriding the map's",
+                  *(f"{name} = {address}" for name, address in given.registers.items())]
     return lines
 
 
-def _profile_line(args: argparse.Namespace) -> str:
-    """The profile: the built-in map, or the map file of ``--profile`` as a path from
-    the config's folder (where the station looks for it)."""
+def _profile_line(profile: str | None, out: Path) -> str:
+    """The profile: the built-in map, or the map file (``--profile``, or the
+    ``--config``'s) as a path from the folder of ``out`` (where the station looks
+    for it)."""
     from drivers.map_files import is_map_file
 
-    profile = getattr(args, "profile", None)
     if not profile:
-        return 'profile = "orthocal-generic"   # built-in register map (design.md)'
+        return (f"profile = {v(_default(ControllerConfig, 'profile'))}   # built-in register "
+                "map (design.md)")
     if not is_map_file(profile):
         return f"profile = {v(profile)}   # built-in register map"
-    here = Path(args.out).resolve().parent
+    here = out.resolve().parent
     path = Path(profile).resolve()
     try:
         shown = str(path.relative_to(here))
@@ -104,25 +169,31 @@ def _profile_line(args: argparse.Namespace) -> str:
             "folder)")
 
 
-def render(found: dict[str, Any], args: argparse.Namespace) -> str:
+def render(found: dict[str, Any], args: argparse.Namespace,
+           config: StationConfig | None = None) -> str:
+    """The starter config's text; ``config``: that of ``--config``, whose controller
+    was probed (module docstring)."""
     gauges = [ind for ind in found["indicators"] if ind["protocol"] is not None]
     silent = [ind for ind in found["indicators"] if ind["protocol"] is None]
     names = [NAMES[i] for i in range(min(len(gauges), len(NAMES)))]
     stamp = datetime.now(UTC).astimezone().isoformat(timespec="seconds")
+    probe = "orthocal probe" if config is None else f"orthocal probe --config {args.config}"
+    machine = config.machine if config is not None else MachineConfig()
+    stroke = _default(IndicatorConfig, "stroke_mm")
     out = [
         f"# orthocal station config, written by `orthocal init` on {stamp}",
-        "# from what `orthocal probe` found. Check every line marked EDIT, then:",
+        f"# from what `{probe}` found. Check every line marked EDIT, then:",
         f"#   orthocal run --config {args.out} --plan     (lists and checks, moves nothing)",
         f"#   orthocal run --config {args.out}            (the calibration)",
         "# Every key is checked: a typo stops `orthocal run` with exit 2 naming the field.",
         "",
         "[machine]                      # EDIT: your machine's nominal geometry (mm)",
-        "leg_length = 310.25",
-        "rho_min = -100.0               # Π_i^−: end point at ρmin·e_i",
-        "rho_max = 60.0                 # Π_i^+: end point at ρmax·e_i",
+        _line("leg_length", machine.leg_length),
+        _line("rho_min", machine.rho_min, "Π_i^−: end point at ρmin·e_i"),
+        _line("rho_max", machine.rho_max, "Π_i^+: end point at ρmax·e_i"),
         "",
     ]
-    out += _controller_lines(found["controller"], args)
+    out += _controller_lines(found["controller"], args, config)
     out += ["", "# One [[indicators]] table per gauge found. stroke_mm: EDIT to your gauge's",
             "# plunger travel; preload_mm: how far it is pushed in at mounting (default",
             "# stroke/2). The plan check refuses moves beyond the stroke."]
@@ -130,15 +201,15 @@ def render(found: dict[str, Any], args: argparse.Namespace) -> str:
         out += ["# EDIT: no gauge answered on any port probed; set the ports (and protocols).",
                 "[[indicators]]", 'name = "A"', 'port = "/dev/ttyUSB0"',
                 'protocol = "mitutoyo"          # mitutoyo | sylvac | mahr | generic',
-                "stroke_mm = 12.5", "",
+                _line("stroke_mm", stroke), "",
                 "[[indicators]]", 'name = "B"', 'port = "/dev/ttyUSB1"',
-                'protocol = "mitutoyo"', "stroke_mm = 12.5"]
+                'protocol = "mitutoyo"', _line("stroke_mm", stroke)]
         names = ["A", "B"]
     for name, ind in zip(names, gauges, strict=False):
         reading = "" if ind["reading_mm"] is None else f", reading {ind['reading_mm']:+.4f} mm"
         out += ["", f"[[indicators]]                 # answered at {ind['line']}{reading}",
                 f"name = {v(name)}", f"port = {v(ind['port'])}",
-                f"protocol = {v(ind['protocol'])}", "stroke_mm = 12.5"]
+                f"protocol = {v(ind['protocol'])}", _line("stroke_mm", stroke)]
     for ind in silent:
         out.append(f"# {ind['port']}: no gauge ({ind['reason']})")
     out += ["", "# Setups proposed for the gauges found: one [[setups]] per mounting; the",
@@ -147,18 +218,23 @@ def render(found: dict[str, Any], args: argparse.Namespace) -> str:
             '# the direction each measures along ("-y" if mounted reversed).']
     for leg, inds in propose_setups(names):
         out += ["[[setups]]", f"leg = {v(leg)}", f"indicators = {v(inds)}", ""]
+    models = get_args(ProcedureConfig.model_fields["model"].annotation)
+    methods = get_args(ProcedureConfig.model_fields["method"].annotation)
     out += [
         "[procedure]",
-        "cycles = 3                     # Π0 → Π+ → Π− → Π0 cycles per setup (at most)",
-        "readings = 5                   # readings averaged at each stop",
-        "settle_s = 0.3                 # wait after arriving before reading",
-        "repeatability_mm = 0.02        # spread across cycles above this: repeat, then flag",
-        'model = "rho"                  # rho | L | full',
-        'method = "nonlinear"           # linear | nonlinear',
-        "verify = true                  # measure again after write-back",
+        *_defaults(ProcedureConfig,
+                   ("cycles", "Π0 → Π+ → Π− → Π0 cycles per setup (at most)"),
+                   ("readings", "readings averaged at each stop"),
+                   ("settle_s", "wait after arriving before reading"),
+                   ("repeatability_mm", "spread across cycles above this: repeat, then flag")),
+        '# model: auto, the smallest model the run\'s own noise supports (README "Models"),',
+        "# or one of " + " | ".join(m for m in models if m != "auto"),
+        *_defaults(ProcedureConfig, ("model", ""), ("method", " | ".join(methods)),
+                   ("verify", "measure again after write-back")),
         "",
         "[writeback]",
-        "max_abs_offset_mm = 3.0        # refuse larger corrections (nothing written)",
+        *_defaults(WritebackConfig,
+                   ("max_abs_offset_mm", "refuse larger corrections (nothing written)")),
         "",
     ]
     return "\n".join(out)
@@ -171,8 +247,9 @@ def main(args: argparse.Namespace) -> int:
     if out.exists():
         raise BadInput(f"--out: {out} exists; init never overwrites a config "
                        "(choose another name or remove it)")
-    found = gather(args)
-    text = render(found, args)
+    found = gather(args)  # --config: its errors are probe's, one line, exit 2
+    config = load_config(args.config) if getattr(args, "config", None) else None
+    text = render(found, args, config)
     # What init hands out must load as it stands (its map file too, from its folder).
     with_map_file(parse_config(tomllib.loads(text), f"{out} (as generated)"),
                   out.resolve().parent, f"{out} (as generated)")

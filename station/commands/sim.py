@@ -8,7 +8,11 @@ terminal. A separate process cannot be told where the operator mounted the
 gauges, so six fixed indicators stand two per leg, all mounted at once.
 The drive moves as ``--motion`` and ``--drive-*`` say (station.commands.simulation), and
 the config it writes tells the station only what an integrator would: that the
-axes are coordinated, if they are, and the default acceleration.
+axes are coordinated, if they are, and the default acceleration. A map whose axes
+are separate drives (unit ids) gets a drive that does not interpolate, as with
+``run --simulate`` (``separate_drives``), and the config is checked by the rule
+``run`` refuses by (station.plan.limits.motion_model) before it is written: what
+``sim`` hands out, ``run --config`` accepts.
 """
 
 from __future__ import annotations
@@ -33,10 +37,12 @@ from station.commands.simulation import (
     gauge_scales,
     leg_bow_mm,
     map_profile,
+    separate_drives,
     served_map,
 )
 from station.config import dump_toml, parse_config
 from station.errors import BadInput
+from station.plan.limits import motion_model
 
 SIX_GAUGES = 6  # A..F, two per leg: what a separate process mounts (module docstring)
 
@@ -57,11 +63,13 @@ def main(args: argparse.Namespace) -> int:
         raise BadInput(f"--mount-error: must be >= 0 mm, got {mount_error}")
     if args.speed is not None and not args.speed > 0:
         raise BadInput(f"--speed: must be > 0 mm/s, got {args.speed}")
-    drive = drive_params(DriveOptions.from_args(args))
+    profile = map_profile(args.profile)
+    # As run --simulate: axes on separate drives cannot move on one line.
+    drive = drive_params(DriveOptions.from_args(args), separate_drives=separate_drives(profile))
     backlash = backlash_mm(args.backlash)
     bow = leg_bow_mm(args.leg_bow)
     scale = gauge_scales(args.gauge_scale, SIX_GAUGES)
-    kwargs: dict[str, Any] = served_map(map_profile(args.profile))
+    kwargs: dict[str, Any] = served_map(profile)
     if args.speed is not None:
         kwargs["speed_mm_s"] = args.speed
     out = Path(args.config_out)
@@ -90,8 +98,10 @@ def main(args: argparse.Namespace) -> int:
                       f"{backlash} mm, legs bowed {bow} mm, gauge scale errors {scale}, "
                       f"drive {_describe(drive)}\n"
                       f"Use: orthocal run --config {out}")
-            # Validated like any operator's config: what we hand out must load.
+            # Validated like any operator's config: what we hand out must load, and
+            # its motion be one run accepts (checked by run's own rule).
             config = parse_config(station.config(), "orthocal sim")
+            motion_model(config)
             out.write_text(dump_toml(config, header))
             link = (f"Modbus TCP on 127.0.0.1:{station.controller.port}"
                     if args.transport == "tcp" else
