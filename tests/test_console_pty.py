@@ -90,7 +90,8 @@ def test_prompts_never_share_a_line_with_the_live_bar(tmp_path: Path) -> None:
         code, raw = _drive([sys.executable, "-m", "station", "run", "--config", str(config),
                             "--out", str(tmp_path / "runs")])
     text = raw.decode("utf-8", "replace")
-    assert code == 0, text[-3000:]
+    # completed: 0, or 3 where its closed loop did not converge (its first line says so)
+    assert code == (3 if "orthocal run: NOT CONVERGED" in text else 0), text[-3000:]
     assert raw.count(b"Press Enter when done") == 6  # 3 setups, measured and verified
     assert b"[y/N]" in raw  # the write-back question
     assert "left" in text  # the live bar with its time estimate was on screen

@@ -19,6 +19,7 @@ from drivers.map_files import builtin_maps, load_map
 from drivers.profiles import move_time
 from drivers.registers import GENERIC
 from drivers.sim.machine import VirtualOrthoglide
+from station import report
 from station.commands import run as cmd_run
 from station.config import StationConfig, parse_config
 from station.errors import BadInput, RunFailed
@@ -279,9 +280,9 @@ def test_independent_machine_run_with_waypoints_is_interrupted_and_resumed(
     assert not any(r["type"] == "cycle" for r in read_journal(run_dir / "journal.jsonl"))
     capsys.readouterr()
     code = cmd_run.resume(resumed(run_dir, hook=keep))
-    assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] == "ok"
+    assert code == (3 if report.not_converged(result) else 0), result.get("message")
     # the truth within the run's own statement (2 µm gauges, two cycles, stands
     # modelled: a standard error of ~6 µm; a fixed 10 µm failed one draw in a few)
     assert_truth(result, drho(true_drho))

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from truth import assert_truth, drho
 
+from station import report
 from station.commands.cli import main
 from station.config import toml_text
 
@@ -38,9 +39,10 @@ def test_run_over_modbus_rtu_to_a_successful_result(tmp_path: Path, capsys) -> N
         code = main(["run", "--config", str(short), "--yes", "--json",
                      "--out", str(tmp_path / "runs")])
         out, err = capsys.readouterr()
-        assert code == 0, err
+        assert code in (0, 3), err
         result = json.loads(out)
         assert result["status"] == "ok"
+        assert code == (3 if report.not_converged(result) else 0), err
         # one cycle of two readings: the standard errors are ~3 µm, and the gauges'
         # 5 mm mounting error biases the first round; the run's statement holds both
         assert_truth(result, drho((0.4, -0.6, 0.2)))

@@ -19,6 +19,7 @@ from builders import simulated
 
 from orthocal import AXES, Geometry
 from orthocal.accuracy import error_field, optimal_offsets
+from station import report
 from station.commands import run as cmd_run
 from station.config import parse_config
 from station.errors import BadInput
@@ -32,8 +33,11 @@ def run(out: Path, **kw: Any) -> dict[str, Any]:
                                 "procedure": {"settle_s": 0.0, "cycles": 2}, **kw})
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        assert cmd_run.run(options) == 0
-    return json.loads(buf.getvalue())
+        code = cmd_run.run(options)
+    result = json.loads(buf.getvalue())
+    # completed: 0, or 3 where its closed loop did not converge (it says why)
+    assert code == (3 if report.not_converged(result) else 0), result.get("message")
+    return result
 
 
 def true_after(result: dict[str, Any]) -> tuple[float, float]:

@@ -1,9 +1,11 @@
 """The ``orthocal`` command line (also ``python -m station``).
 
-Exit status: 0 success; 1 the run failed or was aborted, with everything
-recorded so far kept; 2 bad input (config, CSV, arguments), with a message
-that names the offending field or line. No traceback reaches the operator
-unless ``--debug`` is given.
+Exit status: 0 success (a run's closed loop converged, or the loop is off);
+1 the run failed or was aborted, with everything recorded so far kept; 2 bad
+input (config, CSV, arguments), with a message that names the offending field
+or line; 3 the run completed but its closed loop did not converge (the
+summary's first line says why). No traceback reaches the operator unless
+``--debug`` is given.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from collections.abc import Sequence
 MODEL_NAMES = ("rho", "L", "full", "rho+tilt", "full+tilt", "rho+gap", "rho+tilt+gap",
                "full+tilt+gap")
 
-EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_NOT_CONVERGED = 0, 1, 2, 3
 
 # Each command lives in its own module, imported only when used, so that
 # `orthocal identify` does not pay for pymodbus and `orthocal --help` is instant.
@@ -133,8 +135,10 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         "--motion", choices=["coordinated", "independent"], default=None,
         help="how the virtual controller moves its axes: together on the straight line "
              "(coordinated, the default; the config then says so) or each on its own "
-             "profile (independent, the default with --drive-delays or --drive-sequence; "
-             "the config then says nothing, as for a drive that does not interpolate)",
+             "profile (independent, the default with --drive-delays or --drive-sequence "
+             "and with a map whose axes are separate drives, unit ids, where coordinated is "
+             "refused; the config then says nothing, as for a drive that does not "
+             "interpolate)",
     )
     # The virtual drive's own behaviour, never written to the config it hands the
     # station: what a real drive does without saying (design.md, "Register map").
@@ -242,6 +246,11 @@ def build_parser() -> argparse.ArgumentParser:
     init.add_argument("--out", metavar="FILE", required=True, help="the config to write "
                       "(never overwritten)")
     _probe_options(init)
+    # As probe's --config (station.commands.probe.gather probes the same devices); the
+    # config written points at its controller, with its map, machine and soft limits.
+    init.add_argument("--config", metavar="FILE",
+                      help="probe the controller (and, without PORTs, the indicator ports) "
+                      "of a station config, and write the starter config around them")
     init.add_argument("--debug", action="store_true", help="show tracebacks of failures")
 
     ident = sub.add_parser("identify", help="identify parameters from a READINGS.csv")

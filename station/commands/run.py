@@ -157,10 +157,24 @@ def print_result(as_json: bool, result: dict[str, Any]) -> None:
         print(report.summary_text(result))
 
 
+def exit_status(result: dict[str, Any], code: int | None = None) -> int:
+    """The exit status of a finished run (station.commands.cli): 0 completed, its
+    closed loop converged or off; 3 completed but the loop did not converge
+    (``loop.stopped`` "not-converged" or "max_iterations"); 1 anything else. ``code``:
+    the flow's own (0 completed, 1 not), else taken from the result's status."""
+    from station.commands.cli import EXIT_FAILED, EXIT_NOT_CONVERGED, EXIT_OK
+
+    if code is None:
+        code = EXIT_OK if result.get("status") == "ok" else EXIT_FAILED
+    if code == EXIT_OK and report.not_converged(result):
+        return EXIT_NOT_CONVERGED
+    return code
+
+
 def _report(as_json: bool, code: int, result: dict[str, Any]) -> int:
     """The summary (or the JSON document) on stdout, and the exit status."""
     print_result(as_json, result)
-    return code
+    return exit_status(result, code)
 
 
 def resume(options: ResumeOptions) -> int:
@@ -172,7 +186,7 @@ def resume(options: ResumeOptions) -> int:
         result = json.loads(result_path.read_text()) if result_path.exists() else {}
         say(f"orthocal: {run_dir} already finished ({state.finished.get('status')})")
         print_result(options.json, result)
-        return 0 if state.finished.get("status") == "ok" else 1
+        return exit_status(result, 0 if state.finished.get("status") == "ok" else 1)
     config = _held_offsets(load_config(run_dir / "config.toml"), records)
     sim = state.header.get("simulation")
     records = drop_redone(records)

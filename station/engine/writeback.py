@@ -120,9 +120,17 @@ def write_back(
         return WritebackOutcome("refused", reason, before, None)
 
     if "intent" not in stages:
-        what = "Write offsets " if round == 1 else f"Closed loop, round {round}: write offsets "
+        # A drive with no OFFSET register: the station holds the offsets, nothing
+        # reaches the drive, and the question must not say otherwise.
+        held = getattr(controller, "held_by", "controller") == "station"
+        verb = "hold" if held else "write"
+        what = f"{verb.capitalize()} offsets " if round == 1 else \
+            f"Closed loop, round {round}: {verb} offsets "
+        where = (" in the station? (the drive takes no zero offset over Modbus: the station "
+                 "holds them, and the report says where to enter them in the drive)"
+                 if held else " to the controller?")
         question = what + ", ".join(
-            f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + " to the controller?" \
+            f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + where \
             + (f" ({note})" if note else "")
         if not operator.confirm(question):
             reason = "declined by the operator; offsets unchanged"

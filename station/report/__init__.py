@@ -14,7 +14,15 @@ document only, never the engine.
 
 from __future__ import annotations
 
-from station.report.format import AXES, DEVIATION_KEYS, PARAM_NAMES, STATUS_TEXT, fmt, param_plain
+from station.report.format import (
+    AXES,
+    DEVIATION_KEYS,
+    PARAM_NAMES,
+    STATUS_TEXT,
+    fmt,
+    not_converged,
+    param_plain,
+)
 from station.report.html import render_html, write_html
 from station.report.io import jsonable, jsonable_value, write_result
 from station.report.text import summary_text
@@ -27,6 +35,7 @@ __all__ = [
     "fmt",
     "jsonable",
     "jsonable_value",
+    "not_converged",
     "param_plain",
     "render_html",
     "summary_text",

@@ -45,12 +45,28 @@ STATUS_TEXT = {
     "refused": "Write-back refused",
     "aborted": "Aborted",
 }
+#: The closed loop's stop reasons (the result's ``loop.stopped``) that mean it did
+#: not converge: the run completed, and its summary's first line, the report's badge
+#: and the exit status (3) say so before anything else.
+NOT_CONVERGED_STOPS = ("not-converged", "max_iterations")
+#: What the run came to (run_state): the result's status, or "not-converged".
+STATE_TEXT = {**STATUS_TEXT, "not-converged": "Not converged"}
 WRITEBACK_TEXT = {
     "written": "the corrected offsets were written to the controller and read back",
     "refused": "the corrections were NOT written: the station refused them",
     "declined": "the corrections were NOT written: the operator declined",
     "skipped": "the corrections were not written (write-back skipped)",
     "failed-restored": "writing the corrections failed; the previous offsets were restored",
+}
+#: The same where the station holds the offsets (a drive with no OFFSET register):
+#: nothing reaches the drive until the operator enters the offsets there.
+HELD_WRITEBACK_TEXT = {
+    **WRITEBACK_TEXT,
+    "written": "the corrected offsets are held by the station, not by the drive (it takes "
+               "no zero offset over Modbus): enter them in the drive as the top of this "
+               "report says",
+    "failed-restored": "taking the corrections failed; the station holds the previous "
+                       "offsets again",
 }
 
 
@@ -142,6 +158,61 @@ def true_value(result: Mapping[str, Any], name: str) -> float | None:
 
 def as_dict(value: Any) -> dict:
     return value if isinstance(value, dict) else {}
+
+
+def not_converged(result: Mapping[str, Any]) -> bool:
+    """A run that completed but whose closed loop did not converge (exit status 3)."""
+    loop = result.get("loop")
+    return (result.get("status") == "ok" and isinstance(loop, Mapping)
+            and loop.get("stopped") in NOT_CONVERGED_STOPS)
+
+
+def run_state(result: Mapping[str, Any]) -> str:
+    """What the run came to, for the first line and the badge: the result's status
+    ("ok", "failed", …), or "not-converged" for a completed run whose loop did not."""
+    return "not-converged" if not_converged(result) else str(result.get("status", "unknown"))
+
+
+_NOT_CONVERGED_PREFIX = "closed loop did not converge: "
+
+
+def not_converged_why(result: Mapping[str, Any]) -> str:
+    """Why the loop did not converge, in words: ``loop.detail``, else the run's
+    message without its "closed loop did not converge" prefix."""
+    loop = as_dict(result.get("loop"))
+    if loop.get("detail"):
+        return str(loop["detail"])
+    message = str(result.get("message") or "")
+    if message.startswith(_NOT_CONVERGED_PREFIX):
+        message = message[len(_NOT_CONVERGED_PREFIX):]
+    if message:
+        return message
+    if loop.get("stopped") == "max_iterations":
+        return (f"{loop.get('max_iterations', 'max_iterations')} write-back(s) done and the "
+                "last verification still finds a significant correction")
+    return "the last verification could not show every joint offset within converge_mm"
+
+
+def held_by_station(result: Mapping[str, Any]) -> bool:
+    """The station holds the offsets (the drive's map has no OFFSET registers)."""
+    return result.get("offsets_held_by") == "station"
+
+
+def held_offsets_text(result: Mapping[str, Any]) -> str | None:
+    """The offsets the station holds when the run stops ("x +1.3553, y −0.7808,
+    z −0.9890 mm"), or None when the result does not say."""
+    final = as_dict(result.get("offsets_final"))
+    values = [(a, num(final.get(a))) for a in AXES]
+    if not final or any(v is None for _, v in values):
+        return None
+    return ", ".join(f"{a} {fmt(v, 4, signed=True)}" for a, v in values) + " mm"
+
+
+def writeback_text(result: Mapping[str, Any], status: str) -> str:
+    """What a write-back status means for this run: written to the controller, or
+    held by the station where the drive takes no offsets."""
+    table = HELD_WRITEBACK_TEXT if held_by_station(result) else WRITEBACK_TEXT
+    return table.get(status, f"write-back: {status}")
 
 
 def machine_parameters(result: Mapping[str, Any]) -> dict:

@@ -15,22 +15,25 @@ from station.report.format import (
     AXES,
     MODEL_TEXT,
     PARAM_NAMES,
-    STATUS_TEXT,
-    WRITEBACK_TEXT,
+    STATE_TEXT,
     as_dict,
     dev_html,
     dev_keys,
     fmt,
     format_duration,
     format_when,
+    held_by_station,
     machine_parameters,
     max_abs,
     num,
     param_html,
     params_of,
+    run_state,
     true_value,
     unit,
+    writeback_text,
 )
+from station.report.header import header_boxes, held_box
 from station.report.plots import plot_deviations, plot_field, plot_parameters, release_fonts
 from station.report.text import model_notes
 from station.report.tool import html_section as tool_section
@@ -170,7 +173,7 @@ def _result_paragraph(result: Mapping[str, Any]) -> str:
                              f"{fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
     wb = as_dict(result.get("writeback"))
     if wb.get("status"):
-        text = WRITEBACK_TEXT.get(str(wb["status"]), f"write-back: {wb['status']}")
+        text = writeback_text(result, str(wb["status"]))
         reason = f" ({_e(wb['reason'])})" if wb.get("reason") else ""
         parts.append(f"{_e(text[0].upper() + text[1:])}{reason}.")
     ver = as_dict(result.get("verification"))
@@ -367,13 +370,16 @@ def _offsets_section(result: Mapping[str, Any]) -> str:
     written = result.get("offsets_written")
     written = written if isinstance(written, dict) else {}
     wb = as_dict(result.get("writeback"))
+    held = held_by_station(result)
     out = []
     if wb:
         status = str(wb.get("status", "—"))
-        cls = "box" if status == "written" else "box warn"
-        text = WRITEBACK_TEXT.get(status, status)
+        cls = "box" if status == "written" and not held else "box warn"
+        text = writeback_text(result, status) if status in (
+            "written", "refused", "declined", "skipped", "failed-restored") else status
+        label = "held by the station" if held and status == "written" else status
         reason = f"<br>Reason: {_e(wb['reason'])}" if wb.get("reason") else ""
-        out.append(f'<div class="{cls}"><b>Write-back: {_e(status)}</b> — {_e(text)}.'
+        out.append(f'<div class="{cls}"><b>Write-back: {_e(label)}</b> — {_e(text)}.'
                    f"{reason}</div>")
     if before or written:
         rows = []
@@ -384,14 +390,17 @@ def _offsets_section(result: Mapping[str, Any]) -> str:
             change = fmt(w - b, signed=True) if b is not None and w is not None else "—"
             rows.append([f"axis {a}", fmt(b, signed=True),
                          fmt(w, signed=True) if written else "not written", change])
-        out.append(_table(["axis", "offset before (mm)", "offset written (mm)", "change (mm)"],
-                          rows, caption=(
-            "The controller's joint zero offset o<sub>i</sub>; the correction is "
+        whose = ("The joint zero offset o<sub>i</sub> the station holds (the drive takes "
+                 "none over Modbus)" if held else
+                 "The controller's joint zero offset o<sub>i</sub>")
+        out.append(_table(["axis", "offset before (mm)",
+                           "offset held (mm)" if held else "offset written (mm)",
+                           "change (mm)"], rows, caption=(
+            f"{whose}; the correction is "
             "o<sub>i</sub> ← o<sub>i</sub> − Δρ<sub>i</sub>. The old values are saved in "
             "the run directory, so <code>orthocal rollback</code> can restore them.")))
-    if result.get("offsets_held_by") == "station":
-        out.append(f'<div class="box warn"><b>Offsets held by the station</b> — '
-                   f"{_e(result.get('offsets_note', ''))}.</div>")
+    if held:
+        out.append(held_box(result))
     return "".join(out) or "<p>The controller's offsets were not read.</p>"
 
 
@@ -460,7 +469,6 @@ def _field_plot(result: Mapping[str, Any]) -> str | None:
 
 def render_html(result: dict) -> str:
     """The whole report as one HTML string (no external resources)."""
-    status = str(result.get("status", "unknown"))
     title = "Calibration report"
     when = format_when(result.get("started"))
     try:
@@ -490,13 +498,20 @@ def render_html(result: dict) -> str:
             "with ±1σ (thick) and ±3σ (thin) error bars; after calibration the re-identified "
             "values should be near zero. In a simulated run the red bar marks the value "
             "hidden in the virtual machine.</figcaption></figure>")
-    status_cls = f"st-{status}" if status in STATUS_TEXT else "st-failed"
+    state = run_state(result)
+    # A loop that did not converge, offsets the station holds: the warning colour
+    # (st-refused's), never the green of a run that did all it set out to.
+    status_cls = ("st-refused st-not-converged" if state == "not-converged" else
+                  f"st-{state}" if state in STATE_TEXT else "st-failed")
     sim_tag = " (simulated)" if result.get("simulated") else ""
-    badge = f'<span class="status {status_cls}">{_e(STATUS_TEXT.get(status, status))}</span>'
+    badge = f'<span class="status {status_cls}">{_e(STATE_TEXT.get(state, state))}</span>'
+    held = held_by_station(result)
+    if held:
+        badge += '<span class="status st-refused st-held">Offsets held by the station</span>'
     body = f"""
 <h1>{_e(title)}{_e(sim_tag)}{badge}</h1>
 <p class="meta">Orthoglide-type parallel machine · leg-parallelism calibration · {_e(when)}</p>
-{_info_list(result)}
+{header_boxes(result)}{_info_list(result)}
 <h2>What was done</h2>
 {_what_was_done(result)}
 <h2>Result</h2>
@@ -517,7 +532,7 @@ def render_html(result: dict) -> str:
 {_deviations_table(result)}
 <h2>Setups</h2>
 {_setups_table(result)}
-<h2>Controller offsets</h2>
+<h2>{"Offsets (held by the station)" if held else "Controller offsets"}</h2>
 {_offsets_section(result)}
 <p class="small">Generated by orthocal. All lengths in millimetres.</p>
 """

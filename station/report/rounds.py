@@ -249,6 +249,8 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
                      f"offsets are off {'from their aim ' if 'from the aim' in left else ''}"
                      f"by this much; its Δρ is the correction applied plus what the last "
                      f"verification measured (the JSON's remaining.total).</p>")
+    # where the station holds the offsets, none of them reached the drive
+    held = "held" if result.get("offsets_held_by") == "station" else "written"
     rows = []
     for n, it in enumerate(iterations):
         written = it.get("offsets_written")
@@ -263,6 +265,6 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
             )) + "</tr>")
     parts.append("<table><thead><tr><th>measurement</th><th>deviations RMS</th>"
                  "<th>residual RMS</th><th>noise floor</th><th>correction max</th>"
-                 "<th>significant</th><th>offsets written (mm)</th></tr></thead><tbody>"
+                 f"<th>significant</th><th>offsets {held} (mm)</th></tr></thead><tbody>"
                  + "".join(rows) + "</tbody></table>")
     return "\n".join(parts)

@@ -17,13 +17,17 @@ from station.report import budget, reversal, tool
 from station.report.format import (
     AXES,
     NOT_WRITTEN_TEXT,
-    STATUS_TEXT,
+    STATE_TEXT,
     as_dict,
     fmt,
+    held_by_station,
+    held_offsets_text,
+    not_converged_why,
     num,
     param_line,
     param_plain,
     params_of,
+    run_state,
     unit,
 )
 
@@ -59,14 +63,29 @@ def guard_lines(result: dict) -> list[str]:
     return lines
 
 
+def headline(result: Mapping[str, Any]) -> str:
+    """The summary's first line: what happened, before anything else. A completed
+    run whose closed loop did not converge says NOT CONVERGED and why (exit status
+    3); offsets the station holds say so, with their values, to be entered in the
+    drive (the "offsets held" line below says where)."""
+    state = run_state(result)
+    head = f"orthocal run: {STATE_TEXT.get(state, state).upper()}"
+    if state == "not-converged":
+        head += f" — {not_converged_why(result)}"
+    elif result.get("message"):
+        head += f" — {result['message']}"
+    if held_by_station(result):
+        values = held_offsets_text(result)
+        head += (" — offsets HELD BY THE STATION, not by the drive"
+                 + (f": {values}" if values else "")
+                 + "; enter them in the drive (see \"offsets held\" below)")
+    return head
+
+
 def summary_text(result: dict) -> str:
     """A few lines for the end of a run: status, identified values, residual,
     offsets written, verification before → after, where the report is."""
-    status = str(result.get("status", "unknown"))
-    head = f"orthocal run: {STATUS_TEXT.get(status, status).upper()}"
-    if result.get("message"):
-        head += f" — {result['message']}"
-    lines = [head]
+    lines = [headline(result)]
     names = params_of(result)
     if names:
         model = str(result.get("model", ""))
