@@ -148,7 +148,9 @@ def test_offsets_held_by_the_station_resume_roll_back_and_carry_on(
                         procedure=PROCEDURE, profile=str(GATEWAY_NO_OFFSETS))
     code = cmd_run.run(dataclasses.replace(options, offsets_from=run_dir))
     again = json.loads(capsys.readouterr().out)
-    assert code == 0, again.get("message")
+    # a recheck writes only what stands out of its noise: it may end "within
+    # tolerance", or undecided (exit 3, saying why) on what the last run left
+    assert code == (3 if report.not_converged(again) else 0), again.get("message")
     assert again["offsets_before"] == pytest.approx(result["offsets_final"], abs=1e-12)
     assert all(abs(again["identified"][f"drho_{a}"]) <= WITHIN_MM for a in "xyz")
     assert again["loop"]["write_backs"] == 0 or all(
