@@ -321,11 +321,12 @@ class Flow:
         if reason == "not-converged":
             detail = verdict.not_converged(self.iterations[-1], proc.converge_mm, count)
             message = f"closed loop did not converge: {detail}"
-        if converged and last is None:
+        if last is None:
             # nothing written: the offsets as found are the run's before and after
             self.result["offsets_before"] = {a: float(v) for a, v in zip(
                 "xyz", self.ctx.devices.controller.read_offsets(), strict=True)}
             self.result["offsets_written"] = None
+        if converged and last is None:
             limit = verdict.converge_limit(proc.converge_mm, count)
             message = (f"within tolerance, nothing written: every joint offset is shown within "
                        f"{1000 * limit:.1f} µm at 95 % and no correction stands out of the "
