@@ -41,13 +41,11 @@ from typing import Any
 
 import numpy as np
 
+# The budget's own inputs: the model test and the statement read the stated errors alike.
+from orthocal.budget import MPE_SPAN_MM, STEEL_ALPHA, form_vector
 from orthocal.geometry import Geometry
+from orthocal.identification import exact_jacobian
 from orthocal.measurement import Key
-
-# Steel's expansion (1/K): a leg's length change per kelvin per mm of leg.
-STEEL_ALPHA = 11.5e-6
-# The travel (mm) over which a gauge's MPE is stated for a deviation (orthocal.budget).
-MPE_SPAN_MM = 0.2
 
 
 @dataclass(frozen=True)
@@ -102,9 +100,6 @@ def columns(allowance: Allowance, distinct: Sequence[Key], means: np.ndarray,
     whose measured means are ``means`` (mm), the bows' signatures at the fit's
     ``params`` (12-vector) in the planes L/2 + ``mount_offsets`` (one per key;
     None: L/2). Columns of zero bound are left out."""
-    from orthocal.budget import form_vector
-    from orthocal.identification import exact_jacobian
-
     K = len(distinct)
     cols: list[np.ndarray] = []
     bounds: list[float] = []
