@@ -105,7 +105,11 @@ def significant_corrections(parameters: Mapping[str, float],
             prev = finite(previous_std_errors.get(name))
             if prev is None:
                 continue
-            prev = min(prev, se)
+            # A written round no noisier than this one: its leftover is a fair trade
+            # of noises (hypot). A noisier one (a verification joined with the layout
+            # the rounds before measured): its leftover is an error this round resolves,
+            # and the term fades as se²/se_prev, continuous at se_prev = se.
+            prev = prev if prev <= se else se * se / prev
             nu = _welch(se, dof, prev, previous_dof)
             se = math.hypot(se, prev)
         kk = k if k is not None else coverage_factor(nu, 1.0 - FALSE_ALARM)

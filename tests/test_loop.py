@@ -77,9 +77,16 @@ def test_significance_needs_both_three_sigma_and_converge_mm() -> None:
     # 4 σ of this measurement is under 3 σ of both (4 < 3·√2).
     prev = {"drho_x": 0.001, "drho_y": 0.001, "drho_z": 0.0001}
     assert significant_corrections(params, se, 0.002, previous_std_errors=prev, k=3.0) == ["drho_z"]
-    # A previous se inflated by misfit (the stands' bias) does not hide a correction.
+    # A previous se inflated by misfit (the stands' bias) does not hide a correction:
+    # a round ten times noisier left an error this one resolves, so its term fades
+    # (se²/se_prev: 4 σ > 3·√1.01) and Δρ_y is written where equal rounds hold it.
     big = {"drho_x": 0.01, "drho_y": 0.01, "drho_z": 0.01}
-    assert significant_corrections(params, se, 0.002, previous_std_errors=big, k=3.0) == ["drho_z"]
+    assert significant_corrections(params, se, 0.002, previous_std_errors=big,
+                                   k=3.0) == ["drho_y", "drho_z"]
+    # continuous where the rounds' noises meet: just above se_prev = se, still √2
+    near = {"drho_x": 0.00101, "drho_y": 0.00101, "drho_z": 0.0001}
+    assert significant_corrections(params, se, 0.002, previous_std_errors=near,
+                                   k=3.0) == ["drho_z"]
     assert significant_corrections({"drho_x": 0.0045}, se, 0.002,
                                    previous_std_errors=big, k=3.0) == ["drho_x"]
 
