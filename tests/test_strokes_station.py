@@ -99,7 +99,7 @@ TRUE_DRHO = (0.7, -1.1, 0.5)
 def run_argv(out: Path) -> list[str]:
     return ["run", "--simulate", "--seed", "11", "--true-drho", ",".join(map(str, TRUE_DRHO)),
             "--noise", "0", "--sim-procedure", json.dumps(PROCEDURE), "--sim-speed", "20000",
-            # stands exact: one write-back, the two phases counted below (issue 10)
+            # stands exact: every phase's cycles counted below
             "--mount-error", "0", "--yes", "--json", "--out", str(out)]
 
 
@@ -107,7 +107,7 @@ def test_simulated_run_with_strokes(tmp_path: Path, capsys) -> None:
     """Every stroke in the deviations, the journal and the report; the offsets
     come back and the verification is at the noise level."""
     args = simulated(tmp_path / "runs", seed=11, true_drho=TRUE_DRHO, procedure=PROCEDURE,
-                     mount_error=0.0)  # one write-back
+                     mount_error=0.0)
     code = cmd_run.run(args)
     result = json.loads(capsys.readouterr().out)
     # completed: 0, or 3 where its closed loop did not converge (it says why)
@@ -180,4 +180,6 @@ def test_killed_run_with_strokes_resumes_to_the_same_result(tmp_path: Path) -> N
     assert (run_dir / "journal.jsonl").read_bytes().startswith(before)
     cycles = [(r["phase"], r["setup"], r["cycle"])
               for r in read_journal(run_dir / "journal.jsonl") if r["type"] == "cycle"]
-    assert len(cycles) == len(set(cycles)) == 12  # 3 setups × 2 cycles × 2 phases
+    # 3 setups × 2 cycles per phase: measurement, then a verification per write-back
+    phases = 1 + expected["loop"]["write_backs"]
+    assert len(cycles) == len(set(cycles)) == 6 * phases
