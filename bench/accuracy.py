@@ -13,7 +13,7 @@ Target: nonlinear ≤ 1.05 at every size. The Monte Carlo itself is uncertain by
 about 1/sqrt(2·trials) (1.1 % at 4000 trials; 1.6 % at the 2000 that tilt models
 default to, their fit being slower).
 
-Tilt models (issue 9): the hidden tilts are drawn uniform in ±1 mrad beside the
+Tilt models: the hidden tilts are drawn uniform in ±1 mrad beside the
 offsets, the ratio is printed per parameter, and beside it the bias a
 ``rho``-only fit takes from tilts of 0.1, 0.3 and 1 mrad (noiseless data, the
 worst of the eight sign patterns ±t on each pair of axes).

@@ -1,4 +1,4 @@
-"""The uncertainty budget against the truth (issue 23): whole simulated runs through
+"""The uncertainty budget against the truth: whole simulated runs through
 the station (run --simulate in this process) on a machine whose legs are bowed by
 ``--leg-bow`` on every gauge plane, the config stating ``leg_straightness_mm``
 (``--stated``, or none: the default), 1 µm noise, 3 cycles × 3 readings, model auto,

@@ -1,4 +1,4 @@
-"""What the closed loop is for, and that it never chases noise (issue 10).
+"""What the closed loop is for, and that it never chases noise.
 
 Whole simulated calibrations through the real station (``orthocal run
 --simulate ... --yes --json``, a subprocess each: virtual station, measurement,
@@ -21,7 +21,7 @@ run's 95 % interval.
 Part "small": hidden Δρ uniform in ±0.5 mm, stands within ±1 mm, 1 µm noise:
 one round fixes these machines, so every run must take exactly one write-back.
 
-Part "promise" (issue 20): what "converged" promises. The held-out controller
+Part "promise": what "converged" promises. The held-out controller
 of the issue (a drive of its own: cosine profiles, the station told nothing),
 12.5 mm gauges at half preload, stands set by eye (±5 mm), 1 µm noise, model
 auto, Δρ uniform in ±1.5 mm; with the short procedure of the issue (2 cycles × 3

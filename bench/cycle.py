@@ -1,4 +1,4 @@
-"""Whole-calibration cycle time against the physical floor (issue 6).
+"""Whole-calibration cycle time against the physical floor.
 
 A virtual station with realistic timing runs in this process (100 mm/s,
 1000 mm/s², six Mitutoyo gauges at 9600 baud with line time emulated, all
@@ -14,7 +14,7 @@ The floor is what the physics of the run that actually happened costs:
   longest axis), in the machine's own scale, so the move that a write-back's
   new offsets cause is counted; waypoints are not part of the floor, they are
   what independent axes cost; nor are the approach's overruns and the reversal
-  stop's trip beyond Π0 and back (issue 21: ``--approach as-planned`` runs without);
+  stop's trip beyond Π0 and back (``--approach as-planned`` runs without);
 * the settle time at every stop;
 * at every stop, the serial line time of its readings: readings × (request +
   reply characters) × bits per character / baud; the gauges of a stop are read
@@ -36,7 +36,7 @@ it is the time the station spends between and around the moves.
     python bench/cycle.py --strokes 60,30,-50,-100                 # four stops per leg
     python bench/cycle.py --drive-profile cosine --readings 3 --cycles 2 --repeat 2
                                           # a drive of its own timing: wall over the
-                                          # drive floor (issue 20's held-out controller)
+                                          # drive floor (a held-out controller's)
     python bench/cycle.py --path-cost     # the plan for any axis timing against a
                                           # coordinated controller, on drives of every
                                           # kind, and what the plunger guard costs

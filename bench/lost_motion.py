@@ -1,12 +1,12 @@
 """Lost motion: what a joint's reversal does to the identification, before and after
-the one-side approach (issue 21).
+the one-side approach.
 
 Each run is one measurement of the station's procedure (three setups, two gauges
 each, 3 cycles × 5 readings, a reversal stop per cycle), simulated reading by
 reading on the exact model: hidden Δρ uniform in ±1.5 mm, every stand by eye (±5
 mm off the leg's middle), gauges of 1 µm noise quantised to 1 µm, and every
 joint's carriage following its count through a dead band of B (a play operator,
-model.md "Lost motion"). "before": the stops in the paper's order (the joints
+docs/model.md "Lost motion"). "before": the stops in the paper's order (the joints
 reach them from either side, approach "as-planned"); "after": every stop
 approached from below after a 0.05 mm overrun, Δρ moved to the middle of the band
 with the reversal the run measured. Identified by the station's own code

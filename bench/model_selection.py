@@ -1,4 +1,4 @@
-"""How often ``auto`` picks the right model (issue 9): simulated station runs.
+"""How often ``auto`` picks the right model: simulated station runs.
 
 Each run is simulated at the station's data level, not through the devices: per
 setup (leg i, two gauges along j and k) the stops Π0, Π_i^+, Π_i^−, Π0, ... of
@@ -15,7 +15,7 @@ with ``model = "auto"``.
     python bench/model_selection.py --only section_standard_errors
     python bench/model_selection.py --only section_strokes   # what intermediate stops cost and buy
 
-Requirement (issue 9, noise 2 µm): untilted machines keep ``rho`` in ≥ 99 % of
+Requirement (noise 2 µm): untilted machines keep ``rho`` in ≥ 99 % of
 runs; with 0.2 mrad of tilt or more a tilt model is picked in ≥ 99 %.
 Sections are functions in ``SECTIONS``: add one to report another figure.
 """
@@ -217,7 +217,7 @@ def section_strokes(args: argparse.Namespace, rng: np.random.Generator) -> None:
             pred = 1000 * args.noise * design.run_std_errors(J, indicators, args.cycles,
                                                               args.readings)
             # RMS error about the truth of the station's (nonlinear) fit: the linear
-            # one carries several µm of linearisation bias at ±2 mm offsets (model.md).
+            # one carries several µm of linearisation bias at ±2 mm offsets (docs/model.md).
             emp = 1000 * np.sqrt(np.mean(np.square(estimates[m]), axis=0))[list(MODELS[m])]
             groups = {"Δρ": "drho", "ΔL": "dL", "tilt": "tilt"}
             parts = []

@@ -1,10 +1,10 @@
-"""Soak: many simulated calibrations back to back through flaky devices (issues 5, 11).
+"""Soak: many simulated calibrations back to back through flaky devices.
 
 Each run is a whole ``orthocal run --simulate`` (measure, identify, write back,
 verify) on a fresh virtual station with random hidden offsets, while every
 device misbehaves at random: the controller drops, garbles and answers "busy"
 to a fraction of its requests, the gauges drop and garble a fraction of their
-replies. On top (issue 11), the controller loses power once per run at a random
+replies. On top, the controller loses power once per run at a random
 move (``--cut-s`` unreachable, then back unhomed with its count lost: the run
 ends saying so and the soak answers ``orthocal resume --yes`` as an operator
 would, which homes and checks Π0), and one gauge's USB adapter is pulled at a

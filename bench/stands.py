@@ -1,4 +1,4 @@
-"""Misplaced indicator stands against ``auto`` (issue 17, "Stands are not tilt").
+"""Misplaced indicator stands against ``auto`` ("Stands are not tilt").
 
 The operator sets each stand "at the middle of the leg" by eye: each of the six
 gauges reads in its own plane x_i = L/2 + m, m uniform in ±``--stand`` mm, drawn
@@ -17,7 +17,7 @@ modelled (``stands=Stands(tolerance=--tolerance)``), on the same data.
     python bench/stands.py --runs 100
     python bench/stands.py --only section_designs
 
-Requirement (issue 17, noise 2 µm, offsets ±1.5 mm, stands ±5 mm): square
+Requirement (noise 2 µm, offsets ±1.5 mm, stands ±5 mm): square
 machines keep a model without tilt in ≥ 99 % of runs, and 0.2 mrad of tilt (one
 pair of axes, random pair and sign) is still found in ≥ 99 %.
 Sections are functions in ``SECTIONS``.

@@ -1,4 +1,4 @@
-"""Is the uncertainty the station reports honest? (issue 6)
+"""Is the uncertainty the station reports honest?
 
 Runs ``orthocal run --simulate --noise 0.005 --seed k --yes --json`` for k =
 seed .. seed+runs−1 (each a whole calibration: virtual station, measurement,

@@ -1,4 +1,4 @@
-"""Accuracy at the tool, judged by the hidden machine (issue 17).
+"""Accuracy at the tool, judged by the hidden machine.
 
 Whole simulated calibrations (``orthocal run --simulate`` in-process, the default
 procedure: three cycles of five readings, closed loop, stands placed by eye up

@@ -1,6 +1,6 @@
 """The axis controller over Modbus TCP or RTU: :class:`ModbusAxisController`
 implements :class:`drivers.base.AxisController` for any register map of
-:mod:`drivers.registers` (design.md, "Register map "orthocal-generic""): the
+:mod:`drivers.registers` (docs/design.md, "Register map "orthocal-generic""): the
 axes' behaviour (moves and their deadlines, waits, stop, homing, offsets, soft
 limits) on the link of :mod:`drivers.modbus_link`, which owns the wire
 discipline (retries, reconnects, the reference check after a power cut).

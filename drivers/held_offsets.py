@@ -1,4 +1,4 @@
-"""Offsets the drive cannot hold, held by the station (design.md, "Offsets held by
+"""Offsets the drive cannot hold, held by the station (docs/design.md, "Offsets held by
 the station").
 
 Most drives have no Modbus-writable zero offset (their home offset is a

@@ -1,5 +1,5 @@
 """Dial-indicator protocols as data: how one kind of gauge talks
-(:class:`IndicatorProtocol`), the built-ins design.md fixes
+(:class:`IndicatorProtocol`), the built-ins docs/design.md fixes
 (:data:`BUILTIN_PROTOCOLS`), a built-in with a config table's overrides
 (:func:`make_protocol`), and what a reply line means (:class:`ReplyParser`).
 
@@ -141,7 +141,7 @@ def _format(fmt: str, field: str, **kw: Any) -> str:
         raise ValueError(f"{field} {fmt!r} cannot be formatted: {e}") from None
 
 
-# Built-ins as design.md fixes them. Mitutoyo's reply pattern accepts any channel
+# Built-ins as docs/design.md fixes them. Mitutoyo's reply pattern accepts any channel
 # number in front because multiplexers answer with their own; the value itself
 # must carry sign and point, as the gauge always sends both.
 BUILTIN_PROTOCOLS: dict[str, IndicatorProtocol] = {

@@ -1,4 +1,4 @@
-"""Soft limits as a controller reports them (design.md, "Register map"): read
+"""Soft limits as a controller reports them (docs/design.md, "Register map"): read
 from SOFT_MIN/SOFT_MAX where the map has them and the controller answers, or
 marked unknown, with the reason, where it does not.
 

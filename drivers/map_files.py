@@ -1,4 +1,4 @@
-"""Register maps as files (design.md, "Register-map files"): a map is a TOML file
+"""Register maps as files (docs/design.md, "Register-map files"): a map is a TOML file
 holding exactly the fields of :class:`drivers.registers.RegisterMap`, so that any
 built-in map dumped to TOML loads back identical; the built-in maps beside the
 code-defined generic one ship as such files (drivers/maps/); ``[controller]
@@ -166,7 +166,7 @@ def resolve_map(profile: str | RegisterMap, base_dir: str | Path | None = None
             path = Path(base_dir) / path
         return read_map(path)
     raise RegisterMapError(f"profile {profile!r}", "unknown register map; built-in: "
-                           f"{sorted(maps)}, or a .toml file (design.md, Register-map files)")
+                           f"{sorted(maps)}, or a .toml file (docs/design.md, Register-map files)")
 
 
 def load_map(profile: str | RegisterMap = "orthocal-generic",

@@ -1,4 +1,4 @@
-"""Register maps of axis controllers, as data (design.md, "Register map
+"""Register maps of axis controllers, as data (docs/design.md, "Register map
 "orthocal-generic"").
 
 A :class:`RegisterMap` says where every quantity the station needs lives on
@@ -18,7 +18,7 @@ Conventions every map follows:
   Modbus-writable zero offset), and the driver raises that reason verbatim.
 
 The map the simulator serves by default is :data:`GENERIC` ("orthocal-generic",
-design.md's table), defined here; every other built-in map is a file of
+docs/design.md's table), defined here; every other built-in map is a file of
 drivers/maps/, and a user's drive is a file of its own: drivers.map_files reads
 and writes them, resolves a profile's name or path, and applies the single-entry
 overrides of the config table ``[controller.registers]`` (``load_map``).
@@ -220,7 +220,7 @@ class RegisterMap(BaseModel):
     alarm_code: list[str] = Field(default_factory=list)
     commands: dict[str, list[CommandStep]]
     unsupported: dict[str, str] = Field(default_factory=dict)
-    #: the controller's sign convention for OFFSET (design.md "Writing the offsets back")
+    #: the controller's sign convention for OFFSET (docs/design.md "Writing the offsets back")
     offset_convention: str = ""
     #: read registers up to this many addresses apart in one request
     merge_gap: int = Field(default=0, ge=0, le=16)
@@ -339,7 +339,7 @@ _POS = {"type": "i32", "scale": 1000.0, "unit": "mm"}
 GENERIC = RegisterMap(
     name="orthocal-generic",
     description=(
-        "design.md's built-in map: one Modbus device, holding registers, i32 = two "
+        "docs/design.md's built-in map: one Modbus device, holding registers, i32 = two "
         "registers high word first, positions in µm. Extended with the soft limits "
         "SOFT_MIN_* (50/52/54) and SOFT_MAX_* (60/62/64) the station reads before planning."
     ),
@@ -376,7 +376,7 @@ GENERIC = RegisterMap(
     },
     offset_convention="commanded ρ_i puts the carriage at ρ_i + o_i; write-back sets "
                       "o_i ← o_i − Δρ_i",
-    # design.md: COMMAND 1 promises no interpolation, so a controller serving this
+    # docs/design.md: COMMAND 1 promises no interpolation, so a controller serving this
     # map is planned as independent axes unless its config says coordinated.
     motion="independent",
 )

@@ -1,4 +1,4 @@
-"""Accuracy at the tool (model.md, "Accuracy at the tool"; design.md, "Accuracy at
+"""Accuracy at the tool (docs/model.md, "Accuracy at the tool"; docs/design.md, "Accuracy at
 the tool").
 
 The controller believes the machine nominal: for a commanded tool point p it
@@ -125,7 +125,7 @@ class Grid(NamedTuple):
 
 
 def default_box(geometry: Geometry) -> np.ndarray:
-    """[rho_min, rho_max]³: the cube the test postures span (design.md, workspace)."""
+    """[rho_min, rho_max]³: the cube the test postures span (docs/design.md, workspace)."""
     return np.array([[geometry.rho_min, geometry.rho_max]] * 3, dtype=float)
 
 
@@ -169,7 +169,7 @@ def tool_error(points, geometry: Geometry, params, offsets) -> np.ndarray:
     machine of parameters ``params`` (12-, 9- or 6-vector of PARAM_NAMES, or a dict
     by name) with the offset registers changed by ``offsets`` o (3, mm; None: 0)
     since delivery: P = forward(IK_nominal(p) + o, geometry, Δρ, ΔL, tilt, gap)
-    (model.md, "Accuracy at the tool"; the axes may pass each other: "Axes that do
+    (docs/model.md, "Accuracy at the tool"; the axes may pass each other: "Axes that do
     not meet")."""
     p = np.asarray(points, dtype=float)
     drho, dL, tilt, gap = split_params(parameter_vector(params))
@@ -190,7 +190,7 @@ def rigid_fit(points, landed) -> tuple[np.ndarray, np.ndarray]:
 
 
 def fit_frame(points, errors, frame: str = "translation") -> np.ndarray:
-    """The error field left after fitting away the frame (model.md, "Accuracy at
+    """The error field left after fitting away the frame (docs/model.md, "Accuracy at
     the tool"): ``"translation"`` subtracts the mean of E (least-squares
     translation); ``"rigid"`` returns P − (R·p + t) for the least-squares rigid
     motion (Kabsch) of the commanded points p onto the landed points P = p + E."""
@@ -224,7 +224,7 @@ class ErrorField:
     offsets: np.ndarray
 
     def stats(self) -> dict[str, float]:
-        """{"rms_mm": .., "max_mm": ..} (design.md's "before"/"after")."""
+        """{"rms_mm": .., "max_mm": ..} (docs/design.md's "before"/"after")."""
         return {"rms_mm": self.rms_mm, "max_mm": self.max_mm}
 
 
@@ -262,7 +262,7 @@ def optimal_offsets(points, geometry: Geometry, params, frame: str = "translatio
     fit_frame(E(o)), whose sum of squares is n·RMS²), by nonlinear least squares
     over ``points`` (scipy ``least_squares``), each |o_i| ≤ ``max_abs_offset_mm``
     when given. Start: ``start``, default −Δρ (the paper's correction), clipped to
-    the bounds. model.md: the offsets can cancel part of the field the tilts leave,
+    the bounds. docs/model.md: the offsets can cancel part of the field the tilts leave,
     so this beats −Δρ whenever the tilts are not zero."""
     from scipy.optimize import least_squares  # ~0.3 s to import; only here
 
@@ -352,7 +352,7 @@ def squareness(params, geometry: Geometry | None = None, offsets=None, points=No
                covariance=None, names: Sequence[str] | None = None) -> Squareness:
     """Squareness errors XY, XZ, YZ (mm/m) of the tool's motions along commanded
     x, y, z (ISO 230-1: the angle between the motions minus 90°), from the exact
-    model (model.md, "Accuracy at the tool"):
+    model (docs/model.md, "Accuracy at the tool"):
 
     - ``points`` None (default): the Jacobian dP/dp at the commanded Π0 (p = 0),
       analytic (implicit differentiation of the sphere equations); its columns are
@@ -364,7 +364,7 @@ def squareness(params, geometry: Geometry | None = None, offsets=None, points=No
       ISO 230-1's reference straight lines over the travel).
 
     ``offsets`` o (mm): default None means o = −Δρ (the joint zeros corrected,
-    the carriages at their nominal Π0): model.md's statement, which depends on the
+    the carriages at their nominal Π0): docs/model.md's statement, which depends on the
     tilts and ΔL only. Uncorrected joint zeros shear the tool's motions by about
     Δρ_j/L each (0.5 mm → 1.6 mm/m), so pass the offsets actually written to state
     a "before".

@@ -1,6 +1,6 @@
 """The uncertainty budget of an identification: Type B inputs propagated through
 the identification's own sensitivity and combined with its Type A part (GUM,
-JCGM 100:2008; design.md, "Uncertainty budget"; issue 23).
+JCGM 100:2008; docs/design.md, "Uncertainty budget").
 
 At the solution the identification is, to first order, linear in the data:
 δθ = K·δΔ (:func:`sensitivity`; GUM 5.1.3, the sensitivity coefficients as a
@@ -36,10 +36,10 @@ from orthocal.postures import posture
 from orthocal.stands import incidence, prior_penalty, stand_jacobian
 
 Gauge = tuple[str, str]  # (leg i, direction j): one dial indicator, one gauge plane
-#: Linear expansion of steel, 1/K (issue 23).
+#: Linear expansion of steel, 1/K.
 STEEL_ALPHA = 11.5e-6
 #: The travel over which a gauge's MPE is stated (mm): about what a first round's
-#: deviations span (issue 23: "the few tenths of a millimetre a deviation spans").
+#: deviations span ("the few tenths of a millimetre a deviation spans").
 MPE_SPAN_MM = 0.2
 #: The coverage probability of ``expanded_95_mm``.
 COVERAGE = 0.95
@@ -268,7 +268,7 @@ class Source:
     covariance: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
-        """design.md's ``uncertainty_budget.sources`` entry (JSON-ready)."""
+        """docs/design.md's ``uncertainty_budget.sources`` entry (JSON-ready)."""
         out: dict[str, Any] = {
             "source": self.name, "type": self.type, "distribution": self.distribution,
             "value_mm": finite(self.value_mm), "u_mm": finite(self.u_mm),
@@ -304,7 +304,7 @@ def _per(value, names: Sequence, what: str) -> dict:
 
 
 def straightness_sources(prop: Propagation, straightness) -> list[Source]:
-    """Leg straightness (issue 23 (a)), one source: each gauge
+    """Leg straightness (a), one source: each gauge
     plane (leg, direction) of the leg bowed with a sagitta uniform in ±s
     (u = s/√3); the bow h adds h·g_plane to the plane's deviations
     (:func:`form_vector` restricted to its keys), so the plane contributes
@@ -344,7 +344,7 @@ def _per_deviation(prop: Propagation, name: str, distribution: str, value_of: di
 
 
 def mpe_sources(prop: Propagation, mpe, span_mm: float | None = MPE_SPAN_MM) -> list[Source]:
-    """Gauge MPE (issue 23 (b)), one source per gauge: each deviation it measures
+    """Gauge MPE (b), one source per gauge: each deviation it measures
     off by a rectangular ±e_k, independent per deviation and systematic (the same
     in every cycle): u = e_k/√3, contribution sqrt(Σ_k K_pk²·u_k²). e_k is the MPE
     e over the travel a deviation spans: e for a deviation of ``span_mm`` or more,
@@ -362,7 +362,7 @@ def mpe_sources(prop: Propagation, mpe, span_mm: float | None = MPE_SPAN_MM) -> 
 
 
 def resolution_sources(prop: Propagation, resolution) -> list[Source]:
-    """Gauge resolution (issue 23 (c)), one source per gauge: a deviation is the
+    """Gauge resolution (c), one source per gauge: a deviation is the
     difference of two readings each quantised by ±r/2 (rectangular), i.e.
     triangular ±r, u = r/√6 (GUM 4.3.9 and F.2.2.1); like :func:`mpe_sources`
     otherwise. ``resolution``: the gauge's step r, mm, one value or gauge → r."""
@@ -371,7 +371,7 @@ def resolution_sources(prop: Propagation, resolution) -> list[Source]:
 
 
 def plunger_angle_source(prop: Propagation, angle_deg: float) -> Source:
-    """Plunger angle (issue 23 (d)): a plunger θ off the direction it should measure
+    """Plunger angle (d): a plunger θ off the direction it should measure
     reads cos θ of the travel, a relative scale error of all the gauge's
     deviations; taken as rectangular over ±c, c = 1 − cos θmax (conservative:
     the real error is one-sided), common to the gauge's deviations and
@@ -387,7 +387,7 @@ def plunger_angle_source(prop: Propagation, angle_deg: float) -> Source:
 
 def temperature_source(prop: Propagation, temperature_change: float,
                        alpha: float = STEEL_ALPHA) -> Source:
-    """Temperature change (issue 23 (e)): a leg of length L grows by α·ΔT·L; as a
+    """Temperature change (e): a leg of length L grows by α·ΔT·L; as a
     step at an unknown time between the Π0 stops that bracket a reading, their
     mean does not remove it: each deviation off by a rectangular ±α·ΔT·L/2,
     independent per deviation. ``temperature_change``: ΔT in K (or °C)."""
@@ -438,7 +438,7 @@ def welch_satterthwaite(parts: Sequence[tuple[float, float]]) -> float:
 def combine(type_a_se: Mapping[str, float], type_a_dof: float | None,
             sources: Sequence[Source], coverage: float = COVERAGE,
             type_a_name: str = "repeatability") -> dict[str, Any]:
-    """design.md's ``uncertainty_budget`` (JSON-ready): per parameter of
+    """docs/design.md's ``uncertainty_budget`` (JSON-ready): per parameter of
     ``type_a_se`` (the identification's standard errors, resting on
     ``type_a_dof`` degrees of freedom, None: ∞), the combined standard
     uncertainty u_c = sqrt(u_A² + Σ u_s²) (GUM 5.1.2, independent sources), the

@@ -1,4 +1,4 @@
-"""Linearised calibration equations, system (7) of the paper (model.md).
+"""Linearised calibration equations, system (7) of the paper (docs/model.md).
 
     Δ^s_{i,j} = b·Δρ_i + a·Δρ_j − b·ΔL_i − c·ΔL_j                          (7)
 
@@ -7,7 +7,7 @@ an intermediate stop Π_i(s): s itself; the derivation holds for any α),
 
     a = sin α,   b = (0.5 + sin α)·tan α,   c = (0.5 + sin α)/cos α − 0.5.
 
-Extended model (tilted actuator axes, model.md), one more term per row:
+Extended model (tilted actuator axes, docs/model.md), one more term per row:
 
     Δ^s_{i,j} = (7) + d·τ_{ij},   d = −L·sin α·(0.5 + sin α)·1e-3 mm/mrad     (7')
 
@@ -21,7 +21,7 @@ reading by 0.5·L·(δu_i)_j. The difference is −L·sin α·μ·((δu_i)_j + (
 only the symmetric part, the change of the angle between the two axes, shows.
 A rotation of the whole machine (antisymmetric δu) shows in no deviation.
 
-Axes that do not meet (model.md, "Axes that do not meet"): the carriage of axis i
+Axes that do not meet (docs/model.md, "Axes that do not meet"): the carriage of axis i
 sits at c_i + q_i·u_i, c_i the point of its line nearest the origin. One more
 pair of terms per row:
 

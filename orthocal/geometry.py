@@ -1,4 +1,4 @@
-"""Machine geometry and parameter names (model.md, "Machine and parameters")."""
+"""Machine geometry and parameter names (docs/model.md, "Machine and parameters")."""
 
 from __future__ import annotations
 
@@ -13,12 +13,12 @@ PARAM_NAMES: tuple[str, ...] = (
     "gap_xy", "gap_xz", "gap_yz",
 )  # fmt: skip
 TILT_NAMES: tuple[str, str, str] = ("tilt_yx", "tilt_zx", "tilt_zy")
-# How far the actuator axes pass each other (mm; model.md, "Axes that do not meet").
+# How far the actuator axes pass each other (mm; docs/model.md, "Axes that do not meet").
 GAP_NAMES: tuple[str, str, str] = ("gap_xy", "gap_xz", "gap_yz")
-# The tilts are named and reported in mrad (model.md, "Extended model"); the
+# The tilts are named and reported in mrad (docs/model.md, "Extended model"); the
 # kinematics works in radians.
 MRAD = 1e-3
-# Columns of PARAM_NAMES each model identifies (design.md, "Models").
+# Columns of PARAM_NAMES each model identifies (docs/design.md, "Models").
 MODELS: dict[str, tuple[int, ...]] = {
     "rho": (0, 1, 2),
     "L": (3, 4, 5),

@@ -1,5 +1,5 @@
 """Identification of Δρ, ΔL and the axis tilts from measured deviations
-(model.md, "Identification" and "Extended model").
+(docs/model.md, "Identification" and "Extended model").
 
 ``linear``: the paper's Moore–Penrose solution of the linearised system (7).
 ``nonlinear``: least squares on the exact model (1), started from the linear
@@ -102,7 +102,7 @@ class Identification:
         return np.array([self.parameters.get(n, 0.0) for n in PARAM_NAMES])
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (design.md's identify fields plus statistics)."""
+        """JSON-ready summary (docs/design.md's identify fields plus statistics)."""
 
         return {
             "model": self.model,
@@ -171,7 +171,7 @@ def _check_identifiable(
 
 
 # Said in every report: the measurements see angles between legs' lines, never the
-# machine's orientation against the base (model.md, "Extended model").
+# machine's orientation against the base (docs/model.md, "Extended model").
 ROTATION_NOTE = (
     "A rotation of the whole machine against the base cannot be identified: it changes "
     "no deviation (every leg still translates along its own line). Only the angles "
@@ -240,7 +240,7 @@ def identify(
     ``stands``: model the indicator stands' positions too (:class:`orthocal.stands.Stands`:
     which gauges share a stand, their placement tolerance): random effects with
     the tolerance's prior, the parameters by least squares and the stands by
-    their posterior mean (orthocal.stands; model.md, "Where the indicator plane
+    their posterior mean (orthocal.stands; docs/model.md, "Where the indicator plane
     is"). The prior is weighed against the data by σ of one deviation:
     ``sigma``, or (None) the cycle-to-cycle scatter of the repeats
     (orthocal.noise.noise_from_cycles). The result's ``stands`` holds each

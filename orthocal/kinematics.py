@@ -6,9 +6,9 @@ A_i = c_i + (ρ_i + Δρ_i)·u_i to the end point P:
 
     |P − A_i| = L_i                                                         (1')
 
-with u_i the direction of actuator axis i (model.md, "Extended model"):
+with u_i the direction of actuator axis i (docs/model.md, "Extended model"):
 u_x = e_x, u_y = normalise(e_y + t_yx·e_x), u_z = normalise(e_z + t_zx·e_x +
-t_zy·e_y), tilts t in mrad; and c_i a point of axis i's line (model.md, "Axes
+t_zy·e_y), tilts t in mrad; and c_i a point of axis i's line (docs/model.md, "Axes
 that do not meet"): c_x = (0, g_xz/2, g_xy/2), c_y = (g_yz/2, 0, −g_xy/2),
 c_z = (−g_yz/2, −g_xz/2, 0), gaps g in mm. With zero tilts and gaps u_i = e_i,
 c_i = 0 and (1') is the paper's
@@ -38,7 +38,7 @@ def _legs(geometry: Geometry, drho, dL) -> tuple[np.ndarray, np.ndarray]:
 
 def axis_directions(tilt=None) -> np.ndarray | None:
     """Rows u_x, u_y, u_z of the actuator axes for tilts (t_yx, t_zx, t_zy) in mrad
-    (model.md, "Extended model"); None when every tilt is zero, so that callers
+    (docs/model.md, "Extended model"); None when every tilt is zero, so that callers
     keep the paper's closed forms (and today's numbers to the bit)."""
     if tilt is None:
         return None
@@ -53,7 +53,7 @@ def axis_directions(tilt=None) -> np.ndarray | None:
 
 def axis_origins(gap=None) -> np.ndarray | None:
     """Rows c_x, c_y, c_z: where each actuator axis's line passes the origin, for
-    gaps (g_xy, g_xz, g_yz) in mm (model.md, "Axes that do not meet": the origin
+    gaps (g_xy, g_xz, g_yz) in mm (docs/model.md, "Axes that do not meet": the origin
     midway between each pair of axes); None when every gap is zero, so that
     callers keep the closed forms of axes that meet."""
     if gap is None:
@@ -73,7 +73,7 @@ def inverse(p, geometry: Geometry, drho=None, dL=None, tilt=None, gap=None) -> n
     |P − c_i − q_i·u_i| = L_i is a quadratic in q_i = ρ_i + Δρ_i whose working root
     (carriage beyond P) is q_i = u_i·(P − c_i) + sqrt(L_i² − |d_i − (u_i·d_i)·u_i|²),
     d_i = P − c_i; with u_i = e_i, c_i = 0 it is ρ_i = p_i + sqrt(L_i² − p_j² − p_k²)
-    − Δρ_i (model.md).
+    − Δρ_i (docs/model.md).
     """
     p = np.asarray(p, dtype=float)
     drho, L = _legs(geometry, drho, dL)
@@ -96,7 +96,7 @@ def inverse(p, geometry: Geometry, drho=None, dL=None, tilt=None, gap=None) -> n
 
 
 def _forward_orthogonal(q: np.ndarray, L: np.ndarray) -> np.ndarray:
-    """Closed-form P for carriages at q_i·e_i (model.md, forward kinematics)."""
+    """Closed-form P for carriages at q_i·e_i (docs/model.md, forward kinematics)."""
     k = q**2 - L**2
     w = 1.0 / (4.0 * q**2)
     A = w.sum(axis=-1)

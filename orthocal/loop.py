@@ -1,5 +1,5 @@
 """Closed-loop calibration maths: what a correction leaves behind, and when a
-further correction is worth a round (model.md, "Writing the offsets back" and
+further correction is worth a round (docs/model.md, "Writing the offsets back" and
 "Where the indicator plane is").
 
 Only the joint offsets Δρ can be written to a controller. After o_i ← o_i − Δρ̂_i
@@ -128,7 +128,7 @@ def shown_within(parameters: Mapping[str, float], std_errors: Mapping[str, float
     the interval excludes the target, a correction seen at that level; −inf
     without a standard error). The closed loop says "converged" only where every bound is within
     converge_mm and half the drive's count (a correction is rounded to it, so no
-    offset can be set closer): the promise the word makes (design.md, "Closed
+    offset can be set closer): the promise the word makes (docs/design.md, "Closed
     loop"). The verification measures the machine as the drive holds its offsets,
     rounded, so the rounding is inside the bound."""
     aim = target or {}

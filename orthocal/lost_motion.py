@@ -1,5 +1,5 @@
 """Lost motion (reversal): what a joint's dead band does to the readings, how the
-station measures it, and the Δρ it states (model.md, "Lost motion (reversal)";
+station measures it, and the Δρ it states (docs/model.md, "Lost motion (reversal)";
 ISO 230-2's reversal value B).
 
 A joint follows its counted position ρ_i through a dead band of width B_i: after

@@ -1,5 +1,5 @@
 """Exact measurement model: what a dial indicator on leg i, measuring along j,
-shows (model.md, "Measurement").
+shows (docs/model.md, "Measurement").
 
 The indicator is fixed to the base in the plane x_i = M (the middle of leg i
 at Π0, nominally L/2) and reads the j-coordinate of the leg's axis where the
@@ -61,7 +61,7 @@ def fraction_at(
     """The fraction t = (A_i − M)/(A_i − p_i) from the carriage A toward P at which
     leg i's axis crosses the base-fixed plane x_i = ``mount`` (arguments as for
     :func:`reading_at`): where the plunger touches the leg. Nominally 1/2 at Π0
-    and 1/2 + sin α at Π_i^s (model.md, μ of system (7))."""
+    and 1/2 + sin α at Π_i^s (docs/model.md, μ of system (7))."""
     if u is None and c is None:
         q_i = _pick(rho, i) + drho[i]
         return (q_i - mount) / (q_i - _pick(p, i))
@@ -97,7 +97,7 @@ def reading_at(
 def bow_at(t, h) -> np.ndarray:
     """What a bow of the leg's surface adds to a reading taken at the fraction ``t``
     along the leg (from the carriage): the parabola through both ends of the leg
-    with sagitta ``h`` (mm) at its middle, w(t) = 4·h·t·(1 − t) (issue 23). A
+    with sagitta ``h`` (mm) at its middle, w(t) = 4·h·t·(1 − t). A
     straight leg (h = 0) adds nothing; a deviation sees w(t_s) − w(t_0)."""
     t = np.asarray(t, dtype=float)
     return 4.0 * np.asarray(h, dtype=float) * t * (1.0 - t)
@@ -126,7 +126,7 @@ def leg_reading(
     gap=None,
 ) -> np.ndarray:
     """Coordinate along ``direction`` of leg ``leg``'s axis in the base-fixed plane
-    x_leg = M (model.md, "Where the indicator plane is").
+    x_leg = M (docs/model.md, "Where the indicator plane is").
 
     The leg runs from the carriage A = c_i + q_i·u_i (q = ρ + Δρ; u_i = e_i unless
     ``tilt`` (mrad) tilts the axes, c_i = 0 unless ``gap`` (mm) says the axes do not
@@ -177,7 +177,7 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
 
     ``mount_offsets``: None (every indicator in the nominal plane x_i = L/2), or
     one number per key, mm: how far the stand of that row's gauge sits off L/2
-    (M = L/2 + offset, model.md, "Where the indicator plane is"); the Π0 reading
+    (M = L/2 + offset, docs/model.md, "Where the indicator plane is"); the Π0 reading
     it is taken against uses the same plane. With None the result is bit for bit
     the one without the argument.
 

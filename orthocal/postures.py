@@ -1,4 +1,4 @@
-"""Test postures of the nominal machine (model.md, "Test postures").
+"""Test postures of the nominal machine (docs/model.md, "Test postures").
 
 A posture is named by a string: ``"0"`` is Π0; ``"+"`` / ``"-"`` are Π_i^± at
 the geometry's ρmax / ρmin (the paper's postures); a signed stroke such as

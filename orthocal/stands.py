@@ -1,4 +1,4 @@
-"""Indicator stands as nuisance parameters (issue 17; model.md, "Where the
+"""Indicator stands as nuisance parameters (docs/model.md, "Where the
 indicator plane is").
 
 The operator sets each dial-indicator stand "at the middle of the leg" by eye:
@@ -42,7 +42,7 @@ from orthocal.measurement import Key, deviations
 
 Gauge = tuple[str, str]  # (leg i, direction j): one dial indicator
 GAUGES: tuple[Gauge, ...] = tuple((i, j) for i in "xyz" for j in "xyz" if i != j)
-#: The operator's "middle of the leg by eye": ±5 mm (issue 17).
+#: The operator's "middle of the leg by eye": ±5 mm.
 DEFAULT_TOLERANCE = 5.0
 #: A stand counts as observable when the data, not the prior, place it: its
 #: posterior SD at most the prior's/√2, i.e. the deviations alone would place it

@@ -1,4 +1,4 @@
-"""How well the after-figures of accuracy at the tool are known (model.md,
+"""How well the after-figures of accuracy at the tool are known (docs/model.md,
 "Accuracy at the tool"): the RMS and max of the field left once offsets are
 written, with a 95 % interval from the parameters' covariance, and the words
 that say what such a figure takes as known (``assumes``).
@@ -47,7 +47,7 @@ class AfterInterval:
         return self.field.max_mm
 
     def to_dict(self) -> dict[str, object]:
-        """design.md's ``"after"`` object."""
+        """docs/design.md's ``"after"`` object."""
         return {"rms_mm": self.rms_mm, "max_mm": self.max_mm,
                 "rms_interval_95_mm": list(self.rms_interval_mm),
                 "max_interval_95_mm": list(self.max_interval_mm)}
@@ -201,7 +201,7 @@ def assumes(model: str, frame: str = "translation", tilt_interval: Mapping | Non
             postures_per_leg: int = 2, dof: float | None = None,
             tilts_in_interval: bool = False) -> list[str]:
     """In words, what an accuracy figure computed from a fit of ``model`` (a key
-    of MODELS) takes as known (model.md, "Accuracy at the tool": "what the figure
+    of MODELS) takes as known (docs/model.md, "Accuracy at the tool": "what the figure
     cannot know must be said with it"). ``tilt_interval``: {tilt name: (lo, hi)
     mrad}, the 95 % intervals of a rho+tilt fit when the model selection kept a
     model without tilts; ``postures_per_leg``: test stops per leg (ΔL beside the

@@ -1,4 +1,4 @@
-"""Station configuration: a TOML file validated by pydantic (design.md, "Station config").
+"""Station configuration: a TOML file validated by pydantic (docs/design.md, "Station config").
 
 Every table forbids unknown keys, so a typo is an error naming its field instead
 of a silently ignored setting. ``load_config`` turns every failure into one
@@ -71,7 +71,7 @@ class ControllerConfig(_Strict):
     # A TCP port number, or the serial device of an RTU link.
     port: int | str = 502
     device_id: int = Field(1, ge=0, le=247)
-    # A built-in register map, or a map file (design.md, "Register-map files"), a path
+    # A built-in register map, or a map file (docs/design.md, "Register-map files"), a path
     # relative to the config's folder (made absolute when the config is loaded).
     profile: str = "orthocal-generic"
     # The zero offsets the station holds where the drive has no Modbus-writable ones
@@ -166,7 +166,7 @@ class IndicatorConfig(_Strict):
     unit: Literal["mm", "um", "in"] | None = None
     scale: float | None = None
     # The gauge's maximum permissible error over a deviation's span (its data sheet or
-    # calibration certificate; design.md "Uncertainty budget"). Absent: the budget
+    # calibration certificate; docs/design.md "Uncertainty budget"). Absent: the budget
     # takes its family's typical figure and says so.
     mpe_mm: float | None = Field(None, gt=0, le=1)
     # For the certificate: the instrument's serial number.
@@ -252,7 +252,7 @@ class ProcedureConfig(_Strict):
                    "full+tilt+gap", "auto"] = "auto"
     method: Literal["linear", "nonlinear"] = "nonlinear"
     verify: bool = True
-    # Closed loop (design.md): write-backs at most, each verified; 1 = one round, no loop.
+    # Closed loop (docs/design.md): write-backs at most, each verified; 1 = one round, no loop.
     max_iterations: int = Field(3, ge=1, le=10)
     # "Converged" means the remaining Δρ is shown within ±converge_mm at 95 % on every
     # axis (mm); a significant correction smaller than this is not worth another round.
@@ -261,7 +261,7 @@ class ProcedureConfig(_Strict):
     # further pass of every setup, pooled with it) at most this many times; then the
     # loop ends "not-converged", saying why.
     max_extra_passes: int = Field(2, ge=0, le=10)
-    # The stops Π_i(s) of each cycle, mm (model.md "Test postures"); absent: the
+    # The stops Π_i(s) of each cycle, mm (docs/model.md "Test postures"); absent: the
     # paper's two, ρmax and ρmin, and every plan, journal and JSON exactly as before.
     strokes: list[float] | None = Field(None, min_length=1, max_length=20)
     # Lost motion (ISO 230-2): every stop whose readings enter an identification is
@@ -297,7 +297,7 @@ class WritebackConfig(_Strict):
     max_abs_offset_mm: float = Field(3.0, gt=0)
     # What the offsets aim at: "joints", the paper's Δρ (legs parallel); "tool", the
     # offsets that leave the least RMS tool-point error over the workspace in
-    # ``frame`` (design.md, "Accuracy at the tool").
+    # ``frame`` (docs/design.md, "Accuracy at the tool").
     objective: Literal["joints", "tool"] = "joints"
     # How the tool-point error is stated: after fitting away a translation (the tool
     # offset is set by touching off) or a rigid motion (parts aligned by probing).
@@ -305,7 +305,7 @@ class WritebackConfig(_Strict):
 
 
 class UncertaintyConfig(_Strict):
-    """Type B inputs of the uncertainty budget (design.md "Uncertainty budget"); each
+    """Type B inputs of the uncertainty budget (docs/design.md "Uncertainty budget"); each
     absent one is taken at the default the budget names (station.engine.budget),
     never silently as zero."""
 

@@ -20,7 +20,7 @@ PAPER_BEFORE = dict(zip(
 
 
 def _coefficients(sign: str) -> tuple[float, float, float]:
-    """a, b, c of the linearised calibration equations (model.md, system (7))."""
+    """a, b, c of the linearised calibration equations (docs/model.md, system (7))."""
     s = (RHO_MAX if sign == "+" else RHO_MIN) / L
     alpha = math.asin(s)
     return s, (0.5 + s) * math.tan(alpha), (0.5 + s) / math.cos(alpha) - 0.5

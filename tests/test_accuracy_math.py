@@ -1,4 +1,4 @@
-"""Accuracy at the tool, the mathematics (model.md, "Accuracy at the tool"): the
+"""Accuracy at the tool, the mathematics (docs/model.md, "Accuracy at the tool"): the
 tool-point error field, its frames, the optimal offsets, squareness and the
 interval of the after-field."""
 
@@ -41,7 +41,7 @@ def grid() -> np.ndarray:
     return points
 
 
-# --- model.md's check values ---------------------------------------------------------
+# --- docs/model.md's check values ---------------------------------------------------------
 
 CHECKS = [  # tilts, frame, (rms, max) µm for offsets 0, −Δρ, optimal
     ((0.2, 0.1, -0.15), "translation", [(243.7, 487.6), (14.0, 35.5), (7.5, 16.3)]),

@@ -1,4 +1,4 @@
-"""A path that is safe on any controller (issue 15): whole calibrations against
+"""A path that is safe on any controller: whole calibrations against
 simulated drives that disagree with everything the station is not told (profile
 shape, acceleration, start delays, one axis after another), with standard gauges
 preloaded by half and with a short-stroke gauge. Every run completes, the

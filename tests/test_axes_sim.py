@@ -109,7 +109,7 @@ def test_soft_limits_read_and_enforced(transport: str) -> None:
         np.testing.assert_allclose(lo, [200.25] * 3, atol=1e-12)
         np.testing.assert_allclose(hi, [380.25] * 3, atol=1e-12)
         for sign in "+-":
-            for leg in "xyz":  # every test posture of design.md fits
+            for leg in "xyz":  # every test posture of docs/design.md fits
                 p = orthocal.posture(sign, leg, GEOMETRY)
                 assert np.all(p > lo) and np.all(p < hi)
         with pytest.raises(TargetRefused) as info:
@@ -168,7 +168,7 @@ def test_offsets_write_readback_and_effect_on_the_legs(transport: str) -> None:
         before = measured_deviation(ctl)
         assert before == pytest.approx(expected, abs=2e-3)
         assert abs(before) > 0.05  # the error is visible
-        # design.md "Writing the offsets back": o ← o − Δρ
+        # docs/design.md "Writing the offsets back": o ← o − Δρ
         written = ctl.write_offsets(ctl.read_offsets() - true_drho)
         np.testing.assert_allclose(written, -true_drho, atol=1e-12)
         np.testing.assert_allclose(sim.machine.offsets, -true_drho, atol=1e-12)
@@ -325,7 +325,7 @@ def _words(um: int) -> list[int]:
 
 
 def test_independent_pymodbus_client_drives_the_simulator() -> None:
-    """design.md's table is enough: no code of ours on the client side."""
+    """docs/design.md's table is enough: no code of ours on the client side."""
     with SimController(fast_machine(), transport="tcp") as sim:
         client = ModbusTcpClient("127.0.0.1", port=sim.port, timeout=1.0)
         try:

@@ -1,4 +1,4 @@
-"""The uncertainty budget, the mathematics (issue 23; orthocal.budget; design.md,
+"""The uncertainty budget, the mathematics (orthocal.budget; docs/design.md,
 "Uncertainty budget"): the legs' form in the exact measurement model, its check
 values, the identification's sensitivity against finite differences, the Type B
 sources and their GUM combination, and the lack of fit they let the residual have."""
@@ -48,7 +48,7 @@ from orthocal.stands import GAUGES
 G = Geometry()
 UM = 1e-3
 KEYS = [(s, i, j) for s in "+-" for i in "xyz" for j in "xyz" if i != j]  # the paper's 12
-TRUTH = np.r_[0.6, -0.4, 0.9, 0, 0, 0, 0, 0, 0]  # issue 23's machine: Δρ only
+TRUTH = np.r_[0.6, -0.4, 0.9, 0, 0, 0, 0, 0, 0]  # the budget's check machine: Δρ only
 STANDS_MM = [3.0, -4.0, 2.5, -1.0, 4.5, -2.0]  # GAUGES order
 
 
@@ -133,10 +133,10 @@ def test_the_form_vector_is_the_exact_change_per_unit_sagitta():
     assert sagitta_from_straightness(0.266 * 0.01, (60 + 100) / L) == pytest.approx(0.01, rel=2e-3)
 
 
-# --- issue 23's check values ---------------------------------------------------------------
+# --- the budget's check values ---------------------------------------------------------------
 
 # Every plane bowed with sagitta h, 12 deviations, no noise, rho, nonlinear, stands at
-# L/2. Issue 23's independent model: bias ≈ (2.1, 4.3, 8.6) µm on every axis, residual
+# L/2. An independent model: bias ≈ (2.1, 4.3, 8.6) µm on every axis, residual
 # ≈ 1.4, 2.7 µm. It evaluates the bow at the nominal contact fractions 1/2, 1/2 + s
 # (convention B, below). This model's plane is fixed to the base (convention A): the
 # offsets slide each leg under its plungers by Δρ_i/L, which changes g by ≈ Δρ_i/30 mm

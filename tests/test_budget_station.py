@@ -1,4 +1,4 @@
-"""The uncertainty budget in a whole run (issue 23), over the simulators: on a
+"""The uncertainty budget in a whole run, over the simulators: on a
 machine whose legs are bowed by 8 µm, with the legs stated straight to 10 µm, the
 statement with its expanded uncertainty contains the truth on every axis, the
 budget names the legs' form, and the interval stays a useful size; a run without

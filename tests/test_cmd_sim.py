@@ -1,6 +1,6 @@
 """``orthocal sim``: the virtual station as its own process, driven from outside.
 
-An independent Modbus client and a plain serial reader drive it by design.md's
+An independent Modbus client and a plain serial reader drive it by docs/design.md's
 register map and protocol table alone, and ``orthocal run --config`` calibrates
 it from another process.
 """

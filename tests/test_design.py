@@ -39,7 +39,7 @@ def test_noise_gains_are_the_statistical_floor(model, strokes) -> None:
 
 
 def test_paper_figures() -> None:
-    """model.md: condition 61.87 for the full model, noise gain 1.87 for Δρ alone."""
+    """docs/model.md: condition 61.87 for the full model, noise gain 1.87 for Δρ alone."""
     keys = design.keys_for([60, -100], LEGS, G)
     assert design.quality(keys, G, "full").condition_number == pytest.approx(61.87, abs=0.01)
     assert design.quality(keys, G, "rho").noise_gain["drho_x"] == pytest.approx(1.867, abs=1e-3)
@@ -49,7 +49,7 @@ def test_full_tilt_from_two_postures_is_explained_in_words() -> None:
     q = design.quality(design.keys_for([60, -100], LEGS, G), G, "full+tilt")
     assert q.rank == 8 and not q.identifiable and len(q.invisible) == 1
     (combo,) = q.invisible
-    # ΔL and the tilts trade against each other (model.md, "Extended model")
+    # ΔL and the tilts trade against each other (docs/model.md, "Extended model")
     assert {"dL_x", "dL_y", "dL_z", "tilt_yx", "tilt_zx", "tilt_zy"} <= set(combo)
     J = orthocal.jacobian(design.keys_for([60, -100], LEGS, G), G, "full+tilt")
     v = np.array([combo.get(n, 0.0) for n in q.names])

@@ -1,8 +1,8 @@
 """Axes that do not meet (docs/model.md, "Axes that do not meet"): the exact
-kinematics with gaps, equation (7'') against the exact model, model.md's check
+kinematics with gaps, equation (7'') against the exact model, docs/model.md's check
 values, the models that identify gaps, and the simulator against the maths.
 
-The check values of model.md take the gauges at the real legs' middles at Π0,
+The check values of docs/model.md take the gauges at the real legs' middles at Π0,
 which move with Δρ and the gaps; :func:`middles` computes them from the exact
 forward kinematics alone."""
 
@@ -30,7 +30,7 @@ from orthocal import (
 from orthocal.kinematics import axis_origins
 
 G = Geometry()
-# model.md's "paper order" of the twelve deviations
+# docs/model.md's "paper order" of the twelve deviations
 PAPER = [(k[0], k[1], k[2]) for k in
          "+yx +xy -yx -xy +zx +xz -zx -xz +zy +yz -zy -yz".split()]
 DRHO = np.array([0.6, -0.4, 0.9])

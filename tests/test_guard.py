@@ -1,4 +1,4 @@
-"""The plunger guard (issue 11): gauges watched while the axes move during a
+"""The plunger guard: gauges watched while the axes move during a
 mounting's first cycle, the axes stopped before a plunger reaches an end of its
 stroke, later cycles refused before moving when predicted too close; and the
 simulated gauge's finite stroke it is tested with."""

@@ -1,4 +1,4 @@
-"""Offsets held by the station (drivers.held_offsets; design.md "Offsets held by
+"""Offsets held by the station (drivers.held_offsets; docs/design.md "Offsets held by
 the station"): a drive without a writable zero offset is commanded ρ + o, its
 positions and soft limits reported less o, exactly as a drive holding o would;
 and the journal says what the station holds after write-backs and rollbacks."""

@@ -1,4 +1,4 @@
-"""Ctrl-C and kill -9 of the real command line, then ``orthocal resume`` (issue 5).
+"""Ctrl-C and kill -9 of the real command line, then ``orthocal resume``.
 
 Every run here is a real ``python -m station`` subprocess on the in-process
 virtual station. With indicator noise 0 the simulation is deterministic per
@@ -42,7 +42,7 @@ from station import report
 from station.rundir.journal import read_journal
 
 # Offsets of 2-3 mm and stands 8 mm off the legs' middles: the closed loop takes a
-# second write-back round (issue 10), so kills land in round 2 too.
+# second write-back round, so kills land in round 2 too.
 TRUE_DRHO = "2.4,-2.7,2.1"
 MOUNT_ERROR = "8"
 # model rho: with noise 0 the gauges' 1 µm steps are not dithered, and a tilt model

@@ -1,4 +1,4 @@
-"""One station per machine (issue 11): the lock on a controller, with real
+"""One station per machine: the lock on a controller, with real
 processes holding it, dying with it (kill -9) and releasing it."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Lost motion (issue 21): the joints' dead band measured, never taken for tilt or
+"""Lost motion: the joints' dead band measured, never taken for tilt or
 offset. The maths (orthocal.lost_motion), the simulator's play operator, the plan
 (every stop approached from one side, a reversal stop per cycle), and whole runs
 through the real station on machines whose joints have lost motion."""

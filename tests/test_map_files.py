@@ -1,4 +1,4 @@
-"""Register maps as files (drivers.map_files; design.md "Register-map files"):
+"""Register maps as files (drivers.map_files; docs/design.md "Register-map files"):
 every built-in map round-trips through TOML, a user's file loads from the
 config's folder, and a bad file is refused naming the file and the entry
 (exit 2, one line, before anything moves)."""
@@ -27,7 +27,7 @@ SHIPPED = sorted(p.stem for p in MAPS_DIR.glob("*.toml"))
 
 
 def test_the_shipped_map_files_are_built_in() -> None:
-    # The three drive families of issue 22 ship as data beside the generic map.
+    # The three drive families ship as data beside the generic map.
     assert {"iai-pcon-direct", "oriental-az-direct", "kinco-fd-cia402-modbus"} <= set(SHIPPED)
     maps = builtin_maps()
     assert set(maps) == {GENERIC.name, *SHIPPED}  # each file is named as its map

@@ -1,5 +1,5 @@
 """The mathematics: exact kinematics, equation (7), identification, checked
-against each other and against the paper's printed numbers (model.md)."""
+against each other and against the paper's printed numbers (docs/model.md)."""
 
 from __future__ import annotations
 
@@ -60,7 +60,7 @@ def test_coefficients_match_the_paper():
     a1, b1, c1 = coefficients("+", G)
     a2, b2, c2 = coefficients("-", G)
     assert (a1, b1, c1) == pytest.approx((0.1934, 0.1367, 0.2067), abs=5e-5)
-    # The paper prints b2 as 0.06: its sign was lost in print (model.md).
+    # The paper prints b2 as 0.06: its sign was lost in print (docs/model.md).
     assert (a2, b2, c2) == pytest.approx((-0.3223, -0.0605, -0.3123), abs=5e-5)
 
 

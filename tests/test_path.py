@@ -1,4 +1,4 @@
-"""The path the controller may take (issues 11, 15): the motion model in the
+"""The path the controller may take: the motion model in the
 register-map profile and the config, the simulator's independent axes, the plan
 check over every position a move can pass through, and the fewest waypoints that
 keep the plungers in their strokes."""

@@ -1,4 +1,4 @@
-"""Issue 11, the driver side of a lost controller: a real pymodbus server on
+"""Power loss, the driver side of a lost controller: a real pymodbus server on
 loopback that loses power (connections reset, new ones refused for a while, then
 back unhomed with its count restarted) or only its network.
 

@@ -21,7 +21,7 @@ from drivers.registers import (
 
 IAI_PCON = builtin_maps()["iai-pcon-direct"]
 
-# design.md's table, written out independently of the code under test.
+# docs/design.md's table, written out independently of the code under test.
 DESIGN_TABLE = {
     "COMMAND": (0, "u16", "W"), "STATUS": (1, "u16", "R"), "ALARM_CODE": (2, "u16", "R"),
     "TARGET_X": (10, "i32", "RW"), "TARGET_Y": (12, "i32", "RW"), "TARGET_Z": (14, "i32", "RW"),

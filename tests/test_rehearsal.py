@@ -1,4 +1,4 @@
-"""Rehearsal works as the README says (issue 30, item 4): ``orthocal sim --profile MAP
+"""Rehearsal works as the README says: ``orthocal sim --profile MAP
 --config-out FILE`` hands out a config that ``orthocal run --config FILE --plan``
 accepts for every shipped and every example map (a map whose axes are separate
 drives gets no ``motion = "coordinated"``); ``orthocal init`` writes the documented

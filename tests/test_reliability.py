@@ -1,4 +1,4 @@
-"""Reliability through the real command line and the real simulators (issue 5).
+"""Reliability through the real command line and the real simulators.
 
 Faults are injected through the knobs of the simulated devices (Modbus server
 faults, pty gauge faults, the virtual machine) while ``orthocal run --simulate``

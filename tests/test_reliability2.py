@@ -1,4 +1,4 @@
-"""Reliability II (issue 11) through the real command line and the simulators: a
+"""Reliability II through the real command line and the simulators: a
 controller that loses power mid-run (unreachable, then back unhomed with its count
 lost), a network that drops, a gauge adapter pulled and plugged back behind its
 stable link, a full disk, and a second station on the same machine.

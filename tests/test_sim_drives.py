@@ -1,4 +1,4 @@
-"""A simulator as varied as the drives (issue 15): the virtual drive's profile
+"""A simulator as varied as the drives: the virtual drive's profile
 shapes, own acceleration, start delays and axis sequences; stopping any of them;
 the plain "independent" drive unchanged; every move that drove a plunger past an
 end of its stroke counted from the trajectory, read or not; a knocked stand; the
@@ -276,7 +276,7 @@ def short_station() -> Iterator[tuple[VirtualStation, Clock]]:
     """Two 7 mm gauges preloaded 3.5 mm on leg x, an independent drive, a stepped
     clock, no noise. With each axis on its own trapezoid, Π0 → Π_x^+ swings them
     by −3.0 mm (within), Π_x^− → Π0 by +2.5 mm (within), a single Π_x^+ → Π_x^−
-    by −8.8 mm (the figure of issue 11): 5.3 mm past the end."""
+    by −8.8 mm (a figure from a held-out controller): 5.3 mm past the end."""
     clock = Clock()
     with VirtualStation(noise_mm=0.0, motion="independent", speed_mm_s=SPEED,
                         accel_mm_s2=ACCEL, clock=clock, line_time=False,

@@ -1,4 +1,4 @@
-"""The simulator has the errors the budget counts (issue 23 item 4): bowed legs
+"""The simulator has the errors the budget counts: bowed legs
 (``--leg-bow``) and gauges with a scale error (``--gauge-scale``).
 
 A bow of sagitta h shows as 4h·t(1 − t) where the gauge's base-fixed plane

@@ -1,5 +1,5 @@
 """The simulator's axes that do not meet (``--true-gap X,Y,Z``: gap_xy, gap_xz, gap_yz in
-mm; model.md, "Axes that do not meet"), as ``--true-tilt`` is given: on ``run
+mm; docs/model.md, "Axes that do not meet"), as ``--true-tilt`` is given: on ``run
 --simulate`` and ``orthocal sim``, kept in the journal header for resume, recorded
 in the result beside the tilts.
 

@@ -1,6 +1,6 @@
 """The simulated controller driven as an integrator would drive a drive: pymodbus's
 own client used raw (no orthocal driver, no register-map code), registers by
-address from design.md's table. The simulator must be as strict as a drive:
+address from docs/design.md's table. The simulator must be as strict as a drive:
 targets start where the axes stand, a move to stored targets outside the soft
 limits is refused with exception 3, and addresses outside the map answer
 exception 2."""

@@ -1,4 +1,4 @@
-"""The virtual drive serving register maps other than the generic one (issue 22):
+"""The virtual drive serving register maps other than the generic one:
 the real ModbusAxisController against the real pymodbus server on 127.0.0.1
 (ephemeral ports) or on a pseudo-terminal null-modem (RTU), for IAI's PCON map and
 for a map never seen before, built here: three single-axis drives behind one

@@ -1,4 +1,4 @@
-"""Soft limits as design.md's "Register map" says: from the controller where it
+"""Soft limits as docs/design.md's "Register map" says: from the controller where it
 answers, from `[controller] soft_min`/`soft_max` where it does not (exception 2,
 a profile without them, a range that is none), and no motion with neither."""
 

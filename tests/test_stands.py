@@ -1,5 +1,5 @@
-"""Misplaced indicator stands as nuisance parameters (issue 17; orthocal.stands;
-model.md, "Where the indicator plane is")."""
+"""Misplaced indicator stands as nuisance parameters (orthocal.stands;
+docs/model.md, "Where the indicator plane is")."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The extended model: actuator axes tilted off square (model.md, "Extended model").
+"""The extended model: actuator axes tilted off square (docs/model.md, "Extended model").
 Exact kinematics with tilts, the measurement in the base-fixed indicator plane,
 equation (7') against the exact model, identification and its refusals."""
 
@@ -93,7 +93,7 @@ def test_tilted_machine_is_not_nominal_and_readings_match_deviations():
         for s, i, j in ALL_KEYS
     ]  # fmt: skip
     assert dev == pytest.approx(one_by_one, abs=1e-12)
-    # tilts alone move the deviations by tens of µm per mrad (model.md: 0.5 mrad → ~10 µm RMS)
+    # tilts alone move the deviations by tens of µm per mrad (docs/model.md: 0.5 mrad → ~10 µm RMS)
     tilt_only = deviations(ALL_KEYS, G, np.r_[np.zeros(6), 0.5, -0.5, 0.3])
     assert 0.005 < np.sqrt(np.mean(tilt_only**2)) < 0.05
 

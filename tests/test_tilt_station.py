@@ -1,6 +1,6 @@
 """Tilted machines through the station: the virtual machine's hidden tilts, the
 config's models, ``identify --model auto``, and a whole simulated run with
-model auto that writes the right offsets and reports the tilts (issue 9)."""
+model auto that writes the right offsets and reports the tilts."""
 
 from __future__ import annotations
 
@@ -97,7 +97,7 @@ def test_simulated_tilted_run_with_auto_writes_offsets_within_4_um(tmp_path, cap
     true_drho = (1.3, -0.9, 2.1)
     args = simulated(tmp_path / "runs", seed=11, true_drho=true_drho, true_tilt=TILT,
                      noise=0.001, yes=True, procedure={"settle_s": 0.0, "stand_tolerance_mm": 0},
-                     mount_error=0.0)  # stands exact: their misfit would blur the tilts (issue 10)
+                     mount_error=0.0)  # stands exact: their misfit would blur the tilts
     # (and the station told so: stand_tolerance_mm 0 takes them at L/2, as the paper)
     code = cmd_run.run(args)
     result = json.loads(capsys.readouterr().out)

@@ -1,4 +1,4 @@
-"""Accuracy at the tool in the report (issue 17): report.html's section, the
+"""Accuracy at the tool in the report: report.html's section, the
 headline that no longer lets "legs parallel" stand for "accurate", the summary's
 "at the tool" and squareness lines, the stands, and results without the block.
 
@@ -414,7 +414,7 @@ def test_broken_accuracy_blocks_never_raise(damage: str) -> None:
 
 
 def test_old_and_failed_results_have_no_false_statement() -> None:
-    old = make_result()  # a result from before issue 17: no accuracy, no stands
+    old = make_result()  # an older result: no accuracy, no stands
     page = report.render_html(old)
     assert "commanded points land" not in page and "Where the stands were" not in page
     assert "not stated" in section(page) and page.count("<svg") == 2

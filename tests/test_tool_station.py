@@ -1,4 +1,4 @@
-"""Accuracy at the tool in a whole run (issue 17): the run states where the tool
+"""Accuracy at the tool in a whole run: the run states where the tool
 goes before and after, with intervals that hold the hidden machine's truth, for
 both objectives; objective "tool" writes the offsets that leave less tool error
 than the paper's Δρ; the run directory exports the identified machine; misplaced
@@ -58,7 +58,7 @@ def tilted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, Any]
     out = tmp_path_factory.mktemp("tilted")
     # The simulated legs are straight, and the config says so: tilts of 0.1-0.2 mrad
     # on two postures per leg are told apart from legs straight to 1 µm, not from
-    # the default 10 µm (issue 23).
+    # the default 10 µm.
     return {objective: run(out / objective, true_drho=DRHO, true_tilt=TILT,
                            writeback={"objective": objective},
                            uncertainty={"leg_straightness_mm": 0.001})
@@ -70,7 +70,7 @@ def test_a_tilted_machine_is_stated_at_the_tool_not_by_its_legs(tilted) -> None:
     acc = result["accuracy"]
     # the verification shows the legs as the model predicts them once Δρ is
     # written (to a few µm: the tilts' own deviations stay); the tool is off by
-    # model.md's 14 µm
+    # docs/model.md's 14 µm
     assert result["verification"]["vs_expected_rms_mm"] < 0.003
     assert 0.010 < acc["after"]["rms_mm"] < 0.018 and acc["before"]["rms_mm"] > 0.2
     lo, hi = acc["after"]["rms_interval_95_mm"]

@@ -1,4 +1,4 @@
-"""The truth first (issue 30, item 2): the summary's first line, the report's header
+"""The truth first: the summary's first line, the report's header
 badge and the exit status say what happened. A completed run whose closed loop did
 not converge says NOT CONVERGED and why, in a warning colour, and exits 3; offsets
 the station holds (a drive with no OFFSET register) are said to be held, with where

@@ -1,4 +1,4 @@
-"""Behaviour unchanged by the restructure of the house (issue 16): a seeded
+"""Behaviour unchanged by the restructure of the house: a seeded
 simulated run (noise 0, so every reading is deterministic) gives the same
 result.json, the same journal and the same report.html as the code gave before
 station/ moved into its rooms (tests/data/golden_run/, made by that code).

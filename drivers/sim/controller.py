@@ -1,5 +1,5 @@
 """A simulated axis controller: a real pymodbus server serving a register map
-(``register_map``, default "orthocal-generic", design.md) for a
+(``register_map``, default "orthocal-generic", docs/design.md) for a
 :class:`~drivers.sim.machine.VirtualOrthoglide`, with fault injection. What the
 registers do (targets, commands, the exception 2/3 rules) is the drive's,
 :class:`~drivers.sim.drive.DriveRegisters`, which :class:`SimController` extends

@@ -1,5 +1,5 @@
 """The simulated drive's registers: what a register map (by default
-"orthocal-generic", design.md) serves for a
+"orthocal-generic", docs/design.md) serves for a
 :class:`~drivers.sim.machine.VirtualOrthoglide` and what a write to it does, as a
 real drive of that layout would — so a new map can be rehearsed before the
 machine is touched. Kept apart from the Modbus server and its fault injection
@@ -56,7 +56,7 @@ _READ_CODES = {3, 23}  # function codes whose reads consume a taken command code
 def default_soft_limits(machine: VirtualOrthoglide, margin_mm: float = 10.0
                         ) -> tuple[np.ndarray, np.ndarray]:
     """[L + ρmin − margin, L + ρmax + margin] on each axis: room for every test
-    posture of design.md with a margin (paper's machine: [200.25, 380.25] mm)."""
+    posture of docs/design.md with a margin (paper's machine: [200.25, 380.25] mm)."""
     g = machine.geometry
     return (np.full(3, g.leg_length + g.rho_min - margin_mm),
             np.full(3, g.leg_length + g.rho_max + margin_mm))

@@ -1,4 +1,4 @@
-"""Form errors of the virtual machine's legs (issue 23): a bowed leg.
+"""Form errors of the virtual machine's legs: a bowed leg.
 
 A leg is not a straight line: its surface, where a gauge's plunger touches it,
 lies off the straight line from the carriage A to the end point P by a bow

@@ -31,7 +31,7 @@ does: a constant reading (``unmounted_mm``) plus noise.
 
 A scale error (``scale_error`` S, relative): the gauge shows (1 + S) times its
 plunger's travel from where it was zeroed, as a gauge whose scale is off by
-S·100 % does (issue 23); its noise and its digits come on top, as on a real
+S·100 % does; its noise and its digits come on top, as on a real
 one. The stroke and its clamp are the plunger's, so they stay in true mm.
 
 A finite plunger (``stroke_mm``, mounted pushed in by ``preload_mm``, default

@@ -1,5 +1,5 @@
 """A virtual Orthoglide: three linear axes that take time to move, with hidden
-geometric errors (design.md, "Writing the offsets back"; model.md, "Machine and
+geometric errors (docs/design.md, "Writing the offsets back"; docs/model.md, "Machine and
 parameters").
 
 Frames. The carriage of axis i sits at ``m_i`` on the machine's own scale. The
@@ -27,7 +27,7 @@ carriages do is handed to ``segment_listeners`` as
 
 Lost motion (``backlash``, mm per joint: ISO 230-2's reversal value B): the
 drive counts its motor; the carriage follows it through a dead band of width
-B, a play operator (model.md, "Lost motion"): after a move up it sits B/2 below
+B, a play operator (docs/model.md, "Lost motion"): after a move up it sits B/2 below
 where the count puts the band's middle, after a move down B/2 above. Within a
 move each axis is monotone, so the carriage is clamp(c_start, m − B/2, m + B/2).
 The controller reports the count; the legs, the gauges and the end point see
@@ -99,8 +99,8 @@ class VirtualOrthoglide:
 
     ``true_drho``/``true_dl``: hidden joint offsets Δρ and leg-length errors ΔL
     (mm, 3-vectors); ``true_tilt``: hidden actuator axis tilts (tilt_yx, tilt_zx,
-    tilt_zy, mrad; model.md "Extended model"); ``true_gap``: how far the axes pass
-    each other (gap_xy, gap_xz, gap_yz, mm; model.md "Axes that do not meet"); or
+    tilt_zy, mrad; docs/model.md "Extended model"); ``true_gap``: how far the axes pass
+    each other (gap_xy, gap_xz, gap_yz, mm; docs/model.md "Axes that do not meet"); or
     pass ``true_params`` as the 6-, 9- or 12-vector of :data:`orthocal.PARAM_NAMES`;
     ``leg_bow``: each leg's hidden bow
     (mm, module docstring). ``offsets``: the controller's zero offsets at

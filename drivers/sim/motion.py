@@ -16,7 +16,7 @@ together; a :class:`DriveMotion` varies what real drives vary and the station
 is not told: the profile's shape (trapezoid, S-curve, cosine), the
 acceleration, start delays per axis, one axis after another. Every profile is
 rest-to-rest, monotone and within the commanded speed, so the path between two
-stops stays in the joint-space box of its ends (what design.md "Register map"
+stops stays in the joint-space box of its ends (what docs/design.md "Register map"
 promises the station, and no more).
 
 Segments. Everything the carriages do is a sequence of motion segments (a
@@ -196,7 +196,7 @@ def _three(value: object, what: str) -> tuple[object, object, object]:
 @dataclass(frozen=True)
 class DriveMotion:
     """How the simulated drive moves its axes on COMMAND 1 (and homing): what a
-    real drive decides and the station is not told (design.md, "Register map").
+    real drive decides and the station is not told (docs/design.md, "Register map").
 
     ``coordinated``: one shared profile along the straight line in joint space
     (then one shape, one acceleration, no delays, no sequence). Otherwise each

@@ -18,7 +18,7 @@ exercise the sign convention).
 Stand misplacement (``mount_error_mm``): an operator sets each indicator stand
 "at the middle of the leg" by eye, so each mounting puts the indicator's plane
 x_i = M_i off the nominal L/2 by a hidden error drawn uniform in
-±``mount_error_mm`` (model.md, "Where the indicator plane is"); every mounting
+±``mount_error_mm`` (docs/model.md, "Where the indicator plane is"); every mounting
 draws anew, as a real operator places the stand again. ``mount_errors`` fixes
 them instead (name -> mm), for figures that need a given misplacement.
 
@@ -39,7 +39,7 @@ what an integrator would write: ``motion = "coordinated"`` for a drive that
 interpolates, nothing otherwise (the profile's default, any timing), and the
 ``accel_mm_s2`` the station was given, not the drive's.
 
-Form and scale (issue 23): ``leg_bow`` bows each leg (the sagitta of its
+Form and scale: ``leg_bow`` bows each leg (the sagitta of its
 surface at its middle, mm, :mod:`drivers.sim.form`), so that a gauge's plunger,
 touching the leg at another point of it at each posture, sees the curve;
 ``gauge_scale`` gives the gauges a relative scale error (one for all, or one per
@@ -90,7 +90,7 @@ STANDARD_STROKE_MM = 12.5  # station.config's default stroke_mm (preload: half)
 # Fast but physical: moves still take time, so in-position waits are real.
 SIM_SPEED_MM_S = 1000.0
 SIM_ACCEL_MM_S2 = 20000.0
-# How far off the leg's middle an operator sets a stand by eye (model.md: 5-10 mm);
+# How far off the leg's middle an operator sets a stand by eye (docs/model.md: 5-10 mm);
 # the command line's default, so that a default simulated run shows the closed loop.
 DEFAULT_MOUNT_ERROR_MM = 5.0
 

@@ -104,7 +104,7 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--profile", metavar="MAP", default=None,
         help="the register map the virtual drive serves, a built-in name or a .toml file "
-             "(design.md, Register-map files): its addresses, types, word order, scale, "
+             "(docs/design.md, Register-map files): its addresses, types, word order, scale, "
              "tables, devices and command sequences, as a drive of that layout would; the "
              "config it hands the station names it (default orthocal-generic)",
     )
@@ -141,7 +141,7 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
              "interpolate)",
     )
     # The virtual drive's own behaviour, never written to the config it hands the
-    # station: what a real drive does without saying (design.md, "Register map").
+    # station: what a real drive does without saying (docs/design.md, "Register map").
     # Strings here, checked in station.commands.simulation: a bad value is one line, exit 2.
     p.add_argument(
         "--drive-profile", metavar="SHAPE[,SHAPE,SHAPE]", default=None,
@@ -172,7 +172,7 @@ def _probe_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device-id", type=int, default=1, help="Modbus device id (default 1)")
     p.add_argument("--profile", metavar="MAP", default=None,
                    help="the controller's register map: a built-in name or a .toml file "
-                        "(design.md, Register-map files; default orthocal-generic)")
+                        "(docs/design.md, Register-map files; default orthocal-generic)")
     p.add_argument("--baudrate", type=int, default=19200, help="RTU line speed (default 19200)")
     p.add_argument("--timeout", type=float, default=0.5, metavar="S",
                    help="wait per protocol tried on a port (default 0.5 s)")

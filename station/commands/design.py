@@ -1,4 +1,4 @@
-"""``orthocal design``: the experiment before anything moves (design.md).
+"""``orthocal design``: the experiment before anything moves (docs/design.md).
 
 For the configured test postures and a model: rank, condition number, each
 parameter's standard error per µm of noise, what cannot be separated (in

@@ -1,6 +1,6 @@
 """``orthocal identify READINGS.csv``: identification alone, from a CSV of deviations.
 
-READINGS.csv (design.md): header ``posture,leg,direction,deviation_mm``, one row
+READINGS.csv (docs/design.md): header ``posture,leg,direction,deviation_mm``, one row
 per deviation, posture ``+``/``-``, leg and direction ``x``/``y``/``z``
 (direction ≠ leg). An intermediate stop Π_i(s) (``[procedure] strokes``) is a
 posture written as its signed stroke in mm, ``+30`` or ``-50.5``: the same

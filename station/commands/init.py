@@ -156,7 +156,7 @@ def _profile_line(profile: str | None, out: Path) -> str:
 
     if not profile:
         return (f"profile = {v(_default(ControllerConfig, 'profile'))}   # built-in register "
-                "map (design.md)")
+                "map (docs/design.md)")
     if not is_map_file(profile):
         return f"profile = {v(profile)}   # built-in register map"
     here = out.resolve().parent

@@ -1,5 +1,5 @@
 """``orthocal probe [PORT ...] [--controller HOST:PORT | --config FILE] [--json]``:
-bring-up, what answers where (design.md, "Command line").
+bring-up, what answers where (docs/design.md, "Command line").
 
 For each port named (else the config's indicator ports with ``--config``, else
 every port pyserial lists) it tries each built-in indicator protocol at its
@@ -78,7 +78,7 @@ def default_ports(config: Any) -> list[str]:
 
 
 def gather(args: argparse.Namespace) -> dict[str, Any]:
-    """The probe's findings as design.md's JSON: ``indicators`` and ``controller``."""
+    """The probe's findings as docs/design.md's JSON: ``indicators`` and ``controller``."""
     from drivers.errors import DeviceError
     from drivers.probe import probe_controller, probe_port
     from station.config import load_config

@@ -7,7 +7,7 @@ run's parameters as plain JSON values (the journal header keeps them), and
 :func:`drive_motion` rebuilds the same :class:`~drivers.sim.motion.DriveMotion`
 from them for ``resume``; a journal from before these existed has none and gets
 the plain drive of its ``motion``. So with the legs' form and the gauges' scale
-(``--leg-bow``, ``--gauge-scale``, issue 23): kept in the header, absent from
+(``--leg-bow``, ``--gauge-scale``): kept in the header, absent from
 older journals, whose runs had straight legs and true gauges. And with the axes'
 gaps (``--true-gap``, gap_xy, gap_xz, gap_yz in mm): absent from journals of runs
 before them, whose machines' axes met."""
@@ -156,7 +156,7 @@ def served_map(profile: str | None) -> dict[str, Any]:
 
 def gaps_mm(value: str | Sequence[float] | None) -> list[float]:
     """``--true-gap X,Y,Z``: how far the virtual machine's actuator axes pass each
-    other, gap_xy, gap_xz, gap_yz (mm, either sign; model.md, "Axes that do not
+    other, gap_xy, gap_xz, gap_yz (mm, either sign; docs/model.md, "Axes that do not
     meet"), as the command line's text or three numbers; none given, zeros;
     BadInput naming the option."""
     if value is None:

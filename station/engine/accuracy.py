@@ -1,4 +1,4 @@
-"""Accuracy at the tool, as the run states it (design.md and model.md, "Accuracy
+"""Accuracy at the tool, as the run states it (docs/design.md and docs/model.md, "Accuracy
 at the tool"): where the tool goes before and after the offsets written, with
 95 % intervals, over the workspace, for both objectives; the squareness and the
 gaps between the axes, which the offsets cannot fix, and what to do about them;
@@ -33,13 +33,13 @@ from orthocal.numbers import finite
 from orthocal.tool_interval import after_interval, assumes
 from station.config import StationConfig
 
-#: Grid nodes per axis of the workspace box (model.md's check values use 7³).
+#: Grid nodes per axis of the workspace box (docs/model.md's check values use 7³).
 GRID_POINTS = 7
 #: Consistency of one round's layout with the others' (χ², one dof per name): below
 #: this p-value the round is left out of the pool (the first round's stands).
 POOL_LEVEL = 0.001
 DRHO = tuple(f"drho_{a}" for a in AXES)
-#: How the axes lie: what no offset changes (model.md, "Extended model" and "Axes
+#: How the axes lie: what no offset changes (docs/model.md, "Extended model" and "Axes
 #: that do not meet"). Pooled over the rounds, in this order.
 LAYOUT_NAMES: tuple[str, ...] = (*TILT_NAMES, *GAP_NAMES)
 #: The layout's fits, largest first: a round whose own model lacks part of the
@@ -231,7 +231,7 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
               drho_now_cov: np.ndarray | None, dof: float | None, layout: Layout | None,
               model: str, in_model: Sequence[str], offsets_before: Mapping[str, float] | None,
               target_tool: Mapping[str, float]) -> dict[str, Any]:
-    """The run JSON's ``accuracy`` (design.md): before and after over the workspace
+    """The run JSON's ``accuracy`` (docs/design.md): before and after over the workspace
     with 95 % intervals for the after-figures, both objectives' predicted after-
     figures side by side, squareness and the gaps with what to do, what it all
     assumes. ``in_model``: the parameter names of the model the run kept."""

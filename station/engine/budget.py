@@ -1,4 +1,4 @@
-"""The run's uncertainty budget (design.md, "Uncertainty budget"; issue 23): the
+"""The run's uncertainty budget (docs/design.md, "Uncertainty budget"): the
 config's Type B inputs, each absent one at a default named here, propagated by
 orthocal.budget through the last round's identification to the run's statement,
 combined with its Type A part (the scatter), and the noise the model test is to

@@ -1,5 +1,5 @@
 """The run's flow as one small state machine: measure → identify → write →
-verify → (write → verify)… → finish (design.md, "Closed loop").
+verify → (write → verify)… → finish (docs/design.md, "Closed loop").
 
 :func:`next_step` is a pure function from what has happened so far
 (:class:`LoopState`) to what to do next. The executor (station.engine.procedure)

@@ -1,6 +1,6 @@
 """Which model the station identifies: a named one, or ``auto`` resolved by
 :func:`orthocal.select_model` against the noise this very measurement shows
-(design.md, "Models")."""
+(docs/design.md, "Models")."""
 
 from __future__ import annotations
 

@@ -66,7 +66,7 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
         "noise_mm": num(noise), "noise_floor_mm": num(expected), "fit_ok": bool(fit_ok),
         "fit_note": fit_note,
         "deviations": deviations,
-        # said in every report, never silently fixed (issue 9)
+        # said in every report, never silently fixed
         "not_identifiable": orthocal.cannot_identify(
             ident.keys, config.machine.geometry(), "full+tilt+gap"),
         "deviations_rms_mm": float(np.sqrt(np.mean(means**2))) if means.size else None,
@@ -154,7 +154,7 @@ def guard_fields(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 def offsets_fields(controller: Any, result: dict[str, Any],
                    records: list[dict[str, Any]]) -> dict[str, Any]:
-    """Where the offsets live and what they are when the run stops (design.md,
+    """Where the offsets live and what they are when the run stops (docs/design.md,
     "Offsets held by the station"): ``offsets_held_by`` "controller" | "station",
     ``offsets_final`` (the journal's last write-back or rollback, else the offsets
     before), and for a station that holds them what to do with them."""

@@ -1,6 +1,6 @@
 """The joints' lost motion in a run: measured from its reversal stops, stated in the
 result, checked against the approach's overrun, and what it leaves at the tool
-(design.md, "Lost motion (reversal)"; orthocal.lost_motion has the maths)."""
+(docs/design.md, "Lost motion (reversal)"; orthocal.lost_motion has the maths)."""
 
 from __future__ import annotations
 
@@ -73,7 +73,7 @@ def check_overrun(config: StationConfig, rev: Reversal) -> None:
 
 
 def fields(config: StationConfig, rev: Reversal) -> dict[str, Any]:
-    """The run JSON's ``reversal`` (design.md)."""
+    """The run JSON's ``reversal`` (docs/design.md)."""
     proc = config.procedure
     side = {"below": "from below", "above": "from above"}.get(proc.approach)
     return {

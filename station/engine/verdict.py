@@ -1,6 +1,6 @@
 """What a verification round says of the machine: a correction worth writing, the
 machine shown converged, or neither (station.engine.closed_loop's verdicts), and in
-words why a run that stopped undecided is not converged (design.md, "Closed loop")."""
+words why a run that stopped undecided is not converged (docs/design.md, "Closed loop")."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Writing the identified offsets back to the controller (design.md, "Write-back").
+"""Writing the identified offsets back to the controller (docs/design.md, "Write-back").
 
 Order, each step journaled before the next: back up the controller's offsets
 to the run directory (fsynced) → refuse any |Δρ_i| > max_abs_offset_mm (nothing

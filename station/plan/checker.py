@@ -1,5 +1,5 @@
 """Path safety: every move checked over every joint position the controller may
-pass through, before anything moves (design.md, "Register map"; station.plan.motion
+pass through, before anything moves (docs/design.md, "Register map"; station.plan.motion
 says what is assumed of the drive), with the fewest waypoints that keep every
 mounted plunger within its stroke; the soft limits the plan uses.
 """

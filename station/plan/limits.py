@@ -1,6 +1,6 @@
 """What a plan assumes of the controller before anything moves: the soft limits it
 uses (the controller's, narrowed by the config) and where they come from, and the
-path model of its moves (design.md, "Register map"; station.plan.motion)."""
+path model of its moves (docs/design.md, "Register map"; station.plan.motion)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def effective_limits(
     Where the controller cannot tell its limits (``controller_limits.source`` is
     "absent" or "nonsense", drivers.limits.SoftLimits) they come from
     ``[controller] soft_min`` / ``soft_max`` alone; with neither, BadInput names both
-    ways to provide them, before anything moves (design.md, "Register map").
+    ways to provide them, before anything moves (docs/design.md, "Register map").
     """
     c = config.controller
     if getattr(controller_limits, "source", "registers") in ("absent", "nonsense"):
@@ -55,7 +55,7 @@ def limits_source(config: StationConfig, controller_limits: object) -> str:
 
 def motion_model(config: StationConfig) -> str:
     """The path model of the controller: the config's ``[controller] motion``, else
-    what the register-map profile promises (design.md: COMMAND 1 promises no
+    what the register-map profile promises (docs/design.md: COMMAND 1 promises no
     interpolation unless the profile says the axes are coordinated). "coordinated"
     is refused for a map whose axes are separate drives (unit ids): each takes its
     target in its own request, so nothing moves them on one line, and a plan

@@ -1,5 +1,5 @@
 """Where the axes can be during one COMMAND 1, and bounds over that set
-(design.md, "Register map": COMMAND 1 promises no interpolation).
+(docs/design.md, "Register map": COMMAND 1 promises no interpolation).
 
 The station never models a drive's timing: profile shape, acceleration, start
 delays and the order of the axes are the drive's own and cannot be measured

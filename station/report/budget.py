@@ -1,5 +1,5 @@
 """The uncertainty budget in the summary and report.html, from the run JSON's
-``uncertainty_budget`` alone (design.md, "Uncertainty budget"): the statement with
+``uncertainty_budget`` alone (docs/design.md, "Uncertainty budget"): the statement with
 its expanded uncertainty, the budget table (largest contribution first), what was
 assumed, and a certificate block."""
 

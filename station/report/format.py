@@ -91,7 +91,7 @@ _SYMBOL = {"drho": ("Δρ", r"\Delta\rho"), "dL": ("ΔL", r"\Delta L"), "tilt": 
 
 
 def unit(name: str) -> str:
-    """Tilts are angles in mrad (model.md); everything else is a length in mm."""
+    """Tilts are angles in mrad (docs/model.md); everything else is a length in mm."""
     return "mrad" if name.startswith("tilt_") else "mm"
 
 

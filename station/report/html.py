@@ -264,7 +264,7 @@ def _params_table(result: Mapping[str, Any]) -> str:
 
 def _model_section(result: Mapping[str, Any]) -> str:
     """Why this model (auto's test), what these measurements can never identify,
-    what cannot be written: said, not silently fixed (issue 9)."""
+    what cannot be written: said, not silently fixed."""
     notes = model_notes(result)
     if not notes:
         return ""

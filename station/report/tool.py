@@ -1,4 +1,4 @@
-"""Accuracy at the tool in the report (design.md and model.md, "Accuracy at the
+"""Accuracy at the tool in the report (docs/design.md and docs/model.md, "Accuracy at the
 tool"): the result's ``accuracy`` block as the headline's clause, the summary's
 lines and report.html's section, and the ``stands`` table.
 
@@ -30,7 +30,7 @@ from station.report.format import (
     um_interval,
 )
 
-#: What each frame fits away before the error is stated (design.md).
+#: What each frame fits away before the error is stated (docs/design.md).
 FRAME_TEXT = {
     "translation": "a common translation, as when the tool offset is set by touching off",
     "rigid": "a rigid motion, as when parts are aligned by probing",
@@ -40,7 +40,7 @@ OBJECTIVE_TEXT = {
     "joints": "the paper's Δρ: legs parallel",
     "tool": "the least predicted tool error",
 }
-#: Squareness of the tool's motions and the tilt it equals to first order (model.md).
+#: Squareness of the tool's motions and the tilt it equals to first order (docs/model.md).
 PAIRS = (("xy", "tilt_yx"), ("xz", "tilt_zx"), ("yz", "tilt_zy"))
 #: Coverage factor of a 95 % interval when the result gives none (normal).
 K_NORMAL = 1.96
