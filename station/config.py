@@ -261,6 +261,12 @@ class ProcedureConfig(_Strict):
     # further pass of every setup, pooled with it) at most this many times; then the
     # loop ends "not-converged", saying why.
     max_extra_passes: int = Field(2, ge=0, le=10)
+    # A verification whose setup cannot yet show its verdict measures more cycles on
+    # the gauges already mounted, up to this many per mounting (None: cycles × (1 +
+    # max_extra_passes), the cycles its extra passes would take, without mounting
+    # again; at most cycles turns it off). The first measurement does not: there a
+    # new mounting is what averages the stands' placement.
+    max_cycles_in_mounting: int | None = Field(None, ge=1, le=100)
     # The stops Π_i(s) of each cycle, mm (docs/model.md "Test postures"); absent: the
     # paper's two, ρmax and ρmin, and every plan, journal and JSON exactly as before.
     strokes: list[float] | None = Field(None, min_length=1, max_length=20)

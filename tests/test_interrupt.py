@@ -347,7 +347,7 @@ def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -
     finally:
         interrupted = finish(proc)
     assert journal is not None, interrupted.err
-    assert interrupted.returncode == 1
+    assert interrupted.returncode == 1, interrupted.err[-3000:]
     run_dir = journal.parent
     assert "Traceback" not in interrupted.err
     (line,) = [ln for ln in interrupted.err.splitlines() if ln.startswith("orthocal: failed")]

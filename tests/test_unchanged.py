@@ -11,7 +11,8 @@ narrowed to its baseline and OpenBLAS on another kernel family, in a process of 
 own, and compared with the same files: a user's clone on another CPU.
 
 Only what cannot repeat is taken out before comparing: times, the run
-directory, the virtual station's ephemeral ports and pty paths, the wall time,
+directory, the virtual station's ephemeral ports and pty paths, the wall time
+and the operator's time at each mounting,
 what the plunger guard's polls saw while the axes moved (how many polls fit
 into a move depends on the machine's load), and the names matplotlib gives the
 markers and clip paths of its figures."""
@@ -43,7 +44,8 @@ VOLATILE_GUARD = ("polls", "min_slack_mm", "predicted_mm")
 
 def normal_result(result: dict[str, Any]) -> dict[str, Any]:
     out = {k: v for k, v in result.items() if k not in VOLATILE_RESULT}
-    out["timing"] = {k: v for k, v in result.get("timing", {}).items() if k != "wall_s"}
+    out["timing"] = {k: v for k, v in result.get("timing", {}).items()
+                     if k not in ("wall_s", "operator_s")}
     return out
 
 
@@ -60,6 +62,8 @@ def normal_journal(text: str) -> list[dict[str, Any]]:
     for line in text.splitlines():
         record = json.loads(line)
         record.pop("t", None)
+        if record["type"] == "setup":
+            record.pop("operator_s", None)  # the (virtual) operator's time
         if record["type"] == "header":
             for key in ("started", "version", "argv"):
                 record.pop(key, None)
@@ -77,6 +81,7 @@ def normal_html(page: str, run_dir: str) -> str:
     page = re.sub(r"\d{4}-\d\d-\d\d[ T]\d\d:\d\d(:\d\d)?([+-]\d\d:?\d\d)?", "WHEN", page)
     page = re.sub(r"\d{1,2} \w{3} \d{4},? \d\d:\d\d(:\d\d)?", "WHEN", page)
     page = re.sub(r"wall [^,<]*,", "wall WALL,", page)
+    page = re.sub(r"\d+ s at the machine", "OPERATOR s at the machine", page)
     page = re.sub(r"(duration</dt><dd>)[^<]*", r"\1DURATION", page)
     # matplotlib names an SVG's markers and clip paths after object ids
     page = re.sub(r"\b([mp])[0-9a-f]{10}\b", r"\1ID", page)

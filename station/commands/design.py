@@ -146,18 +146,9 @@ def _separation(plan: Plan, config: StationConfig) -> dict[str, Any]:
 
 
 def plan_keys(plan: Plan) -> tuple[list[tuple[str, str, str]], list[list[int]]]:
-    """The deviation keys the plan measures and, per mounted indicator, its rows in
-    the order a cycle visits the stops (for orthocal.design.run_std_errors)."""
-    keys: list[tuple[str, str, str]] = []
-    indicators: list[list[int]] = []
-    for sp in plan.setups:
-        for direction in sp.indicators.values():
-            rows = []
-            for posture in sp.order:
-                rows.append(len(keys))
-                keys.append((posture, sp.leg, direction.lstrip("-")))
-            indicators.append(rows)
-    return keys, indicators
+    """The deviation keys the plan measures, with each indicator's rows
+    (station.plan.steps.Plan.deviation_keys)."""
+    return plan.deviation_keys()
 
 
 def _line_time_s(config: StationConfig, name: str) -> float:

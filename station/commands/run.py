@@ -21,6 +21,7 @@ from station import report
 from station.commands.options import ResumeOptions, RunOptions
 from station.config import load_config, parse_config
 from station.console.operator import ConsoleOperator, Operator, VirtualOperator
+from station.engine.closed_loop import mountings_expected
 from station.engine.devices import build_controller, open_devices
 from station.engine.procedure import Run, execute
 from station.engine.recovery import check_reference, drop_redone, home_if_needed
@@ -112,8 +113,10 @@ def run(options: RunOptions) -> int:
 
             summary = design_summary(config, config.procedure.model,
                                      controller_limits=controller.soft_limits())
-            print(json.dumps({**plan.to_json(), "design": summary}) if options.json
-                  else plan.format() + "\n" + format_summary(summary))
+            mounts = _mountings(config, plan)
+            print(json.dumps({**plan.to_json(), "mountings": mounts, "design": summary})
+                  if options.json else plan.format() + "\n" + report.mountings_line(mounts)
+                  + "\n" + format_summary(summary))
             return 0
         lock = _lock(stack, config, "run", None)
         devices = open_devices(config, on_event, station)
@@ -144,9 +147,16 @@ def run(options: RunOptions) -> int:
                         "plan": plan.to_json(), "simulation": sim, "started": now_iso(),
                         "argv": sys.argv[1:]})
         say(f"orthocal: run directory {run_dir}")
+        say(f"orthocal: {report.mountings_line(_mountings(config, plan))}")
         ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
                   JournalState(), [], now_iso(), checker=checker)
         return _report(options.json, *execute(ctx))
+
+
+def _mountings(config: Any, plan: Any) -> dict[str, int]:
+    proc = config.procedure
+    return mountings_expected(len(plan.setups), proc.max_iterations, proc.max_extra_passes,
+                              proc.verify)
 
 
 def print_result(as_json: bool, result: dict[str, Any]) -> None:

@@ -5,20 +5,41 @@ from __future__ import annotations
 
 from typing import Any
 
-from station.plan.steps import Plan, posture_label
+from station.plan.steps import Plan, Read, posture_label
 
 
 class Progress:
     """Run progress on stderr through station.console.terminal.RunProgress (a live bar on a
-    terminal, plain lines in a log); one step per stop read."""
+    terminal, plain lines in a log); one step per stop read.
+
+    The total counts the plan's reads (the one-side approach's extra stop included)
+    for the usual run, a measurement and one verification; a further phase (another
+    write-back, a pass measured again) or a cycle more in a mounting adds its reads
+    as it starts, so the bar never reads more done than it counts."""
 
     def __init__(self, plan: Plan, verify: bool, enabled: bool = True) -> None:
         from station.console.terminal import RunProgress
 
         self.plan = plan
-        per_phase = sum(1 + (len(sp.order) + 1) * plan.cycles for sp in plan.setups)
-        self.bar = RunProgress(per_phase * (2 if verify else 1), enabled=enabled)
+        reads = [s for s in plan.steps("m") if isinstance(s, Read)]
+        self.per_phase = len(reads)
+        self.per_cycle = {sp.index: sum(1 for r in reads if r.setup == sp.index
+                                        and r.cycle == 1) for sp in plan.setups}
+        self.expected_phases = 2 if verify else 1
+        self.bar = RunProgress(self.per_phase * self.expected_phases, enabled=enabled)
         self.steps = 0
+        self._phases: set[str] = set()
+        self._more: set[tuple[str, int, int]] = set()
+
+    def _count(self, code: str, setup: int, cycle: int) -> None:
+        """Grow the total by what the run turned out to take beyond the usual."""
+        if code not in self._phases:
+            self._phases.add(code)
+            if len(self._phases) > self.expected_phases:
+                self.bar.total_steps += self.per_phase
+        if cycle > self.plan.cycles and (code, setup, cycle) not in self._more:
+            self._more.add((code, setup, cycle))
+            self.bar.total_steps += self.per_cycle.get(setup, 0)
 
     def __enter__(self) -> Progress:
         self.bar.__enter__()
@@ -48,6 +69,7 @@ class Progress:
         if event == "read":
             self.steps += 1
             sp = self.plan.setups[info["setup"]]
+            self._count(code, sp.index, int(info["cycle"]))
             posture = posture_label(info["sign"], sp.leg)
             self.bar.total_steps = max(self.bar.total_steps, self.steps)
             self.bar.update(f"{sp.index + 1}/{len(self.plan.setups)} (leg {sp.leg}, {phase})",
@@ -58,7 +80,8 @@ class Progress:
         elif event == "cycle_replayed":
             # Replayed cycles count as done for the time estimate.
             sp = self.plan.setups[info["setup"]]
-            self.steps += len(sp.order) + 1 + (1 if info["cycle"] == 1 else 0)
+            self._count(code, sp.index, int(info["cycle"]))
+            self.steps += self.per_cycle[sp.index] + (1 if info["cycle"] == 1 else 0)
             self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: "
                      "from the journal")
         elif event == "repeat":

@@ -15,13 +15,18 @@ A measurement ends in a verdict: "significant" (a correction beyond the noise of
 both rounds and beyond converge_mm: write it), "converged" (the remaining Δρ is
 shown within ±converge_mm at 95 % on every axis: orthocal.loop.shown_within), or
 neither: "suspected" (a correction the round sees at 95 % but not beyond the noise
-of both rounds) or "unproven" (the round's noise hides whatever is left). Either
-is measured again, a further pass of the same verification pooled with it (phase
-"v+1", "v2+1"…), up to ``max_extra_passes``: what is left beyond the noise then
-shows as significant and is written, a machine within converge_mm shows as
-converged. Still undecided, the loop ends "not-converged", saying why; it never
-writes what does not stand out of both rounds' noise (that would trade one noise
-for another, and a machine one round fixed would be written again).
+of both rounds) or "unproven" (the round's noise hides whatever is left). Each
+setup of a verification has already taken more cycles on its mounted gauges where
+its own scatter said the verdict needed them ([procedure] max_cycles_in_mounting,
+station.engine.sequencer); still undecided, the round is measured again, a further
+pass of the same verification pooled with it (phase "v+1", "v2+1"…), up to
+``max_extra_passes``: what is left beyond the noise then shows as significant and
+is written, a machine within converge_mm shows as converged. Still undecided, the
+loop ends "not-converged", saying why; it never writes what does not stand out of
+both rounds' noise (that would trade one noise for another, and a machine one
+round fixed would be written again). After a write-back, a correction beyond that
+noise but under converge_mm is written where it keeps "converged" out of reach
+(station.engine.verdict.judge).
 
 States (``len(verdicts)``, ``len(writes)``):
 
@@ -136,3 +141,19 @@ def next_step(state: LoopState) -> Step:
             return Step("measure", phase=phase_of(k))
         return Step("finish", reason={"failed-restored": "failed"}.get(status, status))
     raise AssertionError(f"inconsistent loop state: {k} measurements, {w} write-backs")
+
+
+def mountings_expected(setups: int, max_iterations: int, max_extra_passes: int,
+                       verify: bool = True) -> dict[str, int]:
+    """How many times the operator mounts the gauges, from the flow above: every
+    pass of every measurement mounts each of the plan's ``setups`` once.
+
+    ``fewest``: the first measurement alone (a machine within tolerance, nothing
+    written). ``usual``: one write-back and its verification, each decided in one
+    pass. ``most``: every round up to ``max_iterations`` write-backs, each
+    measurement taking all its ``max_extra_passes``. A retake or a resume after a
+    stand was moved adds its own mounting beyond these."""
+    passes = 1 + max_extra_passes
+    rounds = 1 + (max_iterations if verify else 0)
+    return {"fewest": setups, "usual": setups * (2 if verify else 1),
+            "most": setups * passes * rounds}

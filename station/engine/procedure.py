@@ -510,9 +510,14 @@ def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
         pass
     retries = sum(1 for r in records if r["type"] == "event"
                   and r.get("event", {}).get("event") == "retry")
+    mounts = [r for r in records if r["type"] == "setup"]
     result["timing"] = {"wall_s": round(wall, 3), "moves": seq.counters.moves,
                         "readings": seq.counters.readings, "retries": retries,
-                        "outliers_rejected": seq.counters.rejected}
+                        "outliers_rejected": seq.counters.rejected,
+                        # what the operator paid: each mounting and the time it took
+                        "mountings": len(mounts),
+                        "operator_s": round(sum(float(r.get("operator_s") or 0.0)
+                                                for r in mounts), 3)}
     result["plunger_guard"] = guard_fields(records)
     result.update(offsets_fields(ctx.devices.controller, result, records))
     if final:

@@ -22,6 +22,7 @@ fault journaled, and the exception re-raised for the command to report.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -122,6 +123,7 @@ class Sequencer:
         self._all_names = [ind.name for ind in config.indicators]
         self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
         self._gains: dict[tuple[str, str], float] = {}  # (leg, axis) -> reversal gain
+        self._verdict_target: float | None = None  # see _verdict_se
         # The guard's records are the run's like any other: one that cannot be saved
         # stops the run (a swallowed error once lost a record that had an infinity).
         self.guard = PlungerGuard(
@@ -201,6 +203,14 @@ class Sequencer:
                 this_pass.append((cycle, devs, w, rev))
                 if self._converged([d for _, d, _, _ in this_pass]):
                     break
+            # A verification that cannot yet show its verdict: more cycles on the
+            # gauges already mounted, not another mounting (replayed alike on resume).
+            while (len(this_pass) < self._cycle_limit(phase)
+                   and not self._converged([d for _, d, _, _ in this_pass])
+                   and not self._decided(phase, [d for _, d, _, _ in this_pass])):
+                cycle += 1
+                devs, w, rev = self._cycle(phase, sp, cycle)
+                this_pass.append((cycle, devs, w, rev))
             passes.append(this_pass)
             spread = self._spread([d for _, d, _, _ in this_pass])
             if spread <= proc.repeatability_mm or repeats >= proc.max_repeats:
@@ -221,7 +231,7 @@ class Sequencer:
                 reversal.setdefault(axis, []).append(value)
         outcome = SetupOutcome(
             index=sp.index, leg=sp.leg, indicators=dict(sp.indicators),
-            cycles_used=len(used), cycles_max=proc.cycles, repeats=repeats,
+            cycles_used=len(used), cycles_max=self._cycle_limit(phase), repeats=repeats,
             flagged=spread > proc.repeatability_mm, spread_mm=spread,
             cycles=[c for c, *_ in used])
         if (phase, sp.index) not in self.done_setups:
@@ -236,6 +246,42 @@ class Sequencer:
         if target is None or len(cycles) < 2:
             return False
         return cycle_std_error(cycles) <= target
+
+    def _cycle_limit(self, phase: str) -> int:
+        """Cycles a mounting may take in ``phase``: the planned ones, and in a
+        verification up to [procedure] max_cycles_in_mounting."""
+        proc = self.config.procedure
+        if not phase.startswith("v"):
+            return proc.cycles
+        most = proc.max_cycles_in_mounting or proc.cycles * (1 + proc.max_extra_passes)
+        return max(proc.cycles, most)
+
+    def _decided(self, phase: str, cycles: list[dict[str, float]]) -> bool:
+        """Whether this setup's cycles are enough for the verification's verdict: the
+        standard error of its deviations' means (:func:`cycle_std_error`) at
+        :meth:`_verdict_se` or below. Any other phase: always."""
+        if not phase.startswith("v"):
+            return True
+        return cycle_std_error(cycles) <= self._verdict_se()
+
+    def _verdict_se(self) -> float:
+        """The standard error of a deviation's mean at which a verification can show
+        "converged": |Δρ̂| + k·se(Δρ) within converge_mm + half the drive's count,
+        with |Δρ̂| ≈ se(Δρ) on a machine the last write fixed and k ≈ 2 (95 %), and
+        se(Δρ) = G·se of the deviations, G the largest Δρ noise gain of the model on
+        the plan's stops (orthocal.design.quality; auto: rho, the smallest model,
+        whose verdict the loop's extra passes then extend)."""
+        if self._verdict_target is None:
+            from orthocal import design
+
+            proc = self.config.procedure
+            model = "rho" if proc.model == "auto" else proc.model
+            keys, _ = self.plan.deviation_keys()
+            q = design.quality(keys, self.config.machine.geometry(), model)
+            gain = max(v for n, v in q.noise_gain.items() if n.startswith("drho"))
+            limit = proc.converge_mm + 0.5 * self.controller.offset_resolution_mm()
+            self._verdict_target = limit / (3.0 * gain) if math.isfinite(gain) else 0.0
+        return self._verdict_target
 
     @staticmethod
     def _spread(cycles: list[dict[str, float]]) -> float:
@@ -386,12 +432,17 @@ class Sequencer:
     def _prompt(self, phase: str, step: Prompt) -> None:
         indicators = dict(step.indicators)
         self.progress("prompt", phase=phase, setup=step.setup)
+        # The operator's time is what a calibration costs (a minute or two per
+        # mounting): journaled with the mounting, so a resumed run still counts it.
+        asked = time.monotonic()
         self.operator.mount(phase, step.setup, step.leg, indicators, self._all_names)
+        operator_s = time.monotonic() - asked
         self.mover.mount(indicators)
         self.guard.forget()
         self._guard_pending, self._guard_cycle = True, None
         self.journal.append({"type": "setup", "phase": phase, "setup": step.setup,
                              "leg": step.leg, "indicators": indicators,
+                             "operator_s": round(operator_s, 3),
                              "position": None if self.mover.position is None
                              else [float(v) for v in self.mover.position]})
 

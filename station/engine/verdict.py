@@ -35,7 +35,9 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
     """The verdict on round ``ident`` (``previous``: the identification whose
     correction it verifies; None for the first measurement, judged against its
     own noise alone). Significant: beyond k standard errors of both rounds (of
-    the first alone) and beyond converge_mm (orthocal.loop.significant_corrections).
+    the first alone) and beyond converge_mm (orthocal.loop.significant_corrections);
+    after a write-back, where the round cannot show the machine within ``limit``,
+    beyond the noise alone.
     Converged: every axis shown within ``limit`` at 95 % (orthocal.loop.shown_within):
     for a first measurement, a machine within tolerance that nothing is written
     to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
@@ -48,6 +50,15 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
     shown = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
                          target=target)
     verdict = "significant" if sig else "converged"
+    if not sig and previous is not None and any(v > limit for v in shown.values()):
+        # converge_mm spares a correction too small to matter, where the machine can
+        # be shown within it; where it cannot, a correction beyond the noise of both
+        # rounds is what stands between it and "converged": it is written.
+        sig = significant_corrections(
+            ident.parameters, ident.std_errors, 0.0,
+            previous_std_errors=previous.std_errors, dof=ident.std_error_dof,
+            previous_dof=previous.std_error_dof, target=target)
+        verdict = "significant" if sig else verdict
     if not sig and any(v > limit for v in shown.values()):
         seen = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
                             target=target, sign=True)

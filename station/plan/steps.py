@@ -173,6 +173,20 @@ class Plan:
     routes: dict[tuple, list[tuple[float, float, float]]] = field(default_factory=dict)
     start: tuple[float, ...] | None = None
 
+    def deviation_keys(self) -> tuple[list[tuple[str, str, str]], list[list[int]]]:
+        """The deviation keys the plan measures and, per mounted indicator, its rows in
+        the order a cycle visits the stops (for orthocal.design.run_std_errors)."""
+        keys: list[tuple[str, str, str]] = []
+        indicators: list[list[int]] = []
+        for sp in self.setups:
+            for direction in sp.indicators.values():
+                rows = []
+                for posture in sp.order:
+                    rows.append(len(keys))
+                    keys.append((posture, sp.leg, direction.lstrip("-")))
+                indicators.append(rows)
+        return keys, indicators
+
     def waypoints_of(self) -> Iterator[tuple[Step, list[tuple[float, float, float]]]]:
         """Each step of the measurement phase with the waypoints of its move (its
         approach point, where it has one, is the move's own: Move.approach)."""

@@ -25,7 +25,7 @@ from station.report.format import (
 )
 from station.report.html import render_html, write_html
 from station.report.io import jsonable, jsonable_value, write_result
-from station.report.text import summary_text
+from station.report.text import mountings_line, summary_text
 
 __all__ = [
     "AXES",
@@ -35,6 +35,7 @@ __all__ = [
     "fmt",
     "jsonable",
     "jsonable_value",
+    "mountings_line",
     "not_converged",
     "param_plain",
     "render_html",

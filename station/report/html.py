@@ -431,7 +431,9 @@ def _info_list(result: Mapping[str, Any]) -> str:
     if timing:
         rows.append(("timing", _e(
             f"wall {format_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "
-            f"{timing.get('readings', '—')} readings, retries: {timing.get('retries', '—')}")))
+            f"{timing.get('readings', '—')} readings, retries: {timing.get('retries', '—')}"
+            + (f"; {timing['mountings']} mountings, {timing.get('operator_s', 0):.0f} s at the "
+               "machine" if isinstance(timing.get("mountings"), int) else ""))))
     guard = as_dict(result.get("plunger_guard"))
     recovered = [r for r in guard.get("recovered") or [] if isinstance(r, dict)]
     if recovered:

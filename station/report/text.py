@@ -82,6 +82,27 @@ def headline(result: Mapping[str, Any]) -> str:
     return head
 
 
+def mountings_line(expected: Mapping[str, int]) -> str:
+    """What the operator will be asked for (station.engine.closed_loop.mountings_expected)."""
+    return (f"mountings: expect {expected['usual']} (one write-back, verified at once); "
+            f"{expected['fewest']} if the machine is within tolerance, up to "
+            f"{expected['most']} if every round takes all its passes")
+
+
+def timing_line(result: Mapping[str, Any]) -> str | None:
+    """The mountings the run took and the operator's time at them, or None (an older
+    result without them)."""
+    timing = as_dict(result.get("timing"))
+    count = num(timing.get("mountings"))
+    if count is None:
+        return None
+    operator = num(timing.get("operator_s"))
+    took = f", {operator:.0f} s at the machine" if operator is not None else ""
+    wall = num(timing.get("wall_s"))
+    total = f"; the whole run {wall:.0f} s" if wall is not None else ""
+    return f"  mountings     {int(count)}{took}{total}"
+
+
 def summary_text(result: dict) -> str:
     """A few lines for the end of a run: status, identified values, residual,
     offsets written, verification before → after, where the report is."""
@@ -144,6 +165,8 @@ def summary_text(result: dict) -> str:
         lines.append("  not written   tilts, gaps and ΔL (a controller's offsets take only Δρ; "
                      "its kinematics can take the rest, model.json)")
     lines += guard_lines(result)
+    if (line := timing_line(result)) is not None:
+        lines.append(line)
     from station.report import rounds
 
     lines += rounds.summary_lines(result)
