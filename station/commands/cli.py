@@ -33,6 +33,7 @@ _COMMANDS = {
     "probe": "station.commands.probe:main",
     "init": "station.commands.init:main",
     "design": "station.commands.design:main",
+    "schema": "station.commands.schema:main",
 }
 
 
@@ -279,6 +280,10 @@ def build_parser() -> argparse.ArgumentParser:
     design.add_argument("--rho-max", type=float, default=60.0)
     design.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     design.add_argument("--debug", action="store_true", help="show tracebacks of failures")
+
+    schema = sub.add_parser(
+        "schema", help="print the JSON Schema of result.json or of a journal.jsonl line")
+    schema.add_argument("kind", choices=["result", "journal"])
     return parser
 
 

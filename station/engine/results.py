@@ -16,6 +16,7 @@ from orthocal.numbers import finite
 from station.config import StationConfig
 from station.engine.statistics import Measurement, split_key
 from station.engine.writeback import WritebackOutcome
+from station.record.result import SCHEMA_VERSION
 
 
 def ident_json(ident: Any) -> dict[str, Any]:
@@ -192,6 +193,8 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
                 started_iso: str) -> dict[str, Any]:
     m = config.machine
     return {
+        # the record's schema (station.record.result; orthocal schema result)
+        "schema_version": SCHEMA_VERSION,
         "run_dir": str(run_dir), "status": "failed", "message": None,
         "started": started_iso, "finished": None, "duration_s": None,
         "simulated": sim is not None,

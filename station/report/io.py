@@ -16,10 +16,10 @@ from station.report.format import dev_keys
 # Key order of result.json: the schema's order, so that a person opening the file
 # finds status and identified values at the top, not buried alphabetically.
 _TOP_ORDER = (
-    "run_dir", "status", "message", "started", "finished", "duration_s", "simulated",
-    "simulation", "machine", "model", "method", "model_selection", "identified", "std_errors",
-    "correlation", "residual_rms_mm", "sigma_mm", "condition_number", "noise_mm", "fit_ok",
-    "fit_note",
+    "schema_version", "run_dir", "status", "message", "started", "finished", "duration_s",
+    "simulated", "simulation", "machine", "model", "method", "model_selection", "identified",
+    "std_errors", "correlation", "residual_rms_mm", "sigma_mm", "condition_number", "noise_mm",
+    "fit_ok", "fit_note",
     "deviations", "deviations_rms_mm", "setups", "stands", "offsets_before", "offsets_written",
     "writeback", "verification", "iterations", "converged", "loop", "remaining", "accuracy",
     "timing",

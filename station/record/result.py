@@ -1,0 +1,145 @@
+"""result.json as pydantic models (docs/design.md, "The run record").
+
+Every top-level field is declared (a field the engine adds and this model does not
+know fails the test that validates real runs against it); sections whose inner
+shape is documented elsewhere (accuracy, the budget, model selection, lost motion,
+the plunger guard) are typed as objects here and described in docs/design.md.
+Floats that were NaN or infinite are written as null."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+#: Bumped when a field changes meaning or goes away (adding one does not).
+SCHEMA_VERSION = 1
+
+Axis3 = dict[str, float | None]  # {"x": …, "y": …, "z": …}, mm
+Params = dict[str, float | None]  # parameter name (docs/model.md) → value
+
+
+class _Open(BaseModel):
+    """A section whose further fields are documented, not yet modelled."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class Timing(_Open):
+    wall_s: float = Field(description="the run's wall time in this process, s")
+    moves: int
+    readings: int
+    retries: int
+    outliers_rejected: int
+    mountings: int | None = Field(None, description="setup records: the operator mounted gauges")
+    operator_s: float | None = Field(None, description="time waited at the mounting prompts, s")
+
+
+class Loop(_Open):
+    stopped: Literal["converged", "max_iterations", "not-converged", "refused", "declined",
+                     "failed", "skipped", "not-verified"]
+    detail: str | None = None
+    write_backs: int
+    max_iterations: int
+    converge_mm: float
+    converged_within_mm: float | None = None
+    extra_passes: int = 0
+    max_extra_passes: int = 0
+
+
+class Writeback(_Open):
+    status: str
+    reason: str | None = None
+    round: int | None = None
+
+
+class Iteration(_Open):
+    phase: str = Field(description='"m", then "v", "v2", … one per write-back')
+    model: str
+    identified: Params
+    std_errors: Params
+    std_errors_dof: float | None = None
+    offsets_written: Axis3 | None = None
+    writeback: str | None = None
+    verdict: Literal["significant", "converged", "suspected", "unproven"] | None = None
+    significant: list[str] = []
+    passes: list[str] | None = None
+
+
+class Remaining(_Open):
+    phase: str
+    round: int
+    estimate: Params
+    total: Params
+    std_errors: Params
+    std_errors_dof: float | None = None
+    coverage_factor_95: float | None = None
+
+
+class Setup(_Open):
+    leg: str
+    indicators: dict[str, str]
+    cycles_used: int
+    cycles_max: int
+    repeats: int
+    flagged: bool
+    spread_mm: float | None = None
+
+
+class Machine(_Open):
+    leg_length: float
+    rho_min: float
+    rho_max: float
+
+
+class RunResult(BaseModel):
+    """result.json: one calibration run, as written at its end (or when it stopped)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    schema_version: Literal[1] | None = Field(
+        None, description="absent in results written before the schema")
+    run_dir: str
+    status: Literal["ok", "failed", "refused", "aborted"]
+    message: str | None
+    started: str
+    finished: str | None
+    duration_s: float | None
+    simulated: bool
+    simulation: dict[str, Any] | None
+    machine: Machine
+    model: str
+    method: Literal["linear", "nonlinear"]
+    model_selection: dict[str, Any] | None = None
+    identified: Params
+    std_errors: Params
+    std_errors_dof: float | None = None
+    correlation: dict[str, Any] | None = None
+    residual_rms_mm: float | None = None
+    sigma_mm: float | None = None
+    condition_number: float | None = None
+    noise_mm: float | None = None
+    noise_floor_mm: float | None = None
+    fit_ok: bool | None = None
+    fit_note: str | None = None
+    deviations: dict[str, dict[str, Any]] | None = None
+    deviations_rms_mm: float | None = None
+    not_identifiable: list[str] | None = None
+    setups: list[Setup] | None = None
+    stands: dict[str, dict[str, Any]] | None = None
+    offsets_before: Axis3 | None
+    offsets_written: Axis3 | None
+    offsets_final: Axis3 | None = None
+    offsets_held_by: Literal["controller", "station"] | None = None
+    offsets_note: str | None = None
+    writeback: Writeback | None
+    verification: dict[str, Any] | None
+    iterations: list[Iteration] | None = None
+    converged: bool | None = None
+    loop: Loop | None = None
+    remaining: Remaining | None = None
+    accuracy: dict[str, Any] | None = None
+    uncertainty_budget: dict[str, Any] | None = None
+    reversal: dict[str, Any] | None = None
+    plunger_guard: dict[str, Any] | None = None
+    timing: Timing | None = None

@@ -1,0 +1,37 @@
+"""The JSON Schema of the run's documents, as ``orthocal schema`` prints it and as the
+package ships it (station/record/schemas/*.schema.json, kept equal by a test)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from station.record.journal import RECORD
+from station.record.result import SCHEMA_VERSION, RunResult
+
+KINDS = ("result", "journal")
+SHIPPED = Path(__file__).parent / "schemas"
+
+
+def json_schema(kind: str) -> dict[str, Any]:
+    """The JSON Schema (2020-12) of ``kind``: "result" (result.json) or "journal" (one
+    line of journal.jsonl)."""
+    if kind == "result":
+        body = RunResult.model_json_schema()
+    elif kind == "journal":
+        body = RECORD.json_schema()
+        body["title"] = "JournalRecord"
+    else:
+        raise ValueError(f"schema: one of {', '.join(KINDS)}, got {kind!r}")
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema",
+            "$id": f"https://orthocal.invalid/schema/{kind}/v{SCHEMA_VERSION}",
+            "schema_version": SCHEMA_VERSION, **body}
+
+
+def dumps(kind: str) -> str:
+    return json.dumps(json_schema(kind), indent=2, ensure_ascii=False, sort_keys=True) + "\n"
+
+
+def shipped(kind: str) -> str:
+    return (SHIPPED / f"{kind}.schema.json").read_text(encoding="utf-8")

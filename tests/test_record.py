@@ -1,0 +1,73 @@
+"""The run's record has a schema (station.record): the one we ship is the one the
+models make, and real runs' result.json and journal lines validate against it with
+an independent validator (jsonschema), as another tool reading them would."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from builders import simulated
+from jsonschema import Draft202012Validator
+
+from station.commands import run as cmd_run
+from station.commands.cli import main
+from station.record import schema
+
+GOLDEN = Path(__file__).parent / "data" / "golden_run"
+
+
+def validator(kind: str) -> Draft202012Validator:
+    doc = json.loads(schema.shipped(kind))
+    Draft202012Validator.check_schema(doc)
+    return Draft202012Validator(doc)
+
+
+def errors(kind: str, doc: dict[str, Any]) -> list[str]:
+    return [f"{'/'.join(map(str, e.absolute_path))}: {e.message}"
+            for e in validator(kind).iter_errors(doc)]
+
+
+@pytest.mark.parametrize("kind", schema.KINDS)
+def test_the_shipped_schema_is_the_models(kind: str, capsys) -> None:
+    # after changing a model: python -m station schema KIND > station/record/schemas/...
+    assert schema.shipped(kind) == schema.dumps(kind)
+    assert main(["schema", kind]) == 0
+    assert capsys.readouterr().out == schema.shipped(kind)
+    assert json.loads(schema.shipped(kind))["schema_version"] == 1
+
+
+def _check_run_dir(run_dir: Path) -> dict[str, Any]:
+    result = json.loads((run_dir / "result.json").read_text())
+    assert errors("result", result) == []
+    for n, line in enumerate((run_dir / "journal.jsonl").read_text().splitlines()):
+        assert errors("journal", json.loads(line)) == [], n
+    return result
+
+
+def test_a_run_and_a_refused_write_back_validate(tmp_path: Path, capsys) -> None:
+    cmd_run.run(simulated(tmp_path / "ok", seed=3, true_drho=(0.3, -0.2, 0.1)))
+    capsys.readouterr()
+    (ok,) = (tmp_path / "ok").iterdir()
+    assert _check_run_dir(ok)["schema_version"] == 1
+    # a correction beyond max_abs_offset_mm is refused: another status, other records
+    cmd_run.run(simulated(tmp_path / "refused", seed=3, true_drho=(0.3, -0.2, 0.1),
+                          writeback={"max_abs_offset_mm": 0.05}))
+    capsys.readouterr()
+    (refused,) = (tmp_path / "refused").iterdir()
+    assert _check_run_dir(refused)["writeback"]["status"] == "refused"
+
+
+def test_the_golden_run_validates_and_drift_does_not() -> None:
+    result = json.loads((GOLDEN / "result.json").read_text())
+    result.update(run_dir="RUN_DIR", started="WHEN", finished="WHEN", duration_s=1.0)
+    result["timing"].update(wall_s=1.0, operator_s=0.0)
+    assert errors("result", result) == []
+    # a field the models do not declare, or a status they do not know, is caught
+    assert any("unexpected" in e for e in errors("result", {**result, "offsets_new": 1}))
+    assert errors("result", {**result, "status": "fine"})
+    # a journal line of an unknown type, or a reading without values
+    assert errors("journal", {"type": "mystery", "t": 0.0})
+    assert errors("journal", {"type": "reading", "t": 0.0, "stop": "m:0:0:0", "indicator": "A"})
