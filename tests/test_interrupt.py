@@ -331,23 +331,41 @@ def test_kill_9_then_resume_gives_the_uninterrupted_result(
     assert len(cycles) == len(set(cycles))  # a journaled cycle is never measured again
 
 
-def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -> None:
-    out = tmp_path / "runs"
-    proc = spawn([sys.executable, "-m", "station", *run_argv(out, 0.0)], tmp_path)
+def _interrupt_mid_measurement(out: Path, cwd: Path) -> tuple[Proc, Path | None, int]:
+    """A run, and Ctrl-C once its journal holds 9 readings: (the process, its journal,
+    how many readings the journal held when the signal was sent)."""
+    proc = spawn([sys.executable, "-m", "station", *run_argv(out, 0.0)], cwd)
+    journal: Path | None = None
+    sent_at = 0
     try:
         deadline = time.monotonic() + LIMIT_S
-        journal: Path | None = None
         while time.monotonic() < deadline and proc.poll() is None:
             found = list(out.glob("run-*/journal.jsonl"))
-            if found and count_readings(found[0]) >= 9:  # mid-measurement
+            if found and (sent_at := count_readings(found[0])) >= 9:  # mid-measurement
                 journal = found[0]
                 proc.send_signal(signal.SIGINT)
                 break
             time.sleep(0.005)
     finally:
         interrupted = finish(proc)
-    assert journal is not None, interrupted.err
-    assert interrupted.returncode == 1, interrupted.err[-3000:]
+    return interrupted, journal, sent_at
+
+
+def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -> None:
+    for attempt in range(3):
+        out = tmp_path / f"runs{attempt}"
+        interrupted, journal, sent_at = _interrupt_mid_measurement(out, tmp_path)
+        assert journal is not None, interrupted.err
+        total = count_readings(journal)
+        # A loaded machine may starve this test until the run is all but done: a signal
+        # sent with the last stop read (or after) finds nothing left to abort. Sent
+        # earlier, a run that still finishes has ignored Ctrl-C: that fails.
+        late = interrupted.returncode == 0 and total - sent_at <= 2 * 2 * 3
+        if not late:
+            break
+    assert interrupted.returncode == 1, (
+        f"Ctrl-C sent at {sent_at} readings, the run went on to {total}: "
+        + interrupted.err[-2000:])
     run_dir = journal.parent
     assert "Traceback" not in interrupted.err
     (line,) = [ln for ln in interrupted.err.splitlines() if ln.startswith("orthocal: failed")]
