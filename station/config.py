@@ -34,6 +34,9 @@ class _Strict(BaseModel):
 
 
 class MachineConfig(_Strict):
+    # The machine's serial: recorded in every run, its history and its certificate,
+    # and what `orthocal compare` checks before it compares two runs.
+    id: str | None = Field(None, min_length=1, max_length=100)
     leg_length: float = Field(310.25, gt=0, allow_inf_nan=False)
     rho_min: float = Field(-100.0, lt=0, allow_inf_nan=False)
     rho_max: float = Field(60.0, gt=0, allow_inf_nan=False)
@@ -336,6 +339,14 @@ class UncertaintyConfig(_Strict):
         return value
 
 
+class HistoryConfig(_Strict):
+    # Every finished run is recorded here (station.history): a database URL
+    # (sqlite:///…, postgresql://…), or None for history.sqlite beside the run
+    # directories (--out). A store that cannot be written never fails a run.
+    url: str | None = None
+    enabled: bool = True
+
+
 class StationConfig(_Strict):
     machine: MachineConfig = Field(default_factory=MachineConfig)
     controller: ControllerConfig = Field(default_factory=ControllerConfig)
@@ -344,6 +355,7 @@ class StationConfig(_Strict):
     procedure: ProcedureConfig = Field(default_factory=ProcedureConfig)
     writeback: WritebackConfig = Field(default_factory=WritebackConfig)
     uncertainty: UncertaintyConfig = Field(default_factory=UncertaintyConfig)
+    history: HistoryConfig = Field(default_factory=HistoryConfig)
 
     @model_validator(mode="after")
     def _references(self) -> StationConfig:

@@ -137,7 +137,7 @@ class CliOutcome:
 
     @property
     def run_dir(self) -> Path:
-        (run_dir,) = [p for p in self.out_dir.iterdir() if p.is_dir()]
+        (run_dir,) = [p for p in self.out_dir.glob("run-*") if p.is_dir()]
         return run_dir
 
     @property

@@ -59,7 +59,7 @@ def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -
         cmd_run.run(simulated(tmp_path / "runs", seed=3, true_drho=(-2.0, -2.0, -2.0),
                               speed=100.0, hook=short_preload))
     message = str(info.value)
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = list((tmp_path / "runs").glob("run-*"))
     assert "\n" not in message
     assert "plunger guard: indicator A (y) on measurement setup 1 (leg x), move to Π_x^+" \
         in message

@@ -232,7 +232,7 @@ def test_a_reversal_the_overrun_cannot_take_up_is_an_error_that_says_so(tmp_path
     msg = str(info.value)
     assert "joint x reverses by" in msg and "approach_overrun_mm" in msg
     assert "nothing was written" in msg
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = list((tmp_path / "runs").glob("run-*"))
     assert not any(r["type"] == "writeback" for r in read_journal(run_dir / "journal.jsonl"))
 
 

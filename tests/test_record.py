@@ -50,13 +50,13 @@ def _check_run_dir(run_dir: Path) -> dict[str, Any]:
 def test_a_run_and_a_refused_write_back_validate(tmp_path: Path, capsys) -> None:
     cmd_run.run(simulated(tmp_path / "ok", seed=3, true_drho=(0.3, -0.2, 0.1)))
     capsys.readouterr()
-    (ok,) = (tmp_path / "ok").iterdir()
+    (ok,) = (tmp_path / "ok").glob("run-*")
     assert _check_run_dir(ok)["schema_version"] == 1
     # a correction beyond max_abs_offset_mm is refused: another status, other records
     cmd_run.run(simulated(tmp_path / "refused", seed=3, true_drho=(0.3, -0.2, 0.1),
                           writeback={"max_abs_offset_mm": 0.05}))
     capsys.readouterr()
-    (refused,) = (tmp_path / "refused").iterdir()
+    (refused,) = (tmp_path / "refused").glob("run-*")
     assert _check_run_dir(refused)["writeback"]["status"] == "refused"
 
 

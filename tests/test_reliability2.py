@@ -48,7 +48,7 @@ def reference(tmp_path_factory) -> dict[str, Any]:
                           env={**os.environ, "ORTHOCAL_STATE_DIR": str(out / "state")})
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
-    (run_dir,) = (out / "runs").iterdir()
+    (run_dir,) = (out / "runs").glob("run-*")
     result["nvram"] = json.loads((run_dir / "controller_nvram.json").read_text())["offsets_mm"]
     return result
 
@@ -218,7 +218,7 @@ def test_a_full_disk_stops_the_run_and_resume_finishes_it(tmp_path: Path, refere
                           preexec_fn=_limited(20_000))  # plan.json: 13 kB
     assert full.returncode == 1, full.stderr
     assert "Traceback" not in full.stderr and "internal error" not in full.stderr
-    (run_dir,) = out.iterdir()
+    (run_dir,) = out.glob("run-*")
     (line,) = [ln for ln in full.stderr.splitlines() if ln.startswith("orthocal: failed")]
     assert "the disk is full" in line and "was not saved" in line, line
     assert "free some disk space" in line and f"orthocal resume {run_dir}" in line

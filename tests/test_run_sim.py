@@ -22,7 +22,7 @@ from station.rundir.journal import read_journal
 
 
 def only_run_dir(tmp_path: Path) -> Path:
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = list((tmp_path / "runs").glob("run-*"))
     return run_dir
 
 

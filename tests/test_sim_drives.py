@@ -544,7 +544,7 @@ def test_a_run_against_a_sequenced_drive_resumes_with_the_same_drive(
                      drive_delays="0,0.004,0.008", drive_sequence="zyx", hook=keep)
     with pytest.raises(RunFailed, match="alarm 17"):
         cmd_run.run(args)
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = list((tmp_path / "runs").glob("run-*"))
     header = replay(read_journal(run_dir / "journal.jsonl")).header
     assert drive_motion(header["simulation"]) == expected
     capsys.readouterr()

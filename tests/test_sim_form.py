@@ -299,7 +299,7 @@ def test_an_interrupted_run_resumes_with_the_same_bow_and_scales(
                      gauge_scale="0.001,-0.002", hook=keep)
     with pytest.raises(RunFailed, match="alarm 17"):
         cmd_run.run(args)
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = list((tmp_path / "runs").glob("run-*"))
     header = replay(read_journal(run_dir / "journal.jsonl")).header
     assert header["simulation"]["leg_bow_mm"] == [0.004, 0.008, -0.006]
     assert header["simulation"]["gauge_scale"] == [0.001, -0.002]
@@ -327,7 +327,7 @@ def test_a_whole_simulated_run_with_bowed_legs_completes(
     assert result["status"] == "ok", result["message"]
     assert code == (3 if report.not_converged(result) else 0), result["message"]
     assert result["verification"] is not None
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = list((tmp_path / "runs").glob("run-*"))
     header = replay(read_journal(run_dir / "journal.jsonl")).header
     assert header["simulation"]["leg_bow_mm"] == [0.008] * 3
     assert header["simulation"]["gauge_scale"] == [0.001] * 2

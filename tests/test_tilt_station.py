@@ -143,7 +143,7 @@ def test_a_tilted_simulated_run_resumes_on_the_same_tilted_machine(tmp_path, cap
                      noise=0.001, yes=True, hook=alarm_soon)
     with pytest.raises(RunFailed):
         cmd_run.run(args)
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = list((tmp_path / "runs").glob("run-*"))
     capsys.readouterr()
     code = cmd_run.resume(resumed(run_dir, yes=True))
     result = json.loads(capsys.readouterr().out)

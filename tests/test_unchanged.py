@@ -92,7 +92,7 @@ def seeded_run(out: Path) -> Path:
     options = simulated(out, seed=21, true_drho=(1.1, -0.7, 0.4), noise=0.0, procedure=FAST)
     with contextlib.redirect_stdout(io.StringIO()):
         assert cmd_run.run(options) == 0
-    (run_dir,) = list(out.iterdir())
+    (run_dir,) = list(out.glob("run-*"))
     return run_dir
 
 

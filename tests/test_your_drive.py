@@ -127,7 +127,7 @@ def test_offsets_held_by_the_station_resume_roll_back_and_carry_on(
         cmd_run.run(simulated(tmp_path / "runs", seed=3, noise=0.001, true_drho=TRUE,
                               procedure=PROCEDURE, profile=str(GATEWAY_NO_OFFSETS),
                               hook=keep))
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = list((tmp_path / "runs").glob("run-*"))
     records = read_journal(run_dir / "journal.jsonl")
     done = [r for r in records if r["type"] == "writeback" and r["stage"] == "done"]
     assert len(done) == 1  # the first round was written (held) before the alarm

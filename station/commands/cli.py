@@ -34,6 +34,8 @@ _COMMANDS = {
     "init": "station.commands.init:main",
     "design": "station.commands.design:main",
     "schema": "station.commands.schema:main",
+    "history": "station.commands.history:history_main",
+    "compare": "station.commands.history:compare_main",
 }
 
 
@@ -252,6 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
     init.add_argument("--config", metavar="FILE",
                       help="probe the controller (and, without PORTs, the indicator ports) "
                       "of a station config, and write the starter config around them")
+    init.add_argument("--machine-id", metavar="ID", help="the machine's serial ([machine] id)")
     init.add_argument("--debug", action="store_true", help="show tracebacks of failures")
 
     ident = sub.add_parser("identify", help="identify parameters from a READINGS.csv")
@@ -284,6 +287,21 @@ def build_parser() -> argparse.ArgumentParser:
     schema = sub.add_parser(
         "schema", help="print the JSON Schema of result.json or of a journal.jsonl line")
     schema.add_argument("kind", choices=["result", "journal"])
+
+    history = sub.add_parser("history", help="a machine's calibrations, oldest first")
+    history.add_argument("--machine", metavar="ID", help="only runs of [machine] id ID")
+    history.add_argument("--out", default="runs", metavar="RUNS_DIR",
+                         help="where the runs and their history.sqlite are (default runs/)")
+    history.add_argument("--db", metavar="URL", help="a history database URL instead "
+                         "(sqlite:///FILE, postgresql://…), as [history] url")
+    history.add_argument("--rebuild", metavar="RUNS_DIR",
+                         help="record every finished run under RUNS_DIR again first")
+    history.add_argument("--json", action="store_true", help="print one JSON document")
+
+    compare = sub.add_parser("compare", help="what changed between two runs of one machine")
+    compare.add_argument("run_a", metavar="RUN_A", help="the earlier run's directory")
+    compare.add_argument("run_b", metavar="RUN_B", help="the later run's directory")
+    compare.add_argument("--json", action="store_true", help="print one JSON document")
     return parser
 
 

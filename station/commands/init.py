@@ -61,6 +61,15 @@ def _line(key: str, value: Any, comment: str = "") -> str:
     return f"{text.ljust(COMMENT_COLUMN - 1)} # {comment}" if comment else text
 
 
+def _machine_id(args: argparse.Namespace, machine: MachineConfig) -> list[str]:
+    """The machine's serial: recorded in every run and its history, checked by compare."""
+    known = getattr(args, "machine_id", None) or machine.id
+    if known:
+        return [_line("id", known, "the machine's serial (its runs' history)")]
+    return ['# id = "SERIAL"                # EDIT: the machine\'s serial, so that its runs '
+            "form a history (orthocal history, orthocal compare)"]
+
+
 def _defaults(table: type[BaseModel], *keys: tuple[str, str]) -> list[str]:
     """The lines of ``keys`` ((key, comment) pairs) at their defaults."""
     return [_line(key, _default(table, key), comment) for key, comment in keys]
@@ -188,6 +197,7 @@ def render(found: dict[str, Any], args: argparse.Namespace,
         "# Every key is checked: a typo stops `orthocal run` with exit 2 naming the field.",
         "",
         "[machine]                      # EDIT: your machine's nominal geometry (mm)",
+        *_machine_id(args, machine),
         _line("leg_length", machine.leg_length),
         _line("rho_min", machine.rho_min, "Π_i^−: end point at ρmin·e_i"),
         _line("rho_max", machine.rho_max, "Π_i^+: end point at ρmax·e_i"),

@@ -150,7 +150,9 @@ def run(options: RunOptions) -> int:
         say(f"orthocal: {report.mountings_line(_mountings(config, plan))}")
         ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
                   JournalState(), [], now_iso(), checker=checker)
-        return _report(options.json, *execute(ctx))
+        code, result = execute(ctx)
+        record_history(config, result, run_dir.parent)
+        return _report(options.json, code, result)
 
 
 def _mountings(config: Any, plan: Any) -> dict[str, int]:
@@ -179,6 +181,23 @@ def exit_status(result: dict[str, Any], code: int | None = None) -> int:
     if code == EXIT_OK and report.not_converged(result):
         return EXIT_NOT_CONVERGED
     return code
+
+
+def record_history(config: Any, result: dict[str, Any], runs_dir: Path) -> None:
+    """The run into the machine's history (station.history): one line, never a failed
+    run, when the store cannot take it (the run directory is the record)."""
+    if not config.history.enabled:
+        return
+    from station.history.entry import entry_of
+    from station.history.store import HistoryStore, default_url
+
+    url = config.history.url or default_url(runs_dir)
+    try:
+        with HistoryStore(url) as store:
+            store.record(entry_of(report.jsonable(result), config.controller.profile))
+    except Exception as exc:  # any database error: said, and the run stands
+        say(f"orthocal: not recorded in the history at {url} ({type(exc).__name__}: {exc});"
+            f" orthocal history --rebuild {runs_dir} makes it again from the run directories")
 
 
 def _report(as_json: bool, code: int, result: dict[str, Any]) -> int:
@@ -232,7 +251,9 @@ def resume(options: ResumeOptions) -> int:
         started = state.header.get("started") or now_iso()
         ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
                   state, records, started, checker=checker)
-        return _report(options.json, *execute(ctx))
+        code, result = execute(ctx)
+        record_history(config, result, run_dir.parent)
+        return _report(options.json, code, result)
 
 
 def _held_offsets(config: Any, records: list[dict[str, Any]]) -> Any:

@@ -413,7 +413,8 @@ def _info_list(result: Mapping[str, Any]) -> str:
         ("finished", _e(format_when(result.get("finished")))),
         ("duration", _e(format_duration(result.get("duration_s", timing.get("wall_s"))))),
         ("machine", _e(
-            f"leg length L = {fmt(machine.get('leg_length'), 2)} mm, joint stroke "
+            (f"{machine['id']}: " if machine.get("id") else "")
+            + f"leg length L = {fmt(machine.get('leg_length'), 2)} mm, joint stroke "
             f"ρmin = {fmt(machine.get('rho_min'), 1)} mm … ρmax = "
             f"{fmt(machine.get('rho_max'), 1)} mm") if machine else "—"),
         ("model", _e(f"{MODEL_TEXT.get(str(result.get('model')), result.get('model', '—'))}"

@@ -1,0 +1,97 @@
+"""``orthocal history`` and ``orthocal compare``: a machine's runs, and what changed
+between two of them (docs/design.md, "Machine history")."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from station.errors import BadInput
+
+
+def _store(args: argparse.Namespace) -> Any:
+    from station.history.store import HistoryStore, default_url
+
+    runs = Path(args.out)
+    url = args.db or default_url(runs)
+    if args.db is None and args.rebuild is None and not (runs / "history.sqlite").exists():
+        raise BadInput(f"--out: no history in {runs} (history.sqlite); runs record there "
+                       "as they finish, or make it with --rebuild RUNS_DIR")
+    try:
+        return HistoryStore(url)
+    except Exception as exc:  # a bad URL or an unreachable server: one line
+        raise BadInput(f"--db: cannot open {url} ({type(exc).__name__}: {exc})") from None
+
+
+def _um(value: float | None) -> str:
+    return "—" if value is None else f"{1000 * value:+.1f}"
+
+
+def history_main(args: argparse.Namespace) -> int:
+    with _store(args) as store:
+        if args.rebuild is not None:
+            count = store.rebuild(Path(args.rebuild))
+            print(f"orthocal: history rebuilt from {count} run(s) in {args.rebuild}",
+                  file=sys.stderr)
+        entries = store.entries(args.machine)
+    if args.json:
+        print(json.dumps({"machine_id": args.machine, "runs": entries}, indent=2))
+        return 0
+    print(f"{'started':<26} {'machine':<12} {'state':<14} as found e = Δρ − o (µm) x, y, z"
+          f"   tool after (µm RMS)   run")
+    for e in entries:
+        found = (e.get("as_found") or {}).get("joint_error_mm") or {}
+        state = e.get("stopped") or e.get("status") or "—"
+        tool = e.get("tool_after_rms_mm")
+        print(f"{e.get('started') or '—':<26} {e.get('machine_id') or '—':<12} {state:<14} "
+              + ", ".join(_um((found.get(a) or {}).get("value_mm")) for a in "xyz")
+              + f"   {'—' if tool is None else f'{1000 * tool:.1f}'}   {e['run_dir']}")
+    if not entries:
+        print("(no runs" + (f" of machine {args.machine!r})" if args.machine else ")"))
+    return 0
+
+
+def _entry_of_dir(run_dir: str) -> dict[str, Any]:
+    from station.history.entry import entry_of
+    from station.history.store import profile_of
+
+    path = Path(run_dir) / "result.json"
+    try:
+        result = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise BadInput(f"{path}: cannot read ({exc.strerror})") from None
+    except ValueError as exc:
+        raise BadInput(f"{path}: not a result document ({exc})") from None
+    if not result.get("finished"):
+        raise BadInput(f"{path}: the run has not finished")
+    return entry_of(result, profile_of(Path(run_dir)))
+
+
+def compare_main(args: argparse.Namespace) -> int:
+    from station.history.compare import Incomparable, compare
+
+    a, b = _entry_of_dir(args.run_a), _entry_of_dir(args.run_b)
+    try:
+        doc = compare(a, b)
+    except Incomparable as exc:
+        raise BadInput(f"compare: {exc}") from None
+    if args.json:
+        print(json.dumps(doc, indent=2))
+        return 0
+    print(f"machine {doc['machine_id']}: A {doc['a']} ({doc['a_state']}) → B {doc['b']} "
+          "(as found)")
+    for axis, c in doc["joint_error_mm"].items():
+        print(f"  joint {axis}  {_um(c['before'])} → {_um(c['after'])} µm: change "
+              f"{_um(c['change'])} ± {_um(c['interval_95']).lstrip('+')} µm at 95 %"
+              + (" (significant)" if c["significant"] else ""))
+    for name, c in doc["layout"].items():
+        scale, unit = (1000.0, "µm") if name.startswith("gap") else (1.0, "mrad")
+        ci = c["interval_95"]
+        print(f"  {name:<8} {c['before'] * scale:+.3f} → {c['after'] * scale:+.3f} {unit}: "
+              f"change {c['change'] * scale:+.3f}"
+              + ("" if ci is None else f" ± {ci * scale:.3f}") + f" {unit}"
+              + (" (significant)" if c["significant"] else ""))
+    return 0

@@ -1,0 +1,64 @@
+"""What changed between two runs of one machine (docs/design.md, "Machine history"):
+A's machine as left against B's as found, per axis in the controller's zero frame
+(station.history.entry), and the tilts and gaps; each change with its standard
+error and whether it stands out at 95 %."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from orthocal import coverage_factor
+
+
+class Incomparable(ValueError):
+    """The two runs are not of one machine set up alike (said in one line)."""
+
+
+def check_comparable(a: Mapping[str, Any], b: Mapping[str, Any]) -> None:
+    for label, entry in (("A", a), ("B", b)):
+        if not entry.get("machine_id"):
+            raise Incomparable(f"run {label} ({entry.get('run_dir')}) names no machine: set "
+                               "[machine] id so that runs of one machine can be compared")
+    if a["machine_id"] != b["machine_id"]:
+        raise Incomparable(f"different machines: A is {a['machine_id']!r}, "
+                           f"B is {b['machine_id']!r}")
+    if a.get("geometry") != b.get("geometry"):
+        raise Incomparable(f"different geometry: A {a.get('geometry')}, B {b.get('geometry')}")
+    if a.get("profile") != b.get("profile"):
+        raise Incomparable(f"different register maps: A {a.get('profile')!r}, "
+                           f"B {b.get('profile')!r}")
+
+
+def _change(before: float, se_a: float | None, after: float, se_b: float | None,
+            dof: float | None) -> dict[str, Any]:
+    change = after - before
+    se = None if se_a is None or se_b is None else math.hypot(se_a, se_b)
+    k = coverage_factor(dof, 0.95)
+    return {"before": before, "after": after, "change": change, "std_error": se,
+            "interval_95": None if se is None else k * se,
+            "significant": None if se is None else abs(change) > k * se}
+
+
+def compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
+    """Changes from history entry ``a`` (earlier) to ``b``: joint errors (A as left, or
+    as found where it left nothing measured, against B as found) and the layout."""
+    check_comparable(a, b)
+    left = a.get("as_left") or a.get("as_found")
+    found = b.get("as_found")
+    joints: dict[str, Any] = {}
+    if left and found:
+        dofs = [d for d in (left.get("dof"), found.get("dof")) if d]
+        dof = min(dofs) if dofs else None
+        for axis, va in left["joint_error_mm"].items():
+            vb = found["joint_error_mm"][axis]
+            joints[axis] = _change(va["value_mm"], va["std_error_mm"], vb["value_mm"],
+                                   vb["std_error_mm"], dof)
+    layout = {name: _change(va["value"], va["std_error"], b["layout"][name]["value"],
+                            b["layout"][name]["std_error"], None)
+              for name, va in (a.get("layout") or {}).items()
+              if name in (b.get("layout") or {})}
+    return {"machine_id": a["machine_id"], "a": a["run_dir"], "b": b["run_dir"],
+            "a_state": "as left" if a.get("as_left") else "as found",
+            "joint_error_mm": joints, "layout": layout}

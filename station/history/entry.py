@@ -1,0 +1,78 @@
+"""One run as a history entry, from its result.json alone (docs/design.md, "Machine
+history").
+
+Δρ depends on the offsets the controller held when it was measured: writing o' for o
+moves it by o' − o (a correction o ← o − Δρ̂ leaves Δρ ≈ 0). What belongs to the
+machine, and can be compared between runs whatever was written in between, is the
+joint error in the controller's zero frame, e = Δρ − o (mm, per axis): as found, from
+the run's statement of Δρ at its start (``remaining.total`` where a verification
+measured after the last write, else the first identification) and its offsets
+before; as left, from the last verification's estimate and the offsets the run left
+(``offsets_final``). Tilts and gaps need no frame: offsets do not move them."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+AXES = ("x", "y", "z")
+
+
+def _num(value: Any) -> float | None:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
+        else None
+
+
+def _frame(drho: Mapping[str, Any], se: Mapping[str, Any], offsets: Mapping[str, Any] | None,
+           dof: Any) -> dict[str, Any] | None:
+    """Per axis e = Δρ − o with Δρ's standard error; None when any is missing."""
+    if not isinstance(offsets, Mapping):
+        return None
+    out: dict[str, Any] = {}
+    for a in AXES:
+        d, s, o = _num(drho.get(f"drho_{a}")), _num(se.get(f"drho_{a}")), _num(offsets.get(a))
+        if d is None or o is None:
+            return None
+        out[a] = {"value_mm": d - o, "std_error_mm": s}
+    return {"joint_error_mm": out, "dof": _num(dof)}
+
+
+def _layout(result: Mapping[str, Any]) -> dict[str, Any]:
+    acc = result.get("accuracy") if isinstance(result.get("accuracy"), Mapping) else {}
+    out: dict[str, Any] = {}
+    for values, errors in (("tilts", "tilt_std_errors"), ("gaps", "gap_std_errors")):
+        got = acc.get(values) if isinstance(acc.get(values), Mapping) else {}
+        ses = acc.get(errors) if isinstance(acc.get(errors), Mapping) else {}
+        for name, value in got.items():
+            if _num(value) is not None:
+                out[name] = {"value": float(value), "std_error": _num(ses.get(name))}
+    return out
+
+
+def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str, Any]:
+    """The history entry of a finished run's ``result`` (its result.json);
+    ``profile``: the register map its controller used (from its config)."""
+    machine = result.get("machine") if isinstance(result.get("machine"), Mapping) else {}
+    rem = result.get("remaining") if isinstance(result.get("remaining"), Mapping) else {}
+    found_drho = rem.get("total") or result.get("identified") or {}
+    found_se = rem.get("std_errors") if rem.get("total") else result.get("std_errors") or {}
+    found_dof = rem.get("std_errors_dof") if rem.get("total") else result.get("std_errors_dof")
+    as_found = _frame(found_drho, found_se or {}, result.get("offsets_before"), found_dof)
+    as_left = None if not rem.get("estimate") else _frame(
+        rem["estimate"], rem.get("std_errors") or {}, result.get("offsets_final"),
+        rem.get("std_errors_dof"))
+    acc = result.get("accuracy") if isinstance(result.get("accuracy"), Mapping) else {}
+    after = acc.get("after") if isinstance(acc.get("after"), Mapping) else {}
+    loop = result.get("loop") if isinstance(result.get("loop"), Mapping) else {}
+    return {
+        "run_dir": str(result.get("run_dir")), "machine_id": machine.get("id"),
+        "started": result.get("started"), "finished": result.get("finished"),
+        "status": result.get("status"), "stopped": loop.get("stopped"),
+        "model": result.get("model"), "converged": bool(result.get("converged")),
+        "geometry": {k: machine.get(k) for k in ("leg_length", "rho_min", "rho_max")},
+        "profile": profile,
+        "offsets_before": result.get("offsets_before"),
+        "offsets_final": result.get("offsets_final"),
+        "as_found": as_found, "as_left": as_left, "layout": _layout(result),
+        "tool_after_rms_mm": _num(after.get("rms_mm")),
+    }

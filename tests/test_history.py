@@ -1,0 +1,121 @@
+"""A machine's history (station.history): every finished run recorded by machine id,
+listed by ``orthocal history``, rebuilt from the run directories, and two runs of one
+machine compared by ``orthocal compare`` with each change's uncertainty; a store
+that cannot be written never fails a run."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from builders import simulated
+
+from station.commands import run as cmd_run
+from station.history.store import DEFAULT_NAME, HistoryStore, default_url
+
+TRUE = (0.4, -0.3, 0.2)
+
+
+def _with(machine_id: str | None, history: dict[str, Any] | None = None) -> Any:
+    def hook(station: Any) -> None:  # what a user writes in [machine] and [history]
+        config = station.config
+
+        def patched() -> dict[str, Any]:
+            data = config()
+            if machine_id is not None:
+                data["machine"] = {**data.get("machine", {}), "id": machine_id}
+            if history is not None:
+                data["history"] = history
+            return data
+        station.config = patched
+    return hook
+
+
+def _run(out: Path, capsys, machine_id: str | None, true_drho=TRUE, seed: int = 4,
+         history: dict[str, Any] | None = None) -> dict[str, Any]:
+    code = cmd_run.run(simulated(out, seed=seed, noise=0.001, true_drho=true_drho,
+                                 mount_error=0.0, hook=_with(machine_id, history)))
+    result = json.loads(capsys.readouterr().out)
+    assert code in (0, 3) and result["status"] == "ok", result.get("message")
+    return result
+
+
+def orthocal(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "station", *argv], cwd=cwd,
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_runs_are_recorded_listed_and_rebuilt(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "runs"
+    a = _run(out, capsys, "OG-0042")
+    b = _run(out, capsys, "OG-0042", seed=5)
+    other = _run(out, capsys, "OG-0007", seed=6)
+    assert a["machine"]["id"] == "OG-0042"
+    with HistoryStore(default_url(out)) as store:
+        mine = store.entries("OG-0042")
+        assert [e["run_dir"] for e in mine] == [a["run_dir"], b["run_dir"]]
+        assert [e["run_dir"] for e in store.entries()] == \
+            [a["run_dir"], b["run_dir"], other["run_dir"]]
+    listed = orthocal("history", "--out", str(out), "--machine", "OG-0042", "--json",
+                      cwd=tmp_path)
+    assert listed.returncode == 0, listed.stderr
+    doc = json.loads(listed.stdout)
+    assert [e["run_dir"] for e in doc["runs"]] == [a["run_dir"], b["run_dir"]]
+    found = doc["runs"][0]["as_found"]["joint_error_mm"]
+    # the machine's joint error in the controller's zero frame: Δρ − o, o = 0 here
+    for axis, true in zip("xyz", TRUE, strict=True):
+        assert abs(found[axis]["value_mm"] - true) < 5 * found[axis]["std_error_mm"] + 0.001
+    (out / DEFAULT_NAME).unlink()  # the run directories are the record
+    rebuilt = orthocal("history", "--out", str(out), "--rebuild", str(out), "--json",
+                       cwd=tmp_path)
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    assert len(json.loads(rebuilt.stdout)["runs"]) == 3
+    text = orthocal("history", "--out", str(out), cwd=tmp_path)
+    assert text.returncode == 0 and "OG-0007" in text.stdout and "OG-0042" in text.stdout
+
+
+def test_compare_finds_drift_and_not_noise(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "runs"
+    a = _run(out, capsys, "OG-1")
+    same = _run(out, capsys, "OG-1", seed=5)
+    moved = _run(out, capsys, "OG-1", seed=6, true_drho=(TRUE[0] + 0.02, TRUE[1], TRUE[2]))
+    unchanged = orthocal("compare", a["run_dir"], same["run_dir"], "--json", cwd=tmp_path)
+    assert unchanged.returncode == 0, unchanged.stderr
+    for axis, c in json.loads(unchanged.stdout)["joint_error_mm"].items():
+        # the same machine: the change is noise (4 standard errors: 1 in 16 000)
+        assert abs(c["change"]) < 4 * c["std_error"], (axis, c)
+    drift = json.loads(orthocal("compare", a["run_dir"], moved["run_dir"], "--json",
+                                cwd=tmp_path).stdout)["joint_error_mm"]
+    assert drift["x"]["significant"] and abs(drift["x"]["change"] - 0.02) < 0.003
+    assert abs(drift["y"]["change"]) < 4 * drift["y"]["std_error"]
+    said = orthocal("compare", a["run_dir"], moved["run_dir"], cwd=tmp_path).stdout
+    assert "joint x" in said and "(significant)" in said
+
+
+def test_compare_refuses_other_machines_in_one_line(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "runs"
+    a = _run(out, capsys, "OG-1")
+    b = _run(out, capsys, "OG-2", seed=5)
+    anonymous = _run(out, capsys, None, seed=6)
+    for other, words in ((b, "different machines"), (anonymous, "names no machine")):
+        refused = orthocal("compare", a["run_dir"], other["run_dir"], cwd=tmp_path)
+        assert refused.returncode == 2 and words in refused.stderr
+        assert len(refused.stderr.strip().splitlines()) == 1 and "Traceback" not in refused.stderr
+    missing = orthocal("compare", a["run_dir"], str(tmp_path / "nowhere"), cwd=tmp_path)
+    assert missing.returncode == 2 and "cannot read" in missing.stderr
+
+
+def test_a_store_that_cannot_be_written_never_fails_the_run(tmp_path: Path, capsys) -> None:
+    url = f"sqlite:///{tmp_path / 'no' / 'such' / 'dir' / 'h.sqlite'}"
+    code = cmd_run.run(simulated(tmp_path / "runs", seed=4, noise=0.001, true_drho=TRUE,
+                                 mount_error=0.0, hook=_with("OG-1", {"url": url})))
+    captured = capsys.readouterr()
+    assert code in (0, 3) and json.loads(captured.out)["status"] == "ok"
+    assert "not recorded in the history" in captured.err and "--rebuild" in captured.err
+    off = cmd_run.run(simulated(tmp_path / "off", seed=4, noise=0.001, true_drho=TRUE,
+                                mount_error=0.0, hook=_with("OG-1", {"enabled": False})))
+    capsys.readouterr()
+    assert off in (0, 3) and not (tmp_path / "off" / DEFAULT_NAME).exists()
