@@ -36,6 +36,7 @@ _COMMANDS = {
     "schema": "station.commands.schema:main",
     "history": "station.commands.history:history_main",
     "compare": "station.commands.history:compare_main",
+    "export": "station.commands.history:export_main",
 }
 
 
@@ -302,6 +303,15 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("run_a", metavar="RUN_A", help="the earlier run's directory")
     compare.add_argument("run_b", metavar="RUN_B", help="the later run's directory")
     compare.add_argument("--json", action="store_true", help="print one JSON document")
+
+    export = sub.add_parser("export", help="a run's final offsets in a controller's terms")
+    export.add_argument("run_dir", metavar="RUN_DIR")
+    export.add_argument("--to", choices=["linuxcnc", "csv"], required=True)
+    export.add_argument("--ini", metavar="FILE", help="the machine's LinuxCNC INI (its "
+                        "HOME_OFFSETs: the export writes the new value beside the old)")
+    export.add_argument("--joints", default="0,1,2", metavar="I,J,K",
+                        help="the LinuxCNC joints of axes x,y,z (default 0,1,2)")
+    export.add_argument("--out", metavar="FILE", help="write here instead of stdout")
     return parser
 
 

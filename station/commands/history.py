@@ -95,3 +95,39 @@ def compare_main(args: argparse.Namespace) -> int:
               + ("" if ci is None else f" ± {ci * scale:.3f}") + f" {unit}"
               + (" (significant)" if c["significant"] else ""))
     return 0
+
+
+def export_main(args: argparse.Namespace) -> int:
+    from station.history.export import ExportError, csv_lines, linuxcnc
+
+    path = Path(args.run_dir) / "result.json"
+    try:
+        result = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise BadInput(f"{path}: cannot read ({exc.strerror})") from None
+    except ValueError as exc:
+        raise BadInput(f"{path}: not a result document ({exc})") from None
+    try:
+        if args.to == "csv":
+            text = csv_lines(result)
+        else:
+            if args.ini is None:
+                raise BadInput("--ini: LinuxCNC takes HOME_OFFSET as a value, not a "
+                               "correction; give the machine's INI file")
+            try:
+                ini_text = Path(args.ini).read_text(encoding="utf-8")
+            except OSError as exc:
+                raise BadInput(f"--ini: cannot read {args.ini} ({exc.strerror})") from None
+            joints = [int(j) for j in args.joints.split(",")]
+            if len(joints) != 3:
+                raise BadInput(f"--joints: three joint numbers for x,y,z, got {args.joints}")
+            text = linuxcnc(result, ini_text, joints, source=str(args.ini))
+    except ExportError as exc:
+        raise BadInput(str(exc)) from None
+    except ValueError as exc:
+        raise BadInput(f"--joints: {exc}") from None
+    if args.out:
+        Path(args.out).write_text(text, encoding="utf-8")
+    else:
+        sys.stdout.write(text)
+    return 0

@@ -1,0 +1,104 @@
+"""A run's final offsets in a controller's own terms (docs/design.md, "Machine
+history", export). Pure: from result.json (and a LinuxCNC INI's text) to text.
+
+The station's convention (the register map's ``offset_convention``): a commanded ρ_i
+puts the carriage at ρ_i + o_i. LinuxCNC's ``[JOINT_n] HOME_OFFSET`` is the joint
+position it assigns to the home switch, so a carriage commanded to ρ sits at
+switch + ρ − HOME_OFFSET: raising o by Δo is lowering HOME_OFFSET by Δo. The export
+writes the new value beside the old from the machine's own INI, never the
+correction alone, which a person would add with the sign left to guess."""
+
+from __future__ import annotations
+
+import configparser
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+AXES = ("x", "y", "z")
+
+
+class ExportError(ValueError):
+    """What the export cannot do, in one line naming the field or section."""
+
+
+def offset_changes(result: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
+    """Per axis (offset before, offset the run left), mm."""
+    before, final = result.get("offsets_before"), result.get("offsets_final")
+    if not isinstance(before, Mapping) or not isinstance(final, Mapping):
+        raise ExportError("result.json: the run states no offsets_before/offsets_final "
+                          "(it stopped before reading the controller)")
+    return {a: (float(before[a]), float(final[a])) for a in AXES}
+
+
+def _reversal(result: Mapping[str, Any]) -> dict[str, tuple[float, float | None]]:
+    """Per axis the measured reversal and its standard error (mm), where measured."""
+    rev = result.get("reversal")
+    if not isinstance(rev, Mapping) or not isinstance(rev.get("value_mm"), Mapping):
+        return {}
+    values, ses = rev["value_mm"], rev.get("std_errors_mm") or {}
+    return {a: (float(values[a]), float(ses[a]) if isinstance(ses.get(a), int | float)
+                else None) for a in AXES if isinstance(values.get(a), int | float)}
+
+
+def _backlash_line(value: float, se: float | None) -> str:
+    """BACKLASH where the reversal stands out of its noise (beyond 2 standard errors and
+    positive); otherwise why not, as a comment: a controller must not be told to
+    compensate a dead band the measurement cannot tell from zero."""
+    if se is not None and value > 2.0 * se:
+        return f"BACKLASH = {value:.6f}    # the joint's reversal as measured (ISO 230-2)"
+    shown = f"{value:+.6f}" + ("" if se is None else f" ± {se:.6f}")
+    return f"# BACKLASH not written: the reversal measured {shown} mm is not beyond its noise"
+
+
+def linuxcnc(result: Mapping[str, Any], ini_text: str, joints: Sequence[int] = (0, 1, 2),
+             source: str = "INI") -> str:
+    """The ``[JOINT_n]`` lines of the calibrated HOME_OFFSETs (and BACKLASH where the
+    run measured the joints' reversal), from the machine's INI ``ini_text``."""
+    ini = configparser.ConfigParser(strict=False, interpolation=None,
+                                    inline_comment_prefixes=("#", ";"))
+    ini.optionxform = str  # LinuxCNC's keys are upper case, kept as written
+    try:
+        ini.read_string(ini_text, source=source)
+    except configparser.Error as exc:
+        raise ExportError(f"{source}: not an INI file ({exc.message.splitlines()[0]})") \
+            from None
+    changes = offset_changes(result)
+    reversal = _reversal(result)
+    machine = (result.get("machine") or {}).get("id") or "no [machine] id"
+    lines = [f"# orthocal export for LinuxCNC: machine {machine}, run {result.get('run_dir')}",
+             "# a commanded joint position rho puts the carriage at rho + o (orthocal's o);",
+             "# HOME_OFFSET is the joint position of the home switch, so it moves by -(o change)"]
+    for axis, joint in zip(AXES, joints, strict=True):
+        section = f"JOINT_{joint}"
+        if not ini.has_option(section, "HOME_OFFSET"):
+            raise ExportError(f"{source}: [{section}] has no HOME_OFFSET (joint of axis "
+                              f"{axis}; --joints says which joint drives which axis)")
+        raw = ini.get(section, "HOME_OFFSET")
+        try:
+            old = float(raw)
+        except ValueError:
+            raise ExportError(f"{source}: [{section}] HOME_OFFSET = {raw!r} is not a "
+                              "number") from None
+        before, final = changes[axis]
+        new = old - (final - before)
+        lines += ["", f"[{section}]",
+                  f"HOME_OFFSET = {new:.6f}    # was {old:.6f}; o_{axis} {before:+.6f} -> "
+                  f"{final:+.6f} mm"]
+        if axis in reversal:
+            lines.append(_backlash_line(*reversal[axis]))
+    return "\n".join(lines) + "\n"
+
+
+def csv_lines(result: Mapping[str, Any]) -> str:
+    """One row per axis: the offsets before and after, their change, the reversal."""
+    changes = offset_changes(result)
+    reversal = _reversal(result)
+    machine = (result.get("machine") or {}).get("id") or ""
+    rows = ["axis,offset_before_mm,offset_final_mm,change_mm,reversal_mm,machine_id,run_dir,"
+            "convention"]
+    for axis in AXES:
+        before, final = changes[axis]
+        rev = f"{reversal[axis][0]:.6f}" if axis in reversal else ""
+        rows.append(f"{axis},{before:.6f},{final:.6f},{final - before:+.6f},{rev},{machine},"
+                    f"{result.get('run_dir')},commanded rho puts the carriage at rho + o")
+    return "\n".join(rows) + "\n"
