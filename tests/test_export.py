@@ -3,8 +3,8 @@ beside the old and the sign taken from the conventions, not left to guess."""
 
 from __future__ import annotations
 
+import configparser
 import json
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -27,7 +27,7 @@ HOME_OFFSET = 0
 
 
 def result(**extra: Any) -> dict[str, Any]:
-    return {"run_dir": "/runs/run-1", "machine": {"id": "OG-1"},
+    return {"run_dir": "/runs/run-1", "machine": {"id": "OG-1"}, "offsets_held_by": "station",
             "offsets_before": {"x": 0.1, "y": 0.0, "z": -0.2},
             "offsets_final": {"x": 0.6, "y": -0.3, "z": -0.2},
             "reversal": {"value_mm": {"x": 0.02, "y": 0.0003, "z": 0.0},
@@ -35,7 +35,13 @@ def result(**extra: Any) -> dict[str, Any]:
 
 
 def home_offsets(text: str) -> dict[str, float]:
-    return {m[0]: float(m[1]) for m in re.findall(r"\[(JOINT_\d)\]\nHOME_OFFSET = (\S+)", text)}
+    """As LinuxCNC would read them: configparser, comments stripped."""
+    ini = configparser.ConfigParser(strict=False, interpolation=None,
+                                    inline_comment_prefixes=("#", ";"))
+    ini.optionxform = str
+    ini.read_string(text)
+    return {s: float(ini.get(s, "HOME_OFFSET")) for s in ini.sections()
+            if ini.has_option(s, "HOME_OFFSET")}
 
 
 def test_the_carriage_stays_where_the_station_put_it() -> None:
@@ -53,13 +59,19 @@ def test_the_carriage_stays_where_the_station_put_it() -> None:
                 rho + r["offsets_final"][a] + c[a], abs=1e-9)
 
 
-def test_linuxcnc_writes_old_beside_new_and_backlash_only_where_measured() -> None:
+def test_linuxcnc_keeps_the_ini_writes_old_beside_new_and_backlash_when_asked() -> None:
     text = linuxcnc(result(), INI, source="og.ini")
     assert home_offsets(text) == pytest.approx({"JOINT_0": 9.5, "JOINT_1": -2.2,
                                                 "JOINT_2": 0.0})
-    assert "# was 10.000000" in text and "machine OG-1" in text
-    assert "BACKLASH = 0.020000" in text  # 20 standard errors out
-    assert text.count("BACKLASH = ") == 1 and "BACKLASH not written" in text
+    assert "HOME_OFFSET was 10.000000" in text and "machine OG-1" in text
+    assert "MACHINE = og" in text and "TYPE = LINEAR" in text  # the rest as it was
+    assert "BACKLASH" not in text  # not asked for
+    asked = linuxcnc(result(), INI, source="og.ini", backlash=True)
+    assert "BACKLASH = 0.020000" in asked  # 20 standard errors out
+    assert asked.count("BACKLASH = ") == 1 and "BACKLASH not written" in asked
+    # a drive that holds the offsets itself: LinuxCNC must not correct them again
+    with pytest.raises(ExportError, match="correct the machine twice"):
+        linuxcnc(result(offsets_held_by="controller"), INI)
     # joints mapped otherwise: x drives joint 2
     swapped = home_offsets(linuxcnc(result(), INI, joints=(2, 1, 0)))
     assert swapped["JOINT_2"] == pytest.approx(-0.5)

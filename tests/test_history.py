@@ -88,9 +88,12 @@ def test_compare_finds_drift_and_not_noise(tmp_path: Path, capsys) -> None:
         # the same machine: the change is noise (4 standard errors: 1 in 16 000)
         assert abs(c["change"]) < 4 * c["std_error"], (axis, c)
     drift = json.loads(orthocal("compare", a["run_dir"], moved["run_dir"], "--json",
-                                cwd=tmp_path).stdout)["joint_error_mm"]
-    assert drift["x"]["significant"] and abs(drift["x"]["change"] - 0.02) < 0.003
-    assert abs(drift["y"]["change"]) < 4 * drift["y"]["std_error"]
+                                cwd=tmp_path).stdout)["changes"]
+    assert drift["drho_x"]["significant"] and abs(drift["drho_x"]["change_mm"] - 0.02) < 0.003
+    for name in ("drho_y", "drho_z"):
+        assert abs(drift[name]["change_mm"]) < 4 * drift[name]["std_error_mm"]
+    assert {"tilt_yx", "tilt_zx", "tilt_zy"} <= set(drift)  # the layout too
+    assert "change_mrad" in drift["tilt_yx"]
     said = orthocal("compare", a["run_dir"], moved["run_dir"], cwd=tmp_path).stdout
     assert "joint x" in said and "(significant)" in said
 

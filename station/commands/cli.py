@@ -311,7 +311,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "HOME_OFFSETs: the export writes the new value beside the old)")
     export.add_argument("--joints", default="0,1,2", metavar="I,J,K",
                         help="the LinuxCNC joints of axes x,y,z (default 0,1,2)")
-    export.add_argument("--out", metavar="FILE", help="write here instead of stdout")
+    export.add_argument("--backlash", action="store_true", help="LinuxCNC: set BACKLASH "
+                        "from the run's measured reversal, where it stands out of its noise")
+    export.add_argument("--out", metavar="FILE", help="write here instead of stdout (the "
+                        "whole INI, HOME_OFFSETs calibrated, the rest as it was)")
     return parser
 
 

@@ -121,7 +121,8 @@ def export_main(args: argparse.Namespace) -> int:
             joints = [int(j) for j in args.joints.split(",")]
             if len(joints) != 3:
                 raise BadInput(f"--joints: three joint numbers for x,y,z, got {args.joints}")
-            text = linuxcnc(result, ini_text, joints, source=str(args.ini))
+            text = linuxcnc(result, ini_text, joints, source=str(args.ini),
+                            backlash=args.backlash)
     except ExportError as exc:
         raise BadInput(str(exc)) from None
     except ValueError as exc:

@@ -61,4 +61,19 @@ def compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
               if name in (b.get("layout") or {})}
     return {"machine_id": a["machine_id"], "a": a["run_dir"], "b": b["run_dir"],
             "a_state": "as left" if a.get("as_left") else "as found",
-            "joint_error_mm": joints, "layout": layout}
+            "changes": changes(joints, layout), "joint_error_mm": joints, "layout": layout}
+
+
+def changes(joints: dict[str, Any], layout: dict[str, Any]) -> dict[str, Any]:
+    """Per parameter (docs/model.md's names) the change with its unit in the key:
+    ``change_mm``/``change_mrad``, ``expanded_95_…`` and ``significant``. A joint's
+    change is that of Δρ in the controller's zero frame (Δρ − o): the machine's own."""
+    out: dict[str, Any] = {}
+    for axis, c in joints.items():
+        out[f"drho_{axis}"] = {"change_mm": c["change"], "expanded_95_mm": c["interval_95"],
+                               "std_error_mm": c["std_error"], "significant": c["significant"]}
+    for name, c in layout.items():
+        unit = "mm" if name.startswith("gap") else "mrad"
+        out[name] = {f"change_{unit}": c["change"], f"expanded_95_{unit}": c["interval_95"],
+                     f"std_error_{unit}": c["std_error"], "significant": c["significant"]}
+    return out

@@ -11,6 +11,7 @@ correction alone, which a person would add with the sign left to guess."""
 from __future__ import annotations
 
 import configparser
+import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -51,9 +52,50 @@ def _backlash_line(value: float, se: float | None) -> str:
 
 
 def linuxcnc(result: Mapping[str, Any], ini_text: str, joints: Sequence[int] = (0, 1, 2),
-             source: str = "INI") -> str:
-    """The ``[JOINT_n]`` lines of the calibrated HOME_OFFSETs (and BACKLASH where the
-    run measured the joints' reversal), from the machine's INI ``ini_text``."""
+             source: str = "INI", backlash: bool = False) -> str:
+    """The machine's INI ``ini_text`` with each ``[JOINT_n] HOME_OFFSET`` calibrated (the
+    new value, the old in a comment above it) and everything else kept as it was;
+    ``backlash``: BACKLASH too, where the run's reversal stands beyond its noise.
+    Refused where the drive itself holds the offsets the run wrote: the controller
+    would correct the machine twice."""
+    if result.get("offsets_held_by") == "controller" and any(
+            abs(final - before) > 0 for before, final in offset_changes(result).values()):
+        raise ExportError("the drive holds the offsets this run wrote (offsets_held_by = "
+                          "controller): writing them into LinuxCNC as well would correct "
+                          "the machine twice")
+    old = _home_offsets(ini_text, joints, source)
+    changes = offset_changes(result)
+    reversal = _reversal(result) if backlash else {}
+    machine = (result.get("machine") or {}).get("id") or "no [machine] id"
+    edits: dict[str, tuple[str, list[str]]] = {}
+    for axis, joint in zip(AXES, joints, strict=True):
+        before, final = changes[axis]
+        value = old[joint] - (final - before)
+        note = (f"# orthocal: HOME_OFFSET was {old[joint]:.6f}; o_{axis} {before:+.6f} -> "
+                f"{final:+.6f} mm (run {result.get('run_dir')}, machine {machine}; a commanded "
+                "rho puts the carriage at rho + o, so HOME_OFFSET moves by -(o change))")
+        extra = [_backlash_line(*reversal[axis])] if axis in reversal else []
+        edits[f"JOINT_{joint}"] = (f"HOME_OFFSET = {value:.6f}", [note, *extra])
+    out: list[str] = []
+    section = ""
+    for line in ini_text.splitlines():
+        header = re.match(r"\s*\[([^\]]+)\]", line)
+        if header:
+            section = header.group(1).strip()
+        key = re.match(r"\s*(HOME_OFFSET|BACKLASH)\s*=", line)
+        if section in edits and key and key.group(1) == "HOME_OFFSET":
+            value_line, notes = edits[section]
+            out += [notes[0], value_line, *notes[1:]]
+            continue
+        if section in edits and key and key.group(1) == "BACKLASH" and len(edits[section][1]) > 1:
+            out.append(f"# orthocal: replaced {line.strip()}")
+            continue
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def _home_offsets(ini_text: str, joints: Sequence[int], source: str) -> dict[int, float]:
+    """Each joint's HOME_OFFSET in the INI, checked: a section or value missing is said."""
     ini = configparser.ConfigParser(strict=False, interpolation=None,
                                     inline_comment_prefixes=("#", ";"))
     ini.optionxform = str  # LinuxCNC's keys are upper case, kept as written
@@ -62,12 +104,7 @@ def linuxcnc(result: Mapping[str, Any], ini_text: str, joints: Sequence[int] = (
     except configparser.Error as exc:
         raise ExportError(f"{source}: not an INI file ({exc.message.splitlines()[0]})") \
             from None
-    changes = offset_changes(result)
-    reversal = _reversal(result)
-    machine = (result.get("machine") or {}).get("id") or "no [machine] id"
-    lines = [f"# orthocal export for LinuxCNC: machine {machine}, run {result.get('run_dir')}",
-             "# a commanded joint position rho puts the carriage at rho + o (orthocal's o);",
-             "# HOME_OFFSET is the joint position of the home switch, so it moves by -(o change)"]
+    out: dict[int, float] = {}
     for axis, joint in zip(AXES, joints, strict=True):
         section = f"JOINT_{joint}"
         if not ini.has_option(section, "HOME_OFFSET"):
@@ -75,18 +112,11 @@ def linuxcnc(result: Mapping[str, Any], ini_text: str, joints: Sequence[int] = (
                               f"{axis}; --joints says which joint drives which axis)")
         raw = ini.get(section, "HOME_OFFSET")
         try:
-            old = float(raw)
+            out[joint] = float(raw)
         except ValueError:
             raise ExportError(f"{source}: [{section}] HOME_OFFSET = {raw!r} is not a "
                               "number") from None
-        before, final = changes[axis]
-        new = old - (final - before)
-        lines += ["", f"[{section}]",
-                  f"HOME_OFFSET = {new:.6f}    # was {old:.6f}; o_{axis} {before:+.6f} -> "
-                  f"{final:+.6f} mm"]
-        if axis in reversal:
-            lines.append(_backlash_line(*reversal[axis]))
-    return "\n".join(lines) + "\n"
+    return out
 
 
 def csv_lines(result: Mapping[str, Any]) -> str:
