@@ -4,6 +4,7 @@ for the operator on stderr."""
 from __future__ import annotations
 
 import sys
+import threading
 from pathlib import Path
 
 
@@ -48,3 +49,17 @@ def read_input(path: Path, encoding: str = "utf-8") -> str:
 def say(*parts: object) -> None:
     """A line for the operator on stderr (stdout carries the summary or the JSON)."""
     print(*parts, file=sys.stderr, flush=True)
+
+
+#: Set by the command line's Ctrl-C handler (station.commands.cli). The handler also
+#: raises KeyboardInterrupt at once; this flag is the backstop, because CPython runs a
+#: signal's handler wherever the main thread is, and a KeyboardInterrupt raised inside
+#: a finaliser (an object's __del__ run by the garbage collector) is printed and
+#: dropped, and the run would go on. The sequencer checks it before every step.
+INTERRUPTED = threading.Event()
+
+
+def check_interrupted() -> None:
+    """Raise KeyboardInterrupt if Ctrl-C came, even where its first raise was lost."""
+    if INTERRUPTED.is_set():
+        raise KeyboardInterrupt

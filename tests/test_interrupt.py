@@ -363,8 +363,9 @@ def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -
         late = interrupted.returncode == 0 and total - sent_at <= 2 * 2 * 3
         if not late:
             break
+    lost = [ln for ln in interrupted.err.splitlines() if "Exception ignored" in ln]
     assert interrupted.returncode == 1, (
-        f"Ctrl-C sent at {sent_at} readings, the run went on to {total}: "
+        f"Ctrl-C sent at {sent_at} readings, the run went on to {total} ({lost}): "
         + interrupted.err[-2000:])
     run_dir = journal.parent
     assert "Traceback" not in interrupted.err
@@ -386,3 +387,22 @@ def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -
     reference = station_cmd(*run_argv(tmp_path / "reference", 0.0), cwd=tmp_path)
     assert reference.returncode == 0, reference.err
     assert_same(result["identified"], json.loads(reference.out)["identified"], "identified")
+
+
+def test_a_ctrl_c_whose_raise_was_lost_still_stops_the_next_step() -> None:
+    """CPython drops a KeyboardInterrupt raised inside a finaliser; the command line's
+    handler also remembers the Ctrl-C, and the sequencer stops before its next step."""
+    from station.commands.cli import _on_ctrl_c
+    from station.engine.sequencer import Sequencer
+    from station.errors import INTERRUPTED
+    from station.plan.steps import Settle
+
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            _on_ctrl_c(signal.SIGINT, None)
+        assert INTERRUPTED.is_set()
+        seq = object.__new__(Sequencer)  # no devices: the check comes before any
+        with pytest.raises(KeyboardInterrupt):
+            seq._execute("m", Settle(0.0))
+    finally:
+        INTERRUPTED.clear()

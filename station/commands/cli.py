@@ -331,8 +331,28 @@ def _ignore_file_size_signal() -> None:
             pass  # not the main thread (an embedding application): leave its handlers
 
 
+def _on_ctrl_c(signum: int, frame: object) -> None:
+    from station.errors import INTERRUPTED
+
+    INTERRUPTED.set()  # the backstop: see station.errors.INTERRUPTED
+    raise KeyboardInterrupt
+
+
+def _catch_ctrl_c() -> None:
+    """Ctrl-C raises KeyboardInterrupt and is remembered (station.errors.INTERRUPTED),
+    where the default handler would only raise it, and lose it inside a finaliser."""
+    import signal
+
+    try:
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, _on_ctrl_c)
+    except ValueError:
+        pass  # not the main thread (an embedding application): leave its handlers
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     _ignore_file_size_signal()
+    _catch_ctrl_c()
     args = build_parser().parse_args(argv)  # bad arguments: argparse exits 2 with usage
     module_name, func_name = _COMMANDS[args.command].split(":")
     from drivers.errors import DeviceError

@@ -43,7 +43,7 @@ from station.engine.statistics import (
     cycle_std_error,
     reject_outliers,
 )
-from station.errors import RunFailed
+from station.errors import RunFailed, check_interrupted
 from station.plan.checker import MotionChecker
 from station.plan.guard import PlungerGuard
 from station.plan.steps import (
@@ -412,6 +412,7 @@ class Sequencer:
     # --- steps -------------------------------------------------------------------------
 
     def _execute(self, phase: str, step: Step) -> None:
+        check_interrupted()  # a Ctrl-C whose KeyboardInterrupt was lost (station.errors)
         if isinstance(step, Move):
             self._move(step)
         elif isinstance(step, Prompt):
