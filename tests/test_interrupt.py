@@ -104,9 +104,18 @@ class Proc:
     err: str
 
 
+def _default_ctrl_c() -> None:
+    # As a terminal starts a command: Ctrl-C at its default. A process inherits an
+    # ignored SIGINT (and Python then installs no KeyboardInterrupt for it), and a
+    # test worker's disposition is whatever the tests before it left.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # and not blocked
+
+
 def spawn(args: list[str], cwd: Path) -> subprocess.Popen[str]:
     return subprocess.Popen(args, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                            text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                            preexec_fn=_default_ctrl_c)
 
 
 def finish(proc: subprocess.Popen[str], limit_s: float = LIMIT_S) -> Proc:
@@ -365,7 +374,9 @@ def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -
             break
     lost = [ln for ln in interrupted.err.splitlines() if "Exception ignored" in ln]
     assert interrupted.returncode == 1, (
-        f"Ctrl-C sent at {sent_at} readings, the run went on to {total} ({lost}): "
+        f"Ctrl-C sent at {sent_at} readings, the run went on to {total} ({lost}; this "
+        f"worker's SIGINT: {signal.getsignal(signal.SIGINT)}, blocked: "
+        f"{signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, [])}): "
         + interrupted.err[-2000:])
     run_dir = journal.parent
     assert "Traceback" not in interrupted.err
