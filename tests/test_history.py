@@ -11,6 +11,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import pg
+import pytest
 from builders import simulated
 
 from station.commands import run as cmd_run
@@ -122,3 +124,45 @@ def test_a_store_that_cannot_be_written_never_fails_the_run(tmp_path: Path, caps
                                 mount_error=0.0, hook=_with("OG-1", {"enabled": False})))
     capsys.readouterr()
     assert off in (0, 3) and not (tmp_path / "off" / DEFAULT_NAME).exists()
+
+
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def store_url(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory):
+    """The same store code on SQLite and on a real PostgreSQL server (tests/pg.py)."""
+    if request.param == "sqlite":
+        yield default_url(tmp_path_factory.mktemp("sqlite"))
+        return
+    if not pg.available():
+        pytest.skip("no PostgreSQL binaries (initdb, pg_ctl) on this machine")
+    with pg.server() as url:
+        yield url
+
+
+def _entry(run_dir: str, machine: str | None, started: str, **extra: Any) -> dict[str, Any]:
+    return {"run_dir": run_dir, "machine_id": machine, "started": started,
+            "finished": started, "status": "ok", "stopped": "converged", "converged": True,
+            "tool_after_rms_mm": 0.0012, "as_found": {"joint_error_mm": {
+                "x": {"value_mm": 0.4, "std_error_mm": 0.0005}}, "dof": 30.0}, **extra}
+
+
+def test_the_store_on_each_database(store_url: str, tmp_path: Path, capsys) -> None:
+    with HistoryStore(store_url) as store:
+        for entry in store.entries():  # the module's server is shared by its tests
+            assert entry["run_dir"].startswith("/")
+        prefix = f"/{tmp_path.name}"
+        store.record(_entry(f"{prefix}/b", "OG-9", "2026-12-02T10:00:00+00:00"))
+        store.record(_entry(f"{prefix}/a", "OG-9", "2026-11-02T10:00:00+00:00"))
+        store.record(_entry(f"{prefix}/c", "OG-8", "2026-12-01T10:00:00+00:00"))
+        # a resumed run's end replaces its row
+        store.record(_entry(f"{prefix}/b", "OG-9", "2026-12-02T10:00:00+00:00",
+                            status="ok", stopped="not-converged"))
+        mine = [e for e in store.entries("OG-9") if e["run_dir"].startswith(prefix)]
+        assert [e["run_dir"] for e in mine] == [f"{prefix}/a", f"{prefix}/b"]  # oldest first
+        assert mine[1]["stopped"] == "not-converged"
+        assert mine[0]["as_found"]["joint_error_mm"]["x"]["value_mm"] == 0.4  # JSON kept
+    # a whole run recorded there through [history] url, and listed by the command
+    result = _run(tmp_path / "runs", capsys, "OG-PG", history={"url": store_url})
+    listed = orthocal("history", "--db", store_url, "--machine", "OG-PG", "--json",
+                      cwd=tmp_path)
+    assert listed.returncode == 0, listed.stderr
+    assert result["run_dir"] in [e["run_dir"] for e in json.loads(listed.stdout)["runs"]]
