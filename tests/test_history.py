@@ -166,3 +166,35 @@ def test_the_store_on_each_database(store_url: str, tmp_path: Path, capsys) -> N
                       cwd=tmp_path)
     assert listed.returncode == 0, listed.stderr
     assert result["run_dir"] in [e["run_dir"] for e in json.loads(listed.stdout)["runs"]]
+
+
+def test_a_machine_recalibrated_from_the_offsets_it_was_left_with(tmp_path: Path,
+                                                                   capsys) -> None:
+    """The issue's case: one machine calibrated twice into one --out, its x joint
+    drifted 10 µm between the runs, the second run starting from the offsets the first
+    left in the drive (the virtual drive's memory set to them)."""
+    out = tmp_path / "runs"
+    first = _run(out, capsys, "OG-0007")
+    left = [first["offsets_final"][a] for a in "xyz"]
+    drifted = (TRUE[0] + 0.010, TRUE[1], TRUE[2])
+
+    def from_first(station: Any) -> None:
+        _with("OG-0007")(station)
+        station.machine.set_offsets(left)  # the drive kept what the first run wrote
+
+    code = cmd_run.run(simulated(out, seed=5, noise=0.001, true_drho=drifted,
+                                 mount_error=0.0, hook=from_first))
+    second = json.loads(capsys.readouterr().out)
+    assert code in (0, 3) and second["offsets_before"] == pytest.approx(
+        dict(zip("xyz", left, strict=True)), abs=1e-9)
+    listed = json.loads(orthocal("history", "--out", str(out), "--machine", "OG-0007",
+                                 "--json", cwd=tmp_path).stdout)
+    assert [e["run_dir"] for e in listed["runs"]] == [first["run_dir"], second["run_dir"]]
+    compared = orthocal("compare", first["run_dir"], second["run_dir"], "--json",
+                        cwd=tmp_path)
+    assert compared.returncode == 0, compared.stderr
+    changes = json.loads(compared.stdout)["changes"]
+    assert abs(changes["drho_x"]["change_mm"] - 0.010) < 0.004
+    assert changes["drho_x"]["significant"]
+    for name in ("drho_y", "drho_z"):
+        assert abs(changes[name]["change_mm"]) < 0.004, (name, changes[name])
