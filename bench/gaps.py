@@ -21,9 +21,6 @@ straightness stated in ``[uncertainty]``. For every run, from the hidden machine
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
-import json
 import sys
 import tempfile
 import time
@@ -35,9 +32,9 @@ import numpy as np
 # Runnable from a plain checkout, without the editable install.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.runs import run_json
 from orthocal import AXES, GAP_NAMES, TILT_NAMES, Geometry
 from orthocal.accuracy import error_field, optimal_offsets
-from station.commands import run as cmd_run
 from station.commands.options import RunOptions, SimOptions
 
 NOISE_MM = 0.001
@@ -64,10 +61,7 @@ def one_run(seed: int, case: dict[str, Any], objective: str, out: Path) -> dict[
                                         writeback={"objective": objective},
                                         station_hook=hook),
                          out=out, yes=True, json=True)
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
-        code = cmd_run.run(options)
-    result = json.loads(buf.getvalue())
+    code, result = run_json(options)
     result["exit_code"] = code
     return result
 

@@ -16,9 +16,6 @@ with each mounting costed at ``--mount-s`` seconds of the operator's.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -29,8 +26,8 @@ import numpy as np
 # Runnable from a plain checkout, without the editable install.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.runs import run_json
 from orthocal import AXES
-from station.commands import run as cmd_run
 from station.commands.options import RunOptions, SimOptions
 
 
@@ -45,10 +42,7 @@ def one_run(seed: int, noise: float, in_mounting: int | None, out: Path) -> dict
 
     options = RunOptions(sim=SimOptions(seed=seed, noise=noise, station_hook=hook),
                          out=out, yes=True, json=True)
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
-        code = cmd_run.run(options)
-    result = json.loads(buf.getvalue())
+    code, result = run_json(options)
     result["exit_code"] = code
     return result
 

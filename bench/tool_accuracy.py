@@ -20,9 +20,6 @@ wrote, over the same workspace grid the run stated its figures on:
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
-import json
 import sys
 import tempfile
 import time
@@ -34,9 +31,9 @@ import numpy as np
 # Runnable from a plain checkout, without the editable install.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.runs import run_json
 from orthocal import AXES, Geometry
 from orthocal.accuracy import error_field, optimal_offsets
-from station.commands import run as cmd_run
 from station.commands.options import RunOptions, SimOptions
 
 CASES = {"square": (0.0, 0.0, 0.0), "tilted": (0.2, 0.1, -0.15)}
@@ -51,12 +48,10 @@ def one_run(seed: int, tilt: tuple[float, float, float], objective: str,
     options = RunOptions(sim=SimOptions(seed=seed, true_drho=drho, true_tilt=tilt,
                                         noise=NOISE_MM, writeback={"objective": objective}),
                          out=out, yes=True, json=True)
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
-        code = cmd_run.run(options)
+    code, result = run_json(options)
     if code != 0:
-        raise SystemExit(f"seed {seed}: the run failed: {json.loads(buf.getvalue())}")
-    return json.loads(buf.getvalue())
+        raise SystemExit(f"seed {seed}: the run failed: {result}")
+    return result
 
 
 def judge(result: dict[str, Any]) -> dict[str, float]:
