@@ -42,23 +42,22 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
     for a first measurement, a machine within tolerance that nothing is written
     to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
     unproven."""
-    sig = significant_corrections(
-        ident.parameters, ident.std_errors, converge_mm,
+    aim = target if previous else None
+    beyond_noise = significant_corrections(
+        ident.parameters, ident.std_errors, 0.0,
         previous_std_errors=previous.std_errors if previous else None,
         dof=ident.std_error_dof, previous_dof=previous.std_error_dof if previous else None,
-        target=target if previous else None)
+        target=aim)
+    sig = [n for n in beyond_noise
+           if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
     shown = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
                          target=target)
-    verdict = "significant" if sig else "converged"
     if not sig and previous is not None and any(v > limit for v in shown.values()):
         # converge_mm spares a correction too small to matter, where the machine can
         # be shown within it; where it cannot, a correction beyond the noise of both
         # rounds is what stands between it and "converged": it is written.
-        sig = significant_corrections(
-            ident.parameters, ident.std_errors, 0.0,
-            previous_std_errors=previous.std_errors, dof=ident.std_error_dof,
-            previous_dof=previous.std_error_dof, target=target)
-        verdict = "significant" if sig else verdict
+        sig = beyond_noise
+    verdict = "significant" if sig else "converged"
     if not sig and any(v > limit for v in shown.values()):
         seen = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
                             target=target, sign=True)
