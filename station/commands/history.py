@@ -54,17 +54,22 @@ def history_main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _entry_of_dir(run_dir: str) -> dict[str, Any]:
-    from station.history.entry import entry_of
-    from station.history.store import profile_of
-
+def _read_result(run_dir: str) -> tuple[Path, dict[str, Any]]:
+    """RUN_DIR's result.json and its path; bad input said in one line."""
     path = Path(run_dir) / "result.json"
     try:
-        result = json.loads(path.read_text(encoding="utf-8"))
+        return path, json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise BadInput(f"{path}: cannot read ({exc.strerror})") from None
     except ValueError as exc:
         raise BadInput(f"{path}: not a result document ({exc})") from None
+
+
+def _entry_of_dir(run_dir: str) -> dict[str, Any]:
+    from station.history.entry import entry_of
+    from station.history.store import profile_of
+
+    path, result = _read_result(run_dir)
     if not result.get("finished"):
         raise BadInput(f"{path}: the run has not finished")
     return entry_of(result, profile_of(Path(run_dir)))
@@ -100,13 +105,7 @@ def compare_main(args: argparse.Namespace) -> int:
 def export_main(args: argparse.Namespace) -> int:
     from station.history.export import ExportError, csv_lines, linuxcnc
 
-    path = Path(args.run_dir) / "result.json"
-    try:
-        result = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise BadInput(f"{path}: cannot read ({exc.strerror})") from None
-    except ValueError as exc:
-        raise BadInput(f"{path}: not a result document ({exc})") from None
+    _, result = _read_result(args.run_dir)
     try:
         if args.to == "csv":
             text = csv_lines(result)

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-AXES = ("x", "y", "z")
+from orthocal import AXES
 
 
 def _num(value: Any) -> float | None:

@@ -15,7 +15,7 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-AXES = ("x", "y", "z")
+from orthocal import AXES
 
 
 class ExportError(ValueError):
