@@ -97,6 +97,9 @@ def test_a_leftover_below_converge_mm_is_written_where_it_keeps_converged_out_of
     previous = _ident(0.0, 0.1)
     after_write = judge(_ident(1.9, 0.4), previous, 0.002, 0.0025, None)
     assert after_write.verdict == "significant" and after_write.significant == ["drho_x"]
+    # while a further pass of the verification is left, it is measured again first
+    again = judge(_ident(1.9, 0.4), previous, 0.002, 0.0025, None, passes_left=True)
+    assert again.verdict == "suspected" and again.significant == []
     # shown within the limit: converge_mm spares it
     assert judge(_ident(1.5, 0.1), previous, 0.003, 0.0035, None).verdict == "converged"
     # within the noise of both rounds (k·√2·0.5 > 1.9): not written, and said undecided

@@ -25,8 +25,8 @@ is written, a machine within converge_mm shows as converged. Still undecided, th
 loop ends "not-converged", saying why; it never writes what does not stand out of
 both rounds' noise (that would trade one noise for another, and a machine one
 round fixed would be written again). After a write-back, a correction beyond that
-noise but under converge_mm is written where it keeps "converged" out of reach
-(station.engine.verdict.judge).
+noise but under converge_mm is written where, with no pass left, it keeps
+"converged" out of reach (station.engine.verdict.judge).
 
 States (``len(verdicts)``, ``len(writes)``):
 

@@ -223,7 +223,8 @@ class Flow:
         proc = ctx.config.procedure
         count = ctx.devices.controller.offset_resolution_mm()
         judged = verdict.judge(ident, prev, proc.converge_mm,
-                               verdict.converge_limit(proc.converge_mm, count), self.target)
+                               verdict.converge_limit(proc.converge_mm, count), self.target,
+                               passes_left=len(passes) - 1 < proc.max_extra_passes)
         sig = judged.significant
         entry: dict[str, Any] = {
             "phase": phase, "model": ident.model, "identified": fields["identified"],

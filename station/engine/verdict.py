@@ -31,13 +31,13 @@ def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
 
 
 def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
-          target: dict[str, float] | None) -> Verdict:
+          target: dict[str, float] | None, passes_left: bool = False) -> Verdict:
     """The verdict on round ``ident`` (``previous``: the identification whose
     correction it verifies; None for the first measurement, judged against its
     own noise alone). Significant: beyond k standard errors of both rounds (of
     the first alone) and beyond converge_mm (orthocal.loop.significant_corrections);
-    after a write-back, where the round cannot show the machine within ``limit``,
-    beyond the noise alone.
+    after a write-back, where the round cannot show the machine within ``limit`` and
+    no further pass of it is left (``passes_left`` False), beyond the noise alone.
     Converged: every axis shown within ``limit`` at 95 % (orthocal.loop.shown_within):
     for a first measurement, a machine within tolerance that nothing is written
     to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
@@ -52,10 +52,11 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
            if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
     shown = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
                          target=target)
-    if not sig and previous is not None and any(v > limit for v in shown.values()):
+    if not sig and previous is not None and not passes_left and \
+            any(v > limit for v in shown.values()):
         # converge_mm spares a correction too small to matter, where the machine can
-        # be shown within it; where it cannot, a correction beyond the noise of both
-        # rounds is what stands between it and "converged": it is written.
+        # be shown within it; where no further pass can show that, a correction beyond
+        # the noise of both rounds is what stands between it and "converged": written.
         sig = beyond_noise
     verdict = "significant" if sig else "converged"
     if not sig and any(v > limit for v in shown.values()):
