@@ -87,7 +87,7 @@ def judge(result: dict[str, Any], case: dict[str, Any]) -> dict[str, Any]:
         "rounds": [(it.get("model"), it.get("decision") or it.get("verdict"),
                     {n: round(1000 * v, 1) for n, v in (it.get("identified") or {}).items()
                      if n.startswith("drho")}) for it in result.get("iterations", [])],
-        "exit": result["exit_code"],
+        "exit": result["exit_code"], "mountings": result["timing"]["mountings"],
         "gap_err": max((abs(gaps.get(n, 0.0) - t) for n, t in
                         zip(GAP_NAMES, case["gap"], strict=True)), default=float("nan")),
         "tilt_err": max(abs(tilts.get(n, 0.0) - t) for n, t in
@@ -119,7 +119,7 @@ def main() -> None:
                   f"{r['tilt_err']:.3f} mrad; offsets leave ≤ {r['left_um']:.1f} µm; tool "
                   f"after {r['predicted_um']:.1f} µm RMS predicted, {r['true_um']:.1f} true "
                   f"({'within' if ok_tool else 'NOT within'} 10 % + 3 µm), best offsets "
-                  f"{r['best_um']:.1f}; {time.monotonic() - t0:.0f} s")
+                  f"{r['best_um']:.1f}; {r['mountings']} mountings; {time.monotonic() - t0:.0f} s")
             if r["stopped"] != "converged":
                 print(f"    {r['detail']}")
                 for round_ in r["rounds"]:

@@ -31,6 +31,7 @@ from orthocal.calibration import jacobian
 from orthocal.geometry import MODELS, PARAM_NAMES, Geometry
 from orthocal.measurement import Key
 from orthocal.postures import posture_name
+from orthocal.stands import Stands
 
 # Relative singular value below which a combination counts as invisible (as in
 # identification: the worst well-posed case sits near 1/200).
@@ -270,6 +271,37 @@ def search_strokes(
     strokes = tuple(sorted((grid[k] for k in best), reverse=True))
     return Search(strokes, quality(keys_for(strokes, legs, geometry), geometry, model),
                   len(grid))
+
+
+def drho_error_parts(keys: Sequence[Key], geometry: Geometry, model: str, params,
+                     deviation_se: float, stand_sd: float,
+                     stands: Stands | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The standard error of Δρ̂ (x, y, z) from the rows ``keys`` (default: one
+    mounting of their gauges), split into (the gauges' noise part, the stands'
+    part), in mm.
+
+    ``deviation_se``: the standard error of each row (a deviation's mean over
+    the mounting's cycles, or one cycle's); ``stand_sd``: each stand's SD about
+    L/2; ``stands``: which rows share a stand (orthocal.stands, its ``mounts``).
+    The fit is the station's, generalised least squares with the stands as
+    random effects, covariance (Jᵀ·V⁻¹·J)⁻¹ with V = se²·I + σ_M²·J_M·J_Mᵀ, linear
+    at the machine ``params`` (12-vector: the stands' columns grow with the legs'
+    slopes, docs/model.md, "Where the indicator plane is"). The noise part is
+    se·(JᵀJ)^(-1/2) (the gains of :func:`quality`); more cycles in the mounting
+    shrink it, only another mounting the stands' part."""
+    from orthocal.identification import exact_jacobian
+    from orthocal.stands import incidence, stand_jacobian
+
+    keys = list(keys)
+    J = exact_jacobian(keys, geometry, params, model, [0.0] * len(keys))
+    _, S = incidence(keys, stands or Stands())
+    J_m = stand_jacobian(keys, geometry, params, S)
+    drho = [k for k, n in enumerate(PARAM_NAMES[c] for c in MODELS[model])
+            if n.startswith("drho")]
+    noise = deviation_se * np.sqrt(np.diag(np.linalg.inv(J.T @ J)))[drho]
+    V = deviation_se**2 * np.eye(len(keys)) + stand_sd**2 * (J_m @ J_m.T)
+    total = np.sqrt(np.diag(np.linalg.inv(J.T @ np.linalg.solve(V, J))))[drho]
+    return noise, np.sqrt(np.maximum(total**2 - noise**2, 0.0))
 
 
 #: Where a second gauge plane may stand on each leg, as the fraction of the leg

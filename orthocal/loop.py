@@ -146,6 +146,37 @@ def shown_within(parameters: Mapping[str, float], std_errors: Mapping[str, float
     return out
 
 
+def joined_with_previous(values: Mapping[str, float], std_errors: Mapping[str, float | None],
+                         previous: Mapping[str, float], previous_std_errors:
+                         Mapping[str, float | None], moved: Mapping[str, float],
+                         k: float) -> tuple[dict[str, float], dict[str, float | None]]:
+    """A verification's Δρ̂ joined with what the round before it knew of the same
+    joints: that round's Δρ̂ moved by the offsets written since (``moved``, mm per
+    writable name: the write-back read back, o_new − o_old, which moves Δρ by as
+    much). Two independent measurements of one quantity, per axis by inverse
+    variance: se² = 1/(1/se² + 1/se_prev²). An axis whose two disagree beyond ``k``
+    standard errors of their difference is not joined: the write did not move the
+    joint as written, or a round's model is wrong, and the verification alone is
+    what the machine shows. An axis without a standard error in either: this one's."""
+    out_v: dict[str, float] = {}
+    out_se: dict[str, float | None] = {}
+    for name in WRITABLE:
+        if name not in values:
+            continue
+        v, se = float(values[name]), finite(std_errors.get(name))
+        out_v[name], out_se[name] = v, se
+        prev_se = finite(previous_std_errors.get(name))
+        if se is None or prev_se is None or name not in previous or se <= 0 or prev_se <= 0:
+            continue
+        p = float(previous[name]) + float(moved.get(name, 0.0))
+        if abs(v - p) > k * math.hypot(se, prev_se):
+            continue
+        w, w_p = 1.0 / se**2, 1.0 / prev_se**2
+        out_v[name] = (w * v + w_p * p) / (w + w_p)
+        out_se[name] = 1.0 / math.sqrt(w + w_p)
+    return out_v, out_se
+
+
 def _welch(a: float, nu_a: float | None, b: float, nu_b: float | None) -> float | None:
     """Welch–Satterthwaite dof of a² + b² (None: a term's dof unknown, the normal)."""
     if nu_a is None or nu_b is None:

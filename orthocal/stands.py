@@ -66,11 +66,17 @@ class Stands:
     direction) → stand name; gauges not named have their own stand,
     ``stand_<leg><direction>`` (the default: one stand per gauge, i.e. per (leg,
     direction) pair of deviation keys). A stand holds gauges of one leg only: its
-    plane is x_leg = M.
+    plane is x_leg = M. ``mounts``: where a key's rows come from more than one
+    mounting (a verification's further passes take the gauges off and set them
+    again by eye), the number of its rows (cycles) of each mounting, in row
+    order; each mounting is a stand of its own (``stand_xy@2``, …), so the
+    stands' errors average over the mountings as the noise does over cycles.
+    Keys not named: one mounting.
     """
 
     tolerance: float = DEFAULT_TOLERANCE
     groups: Mapping[Gauge, str] | None = field(default=None, hash=False)
+    mounts: Mapping[Key, tuple[int, ...]] | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.tolerance, int | float) and math.isfinite(self.tolerance)
@@ -98,6 +104,13 @@ class Stands:
         """The name of the stand holding the gauge of ``leg`` along ``direction``."""
         return (self.groups or {}).get((leg, direction)) or stand_name(leg, direction)
 
+    def mounting_of(self, key: Key, row: int) -> int:
+        """Which mounting (0: the first) the ``row``-th row of ``key`` was read in."""
+        counts = (self.mounts or {}).get(tuple(key))  # type: ignore[arg-type]
+        if not counts:
+            return 0
+        return min(int(np.searchsorted(np.cumsum(counts), row, side="right")), len(counts) - 1)
+
     def to_dict(self) -> dict[str, Any]:
         groups: dict[str, list[str]] = {}
         for leg, direction in GAUGES:
@@ -108,9 +121,16 @@ class Stands:
 
 def incidence(keys: Sequence[Key], stands: Stands) -> tuple[tuple[str, ...], np.ndarray]:
     """(stand names in order of first appearance, S) with S[r, s] = 1 when row
-    ``keys[r]`` is read by a gauge on stand s: its plane offset is (S·m)[r]."""
+    ``keys[r]`` is read by a gauge on stand s: its plane offset is (S·m)[r]. A
+    key's later mountings (``stands.mounts``) are stands of their own."""
     names: dict[str, int] = {}
-    cols = [names.setdefault(stands.stand_of(k[1], k[2]), len(names)) for k in keys]
+    seen: dict[Key, int] = {}
+    cols = []
+    for k in keys:
+        row = seen[k] = seen.get(k, -1) + 1
+        mounting = stands.mounting_of(k, row)
+        name = stands.stand_of(k[1], k[2]) + (f"@{mounting + 1}" if mounting else "")
+        cols.append(names.setdefault(name, len(names)))
     S = np.zeros((len(keys), len(names)))
     S[np.arange(len(keys)), cols] = 1.0
     return tuple(names), S
@@ -122,9 +142,9 @@ def stand_gauges(names: Sequence[str], stands: Stands,
     out: dict[str, list[Gauge]] = {n: [] for n in names}
     for k in keys:
         g = (k[1], k[2])
-        name = stands.stand_of(*g)
-        if name in out and g not in out[name]:
-            out[name].append(g)
+        for name in (n for n in names if n.split("@")[0] == stands.stand_of(*g)):
+            if g not in out[name]:
+                out[name].append(g)
     return {n: tuple(v) for n, v in out.items()}
 
 

@@ -13,6 +13,7 @@ from orthocal import Geometry
 from orthocal.loop import (
     WRITABLE,
     after_correction,
+    joined_with_previous,
     predicted_after_correction,
     significant_corrections,
 )
@@ -285,3 +286,27 @@ def test_a_first_measurement_writes_only_what_stands_out_of_its_noise() -> None:
     # never decided: not converged, and nothing written
     steps = walk_verdicts(1, ["unproven", "unproven"])
     assert steps[-1].reason == "not-converged" and not any(s.kind == "write" for s in steps)
+
+
+def test_a_verification_joins_the_round_before_it_moved_by_what_was_written() -> None:
+    # Round 1 saw Δρ_x = 12 ± 1 µm and 12 µm was written off: it says the joint is
+    # now at 0 ± 1; the verification sees 1.5 ± 1. Joined: 0.75 ± 0.71 µm.
+    um = 1e-3
+    values, ses = joined_with_previous(
+        {"drho_x": 1.5 * um, "drho_y": 0.0}, {"drho_x": 1.0 * um, "drho_y": 2.0 * um},
+        {"drho_x": 12.0 * um, "drho_y": 0.5 * um}, {"drho_x": 1.0 * um, "drho_y": 2.0 * um},
+        {"drho_x": -12.0 * um}, k=3.6)
+    assert values["drho_x"] == pytest.approx(0.75 * um, abs=1e-12)
+    assert ses["drho_x"] == pytest.approx(um / np.sqrt(2.0), rel=1e-9)
+    # y was not written: the earlier 0.5 µm is a measurement of the same joint
+    assert values["drho_y"] == pytest.approx(0.25 * um, abs=1e-12)
+    # a verification far from what was written (10 µm, 7 standard errors of the
+    # difference): the write did not move the joint as said, nothing is joined
+    values, ses = joined_with_previous(
+        {"drho_x": 10.0 * um}, {"drho_x": 1.0 * um}, {"drho_x": 12.0 * um},
+        {"drho_x": 1.0 * um}, {"drho_x": -12.0 * um}, k=3.6)
+    assert values["drho_x"] == 10.0 * um and ses["drho_x"] == 1.0 * um
+    # without a standard error on either side: this round's alone
+    values, ses = joined_with_previous({"drho_x": 1.0 * um}, {"drho_x": 1.0 * um},
+                                       {"drho_x": 0.0}, {"drho_x": None}, {}, k=3.6)
+    assert values["drho_x"] == 1.0 * um and ses["drho_x"] == 1.0 * um

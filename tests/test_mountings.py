@@ -83,9 +83,10 @@ def test_the_plan_says_how_many_mountings_to_expect(tmp_path: Path, capsys) -> N
         {"fewest": 3, "usual": 6, "most": 12}
 
 
-def _ident(drho_um: float, se_um: float) -> SimpleNamespace:
+def _ident(drho_um: float, se_um: float, **others_um: float) -> SimpleNamespace:
     names = ("drho_x", "drho_y", "drho_z")
-    return SimpleNamespace(parameters={n: 0.0 for n in names} | {"drho_x": drho_um / 1000},
+    values = {n: 0.0 for n in names} | {"drho_x": drho_um} | others_um
+    return SimpleNamespace(parameters={n: v / 1000 for n, v in values.items()},
                            std_errors=dict.fromkeys(names, se_um / 1000), std_error_dof=None)
 
 
@@ -102,11 +103,33 @@ def test_a_leftover_below_converge_mm_is_written_where_it_keeps_converged_out_of
     assert again.verdict == "suspected" and again.significant == []
     # shown within the limit: converge_mm spares it
     assert judge(_ident(1.5, 0.1), previous, 0.003, 0.0035, None).verdict == "converged"
-    # within the noise of both rounds (k·√2·0.5 > 1.9): not written, and said undecided
-    undecided = judge(_ident(1.9, 0.5), _ident(0.0, 0.5), 0.002, 0.0025, None)
+    # within the noise of both rounds (k·√2·0.5 > 1.9) while a pass is left: not
+    # written, and said undecided; with none left, seen at 95 % (1.9 > 1.96 × 0.5),
+    # it is written rather than left between the machine and "converged"
+    undecided = judge(_ident(1.9, 0.5), _ident(0.0, 0.5), 0.002, 0.0025, None,
+                      passes_left=True)
     assert undecided.significant == [] and undecided.verdict == "suspected"
+    spent = judge(_ident(1.9, 0.5), _ident(0.0, 0.5), 0.002, 0.0025, None)
+    assert spent.significant == ["drho_x"]
+    # not seen at 95 % (1.0 < 1.96 × 0.8), not shown within: never written, unproven
+    unseen = judge(_ident(1.0, 0.8), _ident(0.0, 0.8), 0.002, 0.0025, None)
+    assert unseen.significant == [] and unseen.verdict == "unproven"
     # a first measurement keeps the floor: a machine within tolerance is left alone
     assert judge(_ident(1.9, 0.4), None, 0.002, 0.0025, None).significant == []
+
+
+def test_converged_rests_on_the_rounds_joined() -> None:
+    # 1.0 ± 0.8 µm alone cannot be shown within 2.5 µm (1.0 + 1.96 × 0.8); joined
+    # with the round before (0.7 ± 0.5 µm) it can, and nothing is written either way.
+    previous = _ident(0.0, 0.8)
+    alone = judge(_ident(1.0, 0.8), previous, 0.002, 0.0025, None, passes_left=True)
+    assert alone.verdict == "unproven"
+    joined = ({"drho_x": 0.0007, "drho_y": 0.0, "drho_z": 0.0},
+              dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0005))
+    both = judge(_ident(1.0, 0.8), previous, 0.002, 0.0025, None, passes_left=True,
+                 joined=joined)
+    assert both.verdict == "converged" and both.significant == []
+    assert both.shown_mm["drho_x"] == pytest.approx(0.0007 + 1.96 * 0.0005, rel=1e-3)
 
 
 def test_the_progress_bar_counts_what_really_happens() -> None:

@@ -37,6 +37,35 @@ def station_run(truth, stand, rng, noise=0.002, cycles=3, readings=5):
                               stands=stand)[0]
 
 
+def test_each_mounting_is_a_stand_of_its_own():
+    # A verification's second pass sets the gauges again by eye: its rows get stands
+    # of their own, so the stands' errors average over mountings as noise does.
+    keys = [("+", "x", "y")] * 5 + [("-", "x", "y")] * 5
+    mounts = {("+", "x", "y"): (3, 2), ("-", "x", "y"): (3, 2)}
+    names, S = incidence(keys, Stands(mounts=mounts))
+    assert names == ("stand_xy", "stand_xy@2")
+    assert S[:, 0].tolist() == [1, 1, 1, 0, 0] * 2 and S[:, 1].tolist() == [0, 0, 0, 1, 1] * 2
+    # one mounting: as before
+    assert incidence(keys, Stands())[0] == ("stand_xy",)
+
+
+def test_more_mountings_shrink_the_stands_part_of_the_standard_error():
+    truth = full_params([0.6, -0.4, 0.9, 0.0, 0.0, 0.0, 0.2, 0.1, -0.15])
+    exact = {k: float(v) for k, v in zip(KEYS, deviations(KEYS, G, truth), strict=True)}
+    # noiseless data, three mountings of one cycle each: σ is given, so the standard
+    # errors are the design's alone
+    data = {k: [v, v, v] for k, v in exact.items()}
+    one = identify(data, G, model="rho+tilt", sigma=1e-5, stands=Stands())
+    three = identify(data, G, model="rho+tilt", sigma=1e-5,
+                     stands=Stands(mounts={k: (1, 1, 1) for k in KEYS}))
+    se_one = np.array([one.std_errors[f"drho_{a}"] for a in "xyz"])
+    se_three = np.array([three.std_errors[f"drho_{a}"] for a in "xyz"])
+    # the stands dominate at 0.01 µm of noise: three independent mountings take
+    # their part down by about √3
+    assert np.all(se_three < se_one / 1.5)
+    assert len(three.stands) == 3 * len(one.stands)
+
+
 def test_mount_offsets_are_the_exact_reading_in_each_plane():
     truth = np.r_[1.5, -1.2, 0.8, 0.1, 0, -0.1, 0.2, -0.1, 0.3]
     offsets = np.linspace(-5, 5, len(KEYS))

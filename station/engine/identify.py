@@ -65,7 +65,8 @@ def identify_measurement(config: StationConfig, m: Measurement,
     selection = None
     # Misplaced stands are modelled so that they are not taken for tilted axes
     # (orthocal.stands); the linearised system (7) has no stand effect.
-    stands = orthocal.Stands(tolerance=proc.stand_tolerance_mm) \
+    stands = orthocal.Stands(tolerance=proc.stand_tolerance_mm,
+                             mounts=m.mounts_for_identify() or None) \
         if proc.stand_tolerance_mm > 0 and proc.method == "nonlinear" else None
     try:
         if model != "auto":

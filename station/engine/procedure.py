@@ -20,7 +20,12 @@ import numpy as np
 from drivers.errors import DeviceError
 from drivers.files import write_atomic
 from orthocal import carry
-from orthocal.loop import WRITABLE, correction
+from orthocal.geometry import params_vector
+from orthocal.loop import (
+    WRITABLE,
+    after_correction,
+    correction,
+)
 from orthocal.lost_motion import band_middle, edge_of
 from orthocal.numbers import finite
 from station.config import StationConfig
@@ -172,11 +177,14 @@ class Flow:
         self.model: dict[str, Any] | None = None  # model.json, once the run stops
         self.outcomes: list[WritebackOutcome] = []
         self.iterations: list[dict[str, Any]] = result.setdefault("iterations", [])
+        # each round's Δρ̂ and standard errors joined with the rounds before (_joined)
+        self.joined: list[tuple[dict[str, float], dict[str, float | None]]] = []
 
     def measure(self, phase: str) -> str:
         """Measure (or replay) a round's first pass and identify it: its verdict
         (station.engine.closed_loop; the first round's correction is written only
         where it stands out of the noise, as every round's)."""
+        self._expect(written=True)
         m = self.seq.measure(phase)
         self.measurements.append(m)
         return self._identify_round(m, [phase])
@@ -186,10 +194,33 @@ class Flow:
         the machine converged, nor a correction worth writing): measured (or
         replayed) and pooled with the round's passes, identified again, decided
         again."""
+        self._expect(written=False)
         m = pooled(self.measurements[-1], self.seq.measure(phase))
         self.measurements[-1] = m
         return self._identify_round(m, [*self.iterations[-1].get("passes", [
             self.iterations[-1]["phase"]]), phase])
+
+    def _expect(self, written: bool) -> None:
+        """Tell the sequencer the machine the next pass should find (it sizes a
+        verification's cycles by it): the last fit, with the offsets at their aim
+        after a write-back (``written``); none before the first round."""
+        if not self.idents:
+            return
+        ident = self.idents[-1]
+        values = after_correction(ident.parameters, self.target) if written \
+            else ident.parameters
+        self.seq.expected = (ident.model, params_vector(values))
+
+    def _joined(self, n: int, ident: Any) -> tuple[dict[str, float], dict[str, float | None]]:
+        """Round ``n``'s Δρ̂ joined with the rounds before it (verdict.joined_round),
+        kept per round."""
+        outcome = self.outcomes[n - 1] if 0 < n <= len(self.outcomes) else None
+        joined = verdict.joined_round(ident, self.joined[n - 1] if n else None,
+                                      outcome.before if outcome else None,
+                                      outcome.written if outcome else None)
+        del self.joined[n:]
+        self.joined.append(joined)
+        return joined
 
     def _identify_round(self, m: Measurement, passes: list[str]) -> str:
         ctx = self.ctx
@@ -222,9 +253,11 @@ class Flow:
         prev = self.idents[n - 1] if n else None
         proc = ctx.config.procedure
         count = ctx.devices.controller.offset_resolution_mm()
+        joined = self._joined(n, ident)
         judged = verdict.judge(ident, prev, proc.converge_mm,
                                verdict.converge_limit(proc.converge_mm, count), self.target,
-                               passes_left=len(passes) - 1 < proc.max_extra_passes)
+                               passes_left=len(passes) - 1 < proc.max_extra_passes,
+                               joined=joined if n else None)
         sig = judged.significant
         entry: dict[str, Any] = {
             "phase": phase, "model": ident.model, "identified": fields["identified"],
@@ -233,7 +266,9 @@ class Flow:
             "deviations_rms_mm": fields["deviations_rms_mm"],
             "residual_rms_mm": fields["residual_rms_mm"],
             "noise_floor_mm": fields["noise_floor_mm"], "fit_ok": fields["fit_ok"],
-            "significant": sig, **judged.fields()}
+            "significant": sig, **judged.fields(),
+            **verdict.stands_part(ident, ctx.config.machine.geometry()),
+            **({"joined": {"drho_mm": joined[0], "std_errors_mm": joined[1]}} if n else {})}
         if again:
             entry["passes"] = passes
             self.iterations[-1] = entry

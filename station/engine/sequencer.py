@@ -124,6 +124,9 @@ class Sequencer:
         self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
         self._gains: dict[tuple[str, str], float] = {}  # (leg, axis) -> reversal gain
         self._verdict_target: float | None = None  # see _verdict_se
+        # The machine a verification expects, (model, 12-vector of its parameters):
+        # the last round's fit after the write-back (set by the procedure; _decided).
+        self.expected: tuple[str, Any] | None = None
         # The guard's records are the run's like any other: one that cannot be saved
         # stops the run (a swallowed error once lost a record that had an infinity).
         self.guard = PlungerGuard(
@@ -180,7 +183,8 @@ class Sequencer:
             within.extend(w)
             for axis, values in rev.items():
                 reversal.setdefault(axis, []).extend(values)
-        return Measurement(phase, deviations, outcomes, within, reversal)
+        mounts = {k: [len(v)] for k, v in deviations.items()}
+        return Measurement(phase, deviations, outcomes, within, reversal, mounts)
 
     def _run_setup(self, phase: str, sp: SetupPlan
                    ) -> tuple[SetupOutcome, dict[str, list[float]], list[float],
@@ -259,10 +263,29 @@ class Sequencer:
     def _decided(self, phase: str, cycles: list[dict[str, float]]) -> bool:
         """Whether this setup's cycles are enough for the verification's verdict: the
         standard error of its deviations' means (:func:`cycle_std_error`) at
-        :meth:`_verdict_se` or below. Any other phase: always."""
+        :meth:`_verdict_se` or below. With the machine the verification expects
+        known (:attr:`expected`), from the Δρ it will state: enough once that is
+        within a third of the converge limit on every axis, or once the gauges'
+        noise is no longer its larger part on any axis still short of it: the
+        stands set by eye are the rest, and only another mounting averages them
+        (orthocal.design.drho_error_parts). Any other phase: always."""
         if not phase.startswith("v"):
             return True
-        return cycle_std_error(cycles) <= self._verdict_se()
+        se = cycle_std_error(cycles)
+        if self.expected is None or not math.isfinite(se) or se <= 0.0:
+            # no scatter at all (quantised readings that never move): nothing to average
+            return se <= self._verdict_se()
+        from orthocal import design
+
+        proc = self.config.procedure
+        model, params = self.expected
+        keys, _ = self.plan.deviation_keys()
+        noise, stands = design.drho_error_parts(
+            keys, self.config.machine.geometry(), model, params, se,
+            proc.stand_tolerance_mm / math.sqrt(3.0))
+        limit = proc.converge_mm + 0.5 * self.controller.offset_resolution_mm()
+        short = np.hypot(noise, stands) > limit / 3.0
+        return bool(np.all(noise[short] <= stands[short]))
 
     def _verdict_se(self) -> float:
         """The standard error of a deviation's mean at which a verification can show

@@ -123,6 +123,9 @@ class Measurement:
     within_std: list[float]  # std of the readings at each stop, for the noise estimate
     # joint axis -> each cycle's measurement of its reversal (mm; orthocal.lost_motion)
     reversal: dict[str, list[float]] = field(default_factory=dict)
+    # key -> its cycles from each mounting of its gauges, in order (pooled passes:
+    # one per pass); the stands were set again for each (orthocal.Stands.mounts)
+    mounts: dict[str, list[int]] = field(default_factory=dict)
 
     def stats(self) -> dict[str, dict[str, Any]]:
         out = {}
@@ -142,6 +145,10 @@ class Measurement:
     def for_identify(self) -> dict[tuple[str, str, str], list[float]]:
         return {split_key(k): list(v) for k, v in self.deviations.items()}
 
+    def mounts_for_identify(self) -> dict[tuple[str, str, str], tuple[int, ...]]:
+        """The keys read in more than one mounting: their cycles of each."""
+        return {split_key(k): tuple(v) for k, v in self.mounts.items() if len(v) > 1}
+
 
 def pooled(first: Measurement, more: Measurement) -> Measurement:
     """One round's passes as one measurement (the same machine, the same offsets):
@@ -154,4 +161,12 @@ def pooled(first: Measurement, more: Measurement) -> Measurement:
         first.phase,
         {k: [*first.deviations.get(k, []), *more.deviations.get(k, [])] for k in keys},
         [*first.setups, *more.setups], [*first.within_std, *more.within_std],
-        {a: [*first.reversal.get(a, []), *more.reversal.get(a, [])] for a in axes})
+        {a: [*first.reversal.get(a, []), *more.reversal.get(a, [])] for a in axes},
+        {k: [*_mounts(first, k), *_mounts(more, k)] for k in keys})
+
+
+def _mounts(m: Measurement, key: str) -> list[int]:
+    """``key``'s cycles of each mounting in ``m`` (one mounting unless it says)."""
+    if key not in m.deviations:
+        return []
+    return list(m.mounts.get(key) or [len(m.deviations[key])])

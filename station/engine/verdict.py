@@ -8,8 +8,18 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from orthocal.loop import WRITABLE, shown_within, significant_corrections
+from orthocal.geometry import AXES, Geometry
+from orthocal.loop import (
+    FALSE_ALARM,
+    WRITABLE,
+    joined_with_previous,
+    shown_within,
+    significant_corrections,
+)
+from orthocal.noise import coverage_factor
 from orthocal.numbers import finite
+
+Joined = tuple[dict[str, float], dict[str, float | None]]  # Δρ̂ and standard errors
 
 
 @dataclass(frozen=True)
@@ -31,17 +41,20 @@ def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
 
 
 def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
-          target: dict[str, float] | None, passes_left: bool = False) -> Verdict:
+          target: dict[str, float] | None, passes_left: bool = False,
+          joined: Joined | None = None) -> Verdict:
     """The verdict on round ``ident`` (``previous``: the identification whose
     correction it verifies; None for the first measurement, judged against its
     own noise alone). Significant: beyond k standard errors of both rounds (of
     the first alone) and beyond converge_mm (orthocal.loop.significant_corrections);
     after a write-back, where the round cannot show the machine within ``limit`` and
-    no further pass of it is left (``passes_left`` False), beyond the noise alone.
+    no further pass of it is left (``passes_left`` False), seen at 95 %.
     Converged: every axis shown within ``limit`` at 95 % (orthocal.loop.shown_within):
     for a first measurement, a machine within tolerance that nothing is written
     to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
-    unproven."""
+    unproven. ``joined``: the round's Δρ̂ and standard errors joined with the rounds
+    before it (orthocal.loop.joined_with_previous): what the machine is shown
+    within and seen off by; the corrections stand out of this round's own noise."""
     aim = target if previous else None
     beyond_noise = significant_corrections(
         ident.parameters, ident.std_errors, 0.0,
@@ -50,20 +63,49 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
         target=aim)
     sig = [n for n in beyond_noise
            if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
-    shown = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
-                         target=target)
+    values, ses = joined or (ident.parameters, ident.std_errors)
+    shown = shown_within(values, ses, ident.std_error_dof, target=target)
+    off = shown_within(values, ses, ident.std_error_dof, target=aim, sign=True)
     if not sig and previous is not None and not passes_left and \
             any(v > limit for v in shown.values()):
-        # converge_mm spares a correction too small to matter, where the machine can
-        # be shown within it; where no further pass can show that, a correction beyond
-        # the noise of both rounds is what stands between it and "converged": written.
-        sig = beyond_noise
+        # converge_mm spares a correction too small to matter, and the false-alarm k
+        # a machine already fixed, where a further pass can still show it within the
+        # limit; where none can, a correction seen at 95 % is what stands between the
+        # machine and "converged": written.
+        sig = [n for n in WRITABLE if off.get(n, -math.inf) > 0]
     verdict = "significant" if sig else "converged"
     if not sig and any(v > limit for v in shown.values()):
-        seen = shown_within(ident.parameters, ident.std_errors, ident.std_error_dof,
-                            target=target, sign=True)
+        seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
         verdict = "suspected" if any(v > 0 for v in seen.values()) else "unproven"
     return Verdict(verdict, sig, shown)
+
+
+def joined_round(ident: Any, before: Joined | None, offsets_before: dict[str, float] | None,
+                 offsets_written: dict[str, float] | None) -> Joined:
+    """A round's Δρ̂ joined with ``before`` (the rounds before it, joined alike; None:
+    the first round), moved by the offsets its write-back changed from
+    ``offsets_before`` to ``offsets_written`` (read back; None: nothing written), by
+    orthocal.loop.joined_with_previous at the loop's false-alarm k."""
+    own = (dict(ident.parameters), dict(ident.std_errors))
+    if before is None:
+        return own
+    moved = {} if offsets_before is None or offsets_written is None else \
+        {f"drho_{a}": offsets_written[a] - offsets_before[a] for a in AXES}
+    return joined_with_previous(*own, *before, moved, coverage_factor(None, 1.0 - FALSE_ALARM))
+
+
+def stands_part(ident: Any, geometry: Geometry) -> dict[str, Any]:
+    """A round's entry ``stands_part_mm``: how much of each Δρ standard error the stands
+    set by eye make (orthocal.design.drho_error_parts at the round's fit), where they
+    were modelled; read by :func:`not_converged`."""
+    stands = getattr(ident, "stand_model", None)
+    if stands is None or not (ident.stand_sigma or 0.0) > 0.0:
+        return {}
+    from orthocal import design
+
+    _, part = design.drho_error_parts(ident.keys, geometry, ident.model, ident.vector,
+                                      ident.stand_sigma, stands.prior_sd, stands)
+    return {"stands_part_mm": {f"drho_{a}": float(v) for a, v in zip(AXES, part, strict=True)}}
 
 
 def not_converged(entry: dict[str, Any], converge_mm: float, offset_count_mm: float) -> str:
@@ -91,5 +133,16 @@ def not_converged(entry: dict[str, Any], converge_mm: float, offset_count_mm: fl
                 "quieter gauges will not help; look for what the model lacks (a loose "
                 "gauge or stand, lost motion, legs bowed beyond [uncertainty] "
                 "leg_straightness_mm) or name a larger model")
+    part = (entry.get("stands_part_mm") or {}).get(worst)
+    se = (entry.get("std_errors") or {}).get(worst)
+    if part is not None and se and part > 0.5 * se:
+        # the stands, not the gauges, hold the error: more cycles cannot take it
+        return (f"{said}; of Δρ_{worst[-1]}'s standard error {1000 * se:.1f} µm, the "
+                f"stands set by eye make {1000 * part:.1f} µm (each gauge's plane moves "
+                "the reading by its offset times the leg's slope, and these axes' tilts "
+                "and gaps slope the legs): more cycles cannot shrink that part; more "
+                "passes of the verification ([procedure] max_extra_passes) average it, "
+                "and so do stands set against a mark at the legs' middles with "
+                "[procedure] stand_tolerance_mm stated")
     return (f"{said}; measure with more cycles or readings, quieter gauges, or a larger "
             "converge_mm")

@@ -64,6 +64,13 @@ class Iteration(_Open):
     verdict: Literal["significant", "converged", "suspected", "unproven"] | None = None
     significant: list[str] = []
     passes: list[str] | None = None
+    joined: dict[str, Params] | None = Field(
+        None, description="a verification's Δρ joined with the rounds before it, each moved "
+                          "by the offsets written since (drho_mm, std_errors_mm): what "
+                          "shown_within_95_mm and the verdict's converged rest on")
+    stands_part_mm: Params | None = Field(
+        None, description="of each Δρ standard error, the part the stands set by eye make "
+                          "(more cycles in a mounting do not shrink it, more mountings do)")
 
 
 class Remaining(_Open):
