@@ -203,37 +203,9 @@ class ModbusLink:
             kind, error = "timeout", ""
             attempts = self.retries + 1
             for attempt in range(1, attempts + 1):
-                client = self._client
-                assert client is not None
-                try:
-                    rr = call(client)
-                except ModbusIOException as exc:
-                    text = str(exc)
-                    kind, error = "timeout", (
-                        f"no reply within {self.timeout_s:g} s" if "No response" in text
-                        else f"invalid reply ({_short(exc)})")
-                except (ConnectionException, OSError) as exc:
-                    # pymodbus maps most socket failures to ConnectionException but lets
-                    # a reset during a read through as ConnectionResetError.
-                    client.close()
-                    kind, error = "connection", f"connection lost ({_short(exc)})"
-                else:
-                    if rr.isError():
-                        code = int(getattr(rr, "exception_code", 0))
-                        text = f"Modbus exception {code} ({EXCEPTION_NAMES.get(code, '?')})"
-                        if code == 6:
-                            kind, error = "busy", text
-                        elif code == 3 and refused is not None:
-                            raise TargetRefused(self.device, f"{refused} refused: {text}", code)
-                        else:
-                            raise ExceptionResponse(self.device, f"{op}: {text}", code)
-                    elif rr.function_code != fc or (
-                            count is not None and len(_payload(rr, fc)) < count):
-                        # A stale or foreign frame that decoded cleanly: never trust it.
-                        kind, error = "timeout", (f"unexpected reply (function {rr.function_code}"
-                                                  f" to a function {fc} request)")
-                    else:
-                        return rr
+                rr, kind, error = self._attempt(op, call, fc=fc, count=count, refused=refused)
+                if rr is not None:
+                    return rr
                 if attempt < attempts:
                     self._event(event="retry", device=self.device, op=op, error=error,
                                 attempt=attempt)
@@ -251,6 +223,40 @@ class ModbusLink:
             if kind == "connection":
                 raise ControllerConnectionError(self.device, detail)
             raise ControllerTimeout(self.device, detail)
+
+    def _attempt(self, op: str, call: Callable[[Any], ModbusPDU], *, fc: int,
+                 count: int | None, refused: str | None
+                 ) -> tuple[ModbusPDU | None, str, str]:
+        """Send the request once: (reply, "", "") when it is good, else (None, kind,
+        error) with kind "timeout", "connection" or "busy", which decides how
+        ``_execute`` retries. An exception code that no retry can change raises."""
+        client = self._client
+        assert client is not None
+        try:
+            rr = call(client)
+        except ModbusIOException as exc:
+            text = str(exc)
+            return None, "timeout", (f"no reply within {self.timeout_s:g} s"
+                                     if "No response" in text
+                                     else f"invalid reply ({_short(exc)})")
+        except (ConnectionException, OSError) as exc:
+            # pymodbus maps most socket failures to ConnectionException but lets
+            # a reset during a read through as ConnectionResetError.
+            client.close()
+            return None, "connection", f"connection lost ({_short(exc)})"
+        if rr.isError():
+            code = int(getattr(rr, "exception_code", 0))
+            text = f"Modbus exception {code} ({EXCEPTION_NAMES.get(code, '?')})"
+            if code == 6:
+                return None, "busy", text
+            if code == 3 and refused is not None:
+                raise TargetRefused(self.device, f"{refused} refused: {text}", code)
+            raise ExceptionResponse(self.device, f"{op}: {text}", code)
+        if rr.function_code != fc or (count is not None and len(_payload(rr, fc)) < count):
+            # A stale or foreign frame that decoded cleanly: never trust it.
+            return None, "timeout", (f"unexpected reply (function {rr.function_code}"
+                                     f" to a function {fc} request)")
+        return rr, "", ""
 
     def _reconnect(self, op: str, error: str) -> None:
         """Open a new connection, trying again until ``reconnect_s`` has passed (a drive

@@ -239,18 +239,7 @@ class RegisterMap(BaseModel):
                 raise ValueError(f"register {reg.name} defined twice")
             by_name[reg.name] = reg
         self._by_name = by_name
-        for role in ROLES_REQUIRED:
-            for ax in AXES:
-                if f"{role}_{ax}" not in by_name:
-                    raise ValueError(f"missing register {role}_{ax}")
-        for role in ROLES_OPTIONAL:
-            present = [f"{role}_{ax}" in by_name for ax in AXES]
-            if any(present) and not all(present):
-                raise ValueError(f"{role} needs all of {role}_X/_Y/_Z or none")
-        if self.has_role("OFFSET") == ("offsets" in self.unsupported):
-            raise ValueError("either OFFSET_X/_Y/_Z exist or unsupported['offsets'] says why not")
-        if self.has_role("SOFT_MIN") != self.has_role("SOFT_MAX"):
-            raise ValueError("SOFT_MIN and SOFT_MAX come together")
+        self._check_roles()
         missing = set(STATUS_FLAGS) - set(self.status)
         if missing or set(self.status) - set(STATUS_FLAGS):
             raise ValueError(f"status must define exactly {STATUS_FLAGS}")
@@ -264,20 +253,40 @@ class RegisterMap(BaseModel):
                 raise ValueError(f"reference to unknown register {n}")
         for steps in self.commands.values():
             for step in steps:
-                reg = by_name[step.reg]
-                if reg.access == "R":
-                    raise ValueError(f"command writes read-only register {step.reg}")
-                if reg.is_bit:
-                    if step.value not in (0, 1):
-                        raise ValueError(f"command writes {step.value} to the bit "
-                                         f"{step.reg} (0 or 1)")
-                else:
-                    try:
-                        encode_int(step.value, reg.type, reg.word_order)
-                    except ValueError as exc:
-                        raise ValueError(f"command value for {step.reg}: {exc}") from None
+                self._check_step(step)
         self._check_overlaps()
         return self
+
+    def _check_roles(self) -> None:
+        """Every required role on all three axes, an optional one on all or none, and
+        a reason for each role the drive cannot offer."""
+        for role in ROLES_REQUIRED:
+            for ax in AXES:
+                if f"{role}_{ax}" not in self._by_name:
+                    raise ValueError(f"missing register {role}_{ax}")
+        for role in ROLES_OPTIONAL:
+            present = [f"{role}_{ax}" in self._by_name for ax in AXES]
+            if any(present) and not all(present):
+                raise ValueError(f"{role} needs all of {role}_X/_Y/_Z or none")
+        if self.has_role("OFFSET") == ("offsets" in self.unsupported):
+            raise ValueError("either OFFSET_X/_Y/_Z exist or unsupported['offsets'] says why not")
+        if self.has_role("SOFT_MIN") != self.has_role("SOFT_MAX"):
+            raise ValueError("SOFT_MIN and SOFT_MAX come together")
+
+    def _check_step(self, step: CommandStep) -> None:
+        """A command step writes a writable register, a value its type can hold."""
+        reg = self._by_name[step.reg]
+        if reg.access == "R":
+            raise ValueError(f"command writes read-only register {step.reg}")
+        if reg.is_bit:
+            if step.value not in (0, 1):
+                raise ValueError(f"command writes {step.value} to the bit "
+                                 f"{step.reg} (0 or 1)")
+            return
+        try:
+            encode_int(step.value, reg.type, reg.word_order)
+        except ValueError as exc:
+            raise ValueError(f"command value for {step.reg}: {exc}") from None
 
     def _check_overlaps(self) -> None:
         spans: dict[tuple[int | None, str], list[tuple[int, int, str]]] = {}

@@ -38,7 +38,38 @@ def read_deviations(path: Path, geometry: Geometry | None = None) -> dict[Key, l
     With ``geometry``, a stroke posture must also lie within ±leg_length."""
     text = read_input(path, encoding="utf-8-sig")  # a spreadsheet's BOM is not a column
     rows = csv.reader(text.splitlines())
-    header = next(rows, None)
+    columns = _read_header(path, next(rows, None))
+    col = {c: columns.index(c) for c in columns}
+
+    data: dict[Key, list[float]] = {}
+    seen: dict[tuple, int] = {}
+    for lineno, row in enumerate(rows, start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        if len(row) != len(columns):
+            raise BadInput(f"{path}: line {lineno}: {len(row)} fields, expected {len(columns)}")
+        cell = {c: row[i].strip() for c, i in col.items()}
+        where = f"{path}: line {lineno}"
+        key, value_mm = _parse_row(where, cell, geometry)
+        ident = (*key, cell.get("cycle", ""))
+        if ident in seen:
+            sign, leg, direction = key
+            what = f"cycle {ident[3]!r} of " if ident[3] else ""
+            raise BadInput(
+                f"{where}: duplicate row: {what}posture {sign} leg {leg} "
+                f"direction {direction} already on line {seen[ident]}"
+                + ("" if ident[3] else " (add a 'cycle' column for repeats)")
+            )
+        seen[ident] = lineno
+        data.setdefault(key, []).append(value_mm)
+    if not data:
+        raise BadInput(f"{path}: no data rows after the header")
+    return data
+
+
+def _read_header(path: Path, header: list[str] | None) -> list[str]:
+    """The header's column names, lower-cased; a BadInput on line 1 unless it holds
+    every required column, nothing unknown and nothing twice."""
     if not header or not any(h.strip() for h in header):
         raise BadInput(f"{path}: line 1: empty file, expected header {','.join(REQUIRED)}")
     columns = [h.strip().lower() for h in header]
@@ -50,51 +81,35 @@ def read_deviations(path: Path, geometry: Geometry | None = None) -> dict[Key, l
         raise BadInput(f"{path}: line 1: unknown column(s) {', '.join(unknown)}")
     if len(set(columns)) != len(columns):
         raise BadInput(f"{path}: line 1: a column appears twice")
-    col = {c: columns.index(c) for c in columns}
+    return columns
 
-    data: dict[Key, list[float]] = {}
-    seen: dict[tuple, int] = {}
-    for lineno, row in enumerate(rows, start=2):
-        if not row or all(not cell.strip() for cell in row):
-            continue
-        if len(row) != len(columns):
-            raise BadInput(f"{path}: line {lineno}: {len(row)} fields, expected {len(columns)}")
-        cell = {c: row[i].strip() for c, i in col.items()}
-        sign, leg, direction = cell["posture"], cell["leg"].lower(), cell["direction"].lower()
-        try:
-            check_posture(sign)
-            if geometry is not None:
-                stroke(sign, geometry)
-        except ValueError:
-            raise BadInput(
-                f"{path}: line {lineno}: posture must be + or - or a signed nonzero stroke "
-                f"in mm within ±leg_length such as +30, got {sign!r}") from None
-        for field, value in (("leg", leg), ("direction", direction)):
-            if value not in ("x", "y", "z"):
-                raise BadInput(f"{path}: line {lineno}: {field} must be x, y or z, got {value!r}")
-        if leg == direction:
-            raise BadInput(f"{path}: line {lineno}: direction must differ from leg ({leg!r})")
-        try:
-            value_mm = float(cell["deviation_mm"])
-        except ValueError:
-            raise BadInput(
-                f"{path}: line {lineno}: deviation_mm is not a number: {cell['deviation_mm']!r}"
-            ) from None
-        if not math.isfinite(value_mm):
-            raise BadInput(f"{path}: line {lineno}: deviation_mm must be finite, got {value_mm}")
-        ident = (sign, leg, direction, cell.get("cycle", ""))
-        if ident in seen:
-            what = f"cycle {ident[3]!r} of " if ident[3] else ""
-            raise BadInput(
-                f"{path}: line {lineno}: duplicate row: {what}posture {sign} leg {leg} "
-                f"direction {direction} already on line {seen[ident]}"
-                + ("" if ident[3] else " (add a 'cycle' column for repeats)")
-            )
-        seen[ident] = lineno
-        data.setdefault((sign, leg, direction), []).append(value_mm)
-    if not data:
-        raise BadInput(f"{path}: no data rows after the header")
-    return data
+
+def _parse_row(where: str, cell: dict[str, str], geometry: Geometry | None
+               ) -> tuple[Key, float]:
+    """One data row's (posture, leg, direction) and deviation in mm; a BadInput
+    prefixed with ``where`` (file and line) for the first field that is wrong."""
+    sign, leg, direction = cell["posture"], cell["leg"].lower(), cell["direction"].lower()
+    try:
+        check_posture(sign)
+        if geometry is not None:
+            stroke(sign, geometry)
+    except ValueError:
+        raise BadInput(
+            f"{where}: posture must be + or - or a signed nonzero stroke "
+            f"in mm within ±leg_length such as +30, got {sign!r}") from None
+    for field, value in (("leg", leg), ("direction", direction)):
+        if value not in ("x", "y", "z"):
+            raise BadInput(f"{where}: {field} must be x, y or z, got {value!r}")
+    if leg == direction:
+        raise BadInput(f"{where}: direction must differ from leg ({leg!r})")
+    try:
+        value_mm = float(cell["deviation_mm"])
+    except ValueError:
+        raise BadInput(
+            f"{where}: deviation_mm is not a number: {cell['deviation_mm']!r}") from None
+    if not math.isfinite(value_mm):
+        raise BadInput(f"{where}: deviation_mm must be finite, got {value_mm}")
+    return (sign, leg, direction), value_mm
 
 
 def format_table(result: Identification, geometry: Geometry) -> str:
