@@ -1,0 +1,430 @@
+"""One run's steps against the devices (:class:`Flow`): measure, identify, write back,
+verify, each replayed from the journal when a resumed run already did it, filling the
+result as it goes; :class:`Run`, what a run holds. station.engine.procedure drives it.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.files import write_atomic
+from orthocal import carry
+from orthocal.geometry import params_vector
+from orthocal.loop import (
+    WRITABLE,
+    after_correction,
+    correction,
+)
+from orthocal.lost_motion import band_middle, edge_of
+from orthocal.numbers import finite
+from station.config import StationConfig
+from station.console.operator import Operator
+from station.engine import accuracy, budget, reversal, verdict
+from station.engine.closed_loop import round_phase
+from station.engine.devices import Devices
+from station.engine.results import (
+    ident_json,
+    measurement_fields,
+    remaining_fields,
+    verification_fields,
+    writeback_fields,
+)
+from station.engine.sequencer import Sequencer
+from station.engine.statistics import Measurement, pooled
+from station.engine.writeback import WritebackOutcome, write_back
+from station.errors import RunFailed, say, storage_message
+from station.plan.checker import MotionChecker
+from station.plan.steps import Plan
+from station.report.io import jsonable_value
+from station.rundir.directory import MODEL_NAME
+from station.rundir.journal import Journal, JournalState
+
+
+@dataclass
+class Run:
+    run_dir: Path
+    config: StationConfig
+    plan: Plan
+    journal: Journal
+    devices: Devices
+    operator: Operator
+    sim: dict[str, Any] | None
+    state: JournalState
+    records: list[dict[str, Any]]
+    started_iso: str
+    checker: MotionChecker | None = None
+    t0: float = field(default_factory=time.monotonic)
+    result: dict[str, Any] = field(default_factory=dict)
+
+
+class Flow:
+    """The steps of station.engine.closed_loop against the devices, each one replayed from the
+    journal when a resumed run already did it; fills the result as it goes."""
+
+    def __init__(self, ctx: Run, seq: Sequencer, result: dict[str, Any]) -> None:
+        self.ctx, self.seq, self.result = ctx, seq, result
+        self.idents: list[Any] = []  # identification of each round, in order
+        self.measurements: list[Measurement] = []  # each round's, its passes pooled
+        self.reversal: Any = None  # the joints' lost motion (orthocal.lost_motion)
+        # each round's rho+tilt fit, for the tilts the run states (engine.accuracy)
+        self.layout_rounds: list[accuracy.RoundLayout] = []
+        # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
+        # the joint errors that leave the least tool error (engine.accuracy)
+        self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
+        self._grid: Any = None
+        self.model: dict[str, Any] | None = None  # model.json, once the run stops
+        self.outcomes: list[WritebackOutcome] = []
+        self.iterations: list[dict[str, Any]] = result.setdefault("iterations", [])
+        # each round's Δρ̂ and standard errors joined with the rounds before (_joined)
+        self.joined: list[tuple[dict[str, float], dict[str, float | None]]] = []
+
+    def measure(self, phase: str) -> str:
+        """Measure (or replay) a round's first pass and identify it: its verdict
+        (station.engine.closed_loop; the first round's correction is written only
+        where it stands out of the noise, as every round's)."""
+        self._expect(written=True)
+        m = self.seq.measure(phase)
+        self.measurements.append(m)
+        return self._identify_round(m, [phase])
+
+    def extend(self, phase: str) -> str:
+        """A further pass of the last round's verification (its noise could not show
+        the machine converged, nor a correction worth writing): measured (or
+        replayed) and pooled with the round's passes, identified again, decided
+        again."""
+        self._expect(written=False)
+        m = pooled(self.measurements[-1], self.seq.measure(phase))
+        self.measurements[-1] = m
+        return self._identify_round(m, [*self.iterations[-1].get("passes", [
+            self.iterations[-1]["phase"]]), phase])
+
+    def _expect(self, written: bool) -> None:
+        """Tell the sequencer the machine the next pass should find (it sizes a
+        verification's cycles by it): the last fit, with the offsets at their aim
+        after a write-back (``written``); none before the first round."""
+        if not self.idents:
+            return
+        ident = self.idents[-1]
+        values = after_correction(ident.parameters, self.target) if written \
+            else ident.parameters
+        self.seq.expected = (ident.model, params_vector(values))
+
+    def _joined(self, n: int, ident: Any) -> tuple[dict[str, float], dict[str, float | None]]:
+        """Round ``n``'s Δρ̂ joined with the rounds before it (verdict.joined_round),
+        kept per round."""
+        outcome = self.outcomes[n - 1] if 0 < n <= len(self.outcomes) else None
+        joined = verdict.joined_round(ident, self.joined[n - 1] if n else None,
+                                      outcome.before if outcome else None,
+                                      outcome.written if outcome else None)
+        del self.joined[n:]
+        self.joined.append(joined)
+        return joined
+
+    def _identify_round(self, m: Measurement, passes: list[str]) -> str:
+        ctx = self.ctx
+        again = len(passes) > 1
+        n = len(self.idents) - 1 if again else len(self.idents)  # the round's index
+        phase = round_phase(passes[0])
+        # With auto, every round chooses its model again: misplaced stands bias the
+        # first round by (stand error × leg tilt), a misfit no model explains that
+        # can push the choice to a tilt model on a square machine; it vanishes with
+        # the offsets, so a later round's choice sees the machine as it is.
+        ident, selection = _identify(ctx, m)
+        if n == 0 and selection is not None:
+            self.result["model_selection"] = selection
+        # Lost motion: the joints' reversal from every round so far; every stop was
+        # approached from one side, so the fit found Δρ at that edge of each band:
+        # what is stated and written is its middle.
+        rev = reversal.estimate(ctx.config, self.measurements)
+        self.result["reversal"] = reversal.fields(ctx.config, rev)
+        reversal.check_overrun(ctx.config, rev)
+        self.reversal = rev
+        self._layout_of(phase, m, ident)
+        if n:
+            ident = self._carried(phase, ident)
+        ident = band_middle(ident, rev, ctx.config.procedure.approach)
+        if again:
+            self.idents[-1] = ident
+        else:
+            self.idents.append(ident)
+        fields = measurement_fields(ctx.config, m, ident)
+        prev = self.idents[n - 1] if n else None
+        proc = ctx.config.procedure
+        count = ctx.devices.controller.offset_resolution_mm()
+        joined = self._joined(n, ident)
+        judged = verdict.judge(ident, prev, proc.converge_mm,
+                               verdict.converge_limit(proc.converge_mm, count), self.target,
+                               passes_left=len(passes) - 1 < proc.max_extra_passes,
+                               joined=joined if n else None)
+        sig = judged.significant
+        entry: dict[str, Any] = {
+            "phase": phase, "model": ident.model, "identified": fields["identified"],
+            "std_errors": fields["std_errors"], "std_errors_dof": fields["std_errors_dof"],
+            "offsets_written": None, "writeback": None,
+            "deviations_rms_mm": fields["deviations_rms_mm"],
+            "residual_rms_mm": fields["residual_rms_mm"],
+            "noise_floor_mm": fields["noise_floor_mm"], "fit_ok": fields["fit_ok"],
+            "significant": sig, **judged.fields(),
+            **verdict.stands_part(ident, ctx.config.machine.geometry()),
+            **({"joined": {"drho_mm": joined[0], "std_errors_mm": joined[1]}} if n else {})}
+        if again:
+            entry["passes"] = passes
+            self.iterations[-1] = entry
+        else:
+            self.iterations.append(entry)
+        if n == 0:
+            self.result.update(fields)
+            journaled = ctx.state.identification
+            if journaled is None or len(journaled.get("passes", ["m"])) < len(passes):
+                ctx.journal.append({"type": "identification", **ident_json(ident),
+                                    **({"passes": passes} if again else {})})
+                ctx.state.identification = {"passes": passes}
+            return judged.verdict
+        self.result["verification"] = verification_fields(
+            ctx.config, fields, self.idents[n - 1], self.target,
+            edge=edge_of(rev, ctx.config.procedure.approach))
+        journaled = ctx.state.verifications.get(n)
+        if journaled is None or len(journaled.get("passes", [phase])) < len(passes):
+            ctx.journal.append({"type": "verification", "round": n, "phase": phase,
+                                **({"passes": passes} if again else {}),
+                                **ident_json(ident),
+                                "deviations_rms_mm": fields["deviations_rms_mm"],
+                                "significant": sig, "verdict": judged.verdict})
+        return judged.verdict
+
+    def write(self, round: int) -> str:
+        """Write-back ``round`` (1-based) of the correction the last measurement found."""
+        ctx = self.ctx
+        ident = self.idents[round - 1]
+        first = self.outcomes[0] if self.outcomes else None
+        self.target = self._aim()
+        note = self._objective_note(ident)
+        outcome = write_back(
+            controller=ctx.devices.controller,
+            identified=correction(ident.parameters, self.target), note=note,
+            max_abs_offset_mm=ctx.config.writeback.max_abs_offset_mm, run_dir=ctx.run_dir,
+            journal=ctx.journal, operator=ctx.operator, prior=ctx.state, round=round,
+            offsets_at_start=first.before if first is not None else None)
+        self.outcomes.append(outcome)
+        self.iterations[round - 1]["offsets_written"] = outcome.written
+        self.iterations[round - 1]["writeback"] = outcome.status
+        if ctx.config.writeback.objective != "joints":
+            self.iterations[round - 1]["target_drho"] = dict(self.target)
+        if round == 1:
+            writeback_fields(self.result, outcome, ctx.devices.controller)
+        elif outcome.written is not None:
+            self.result["offsets_written"] = outcome.written
+        self.result["writeback"] = {**outcome.to_json(), "round": round}
+        self._totals()
+        return outcome.status
+
+    def _totals(self) -> None:
+        """Top-level ``identified``: the total Δρ written since the run started (the
+        other parameters as the first identification found them)."""
+        total = dict(self.iterations[0]["identified"])
+        written = [it for it in self.iterations if it["offsets_written"] is not None]
+        if written:
+            for name in WRITABLE:
+                if name in total:
+                    total[name] = sum(it["identified"].get(name, 0.0)
+                                      - it.get("target_drho", {}).get(name, 0.0)
+                                      for it in written)
+        self.result["identified"] = total
+
+    def stopped(self, reason: str) -> None:
+        """Status, message and the loop's verdict once station.engine.closed_loop says finish."""
+        proc = self.ctx.config.procedure
+        first = self.outcomes[0] if self.outcomes else None
+        last = self.outcomes[-1] if self.outcomes else None
+        status, message = _status_of(first) if first is not None else ("ok", None)
+        if last is not None and last is not first:
+            if last.status == "failed-restored":
+                status, message = "failed", f"closed loop, round {len(self.outcomes)}: " \
+                    f"{last.reason}"
+            elif last.status in ("refused", "declined"):
+                message = (f"closed loop stopped before round {len(self.outcomes)}: "
+                           f"write-back {last.reason}")
+        converged = reason == "converged"
+        detail = last.reason if last is not None and not converged \
+            and reason in ("refused", "declined", "failed") else None
+        if reason == "max_iterations":
+            message = (f"closed loop did not converge: {proc.max_iterations} write-back(s) "
+                       "done and the last verification still finds a significant "
+                       "correction; run again or look for errors outside the model")
+        count = self.ctx.devices.controller.offset_resolution_mm()
+        if reason == "not-converged":
+            detail = verdict.not_converged(self.iterations[-1], proc.converge_mm, count)
+            message = f"closed loop did not converge: {detail}"
+        if last is None:
+            # nothing written: the offsets as found are the run's before and after
+            self.result["offsets_before"] = {a: float(v) for a, v in zip(
+                "xyz", self.ctx.devices.controller.read_offsets(), strict=True)}
+            self.result["offsets_written"] = None
+        if converged and last is None:
+            limit = verdict.converge_limit(proc.converge_mm, count)
+            message = (f"within tolerance, nothing written: every joint offset is shown within "
+                       f"{1000 * limit:.1f} µm at 95 % and no correction stands out of the "
+                       "noise")
+        self.result["converged"] = converged
+        self.result["loop"] = {
+            "stopped": reason, "detail": detail,
+            "write_backs": sum(1 for o in self.outcomes if o.status == "written"),
+            "max_iterations": proc.max_iterations, "converge_mm": proc.converge_mm,
+            "converged_within_mm": verdict.converge_limit(proc.converge_mm, count),
+            "extra_passes": sum(len(it.get("passes", ())) - 1 for it in self.iterations
+                                if it.get("passes")),
+            "max_extra_passes": proc.max_extra_passes,
+        }
+        self.result["remaining"] = remaining_fields(self.iterations, self.result)
+        self.result["uncertainty_budget"] = budget.of_run(self.ctx.config, self.idents,
+                                                          self.result)
+        self._accuracy()
+        self.result["status"], self.result["message"] = status, message
+
+    # --- accuracy at the tool ------------------------------------------------------
+
+    def _layout_of(self, phase: str, m: Measurement, ident: Any) -> None:
+        """The round's axes layout (tilts and gaps): from its own fit if it has them
+        all, else from a rho+tilt+gap fit of the same measurement (what the run could
+        not rule out; rho+tilt where the gaps cannot be told); a round measured again
+        replaces what its earlier passes gave."""
+        self.layout_rounds = [t for t in self.layout_rounds if t.phase != phase]
+        layout = accuracy.round_layout(phase, ident)
+        whole = layout is not None and len(layout.names) == len(accuracy.LAYOUT_NAMES)
+        for model in () if whole or not len(m.deviations) else accuracy.LAYOUT_MODELS:
+            try:
+                fit, _ = _identify(self.ctx, m, model)
+            except RunFailed:
+                continue  # too little data for this layout: try the smaller one
+            layout = accuracy.round_layout(phase, fit) or layout
+            break
+        if layout is not None:
+            self.layout_rounds.append(layout)
+
+    def _carried(self, phase: str, ident: Any) -> Any:
+        """A verification's identification joined with the axes' layout (tilts, gaps)
+        the earlier rounds measured, which no offset changed (orthocal.carry): its Δρ
+        gains, never loses. Without an earlier layout of its model's names: as it is."""
+        held = [n for n in accuracy.LAYOUT_NAMES if n in ident.names]
+        prior = accuracy.pool_layout([r for r in self.layout_rounds if r.phase != phase])
+        if not held or prior is None or not set(held) <= set(prior.names):
+            return ident
+        idx = [prior.names.index(n) for n in held]
+        try:
+            return carry.carried(ident, self.ctx.config.machine.geometry(), held,
+                                 prior.values[idx], prior.covariance[np.ix_(idx, idx)])
+        except (ValueError, np.linalg.LinAlgError):
+            return ident  # the round's own fit stands
+
+    def _points(self) -> Any:
+        if self._grid is None:
+            c = self.seq.checker
+            self._grid = accuracy.grid(self.ctx.config, (c.lo, c.hi)).points
+        return self._grid
+
+    def _aim(self) -> dict[str, float]:
+        """The Δρ the next write aims at (objective joints: 0)."""
+        if self.ctx.config.writeback.objective == "joints":
+            return dict.fromkeys(WRITABLE, 0.0)
+        return self._tool_target()
+
+    def _tool_target(self) -> dict[str, float]:
+        """Objective tool's Δρ for the pooled layout, only as far as the model chosen
+        for the last round has it: aiming the offsets at tilts or gaps the data do
+        not show would chase noise (on a square machine whose axes meet, objective
+        tool then writes what objective joints does)."""
+        last = self.idents[-1] if self.idents else None
+        return accuracy.tool_target(self.ctx.config, accuracy.pool_layout(self.layout_rounds),
+                                    self._points(), () if last is None else last.names)
+
+    def _objective_note(self, ident: Any) -> str:
+        """What the write-back prompt says of the objective and what each buys."""
+        cfg = self.ctx.config
+        layout = accuracy.pool_layout(self.layout_rounds)
+        tv = layout.vector() if layout is not None else np.zeros(6)
+        points, frame = self._points(), cfg.writeback.frame
+        geometry = cfg.machine.geometry()
+        figures = {}
+        for name, aim in (("joints", dict.fromkeys(WRITABLE, 0.0)),
+                          ("tool", self._tool_target())):
+            fld = accuracy.error_field(points, geometry, accuracy.params(aim, tv),
+                                       np.zeros(3), frame)
+            figures[name] = 1000 * fld.rms_mm
+        what = {"joints": "the paper's Δρ, legs parallel", "tool": "the least tool error"}
+        chosen = cfg.writeback.objective
+        other = "tool" if chosen == "joints" else "joints"
+        return (f"objective {chosen} ({what[chosen]}): predicted tool error "
+                f"{figures[chosen]:.1f} µm RMS over the workspace ({frame} frame); "
+                f"objective {other} would leave {figures[other]:.1f} µm")
+
+    def _accuracy(self) -> None:
+        """The run's statement at the tool (result ``accuracy``) and model.json."""
+        if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
+            return
+        cfg = self.ctx.config
+        layout = accuracy.pool_layout(self.layout_rounds)
+        last = self.idents[-1]
+        names = list(last.names)
+        idx = [names.index(n) for n in WRITABLE if n in names]
+        remaining = self.result.get("remaining")
+        start = (remaining or {}).get("total") or {
+            n: self.result["identified"].get(n, 0.0) for n in WRITABLE}
+        if remaining:
+            now = remaining["estimate"]
+        else:  # the last correction written and not verified: its aim, as predicted
+            now = dict(self.target)
+        now_cov = np.asarray(last.covariance)[np.ix_(idx, idx)] if len(idx) == 3 else None
+        before = self.result.get("offsets_before")
+        try:
+            self.result["accuracy"] = accuracy.statement(
+                cfg, (self.seq.checker.lo, self.seq.checker.hi), drho_start=start,
+                drho_now=now, drho_now_cov=now_cov, dof=finite(last.std_error_dof),
+                layout=layout, model=last.model, in_model=names, offsets_before=before,
+                target_tool=self._tool_target())
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            self.result["accuracy"] = {"error": f"not stated: {exc}"}
+            return
+        if self.reversal is not None:
+            self.result["accuracy"]["reversal"] = reversal.at_the_tool(
+                cfg, self.reversal, self._points())
+        first = self.idents[0]
+        f_names = list(first.names)
+        f_idx = [f_names.index(n) for n in WRITABLE if n in f_names]
+        self.model = accuracy.model_export(
+            cfg, drho_start=start,
+            drho_start_cov=np.asarray(first.covariance)[np.ix_(f_idx, f_idx)]
+            if len(f_idx) == 3 else None,
+            drho_now=now, tilts=layout, model=last.model, offsets_before=before,
+            offsets_written=self.result.get("offsets_written"),
+            dof=finite(first.std_error_dof))
+        try:
+            write_atomic(self.ctx.run_dir / MODEL_NAME,
+                         json.dumps(jsonable_value(self.model), indent=1,
+                                    allow_nan=False) + "\n")
+        except OSError as exc:  # a full disk: result.json says so too, if it can
+            say(f"orthocal: {MODEL_NAME} not written ({storage_message(self.ctx.run_dir, exc)})")
+
+
+def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
+    if outcome.status in ("written", "skipped"):
+        return "ok", None
+    if outcome.status == "refused":
+        return "refused", f"write-back {outcome.reason}"
+    if outcome.status == "declined":
+        return "aborted", f"write-back {outcome.reason}"
+    return "failed", outcome.reason
+
+
+def _identify(ctx: Run, m: Measurement,
+              model: str | None = None) -> tuple[Any, dict[str, Any] | None]:
+    from station.engine.identify import identify_measurement
+
+    return identify_measurement(ctx.config, m, model)
+
+
