@@ -298,6 +298,8 @@ def build_parser() -> argparse.ArgumentParser:
     history.add_argument("--rebuild", metavar="RUNS_DIR",
                          help="record every finished run under RUNS_DIR again first")
     history.add_argument("--json", action="store_true", help="print one JSON document")
+    history.add_argument("--plot", metavar="FILE", help="also draw the machine's parameters "
+                         "over its runs, with their drift per month (FILE.png or FILE.svg)")
 
     compare = sub.add_parser("compare", help="what changed between two runs of one machine")
     compare.add_argument("run_a", metavar="RUN_A", help="the earlier run's directory")

@@ -30,13 +30,52 @@ def _um(value: float | None) -> str:
     return "—" if value is None else f"{1000 * value:+.1f}"
 
 
+def _plot(path: Path, entries: list[dict[str, Any]], machine: str | None) -> None:
+    """``--plot``: one machine's runs drawn into ``path``; a history of several
+    machines, or of none, is refused in one line (their parameters are not one
+    machine's trend)."""
+    from station.history.plot import plot_history
+
+    machines = sorted({str(e.get("machine_id")) for e in entries if e.get("machine_id")})
+    if machine is None and len(machines) > 1:
+        raise BadInput(f"--plot: the history holds {len(machines)} machines "
+                       f"({', '.join(machines)}); say which with --machine ID")
+    mine = [e for e in entries if e.get("machine_id")] if machines else []
+    if not mine:
+        raise BadInput("--plot: no runs of a named machine ([machine] id) to plot"
+                       + (f" for {machine!r}" if machine else ""))
+    try:
+        plot_history(mine, path, machines[0])
+    except ValueError as exc:
+        raise BadInput(f"--plot: {exc}") from None
+    except OSError as exc:
+        raise BadInput(f"--plot: cannot write {path} ({exc.strerror})") from None
+    print(f"orthocal: history of {machines[0]} drawn in {path}", file=sys.stderr)
+
+
+def _plot_path(args: argparse.Namespace) -> Path | None:
+    """The --plot file, its format checked before anything is read."""
+    from station.history.plot import FORMATS
+
+    if args.plot is None:
+        return None
+    path = Path(args.plot)
+    if path.suffix.lower() not in FORMATS:
+        raise BadInput(f"--plot: {args.plot}: suffix {path.suffix or '(none)'!r} is not "
+                       "a figure format; give FILE.png or FILE.svg")
+    return path
+
+
 def history_main(args: argparse.Namespace) -> int:
+    plot = _plot_path(args)
     with _store(args) as store:
         if args.rebuild is not None:
             count = store.rebuild(Path(args.rebuild))
             print(f"orthocal: history rebuilt from {count} run(s) in {args.rebuild}",
                   file=sys.stderr)
         entries = store.entries(args.machine)
+    if plot is not None:
+        _plot(plot, entries, args.machine)
     if args.json:
         print(json.dumps({"machine_id": args.machine, "runs": entries}, indent=2))
         return 0
