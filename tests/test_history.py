@@ -8,13 +8,16 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
 import pg
 import pytest
 from builders import simulated
+from test_record import errors
 
+from station import report
 from station.commands import run as cmd_run
 from station.history.store import DEFAULT_NAME, HistoryStore, default_url
 
@@ -105,6 +108,8 @@ def test_compare_refuses_other_machines_in_one_line(tmp_path: Path, capsys) -> N
     a = _run(out, capsys, "OG-1")
     b = _run(out, capsys, "OG-2", seed=5)
     anonymous = _run(out, capsys, None, seed=6)
+    # no section without an earlier run of the same id, nor without an id
+    assert "since_last" not in b and "since_last" not in anonymous
     for other, words in ((b, "different machines"), (anonymous, "names no machine")):
         refused = orthocal("compare", a["run_dir"], other["run_dir"], cwd=tmp_path)
         assert refused.returncode == 2 and words in refused.stderr
@@ -198,3 +203,26 @@ def test_a_machine_recalibrated_from_the_offsets_it_was_left_with(tmp_path: Path
     assert changes["drho_x"]["significant"]
     for name in ("drho_y", "drho_z"):
         assert abs(changes[name]["change_mm"]) < 0.004, (name, changes[name])
+    # the second run's report says what changed since the first, with compare's numbers
+    assert "since_last" not in first
+    since = second["since_last"]
+    assert since["previous_run"] == first["run_dir"] and since["previous_state"] == "as left"
+    assert since["joint_error_mm"]["x"]["change"] == pytest.approx(changes["drho_x"]["change_mm"])
+    assert since["joint_error_mm"]["x"]["significant"]
+    assert not since["joint_error_mm"]["y"]["significant"]
+    run_dir = Path(second["run_dir"])
+    on_disk = json.loads((run_dir / "result.json").read_text())
+    assert on_disk["since_last"] == since
+    assert errors("result", on_disk) == []
+    page = (run_dir / "report.html").read_text()
+    assert "Since the last calibration" in page and first["run_dir"] in page
+    assert "Since the last calibration" not in (Path(first["run_dir"]) / "report.html") \
+        .read_text()
+    summary = report.summary_text(second)
+    assert "since last" in summary and "joint x" in summary and "(significant)" in summary
+    # a figure of the two runs for the machine's file
+    figure = tmp_path / "og7.svg"
+    drawn = orthocal("history", "--out", str(out), "--machine", "OG-0007", "--plot",
+                     str(figure), cwd=tmp_path)
+    assert drawn.returncode == 0, drawn.stderr
+    assert "OG-0007" in " ".join(ET.parse(figure).getroot().itertext())

@@ -26,10 +26,6 @@ def _store(args: argparse.Namespace) -> Any:
         raise BadInput(f"--db: cannot open {url} ({type(exc).__name__}: {exc})") from None
 
 
-def _um(value: float | None) -> str:
-    return "—" if value is None else f"{1000 * value:+.1f}"
-
-
 def _plot(path: Path, entries: list[dict[str, Any]], machine: str | None) -> None:
     """``--plot``: one machine's runs drawn into ``path``; a history of several
     machines, or of none, is refused in one line (their parameters are not one
@@ -67,6 +63,8 @@ def _plot_path(args: argparse.Namespace) -> Path | None:
 
 
 def history_main(args: argparse.Namespace) -> int:
+    from station.history.compare import microns
+
     plot = _plot_path(args)
     with _store(args) as store:
         if args.rebuild is not None:
@@ -86,7 +84,7 @@ def history_main(args: argparse.Namespace) -> int:
         state = e.get("stopped") or e.get("status") or "—"
         tool = e.get("tool_after_rms_mm")
         print(f"{e.get('started') or '—':<26} {e.get('machine_id') or '—':<12} {state:<14} "
-              + ", ".join(_um((found.get(a) or {}).get("value_mm")) for a in "xyz")
+              + ", ".join(microns((found.get(a) or {}).get("value_mm")) for a in "xyz")
               + f"   {'—' if tool is None else f'{1000 * tool:.1f}'}   {e['run_dir']}")
     if not entries:
         print("(no runs" + (f" of machine {args.machine!r})" if args.machine else ")"))
@@ -115,7 +113,7 @@ def _entry_of_dir(run_dir: str) -> dict[str, Any]:
 
 
 def compare_main(args: argparse.Namespace) -> int:
-    from station.history.compare import Incomparable, compare
+    from station.history.compare import Incomparable, change_lines, compare
 
     a, b = _entry_of_dir(args.run_a), _entry_of_dir(args.run_b)
     try:
@@ -127,17 +125,8 @@ def compare_main(args: argparse.Namespace) -> int:
         return 0
     print(f"machine {doc['machine_id']}: A {doc['a']} ({doc['a_state']}) → B {doc['b']} "
           "(as found)")
-    for axis, c in doc["joint_error_mm"].items():
-        print(f"  joint {axis}  {_um(c['before'])} → {_um(c['after'])} µm: change "
-              f"{_um(c['change'])} ± {_um(c['interval_95']).lstrip('+')} µm at 95 %"
-              + (" (significant)" if c["significant"] else ""))
-    for name, c in doc["layout"].items():
-        scale, unit = (1000.0, "µm") if name.startswith("gap") else (1.0, "mrad")
-        ci = c["interval_95"]
-        print(f"  {name:<8} {c['before'] * scale:+.3f} → {c['after'] * scale:+.3f} {unit}: "
-              f"change {c['change'] * scale:+.3f}"
-              + ("" if ci is None else f" ± {ci * scale:.3f}") + f" {unit}"
-              + (" (significant)" if c["significant"] else ""))
+    for line in change_lines(doc):
+        print(f"  {line}")
     return 0
 
 

@@ -6,10 +6,11 @@ error and whether it stands out at 95 %."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from orthocal import coverage_factor
+from station.history.trend import started_at
 
 
 class Incomparable(ValueError):
@@ -77,3 +78,54 @@ def changes(joints: dict[str, Any], layout: dict[str, Any]) -> dict[str, Any]:
         out[name] = {f"change_{unit}": c["change"], f"expanded_95_{unit}": c["interval_95"],
                      f"std_error_{unit}": c["std_error"], "significant": c["significant"]}
     return out
+
+
+def microns(value: float | None) -> str:
+    """A length in mm shown in µm, signed; — where not stated."""
+    return "—" if value is None else f"{1000 * value:+.1f}"
+
+
+def change_lines(doc: Mapping[str, Any]) -> list[str]:
+    """One line per parameter of a comparison (``compare``'s ``joint_error_mm`` and
+    ``layout``): before → after, the change ± its 95 % half-width, and whether it is
+    significant; the joints and gaps in µm, the tilts in mrad."""
+    lines = []
+    for axis, c in (doc.get("joint_error_mm") or {}).items():
+        lines.append(f"joint {axis}  {microns(c['before'])} → {microns(c['after'])} µm: change "
+                     f"{microns(c['change'])} ± {microns(c['interval_95']).lstrip('+')} µm at 95 %"
+                     + (" (significant)" if c["significant"] else ""))
+    for name, c in (doc.get("layout") or {}).items():
+        scale, unit = (1000.0, "µm") if name.startswith("gap") else (1.0, "mrad")
+        ci = c["interval_95"]
+        lines.append(f"{name:<8} {c['before'] * scale:+.3f} → {c['after'] * scale:+.3f} "
+                     f"{unit}: change {c['change'] * scale:+.3f}"
+                     + ("" if ci is None else f" ± {ci * scale:.3f}") + f" {unit}"
+                     + (" (significant)" if c["significant"] else ""))
+    return lines
+
+
+def since_last(earlier: Sequence[Mapping[str, Any]],
+               entry: Mapping[str, Any]) -> dict[str, Any] | None:
+    """A run's "Since the last calibration" (result ``since_last``): its ``entry``
+    against the last of ``earlier`` (history entries) of its machine that started
+    before it, through ``compare``. None without a machine id, without an earlier
+    run, or where nothing could be compared; ``not_compared`` says why two runs of
+    one id are not comparable (another geometry or register map)."""
+    machine, start = entry.get("machine_id"), started_at(entry)
+    if not machine or start is None:
+        return None
+    prior = [e for e in earlier if e.get("machine_id") == machine
+             and e.get("run_dir") != entry.get("run_dir")  # a resumed run's own row
+             and (when := started_at(e)) is not None and when < start]
+    if not prior:
+        return None
+    last = max(prior, key=lambda e: started_at(e))  # type: ignore[arg-type,return-value]
+    head = {"previous_run": last["run_dir"], "previous_started": last.get("started")}
+    try:
+        doc = compare(last, entry)
+    except Incomparable as exc:
+        return {**head, "not_compared": str(exc)}
+    if not doc["joint_error_mm"] and not doc["layout"]:
+        return None
+    return {**head, "previous_state": doc["a_state"],
+            "joint_error_mm": doc["joint_error_mm"], "layout": doc["layout"]}

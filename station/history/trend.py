@@ -50,7 +50,8 @@ class Drift:
     runs: int
 
 
-def _when(entry: Mapping[str, Any], key: str = "started") -> datetime | None:
+def started_at(entry: Mapping[str, Any], key: str = "started") -> datetime | None:
+    """The entry's start (or ``key``'s date) as an aware datetime; None if absent."""
     try:
         when = datetime.fromisoformat(str(entry.get(key)))
     except ValueError:
@@ -65,11 +66,11 @@ def series(entries: Sequence[Mapping[str, Any]]) -> dict[str, list[Point]]:
     any run identified), its points oldest first."""
     out: dict[str, list[Point]] = {f"drho_{a}": [] for a in AXES}
     for entry in entries:
-        when = _when(entry)
+        when = started_at(entry)
         if when is None:
             continue
         # As found is the machine at the run's start, as left at its end.
-        left = _when(entry, "finished") or when
+        left = started_at(entry, "finished") or when
         for state, key, at in (("as found", "as_found", when), ("as left", "as_left", left)):
             frame = entry.get(key) or {}
             for axis, v in (frame.get("joint_error_mm") or {}).items():

@@ -99,6 +99,23 @@ class Machine(_Open):
     rho_max: float
 
 
+class SinceLast(_Open):
+    """What changed since the machine's last run in the history (docs/design.md,
+    "Machine history"): that run's as left (as found where it verified nothing)
+    against this run's as found, through station.history.compare."""
+
+    previous_run: str = Field(description="the last earlier run of this machine id")
+    previous_started: str | None = None
+    previous_state: Literal["as left", "as found"] | None = None
+    joint_error_mm: dict[str, dict[str, Any]] | None = Field(
+        None, description="per axis e = Δρ − o: before, after, change, std_error, "
+        "interval_95 (mm), significant")
+    layout: dict[str, dict[str, Any]] | None = Field(
+        None, description="per tilt (mrad) and gap (mm), the same fields")
+    not_compared: str | None = Field(
+        None, description="why the two runs could not be compared (then no changes)")
+
+
 class RunResult(BaseModel):
     """result.json: one calibration run, as written at its end (or when it stopped)."""
 
@@ -150,3 +167,5 @@ class RunResult(BaseModel):
     reversal: dict[str, Any] | None = None
     plunger_guard: dict[str, Any] | None = None
     timing: Timing | None = None
+    since_last: SinceLast | None = Field(
+        None, description="absent without [machine] id or an earlier run in the history")

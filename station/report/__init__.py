@@ -8,8 +8,8 @@ that crashes on the failed run is the one report the operator needed most.
 Split by job: io.py (result.json), format.py (names and formatting), text.py (the
 text summary), tool.py (accuracy at the tool: the headline's clause, the summary's
 lines, the page's section, where the stands were), rounds.py (the closed loop's
-rounds), plots.py (figures), html.py (the page). The report reads the result
-document only, never the engine.
+rounds), since.py (what changed since the machine's last run), plots.py (figures),
+html.py (the page). The report reads the result document only, never the engine.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ from typing import Any
 
 from drivers.files import write_atomic
 from orthocal import coverage_factor
-from station.report import budget, reversal
+from station.report import budget, reversal, since
 from station.report.format import (
     AXES,
     MODEL_TEXT,
@@ -522,6 +522,7 @@ def render_html(result: dict) -> str:
 {accuracy}
 {reversal.section_html(result)}
 {budget.section_html(result)}
+{since.section_html(result)}
 {"<h2>The measurement: the legs' parallelism</h2>" if accuracy else ""}
 {_fit_box(result)}
 {"".join(figures)}

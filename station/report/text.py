@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from station.report import budget, reversal, tool
+from station.report import budget, reversal, since, tool
 from station.report.format import (
     AXES,
     NOT_WRITTEN_TEXT,
@@ -157,6 +157,7 @@ def summary_text(result: dict) -> str:
     lines += tool.summary_lines(result)
     lines += reversal.summary_lines(result)
     lines += budget.summary_lines(result)
+    lines += since.summary_lines(result)
     if names and result.get("not_identifiable"):
         two = any("ΔL cannot be separated" in str(n) for n in result["not_identifiable"])
         lines.append("  not identifiable  a rotation of the whole machine"
