@@ -226,3 +226,8 @@ def test_a_machine_recalibrated_from_the_offsets_it_was_left_with(tmp_path: Path
                      str(figure), cwd=tmp_path)
     assert drawn.returncode == 0, drawn.stderr
     assert "OG-0007" in " ".join(ET.parse(figure).getroot().itertext())
+    # the drive holds what the runs wrote: TwinCAT must not be told it again
+    assert second["offsets_held_by"] == "controller"
+    refused = orthocal("export", second["run_dir"], "--to", "twincat", cwd=tmp_path)
+    assert refused.returncode == 2 and "correct the machine twice" in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1

@@ -308,15 +308,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     export = sub.add_parser("export", help="a run's final offsets in a controller's terms")
     export.add_argument("run_dir", metavar="RUN_DIR")
-    export.add_argument("--to", choices=["linuxcnc", "csv"], required=True)
+    export.add_argument("--to", choices=["linuxcnc", "twincat", "csv"], required=True)
     export.add_argument("--ini", metavar="FILE", help="the machine's LinuxCNC INI (its "
                         "HOME_OFFSETs: the export writes the new value beside the old)")
     export.add_argument("--joints", default="0,1,2", metavar="I,J,K",
                         help="the LinuxCNC joints of axes x,y,z (default 0,1,2)")
-    export.add_argument("--backlash", action="store_true", help="LinuxCNC: set BACKLASH "
-                        "from the run's measured reversal, where it stands out of its noise")
-    export.add_argument("--out", metavar="FILE", help="write here instead of stdout (the "
-                        "whole INI, HOME_OFFSETs calibrated, the rest as it was)")
+    export.add_argument("--axes", default="Axis 1,Axis 2,Axis 3", metavar="A,B,C",
+                        help="the TwinCAT NC axes of x,y,z (default Axis 1,Axis 2,Axis 3)")
+    export.add_argument("--backlash", action="store_true", help="LinuxCNC BACKLASH, TwinCAT "
+                        "MC_BacklashCompensation, from the run's measured reversal, where it "
+                        "stands out of its noise")
+    export.add_argument("--out", metavar="FILE", help="write here instead of stdout (for "
+                        "LinuxCNC the whole INI, HOME_OFFSETs calibrated, the rest as it was)")
     return parser
 
 

@@ -132,11 +132,14 @@ def compare_main(args: argparse.Namespace) -> int:
 
 def export_main(args: argparse.Namespace) -> int:
     from station.history.export import ExportError, csv_lines, linuxcnc
+    from station.history.twincat import twincat
 
     _, result = _read_result(args.run_dir)
     try:
         if args.to == "csv":
             text = csv_lines(result)
+        elif args.to == "twincat":
+            text = twincat(result, args.axes.split(","), backlash=args.backlash)
         else:
             if args.ini is None:
                 raise BadInput("--ini: LinuxCNC takes HOME_OFFSET as a value, not a "
@@ -155,7 +158,10 @@ def export_main(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise BadInput(f"--joints: {exc}") from None
     if args.out:
-        Path(args.out).write_text(text, encoding="utf-8")
+        try:
+            Path(args.out).write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise BadInput(f"--out: cannot write {args.out} ({exc.strerror})") from None
     else:
         sys.stdout.write(text)
     return 0

@@ -28,10 +28,14 @@ def offset_changes(result: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
     if not isinstance(before, Mapping) or not isinstance(final, Mapping):
         raise ExportError("result.json: the run states no offsets_before/offsets_final "
                           "(it stopped before reading the controller)")
-    return {a: (float(before[a]), float(final[a])) for a in AXES}
+    try:
+        return {a: (float(before[a]), float(final[a])) for a in AXES}
+    except (KeyError, TypeError, ValueError):
+        raise ExportError("result.json: offsets_before/offsets_final do not give a number "
+                          f"for each of {', '.join(AXES)}") from None
 
 
-def _reversal(result: Mapping[str, Any]) -> dict[str, tuple[float, float | None]]:
+def reversals(result: Mapping[str, Any]) -> dict[str, tuple[float, float | None]]:
     """Per axis the measured reversal and its standard error (mm), where measured."""
     rev = result.get("reversal")
     if not isinstance(rev, Mapping) or not isinstance(rev.get("value_mm"), Mapping):
@@ -41,14 +45,40 @@ def _reversal(result: Mapping[str, Any]) -> dict[str, tuple[float, float | None]
                 else None) for a in AXES if isinstance(values.get(a), int | float)}
 
 
-def _backlash_line(value: float, se: float | None) -> str:
-    """BACKLASH where the reversal stands out of its noise (beyond 2 standard errors and
-    positive); otherwise why not, as a comment: a controller must not be told to
-    compensate a dead band the measurement cannot tell from zero."""
-    if se is not None and value > 2.0 * se:
-        return f"BACKLASH = {value:.6f}    # the joint's reversal as measured (ISO 230-2)"
+def backlash_stands_out(value: float, se: float | None) -> bool:
+    """A reversal a controller may be told to compensate: positive and beyond 2
+    standard errors; a dead band the measurement cannot tell from zero is not one."""
+    return se is not None and value > 2.0 * se
+
+
+def not_beyond_noise(value: float, se: float | None) -> str:
+    """Why a reversal is not written as backlash, in words."""
     shown = f"{value:+.6f}" + ("" if se is None else f" ± {se:.6f}")
-    return f"# BACKLASH not written: the reversal measured {shown} mm is not beyond its noise"
+    return f"the reversal measured {shown} mm is not beyond its noise"
+
+
+def _backlash_line(value: float, se: float | None) -> str:
+    """BACKLASH where the reversal stands out of its noise; otherwise why not, as a
+    comment."""
+    if backlash_stands_out(value, se):
+        return f"BACKLASH = {value:.6f}    # the joint's reversal as measured (ISO 230-2)"
+    return f"# BACKLASH not written: {not_beyond_noise(value, se)}"
+
+
+def home_changes(result: Mapping[str, Any], controller: str) -> dict[str, float]:
+    """Per axis the change of a controller's home (reference) position that moves
+    the carriage as the run's offsets did: −(offsets_final − offsets_before), mm.
+    Where a controller sets the joint position at its home switch to H, a carriage
+    commanded to ρ sits at switch + ρ − H, and the station's offset o puts it at
+    ρ + o: raising o by Δo is lowering H by Δo. Refused where the drive itself holds
+    the offsets the run wrote: ``controller`` would correct the machine twice."""
+    changes = offset_changes(result)
+    if result.get("offsets_held_by") == "controller" and any(
+            abs(final - before) > 0 for before, final in changes.values()):
+        raise ExportError(f"the drive holds the offsets this run wrote (offsets_held_by = "
+                          f"controller): writing them into {controller} as well would "
+                          "correct the machine twice")
+    return {a: before - final for a, (before, final) in changes.items()}  # no −0.0
 
 
 def linuxcnc(result: Mapping[str, Any], ini_text: str, joints: Sequence[int] = (0, 1, 2),
@@ -58,19 +88,15 @@ def linuxcnc(result: Mapping[str, Any], ini_text: str, joints: Sequence[int] = (
     ``backlash``: BACKLASH too, where the run's reversal stands beyond its noise.
     Refused where the drive itself holds the offsets the run wrote: the controller
     would correct the machine twice."""
-    if result.get("offsets_held_by") == "controller" and any(
-            abs(final - before) > 0 for before, final in offset_changes(result).values()):
-        raise ExportError("the drive holds the offsets this run wrote (offsets_held_by = "
-                          "controller): writing them into LinuxCNC as well would correct "
-                          "the machine twice")
+    home = home_changes(result, "LinuxCNC")
     old = _home_offsets(ini_text, joints, source)
     changes = offset_changes(result)
-    reversal = _reversal(result) if backlash else {}
+    reversal = reversals(result) if backlash else {}
     machine = (result.get("machine") or {}).get("id") or "no [machine] id"
     edits: dict[str, tuple[str, list[str]]] = {}
     for axis, joint in zip(AXES, joints, strict=True):
         before, final = changes[axis]
-        value = old[joint] - (final - before)
+        value = old[joint] + home[axis]
         note = (f"# orthocal: HOME_OFFSET was {old[joint]:.6f}; o_{axis} {before:+.6f} -> "
                 f"{final:+.6f} mm (run {result.get('run_dir')}, machine {machine}; a commanded "
                 "rho puts the carriage at rho + o, so HOME_OFFSET moves by -(o change))")
@@ -122,7 +148,7 @@ def _home_offsets(ini_text: str, joints: Sequence[int], source: str) -> dict[int
 def csv_lines(result: Mapping[str, Any]) -> str:
     """One row per axis: the offsets before and after, their change, the reversal."""
     changes = offset_changes(result)
-    reversal = _reversal(result)
+    reversal = reversals(result)
     machine = (result.get("machine") or {}).get("id") or ""
     rows = ["axis,offset_before_mm,offset_final_mm,change_mm,reversal_mm,machine_id,run_dir,"
             "convention"]
