@@ -92,9 +92,13 @@ def test_the_figure_as_svg_and_png(runs: Path, tmp_path: Path) -> None:
 
 
 def test_what_cannot_be_plotted_is_said_in_one_line(runs: Path, tmp_path: Path) -> None:
+    with HistoryStore(default_url(runs)) as store:  # a row this version cannot read
+        store.record({**_entry("d", "OG-BAD", 5, 0.1), "as_found": {"joint_error_mm": {
+            "x": {"value_mm": None}}}})
     for argv, words in ((["--plot", "h.pdf"], "'.pdf'"),
+                        (["--plot", "h.svg", "--machine", "OG-BAD"], "cannot be drawn"),
                         (["--plot", "history"], "(none)"),
-                        (["--plot", "h.svg"], "2 machines (OG-0007, OG-0042)"),
+                        (["--plot", "h.svg"], "3 machines (OG-0007, OG-0042, OG-BAD)"),
                         (["--plot", "h.svg", "--machine", "OG-9"], "no runs")):
         bad = orthocal("--out", str(runs), *argv, cwd=tmp_path)
         assert bad.returncode == 2 and words in bad.stderr, (argv, bad.stderr)

@@ -42,6 +42,10 @@ def _plot(path: Path, entries: list[dict[str, Any]], machine: str | None) -> Non
                        + (f" for {machine!r}" if machine else ""))
     try:
         plot_history(mine, path, machines[0])
+    except (KeyError, TypeError) as exc:  # a row written by another version, or edited
+        raise BadInput(f"--plot: a history entry of {machines[0]} cannot be drawn "
+                       f"({type(exc).__name__}: {exc}); --rebuild makes the store again "
+                       "from the run directories") from None
     except ValueError as exc:
         raise BadInput(f"--plot: {exc}") from None
     except OSError as exc:
