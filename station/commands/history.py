@@ -30,7 +30,7 @@ def _plot(path: Path, entries: list[dict[str, Any]], machine: str | None) -> Non
     """``--plot``: one machine's runs drawn into ``path``; a history of several
     machines, or of none, is refused in one line (their parameters are not one
     machine's trend)."""
-    from station.history.plot import plot_history
+    from station.report.history_plot import plot_history
 
     machines = sorted({str(e.get("machine_id")) for e in entries if e.get("machine_id")})
     if machine is None and len(machines) > 1:
@@ -55,7 +55,7 @@ def _plot(path: Path, entries: list[dict[str, Any]], machine: str | None) -> Non
 
 def _plot_path(args: argparse.Namespace) -> Path | None:
     """The --plot file, its format checked before anything is read."""
-    from station.history.plot import FORMATS
+    from station.report.history_plot import FORMATS
 
     if args.plot is None:
         return None

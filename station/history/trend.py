@@ -1,6 +1,6 @@
 """A machine's parameters over its runs, and how fast they drift (docs/design.md,
 "Machine history", ``orthocal history --plot``). Pure: from history entries to
-numbers; the figure is :mod:`station.history.plot`'s.
+numbers; the figure is :mod:`station.report.history_plot`'s.
 
 The drift of a parameter is the weighted least-squares slope of its values against
 the run's date, each value weighted by 1/σ². The joint errors are fitted on their
