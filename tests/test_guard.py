@@ -18,9 +18,9 @@ from drivers.sim.indicators import SimIndicator
 from station import report
 from station.commands import run as cmd_run
 from station.config import parse_config
+from station.engine.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker
-from station.plan.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.plan.steps import build_plan
 from station.rundir.journal import read_journal
 

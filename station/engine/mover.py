@@ -18,9 +18,9 @@ import numpy as np
 
 from drivers.base import AxisController
 from station.config import StationConfig
+from station.engine.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.errors import BadInput, RunFailed
 from station.plan.checker import SIGNAL_PAD_MM, MotionChecker, PathRefused
-from station.plan.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.plan.steps import Move, Plan, SetupPlan
 
 # The plunger guard's second line: after a trip the rest of the move is re-planned

@@ -34,6 +34,7 @@ from drivers.base import AxisController
 from orthocal.lost_motion import reversal_gain
 from station.config import StationConfig
 from station.console.operator import Operator
+from station.engine.guard import PlungerGuard
 from station.engine.mover import Mover, ReadingSource
 from station.engine.statistics import (
     Measurement,
@@ -45,7 +46,6 @@ from station.engine.statistics import (
 )
 from station.errors import RunFailed, check_interrupted
 from station.plan.checker import MotionChecker
-from station.plan.guard import PlungerGuard
 from station.plan.steps import (
     REVERSAL,
     Checkpoint,
