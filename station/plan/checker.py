@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -17,6 +16,7 @@ from orthocal.measurement import reading_at
 from station.config import StationConfig
 from station.errors import BadInput
 from station.plan import motion
+from station.plan.gauges import Gauges, NotCrossing
 from station.plan.limits import effective_limits, limits_source, motion_model
 from station.plan.steps import AXES, Move, Plan, Prompt, SetupPlan, route_key
 
@@ -29,12 +29,9 @@ START_REUSE_MM = 0.05
 # Sub-move bounds a checker remembers before it starts afresh (a design search
 # bounds tens of thousands; each entry is a few hundred bytes).
 BOUND_CACHE_SIZE = 200_000
-# Added on both sides of a measured signal (station.plan.guard) when a move is routed
+# Added on both sides of a measured signal (station.engine.guard) when a move is routed
 # with it: a reading's noise, the error of carrying it to a stop not yet read.
 SIGNAL_PAD_MM = 0.05
-# The signal is a smooth function of the joints, not of the progress along a move:
-# between two stops it may leave their straight ramp by this fraction of its change.
-SIGNAL_BULGE = 0.5
 
 
 class MotionChecker:
@@ -177,13 +174,13 @@ class MotionChecker:
     def _gauges(self, setup: SetupPlan | None, mounted: dict[str, str] | None,
                 signal: Mapping[str, tuple[float, float]] | None,
                 start: np.ndarray | None = None, target: np.ndarray | None = None
-                ) -> _Gauges | None:
+                ) -> Gauges | None:
         if setup is None or not mounted:
             return None
         names = list(mounted)
         inds = [self.config.indicator(n) for n in names]
         sig = signal or {}
-        return _Gauges(
+        return Gauges(
             setup, names, [mounted[n] for n in names],
             low=np.array([-i.preload for i in inds]),
             high=np.array([i.stroke_mm - i.preload for i in inds]),
@@ -192,15 +189,15 @@ class MotionChecker:
             pad=SIGNAL_PAD_MM if signal else 0.0,
             chord=None if start is None or target is None or not signal else (start, target))
 
-    def _room(self, gauges: _Gauges | None, margin: float) -> float:
+    def _room(self, gauges: Gauges | None, margin: float) -> float:
         """The largest slack any route could have: half the stroke left inside the margin."""
         if gauges is None:
             return 0.0
         return max(0.0, float(np.min(gauges.high - gauges.low)) / 2.0 - margin)
 
-    def _values(self, gauges: _Gauges | None, where: str) -> Callable[[np.ndarray], np.ndarray]:
+    def _values(self, gauges: Gauges | None, where: str) -> Callable[[np.ndarray], np.ndarray]:
         """(n, 3) joints -> (n, m) nominal plunger travel of the mounted gauges; raises
-        ValueError outside the workspace and _NotCrossing when the leg leaves a plane."""
+        ValueError outside the workspace and NotCrossing when the leg leaves a plane."""
         geometry = self.geometry
 
         def values(points: np.ndarray) -> np.ndarray:
@@ -211,14 +208,14 @@ class MotionChecker:
             mount = geometry.mount_plane
             if not np.all((np.minimum(p[:, i], points[:, i]) <= mount)
                           & (mount <= np.maximum(p[:, i], points[:, i]))):
-                raise _NotCrossing(where)
+                raise NotCrossing(where)
             return np.stack([self.nominal_travel(gauges.setup, n, d, points, p)
                              for n, d in zip(gauges.names, gauges.directions, strict=True)],
                             axis=-1)
 
         return values
 
-    def _bound(self, gauges: _Gauges | None, a: np.ndarray, b: np.ndarray, where: str,
+    def _bound(self, gauges: Gauges | None, a: np.ndarray, b: np.ndarray, where: str,
                margin: float | None) -> motion.Bound | None:
         """Bound of the travel (signal included) over the sub-move; with ``margin``
         None if it leaves the stroke less that margin (a decision: as sharp as it
@@ -244,7 +241,7 @@ class MotionChecker:
             return None
         return motion.Bound(bound.lo + sig_lo, bound.hi + sig_hi)
 
-    def _segment_bound(self, gauges: _Gauges, f: Callable[[np.ndarray], np.ndarray],
+    def _segment_bound(self, gauges: Gauges, f: Callable[[np.ndarray], np.ndarray],
                        a: np.ndarray, b: np.ndarray, low: np.ndarray | None,
                        high: np.ndarray | None, where: str,
                        max_depth: int = motion.MAX_DEPTH) -> motion.Bound:
@@ -274,21 +271,21 @@ class MotionChecker:
         try:
             found = motion.segment_bound(f, a, b, self.motion, low, high,
                                          max_depth=max_depth)
-        except (motion.OutsideWorkspace, _NotCrossing) as exc:
+        except (motion.OutsideWorkspace, NotCrossing) as exc:
             self._bounds[key] = type(exc)
             raise
         bound = found if known is None else known.merge(found)
         self._bounds[key] = bound
         return bound
 
-    def _feasible(self, gauges: _Gauges | None, a: np.ndarray, b: np.ndarray, margin: float,
+    def _feasible(self, gauges: Gauges | None, a: np.ndarray, b: np.ndarray, margin: float,
                   where: str) -> bool:
         try:
             return self._bound(gauges, a, b, where, margin) is not None
-        except (motion.OutsideWorkspace, _NotCrossing):
+        except (motion.OutsideWorkspace, NotCrossing):
             return False
 
-    def _route_travel(self, gauges: _Gauges | None, start: np.ndarray,
+    def _route_travel(self, gauges: Gauges | None, start: np.ndarray,
                       legs: list[np.ndarray], where: str) -> dict[str, tuple[float, float]]:
         travel: dict[str, tuple[float, float]] = {}
         if gauges is None:
@@ -336,14 +333,14 @@ class MotionChecker:
             bound = self._segment_bound(
                 gauges, self._values(gauges, ""), np.asarray(a, dtype=float),
                 np.asarray(b, dtype=float), low, high, "", max_depth)
-        except (motion.OutsideWorkspace, _NotCrossing):
+        except (motion.OutsideWorkspace, NotCrossing):
             return None
         if not bound.within(low, high):
             return None
         return {n: (float(bound.lo[k]), float(bound.hi[k]))
                 for k, n in enumerate(gauges.names)}
 
-    def _refusal(self, gauges: _Gauges | None, start: np.ndarray, target: np.ndarray,
+    def _refusal(self, gauges: Gauges | None, start: np.ndarray, target: np.ndarray,
                  where: str, max_waypoints: int, margin: float) -> BadInput:
         """Why no route holds, said of the worst sub-move of the most split one tried
         (the even split into max_waypoints + 1 sub-moves)."""
@@ -359,7 +356,7 @@ class MotionChecker:
             except motion.OutsideWorkspace:
                 return BadInput(f"plan: {where}: the axes could leave the machine's workspace "
                                 f"on the way{via}; nothing has moved")
-            except _NotCrossing:
+            except NotCrossing:
                 name = "" if gauges is None else f" of indicator {gauges.names[0]}"
                 return BadInput(f"plan: {where}: leg {gauges.setup.leg if gauges else '?'} "
                                 f"could leave the plane{name}{via}; nothing has moved")
@@ -435,44 +432,6 @@ class PathRefused(BadInput):
         self.indicator = indicator
         self.pushed = pushed
         self.detail = detail
-
-
-class _NotCrossing(ValueError):
-    """The leg under test leaves the plane of a mounted indicator."""
-
-
-@dataclass(frozen=True)
-class _Gauges:
-    """The gauges mounted on a setup's leg, as arrays over the gauges."""
-
-    setup: SetupPlan
-    names: list[str]
-    directions: list[str]
-    low: np.ndarray  # −preload
-    high: np.ndarray  # stroke − preload
-    # Travel beyond the nominal model (the signal) at the chord's start and end,
-    # linear in the progress along the chord in between, ± pad.
-    sig0: np.ndarray
-    sig1: np.ndarray
-    pad: float = 0.0
-    chord: tuple[np.ndarray, np.ndarray] | None = None
-
-    def signal_range(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(m,) lowest and highest signal over the progress that joint positions
-        ``points`` span along the chord: the ramp, ± the pad, ± SIGNAL_BULGE × the
-        ramp's change where the progress is away from both ends (4u(1 − u))."""
-        if self.chord is None:
-            zero = np.zeros(len(self.names))
-            return zero, zero
-        a, b = self.chord
-        d = b - a
-        norm = float(d @ d)
-        u = np.zeros(len(points)) if norm <= 0 else np.clip((points - a) @ d / norm, 0.0, 1.0)
-        lo_u, hi_u = float(u.min()), float(u.max())
-        ends = [self.sig0 + (self.sig1 - self.sig0) * v for v in (lo_u, hi_u)]
-        middle = 1.0 if lo_u <= 0.5 <= hi_u else max(4 * v * (1 - v) for v in (lo_u, hi_u))
-        widen = self.pad + SIGNAL_BULGE * np.abs(self.sig1 - self.sig0) * middle
-        return np.minimum(*ends) - widen, np.maximum(*ends) + widen
 
 
 def check_plan(
