@@ -66,7 +66,7 @@ from drivers.indicator_protocols import make_protocol
 from drivers.profiles import move_time
 from drivers.sim.motion import DriveMotion
 from drivers.sim.station import VirtualStation
-from station.config import toml_text
+from station.config.toml import toml_text
 from station.rundir.journal import read_journal
 
 AXES = ("x", "y", "z")

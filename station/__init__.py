@@ -12,5 +12,5 @@ pyproject.toml's import-linter contracts keep them so):
   (the journal, the run directory, the machine lock);
 - ``plan/``: the procedure as steps checked before anything moves, where the
   axes may pass during a move, the plunger guard;
-- ``config.py`` (the station config) and ``errors.py``.
+- ``config/`` (the station config, and written as TOML) and ``errors.py``.
 """

@@ -13,7 +13,7 @@ from truth import assert_truth, drho
 
 from drivers.sim.station import VirtualStation
 from station.commands.cli import main
-from station.config import toml_text
+from station.config.toml import toml_text
 
 
 def test_simulated_run_then_rollback(tmp_path: Path, capsys) -> None:

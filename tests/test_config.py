@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from station.config import StationConfig, dump_toml, load_config
+from station.config import StationConfig, load_config
+from station.config.toml import dump_toml
 from station.errors import BadInput
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "station.toml"

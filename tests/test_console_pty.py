@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from drivers.sim.station import VirtualStation
-from station.config import toml_text
+from station.config.toml import toml_text
 
 # The console's live bar and its prompts in time: at real time (conftest).
 pytestmark = pytest.mark.real_time

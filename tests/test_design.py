@@ -208,7 +208,8 @@ def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
     """``orthocal run --plan`` asks the controller for its soft limits: the search
     stays inside them and inside the plungers' travel (the whole plan check)."""
     from drivers.sim.station import VirtualStation
-    from station.config import load_config, toml_text
+    from station.config import load_config
+    from station.config.toml import toml_text
 
     with VirtualStation(seed=2, mount_all=True, indicator_count=6) as station:
         path = tmp_path / "station.toml"

@@ -28,8 +28,8 @@ from station.config import (
     ProcedureConfig,
     WritebackConfig,
     load_config,
-    toml_text,
 )
+from station.config.toml import toml_text
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples" / "maps").glob("*.toml"))

@@ -23,7 +23,8 @@ from builders import FAST, Rig, on_setup
 from close import assert_same
 
 from drivers.sim.station import VirtualStation
-from station.config import dump_toml, parse_config
+from station.config import parse_config
+from station.config.toml import dump_toml
 from station.rundir.journal import Journal, read_journal
 
 ROOT = Path(__file__).resolve().parent.parent

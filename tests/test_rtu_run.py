@@ -15,7 +15,7 @@ from truth import assert_truth, drho
 
 from station import report
 from station.commands.cli import main
-from station.config import toml_text
+from station.config.toml import toml_text
 
 
 def test_run_over_modbus_rtu_to_a_successful_result(tmp_path: Path, capsys) -> None:

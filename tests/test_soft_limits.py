@@ -15,7 +15,7 @@ from drivers.axes import ModbusAxisController
 from drivers.sim.controller import SimController
 from drivers.sim.station import VirtualStation
 from station.commands.cli import main
-from station.config import toml_text
+from station.config.toml import toml_text
 
 SHORT = {"cycles": 1, "readings": 2, "settle_s": 0.0, "verify": False}
 CONFIG_LIMITS = {"soft_min": [205.0, 205.0, 205.0], "soft_max": [375.0, 375.0, 375.0]}

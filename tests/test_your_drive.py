@@ -22,7 +22,7 @@ from drivers.sim.station import VirtualStation
 from station import report
 from station.commands import run as cmd_run
 from station.commands.cli import main
-from station.config import toml_text
+from station.config.toml import toml_text
 from station.errors import RunFailed
 from station.rundir.journal import read_journal
 

@@ -43,7 +43,7 @@ from station.config import (
     parse_config,
     with_map_file,
 )
-from station.config import toml_value as v
+from station.config.toml import toml_value as v
 from station.errors import BadInput
 
 NAMES = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"

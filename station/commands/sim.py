@@ -40,7 +40,8 @@ from station.commands.simulation import (
     separate_drives,
     served_map,
 )
-from station.config import dump_toml, parse_config
+from station.config import parse_config
+from station.config.toml import dump_toml
 from station.errors import BadInput
 from station.plan.limits import motion_model
 

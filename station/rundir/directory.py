@@ -16,7 +16,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from station.config import StationConfig, dump_toml
+from station.config import StationConfig
+from station.config.toml import dump_toml
 from station.errors import BadInput, RunFailed
 from station.plan.steps import Plan
 from station.rundir.journal import JOURNAL_NAME, JournalState, read_journal, replay
