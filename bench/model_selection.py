@@ -237,7 +237,7 @@ def section_standard_errors(args: argparse.Namespace, rng: np.random.Generator) 
     """Are the reported standard errors honest? RMS(error / SE) of ordinary least
     squares against the station's (measured noise with the shared-Π0 correlation)."""
     from orthocal import identify
-    from orthocal.selection import with_measured_noise
+    from orthocal.covariance import with_measured_noise
 
     runs = max(args.runs // 2, 20)
     for model, tilt in (("rho", np.zeros(3)), ("rho+tilt", np.array([0.5, -0.5, 0.3]))):

@@ -39,8 +39,9 @@ from model_selection import GAUGE_OF_KEY, Case, G, one_pair
 from model_selection import simulate_run as selection_run
 
 from orthocal import deviations, identify
+from orthocal.covariance import with_measured_noise
 from orthocal.noise import noise_from_cycles
-from orthocal.selection import LEVEL, lack_of_fit, select_model, with_measured_noise
+from orthocal.selection import LEVEL, lack_of_fit, select_model
 from orthocal.stands import GAUGES, Stands
 
 CASES = [

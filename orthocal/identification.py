@@ -67,7 +67,7 @@ class Identification:
     converged: bool = True
     #: Degrees of freedom behind ``std_errors``: the fit's ``dof`` when they come
     #: from its own residual, the noise estimate's when from the measured noise
-    #: (orthocal.selection.with_measured_noise). Sets the coverage factor.
+    #: (orthocal.covariance.with_measured_noise). Sets the coverage factor.
     se_dof: float | None = None
     #: The indicator stands, when they were modelled (``identify(..., stands=)``):
     #: each stand's position, mm off L/2, with its posterior SD, or not observable

@@ -108,7 +108,7 @@ def test_auto_without_noise_information_is_refused():
 
 def test_measured_noise_standard_errors_are_honest_where_ordinary_ones_are_not():
     from orthocal import identify
-    from orthocal.selection import with_measured_noise
+    from orthocal.covariance import with_measured_noise
 
     rng = np.random.default_rng(6)
     names = ("drho_x", "drho_y", "drho_z", "tilt_yx", "tilt_zx", "tilt_zy")
@@ -139,7 +139,7 @@ def test_students_t_intervals_hold_the_truth_where_the_normals_do_not():
     """Two cycles (12 dof per run): ±k95·SE from Student's t holds the truth in
     95 % of runs, ±1.96·SE in visibly fewer; the identification carries its dof."""
     from orthocal import coverage_factor, identify
-    from orthocal.selection import with_measured_noise
+    from orthocal.covariance import with_measured_noise
 
     rng = np.random.default_rng(11)
     z, dofs = [], set()

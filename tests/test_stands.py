@@ -19,9 +19,10 @@ from orthocal import (
     posture,
     select_model,
 )
+from orthocal.covariance import with_measured_noise
 from orthocal.geometry import full_params
 from orthocal.noise import noise_from_cycles
-from orthocal.selection import lack_of_fit, with_measured_noise
+from orthocal.selection import lack_of_fit
 from orthocal.stands import GAUGES, incidence, stand_jacobian
 
 G = Geometry()

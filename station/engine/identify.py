@@ -8,8 +8,9 @@ import math
 from typing import Any
 
 import orthocal
+from orthocal.covariance import with_measured_noise
 from orthocal.noise import noise_from_cycles, noise_from_readings
-from orthocal.selection import LEVEL, lack_of_fit, with_measured_noise
+from orthocal.selection import LEVEL, lack_of_fit
 from station.config import StationConfig
 from station.engine.statistics import Measurement
 from station.errors import RunFailed
@@ -48,7 +49,7 @@ def identify_measurement(config: StationConfig, m: Measurement,
     auto, the selection's JSON (the run JSON's ``model_selection``).
 
     Standard errors: from the noise this measurement shows, with the correlation
-    its shared Π0 stops give the deviations (orthocal.selection.with_measured_noise:
+    its shared Π0 stops give the deviations (orthocal.covariance.with_measured_noise:
     honest where ordinary least squares is ~10-20 % off), inflated by √F when the
     model leaves more than that noise (so a model the data reject does not look
     precise). Without a noise estimate (one cycle of one reading), the fit's own."""
