@@ -24,9 +24,7 @@ from orthocal.budget import (
     combine,
     expected_lack_of_fit,
     form_vector,
-    key_sensitivity,
     propagation,
-    sensitivity,
 )
 from orthocal.calibration import (
     coefficients,
@@ -44,6 +42,7 @@ from orthocal.misfit import Allowance
 from orthocal.noise import coverage_factor
 from orthocal.postures import posture, posture_point
 from orthocal.selection import ModelSelection, select_model
+from orthocal.sensitivities import key_sensitivity, sensitivity
 from orthocal.stands import StandEstimate, Stands
 from orthocal.tool_interval import AfterInterval, after_interval, assumes, field_jacobian
 

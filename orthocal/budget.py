@@ -26,14 +26,19 @@ from typing import Any
 
 import numpy as np
 
-from orthocal.calibration import jacobian
-from orthocal.geometry import AXES, PARAM_NAMES, Geometry, split_params
-from orthocal.identification import Identification, exact_jacobian
-from orthocal.measurement import Key, bow_at, contact_fraction, deviations
+from orthocal.geometry import AXES, Geometry, split_params
+from orthocal.identification import Identification
+from orthocal.measurement import Key, bow_at, contact_fraction
 from orthocal.noise import coverage_factor, row_correlation
 from orthocal.numbers import finite
 from orthocal.postures import posture
-from orthocal.stands import incidence, prior_penalty, stand_jacobian
+from orthocal.sensitivities import (
+    check_geometry,
+    estimate_gain,
+    fit_design,
+    key_sensitivity,
+    rows_of,
+)
 
 Gauge = tuple[str, str]  # (leg i, direction j): one dial indicator, one gauge plane
 #: Linear expansion of steel, 1/K.
@@ -43,122 +48,6 @@ STEEL_ALPHA = 11.5e-6
 MPE_SPAN_MM = 0.2
 #: The coverage probability of ``expanded_95_mm``.
 COVERAGE = 0.95
-# How far (mm) the geometry given may reproduce an identification's model values off.
-_GEOMETRY_TOL = 1e-9
-
-
-# --- sensitivity ----------------------------------------------------------------------
-
-
-def _check_geometry(ident: Identification, geometry: Geometry) -> None:
-    """Refuse a geometry that does not reproduce the identification's model values:
-    the sensitivity would be that of another machine."""
-    keys = list(ident.keys)
-    if ident.method == "nonlinear":
-        again = deviations(keys, geometry, ident.vector, ident.mount_offsets)
-    else:
-        J_all = jacobian(keys, geometry, "full+tilt+gap")
-        again = J_all[:, :6] @ ident.vector[:6] + J_all[:, 6:] @ ident.vector[6:]
-    model_values = np.asarray(ident.values) - np.asarray(ident.residuals)
-    if not np.allclose(again, model_values, rtol=0.0, atol=_GEOMETRY_TOL):
-        raise ValueError("this geometry does not reproduce the identification's model values: "
-                         "give the geometry it was identified with")
-
-
-def _design(ident: Identification, geometry: Geometry
-            ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
-    """(J_θ, J_M, Λ, C) of the identification at its solution: the Jacobian of its
-    parameters (rows its ``keys``), and with stands their exact columns, their
-    prior's penalty σ²/σ_M² (orthocal.stands) and the residual's curvature
-    term (:func:`_stand_curvature`), else None, None, None."""
-    keys = list(ident.keys)
-    if ident.method != "nonlinear":
-        return jacobian(keys, geometry, ident.model), None, None, None
-    J_t = exact_jacobian(keys, geometry, ident.vector, ident.model, ident.mount_offsets)
-    if ident.stand_model is None:
-        return J_t, None, None, None
-    assert ident.stand_sigma is not None
-    _, S = incidence(keys, ident.stand_model)  # columns in the order of ident.stands
-    J_m = stand_jacobian(keys, geometry, ident.vector, S)
-    lam = prior_penalty(ident.stand_sigma, ident.stand_model, S.shape[1])
-    return J_t, J_m, lam, _stand_curvature(ident, geometry)
-
-
-def _gain(J_t: np.ndarray, J_m: np.ndarray | None, lam: np.ndarray | None,
-          curvature: np.ndarray | None = None) -> np.ndarray:
-    """The full linear map from the rows to the estimates (θ, then the stands)."""
-    if J_m is None or lam is None:
-        return np.linalg.pinv(J_t)
-    A = np.hstack([J_t, J_m])
-    p = J_t.shape[1]
-    hessian = A.T @ A
-    hessian[p:, p:] += lam
-    if curvature is not None:
-        hessian = hessian + curvature
-    return np.linalg.solve(hessian, A.T)
-
-
-def _stand_curvature(ident: Identification, geometry: Geometry) -> np.ndarray:
-    """Σ_k r_k·∇²f_k over x = (θ, m) of a fit with stands, r = f − y at the
-    solution: the residual's term of the objective's Hessian. Central differences
-    of A = [J_θ, J_M] with steps of 1e-3 (mm, mrad; A is linear in m, smooth in θ)."""
-    assert ident.stand_model is not None
-    keys = list(ident.keys)
-    _, S = incidence(keys, ident.stand_model)
-    cols = [PARAM_NAMES.index(n) for n in ident.names]
-    x0 = np.concatenate([ident.vector[cols], ident.stand_offsets])
-
-    def A_at(x: np.ndarray) -> np.ndarray:
-        full = np.zeros(len(PARAM_NAMES))
-        full[cols] = x[: len(cols)]
-        return np.hstack([exact_jacobian(keys, geometry, full, ident.model, S @ x[len(cols):]),
-                          stand_jacobian(keys, geometry, full, S)])
-
-    f_minus_y, h = -np.asarray(ident.residuals), 1e-3
-    steps = h * np.eye(len(x0))
-    C = np.column_stack([(A_at(x0 + d) - A_at(x0 - d)).T @ f_minus_y / (2 * h) for d in steps])
-    return 0.5 * (C + C.T)
-
-
-def sensitivity(ident: Identification, geometry: Geometry | None = None) -> np.ndarray:
-    """K (n_params × n_rows, rows ``ident.keys``): δθ = K·δΔ, the change of the
-    identified parameters per change of each measured deviation, at the solution
-    (GUM 5.1.3, the sensitivity coefficients).
-
-    The identification's own Jacobian J (orthocal.identification.exact_jacobian
-    at the solution; (7) for the linear method), pseudo-inverted: K = J⁺. With
-    the stands modelled (orthocal.stands) the estimate minimises
-    |f(θ, m) − y|² + mᵀΛm, A = [J_θ, J_M], Λ = σ²/σ_M² on the stands, and
-    K is the parameters' rows of (AᵀA + Λ + C)⁻¹Aᵀ, the stands taking their
-    share of a deviation error as the fit does; C = Σ r_k·∇²f_k is the
-    residual's curvature term, kept here because the stands' block of AᵀA is
-    weak (~1e-5: the stands act through the offsets' small slopes) and the
-    residual times the cross-curvature ∂J_M/∂θ (~1e-6) moves K by ~0.5 %;
-    without stands it moves K by < 1e-4 and is left out.
-
-    ``geometry``: the one identified with (None: the default Geometry); one that
-    does not reproduce the identification's model values raises ValueError.
-    """
-    geometry = geometry or Geometry()
-    _check_geometry(ident, geometry)
-    return _gain(*_design(ident, geometry))[: len(ident.names)]
-
-
-def key_sensitivity(ident: Identification, geometry: Geometry | None = None
-                    ) -> tuple[list[Key], np.ndarray]:
-    """(distinct keys, K_d): the sensitivity to a systematic error of each distinct
-    deviation, the same in all its cycles: K_d[:, d] = Σ_rows of key d K[:, r]."""
-    keys = list(ident.keys)
-    distinct = list(dict.fromkeys(keys))
-    return distinct, sensitivity(ident, geometry) @ _rows_of(keys, distinct)
-
-
-def _rows_of(keys: Sequence[Key], distinct: Sequence[Key]) -> np.ndarray:
-    """P (n_rows × n_distinct): P[r, d] = 1 when row r measures key d."""
-    index = {k: n for n, k in enumerate(distinct)}
-    P = np.zeros((len(keys), len(distinct)))
-    P[np.arange(len(keys)), [index[k] for k in keys]] = 1.0
-    return P
 
 
 # --- the form of the legs ----------------------------------------------------------------
@@ -240,7 +129,7 @@ def propagation(ident: Identification, geometry: Geometry | None = None) -> Prop
     geometry = geometry or Geometry()
     keys = list(ident.keys)
     distinct, K = key_sensitivity(ident, geometry)
-    P = _rows_of(keys, distinct)
+    P = rows_of(keys, distinct)
     offsets = np.zeros(len(keys)) if ident.mount_offsets is None else ident.mount_offsets
     return Propagation(names=tuple(ident.names), keys=tuple(distinct), K=K, params=ident.vector,
                        mount_offsets=np.asarray(offsets)[[keys.index(k) for k in distinct]],
@@ -516,10 +405,10 @@ def expected_lack_of_fit(ident: Identification, sources: Sequence[Source], sigma
     (systematic: the same in every cycle) and, with stands modelled, their prior
     J_M·σ_M²·J_Mᵀ. Each part stated apart, beside the observed rᵀr."""
     geometry = geometry or Geometry()
-    _check_geometry(ident, geometry)
+    check_geometry(ident, geometry)
     keys = list(ident.keys)
-    J_t, J_m, lam, curvature = _design(ident, geometry)
-    gain = _gain(J_t, J_m, lam, curvature)
+    J_t, J_m, lam, curvature = fit_design(ident, geometry)
+    gain = estimate_gain(J_t, J_m, lam, curvature)
     A = J_t if J_m is None else np.hstack([J_t, J_m])
     R = np.eye(len(keys)) - A @ gain  # r = R·(error of the data)
 
@@ -527,7 +416,7 @@ def expected_lack_of_fit(ident: Identification, sources: Sequence[Source], sigma
         return float(np.einsum("rk,kl,rl->", R, cov, R))
 
     distinct = list(dict.fromkeys(keys))
-    P = _rows_of(keys, distinct)
+    P = rows_of(keys, distinct)
     by_source: dict[str, float] = {}
     for s in sources:
         if s.covariance is None:

@@ -32,17 +32,16 @@ from orthocal.budget import (
     combine,
     expected_lack_of_fit,
     form_vector,
-    key_sensitivity,
     mpe_sources,
     plunger_angle_source,
     propagation,
     resolution_sources,
     sagitta_from_straightness,
-    sensitivity,
     straightness_sources,
     temperature_source,
     welch_satterthwaite,
 )
+from orthocal.sensitivities import key_sensitivity, sensitivity
 from orthocal.stands import GAUGES
 
 G = Geometry()
