@@ -30,7 +30,8 @@ from drivers.errors import (
     MoveTimeout,
     TargetRefused,
 )
-from drivers.sim.controller import Faults, SimController
+from drivers.sim.controller import SimController
+from drivers.sim.faults import Faults
 from drivers.sim.machine import ALARM_NOT_HOMED, VirtualOrthoglide
 
 GEOMETRY = orthocal.Geometry()

@@ -33,7 +33,8 @@ from drivers.registers import (
     RegisterMap,
     StatusBit,
 )
-from drivers.sim.controller import Faults, SimController
+from drivers.sim.controller import SimController
+from drivers.sim.faults import Faults
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.station import VirtualStation
 

@@ -78,7 +78,8 @@ import numpy as np
 from drivers.files import write_atomic
 from drivers.indicator_protocols import make_protocol
 from drivers.registers import RegisterMap
-from drivers.sim.controller import Faults, SimController
+from drivers.sim.controller import SimController
+from drivers.sim.faults import Faults
 from drivers.sim.indicators import IndicatorFaults, SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.motion import DriveMotion
