@@ -157,7 +157,8 @@ def test_generic_gauge_units_and_errors_reach_the_driver(tmp_path: Path, scale: 
     configured by TOML fields alone, read through a real pty."""
     from drivers.errors import IndicatorReplyError
     from drivers.indicator_protocols import make_protocol
-    from drivers.sim.indicators import IndicatorFaults, SimIndicator
+    from drivers.sim.faults import IndicatorFaults
+    from drivers.sim.indicators import SimIndicator
     from station.engine.devices import build_indicators
 
     wire = make_protocol("generic", {

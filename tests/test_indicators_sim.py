@@ -14,7 +14,8 @@ import serial
 from drivers.errors import IndicatorPortError, IndicatorReplyError, IndicatorTimeout
 from drivers.indicator_protocols import BUILTIN_PROTOCOLS, make_protocol
 from drivers.indicators import IndicatorGroup, SerialIndicator
-from drivers.sim.indicators import IndicatorFaults, SimIndicator
+from drivers.sim.faults import IndicatorFaults
+from drivers.sim.indicators import SimIndicator
 
 PROTOCOLS = sorted(BUILTIN_PROTOCOLS)
 

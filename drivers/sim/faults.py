@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 
 @dataclass
@@ -59,3 +60,31 @@ class SimStats:
     power_cuts: int = 0
     #: commands taken, by the generic map's code (1 move, 2 stop, 3 home, 4 reset alarm)
     commands: dict[int, int] = field(default_factory=dict)
+
+
+@dataclass
+class IndicatorFaults:
+    """Fault knobs of one simulated gauge; change fields at any time.
+
+    ``*_rate`` is a probability per request, ``*_next`` a count of the next
+    requests that get the fault for sure (consumed as they happen). Per
+    request, in this order: drop (no reply at all), gauge error reply (the
+    protocol's ``error_format`` with ``error_code``; a protocol without one
+    makes the gauge stay silent), garble (``garble_mode``: "corrupt" replaces
+    one or two characters with junk, "truncate" sends part of the line without
+    its terminator, "any" picks one at random). ``late`` delays whatever reply
+    there is by ``late_s`` and combines with the others.
+    """
+
+    drop_rate: float = 0.0
+    drop_next: int = 0
+    error_rate: float = 0.0
+    error_next: int = 0
+    error_code: int = 1
+    garble_rate: float = 0.0
+    garble_next: int = 0
+    garble_mode: Literal["any", "corrupt", "truncate"] = "any"
+    late_rate: float = 0.0
+    late_next: int = 0
+    late_s: float = 0.5
+    unplugged: bool = False

@@ -14,7 +14,7 @@ What a pty does not do, the simulator emulates:
   ``time_scale`` for a gauge of a virtual station on a faster clock (late
   replies, ``late_s``, and unplugging times stay real: they are measured
   against the driver's real timeouts);
-* faults (:class:`IndicatorFaults`, changeable while running, drawn from a
+* faults (:class:`~drivers.sim.faults.IndicatorFaults`, changeable while running, drawn from a
   seeded RNG so a failing run can be replayed).
 
 Unplugging (``faults.unplugged = True`` or :meth:`SimIndicator.unplug`) closes
@@ -55,11 +55,11 @@ import threading
 import time
 import tty
 from collections.abc import Callable
-from dataclasses import dataclass
 from types import TracebackType
-from typing import Any, Literal, Self
+from typing import Any, Self
 
 from drivers.indicator_protocols import IndicatorProtocol, make_protocol
+from drivers.sim.faults import IndicatorFaults
 
 Source = Callable[[], float]
 
@@ -68,34 +68,6 @@ Source = Callable[[], float]
 # parity or framing; a digit turned into another digit would not be a fault
 # but a wrong measurement, which is not what this knob models).
 _JUNK = b"#%&*@~!$"
-
-
-@dataclass
-class IndicatorFaults:
-    """Fault knobs of one simulated gauge; change fields at any time.
-
-    ``*_rate`` is a probability per request, ``*_next`` a count of the next
-    requests that get the fault for sure (consumed as they happen). Per
-    request, in this order: drop (no reply at all), gauge error reply (the
-    protocol's ``error_format`` with ``error_code``; a protocol without one
-    makes the gauge stay silent), garble (``garble_mode``: "corrupt" replaces
-    one or two characters with junk, "truncate" sends part of the line without
-    its terminator, "any" picks one at random). ``late`` delays whatever reply
-    there is by ``late_s`` and combines with the others.
-    """
-
-    drop_rate: float = 0.0
-    drop_next: int = 0
-    error_rate: float = 0.0
-    error_next: int = 0
-    error_code: int = 1
-    garble_rate: float = 0.0
-    garble_next: int = 0
-    garble_mode: Literal["any", "corrupt", "truncate"] = "any"
-    late_rate: float = 0.0
-    late_next: int = 0
-    late_s: float = 0.5
-    unplugged: bool = False
 
 
 class SimIndicator:

@@ -79,8 +79,8 @@ from drivers.files import write_atomic
 from drivers.indicator_protocols import make_protocol
 from drivers.registers import RegisterMap
 from drivers.sim.controller import SimController
-from drivers.sim.faults import Faults
-from drivers.sim.indicators import IndicatorFaults, SimIndicator
+from drivers.sim.faults import Faults, IndicatorFaults
+from drivers.sim.indicators import SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.motion import DriveMotion
 from drivers.sim.strokes import OutOfStroke, StrokeWatch
