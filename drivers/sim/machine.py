@@ -56,11 +56,9 @@ from dataclasses import dataclass
 import numpy as np
 
 import orthocal
-from drivers.sim import form
+from drivers.sim.legs import GaugeView
 from drivers.sim.motion import (
     EPS,
-    SAMPLE_DT_S,
-    SAMPLE_MIN,
     DriveMotion,
     Motion,
     Profile1D,
@@ -94,7 +92,7 @@ class MachineStatus:
     alarm_code: int
 
 
-class VirtualOrthoglide:
+class VirtualOrthoglide(GaugeView):
     """The machine behind the simulated controller.
 
     ``true_drho``/``true_dl``: hidden joint offsets Δρ and leg-length errors ΔL
@@ -271,18 +269,6 @@ class VirtualOrthoglide:
     def now(self) -> float:
         """The machine's clock."""
         return self._clock()
-
-    def sample_segment(self, segment: Segment, max_dt_s: float = SAMPLE_DT_S,
-                       min_samples: int = SAMPLE_MIN, extra_times: Sequence[float] = ()
-                       ) -> tuple[np.ndarray, np.ndarray]:
-        """(times, joint values (n, 3)) of ``segment`` sampled densely (as
-        :meth:`Segment.sample`), the joints as :func:`orthocal.leg_reading` takes
-        them with ``drho=self.true_drho`` (ρ from the delivered offsets, see "Frames")."""
-        times, motor = segment.sample(max_dt_s, min_samples, extra_times)
-        c0 = segment.motion.carriage0
-        carriage = motor if c0 is None else \
-            np.clip(c0, motor - self._half_band, motor + self._half_band)
-        return times, carriage - self.offsets_initial
 
     def _accels(self) -> tuple[float, float, float]:
         return self.drive.accels(self.accel_mm_s2)
@@ -482,55 +468,6 @@ class VirtualOrthoglide:
                 self._freeze(now)
                 self._pending_alarm = None
             self._estop = bool(engaged)
-
-    # --- what the indicators see --------------------------------------------------------
-
-    def joint_values(self) -> np.ndarray:
-        """Kinematic joint values q (model (1)) at this instant: the carriages'."""
-        with self._lock:
-            return self._carriage(self._clock()) - self.offsets_initial + self.true_drho
-
-    def _rho_kin(self) -> np.ndarray:
-        return self._carriage(self._clock()) - self.offsets_initial
-
-    def leg_reading(self, leg: str, direction: str, mount: float | None = None) -> float:
-        """What a dial indicator on ``leg`` measuring along ``direction`` reads (mm):
-        :meth:`readings` at the instantaneous joint values."""
-        with self._lock:
-            rho = self._rho_kin()
-        return float(self.readings(rho, leg, direction, mount))
-
-    def readings(self, rho: np.ndarray, leg: str, direction: str,
-                 mount: float | None = None) -> np.ndarray:
-        """The coordinate along ``direction`` of leg ``leg`` in the plane x_leg =
-        ``mount`` (default: the nominal L/2) at joints ``rho`` ((..., 3), as
-        :meth:`sample_segment` gives them): :func:`orthocal.leg_reading` with the
-        true errors, plus the leg's bow where the plane touches it
-        (:mod:`drivers.sim.form`; nothing computed for a straight leg, so its
-        readings stay those of the maths to the bit)."""
-        reading = orthocal.leg_reading(rho, leg, direction, self.geometry, self.true_drho,
-                                       self.true_dl, mount=mount, tilt=self.true_tilt,
-                                       gap=self.true_gap)
-        h = float(self.leg_bow[orthocal.AXES.index(leg)])
-        if h == 0.0:
-            return reading
-        plane = self.geometry.mount_plane if mount is None else mount
-        t = form.contact_fraction(rho, leg, self.geometry, self.true_drho, self.true_dl,
-                                  self.true_tilt, plane, self.true_gap)
-        return reading + form.bow_mm(t, h)
-
-    def source(self, leg: str, direction: str,
-               mount: float | None = None) -> Callable[[], float]:
-        """A zero-argument callable for a simulated indicator's ``source``."""
-        return lambda: self.leg_reading(leg, direction, mount)
-
-    def end_point(self) -> np.ndarray:
-        """The end point P (mm) at this instant."""
-        with self._lock:
-            rho = self._rho_kin()
-        return orthocal.forward(rho, self.geometry, self.true_drho, self.true_dl, self.true_tilt,
-                                self.true_gap)
-
 
 
 def _vec(values: Sequence[float] | np.ndarray, n: int, what: str) -> np.ndarray:
