@@ -113,7 +113,7 @@ class Flow:
         ident = self.idents[-1]
         values = after_correction(ident.parameters, self.target) if written \
             else ident.parameters
-        self.seq.expected = (ident.model, params_vector(values))
+        self.seq.sizing.expected = (ident.model, params_vector(values))
 
     def _joined(self, n: int, ident: Any) -> tuple[dict[str, float], dict[str, float | None]]:
         """Round ``n``'s Δρ̂ joined with the rounds before it (verdict.joined_round),

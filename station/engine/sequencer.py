@@ -22,7 +22,6 @@ fault journaled, and the exception re-raised for the command to report.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -36,6 +35,7 @@ from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine.guard import PlungerGuard
 from station.engine.mover import Mover, ReadingSource
+from station.engine.sizing import VerificationSizing
 from station.engine.statistics import (
     Measurement,
     NoiseScale,
@@ -123,10 +123,9 @@ class Sequencer:
         self._all_names = [ind.name for ind in config.indicators]
         self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
         self._gains: dict[tuple[str, str], float] = {}  # (leg, axis) -> reversal gain
-        self._verdict_target: float | None = None  # see _verdict_se
-        # The machine a verification expects, (model, 12-vector of its parameters):
-        # the last round's fit after the write-back (set by the procedure; _decided).
-        self.expected: tuple[str, Any] | None = None
+        # how many cycles a verification's mounting takes (the flow tells it the
+        # machine the verification expects)
+        self.sizing = VerificationSizing(config, plan, controller)
         # The guard's records are the run's like any other: one that cannot be saved
         # stops the run (a swallowed error once lost a record that had an infinity).
         self.guard = PlungerGuard(
@@ -209,9 +208,9 @@ class Sequencer:
                     break
             # A verification that cannot yet show its verdict: more cycles on the
             # gauges already mounted, not another mounting (replayed alike on resume).
-            while (len(this_pass) < self._cycle_limit(phase)
+            while (len(this_pass) < self.sizing.cycle_limit(phase)
                    and not self._converged([d for _, d, _, _ in this_pass])
-                   and not self._decided(phase, [d for _, d, _, _ in this_pass])):
+                   and not self.sizing.decided(phase, [d for _, d, _, _ in this_pass])):
                 cycle += 1
                 devs, w, rev = self._cycle(phase, sp, cycle)
                 this_pass.append((cycle, devs, w, rev))
@@ -235,7 +234,7 @@ class Sequencer:
                 reversal.setdefault(axis, []).append(value)
         outcome = SetupOutcome(
             index=sp.index, leg=sp.leg, indicators=dict(sp.indicators),
-            cycles_used=len(used), cycles_max=self._cycle_limit(phase), repeats=repeats,
+            cycles_used=len(used), cycles_max=self.sizing.cycle_limit(phase), repeats=repeats,
             flagged=spread > proc.repeatability_mm, spread_mm=spread,
             cycles=[c for c, *_ in used])
         if (phase, sp.index) not in self.done_setups:
@@ -250,61 +249,6 @@ class Sequencer:
         if target is None or len(cycles) < 2:
             return False
         return cycle_std_error(cycles) <= target
-
-    def _cycle_limit(self, phase: str) -> int:
-        """Cycles a mounting may take in ``phase``: the planned ones, and in a
-        verification up to [procedure] max_cycles_in_mounting."""
-        proc = self.config.procedure
-        if not phase.startswith("v"):
-            return proc.cycles
-        most = proc.max_cycles_in_mounting or proc.cycles * (1 + proc.max_extra_passes)
-        return max(proc.cycles, most)
-
-    def _decided(self, phase: str, cycles: list[dict[str, float]]) -> bool:
-        """Whether this setup's cycles are enough for the verification's verdict: the
-        standard error of its deviations' means (:func:`cycle_std_error`) at
-        :meth:`_verdict_se` or below. With the machine the verification expects
-        known (:attr:`expected`), from the Δρ it will state: enough once that is
-        within a third of the converge limit on every axis, or once the gauges'
-        noise is no longer its larger part on any axis still short of it: the
-        stands set by eye are the rest, and only another mounting averages them
-        (orthocal.design.drho_error_parts). Any other phase: always."""
-        if not phase.startswith("v"):
-            return True
-        se = cycle_std_error(cycles)
-        if self.expected is None or not math.isfinite(se) or se <= 0.0:
-            # no scatter at all (quantised readings that never move): nothing to average
-            return se <= self._verdict_se()
-        from orthocal import design
-
-        proc = self.config.procedure
-        model, params = self.expected
-        keys, _ = self.plan.deviation_keys()
-        noise, stands = design.drho_error_parts(
-            keys, self.config.machine.geometry(), model, params, se,
-            proc.stand_tolerance_mm / math.sqrt(3.0))
-        limit = proc.converge_mm + 0.5 * self.controller.offset_resolution_mm()
-        short = np.hypot(noise, stands) > limit / 3.0
-        return bool(np.all(noise[short] <= stands[short]))
-
-    def _verdict_se(self) -> float:
-        """The standard error of a deviation's mean at which a verification can show
-        "converged": |Δρ̂| + k·se(Δρ) within converge_mm + half the drive's count,
-        with |Δρ̂| ≈ se(Δρ) on a machine the last write fixed and k ≈ 2 (95 %), and
-        se(Δρ) = G·se of the deviations, G the largest Δρ noise gain of the model on
-        the plan's stops (orthocal.design.quality; auto: rho, the smallest model,
-        whose verdict the loop's extra passes then extend)."""
-        if self._verdict_target is None:
-            from orthocal import design
-
-            proc = self.config.procedure
-            model = "rho" if proc.model == "auto" else proc.model
-            keys, _ = self.plan.deviation_keys()
-            q = design.quality(keys, self.config.machine.geometry(), model)
-            gain = max(v for n, v in q.noise_gain.items() if n.startswith("drho"))
-            limit = proc.converge_mm + 0.5 * self.controller.offset_resolution_mm()
-            self._verdict_target = limit / (3.0 * gain) if math.isfinite(gain) else 0.0
-        return self._verdict_target
 
     @staticmethod
     def _spread(cycles: list[dict[str, float]]) -> float:
