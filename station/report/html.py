@@ -24,7 +24,6 @@ from station.report.format import (
     format_when,
     held_by_station,
     machine_parameters,
-    max_abs,
     num,
     param_html,
     params_of,
@@ -35,9 +34,10 @@ from station.report.format import (
 )
 from station.report.header import header_boxes, held_box
 from station.report.plots import plot_deviations, plot_field, plot_parameters, release_fonts
+from station.report.story import result_paragraph, what_was_done
 from station.report.text import model_notes
 from station.report.tool import html_section as tool_section
-from station.report.tool import stands_html, statement, tool_clause
+from station.report.tool import stands_html, statement
 
 _CSS = """
 body{font-family:-apple-system,"Segoe UI",Roboto,"Helvetica Neue",Arial,sans-serif;
@@ -90,123 +90,6 @@ def _table(head: list[str], rows: list[list[str]], left: int = 1, caption: str =
     )
     cap = f'<p class="small">{caption}</p>' if caption else ""
     return f"<table><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>{cap}"
-
-
-def _what_was_done(result: Mapping[str, Any]) -> str:
-    setups = result.get("setups") if isinstance(result.get("setups"), list) else []
-    cycles = sorted({s.get("cycles_used") for s in setups if isinstance(s, dict)
-                     and isinstance(s.get("cycles_used"), int)})
-    cyc = ""
-    if cycles:
-        cyc = (f" ({cycles[0]} cycle{'s' if cycles[0] != 1 else ''} per leg)"
-               if len(cycles) == 1 else f" ({cycles[0]}–{cycles[-1]} cycles per leg)")
-    model = MODEL_TEXT.get(str(result.get("model")), str(result.get("model", "—")))
-    method = {"linear": "the linearised calibration equations",
-              "nonlinear": "the exact kinematic model (iterative least squares)"}.get(
-        str(result.get("method")), str(result.get("method", "—")))
-    # [procedure] strokes: intermediate stops Π_i(s) beside or instead of Π_i^±.
-    kinds = {k[:-2] for k in as_dict(result.get("deviations"))} or {"+", "-"}
-    n_post = len(kinds)
-    count = 3 * n_post * 2
-    postures = ("the two test postures Π<sub>i</sub><sup>+</sup> and Π<sub>i</sub><sup>−</sup> "
-                "(leg i pushed to the end of its stroke each way)") if kinds == {"+", "-"} else (
-        f"{n_post} test postures Π<sub>i</sub>(s) along leg i's axis, at the strokes s of "
-        "<code>[procedure] strokes</code>")
-    stopped = ""
-    if result.get("status") in ("failed", "aborted"):
-        # The paragraph below describes the whole procedure; say plainly that this
-        # run did not get through it, or a reader takes it for a completed calibration.
-        done = len(setups)
-        stopped = (f"<p><b>This run stopped early</b>, after measuring {done} of the "
-                   "3 legs; see the result below.</p>")
-    return stopped + (
-        "<p>Two dial indicators were mounted against each leg of the machine in turn. "
-        "For each leg the station moved the machine from the <i>mechanical zero</i> "
-        f"posture Π<sub>0</sub> to {postures} and "
-        f"back, repeatedly{_e(cyc)}, reading the indicators at every stop. On a perfectly "
-        "calibrated machine each leg moves parallel to itself in these postures, so the "
-        f"indicators read the same everywhere; the {count} differences "
-        f"(3 legs × {n_post} postures × 2 indicators), called <i>deviations</i>, show how far the "
-        "legs tilt. From them the station estimated, by least squares on "
-        f"{_e(method)}, the {_e(model)}.</p>"
-        '<p class="small">Δρ<sub>i</sub> (joint offset): how far axis i really is from '
-        "where its controller believes it is — an error of the encoder zero. "
-        "ΔL<sub>i</sub> (leg-length error): how much leg i is longer than nominal. "
-        "tilt<sub>yx</sub>, tilt<sub>zx</sub>, tilt<sub>zy</sub> (mrad): how far actuator "
-        "axis y leans toward x, and axis z toward x and toward y, off square. "
-        "± values are one standard error σ, from the noise measured in this run; the "
-        "95 % interval is ±kσ, k from Student's t on that noise's degrees of freedom "
-        "(GUM), so that few cycles do not claim more than they show.</p>"
-    )
-
-
-def _result_paragraph(result: Mapping[str, Any]) -> str:
-    status = str(result.get("status"))
-    parts: list[str] = []
-    names = params_of(result)
-    ident, errs = machine_parameters(result), as_dict(result.get("std_errors"))
-    if status in ("failed", "aborted"):
-        msg = result.get("message") or "no reason recorded"
-        parts.append(f"<b>The run did not complete</b>: {_e(msg)}. "
-                     "Everything measured up to that point is kept in the run directory; "
-                     "the controller's offsets were only changed if stated below.")
-    if names:
-        vals = "; ".join(
-            f"{param_html(n)} = {fmt(ident.get(n), signed=True)} ± {fmt(errs.get(n))} "
-            f"{unit(n)}" for n in names
-        )
-        what = "joint offsets" if all(n.startswith("drho") for n in names) else "parameters"
-        parts.append(f"The {what} were identified as {vals}.")
-        resid, noise = num(result.get("residual_rms_mm")), num(result.get("noise_mm"))
-        if resid is not None:
-            s = f"The fitted model reproduces the measured deviations to {fmt(resid)} mm RMS"
-            if noise is not None:
-                s += f" (indicator noise: {fmt(noise)} mm)"
-            parts.append(s + ".")
-        truths = [(n, true_value(result, n)) for n in names]
-        diffs = {u: [abs(num(ident.get(n)) - t) for n, t in truths if unit(n) == u
-                     and t is not None and num(ident.get(n)) is not None]
-                 for u in ("mm", "mrad")}
-        if diffs["mm"] or diffs["mrad"]:
-            parts.append("This was a simulated run; the identified values differ from the "
-                         "virtual machine's hidden ones by at most " + " and ".join(
-                             f"{fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
-    wb = as_dict(result.get("writeback"))
-    if wb.get("status"):
-        text = writeback_text(result, str(wb["status"]))
-        reason = f" ({_e(wb['reason'])})" if wb.get("reason") else ""
-        parts.append(f"{_e(text[0].upper() + text[1:])}{reason}.")
-    ver = as_dict(result.get("verification"))
-    # Parallel legs are the method's means, not the tool's accuracy: whatever the
-    # verification shows, the same sentence says what the tool does (or that the
-    # run does not state it), so that one is never read for the other.
-    tool = tool_clause(result)
-    _, why_not = statement(result)
-    if ver:
-        after = num(ver.get("deviations_rms_mm"))
-        worst = max_abs(as_dict(ver.get("deviations")))
-        s = ("A verification measurement shows the legs now parallel to within "
-             f"{fmt(after)} mm RMS")
-        if worst is not None:
-            s += f" (largest deviation {fmt(worst)} mm)"
-        before = num(result.get("deviations_rms_mm"))
-        if before is not None:
-            s += f", against {fmt(before)} mm RMS before calibration"
-        s += ": that is the legs' parallelism, the method's means, not the tool's accuracy"
-        if tool:
-            s += f"; {_e(tool)}"
-        else:
-            s += ("; accuracy at the tool is not stated"
-                  + (f" ({_e(why_not)})" if why_not else " by this result"))
-        parts.append(s + ".")
-    else:
-        if names and status == "ok":
-            parts.append("No verification measurement was made.")
-        if tool:
-            parts.append(f"{_e(tool[0].upper() + tool[1:])}.")
-    if not parts:
-        parts.append("No measurement results were recorded.")
-    return "<p>" + " ".join(parts) + "</p>"
 
 
 def _fit_box(result: Mapping[str, Any]) -> str:
@@ -516,9 +399,9 @@ def render_html(result: dict) -> str:
 <p class="meta">Orthoglide-type parallel machine · leg-parallelism calibration · {_e(when)}</p>
 {header_boxes(result)}{_info_list(result)}
 <h2>What was done</h2>
-{_what_was_done(result)}
+{what_was_done(result)}
 <h2>Result</h2>
-{_result_paragraph(result)}
+{result_paragraph(result)}
 {accuracy}
 {reversal.section_html(result)}
 {budget.section_html(result)}
