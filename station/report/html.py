@@ -404,8 +404,7 @@ def render_html(result: dict) -> str:
 {result_paragraph(result)}
 {accuracy}
 {reversal.section_html(result)}
-{budget.section_html(result)}
-{since.section_html(result)}
+{budget.section_html(result)}{since.section_html(result)}
 {"<h2>The measurement: the legs' parallelism</h2>" if accuracy else ""}
 {_fit_box(result)}
 {"".join(figures)}

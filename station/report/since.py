@@ -56,7 +56,7 @@ def section_html(result: Mapping[str, Any]) -> str:
     since = result.get("since_last")
     if not isinstance(since, Mapping):
         return ""
-    title = "<h2>Since the last calibration</h2>"
+    title = "\n<h2>Since the last calibration</h2>"  # its own line, where there is one
     if since.get("not_compared"):
         return (f"{title}<p>Not compared with the last run of this machine, "
                 f"{html.escape(str(since.get('previous_run')))}: "
