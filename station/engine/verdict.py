@@ -48,7 +48,7 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
     own noise alone). Significant: beyond k standard errors of both rounds (of
     the first alone) and beyond converge_mm (orthocal.loop.significant_corrections);
     after a write-back, where the round cannot show the machine within ``limit`` and
-    no further pass of it is left (``passes_left`` False), seen at 95 %.
+    no further pass of it is left (``passes_left`` False), beyond the noise alone.
     Converged: every axis shown within ``limit`` at 95 % (orthocal.loop.shown_within):
     for a first measurement, a machine within tolerance that nothing is written
     to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
@@ -65,14 +65,14 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
            if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
     values, ses = joined or (ident.parameters, ident.std_errors)
     shown = shown_within(values, ses, ident.std_error_dof, target=target)
-    off = shown_within(values, ses, ident.std_error_dof, target=aim, sign=True)
     if not sig and previous is not None and not passes_left and \
             any(v > limit for v in shown.values()):
-        # converge_mm spares a correction too small to matter, and the false-alarm k
-        # a machine already fixed, where a further pass can still show it within the
-        # limit; where none can, a correction seen at 95 % is what stands between the
-        # machine and "converged": written.
-        sig = [n for n in WRITABLE if off.get(n, -math.inf) > 0]
+        # converge_mm spares a correction too small to matter, where the machine can
+        # be shown within it; where no further pass can show that, a correction beyond
+        # the noise of both rounds is what stands between it and "converged": written.
+        # One only seen at 95 % is not: that would rewrite a fixed machine in one
+        # verification of twenty.
+        sig = beyond_noise
     verdict = "significant" if sig else "converged"
     if not sig and any(v > limit for v in shown.values()):
         seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
