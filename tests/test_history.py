@@ -73,6 +73,12 @@ def test_runs_are_recorded_listed_and_rebuilt(tmp_path: Path, capsys) -> None:
     # the machine's joint error in the controller's zero frame: Δρ − o, o = 0 here
     for axis, true in zip("xyz", TRUE, strict=True):
         assert abs(found[axis]["value_mm"] - true) < 5 * found[axis]["std_error_mm"] + 0.001
+    # each row also keeps the joints' lost motion and which gauges measured it
+    row = doc["runs"][0]
+    assert set(row["reversal"]) == set(a["reversal"]["value_mm"]) and \
+        row["reversal"]["x"]["value_mm"] == a["reversal"]["value_mm"]["x"]
+    assert [i["name"] for i in row["instruments"]] == \
+        [i["name"] for i in a["uncertainty_budget"]["instruments"]]
     (out / DEFAULT_NAME).unlink()  # the run directories are the record
     rebuilt = orthocal("history", "--out", str(out), "--rebuild", str(out), "--json",
                        cwd=tmp_path)

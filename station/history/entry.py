@@ -49,6 +49,23 @@ def _layout(result: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _reversal(result: Mapping[str, Any]) -> dict[str, Any]:
+    """Each joint's lost motion as the run measured it (mm, with its standard error)."""
+    rev = result.get("reversal") if isinstance(result.get("reversal"), Mapping) else {}
+    values = rev.get("value_mm") if isinstance(rev.get("value_mm"), Mapping) else {}
+    ses = rev.get("std_errors_mm") if isinstance(rev.get("std_errors_mm"), Mapping) else {}
+    return {a: {"value_mm": _num(values.get(a)), "std_error_mm": _num(ses.get(a))}
+            for a in AXES if _num(values.get(a)) is not None}
+
+
+def _instruments(result: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The gauges by what identifies them (their serials, where the config gives them)."""
+    budget = result.get("uncertainty_budget")
+    found = budget.get("instruments") if isinstance(budget, Mapping) else None
+    return [{"name": i.get("name"), "protocol": i.get("protocol"), "serial": i.get("serial")}
+            for i in (found if isinstance(found, list) else []) if isinstance(i, Mapping)]
+
+
 def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str, Any]:
     """The history entry of a finished run's ``result`` (its result.json);
     ``profile``: the register map its controller used (from its config)."""
@@ -75,4 +92,5 @@ def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str,
         "offsets_final": result.get("offsets_final"),
         "as_found": as_found, "as_left": as_left, "layout": _layout(result),
         "tool_after_rms_mm": _num(after.get("rms_mm")),
+        "reversal": _reversal(result), "instruments": _instruments(result),
     }
