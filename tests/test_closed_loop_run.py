@@ -64,8 +64,12 @@ def test_a_first_round_that_leaves_more_than_converge_mm_takes_a_second(tmp_path
         name = f"drho_{a}"
         assert result["offsets_written"][a] == pytest.approx(
             result["offsets_before"][a] - result["identified"][name], abs=0.0011)
-    assert its[-1]["deviations_rms_mm"] < its[1]["deviations_rms_mm"] < \
-        its[0]["deviations_rms_mm"]
+    # Each round leaves less than the first; once at the gauges' noise (1 µm), two
+    # rounds' RMS draw in either order, so the last is within that noise of the least
+    # before it (a strict order failed where both verifications were at the noise).
+    rms = [it["deviations_rms_mm"] for it in its]
+    assert max(rms[1:]) < rms[0]
+    assert rms[-1] <= min(rms[1:-1], default=rms[1]) + 0.001
     run_dir = Path(result["run_dir"])
     records = read_journal(run_dir / "journal.jsonl")
     rounds = [r.get("round") for r in records
