@@ -215,7 +215,10 @@ def test_a_machine_recalibrated_from_the_offsets_it_was_left_with(tmp_path: Path
     assert since["previous_run"] == first["run_dir"] and since["previous_state"] == "as left"
     assert since["joint_error_mm"]["x"]["change"] == pytest.approx(changes["drho_x"]["change_mm"])
     assert since["joint_error_mm"]["x"]["significant"]
-    assert not since["joint_error_mm"]["y"]["significant"]
+    # y did not drift: whether its change is called significant is a 95 % draw (one run
+    # in twenty), so what is checked is that the call is the one its numbers make
+    y = since["joint_error_mm"]["y"]
+    assert y["significant"] == (abs(y["change"]) > y["interval_95"]), y
     run_dir = Path(second["run_dir"])
     on_disk = json.loads((run_dir / "result.json").read_text())
     assert on_disk["since_last"] == since
