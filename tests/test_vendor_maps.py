@@ -63,7 +63,16 @@ import struct
 import numpy as np
 import pytest
 from pytest_mock import MockerFixture
-from test_axes_protocol import Pair, expected_protocol
+from test_axes_protocol import (
+    Pair,
+    expected_protocol,
+    read_req,
+    read_rsp,
+    rtu,
+    write_multi_req,
+    write_multi_rsp,
+    write_single,
+)
 
 from drivers.errors import ControllerError
 
@@ -102,22 +111,8 @@ O_ZHOME, O_STOP, O_ALM_RST = 1 << 4, 1 << 5, 1 << 7
 O_HOME_END, O_READY, O_ALM_A, O_MOVE, O_IN_POS = 1 << 4, 1 << 5, 1 << 7, 1 << 13, 1 << 14
 
 
-# --- frames (built here, independent of pymodbus and of drivers.registers) -------------
-
-
-def crc16(frame: bytes) -> bytes:
-    """CRC-16/MODBUS (reflected 0xA001, initial 0xFFFF), low byte first on the wire."""
-    crc = 0xFFFF
-    for byte in frame:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return struct.pack("<H", crc)
-
-
-def rtu(unit: int, pdu: bytes) -> bytes:
-    body = bytes([unit]) + pdu
-    return body + crc16(body)
+# --- frames (built by the protocol tests' builders, independent of pymodbus and of
+# drivers.registers; CRC and word order checked against the vendors' own frames below) ---
 
 
 def low_first(value: int) -> bytes:
@@ -129,26 +124,6 @@ def low_first(value: int) -> bytes:
 def high_first(value: int) -> bytes:
     """A 32-bit value as Oriental sends it: upper word at the lower address ([O1])."""
     return struct.pack(">I", value & 0xFFFF_FFFF)
-
-
-def read_req(address: int, count: int) -> bytes:
-    return struct.pack(">BHH", 3, address, count)
-
-
-def read_rsp(payload: bytes) -> bytes:
-    return bytes([3, len(payload)]) + payload
-
-
-def write_single(address: int, value: int) -> bytes:
-    return struct.pack(">BHH", 6, address, value)  # the reply echoes the request
-
-
-def write_multi_req(address: int, payload: bytes) -> bytes:
-    return struct.pack(">BHHB", 16, address, len(payload) // 2, len(payload)) + payload
-
-
-def write_multi_rsp(address: int, count: int) -> bytes:
-    return struct.pack(">BHH", 16, address, count)
 
 
 def echo(unit: int, pdu: bytes) -> Pair:
