@@ -76,6 +76,11 @@ HELD_WRITEBACK_TEXT = {
 num = finite  # the report's short name for it
 
 
+def esc(value: Any) -> str:
+    """Any value as text safe inside report.html's markup and attributes."""
+    return html.escape(str(value), quote=True)
+
+
 def fmt(value: Any, digits: int = 3, signed: bool = False) -> str:
     v = num(value)
     if v is None:

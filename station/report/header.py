@@ -4,20 +4,16 @@ enter them), so that nothing below can be read against it."""
 
 from __future__ import annotations
 
-import html
 from collections.abc import Mapping
 from typing import Any
 
 from station.report.format import (
+    esc,
     held_by_station,
     held_offsets_text,
     not_converged_why,
     run_state,
 )
-
-
-def _e(value: Any) -> str:
-    return html.escape(str(value), quote=True)
 
 
 def held_box(result: Mapping[str, Any]) -> str:
@@ -27,7 +23,7 @@ def held_box(result: Mapping[str, Any]) -> str:
     note = str(result.get("offsets_note") or "the drive takes no zero offset over Modbus: "
                "enter them in the drive's own home-offset parameter").rstrip(".")
     return ('<div class="box warn"><b>Offsets held by the station, not by the drive</b>'
-            + (f": {_e(values)}" if values else "") + f" — {_e(note)}.</div>")
+            + (f": {esc(values)}" if values else "") + f" — {esc(note)}.</div>")
 
 
 def header_boxes(result: Mapping[str, Any]) -> str:
@@ -36,7 +32,7 @@ def header_boxes(result: Mapping[str, Any]) -> str:
     out = []
     if run_state(result) == "not-converged":
         out.append('<div class="box warn"><b>Not converged</b>: the closed loop did not '
-                   f"converge — {_e(not_converged_why(result))}. What each round measured "
+                   f"converge — {esc(not_converged_why(result))}. What each round measured "
                    "and wrote: <i>Closed loop</i>, below.</div>")
     if held_by_station(result):
         out.append(held_box(result))

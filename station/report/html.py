@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import html
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -19,6 +18,7 @@ from station.report.format import (
     as_dict,
     dev_html,
     dev_keys,
+    esc,
     fmt,
     format_duration,
     format_when,
@@ -72,12 +72,9 @@ code{font-family:ui-monospace,Menlo,Consolas,monospace;font-size:.88em;word-brea
 """
 
 
-def _e(value: Any) -> str:
-    return html.escape(str(value), quote=True)
-
 
 def _table(head: list[str], rows: list[list[str]], left: int = 1, caption: str = "") -> str:
-    """Cells are trusted HTML fragments: callers escape text with _e()."""
+    """Cells are trusted HTML fragments: callers escape text with esc()."""
     ths = "".join(
         f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(head)
     )
@@ -103,16 +100,16 @@ def _fit_box(result: Mapping[str, Any]) -> str:
          fmt(result.get("condition_number"), 2)),
         ("deviations RMS before calibration", f"{fmt(result.get('deviations_rms_mm'))} mm"),
     ]
-    dl = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in rows)
+    dl = "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in rows)
     ok = result.get("fit_ok")
     cls = "box" if ok is not False else "box warn"
     verdict = ("The model explains the data: the residual is at the level of the indicator "
                "noise." if ok else "Warning: the residual is larger than the indicator noise "
                "explains; the machine may have errors this model does not include."
                if ok is False else "")
-    note = (f"<p><b>Fit quality:</b> {_e(result['fit_note'])}</p>"
+    note = (f"<p><b>Fit quality:</b> {esc(result['fit_note'])}</p>"
             if result.get("fit_note") else "")
-    return f'<div class="{cls}">{note}<p>{_e(verdict)}</p><dl class="kv">{dl}</dl></div>'
+    return f'<div class="{cls}">{note}<p>{esc(verdict)}</p><dl class="kv">{dl}</dl></div>'
 
 
 def _params_table(result: Mapping[str, Any]) -> str:
@@ -151,23 +148,23 @@ def _model_section(result: Mapping[str, Any]) -> str:
     notes = model_notes(result)
     if not notes:
         return ""
-    out = "".join(f"<p>{_e(n)}</p>" for n in notes)
+    out = "".join(f"<p>{esc(n)}</p>" for n in notes)
     sel = as_dict(result.get("model_selection"))
     cands = [c for c in sel.get("candidates") or [] if isinstance(c, dict)]
     if cands:
-        rows = [[_e(c.get("model")), "yes" if c.get("identifiable") else "no",
-                 fmt(c.get("F"), 2), _e(", ".join(f"{d:g}" for d in c["dof"])
+        rows = [[esc(c.get("model")), "yes" if c.get("identifiable") else "no",
+                 fmt(c.get("F"), 2), esc(", ".join(f"{d:g}" for d in c["dof"])
                                          if isinstance(c.get("dof"), list) else "—"),
                  (f"{c['p_value']:.2g}" if num(c.get("p_value")) is not None else "—"),
                  fmt(c.get("residual_rms_mm"), 4),
                  "chosen" if c.get("model") == result.get("model") else
-                 ("rejected" if c.get("F") is not None else _e(c.get("note") or ""))]
+                 ("rejected" if c.get("F") is not None else esc(c.get("note") or ""))]
                 for c in cands]
         out += _table(["candidate", "identifiable", "F", "dof", "p", "residual RMS (mm)",
                        "verdict"], rows, caption=(
             f"Lack-of-fit F test of each candidate against the noise measured in this run "
             f"(σ = {fmt(sel.get('noise_sigma_mm'), 5)} mm per deviation, "
-            f"{_e(sel.get('noise_source'))}); the first with p ≥ {_e(sel.get('level'))} "
+            f"{esc(sel.get('noise_source'))}); the first with p ≥ {esc(sel.get('level'))} "
             "is used."))
     return out
 
@@ -177,7 +174,7 @@ def _correlation_table(result: Mapping[str, Any]) -> str:
     names, matrix = corr.get("names"), corr.get("matrix")
     if not isinstance(names, list) or not isinstance(matrix, list) or not names:
         return ""
-    head = "".join(f"<th>{param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)}</th>"
+    head = "".join(f"<th>{param_html(str(n)) if str(n) in PARAM_NAMES else esc(n)}</th>"
                    for n in names)
     rows = []
     for i, n in enumerate(names):
@@ -193,7 +190,7 @@ def _correlation_table(result: Mapping[str, Any]) -> str:
             # "almost inseparable"; give such values their digits.
             digits = 4 if r is not None and i != j and abs(r) >= 0.995 else 2
             cells.append(f'<td class="num"{shade}>{fmt(r, digits)}</td>')
-        label = param_html(str(n)) if str(n) in PARAM_NAMES else _e(n)
+        label = param_html(str(n)) if str(n) in PARAM_NAMES else esc(n)
         rows.append(f'<tr><th class="l">{label}</th>{"".join(cells)}</tr>')
     return (f'<h3>Correlation of the estimates</h3><table><thead><tr><th></th>{head}</tr>'
             f'</thead><tbody>{"".join(rows)}</tbody></table>'
@@ -217,7 +214,7 @@ def _deviations_table(result: Mapping[str, Any]) -> str:
         resid = m - f if m is not None and f is not None else None
         n = b.get("n")
         row = [dev_html(k), fmt(m, signed=True), fmt(b.get("std")),
-               _e(n) if isinstance(n, int) else "—", fmt(f, signed=True),
+               esc(n) if isinstance(n, int) else "—", fmt(f, signed=True),
                fmt(resid, signed=True)]
         if after:
             row += [fmt(a.get("mean"), signed=True), fmt(a.get("std"))]
@@ -235,12 +232,12 @@ def _setups_table(result: Mapping[str, Any]) -> str:
     rows = []
     for s in setups:
         s = as_dict(s)
-        inds = ", ".join(f"{_e(k)} → {_e(v)}" for k, v in as_dict(s.get("indicators")).items())
+        inds = ", ".join(f"{esc(k)} → {esc(v)}" for k, v in as_dict(s.get("indicators")).items())
         cu, cm = s.get("cycles_used"), s.get("cycles_max")
-        cycles = f"{_e(cu)} of {_e(cm)}" if cm is not None else _e(cu if cu is not None else "—")
+        cycles = f"{esc(cu)} of {esc(cm)}" if cm is not None else esc(cu if cu is not None else "—")
         flagged = s.get("flagged")
         rows.append([
-            f"leg {_e(s.get('leg', '—'))}", inds or "—", cycles, _e(s.get("repeats", "—")),
+            f"leg {esc(s.get('leg', '—'))}", inds or "—", cycles, esc(s.get("repeats", "—")),
             fmt(s.get("spread_mm")),
             "<b>yes</b> — spread above the repeatability limit" if flagged else "no",
         ])
@@ -261,8 +258,8 @@ def _offsets_section(result: Mapping[str, Any]) -> str:
         text = writeback_text(result, status) if status in (
             "written", "refused", "declined", "skipped", "failed-restored") else status
         label = "held by the station" if held and status == "written" else status
-        reason = f"<br>Reason: {_e(wb['reason'])}" if wb.get("reason") else ""
-        out.append(f'<div class="{cls}"><b>Write-back: {_e(label)}</b> — {_e(text)}.'
+        reason = f"<br>Reason: {esc(wb['reason'])}" if wb.get("reason") else ""
+        out.append(f'<div class="{cls}"><b>Write-back: {esc(label)}</b> — {esc(text)}.'
                    f"{reason}</div>")
     if before or written:
         rows = []
@@ -291,16 +288,16 @@ def _info_list(result: Mapping[str, Any]) -> str:
     machine = as_dict(result.get("machine"))
     timing = as_dict(result.get("timing"))
     rows = [
-        ("run directory", f"<code>{_e(result.get('run_dir', '—'))}</code>"),
-        ("started", _e(format_when(result.get("started")))),
-        ("finished", _e(format_when(result.get("finished")))),
-        ("duration", _e(format_duration(result.get("duration_s", timing.get("wall_s"))))),
-        ("machine", _e(
+        ("run directory", f"<code>{esc(result.get('run_dir', '—'))}</code>"),
+        ("started", esc(format_when(result.get("started")))),
+        ("finished", esc(format_when(result.get("finished")))),
+        ("duration", esc(format_duration(result.get("duration_s", timing.get("wall_s"))))),
+        ("machine", esc(
             (f"{machine['id']}: " if machine.get("id") else "")
             + f"leg length L = {fmt(machine.get('leg_length'), 2)} mm, joint stroke "
             f"ρmin = {fmt(machine.get('rho_min'), 1)} mm … ρmax = "
             f"{fmt(machine.get('rho_max'), 1)} mm") if machine else "—"),
-        ("model", _e(f"{MODEL_TEXT.get(str(result.get('model')), result.get('model', '—'))}"
+        ("model", esc(f"{MODEL_TEXT.get(str(result.get('model')), result.get('model', '—'))}"
                      f" ({result.get('method', '—')})")),
     ]
     if result.get("simulated"):
@@ -309,11 +306,11 @@ def _info_list(result: Mapping[str, Any]) -> str:
         if sim:
             desc += (f"; seed {sim.get('seed') if sim.get('seed') is not None else 'random'}"
                      f", indicator noise σ = {fmt(sim.get('noise_mm'), 4)} mm")
-        rows.append(("simulation", _e(desc)))
+        rows.append(("simulation", esc(desc)))
     else:
         rows.append(("devices", "as configured in the station config (config.toml)"))
     if timing:
-        rows.append(("timing", _e(
+        rows.append(("timing", esc(
             f"wall {format_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "
             f"{timing.get('readings', '—')} readings, retries: {timing.get('retries', '—')}"
             + (f"; {timing['mountings']} mountings, {timing.get('operator_s', 0):.0f} s at the "
@@ -321,12 +318,12 @@ def _info_list(result: Mapping[str, Any]) -> str:
     guard = as_dict(result.get("plunger_guard"))
     recovered = [r for r in guard.get("recovered") or [] if isinstance(r, dict)]
     if recovered:
-        rows.append(("plunger guard", "<br>".join(_e(
+        rows.append(("plunger guard", "<br>".join(esc(
             f"stopped the axes: indicator {r.get('indicator')} on {r.get('where')}, move to "
             f"{r.get('move')}; re-planned from where they stood via {r.get('waypoints')} "
             f"waypoint(s) at {fmt(r.get('speed_mm_s'), 1)} mm/s, the cycle taken again")
             for r in recovered)))
-    return '<dl class="kv">' + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
+    return '<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
 
 
 def _loop_section(result: Mapping[str, Any]) -> str:
@@ -390,13 +387,13 @@ def render_html(result: dict) -> str:
     status_cls = ("st-refused st-not-converged" if state == "not-converged" else
                   f"st-{state}" if state in STATE_TEXT else "st-failed")
     sim_tag = " (simulated)" if result.get("simulated") else ""
-    badge = f'<span class="status {status_cls}">{_e(STATE_TEXT.get(state, state))}</span>'
+    badge = f'<span class="status {status_cls}">{esc(STATE_TEXT.get(state, state))}</span>'
     held = held_by_station(result)
     if held:
         badge += '<span class="status st-refused st-held">Offsets held by the station</span>'
     body = f"""
-<h1>{_e(title)}{_e(sim_tag)}{badge}</h1>
-<p class="meta">Orthoglide-type parallel machine · leg-parallelism calibration · {_e(when)}</p>
+<h1>{esc(title)}{esc(sim_tag)}{badge}</h1>
+<p class="meta">Orthoglide-type parallel machine · leg-parallelism calibration · {esc(when)}</p>
 {header_boxes(result)}{_info_list(result)}
 <h2>What was done</h2>
 {what_was_done(result)}
@@ -424,7 +421,7 @@ def render_html(result: dict) -> str:
 """
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">'
-            f"<title>{_e(title)} — {_e(when)}</title><style>{_CSS}</style></head>"
+            f"<title>{esc(title)} — {esc(when)}</title><style>{_CSS}</style></head>"
             f"<body>{body}</body></html>\n")
 
 

@@ -3,13 +3,13 @@ report.html (station.report.html lays out the rest)."""
 
 from __future__ import annotations
 
-import html
 from collections.abc import Mapping
 from typing import Any
 
 from station.report.format import (
     MODEL_TEXT,
     as_dict,
+    esc,
     fmt,
     machine_parameters,
     max_abs,
@@ -21,10 +21,6 @@ from station.report.format import (
     writeback_text,
 )
 from station.report.tool import statement, tool_clause
-
-
-def _e(value: Any) -> str:
-    return html.escape(str(value), quote=True)
 
 
 def what_was_done(result: Mapping[str, Any]) -> str:
@@ -58,12 +54,12 @@ def what_was_done(result: Mapping[str, Any]) -> str:
         "<p>Two dial indicators were mounted against each leg of the machine in turn. "
         "For each leg the station moved the machine from the <i>mechanical zero</i> "
         f"posture Π<sub>0</sub> to {postures} and "
-        f"back, repeatedly{_e(cyc)}, reading the indicators at every stop. On a perfectly "
+        f"back, repeatedly{esc(cyc)}, reading the indicators at every stop. On a perfectly "
         "calibrated machine each leg moves parallel to itself in these postures, so the "
         f"indicators read the same everywhere; the {count} differences "
         f"(3 legs × {n_post} postures × 2 indicators), called <i>deviations</i>, show how far the "
         "legs tilt. From them the station estimated, by least squares on "
-        f"{_e(method)}, the {_e(model)}.</p>"
+        f"{esc(method)}, the {esc(model)}.</p>"
         '<p class="small">Δρ<sub>i</sub> (joint offset): how far axis i really is from '
         "where its controller believes it is — an error of the encoder zero. "
         "ΔL<sub>i</sub> (leg-length error): how much leg i is longer than nominal. "
@@ -82,7 +78,7 @@ def result_paragraph(result: Mapping[str, Any]) -> str:
     ident, errs = machine_parameters(result), as_dict(result.get("std_errors"))
     if status in ("failed", "aborted"):
         msg = result.get("message") or "no reason recorded"
-        parts.append(f"<b>The run did not complete</b>: {_e(msg)}. "
+        parts.append(f"<b>The run did not complete</b>: {esc(msg)}. "
                      "Everything measured up to that point is kept in the run directory; "
                      "the controller's offsets were only changed if stated below.")
     if names:
@@ -109,8 +105,8 @@ def result_paragraph(result: Mapping[str, Any]) -> str:
     wb = as_dict(result.get("writeback"))
     if wb.get("status"):
         text = writeback_text(result, str(wb["status"]))
-        reason = f" ({_e(wb['reason'])})" if wb.get("reason") else ""
-        parts.append(f"{_e(text[0].upper() + text[1:])}{reason}.")
+        reason = f" ({esc(wb['reason'])})" if wb.get("reason") else ""
+        parts.append(f"{esc(text[0].upper() + text[1:])}{reason}.")
     ver = as_dict(result.get("verification"))
     # Parallel legs are the method's means, not the tool's accuracy: whatever the
     # verification shows, the same sentence says what the tool does (or that the
@@ -129,16 +125,16 @@ def result_paragraph(result: Mapping[str, Any]) -> str:
             s += f", against {fmt(before)} mm RMS before calibration"
         s += ": that is the legs' parallelism, the method's means, not the tool's accuracy"
         if tool:
-            s += f"; {_e(tool)}"
+            s += f"; {esc(tool)}"
         else:
             s += ("; accuracy at the tool is not stated"
-                  + (f" ({_e(why_not)})" if why_not else " by this result"))
+                  + (f" ({esc(why_not)})" if why_not else " by this result"))
         parts.append(s + ".")
     else:
         if names and status == "ok":
             parts.append("No verification measurement was made.")
         if tool:
-            parts.append(f"{_e(tool[0].upper() + tool[1:])}.")
+            parts.append(f"{esc(tool[0].upper() + tool[1:])}.")
     if not parts:
         parts.append("No measurement results were recorded.")
     return "<p>" + " ".join(parts) + "</p>"
