@@ -31,7 +31,7 @@ from orthocal.calibration import jacobian
 from orthocal.geometry import MODELS, PARAM_NAMES, Geometry
 from orthocal.measurement import Key
 from orthocal.postures import posture_name
-from orthocal.stands import Stands
+from orthocal.stands import Stands, incidence, stand_jacobian
 
 # Relative singular value below which a combination counts as invisible (as in
 # identification: the worst well-posed case sits near 1/200).
@@ -290,7 +290,6 @@ def drho_error_parts(keys: Sequence[Key], geometry: Geometry, model: str, params
     se·(JᵀJ)^(-1/2) (the gains of :func:`quality`); more cycles in the mounting
     shrink it, only another mounting the stands' part."""
     from orthocal.identification import exact_jacobian
-    from orthocal.stands import incidence, stand_jacobian
 
     keys = list(keys)
     J = exact_jacobian(keys, geometry, params, model, [0.0] * len(keys))

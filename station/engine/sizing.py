@@ -12,6 +12,7 @@ import numpy as np
 from drivers.base import AxisController
 from station.config import StationConfig
 from station.engine.statistics import cycle_std_error
+from station.engine.verdict import converge_limit
 from station.plan.steps import Plan
 
 
@@ -79,5 +80,5 @@ class VerificationSizing:
         return self._target
 
     def _limit(self) -> float:
-        proc = self.config.procedure
-        return proc.converge_mm + 0.5 * self.controller.offset_resolution_mm()
+        return converge_limit(self.config.procedure.converge_mm,
+                              self.controller.offset_resolution_mm())
