@@ -119,18 +119,24 @@ class Stands:
                 "groups": groups}
 
 
-def incidence(keys: Sequence[Key], stands: Stands) -> tuple[tuple[str, ...], np.ndarray]:
-    """(stand names in order of first appearance, S) with S[r, s] = 1 when row
-    ``keys[r]`` is read by a gauge on stand s: its plane offset is (S·m)[r]. A
-    key's later mountings (``stands.mounts``) are stands of their own."""
-    names: dict[str, int] = {}
+def row_stands(keys: Sequence[Key], stands: Stands) -> list[str]:
+    """The name of the stand each row of ``keys`` was read on: its gauge's stand, and
+    for a key's later mountings (``stands.mounts``) a stand of their own (``@2``, …)."""
     seen: dict[Key, int] = {}
-    cols = []
+    out = []
     for k in keys:
         row = seen[k] = seen.get(k, -1) + 1
         mounting = stands.mounting_of(k, row)
-        name = stands.stand_of(k[1], k[2]) + (f"@{mounting + 1}" if mounting else "")
-        cols.append(names.setdefault(name, len(names)))
+        out.append(stands.stand_of(k[1], k[2]) + (f"@{mounting + 1}" if mounting else ""))
+    return out
+
+
+def incidence(keys: Sequence[Key], stands: Stands) -> tuple[tuple[str, ...], np.ndarray]:
+    """(stand names in order of first appearance, S) with S[r, s] = 1 when row
+    ``keys[r]`` is read by a gauge on stand s (:func:`row_stands`): its plane offset
+    is (S·m)[r]."""
+    names: dict[str, int] = {}
+    cols = [names.setdefault(name, len(names)) for name in row_stands(keys, stands)]
     S = np.zeros((len(keys), len(names)))
     S[np.arange(len(keys)), cols] = 1.0
     return tuple(names), S
@@ -138,13 +144,13 @@ def incidence(keys: Sequence[Key], stands: Stands) -> tuple[tuple[str, ...], np.
 
 def stand_gauges(names: Sequence[str], stands: Stands,
                  keys: Sequence[Key] = ()) -> dict[str, tuple[Gauge, ...]]:
-    """The gauges behind each stand name (those of ``keys`` first, in key order)."""
+    """The gauges behind each stand name (those of the rows ``keys`` first, in row
+    order)."""
     out: dict[str, list[Gauge]] = {n: [] for n in names}
-    for k in keys:
+    for k, name in zip(keys, row_stands(keys, stands), strict=True):
         g = (k[1], k[2])
-        for name in (n for n in names if n.split("@")[0] == stands.stand_of(*g)):
-            if g not in out[name]:
-                out[name].append(g)
+        if name in out and g not in out[name]:
+            out[name].append(g)
     return {n: tuple(v) for n, v in out.items()}
 
 
