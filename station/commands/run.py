@@ -151,7 +151,7 @@ def run(options: RunOptions) -> int:
         ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
                   JournalState(), [], now_iso(), checker=checker)
         code, result = execute(ctx)
-        _since_last(result, run_dir, record_history(config, result, run_dir.parent))
+        record_history(config, result, run_dir.parent)
         return _report(options.json, code, result)
 
 
@@ -183,49 +183,22 @@ def exit_status(result: dict[str, Any], code: int | None = None) -> int:
     return code
 
 
-def record_history(config: Any, result: dict[str, Any],
-                   runs_dir: Path) -> dict[str, Any] | None:
-    """The run into the machine's history (station.history), and what changed since
-    the machine's last run there (``since_last``; None without one). One line, never
-    a failed run, when the store cannot take it (the run directory is the record)."""
+def record_history(config: Any, result: dict[str, Any], runs_dir: Path) -> None:
+    """The run into the machine's history (station.history): one line, never a failed
+    run, when the store cannot take it (the run directory is the record). What changed
+    since the machine's last run was read before, into the result (the run's finish)."""
     if not config.history.enabled:
-        return None
-    from station.history.compare import since_last
+        return
     from station.history.entry import entry_of
     from station.history.store import HistoryStore, default_url
 
     url = config.history.url or default_url(runs_dir)
-    since = None
     try:
         with HistoryStore(url) as store:
-            entry = entry_of(report.jsonable(result), config.controller.profile)
-            earlier = store.entries(entry["machine_id"]) if entry.get("machine_id") else []
-            store.record(entry)
+            store.record(entry_of(report.jsonable(result), config.controller.profile))
     except Exception as exc:  # any database error: said, and the run stands
         say(f"orthocal: not recorded in the history at {url} ({type(exc).__name__}: {exc});"
             f" orthocal history --rebuild {runs_dir} makes it again from the run directories")
-        return None
-    try:
-        since = since_last(earlier, entry)
-    except Exception as exc:  # an earlier entry this code cannot read: said, not raised
-        say(f"orthocal: not compared with the machine's last run ({type(exc).__name__}: "
-            f"{exc})")
-    return since
-
-
-def _since_last(result: dict[str, Any], run_dir: Path, since: dict[str, Any] | None) -> None:
-    """``since``, where there is one, into the result and its report: result.json and
-    report.html were written by the run's end, before the history was read, so they
-    are written again with it (a failure said; the first ones stand)."""
-    if since is None:
-        return
-    result["since_last"] = since
-    try:
-        report.write_result(result, run_dir)
-        report.write_html(result, run_dir)
-    except Exception as exc:  # the report is a view; the run and its record stand
-        say(f"orthocal: the comparison with the last run not written into the report "
-            f"({type(exc).__name__}: {exc})")
 
 
 def _report(as_json: bool, code: int, result: dict[str, Any]) -> int:
@@ -280,7 +253,7 @@ def resume(options: ResumeOptions) -> int:
         ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
                   state, records, started, checker=checker)
         code, result = execute(ctx)
-        _since_last(result, run_dir, record_history(config, result, run_dir.parent))
+        record_history(config, result, run_dir.parent)
         return _report(options.json, code, result)
 
 

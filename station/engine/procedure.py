@@ -123,6 +123,17 @@ def _stopped(seq: Sequencer) -> str:
             "stopped")
 
 
+def _since_last(ctx: Run, result: dict[str, Any]) -> None:
+    """What changed since the machine's last calibration (station.history), into the
+    result before result.json and report.html are written: written once, not again."""
+    from station import report
+    from station.history.compare import since_last_run
+
+    since = since_last_run(ctx.config, report.jsonable(result), ctx.run_dir.parent)
+    if since is not None:
+        result["since_last"] = since
+
+
 def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
             message: str | None, final: bool) -> None:
     result["status"], result["message"] = status, message
@@ -149,6 +160,7 @@ def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
     result.update(offsets_fields(ctx.devices.controller, result, records))
     if final:
         ctx.journal.append({"type": "finished", "status": status, "message": message})
+        _since_last(ctx, result)
     else:
         try:
             ctx.journal.flush()

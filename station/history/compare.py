@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from orthocal import coverage_factor
+from station.errors import say
 from station.history.trend import started_at
 
 
@@ -102,6 +104,31 @@ def change_lines(doc: Mapping[str, Any]) -> list[str]:
                      + ("" if ci is None else f" ± {ci * scale:.3f}") + f" {unit}"
                      + (" (significant)" if c["significant"] else ""))
     return lines
+
+
+def since_last_run(config: Any, result: Mapping[str, Any], runs_dir: Path) -> dict[str, Any] | None:
+    """:func:`since_last` of a finishing run (its ``result``, JSON values) against the
+    machine's history as it stands before the run is recorded there ([history], or
+    ``<runs_dir>``'s store). None without history, machine id or earlier run; a store
+    that cannot be read, or an entry this code cannot read, is said in one line and
+    compares nothing: the run stands."""
+    if not config.history.enabled:
+        return None
+    from station.history.entry import entry_of
+    from station.history.store import HistoryStore, default_url
+
+    entry = entry_of(result, config.controller.profile)
+    if not entry.get("machine_id"):
+        return None
+    url = config.history.url or default_url(runs_dir)
+    try:
+        with HistoryStore(url) as store:
+            earlier = store.entries(entry["machine_id"])
+        return since_last(earlier, entry)
+    except Exception as exc:  # a database or an old entry's error: said, not raised
+        say(f"orthocal: not compared with the machine's last run ({type(exc).__name__}: "
+            f"{exc})")
+        return None
 
 
 def since_last(earlier: Sequence[Mapping[str, Any]],
