@@ -33,7 +33,17 @@ from orthocal.calibration import (
     statistical_floor,
     tilt_coefficient,
 )
-from orthocal.geometry import AXES, GAP_NAMES, MODELS, PARAM_NAMES, TILT_NAMES, Geometry
+from orthocal.geometry import (
+    AXES,
+    BOW_NAMES,
+    FIT_NAMES,
+    FORM,
+    GAP_NAMES,
+    MODELS,
+    PARAM_NAMES,
+    TILT_NAMES,
+    Geometry,
+)
 from orthocal.identification import Identification, cannot_identify, exact_jacobian, identify
 from orthocal.inputs import IdentificationError
 from orthocal.kinematics import axis_directions, axis_origins, forward, inverse
@@ -48,6 +58,9 @@ from orthocal.tool_interval import AfterInterval, after_interval, assumes, field
 
 __all__ = [
     "AXES",
+    "BOW_NAMES",
+    "FIT_NAMES",
+    "FORM",
     "FRAMES",
     "GAP_NAMES",
     "MODELS",

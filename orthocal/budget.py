@@ -28,7 +28,7 @@ import numpy as np
 
 from orthocal.geometry import AXES, Geometry, split_params
 from orthocal.identification import Identification
-from orthocal.measurement import Key, bow_at, contact_fraction
+from orthocal.measurement import Key, bow_at, contact_fraction, row_planes
 from orthocal.noise import coverage_factor, row_correlation
 from orthocal.numbers import finite
 from orthocal.postures import posture
@@ -59,9 +59,10 @@ def form_vector(keys: Sequence[Key], geometry: Geometry, params=None,
     gauge plane, g_k = w(t_k) − w(t_0) with w(t) = 4·t(1 − t)
     (orthocal.measurement.bow_at), t_k the contact fraction at the key's test
     posture Π_i^s and t_0 at Π0, both exact (orthocal.measurement.contact_fraction)
-    at ``params`` (9- or 6-vector, None: nominal) in the planes L/2 +
-    ``mount_offsets`` (one per key, None: L/2). A bow of sagitta h in that plane
-    changes the deviation by exactly h·g_k (the fractions do not depend on h);
+    at ``params`` (9- or 6-vector, None: nominal) in each key's plane (L/2, or
+    its posture's second plane) plus ``mount_offsets`` (one per key, None: 0). A
+    bow of sagitta h in that plane changes the deviation by exactly h·g_k (the
+    fractions do not depend on h);
     nominally g = −4·(s/L)², −0.150 at Π^+ and −0.416 at Π^− on the paper's machine."""
     drho, dL, tilt, gap = split_params(params)
     offsets = np.zeros(len(keys)) if mount_offsets is None else \
@@ -71,8 +72,9 @@ def form_vector(keys: Sequence[Key], geometry: Geometry, params=None,
                          f"got shape {np.shape(mount_offsets)}")
     rho_0 = posture("0", None, geometry)
     g = np.empty(len(keys))
+    planes = row_planes(keys, geometry, offsets)
     for n, (sign, leg, _) in enumerate(keys):
-        m = geometry.mount_plane + offsets[n]
+        m = planes[n]
         t_k = contact_fraction(posture(sign, leg, geometry), leg, geometry, drho, dL, m, tilt,
                                gap)
         t_0 = contact_fraction(rho_0, leg, geometry, drho, dL, m, tilt, gap)
@@ -131,7 +133,7 @@ def propagation(ident: Identification, geometry: Geometry | None = None) -> Prop
     distinct, K = key_sensitivity(ident, geometry)
     P = rows_of(keys, distinct)
     offsets = np.zeros(len(keys)) if ident.mount_offsets is None else ident.mount_offsets
-    return Propagation(names=tuple(ident.names), keys=tuple(distinct), K=K, params=ident.vector,
+    return Propagation(names=tuple(ident.names), keys=tuple(distinct), K=K, params=ident.fit_vector,
                        mount_offsets=np.asarray(offsets)[[keys.index(k) for k in distinct]],
                        measured=(P.T @ np.asarray(ident.values)) / P.sum(axis=0),
                        geometry=geometry)

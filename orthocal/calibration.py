@@ -45,30 +45,45 @@ import numpy as np
 
 from orthocal.geometry import (
     AXIS_INDEX,
+    BOW_NAMES,
+    FIT_NAMES,
     MODELS,
     MRAD,
-    PARAM_NAMES,
     TILT_PAIRS,
     Geometry,
     full_params,
 )
 from orthocal.measurement import Key, check_key
-from orthocal.postures import tilt
+from orthocal.postures import split_plane, tilt
 
 
 def coefficients(sign: str, geometry: Geometry) -> tuple[float, float, float]:
-    """(a, b, c) of equation (7) for posture '+', '-' or a signed stroke '+30'."""
+    """(a, b, c) of equation (7) for posture '+', '-' or a signed stroke '+30'.
+    A second gauge plane (``'+@0.25'``, at the fraction f of the leg from its
+    joint at Π0; f = 1/2 in the paper) cuts the leg at μ = f + sin α, and
+    b = μ·tan α, c = μ/cos α − f."""
+    f = split_plane(sign)[1]
     alpha = tilt(sign, geometry)
     s, c_a, t = np.sin(alpha), np.cos(alpha), np.tan(alpha)
-    mu = 0.5 + s  # fraction of leg i from its actuator joint to the indicator plane
-    return float(s), float(mu * t), float(mu / c_a - 0.5)
+    mu = f + s  # fraction of leg i from its actuator joint to the indicator plane
+    return float(s), float(mu * t), float(mu / c_a - f)
 
 
 def tilt_coefficient(sign: str, geometry: Geometry) -> float:
     """d of equation (7'): mm of deviation per mrad of the angle between the axes
-    of leg i and direction j, d = −L·sin α·(0.5 + sin α)·1e-3."""
+    of leg i and direction j, d = −L·sin α·(f + sin α)·1e-3 (f = 1/2: the middle)."""
     a = np.sin(tilt(sign, geometry))
-    return float(-geometry.leg_length * a * (0.5 + a) * MRAD)
+    return float(-geometry.leg_length * a * (split_plane(sign)[1] + a) * MRAD)
+
+
+def form_coefficient(sign: str, geometry: Geometry) -> float:
+    """e: mm of deviation per mm of sagitta of the leg's bow in the gauge's plane,
+    e = w(μ) − w(f) with w(t) = 4·t·(1 − t), μ = f + sin α (the nominal contact
+    fractions at Π_i^s and Π0: orthocal.budget.form_vector exactly). At the middle
+    e = −4·sin²α."""
+    f = split_plane(sign)[1]
+    mu = f + np.sin(tilt(sign, geometry))
+    return float(4.0 * (mu * (1.0 - mu) - f * (1.0 - f)))
 
 
 # c_{i,j} = (c_i)_j of (7'') as ±gap/2: (i, j) → (the gap's column in PARAM_NAMES, ±1).
@@ -82,14 +97,16 @@ def jacobian(keys: Sequence[Key], geometry: Geometry, model: str = "full") -> np
     """Rows of system (7) (and (7') for tilts, (7'') for gaps) for ``keys``, columns
     the parameters of ``model`` in PARAM_NAMES order ('rho': Δρ; 'L': ΔL; 'full':
     Δρ then ΔL; '…+tilt': then the tilts, per mrad; '…+gap': then the gaps, per
-    mm), shape (len(keys), p)."""
-    full = np.zeros((len(keys), len(PARAM_NAMES)))
-    coef: dict[str, tuple[float, float, float, float]] = {}
+    mm; '…+form': then the legs' bows, per mm of sagitta), shape (len(keys), p).
+    Each key is linearised in its own gauge plane (:func:`coefficients`)."""
+    full = np.zeros((len(keys), len(FIT_NAMES)))
+    coef: dict[str, tuple[float, float, float, float, float]] = {}
     for row, key in enumerate(keys):
         sign, leg, direction = check_key(key)
         if sign not in coef:
-            coef[sign] = (*coefficients(sign, geometry), tilt_coefficient(sign, geometry))
-        a, b, c, d = coef[sign]
+            coef[sign] = (*coefficients(sign, geometry), tilt_coefficient(sign, geometry),
+                          form_coefficient(sign, geometry))
+        a, b, c, d, e = coef[sign]
         i, j = AXIS_INDEX[leg], AXIS_INDEX[direction]
         full[row, i] += b
         full[row, j] += a
@@ -100,6 +117,7 @@ def jacobian(keys: Sequence[Key], geometry: Geometry, model: str = "full") -> np
         col_ji, sign_ji = GAP_OF_ORIGIN[(direction, leg)]
         full[row, col_ij] -= a * sign_ij / 2.0
         full[row, col_ji] -= b * sign_ji / 2.0
+        full[row, FIT_NAMES.index(BOW_NAMES[0]) + BOW_NAMES.index(f"bow_{leg}{direction}")] = e
     return full[:, list(MODELS[model])]
 
 

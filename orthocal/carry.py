@@ -53,7 +53,7 @@ def carried(own: Identification, geometry: Geometry, names: Sequence[str],
                      covariance=cov, correlation=cov / np.outer(std, std))
     if own.method != "nonlinear":
         return joined
-    model_values = deviations(list(own.keys), geometry, joined.vector, own.mount_offsets)
+    model_values = deviations(list(own.keys), geometry, joined.fit_vector, own.mount_offsets)
     residuals = np.asarray(own.values) - model_values
     predicted: dict = {}
     for key, value in zip(own.keys, model_values, strict=True):

@@ -40,7 +40,7 @@ def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma:
         return _with_measured_noise_stands(result, geometry, noise_sigma, inflate,
                                            shared_zero, noise_dof)
     if result.method == "nonlinear":
-        J = exact_jacobian(keys, geometry, result.vector, result.model)
+        J = exact_jacobian(keys, geometry, result.fit_vector, result.model)
     else:
         J = jacobian(keys, geometry, result.model)
     bread = np.linalg.inv(J.T @ J)
@@ -66,8 +66,8 @@ def stand_design(result: Identification, geometry: Geometry, keys: Sequence[Key]
     for c, name in enumerate(names):
         S_full[:, order.index(name)] = S[:, c]
     m = result.stand_offsets
-    J_t = exact_jacobian(keys, geometry, result.vector, result.model, S_full @ m)
-    J_m = stand_jacobian(keys, geometry, result.vector, S_full)
+    J_t = exact_jacobian(keys, geometry, result.fit_vector, result.model, S_full @ m)
+    J_m = stand_jacobian(keys, geometry, result.fit_vector, S_full)
     return J_t, J_m, m
 
 

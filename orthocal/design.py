@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from orthocal.calibration import jacobian
-from orthocal.geometry import MODELS, PARAM_NAMES, Geometry
+from orthocal.geometry import FIT_NAMES, MODELS, PARAM_NAMES, Geometry
 from orthocal.measurement import Key
 from orthocal.postures import posture_name
 from orthocal.stands import Stands, incidence, stand_jacobian
@@ -76,7 +76,7 @@ def quality(keys: Sequence[Key], geometry: Geometry, model: str) -> Quality:
     """Rank, condition number, noise gains, D and A criteria and the invisible
     parameter combinations of ``model`` measured by ``keys``."""
     J = design_matrix(keys, geometry, model)
-    names = tuple(PARAM_NAMES[c] for c in MODELS[model])
+    names = tuple(FIT_NAMES[c] for c in MODELS[model])
     p = len(names)
     # full_matrices: vt is p×p even with fewer deviations than parameters.
     _, s, vt = np.linalg.svd(J.reshape(-1, p), full_matrices=True)
@@ -295,7 +295,7 @@ def drho_error_parts(keys: Sequence[Key], geometry: Geometry, model: str, params
     J = exact_jacobian(keys, geometry, params, model, [0.0] * len(keys))
     _, S = incidence(keys, stands or Stands())
     J_m = stand_jacobian(keys, geometry, params, S)
-    drho = [k for k, n in enumerate(PARAM_NAMES[c] for c in MODELS[model])
+    drho = [k for k, n in enumerate(FIT_NAMES[c] for c in MODELS[model])
             if n.startswith("drho")]
     noise = deviation_se * np.sqrt(np.diag(np.linalg.inv(J.T @ J)))[drho]
     V = deviation_se**2 * np.eye(len(keys)) + stand_sd**2 * (J_m @ J_m.T)

@@ -15,6 +15,16 @@ PARAM_NAMES: tuple[str, ...] = (
 TILT_NAMES: tuple[str, str, str] = ("tilt_yx", "tilt_zx", "tilt_zy")
 # How far the actuator axes pass each other (mm; docs/model.md, "Axes that do not meet").
 GAP_NAMES: tuple[str, str, str] = ("gap_xy", "gap_xz", "gap_yz")
+# The legs' form as the gauges see it (docs/model.md, "Leg form against tilts and
+# gaps"): the sagitta h (mm) of leg i's surface along j, a bow w(t) = 4·h·t·(1 − t)
+# over the leg. Not geometry (the joints' line is straight; the tool never sees
+# it), but a nuisance the fit takes where a second gauge plane tells it from the
+# tilts: models ending in FORM.
+BOW_NAMES: tuple[str, ...] = ("bow_xy", "bow_xz", "bow_yx", "bow_yz", "bow_zx", "bow_zy")
+#: Everything a fit may name: the machine's geometry, then the legs' bows.
+FIT_NAMES: tuple[str, ...] = PARAM_NAMES + BOW_NAMES
+#: The suffix of a model that fits the legs' bows beside its parameters.
+FORM = "+form"
 # The tilts are named and reported in mrad (docs/model.md, "Extended model"); the
 # kinematics works in radians.
 MRAD = 1e-3
@@ -30,6 +40,8 @@ MODELS: dict[str, tuple[int, ...]] = {
     # the whole rigid geometry: needs more than two stops per leg
     "full+tilt+gap": tuple(range(12)),
 }
+# Each model with the legs' bows (FIT_NAMES columns 12–17) as nuisance parameters.
+MODELS |= {m + FORM: (*cols, *range(12, 18)) for m, cols in list(MODELS.items())}
 # The pair of axes {i, j} whose angle each tilt changes: tilt_yx leans y toward x, etc.
 TILT_PAIRS: dict[frozenset[str], int] = {
     frozenset("xy"): 6, frozenset("xz"): 7, frozenset("yz"): 8,
@@ -64,24 +76,37 @@ class Geometry:
 
 
 def full_params(params) -> np.ndarray:
-    """The 12-vector of PARAM_NAMES from ``params``: None (all zero), a 12-vector,
-    a 9-vector (Δρ, ΔL, tilts: axes that meet) or a 6-vector (Δρ, ΔL) of the
-    paper's model, whose tilts and gaps are zero."""
-    n = len(PARAM_NAMES)
+    """The 12-vector of PARAM_NAMES, the machine's geometry, from ``params``: None
+    (all zero), an 18-vector of FIT_NAMES (its bows are not geometry and are left
+    out), a 12-vector, a 9-vector (Δρ, ΔL, tilts: axes that meet) or a 6-vector
+    (Δρ, ΔL) of the paper's model, whose tilts and gaps are zero."""
+    return fit_params(params)[:len(PARAM_NAMES)]
+
+
+def fit_params(params) -> np.ndarray:
+    """The 18-vector of FIT_NAMES from ``params`` (as for :func:`full_params`; the
+    legs' bows are zero unless an 18-vector names them)."""
+    n = len(FIT_NAMES)
     if params is None:
         return np.zeros(n)
     params = np.asarray(params, dtype=float)
-    if params.shape in ((6,), (9,)):
+    if params.shape in ((6,), (9,), (12,)):
         return np.concatenate([params, np.zeros(n - params.shape[0])])
     if params.shape != (n,):
-        raise ValueError(f"expected 6, 9 or 12 parameters {PARAM_NAMES}, got shape "
+        raise ValueError(f"expected 6, 9, 12 or 18 parameters {FIT_NAMES}, got shape "
                          f"{params.shape}")
     return params
 
 
+def bow_params(params) -> np.ndarray:
+    """The legs' bows (BOW_NAMES order, mm) of ``params`` (as for :func:`fit_params`):
+    zero unless an 18-vector names them."""
+    return fit_params(params)[len(PARAM_NAMES):]
+
+
 def split_params(params) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(Δρ, ΔL, tilts in mrad, gaps in mm) from a 12-, 9- or 6-vector ordered as
-    PARAM_NAMES (None: all zero)."""
+    """(Δρ, ΔL, tilts in mrad, gaps in mm) from an 18-, 12-, 9- or 6-vector ordered
+    as FIT_NAMES (None: all zero)."""
     v = full_params(params)
     return v[:3], v[3:6], v[6:9], v[9:]
 

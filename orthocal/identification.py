@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from orthocal.calibration import jacobian
-from orthocal.geometry import MODELS, PARAM_NAMES, TILT_NAMES, Geometry, full_params
+from orthocal.geometry import FIT_NAMES, MODELS, PARAM_NAMES, TILT_NAMES, Geometry, fit_params
 from orthocal.inputs import IdentificationError, flatten_deviations
 from orthocal.measurement import Key, deviations
 from orthocal.noise import noise_from_cycles
@@ -98,8 +98,16 @@ class Identification:
 
     @property
     def vector(self) -> np.ndarray:
-        """All twelve parameters in PARAM_NAMES order (those not in the model are 0)."""
-        return np.array([self.parameters.get(n, 0.0) for n in PARAM_NAMES])
+        """The machine's twelve parameters in PARAM_NAMES order (those not in the
+        model are 0)."""
+        return self.fit_vector[:len(PARAM_NAMES)]
+
+    @property
+    def fit_vector(self) -> np.ndarray:
+        """Every parameter the fit may name, FIT_NAMES order: the twelve of the
+        geometry, then the legs' bows (those not in the model are 0); what the
+        exact model needs to give back the fit's model values."""
+        return np.array([self.parameters.get(n, 0.0) for n in FIT_NAMES])
 
     def to_dict(self) -> dict:
         """JSON-ready summary (docs/design.md's identify fields plus statistics)."""
@@ -190,7 +198,7 @@ def cannot_identify(keys: Sequence[Key], geometry: Geometry | None = None,
     if model not in MODELS:
         raise IdentificationError(f"model must be one of {sorted(MODELS)}, got {model!r}")
     keys = list(keys)
-    names = tuple(PARAM_NAMES[c] for c in MODELS[model])
+    names = tuple(FIT_NAMES[c] for c in MODELS[model])
     try:
         _check_identifiable(jacobian(keys, geometry, model), names, len(set(keys)), keys)
     except IdentificationError as exc:
@@ -207,12 +215,12 @@ def exact_jacobian(
     h = 1e-5 mm or mrad (truncation error O(h²·curvature) ≈ 1e-12, far below any
     µm). At zero it equals (7'). ``mount_offsets``: each row's indicator plane
     off L/2 (mm; :func:`orthocal.measurement.deviations`), None for L/2."""
-    base = full_params(params)
+    base = fit_params(params)
     h = 1e-5
     cols = MODELS[model]
     J = np.empty((len(keys), len(cols)))
     for c, col in enumerate(cols):
-        step = np.zeros(len(PARAM_NAMES))
+        step = np.zeros(len(FIT_NAMES))
         step[col] = h
         forward_diff = deviations(keys, geometry, base + step, mount_offsets)
         J[:, c] = (forward_diff - deviations(keys, geometry, base - step, mount_offsets)) / (2 * h)
@@ -256,7 +264,7 @@ def identify(
         raise IdentificationError(f"sigma must be a positive number, got {sigma!r}")
     keys, y = flatten_deviations(deviations_in)
     cols = MODELS[model]
-    names = tuple(PARAM_NAMES[c] for c in cols)
+    names = tuple(FIT_NAMES[c] for c in cols)
     J0 = jacobian(keys, geometry, model) if keys else np.zeros((0, len(cols)))
     condition = _check_identifiable(J0, names, len(set(keys)), keys)
     if stands is not None:
@@ -264,7 +272,7 @@ def identify(
                                      stands, J0, condition)
 
     x_lin = np.linalg.pinv(J0) @ y
-    full = np.zeros(len(PARAM_NAMES))
+    full = np.zeros(len(FIT_NAMES))
     full[list(cols)] = x_lin
     converged = True
     if method == "nonlinear":
@@ -273,12 +281,12 @@ def identify(
         from scipy.optimize import least_squares
 
         def residual(x: np.ndarray) -> np.ndarray:
-            trial = np.zeros(len(PARAM_NAMES))
+            trial = np.zeros(len(FIT_NAMES))
             trial[list(cols)] = x
             return deviations(keys, geometry, trial) - y
 
         def jac(x: np.ndarray) -> np.ndarray:
-            trial = np.zeros(len(PARAM_NAMES))
+            trial = np.zeros(len(FIT_NAMES))
             trial[list(cols)] = x
             return exact_jacobian(keys, geometry, trial, model)
 
@@ -298,8 +306,9 @@ def identify(
         model_values = deviations(keys, geometry, full)
     else:
         # the tilt columns apart, so that models without tilt keep (7)'s numbers
-        J_all = jacobian(keys, geometry, "full+tilt+gap")
-        model_values = J_all[:, :6] @ full[:6] + J_all[:, 6:] @ full[6:]
+        J_all = jacobian(keys, geometry, "full+tilt+gap+form")
+        model_values = (J_all[:, :6] @ full[:6] + J_all[:, 6:12] @ full[6:12]
+                        + J_all[:, 12:] @ full[12:])
     fit = _Fit.of(y, model_values, len(cols))
     scale = sigma if sigma is not None else fit.sigma_hat
     jtj_inv = np.linalg.inv(J.T @ J)
@@ -334,7 +343,7 @@ class _Fit:
                        condition: float, converged: bool, **extra: Any) -> Identification:
         """The result, parameters ``full[cols]`` with the standard errors of
         ``covariance``; ``extra``: the stands' fields."""
-        names = tuple(PARAM_NAMES[c] for c in cols)
+        names = tuple(FIT_NAMES[c] for c in cols)
         std = np.sqrt(np.diag(covariance))
         predicted: dict[Key, float] = {}
         for key, value in zip(keys, self.model_values, strict=True):
@@ -395,7 +404,7 @@ def _identify_with_stands(
     penalty = prior_penalty(sig, stands, k)
 
     def full_of(theta: np.ndarray) -> np.ndarray:
-        v = np.zeros(len(PARAM_NAMES))
+        v = np.zeros(len(FIT_NAMES))
         v[cols] = theta
         return v
 

@@ -16,11 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from orthocal.geometry import AXIS_INDEX, Geometry, split_params
+from orthocal.geometry import AXIS_INDEX, BOW_NAMES, Geometry, bow_params, split_params
 from orthocal.kinematics import axis_directions, axis_origins, forward_on_axes
-from orthocal.postures import check_posture, posture
+from orthocal.postures import check_posture, plane_offset, posture
 
-Key = tuple[str, str, str]  # (posture: "+", "-" or a signed stroke "+30"; leg i; direction j)
+# (posture: "+", "-" or a signed stroke "+30", each perhaps in a second gauge plane,
+# "+@0.25" (orthocal.postures); leg i; direction j)
+Key = tuple[str, str, str]
 Bows = Mapping[tuple[str, str], float]  # gauge (leg i, direction j) → sagitta h of its plane, mm
 
 
@@ -175,11 +177,16 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
                mount_offsets=None, bow: Bows | None = None) -> np.ndarray:
     """Exact deviations for many keys at once (repeated keys allowed).
 
-    ``mount_offsets``: None (every indicator in the nominal plane x_i = L/2), or
-    one number per key, mm: how far the stand of that row's gauge sits off L/2
-    (M = L/2 + offset, docs/model.md, "Where the indicator plane is"); the Π0 reading
-    it is taken against uses the same plane. With None the result is bit for bit
-    the one without the argument.
+    ``params``: PARAM_NAMES order (a 12-, 9- or 6-vector), or an 18-vector of
+    FIT_NAMES whose last six are the legs' bows (BOW_NAMES: gauge (leg, direction)
+    → sagitta, added to ``bow``'s).
+
+    Each key is read in its gauges' plane: L/2, or the second plane its posture
+    names (``"+@0.25"``: L/2 + L·(1/2 − 0.25), orthocal.postures.plane_offset).
+    ``mount_offsets``: None, or one number per key, mm: how far the stand of that
+    row's gauge sits off that plane (docs/model.md, "Where the indicator plane
+    is"); the Π0 reading it is taken against uses the same plane. With None and
+    middle planes the result is bit for bit the one without the argument.
 
     ``bow``: the legs' form as the gauges see it, gauge (leg, direction) → the
     sagitta h (mm) of the leg's surface in that gauge's plane (gauges not named:
@@ -194,13 +201,19 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
     drho, dL, tilt, gap = split_params(params)
     if len(keys) == 0:
         return np.empty(0)
-    if mount_offsets is not None or bow is not None:
+    fitted = bow_params(params)
+    if np.any(fitted != 0.0):
+        bow = {**{(n[4], n[5]): float(h) for n, h in zip(BOW_NAMES, fitted, strict=True)},
+               **{g: h + float(fitted[BOW_NAMES.index(f"bow_{g[0]}{g[1]}")])
+                  for g, h in (bow or {}).items()}}
+    planes = [plane_offset(k[0], geometry) for k in keys]
+    if mount_offsets is not None or bow is not None or any(planes):
         offsets = np.zeros(len(keys)) if mount_offsets is None else \
             np.asarray(mount_offsets, dtype=float).reshape(-1)
         if offsets.shape != (len(keys),):
             raise ValueError(f"mount_offsets needs one value per key ({len(keys)}), "
                              f"got shape {np.shape(mount_offsets)}")
-        return _deviations_mounted(keys, geometry, drho, dL, tilt, gap, offsets,
+        return _deviations_mounted(keys, geometry, drho, dL, tilt, gap, offsets + planes,
                                    None if bow is None else _row_bows(keys, bow))
     rows, legs, dirs, rho_s, rho_0, p_all, u, c = _solve(keys, geometry, drho, dL, tilt, gap)
     p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
@@ -209,6 +222,13 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
     dev = reading_s - reading_at(np.broadcast_to(rho_0, rho_s.shape), p_0, legs, dirs, drho, m,
                                  u, c)
     return dev[rows]
+
+
+def row_planes(keys: Sequence[Key], geometry: Geometry, mount_offsets=None) -> np.ndarray:
+    """The base-fixed plane x_i = M (mm) each row of ``keys`` is read in: L/2, or
+    its posture's second plane, plus its stand's ``mount_offsets`` (None: 0)."""
+    m = geometry.mount_plane + np.array([plane_offset(k[0], geometry) for k in keys])
+    return m if mount_offsets is None else m + np.asarray(mount_offsets, dtype=float)
 
 
 def _row_bows(keys: Sequence[Key], bow: Bows) -> np.ndarray:

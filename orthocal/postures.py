@@ -6,6 +6,12 @@ the geometry's ρmax / ρmin (the paper's postures); a signed stroke such as
 Every test posture is the same construction at its stroke s: leg i's joint at
 L + s, the two other joints at L·cos α with α = asin(s/L), so that leg i stays
 parallel to its axis and P = s·e_i.
+
+A second gauge plane (docs/model.md, "Leg form against tilts and gaps"): a
+posture name may end in ``"@f"`` (``"+@0.25"``, ``"-50@0.75"``): the same
+posture, its deviations read by gauges whose plane cuts the leg at the fraction
+f of its length from the carriage's joint at Π0 (the plane x_i = L·(1 − f),
+L/2 + L·(1/2 − f)), not at the middle. Without the suffix: f = 1/2.
 """
 
 from __future__ import annotations
@@ -18,14 +24,44 @@ from orthocal.geometry import AXIS_INDEX, Geometry
 
 SIGNS = ("+", "-")
 _STROKE = re.compile(r"^[+-](\d+(\.\d*)?|\.\d+)$")
+_PLANE = re.compile(r"^0?\.\d+$")
+#: The gauges' plane without a suffix: the middle of the leg.
+MIDDLE = 0.5
+
+
+def split_plane(name: str) -> tuple[str, float]:
+    """(the posture, the fraction f of the leg its gauges' plane cuts at Π0) of a
+    posture name: ``"+@0.25"`` → ``("+", 0.25)``, ``"+"`` → ``("+", 0.5)``; raises
+    ValueError for a suffix that is not a fraction strictly between 0 and 1."""
+    if not isinstance(name, str) or "@" not in name:
+        return name, MIDDLE
+    base, _, frac = name.partition("@")
+    if not _PLANE.match(frac) or not 0.0 < float(frac) < 1.0 or float(frac) == MIDDLE:
+        raise ValueError(f"a gauge plane is '@' and a fraction of the leg strictly between "
+                         f"0 and 1 other than 0.5 (such as '+@0.25'), got {name!r}")
+    return base, float(frac)
+
+
+def with_plane(name: str, fraction: float) -> str:
+    """The posture name ``name`` read in the gauge plane at ``fraction`` of the leg
+    (no suffix at the middle)."""
+    return name if fraction == MIDDLE else check_posture(f"{name}@{fraction:g}")
+
+
+def plane_offset(name: str, geometry: Geometry) -> float:
+    """How far (mm) the gauges' plane of posture ``name`` lies off L/2, the middle:
+    L·(1/2 − f) for its fraction f (:func:`split_plane`); 0 without a suffix."""
+    return geometry.leg_length * (MIDDLE - split_plane(name)[1])
 
 
 def check_posture(name: str) -> str:
     """Validate a test-posture name ('+', '-' or a signed nonzero stroke such as
-    '+30'); raises ValueError."""
-    if name in SIGNS:
+    '+30', each optionally read in a second gauge plane, '+@0.25'); raises
+    ValueError."""
+    base, _ = split_plane(name)
+    if base in SIGNS:
         return name
-    if isinstance(name, str) and _STROKE.match(name) and float(name) != 0.0:
+    if isinstance(base, str) and _STROKE.match(base) and float(base) != 0.0:
         return name
     raise ValueError(
         f"posture must be '+', '-' or a signed nonzero stroke in mm such as '+30', got {name!r}")
@@ -34,11 +70,12 @@ def check_posture(name: str) -> str:
 def stroke(name: str, geometry: Geometry) -> float:
     """The stroke s of a test posture: ρmax for '+', ρmin for '-', the number itself
     for a signed stroke string."""
+    name = split_plane(check_posture(name))[0]
     if name == "+":
         return geometry.rho_max
     if name == "-":
         return geometry.rho_min
-    s = float(check_posture(name))
+    s = float(name)
     if not -geometry.leg_length < s < geometry.leg_length:
         raise ValueError(f"stroke {name} mm must lie within ±leg_length ({geometry.leg_length:g})")
     return s
@@ -84,6 +121,7 @@ def posture(sign: str, leg: str | None, geometry: Geometry) -> np.ndarray:
     L = geometry.leg_length
     if sign == "0":
         return np.full(3, L)
+    sign = split_plane(sign)[0]
     if leg not in AXIS_INDEX:
         raise ValueError(f"leg must be one of x, y, z, got {leg!r}")
     rho = np.full(3, L * np.cos(tilt(sign, geometry)))

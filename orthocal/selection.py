@@ -124,8 +124,8 @@ def _allowed_rss(result: Identification, geometry: Geometry, noise_sigma: float,
         r = r + J_m @ m
         V = C + (result.stand_model.prior_sd / noise_sigma) ** 2 * (J_m @ J_m.T)
     else:
-        J, V = exact_jacobian(distinct, geometry, result.vector, result.model), C
-    cols = columns(allowance, distinct, means, geometry, result.vector)
+        J, V = exact_jacobian(distinct, geometry, result.fit_vector, result.model), C
+    cols = columns(allowance, distinct, means, geometry, result.fit_vector)
     fit = bounded_rss(r, V, J, cols)
     return fit.rss, fit.to_dict()
 
@@ -157,7 +157,7 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
     else:
         mean_res = np.array([np.mean(result.residuals[[k == d for k in keys]])
                              for d in distinct])
-        J = exact_jacobian(distinct, geometry, result.vector, result.model)
+        J = exact_jacobian(distinct, geometry, result.fit_vector, result.model)
         W = np.linalg.inv(C)
         g = J.T @ W @ mean_res
         rss = float(mean_res @ W @ mean_res - g @ np.linalg.solve(J.T @ W @ J, g))

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from orthocal.calibration import jacobian
-from orthocal.geometry import PARAM_NAMES, Geometry
+from orthocal.geometry import FIT_NAMES, Geometry
 from orthocal.identification import Identification, exact_jacobian
 from orthocal.measurement import Key, deviations
 from orthocal.stands import incidence, prior_penalty, stand_jacobian
@@ -21,10 +21,10 @@ def check_geometry(ident: Identification, geometry: Geometry) -> None:
     the sensitivity would be that of another machine."""
     keys = list(ident.keys)
     if ident.method == "nonlinear":
-        again = deviations(keys, geometry, ident.vector, ident.mount_offsets)
+        again = deviations(keys, geometry, ident.fit_vector, ident.mount_offsets)
     else:
-        J_all = jacobian(keys, geometry, "full+tilt+gap")
-        again = J_all[:, :6] @ ident.vector[:6] + J_all[:, 6:] @ ident.vector[6:]
+        J_all, v = jacobian(keys, geometry, "full+tilt+gap+form"), ident.fit_vector
+        again = J_all[:, :6] @ v[:6] + J_all[:, 6:12] @ v[6:12] + J_all[:, 12:] @ v[12:]
     model_values = np.asarray(ident.values) - np.asarray(ident.residuals)
     if not np.allclose(again, model_values, rtol=0.0, atol=_GEOMETRY_TOL):
         raise ValueError("this geometry does not reproduce the identification's model values: "
@@ -40,12 +40,12 @@ def fit_design(ident: Identification, geometry: Geometry
     keys = list(ident.keys)
     if ident.method != "nonlinear":
         return jacobian(keys, geometry, ident.model), None, None, None
-    J_t = exact_jacobian(keys, geometry, ident.vector, ident.model, ident.mount_offsets)
+    J_t = exact_jacobian(keys, geometry, ident.fit_vector, ident.model, ident.mount_offsets)
     if ident.stand_model is None:
         return J_t, None, None, None
     assert ident.stand_sigma is not None
     _, S = incidence(keys, ident.stand_model)  # columns in the order of ident.stands
-    J_m = stand_jacobian(keys, geometry, ident.vector, S)
+    J_m = stand_jacobian(keys, geometry, ident.fit_vector, S)
     lam = prior_penalty(ident.stand_sigma, ident.stand_model, S.shape[1])
     return J_t, J_m, lam, _stand_curvature(ident, geometry)
 
@@ -71,11 +71,11 @@ def _stand_curvature(ident: Identification, geometry: Geometry) -> np.ndarray:
     assert ident.stand_model is not None
     keys = list(ident.keys)
     _, S = incidence(keys, ident.stand_model)
-    cols = [PARAM_NAMES.index(n) for n in ident.names]
-    x0 = np.concatenate([ident.vector[cols], ident.stand_offsets])
+    cols = [FIT_NAMES.index(n) for n in ident.names]
+    x0 = np.concatenate([ident.fit_vector[cols], ident.stand_offsets])
 
     def A_at(x: np.ndarray) -> np.ndarray:
-        full = np.zeros(len(PARAM_NAMES))
+        full = np.zeros(len(FIT_NAMES))
         full[cols] = x[: len(cols)]
         return np.hstack([exact_jacobian(keys, geometry, full, ident.model, S @ x[len(cols):]),
                           stand_jacobian(keys, geometry, full, S)])

@@ -224,5 +224,5 @@ def test_a_rotation_of_the_whole_machine_changes_no_deviation():
 def test_six_vector_still_accepted_and_bad_lengths_refused():
     x6 = np.array([0.1, 0.2, 0.3, 0.0, 0.0, 0.0])
     assert deviations(ALL_KEYS, G, x6) == pytest.approx(deviations(ALL_KEYS, G, np.r_[x6, 0, 0, 0]))
-    with pytest.raises(ValueError, match="6, 9 or 12 parameters"):
+    with pytest.raises(ValueError, match="6, 9, 12 or 18 parameters"):
         deviations(ALL_KEYS, G, np.zeros(7))

@@ -17,8 +17,10 @@ from collections.abc import Sequence
 
 # orthocal.MODELS, spelled out: the command line is parsed before numpy is loaded
 # (tests/test_gaps.py checks that the two agree).
-MODEL_NAMES = ("rho", "L", "full", "rho+tilt", "full+tilt", "rho+gap", "rho+tilt+gap",
-               "full+tilt+gap")
+_BASE_MODELS = ("rho", "L", "full", "rho+tilt", "full+tilt", "rho+gap", "rho+tilt+gap",
+                "full+tilt+gap")
+# each also with the legs' bows fitted ("+form": needs a second gauge plane per leg)
+MODEL_NAMES = (*_BASE_MODELS, *(m + "+form" for m in _BASE_MODELS))
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_NOT_CONVERGED = 0, 1, 2, 3
 

@@ -70,7 +70,7 @@ def _at_its_parameters(ident: Any, geometry: orthocal.Geometry) -> Any:
     the residuals of the band's edge, µm away, where its sensitivity is the same."""
     if ident.method != "nonlinear":
         return ident
-    model = orthocal.deviations(list(ident.keys), geometry, ident.vector, ident.mount_offsets)
+    model = orthocal.deviations(list(ident.keys), geometry, ident.fit_vector, ident.mount_offsets)
     return replace(ident, residuals=np.asarray(ident.values) - model)
 
 

@@ -103,7 +103,7 @@ def stands_part(ident: Any, geometry: Geometry) -> dict[str, Any]:
         return {}
     from orthocal import design
 
-    _, part = design.drho_error_parts(ident.keys, geometry, ident.model, ident.vector,
+    _, part = design.drho_error_parts(ident.keys, geometry, ident.model, ident.fit_vector,
                                       ident.stand_sigma, stands.prior_sd, stands)
     return {"stands_part_mm": {f"drho_{a}": float(v) for a, v in zip(AXES, part, strict=True)}}
 
