@@ -112,8 +112,10 @@ def split_params(params) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
 
 
 def params_vector(values: dict[str, float]) -> np.ndarray:
-    """12-vector from a dict by PARAM_NAMES; missing names are zero."""
-    unknown = set(values) - set(PARAM_NAMES)
+    """12-vector from a dict by PARAM_NAMES, or the 18-vector of FIT_NAMES when it
+    names the legs' bows too; missing names are zero."""
+    unknown = set(values) - set(FIT_NAMES)
     if unknown:
         raise ValueError(f"unknown parameter name(s): {sorted(unknown)}")
-    return np.array([float(values.get(n, 0.0)) for n in PARAM_NAMES])
+    names = FIT_NAMES if set(values) & set(BOW_NAMES) else PARAM_NAMES
+    return np.array([float(values.get(n, 0.0)) for n in names])

@@ -39,6 +39,7 @@ import numpy as np
 
 from orthocal.geometry import AXIS_INDEX, Geometry
 from orthocal.measurement import Key, deviations
+from orthocal.postures import MIDDLE, split_plane
 
 Gauge = tuple[str, str]  # (leg i, direction j): one dial indicator
 GAUGES: tuple[Gauge, ...] = tuple((i, j) for i in "xyz" for j in "xyz" if i != j)
@@ -120,14 +121,17 @@ class Stands:
 
 
 def row_stands(keys: Sequence[Key], stands: Stands) -> list[str]:
-    """The name of the stand each row of ``keys`` was read on: its gauge's stand, and
+    """The name of the stand each row of ``keys`` was read on: its gauge's stand (in
+    a second gauge plane another stand, ``stand_xy~0.75``: another mounting), and
     for a key's later mountings (``stands.mounts``) a stand of their own (``@2``, …)."""
     seen: dict[Key, int] = {}
     out = []
     for k in keys:
         row = seen[k] = seen.get(k, -1) + 1
         mounting = stands.mounting_of(k, row)
-        out.append(stands.stand_of(k[1], k[2]) + (f"@{mounting + 1}" if mounting else ""))
+        at = split_plane(k[0])[1]
+        out.append(stands.stand_of(k[1], k[2]) + ("" if at == MIDDLE else f"~{at:g}")
+                   + (f"@{mounting + 1}" if mounting else ""))
     return out
 
 

@@ -325,7 +325,8 @@ class VirtualStation:
 
     def source(self, leg: str, direction: str) -> Callable[[], float]:
         """What a gauge on ``leg`` along ``direction`` reads, its stand in the plane
-        the mounting in progress drew (``self._stand_error`` off the nominal L/2)."""
+        the mounting in progress stands in (``self._stand_error`` off the nominal L/2:
+        its place along the leg and the error it was placed with)."""
         sign = -1.0 if direction.startswith("-") else 1.0
         axis = direction.lstrip("-")
         plane = self.geometry.mount_plane + self._stand_error
@@ -339,10 +340,14 @@ class VirtualStation:
         uninterrupted run would have. None: a fresh draw at every mounting."""
         self._placement = where
 
-    def mount(self, name: str, leg: str, direction: str) -> None:
-        """Put indicator ``name`` against the middle of ``leg`` along ``direction``
-        ("-y": reversed), as placed by eye (a new stand error at every mounting,
-        see :meth:`place`), and zero it there."""
+    def mount(self, name: str, leg: str, direction: str, at: float = 0.5) -> None:
+        """Put indicator ``name`` against ``leg`` along ``direction`` ("-y":
+        reversed) at the fraction ``at`` of the leg from its carriage's joint (the
+        middle by default; a second gauge plane at 0.25 or 0.75), as placed by eye
+        (a new stand error at every mounting, see :meth:`place`), and zero it
+        there."""
+        if not 0.0 < at < 1.0:
+            raise ValueError(f"a gauge's place along the leg is a fraction in (0, 1), got {at!r}")
         where = self._placement
         if name in self._fixed_mounts:
             error = float(self._fixed_mounts[name])
@@ -352,16 +357,19 @@ class VirtualStation:
         gauge = self.indicators[name]
         self._watch.flush()  # what happened so far, with the mounting it happened under
         self._watch.mounted(name)
-        gauge.mount(self._source_at(name, leg, direction, error))
+        # where the stand stands: its plane off L/2, the placement error included
+        plane = self.geometry.leg_length * (0.5 - at) + error
+        gauge.mount(self._source_at(name, leg, direction, plane))
         self._mounts[name] = {"leg": leg, "direction": direction, "zero_mm": gauge.zero_mm,
-                              "stand_error_mm": error}
+                              "stand_error_mm": error, "plane_offset_mm": plane}
         self._save_mounts()
 
     def _source_at(self, name: str, leg: str, direction: str,
-                   stand_error: float) -> Callable[[], float]:
+                   plane_offset: float) -> Callable[[], float]:
         # Through self.source(leg, direction), which tests wrap to inject knocks;
-        # plus this station's own knocks of gauge ``name``.
-        self._stand_error = stand_error
+        # plus this station's own knocks of gauge ``name``. ``plane_offset``: the
+        # stand's plane off L/2 (its place along the leg and its placement error).
+        self._stand_error = plane_offset
         try:
             read = self.source(leg, direction)
         finally:
@@ -425,7 +433,7 @@ class VirtualStation:
             if name in self.indicators:
                 # the stand stays where it was placed, misplacement included
                 src = self._source_at(name, m["leg"], m["direction"],
-                                      m.get("stand_error_mm", 0.0))
+                                      m.get("plane_offset_mm", m.get("stand_error_mm", 0.0)))
                 self._watch.mounted(name)
                 self.indicators[name].mount(src, zero_mm=m["zero_mm"])
                 self._mounts[name] = m

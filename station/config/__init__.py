@@ -219,6 +219,11 @@ class IndicatorConfig(_Strict):
 class SetupConfig(_Strict):
     leg: AxisName
     indicators: dict[str, Direction] = Field(min_length=1)
+    # Where along the leg the gauges touch it, as the fraction of its length from
+    # the carriage's joint at Π0: the middle (0.5), or a second gauge plane (0.25,
+    # 0.75) that tells the legs' bow from the axes' tilts (docs/model.md, "Leg form
+    # against tilts and gaps").
+    at: float = Field(0.5, gt=0.05, lt=0.95)
 
     @model_validator(mode="after")
     def _directions(self) -> SetupConfig:
@@ -376,7 +381,27 @@ class StationConfig(_Strict):
                         f"setups[{idx}].indicators.{name}: no indicator of that name "
                         f"(have {', '.join(names)})"
                     )
+        self._planes()
         return self
+
+    def _planes(self) -> None:
+        """A gauge read off the middle must be read in two planes: only then does
+        the fit tell its leg's bow from the axes' tilts (the bows are fitted where
+        any setup has a second plane)."""
+        planes: dict[tuple[str, str], set[float]] = {}
+        for setup in self.setups:
+            for direction in setup.indicators.values():
+                planes.setdefault((setup.leg, direction.lstrip("-")), set()).add(setup.at)
+        if all(at == 0.5 for seen in planes.values() for at in seen):
+            return
+        for (leg, direction), seen in planes.items():
+            if len(seen) < 2:
+                idx = next(n for n, s in enumerate(self.setups) if s.leg == leg)
+                raise ValueError(
+                    f"setups[{idx}]: the gauge of leg {leg} along {direction} is read in one "
+                    f"plane (at = {min(seen):g}) while other setups have a second one: give "
+                    "every gauge a setup at 0.5 and one at a second plane (0.25 or 0.75), "
+                    "or leave every setup at the middle")
 
     def indicator(self, name: str) -> IndicatorConfig:
         return next(ind for ind in self.indicators if ind.name == name)

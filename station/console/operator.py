@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping, Sequence
 from contextlib import AbstractContextManager, nullcontext
 from typing import Protocol, TextIO
 
+from orthocal.postures import MIDDLE
 from station.errors import BadInput, RunFailed
 
 try:
@@ -22,8 +23,9 @@ except ImportError:  # pragma: no cover - not POSIX
 
 class Operator(Protocol):
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
-              all_names: Sequence[str]) -> None:
-        """Mount ``indicators`` (name -> direction) at the middle of ``leg`` at Π0 and
+              all_names: Sequence[str], at: float = MIDDLE) -> None:
+        """Mount ``indicators`` (name -> direction) on ``leg`` at Π0, at the fraction
+        ``at`` of its length from the carriage's joint (the middle by default), and
         remove the others. Returns once done; raises RunFailed if the operator aborts."""
         ...
 
@@ -37,14 +39,16 @@ class Operator(Protocol):
 
 
 def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str, str],
-                      all_names: Sequence[str]) -> str:
+                      all_names: Sequence[str], at: float = MIDDLE) -> str:
     # "v", "v2", ...: the verification after each write-back of the closed loop.
     what = "verification" if phase.startswith("v") else "measurement"
     mounts = ", ".join(f"{n} along {d}" for n, d in indicators.items())
     others = [n for n in all_names if n not in indicators]
     remove = f"; remove {', '.join(others)}" if others else ""
-    return (f"{what}, setup {setup + 1}: the machine is at Π0. Mount {mounts} against the "
-            f"middle of leg {leg} (plunger pushed in to its preload){remove}.")
+    where = "the middle of" if at == MIDDLE else \
+        f"{at:g} of the length (from the carriage's joint) of"
+    return (f"{what}, setup {setup + 1}: the machine is at Π0. Mount {mounts} against "
+            f"{where} leg {leg} (plunger pushed in to its preload){remove}.")
 
 
 class ConsoleOperator:
@@ -98,8 +102,8 @@ class ConsoleOperator:
         return line.strip().lower()
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
-              all_names: Sequence[str]) -> None:
-        instruction = mount_instruction(phase, setup, leg, indicators, all_names)
+              all_names: Sequence[str], at: float = MIDDLE) -> None:
+        instruction = mount_instruction(phase, setup, leg, indicators, all_names, at)
         if self.yes:
             self._say(instruction)
             return
@@ -115,12 +119,13 @@ class ConsoleOperator:
 
 
 class VirtualOperator:
-    """Mounts simulated indicators through ``mount_fn(name, leg, direction)`` and
+    """Mounts simulated indicators through ``mount_fn(name, leg, direction)`` (``at=``
+    too, off the middle) and
     ``unmount_fn(name)``; says yes to every question. ``place_fn("phase:setup")``,
     if given, is told which placement the next mountings are, so that a simulated
     stand placed again for the same setup after a resume stands where it stood."""
 
-    def __init__(self, mount_fn: Callable[[str, str, str], None],
+    def __init__(self, mount_fn: Callable[..., None],
                  unmount_fn: Callable[[str], None],
                  say: Callable[[str], None] | None = None,
                  place_fn: Callable[[str], None] | None = None) -> None:
@@ -130,17 +135,20 @@ class VirtualOperator:
         self._place = place_fn
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
-              all_names: Sequence[str]) -> None:
+              all_names: Sequence[str], at: float = MIDDLE) -> None:
         for name in all_names:
             if name not in indicators:
                 self._unmount(name)
         if self._place is not None:
             self._place(f"{phase}:{setup}")
         for name, direction in indicators.items():
-            self._mount(name, leg, direction)
+            if at == MIDDLE:
+                self._mount(name, leg, direction)
+            else:
+                self._mount(name, leg, direction, at=at)
         if self._say is not None:
             self._say("[virtual operator] " + mount_instruction(
-                phase, setup, leg, indicators, all_names))
+                phase, setup, leg, indicators, all_names, at))
 
     def confirm(self, question: str) -> bool:
         if self._say is not None:

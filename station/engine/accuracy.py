@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 import orthocal
-from orthocal import AXES, GAP_NAMES, PARAM_NAMES, TILT_NAMES
+from orthocal import AXES, BOW_NAMES, GAP_NAMES, PARAM_NAMES, TILT_NAMES
 from orthocal.accuracy import error_field, optimal_offsets, squareness, workspace_grid
 from orthocal.loop import FALSE_ALARM
 from orthocal.numbers import finite
@@ -120,6 +120,20 @@ def round_layout(phase: str, ident: Any) -> RoundLayout | None:
         return None
     return RoundLayout(phase, held, np.array([ident.parameters[n] for n in held]), cov,
                        finite(ident.std_error_dof))
+
+
+def round_form(phase: str, ident: Any) -> RoundLayout | None:
+    """The legs' bows (orthocal.BOW_NAMES, mm) of an identification that fitted them
+    (a second gauge plane), as a round to pool like the layout; None without them."""
+    names = list(ident.names)
+    if not all(n in names for n in BOW_NAMES):
+        return None
+    idx = [names.index(n) for n in BOW_NAMES]
+    cov = np.asarray(ident.covariance, dtype=float)[np.ix_(idx, idx)]
+    if not np.all(np.isfinite(cov)):
+        return None
+    return RoundLayout(phase, BOW_NAMES, np.array([ident.parameters[n] for n in BOW_NAMES]),
+                       cov, finite(ident.std_error_dof))
 
 
 def pool_layout(rounds: Sequence[RoundLayout]) -> Layout | None:

@@ -15,7 +15,7 @@ import numpy as np
 
 from drivers.files import write_atomic
 from orthocal import carry
-from orthocal.geometry import params_vector
+from orthocal.geometry import BOW_NAMES, params_vector
 from orthocal.loop import (
     WRITABLE,
     after_correction,
@@ -74,6 +74,9 @@ class Flow:
         self.reversal: Any = None  # the joints' lost motion (orthocal.lost_motion)
         # each round's rho+tilt fit, for the tilts the run states (engine.accuracy)
         self.layout_rounds: list[accuracy.RoundLayout] = []
+        # Each round's fit of the legs' bows (a second gauge plane): no offset
+        # changes them either, so later rounds join them as they join the layout.
+        self.form_rounds: list[accuracy.RoundLayout] = []
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
         # the joint errors that leave the least tool error (engine.accuracy)
         self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
@@ -295,6 +298,10 @@ class Flow:
         not rule out; rho+tilt where the gaps cannot be told); a round measured again
         replaces what its earlier passes gave."""
         self.layout_rounds = [t for t in self.layout_rounds if t.phase != phase]
+        self.form_rounds = [t for t in self.form_rounds if t.phase != phase]
+        form = accuracy.round_form(phase, ident)
+        if form is not None:
+            self.form_rounds.append(form)
         layout = accuracy.round_layout(phase, ident)
         whole = layout is not None and len(layout.names) == len(accuracy.LAYOUT_NAMES)
         for model in () if whole or not len(m.deviations) else accuracy.LAYOUT_MODELS:
@@ -309,10 +316,19 @@ class Flow:
 
     def _carried(self, phase: str, ident: Any) -> Any:
         """A verification's identification joined with the axes' layout (tilts, gaps)
-        the earlier rounds measured, which no offset changed (orthocal.carry): its Δρ
-        gains, never loses. Without an earlier layout of its model's names: as it is."""
-        held = [n for n in accuracy.LAYOUT_NAMES if n in ident.names]
-        prior = accuracy.pool_layout([r for r in self.layout_rounds if r.phase != phase])
+        and the legs' bows the earlier rounds measured, which no offset changed
+        (orthocal.carry; the two are independent measurements, joined one after the
+        other): its Δρ gains, never loses. Without an earlier round of its model's
+        names: as it is."""
+        for rounds, names in ((self.layout_rounds, accuracy.LAYOUT_NAMES),
+                              (self.form_rounds, BOW_NAMES)):
+            ident = self._carry(phase, ident, rounds, names)
+        return ident
+
+    def _carry(self, phase: str, ident: Any, rounds: list[accuracy.RoundLayout],
+               names: tuple[str, ...]) -> Any:
+        held = [n for n in names if n in ident.names]
+        prior = accuracy.pool_layout([r for r in rounds if r.phase != phase])
         if not held or prior is None or not set(held) <= set(prior.names):
             return ident
         idx = [prior.names.index(n) for n in held]

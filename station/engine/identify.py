@@ -10,7 +10,8 @@ from typing import Any
 import orthocal
 from orthocal.covariance import with_measured_noise
 from orthocal.noise import noise_from_cycles, noise_from_readings
-from orthocal.selection import LEVEL, lack_of_fit
+from orthocal.postures import MIDDLE, split_plane
+from orthocal.selection import CANDIDATES, LEVEL, lack_of_fit
 from station.config import StationConfig
 from station.engine.statistics import Measurement
 from station.errors import RunFailed
@@ -43,6 +44,19 @@ def measurement_noise(config: StationConfig, m: Measurement) -> tuple[float, flo
     return sigma, dof, source
 
 
+def second_plane(keys) -> bool:
+    """Whether any deviation was read in a second gauge plane (SetupConfig.at)."""
+    return any(split_plane(k[0])[1] != MIDDLE for k in keys)
+
+
+def with_form(model: str, keys) -> str:
+    """``model`` with the legs' bows fitted beside it (orthocal.FORM) where the
+    gauges were read in a second plane: the bows are then measured, not assumed."""
+    if model.endswith(orthocal.FORM) or model == "auto" or not second_plane(keys):
+        return model
+    return model + orthocal.FORM
+
+
 def identify_measurement(config: StationConfig, m: Measurement,
                          model: str | None = None) -> tuple[Any, dict[str, Any] | None]:
     """The identification of ``m`` with ``model`` (default: the config's) and, for
@@ -54,9 +68,9 @@ def identify_measurement(config: StationConfig, m: Measurement,
     model leaves more than that noise (so a model the data reject does not look
     precise). Without a noise estimate (one cycle of one reading), the fit's own."""
     proc = config.procedure
-    model = model or proc.model
-    geometry = config.machine.geometry()
     data = m.for_identify()
+    model = with_form(model or proc.model, data)
+    geometry = config.machine.geometry()
     try:
         noise = measurement_noise(config, m)
     except RunFailed:
@@ -83,9 +97,10 @@ def identify_measurement(config: StationConfig, m: Measurement,
             from station.engine.budget import allowance
 
             allowed = allowance(config)
-            sel = orthocal.select_model(data, geometry, sigma, dof, method=proc.method,
-                                        stands=stands, noise_source=source,
-                                        allowance=allowed)
+            candidates = [with_form(c, data) for c in CANDIDATES]
+            sel = orthocal.select_model(data, geometry, sigma, dof, candidates=candidates,
+                                        method=proc.method, stands=stands,
+                                        noise_source=source, allowance=allowed)
             ident, selection = sel.identification, sel.to_dict()
             selection["allowance"] = {
                 **allowed.to_dict(),

@@ -31,6 +31,7 @@ import numpy as np
 
 from drivers.base import AxisController
 from orthocal.lost_motion import reversal_gain
+from orthocal.postures import MIDDLE
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine.guard import PlungerGuard
@@ -122,7 +123,7 @@ class Sequencer:
         self._stops: dict[str, dict[str, StopStat]] = {}
         self._all_names = [ind.name for ind in config.indicators]
         self._noise: dict[str, NoiseScale] = {n: NoiseScale() for n in self._all_names}
-        self._gains: dict[tuple[str, str], float] = {}  # (leg, axis) -> reversal gain
+        self._gains: dict[tuple[str, str, float], float] = {}  # (leg, axis, at) -> gain
         # how many cycles a verification's mounting takes (the flow tells it the
         # machine the verification expects)
         self.sizing = VerificationSizing(config, plan, controller)
@@ -341,7 +342,7 @@ class Sequencer:
             axis = direction.lstrip("-")
             base = 0.5 * (start[name].mean + end[name].mean)
             for posture, stop in tests:
-                devs[f"{posture}{sp.leg}{axis}"] = sign * (stop[name].mean - base)
+                devs[f"{sp.key_posture(posture)}{sp.leg}{axis}"] = sign * (stop[name].mean - base)
             for st in (*(stop[name] for _, stop in tests), end[name]):
                 if st.std is not None:
                     within.append(st.std)
@@ -367,14 +368,16 @@ class Sequencer:
         for name, direction in sp.indicators.items():
             sign = -1.0 if direction.startswith("-") else 1.0
             axis = direction.lstrip("-")
-            gain = self._gain(sp.leg, axis)
+            gain = self._gain(sp.leg, axis, sp.at)
             out[axis] = side * sign * (other[name].mean - end[name].mean) / gain
         return out
 
-    def _gain(self, leg: str, axis: str) -> float:
-        if (leg, axis) not in self._gains:
-            self._gains[(leg, axis)] = reversal_gain(leg, axis, self.config.machine.geometry())
-        return self._gains[(leg, axis)]
+    def _gain(self, leg: str, axis: str, at: float) -> float:
+        if (leg, axis, at) not in self._gains:
+            geometry = self.config.machine.geometry()
+            plane = geometry.leg_length * (1.0 - at)  # x_leg of the gauges' plane
+            self._gains[(leg, axis, at)] = reversal_gain(leg, axis, geometry, mount=plane)
+        return self._gains[(leg, axis, at)]
 
     # --- steps -------------------------------------------------------------------------
 
@@ -403,13 +406,15 @@ class Sequencer:
         # The operator's time is what a calibration costs (a minute or two per
         # mounting): journaled with the mounting, so a resumed run still counts it.
         asked = time.monotonic()
-        self.operator.mount(phase, step.setup, step.leg, indicators, self._all_names)
+        self.operator.mount(phase, step.setup, step.leg, indicators, self._all_names,
+                            at=step.at)
         operator_s = time.monotonic() - asked
         self.mover.mount(indicators)
         self.guard.forget()
         self._guard_pending, self._guard_cycle = True, None
         self.journal.append({"type": "setup", "phase": phase, "setup": step.setup,
                              "leg": step.leg, "indicators": indicators,
+                             **({} if step.at == MIDDLE else {"at": step.at}),
                              "operator_s": round(operator_s, 3),
                              "position": None if self.mover.position is None
                              else [float(v) for v in self.mover.position]})

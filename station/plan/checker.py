@@ -13,6 +13,7 @@ import numpy as np
 
 import orthocal
 from orthocal.measurement import reading_at
+from orthocal.postures import MIDDLE
 from station.config import StationConfig
 from station.errors import BadInput
 from station.plan import motion
@@ -205,7 +206,7 @@ class MotionChecker:
             if gauges is None:
                 return p
             i = AXES.index(gauges.setup.leg)
-            mount = geometry.mount_plane
+            mount = self.plane(gauges.setup)
             if not np.all((np.minimum(p[:, i], points[:, i]) <= mount)
                           & (mount <= np.maximum(p[:, i], points[:, i]))):
                 raise NotCrossing(where)
@@ -246,7 +247,8 @@ class MotionChecker:
                        high: np.ndarray | None, where: str,
                        max_depth: int = motion.MAX_DEPTH) -> motion.Bound:
         """motion.segment_bound, remembered: the nominal travel of a mounting over a
-        sub-move is a pure function of the leg, its Π0, the gauges and the two ends,
+        sub-move is a pure function of the leg, its gauges' plane, its Π0, the gauges
+        and the two ends,
         and the same sub-moves come back (every cycle, every re-check of a reused
         route, the waypoint search trying slack after slack, every candidate of
         ``orthocal design``'s search). What one search learned (a bound, values
@@ -255,7 +257,7 @@ class MotionChecker:
         def key_of(v: np.ndarray | None) -> bytes | None:
             return None if v is None else np.asarray(v, dtype=float).tobytes()
 
-        key = (gauges.setup.leg, key_of(np.asarray(gauges.setup.postures["0"])),
+        key = (gauges.setup.leg, gauges.setup.at, key_of(np.asarray(gauges.setup.postures["0"])),
                tuple(gauges.names), tuple(gauges.directions), key_of(a), key_of(b),
                max_depth)
         known = self._bounds.get(key)
@@ -417,9 +419,15 @@ class MotionChecker:
         path = np.asarray(path, dtype=float)
         p = orthocal.forward(path, self.geometry) if end_points is None else end_points
         rho0 = np.asarray(sp.postures["0"], dtype=float)
+        plane = self.plane(sp)
         zero = float(reading_at(rho0, orthocal.forward(rho0, self.geometry), i, j,
-                                np.zeros(3), self.geometry.mount_plane))
-        return sign * (reading_at(path, p, i, j, np.zeros(3), self.geometry.mount_plane) - zero)
+                                np.zeros(3), plane))
+        return sign * (reading_at(path, p, i, j, np.zeros(3), plane) - zero)
+
+    def plane(self, sp: SetupPlan) -> float:
+        """x_leg of the plane ``sp``'s gauges read in: the middle of the leg at Π0
+        (L/2), or the fraction ``sp.at`` of it from the carriage's joint."""
+        return self.geometry.mount_plane + self.geometry.leg_length * (MIDDLE - sp.at)
 
 
 class PathRefused(BadInput):

@@ -6,15 +6,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from station.plan.motion import NotCrossing
 from station.plan.steps import SetupPlan
+
+__all__ = ["SIGNAL_BULGE", "Gauges", "NotCrossing"]
 
 # The signal is a smooth function of the joints, not of the progress along a move:
 # between two stops it may leave their straight ramp by this fraction of its change.
 SIGNAL_BULGE = 0.5
-
-
-class NotCrossing(ValueError):
-    """The leg under test leaves the plane of a mounted indicator."""
 
 
 @dataclass(frozen=True)

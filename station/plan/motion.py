@@ -79,6 +79,11 @@ class OutsideWorkspace(ValueError):
     """Part of the set a move can pass through has no forward kinematics."""
 
 
+class NotCrossing(ValueError):
+    """The leg under test leaves the plane of a mounted indicator (raised by a
+    values function; passed on as it is, not taken for leaving the workspace)."""
+
+
 @dataclass(frozen=True)
 class Bound:
     """Lower and upper bound of each column of a function over a move's set, and
@@ -257,6 +262,8 @@ def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str
 def _evaluate(f: Values, points: np.ndarray) -> np.ndarray:
     try:
         values = np.asarray(f(points), dtype=float)
+    except (NotCrossing, OutsideWorkspace):
+        raise
     except ValueError as exc:
         raise OutsideWorkspace(str(exc)) from None
     return values.reshape(len(points), -1)

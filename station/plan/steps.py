@@ -69,6 +69,7 @@ class Prompt:
     leg: str
     indicators: tuple[tuple[str, str], ...]  # (name, direction) as mounted
     kind: str = "prompt"
+    at: float = postures.MIDDLE  # the gauges' place along the leg (SetupConfig.at)
 
 
 @dataclass(frozen=True)
@@ -120,6 +121,13 @@ class SetupPlan:
     # above; None: as planned), and the reversal stop's ("r": from the other side).
     overrun: float | None = None
     reversal_overrun: float | None = None
+    # Where along the leg the gauges touch it (fraction from the carriage's joint).
+    at: float = postures.MIDDLE
+
+    def key_posture(self, sign: str) -> str:
+        """The deviation key's posture of test posture ``sign`` read by this setup's
+        gauges: "+" at the middle, "+@0.25" in a second plane."""
+        return postures.with_plane(sign, self.at)
 
     def move(self, sign: str) -> Move:
         """The move to posture ``sign`` ("r": Π0 from the side opposite the stops')."""
@@ -139,7 +147,7 @@ class SetupPlan:
         names = tuple(self.indicators)
         return [
             self.move("0"),
-            Prompt(self.index, self.leg, tuple(self.indicators.items())),
+            Prompt(self.index, self.leg, tuple(self.indicators.items()), at=self.at),
             Settle(settle_s),
             Read(stop_id(phase, self.index, cycle, "0"), self.index, cycle, "0", names, n),
         ]
@@ -183,7 +191,7 @@ class Plan:
                 rows = []
                 for posture in sp.order:
                     rows.append(len(keys))
-                    keys.append((posture, sp.leg, direction.lstrip("-")))
+                    keys.append((sp.key_posture(posture), sp.leg, direction.lstrip("-")))
                 indicators.append(rows)
         return keys, indicators
 
@@ -315,7 +323,7 @@ def build_plan(config: StationConfig, strokes: Sequence[float] | None = None) ->
             for s in ("0", *order)
         }
         setups.append(SetupPlan(idx, setup.leg, dict(setup.indicators), targets,  # type: ignore[arg-type]
-                                order, *approach_overruns(config)))
+                                order, *approach_overruns(config), at=setup.at))
     return Plan(setups, proc.cycles, proc.readings, proc.settle_s)
 
 

@@ -27,7 +27,8 @@ class Header(_Record):
 
 
 class Setup(_Record):
-    """The operator mounted ``indicators`` (name → direction) on ``leg``."""
+    """The operator mounted ``indicators`` (name → direction) on ``leg``, at the
+    fraction ``at`` of its length from the carriage's joint (absent: the middle)."""
 
     type: Literal["setup"]
     phase: str
@@ -35,6 +36,8 @@ class Setup(_Record):
     leg: str
     indicators: dict[str, str]
     operator_s: float | None = None
+    at: float | None = Field(None, description="a second gauge plane: the fraction of "
+                             "the leg from its carriage's joint (absent: 0.5, the middle)")
 
 
 class Reading(_Record):
