@@ -81,9 +81,9 @@ def excused_note(chosen: ModelTest, level: float) -> str:
     return (f"; {chosen.model} leaves more than the noise alone (p = {p_free:.1e}), within "
             "what the stated leg form and gauge errors can make: one gauge plane per leg "
             "cannot tell a uniform bow of the legs from tilts of the axes, so tilts that "
-            "size are not claimed; a second gauge plane on each leg at a quarter of its "
-            "length, or the legs' straightness measured and stated ([uncertainty] "
-            "leg_straightness_mm), would tell them apart")
+            "size are not claimed; a second gauge plane on each leg ([[setups]] at, e.g. "
+            "0.75 of its length from the carriage's joint), or the legs' straightness "
+            "measured and stated ([uncertainty] leg_straightness_mm), would tell them apart")
 
 
 def also_passing(chosen: ModelTest, tests: Sequence[ModelTest]) -> str:

@@ -38,6 +38,7 @@ import numpy as np
 
 from orthocal import AXES
 from orthocal.numbers import finite
+from orthocal.postures import stroke
 from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
 from station.plan.checker import MotionChecker, check_plan
@@ -130,13 +131,20 @@ def _separation(plan: Plan, config: StationConfig) -> dict[str, Any]:
             "noise_gain_max": {k: v for k, v in kinds.items()
                                if v is not None and q.identifiable},
             **({} if q.identifiable else {"cannot_separate": design.describe(q)})})
-    form = design.form_separation(keys, geometry)
+    middles = [k for k in keys if "@" not in k[0]]
+    form = design.form_separation(middles, geometry)
     finite_form = {k: (v if math.isfinite(v) else None) for k, v in form.items()}
     tells = "cannot tell" if form["middle"] == math.inf else "hardly tells"
+    strokes = [stroke(k[0], geometry) for k in middles]
+    planes = "; ".join(
+        f"at {f:g} of its length from the carriage's joint (condition {form[f'{f:g}']:.0f}"
+        + ("" if f + min(strokes) / geometry.leg_length > 0
+           and f + max(strokes) / geometry.leg_length < 1
+           else ", but the leg leaves that plane at a planned posture") + ")"
+        for f in design.SECOND_PLANES)
     words = (f"one gauge plane per leg (the middles) {tells} "
              "a uniform bow of the legs from the tilts, whatever the strokes; what does: a "
-             "second gauge plane on each leg at a quarter of its length from the joint "
-             f"(condition {form['0.25']:.0f}) or three quarters ({form['0.75']:.0f}), or "
+             f"second gauge plane on each leg ([[setups]] at), {planes}; or "
              "the legs' straightness measured and stated ([uncertainty] leg_straightness_mm)")
     return {"lattice": lattice, "leg_form": {"model": "rho+tilt and one bow per leg",
                                              "condition_number": finite_form, "note": words}}

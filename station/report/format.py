@@ -116,16 +116,19 @@ def param_tex(name: str) -> str:
 
 
 def dev_parts(key: str) -> tuple[str, str, str] | None:
-    """(posture, leg, direction) of "+xy" or of a stroke key such as "+30xy"."""
-    if re.fullmatch(r"[+-](\d+(\.\d*)?|\.\d+)?[xyz][xyz]", key):
+    """(posture, leg, direction) of "+xy", of a stroke key such as "+30xy", or of one
+    read in a second gauge plane, "+@0.75xy"."""
+    if re.fullmatch(r"[+-](\d+(\.\d*)?|\.\d+)?(@0?\.\d+)?[xyz][xyz]", key):
         return key[:-2], key[-2], key[-1]
     return None
 
 
 def posture_html(posture: str, leg: str) -> str:
+    posture, _, plane = posture.partition("@")
+    at = f" at {html.escape(plane)} of the leg" if plane else ""
     if posture in ("+", "-"):
-        return f"Π<sub>{leg}</sub><sup>{'+' if posture == '+' else '−'}</sup>"
-    return f"Π<sub>{leg}</sub>({posture.replace('-', '−')} mm)"
+        return f"Π<sub>{leg}</sub><sup>{'+' if posture == '+' else '−'}</sup>{at}"
+    return f"Π<sub>{leg}</sub>({posture.replace('-', '−')} mm){at}"
 
 
 def dev_html(key: str) -> str:
@@ -141,9 +144,11 @@ def dev_tex(key: str) -> str:
     if parts is None:
         return key
     sign, leg, d = parts
+    sign, _, plane = sign.partition("@")
+    at = f" at {plane}" if plane else ""
     if sign not in ("+", "-"):
-        return rf"$\Pi_{leg}({sign})$" + f"\nalong {d}"
-    return rf"$\Pi_{leg}^{{{sign}}}$" + f"\nalong {d}"
+        return rf"$\Pi_{leg}({sign})$" + f"\nalong {d}{at}"
+    return rf"$\Pi_{leg}^{{{sign}}}$" + f"\nalong {d}{at}"
 
 
 def true_value(result: Mapping[str, Any], name: str) -> float | None:
@@ -246,14 +251,16 @@ def dev_keys(*tables: Mapping[str, Any]) -> list[str]:
 
 
 def dev_order(key: str) -> tuple:
-    """Leg, then posture from ρmax down to ρmin ('+', '+30', '-50', '-'), then
-    direction: DEVIATION_KEYS' order, with intermediate strokes in their place."""
+    """Leg, then its gauge plane (the middle first), then posture from ρmax down to
+    ρmin ('+', '+30', '-50', '-'), then direction: DEVIATION_KEYS' order, with
+    intermediate strokes and second planes in their place."""
     parts = dev_parts(key)
     if parts is None:
         return (1, key)
     posture, leg, d = parts
+    posture, _, plane = posture.partition("@")
     s = {"+": math.inf, "-": -math.inf}.get(posture)
-    return (0, leg, -(float(posture) if s is None else s), d)
+    return (0, leg, float(plane) if plane else 0.5, -(float(posture) if s is None else s), d)
 
 
 def format_when(iso: Any) -> str:

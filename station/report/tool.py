@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from station.report import gaps
+from station.report import form, gaps
 from station.report.format import (
     AXES,
     as_dict,
@@ -267,7 +267,8 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     if alt_name and alt_after:
         line += (f"; objective {alt_name} would leave {um(alt_after.get('rms_mm'))} µm RMS "
                  f"(max {um(alt_after.get('max_mm'))} µm)")
-    return [line, _squareness_line(acc), *gaps.summary_lines(result)]
+    return [line, _squareness_line(acc), *gaps.summary_lines(result),
+            *form.summary_lines(result)]
 
 
 def _squareness_line(acc: Mapping[str, Any]) -> str:
@@ -318,7 +319,7 @@ def html_section(result: Mapping[str, Any], figure: str | None = None,
                 f"for this run: {_e(why_not)}. The legs' parallelism reported here is the "
                 "method's means and does not say where the tool goes.</p></div>")
     parts = [head, _intro(result, acc), _before_after(result, acc), _objectives(result, acc),
-             _squareness_html(acc), gaps.html_section(acc)]
+             _squareness_html(acc), gaps.html_section(acc), form.html_section(result)]
     if figure:
         label = f"Figure {number}. " if number is not None else ""
         parts.append(f"<figure>{figure}<figcaption>{label}{_field_caption(acc)}</figcaption>"
