@@ -319,7 +319,9 @@ def html_section(result: Mapping[str, Any], figure: str | None = None,
                 f"for this run: {_e(why_not)}. The legs' parallelism reported here is the "
                 "method's means and does not say where the tool goes.</p></div>")
     parts = [head, _intro(result, acc), _before_after(result, acc), _objectives(result, acc),
-             _squareness_html(acc), gaps.html_section(acc), form.html_section(result)]
+             _squareness_html(acc), gaps.html_section(acc)]
+    if bows := form.html_section(result):
+        parts.append(bows)
     if figure:
         label = f"Figure {number}. " if number is not None else ""
         parts.append(f"<figure>{figure}<figcaption>{label}{_field_caption(acc)}</figcaption>"
