@@ -20,8 +20,12 @@ from station.report import form
 
 TILT = (0.2, 0.1, -0.15)
 BOW = 0.008
-# one round, no verification: what the identification states is under test here
-PROCEDURE = {**FAST, "cycles": 3, "model": "auto", "max_iterations": 1, "verify": False}
+# One round, no verification: what the identification states is under test here.
+# Six cycles of five readings: a bow's standard error is then about 0.7 µm, so the
+# issue's 3 µm is a test that fails for a wrong bow, not for an unlucky draw (at
+# the default three cycles it is ~1 µm; bench/second_plane.py runs the default).
+PROCEDURE = {**FAST, "cycles": 6, "readings": 5, "model": "auto", "max_iterations": 1,
+             "verify": False}
 
 
 def second_plane(at: float) -> Any:
@@ -51,6 +55,8 @@ def test_a_second_plane_tells_the_bow_from_the_tilts(tmp_path: Path,
         assert abs(identified[name] - true) <= 0.05, (name, identified[name])
     for name in BOW_NAMES:  # the simulator bows every leg alike, along +j in both planes
         assert abs(identified[name] - BOW) <= 0.003, (name, identified[name])
+        # and each is stated with a standard error that covers its error
+        assert abs(identified[name] - BOW) <= 4 * result["std_errors"][name], name
     # six mountings: each leg in its middle and at three quarters
     setups = [r for r in _journal(result) if r["type"] == "setup"]
     assert [r.get("at", 0.5) for r in setups] == [0.5] * 3 + [0.75] * 3
