@@ -92,6 +92,7 @@ def judge(result: dict[str, Any], bow: float) -> dict[str, Any]:
         "bow_err_um": 1000 * max(abs(b - bow) for b in bows) if bows else float("nan"),
         "true_um": 1000 * true_after, "best_um": 1000 * best,
         "predicted_um": 1000 * acc["after"]["rms_mm"],
+        "interval_um": [1000 * v for v in acc["after"].get("rms_interval_95_mm") or []],
     }
 
 
@@ -114,7 +115,9 @@ def main() -> None:
                 print(f"  {kind}, seed {args.seed + k}: model {r['model']}, loop {r['stopped']} "
                       f"(exit {r['exit']}); tilts off by ≤ {r['tilt_err']:.3f} mrad, bows ≤ "
                       f"{r['bow_err_um']:.1f} µm; tool after {r['true_um']:.1f} µm RMS true "
-                      f"({r['predicted_um']:.1f} predicted), best offsets {r['best_um']:.1f} "
+                      f"({r['predicted_um']:.1f} predicted, 95 % "
+                      f"{' … '.join(f'{v:.1f}' for v in r['interval_um']) or '—'}), best offsets "
+                      f"{r['best_um']:.1f} "
                       f"({r['true_um'] / r['best_um']:.2f}×); {r['mountings']} mountings; "
                       f"{time.monotonic() - t0:.0f} s")
                 if r["stopped"] != "converged":

@@ -225,6 +225,28 @@ def straightness_sources(prop: Propagation, straightness) -> list[Source]:
         n: float(v) for n, v in zip(prop.names, worst, strict=True)})]
 
 
+def form_covariance(prop: Propagation, straightness) -> np.ndarray:
+    """The covariance (over ``prop.names``) the legs' form leaves in the identified
+    parameters, for an interval that must hold whatever the legs do: each gauge
+    plane of leg i bowed with a sagitta uniform in ±s_i (u = s/√3), once as one
+    bow shared by every plane (the legs of one machine may bow alike: a uniform
+    bow is exactly a tilt signature in the legs' middles, docs/model.md) and once
+    independently per plane, the two added: Σ = v·vᵀ + Σ_p w_p·w_pᵀ with v = Σ_p
+    K·g_p·u, w_p = K·g_p·u (g_p: :func:`form_vector` on plane p's keys).
+    ``straightness`` as for :func:`straightness_sources`. Zero where the fit took
+    the bows itself (a second gauge plane: the bows are then parameters, not
+    errors)."""
+    legs = list(dict.fromkeys(g[0] for g in prop.gauges))
+    if isinstance(straightness, Sequence):
+        straightness = dict(zip(AXES, straightness, strict=True))
+    s_of = _per(straightness, legs, "leg straightness")
+    g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
+    w = [prop.K @ (g * prop.mask(gg)) * s_of[gg[0]] / math.sqrt(3.0) for gg in prop.gauges]
+    v = sum(w, np.zeros(len(prop.names)))
+    return np.outer(v, v) + sum((np.outer(x, x) for x in w),
+                                np.zeros((len(prop.names), len(prop.names))))
+
+
 def _per_deviation(prop: Propagation, name: str, distribution: str, value_of: dict,
                    divisor: float) -> list[Source]:
     """One source per gauge: each of its deviations off independently by ±value

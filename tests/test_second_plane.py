@@ -115,3 +115,28 @@ def test_the_simulator_reads_a_bowed_leg_in_a_second_plane_as_the_maths_does():
                    - machine.readings(posture("0", None, G), leg, d, plane))
     expected = deviations(keys, G, TRUTH, bow=bow_of())
     assert 1000 * np.array(got) == pytest.approx(1000 * expected, abs=1e-9)
+
+
+def test_the_form_a_single_plane_cannot_see_is_carried_into_the_tilts():
+    """A uniform bow of 8 µm reads as tilts of ~0.155 mrad in the middles; the legs'
+    form stated at 10 µm must cover that in the tilts' form covariance, and with a
+    second plane (bows fitted) it leaves the tilts nothing."""
+    from orthocal.budget import form_covariance, propagation
+
+    truth = np.r_[0.6, -0.4, 0.9, 0, 0, 0, 0.2, 0.1, -0.15, 0, 0, 0]
+    bowed = bow_of((0.008, 0.008, 0.008))
+    values = deviations(MIDDLE_KEYS, G, truth, bow=bowed)
+    fit = identify(dict(zip(MIDDLE_KEYS, values, strict=True)), G, model="rho+tilt")
+    tilts = [fit.names.index(n) for n in ("tilt_yx", "tilt_zx", "tilt_zy")]
+    bias = fit.vector[6:9] - truth[6:9]
+    assert np.abs(bias).min() > 0.1  # mrad: the bow, read as tilts
+    sd = np.sqrt(np.diag(form_covariance(propagation(fit, G), 0.010)))[tilts]
+    assert np.all(np.abs(bias) <= 2 * sd), (bias, sd)
+    # the bows fitted from two planes: the form leaves the tilts nothing
+    keys = MIDDLE_KEYS + [(s + "@0.75", leg, d) for leg, d in GAUGES for s in "+-"]
+    both = identify(dict(zip(keys, deviations(keys, G, truth, bow=bowed), strict=True)), G,
+                    model="rho+tilt" + FORM)
+    assert both.vector[6:9] == pytest.approx(truth[6:9], abs=1e-6)
+    cov = form_covariance(propagation(both, G), 0.010)
+    assert np.sqrt(np.diag(cov))[[both.names.index(n) for n in ("tilt_yx", "tilt_zx",
+                                                                 "tilt_zy")]].max() < 1e-6

@@ -207,14 +207,20 @@ def _stats(field: Any) -> dict[str, float]:
     return {"rms_mm": float(field.rms_mm), "max_mm": float(field.max_mm)}
 
 
-def _covariance(now_cov: np.ndarray | None, layout: Layout | None) -> np.ndarray:
+def _covariance(now_cov: np.ndarray | None, layout: Layout | None,
+                form_cov: np.ndarray | None = None) -> np.ndarray:
     """12×12: Δρ now (the last round's) and the pooled layout; the two come from
-    different fits and are taken as independent."""
+    different fits and are taken as independent. ``form_cov``: what the legs' form
+    leaves in the layout (over ``layout.names``; every round alike, so added after
+    the pooling, not averaged by it)."""
     cov = np.zeros((len(PARAM_NAMES), len(PARAM_NAMES)))
     if now_cov is not None:
         cov[:3, :3] = now_cov
     if layout is not None:
         cov[6:, 6:] = layout.covariance_full()
+        if form_cov is not None:
+            idx = [6 + LAYOUT_NAMES.index(n) for n in layout.names]
+            cov[np.ix_(idx, idx)] += form_cov
     return cov
 
 
@@ -244,11 +250,15 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
               drho_start: Mapping[str, float], drho_now: Mapping[str, float],
               drho_now_cov: np.ndarray | None, dof: float | None, layout: Layout | None,
               model: str, in_model: Sequence[str], offsets_before: Mapping[str, float] | None,
-              target_tool: Mapping[str, float]) -> dict[str, Any]:
+              target_tool: Mapping[str, float], form: tuple[np.ndarray, str] | None = None
+              ) -> dict[str, Any]:
     """The run JSON's ``accuracy`` (docs/design.md): before and after over the workspace
     with 95 % intervals for the after-figures, both objectives' predicted after-
     figures side by side, squareness and the gaps with what to do, what it all
-    assumes. ``in_model``: the parameter names of the model the run kept."""
+    assumes. ``in_model``: the parameter names of the model the run kept.
+    ``form``: what the legs' form may leave in the layout (covariance over
+    ``layout.names``, orthocal.budget.form_covariance) and its words: the after-
+    figures' intervals carry it."""
     geometry = config.machine.geometry()
     g = grid(config, limits)
     points = g.points
@@ -257,7 +267,9 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
     zero = np.zeros(3)
     before = error_field(points, geometry, params(drho_start, lay_v), zero, frame)
     cov = _covariance(drho_now_cov, layout)
-    after = after_interval(params(drho_now, lay_v), cov, dof, zero, points, geometry, frame)
+    with_form = cov if form is None else _covariance(drho_now_cov, layout, form[0])
+    after = after_interval(params(drho_now, lay_v), with_form, dof, zero, points, geometry,
+                           frame)
     # Each objective's offsets written exactly: the machine's Δρ at its target.
     objectives = {}
     for name, target in (("joints", dict.fromkeys(DRHO, 0.0)), ("tool", target_tool)):
@@ -282,6 +294,8 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
                        *(["gap"] if layout is not None and layout.gaps() else [])])
     words = assumes(fitted, frame)
     said = _layout_words(layout, model, in_model)
+    if form is not None and layout is not None:
+        words.insert(0, form[1])
     if said:
         words.insert(0, said)
     rail = config.machine.rho_max - config.machine.rho_min

@@ -6,6 +6,7 @@ allow for them."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -138,6 +139,28 @@ def fields(config: StationConfig, ident: Any, type_a_se: dict[str, float],
                        "k for 95 %; the legs' form as independent bows of each gauge "
                        "plane (rectangular, ±straightness), the gauge MPE over the travel "
                        "a deviation spans (0.2 mm, in proportion below)")}
+
+
+def form_of_layout(config: StationConfig, ident: Any, names: Sequence[str]
+                   ) -> tuple[np.ndarray, str] | None:
+    """What the legs' form ([uncertainty] leg_straightness_mm, stated or assumed) may
+    leave in the layout ``names`` as ``ident`` (the fit that gave them) identifies
+    them, as a covariance over ``names`` and the words the accuracy block says it
+    with; None where the fit took the bows itself (a second gauge plane) or holds
+    none of ``names``."""
+    held = [n for n in names if n in ident.names]
+    if not held or any(n in ident.names for n in orthocal.BOW_NAMES):
+        return None
+    geometry = config.machine.geometry()
+    given = inputs(config)["leg_straightness_mm"]
+    prop = gum.propagation(_at_its_parameters(ident, geometry), geometry)
+    cov = gum.form_covariance(prop, given["value"])
+    idx = [list(ident.names).index(n) for n in held]
+    said = "stated" if given.get("given") else "assumed, not stated in [uncertainty]"
+    return cov[np.ix_(idx, idx)], (
+        f"the 95 % intervals of the after-figures carry the legs' form (straightness "
+        f"{given['value']} mm, {said}) as errors of the tilts and gaps: with one gauge "
+        "plane per leg a uniform bow of the legs reads exactly as tilts")
 
 
 def allowance(config: StationConfig) -> orthocal.Allowance:

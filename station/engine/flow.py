@@ -77,6 +77,9 @@ class Flow:
         # Each round's fit of the legs' bows (a second gauge plane): no offset
         # changes them either, so later rounds join them as they join the layout.
         self.form_rounds: list[accuracy.RoundLayout] = []
+        # What the legs' form may leave in each round's layout (one gauge plane per
+        # leg): the tool's intervals carry it (orthocal.budget.form_covariance).
+        self.layout_form: dict[str, tuple[tuple[str, ...], Any]] = {}
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
         # the joint errors that leave the least tool error (engine.accuracy)
         self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
@@ -302,17 +305,20 @@ class Flow:
         form = accuracy.round_form(phase, ident)
         if form is not None:
             self.form_rounds.append(form)
-        layout = accuracy.round_layout(phase, ident)
+        layout, source = accuracy.round_layout(phase, ident), ident
         whole = layout is not None and len(layout.names) == len(accuracy.LAYOUT_NAMES)
         for model in () if whole or not len(m.deviations) else accuracy.LAYOUT_MODELS:
             try:
                 fit, _ = _identify(self.ctx, m, model)
             except RunFailed:
                 continue  # too little data for this layout: try the smaller one
-            layout = accuracy.round_layout(phase, fit) or layout
+            if (found := accuracy.round_layout(phase, fit)) is not None:
+                layout, source = found, fit
             break
         if layout is not None:
             self.layout_rounds.append(layout)
+            self.layout_form[phase] = (layout.names, budget.form_of_layout(
+                self.ctx.config, source, layout.names))
 
     def _carried(self, phase: str, ident: Any) -> Any:
         """A verification's identification joined with the axes' layout (tilts, gaps)
@@ -379,6 +385,17 @@ class Flow:
                 f"{figures[chosen]:.1f} µm RMS over the workspace ({frame} frame); "
                 f"objective {other} would leave {figures[other]:.1f} µm")
 
+    def _layout_form(self, layout: Any) -> tuple[np.ndarray, str] | None:
+        """The legs' form's part of the pooled ``layout``: the latest round of its
+        names' (every round sees the same legs, so it is not averaged)."""
+        if layout is None:
+            return None
+        for phase in reversed(layout.rounds):
+            names, form = self.layout_form.get(phase, ((), None))
+            if form is not None and names == layout.names:
+                return form
+        return None
+
     def _accuracy(self) -> None:
         """The run's statement at the tool (result ``accuracy``) and model.json."""
         if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
@@ -402,7 +419,7 @@ class Flow:
                 cfg, (self.seq.checker.lo, self.seq.checker.hi), drho_start=start,
                 drho_now=now, drho_now_cov=now_cov, dof=finite(last.std_error_dof),
                 layout=layout, model=last.model, in_model=names, offsets_before=before,
-                target_tool=self._tool_target())
+                target_tool=self._tool_target(), form=self._layout_form(layout))
         except (ValueError, np.linalg.LinAlgError) as exc:
             self.result["accuracy"] = {"error": f"not stated: {exc}"}
             return
