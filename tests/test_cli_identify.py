@@ -164,3 +164,22 @@ def test_console_script_in_a_subprocess(paper_csv):
     bad = subprocess.run(argv, capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "invalid choice" in bad.stderr
     assert "Traceback" not in bad.stderr
+
+
+def test_a_second_gauge_plane_is_read_from_the_csv_and_its_bows_fitted(tmp_path, capsys):
+    gauges = [(leg, d) for leg in "xyz" for d in "xyz" if d != leg]
+    keys = [(s + p, leg, d) for leg, d in gauges for s in "+-" for p in ("", "@0.75")]
+    truth = np.r_[0.6, -0.4, 0.9, 0, 0, 0, 0.2, 0.1, -0.15, 0, 0, 0]
+    values = orthocal.deviations(keys, orthocal.Geometry(), truth,
+                                 bow=dict.fromkeys(gauges, 0.008))
+    path = tmp_path / "two_planes.csv"
+    path.write_text("posture,leg,direction,deviation_mm\n" + "".join(
+        f"{k[0]},{k[1]},{k[2]},{v:.7f}\n" for k, v in zip(keys, values, strict=True)))
+    code, out, _ = run_cli(capsys, "identify", str(path), "--model", "rho+tilt+form",
+                           "--json")
+    assert code == 0
+    params = json.loads(out)["parameters"]
+    assert params["tilt_yx"] == pytest.approx(0.2, abs=1e-3)
+    assert all(params[f"bow_{leg}{d}"] == pytest.approx(0.008, abs=1e-5) for leg, d in gauges)
+    code, out, _ = run_cli(capsys, "identify", str(path), "--model", "rho+tilt+form")
+    assert code == 0 and "Π_x^+ y @0.75" in out

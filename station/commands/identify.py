@@ -136,8 +136,9 @@ def format_table(result: Identification, geometry: Geometry) -> str:
         f"  {'deviation':<{width}} {'measured':>10} {'model':>10} {'residual':>10}",
     ]
     for key, value, res in zip(result.keys, result.values, result.residuals, strict=True):
-        posture = f"^{key[0]}" if key[0] in ("+", "-") else f"({key[0]})"
-        label = f"Π_{key[1]}{posture} {key[2]}"
+        sign, _, plane = key[0].partition("@")
+        posture = f"^{sign}" if sign in ("+", "-") else f"({sign})"
+        label = f"Π_{key[1]}{posture} {key[2]}" + (f" @{plane}" if plane else "")
         lines.append(f"  {label:<{width}} {value:10.4f} {value - res:10.4f} {res:10.4f}")
     return "\n".join(lines)
 
