@@ -140,3 +140,16 @@ def test_the_form_a_single_plane_cannot_see_is_carried_into_the_tilts():
     cov = form_covariance(propagation(both, G), 0.010)
     assert np.sqrt(np.diag(cov))[[both.names.index(n) for n in ("tilt_yx", "tilt_zx",
                                                                  "tilt_zy")]].max() < 1e-6
+
+
+def test_the_summary_writes_signs_as_the_rest_of_it_does():
+    """The gaps' and bows' lines use the typographic minus, as the statement does."""
+    from station.report import form, gaps
+
+    result = {"accuracy": {"gaps": {"gap_xy": -0.0012, "gap_xz": 0.0004},
+                           "gap_interval_95": {"gap_xy": [-0.004, 0.0016]}},
+              "identified": {"bow_xy": -0.0031}, "std_errors": {"bow_xy": 0.0007}}
+    (gap_line,) = gaps.summary_lines(result)
+    assert "XY −1 ± 3, XZ +0" in gap_line and "-" not in gap_line.split("µm")[0]
+    (bow_line,) = form.summary_lines(result)
+    assert "XY −3.1 ± 0.7 µm" in bow_line

@@ -31,7 +31,7 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     rows = _rows(result)
     if not rows:
         return []
-    text = ", ".join(f"{n[4:].upper()} {1000 * v:+.1f}"
+    text = ", ".join(f"{n[4:].upper()} {1000 * v:+.1f}".replace("-", "−")
                      + ("" if s is None else f" ± {1000 * s:.1f}") for n, v, s in rows)
     return [f"  legs' bows    {text} µm (± 1 σ; leg and gauge direction; read in two gauge "
             "planes, told from the tilts; the legs' form, not the machine's geometry: "

@@ -45,7 +45,7 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     rows = _rows(acc)
     if not rows:
         return []
-    text = ", ".join(f"{n[4:].upper()} {1000 * v:+.0f}"
+    text = ", ".join(f"{n[4:].upper()} {1000 * v:+.0f}".replace("-", "−")
                      + (f" ± {1000 * h:.0f}" if (h := _half(iv, v)) is not None else "")
                      for n, v, iv, _ in rows)
     advice = [str(a) for a in acc.get("gap_advice") or []]
