@@ -42,6 +42,8 @@ def test_the_shipped_schema_is_the_models(kind: str, capsys) -> None:
 def _check_run_dir(run_dir: Path) -> dict[str, Any]:
     result = json.loads((run_dir / "result.json").read_text())
     assert errors("result", result) == []
+    if (run_dir / "model.json").exists():
+        assert errors("model", json.loads((run_dir / "model.json").read_text())) == []
     for n, line in enumerate((run_dir / "journal.jsonl").read_text().splitlines()):
         assert errors("journal", json.loads(line)) == [], n
     return result
@@ -52,6 +54,11 @@ def test_a_run_and_a_refused_write_back_validate(tmp_path: Path, capsys) -> None
     capsys.readouterr()
     (ok,) = (tmp_path / "ok").glob("run-*")
     assert _check_run_dir(ok)["schema_version"] == 1
+    machine = json.loads((ok / "model.json").read_text())
+    assert machine["format"] == "orthocal machine model 1"
+    # a field the record does not declare, or a unit it does not know, is caught
+    assert any("unexpected" in e for e in errors("model", {**machine, "bows": {}}))
+    assert errors("model", {**machine, "units": {**machine["units"], "tilt": "rad"}})
     # a correction beyond max_abs_offset_mm is refused: another status, other records
     cmd_run.run(simulated(tmp_path / "refused", seed=3, true_drho=(0.3, -0.2, 0.1),
                           writeback={"max_abs_offset_mm": 0.05}))

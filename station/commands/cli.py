@@ -288,8 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
     design.add_argument("--debug", action="store_true", help="show tracebacks of failures")
 
     schema = sub.add_parser(
-        "schema", help="print the JSON Schema of result.json or of a journal.jsonl line")
-    schema.add_argument("kind", choices=["result", "journal"])
+        "schema", help="print the JSON Schema of result.json, of a journal.jsonl line or "
+                       "of model.json")
+    schema.add_argument("kind", choices=["result", "journal", "model"])
 
     history = sub.add_parser("history", help="a machine's calibrations, oldest first")
     history.add_argument("--machine", metavar="ID", help="only runs of [machine] id ID")

@@ -41,6 +41,7 @@ from station.engine.writeback import WritebackOutcome, write_back
 from station.errors import RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan
+from station.record.model import MachineModel
 from station.report.io import jsonable_value
 from station.rundir.directory import MODEL_NAME
 from station.rundir.journal import Journal, JournalState
@@ -429,13 +430,15 @@ class Flow:
         first = self.idents[0]
         f_names = list(first.names)
         f_idx = [f_names.index(n) for n in WRITABLE if n in f_names]
-        self.model = accuracy.model_export(
+        # built through its record (station.record.model): what another tool validates
+        # model.json against is what the engine writes
+        self.model = MachineModel.model_validate(accuracy.model_export(
             cfg, drho_start=start,
             drho_start_cov=np.asarray(first.covariance)[np.ix_(f_idx, f_idx)]
             if len(f_idx) == 3 else None,
             drho_now=now, tilts=layout, model=last.model, offsets_before=before,
             offsets_written=self.result.get("offsets_written"),
-            dof=finite(first.std_error_dof))
+            dof=finite(first.std_error_dof))).model_dump(mode="json")
         try:
             write_atomic(self.ctx.run_dir / MODEL_NAME,
                          json.dumps(jsonable_value(self.model), indent=1,
