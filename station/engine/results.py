@@ -74,9 +74,7 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
         # Where each indicator stand was, mm off the leg's middle (L/2), when the
         # stands were modelled (orthocal.stands): the operator learns where each stood.
         "stands": {name: est.to_dict() for name, est in ident.stands.items()} or None,
-        "setups": [{"leg": o.leg, "indicators": o.indicators, "cycles_used": o.cycles_used,
-                    "cycles_max": o.cycles_max, "repeats": o.repeats, "flagged": o.flagged,
-                    "spread_mm": o.spread_mm} for o in m.setups],
+        "setups": [o.model_dump(mode="json") for o in m.setups],
     }
 
 

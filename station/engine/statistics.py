@@ -17,6 +17,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from pydantic import Field
+
+from station.record.result import Setup as SetupRecord
 
 MAD_SCALE = 1.4826  # MAD of a normal sample × this ≈ σ
 
@@ -101,17 +104,13 @@ class StopStat:
     rejected: list[float]
 
 
-@dataclass
-class SetupOutcome:
-    index: int
-    leg: str
-    indicators: dict[str, str]
-    cycles_used: int
-    cycles_max: int
-    repeats: int
-    flagged: bool
-    spread_mm: float
-    cycles: list[int] = field(default_factory=list)
+class SetupOutcome(SetupRecord):
+    """How a setup went: result.json's ``setups[]`` entry (station.record.result.Setup,
+    its fields declared there once) and what the engine keeps beside it, left out of
+    the record: the setup's index and which cycles it used."""
+
+    index: int = Field(exclude=True)
+    cycles: list[int] = Field(default_factory=list, exclude=True)
 
 
 @dataclass

@@ -84,6 +84,10 @@ class Remaining(_Open):
 
 
 class Setup(_Open):
+    """One setup of a measurement: how many cycles it used of how many it could, its
+    repeats, and whether its spread was flagged (built by the engine as
+    station.engine.statistics.SetupOutcome, which adds what the record leaves out)."""
+
     leg: str
     indicators: dict[str, str]
     cycles_used: int
