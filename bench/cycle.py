@@ -66,6 +66,7 @@ from drivers.indicator_protocols import make_protocol
 from drivers.profiles import move_time
 from drivers.sim.motion import DriveMotion
 from drivers.sim.station import VirtualStation
+from station.commands import simulation
 from station.config.toml import toml_text
 from station.rundir.journal import read_journal
 
@@ -220,7 +221,7 @@ def first_cycle_extra_s(records: list[dict[str, Any]]) -> tuple[float, int]:
 def station_config(station: VirtualStation, timing: Timing, cycles: int,
                    target_se: float | None, strokes: list[float] | None = None
                    ) -> dict[str, Any]:
-    config = station.config()
+    config = simulation.station_config(station, {})
     config["controller"].update(speed_mm_s=timing.speed_mm_s, accel_mm_s2=timing.accel_mm_s2)
     config["procedure"].update(cycles=cycles, readings=timing.readings,
                                settle_s=timing.settle_s, plunger_guard=timing.guard)

@@ -13,6 +13,7 @@ from truth import assert_truth, drho
 
 from drivers.sim.station import VirtualStation
 from station.commands.cli import main
+from station.commands.simulation import station_config
 from station.config.toml import toml_text
 
 
@@ -63,7 +64,7 @@ def test_bad_config_exit_2_names_the_field(tmp_path: Path, capsys) -> None:
 @pytest.fixture
 def station_toml(tmp_path: Path):
     with VirtualStation(seed=2, mount_all=True, indicator_count=6) as station:
-        config = station.config()
+        config = station_config(station, {})
         path = tmp_path / "station.toml"
 
         def write(**indicator_changes) -> Path:

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from drivers.sim.station import VirtualStation
+from station.commands.simulation import station_config
 from station.config.toml import toml_text
 
 # The console's live bar and its prompts in time: at real time (conftest).
@@ -84,9 +85,10 @@ def test_prompts_never_share_a_line_with_the_live_bar(tmp_path: Path) -> None:
     procedure = {"cycles": 1, "readings": 2, "settle_s": 0.05, "verify": True,
                  "max_extra_passes": 0}  # one verification: six prompts
     with VirtualStation(seed=7, true_drho=(0.2, -0.1, 0.3), mount_all=True,
-                        indicator_count=6, procedure=procedure, speed_mm_s=400.0) as station:
+                        indicator_count=6, speed_mm_s=400.0) as station:
         config = tmp_path / "station.toml"
-        config.write_text(toml_text(station.config(), "pty test"))
+        config.write_text(toml_text(station_config(station, {"procedure": procedure}),
+                                    "pty test"))
         code, raw = _drive([sys.executable, "-m", "station", "run", "--config", str(config),
                             "--out", str(tmp_path / "runs")])
     text = raw.decode("utf-8", "replace")

@@ -12,6 +12,7 @@ import orthocal
 from orthocal import design
 from station.commands.cli import main
 from station.commands.design import design_summary, plan_keys, run_time
+from station.commands.simulation import station_config as sim_station_config
 from station.config import parse_config
 from station.plan.checker import check_plan
 from station.plan.steps import build_plan
@@ -213,7 +214,7 @@ def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
 
     with VirtualStation(seed=2, mount_all=True, indicator_count=6) as station:
         path = tmp_path / "station.toml"
-        path.write_text(toml_text(station.config(), "test"))
+        path.write_text(toml_text(sim_station_config(station, {}), "test"))
         code, out, err = run_cli(capsys, "run", "--config", str(path), "--plan", "--out",
                                  str(tmp_path))
         assert code == 0, err

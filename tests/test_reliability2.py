@@ -23,6 +23,7 @@ from builders import FAST, Rig, on_setup
 from close import assert_same
 
 from drivers.sim.station import VirtualStation
+from station.commands.simulation import station_config
 from station.config import parse_config
 from station.config.toml import dump_toml
 from station.rundir.journal import Journal, read_journal
@@ -255,9 +256,8 @@ sys.stdin.readline()
 
 def test_a_second_station_on_the_same_machine_is_refused_at_once(
         tmp_path: Path, orthocal) -> None:
-    with VirtualStation(true_drho=(0.3, 0.2, -0.1), noise_mm=0.0,
-                        procedure=FAST) as station:
-        config = parse_config(station.config(), "test")
+    with VirtualStation(true_drho=(0.3, 0.2, -0.1), noise_mm=0.0) as station:
+        config = parse_config(station_config(station, {"procedure": FAST}), "test")
         cfg = tmp_path / "station.toml"
         cfg.write_text(dump_toml(config))
         # An interrupted run of this station (its header only) to resume or roll back.

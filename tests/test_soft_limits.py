@@ -15,6 +15,7 @@ from drivers.axes import ModbusAxisController
 from drivers.sim.controller import SimController
 from drivers.sim.station import VirtualStation
 from station.commands.cli import main
+from station.commands.simulation import station_config
 from station.config.toml import toml_text
 
 SHORT = {"cycles": 1, "readings": 2, "settle_s": 0.0, "verify": False}
@@ -46,9 +47,9 @@ def test_all_zero_registers_read_as_nonsense() -> None:
 def _station(tmp_path: Path, soft_limit_registers: Any, controller: dict[str, Any]
              ) -> tuple[VirtualStation, Path]:
     station = VirtualStation(seed=5, true_drho=(0.3, -0.2, 0.1), mount_all=True,
-                             indicator_count=6, procedure=SHORT,
+                             indicator_count=6,
                              controller_options={"soft_limit_registers": soft_limit_registers})
-    config = station.config()
+    config = station_config(station, {"procedure": SHORT})
     config["controller"].update(controller)
     path = tmp_path / "station.toml"
     path.write_text(toml_text(config, "test"))

@@ -105,10 +105,6 @@ SIX_SETUPS: list[dict[str, Any]] = [
     {"leg": "y", "indicators": {"C": "x", "D": "-z"}},
     {"leg": "z", "indicators": {"E": "x", "F": "y"}},
 ]
-DEFAULT_PROCEDURE: dict[str, Any] = {
-    "cycles": 3, "readings": 5, "settle_s": 0.02, "repeatability_mm": 0.02,
-    "max_repeats": 1, "model": "auto", "method": "nonlinear", "verify": True,
-}
 
 
 MOUNTS_NAME = "sim_gauges.json"
@@ -215,8 +211,6 @@ class VirtualStation:
         controller_faults: Faults | None = None,
         indicator_faults: dict[str, IndicatorFaults] | None = None,
         nvram_path: str | Path | None = None,
-        procedure: dict[str, Any] | None = None,
-        writeback: dict[str, Any] | None = None,
         mount_all: bool = False,
         mount_error_mm: float = 0.0,
         mount_errors: dict[str, float] | None = None,
@@ -252,8 +246,6 @@ class VirtualStation:
         self._stand_error = 0.0  # of the mounting in progress, for source()
         #: Every mounting: (indicator, leg, direction, mount error in mm), in order.
         self.mount_log: list[tuple[str, str, str, float]] = []
-        self.procedure = {**DEFAULT_PROCEDURE, **(procedure or {})}
-        self.writeback = dict(writeback or {})
         if drive_accel_mm_s2 is not None and not (
                 math.isfinite(drive_accel_mm_s2) and drive_accel_mm_s2 > 0):
             raise ValueError(f"drive_accel_mm_s2 must be > 0, got {drive_accel_mm_s2}")
@@ -446,7 +438,10 @@ class VirtualStation:
                 "indicators": {n: s.port for n, s in self.indicators.items()}}
 
     def config(self) -> dict[str, Any]:
-        """A station config (station.toml's shape) pointing at this station."""
+        """What this station's hardware is, in station.toml's shape: the machine's
+        geometry, the controller's link and limits, the gauges' ports, protocol and
+        strokes, and where they are mounted (its setups). The procedure and the
+        write-back are the station's to choose (station.commands.simulation)."""
         g = self.geometry
         ctl = self.controller
         # A map without soft-limit registers: the config tells the station the limits
@@ -469,8 +464,6 @@ class VirtualStation:
                             "stroke_mm": self.strokes[n][0], "preload_mm": self.strokes[n][1]}
                            for n, s in self.indicators.items()],
             "setups": [dict(s) for s in self.setups],
-            "procedure": dict(self.procedure),
-            "writeback": {"max_abs_offset_mm": 3.0, **self.writeback},
         }
 
     @property

@@ -86,7 +86,8 @@ def run(options: RunOptions) -> int:
             stack.callback(station.close)
             if options.sim.station_hook is not None:
                 options.sim.station_hook(station)
-            config = parse_config(station.config(), "virtual station config")
+            config = parse_config(simulation.station_config(station, sim),
+                                  "virtual station config")
         else:
             if options.config is None:
                 raise BadInput("run: give --config FILE or --simulate")

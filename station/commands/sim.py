@@ -39,6 +39,7 @@ from station.commands.simulation import (
     map_profile,
     separate_drives,
     served_map,
+    station_config,
 )
 from station.config import parse_config
 from station.config.toml import dump_toml
@@ -101,7 +102,7 @@ def main(args: argparse.Namespace) -> int:
                       f"Use: orthocal run --config {out}")
             # Validated like any operator's config: what we hand out must load, and
             # its motion be one run accepts (checked by run's own rule).
-            config = parse_config(station.config(), "orthocal sim")
+            config = parse_config(station_config(station, {}), "orthocal sim")
             motion_model(config)
             out.write_text(dump_toml(config, header))
             link = (f"Modbus TCP on 127.0.0.1:{station.controller.port}"

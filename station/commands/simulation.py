@@ -105,7 +105,6 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
         true_gap=params.get("true_gap") or (0.0, 0.0, 0.0),
         noise_mm=params["noise_mm"], seed=params["seed"],
         indicator_count=params["indicators"], nvram_path=nvram,
-        procedure=params.get("procedure"), writeback=params.get("writeback"),
         speed_mm_s=speed, accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
         # Journals from before stand misplacement existed ran with perfect stands.
         mount_error_mm=params.get("mount_error_mm", 0.0),
@@ -315,6 +314,28 @@ def rebind(config: StationConfig, ports: dict[str, Any]) -> StationConfig:
     for ind in data["indicators"]:
         ind["port"] = ports["indicators"][ind["name"]]
     return parse_config(data, "virtual station config")
+
+
+#: The procedure a simulated run uses unless told otherwise: the config's defaults,
+#: with a short settle (the virtual machine has no vibration to wait out).
+SIM_PROCEDURE: dict[str, Any] = {
+    "cycles": 3, "readings": 5, "settle_s": 0.02, "repeatability_mm": 0.02,
+    "max_repeats": 1, "model": "auto", "method": "nonlinear", "verify": True,
+}
+
+
+def station_config(station: Any, params: dict[str, Any]) -> dict[str, Any]:
+    """The config a simulated run uses (station.toml's shape): the virtual station's
+    hardware as it describes itself, the procedure (SIM_PROCEDURE, then the
+    simulation's ``procedure``) and the write-back (``max_abs_offset_mm`` 3 mm, then
+    the simulation's ``writeback``). What a test hook put in the station's own
+    description wins: it stands for what a user writes in the file."""
+    hardware = station.config()
+    return {**hardware,
+            "procedure": {**SIM_PROCEDURE, **(params.get("procedure") or {}),
+                          **hardware.get("procedure", {})},
+            "writeback": {"max_abs_offset_mm": 3.0, **(params.get("writeback") or {}),
+                          **hardware.get("writeback", {})}}
 
 
 def restart_station(
