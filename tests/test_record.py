@@ -78,3 +78,22 @@ def test_the_golden_run_validates_and_drift_does_not() -> None:
     # a journal line of an unknown type, or a reading without values
     assert errors("journal", {"type": "mystery", "t": 0.0})
     assert errors("journal", {"type": "reading", "t": 0.0, "stop": "m:0:0:0", "indicator": "A"})
+
+
+def test_an_old_journals_simulation_is_read_with_what_that_run_had() -> None:
+    """Headers from before a simulated error existed lack it, or hold null: the run
+    had none of it, said once (station.record.simulation)."""
+    from station.record.simulation import SimulationParams
+
+    old = {"seed": 4, "true_drho": [0.1, 0.2, 0.3], "true_dl": [0, 0, 0], "noise_mm": 0.002,
+           "true_tilt": None, "backlash_mm": None, "indicators": 6}
+    sim = SimulationParams.from_header(old)
+    assert sim.true_tilt == sim.true_gap == sim.backlash_mm == sim.leg_bow_mm == (0, 0, 0)
+    assert sim.mount_error_mm == 0.0 and sim.gauge_scales(6) == [0.0] * 6
+    assert sim.true_drho == (0.1, 0.2, 0.3) and sim.indicators == 6
+    # what a run draws now is kept as it is, one scale error per gauge included
+    new = SimulationParams.from_header({**old, "gauge_scale": [0.001, -0.002],
+                                        "mount_error_mm": 5.0})
+    assert new.gauge_scales(2) == [0.001, -0.002] and new.mount_error_mm == 5.0
+    with pytest.raises(ValueError):
+        SimulationParams.from_header({**old, "true_drho": [0.1, 0.2]})

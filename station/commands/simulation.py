@@ -26,6 +26,7 @@ import numpy as np
 from station.commands.options import DriveOptions, SimOptions, StationHook
 from station.config import StationConfig, parse_config
 from station.errors import BadInput
+from station.record.simulation import SimulationParams
 from station.rundir.directory import MAP_NAME, NVRAM_NAME
 
 if TYPE_CHECKING:
@@ -94,26 +95,17 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
 def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
     from drivers.sim.station import SIM_ACCEL_MM_S2, SIM_SPEED_MM_S, VirtualStation
 
+    sim = SimulationParams.from_header(params)  # an old journal's gaps, in one place
     # A faster virtual machine (tests) keeps the default's speed/acceleration ratio,
     # so its moves stay physical: trapezoids, in-position waits, derived deadlines.
-    speed = params.get("speed_mm_s") or SIM_SPEED_MM_S
+    speed = sim.speed_mm_s or SIM_SPEED_MM_S
     return VirtualStation(
-        true_drho=params["true_drho"], true_dl=params["true_dl"],
-        # journals of runs before the tilts existed have none: an orthogonal machine
-        true_tilt=params.get("true_tilt") or (0.0, 0.0, 0.0),
-        # ... and those of runs before the gaps, none: axes that meet
-        true_gap=params.get("true_gap") or (0.0, 0.0, 0.0),
-        noise_mm=params["noise_mm"], seed=params["seed"],
-        indicator_count=params["indicators"], nvram_path=nvram,
+        true_drho=sim.true_drho, true_dl=sim.true_dl, true_tilt=sim.true_tilt,
+        true_gap=sim.true_gap, noise_mm=sim.noise_mm, seed=sim.seed,
+        indicator_count=sim.indicators, nvram_path=nvram,
         speed_mm_s=speed, accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
-        # Journals from before stand misplacement existed ran with perfect stands.
-        mount_error_mm=params.get("mount_error_mm", 0.0),
-        motion=drive_motion(params),
-        # ... and those from before lost motion, with none.
-        backlash=params.get("backlash_mm") or (0.0, 0.0, 0.0),
-        # ... and those from before form errors, with straight legs and true gauges.
-        leg_bow=params.get("leg_bow_mm") or (0.0, 0.0, 0.0),
-        gauge_scale=params.get("gauge_scale") or 0.0,
+        mount_error_mm=sim.mount_error_mm, motion=drive_motion(params),
+        backlash=sim.backlash_mm, leg_bow=sim.leg_bow_mm, gauge_scale=sim.gauge_scale,
         **served_map(params.get("profile")),
     )
 

@@ -17,6 +17,7 @@ from station.config import StationConfig
 from station.engine.statistics import Measurement, split_key
 from station.engine.writeback import WritebackOutcome
 from station.record.result import SCHEMA_VERSION
+from station.record.simulation import SimulationParams
 
 
 def ident_json(ident: Any) -> dict[str, Any]:
@@ -187,6 +188,24 @@ def writeback_fields(result: dict[str, Any], outcome: WritebackOutcome, controll
     result["offsets_written"] = outcome.written
 
 
+def _simulation(sim: SimulationParams, gauges: list[str]) -> dict[str, Any]:
+    """result.json's ``simulation``: the hidden machine, named for the report."""
+    return {
+        "seed": sim.seed, "true_drho": dict(zip(AXES, sim.true_drho, strict=True)),
+        "true_dl": dict(zip(AXES, sim.true_dl, strict=True)),
+        "true_tilt": dict(zip(("tilt_yx", "tilt_zx", "tilt_zy"), sim.true_tilt, strict=True)),
+        # how far the axes pass each other (mm)
+        "true_gap": dict(zip(("gap_xy", "gap_xz", "gap_yz"), sim.true_gap, strict=True)),
+        "noise_mm": sim.noise_mm,
+        # stands placed by eye: each mounting off the leg's middle by up to this
+        "mount_error_mm": sim.mount_error_mm,
+        # each joint's lost motion (ISO 230-2's reversal value), mm
+        "backlash_mm": dict(zip(AXES, sim.backlash_mm, strict=True)),
+        # each leg's bow (sagitta at its middle, mm) and each gauge's scale error
+        "leg_bow_mm": dict(zip(AXES, sim.leg_bow_mm, strict=True)),
+        "gauge_scale": dict(zip(gauges, sim.gauge_scales(len(gauges)), strict=True))}
+
+
 def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None,
                 started_iso: str) -> dict[str, Any]:
     m = config.machine
@@ -196,26 +215,8 @@ def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None
         "run_dir": str(run_dir), "status": "failed", "message": None,
         "started": started_iso, "finished": None, "duration_s": None,
         "simulated": sim is not None,
-        "simulation": None if sim is None else {
-            "seed": sim["seed"], "true_drho": dict(zip(AXES, sim["true_drho"], strict=True)),
-            "true_dl": dict(zip(AXES, sim["true_dl"], strict=True)),
-            "true_tilt": dict(zip(("tilt_yx", "tilt_zx", "tilt_zy"),
-                                  sim.get("true_tilt") or (0.0, 0.0, 0.0), strict=True)),
-            # How far the axes pass each other (mm); none in journals from before.
-            "true_gap": dict(zip(("gap_xy", "gap_xz", "gap_yz"),
-                                 sim.get("true_gap") or (0.0, 0.0, 0.0), strict=True)),
-            "noise_mm": sim["noise_mm"],
-            # Stands placed by eye: each mounting off the leg's middle by up to this.
-            "mount_error_mm": sim.get("mount_error_mm", 0.0),
-            # Each joint's lost motion (ISO 230-2's reversal value), mm.
-            "backlash_mm": dict(zip(AXES, sim.get("backlash_mm") or (0.0, 0.0, 0.0),
-                                    strict=True)),
-            # Each leg's bow (sagitta at its middle, mm) and each gauge's scale error.
-            "leg_bow_mm": dict(zip(AXES, sim.get("leg_bow_mm") or (0.0, 0.0, 0.0),
-                                   strict=True)),
-            "gauge_scale": dict(zip([i.name for i in config.indicators],
-                                    sim.get("gauge_scale") or [0.0] * len(config.indicators),
-                                    strict=True))},
+        "simulation": None if sim is None else _simulation(
+            SimulationParams.from_header(sim), [i.name for i in config.indicators]),
         "machine": {"id": m.id, "leg_length": m.leg_length, "rho_min": m.rho_min,
                     "rho_max": m.rho_max},
         "model": config.procedure.model, "method": config.procedure.method,

@@ -1,0 +1,53 @@
+"""A simulated run's parameters (the journal header's ``simulation``), typed: what
+``run --simulate`` drew or was given, kept so that ``resume`` restarts the same
+virtual station. Journals from before a parameter existed lack it; what such a run
+had is said once, here, in :meth:`SimulationParams.from_header`'s defaults."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+Triple = tuple[float, float, float]
+_ZERO: Triple = (0.0, 0.0, 0.0)
+
+
+class SimulationParams(BaseModel):
+    """The hidden machine, its gauges and its drive. A null or missing field of an
+    old journal is what that run had: no tilts, axes that meet, perfect stands, no
+    lost motion, straight legs, true gauges, the plain coordinated drive."""
+
+    model_config = ConfigDict(extra="allow", frozen=True)
+
+    seed: int
+    true_drho: Triple
+    true_dl: Triple
+    true_tilt: Triple = Field(_ZERO, description="mrad: tilt_yx, tilt_zx, tilt_zy")
+    true_gap: Triple = Field(_ZERO, description="mm: gap_xy, gap_xz, gap_yz")
+    noise_mm: float
+    mount_error_mm: float = Field(0.0, description="stands placed by eye, up to this off")
+    backlash_mm: Triple = Field(_ZERO, description="each joint's reversal value, mm")
+    leg_bow_mm: Triple = Field(_ZERO, description="each leg's sagitta at its middle, mm")
+    gauge_scale: list[float] | float = Field(0.0, description="each gauge's scale error")
+    indicators: int = 2
+    profile: str | None = None
+    speed_mm_s: float | None = None
+
+    @field_validator("true_tilt", "true_gap", "backlash_mm", "leg_bow_mm", "gauge_scale",
+                     "mount_error_mm", mode="before")
+    @classmethod
+    def _old_journal(cls, value: Any, info: Any) -> Any:
+        # a header written before the field existed holds null (or nothing)
+        return cls.model_fields[info.field_name].default if value is None else value
+
+    @classmethod
+    def from_header(cls, params: Mapping[str, Any]) -> SimulationParams:
+        """The parameters of a journal header's ``simulation`` (or sim_params')."""
+        return cls.model_validate(dict(params))
+
+    def gauge_scales(self, count: int) -> list[float]:
+        """One scale error per gauge (an old journal's none: true gauges)."""
+        scale = self.gauge_scale
+        return [float(scale)] * count if isinstance(scale, int | float) else list(scale)
