@@ -119,6 +119,9 @@ class Sequencer:
         # fault), so that the operator is never told the axes stopped when unknown.
         self.stop_error: str | None = None
         self._setup: SetupPlan | None = None
+        # What the last Checkpoint step journaled: the cycle's deviations, the
+        # readings' scatter at its stops and its reversal (see _finish_cycle).
+        self._finished: tuple[dict[str, float], list[float], dict[str, float]] = ({}, [], {})
         self._live_setup = False
         self._stops: dict[str, dict[str, StopStat]] = {}
         self._all_names = [ind.name for ind in config.indicators]
@@ -278,11 +281,15 @@ class Sequencer:
         retakes = 0
         while True:
             self.mover.touched = False
-            for step in sp.cycle_steps(phase, cycle, self.plan.settle_s, self.plan.readings):
+            *stops, checkpoint = sp.cycle_steps(phase, cycle, self.plan.settle_s,
+                                                self.plan.readings)
+            for step in stops:
                 self._execute(phase, step)
             moved = self._zero_moved(phase, sp, cycle) if self.mover.touched else None
             if moved is None:
-                return self._finish_cycle(phase, sp, cycle)
+                # the cycle's readings stand: its checkpoint journals the cycle
+                self._execute(phase, checkpoint)
+                return self._finished
             retakes += 1
             if retakes > MAX_RETAKES:
                 raise RunFailed(
@@ -393,7 +400,10 @@ class Sequencer:
         elif isinstance(step, Read):
             self._read(step)
         elif isinstance(step, Checkpoint):
-            pass  # the cycle record written by _finish_cycle is the checkpoint
+            # The cycle's record (its deviations, fsynced) is what a resumed run
+            # replays the cycle from: once it is on disk, the cycle is done.
+            assert self._setup is not None and self._setup.index == step.setup
+            self._finished = self._finish_cycle(phase, self._setup, step.cycle)
 
     def _move(self, step: Move) -> None:
         self.mover.move(step)
