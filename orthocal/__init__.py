@@ -50,7 +50,7 @@ from orthocal.kinematics import axis_directions, axis_origins, forward, inverse
 from orthocal.measurement import bow_at, contact_fraction, deviation, deviations, leg_reading
 from orthocal.misfit import Allowance
 from orthocal.noise import coverage_factor
-from orthocal.postures import posture, posture_point
+from orthocal.postures import plane_at, posture, posture_point
 from orthocal.selection import ModelSelection, select_model
 from orthocal.sensitivities import key_sensitivity, sensitivity
 from orthocal.stands import StandEstimate, Stands
@@ -109,6 +109,7 @@ __all__ = [
     "leg_reading",
     "linear_deviations",
     "optimal_offsets",
+    "plane_at",
     "posture",
     "posture_point",
     "propagation",

@@ -30,7 +30,7 @@ import numpy as np
 from orthocal.calibration import jacobian
 from orthocal.geometry import FIT_NAMES, MODELS, PARAM_NAMES, Geometry
 from orthocal.measurement import Key
-from orthocal.postures import posture_name
+from orthocal.postures import plane_at, posture_name
 from orthocal.stands import Stands, incidence, stand_jacobian
 
 # Relative singular value below which a combination counts as invisible (as in
@@ -325,7 +325,7 @@ def form_separation(keys: Sequence[Key], geometry: Geometry, model: str = "rho+t
     for mu in (None, *second):
         rows = list(keys) + ([] if mu is None else list(keys))
         offsets = [0.0] * len(keys) + ([] if mu is None else
-                                       [geometry.leg_length * (0.5 - mu)] * len(keys))
+                                       [plane_at(mu, geometry)] * len(keys))
         J = exact_jacobian(rows, geometry, params, model, offsets)
         g = form_vector(rows, geometry, params, offsets)
         bows = np.column_stack([np.where([k[1] == leg for k in rows], g, 0.0) for leg in "xyz"])

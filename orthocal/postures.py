@@ -48,10 +48,16 @@ def with_plane(name: str, fraction: float) -> str:
     return name if fraction == MIDDLE else check_posture(f"{name}@{fraction:g}")
 
 
+def plane_at(fraction: float, geometry: Geometry) -> float:
+    """How far (mm) a gauges' plane at ``fraction`` of the leg (from the carriage's
+    joint at Π0) lies off L/2, the middle: L·(1/2 − f); 0 at the middle."""
+    return geometry.leg_length * (MIDDLE - fraction)
+
+
 def plane_offset(name: str, geometry: Geometry) -> float:
-    """How far (mm) the gauges' plane of posture ``name`` lies off L/2, the middle:
-    L·(1/2 − f) for its fraction f (:func:`split_plane`); 0 without a suffix."""
-    return geometry.leg_length * (MIDDLE - split_plane(name)[1])
+    """How far (mm) the gauges' plane of posture ``name`` lies off L/2:
+    :func:`plane_at` its fraction (:func:`split_plane`); 0 without a suffix."""
+    return plane_at(split_plane(name)[1], geometry)
 
 
 def check_posture(name: str) -> str:

@@ -154,13 +154,13 @@ def on_setup(station: VirtualStation, number: int, action: Callable[[], None]) -
     mount = station.mount
     seen: dict[str, Any] = {"leg": None, "setups": 0}
 
-    def wrapped(name: str, leg: str, direction: str) -> None:
+    def wrapped(name: str, leg: str, direction: str, at: float = 0.5) -> None:
         if leg != seen["leg"]:
             seen["leg"] = leg
             seen["setups"] += 1
             if seen["setups"] == number:
                 action()
-        mount(name, leg, direction)
+        mount(name, leg, direction, at=at)
 
     station.mount = wrapped  # type: ignore[method-assign]
 

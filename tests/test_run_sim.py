@@ -153,11 +153,11 @@ def test_ctrl_c_stops_the_axes_and_says_how_to_resume(tmp_path: Path) -> None:
         mount = station.mount
         calls = {"n": 0}
 
-        def operator_hits_ctrl_c(name: str, leg: str, direction: str) -> None:
+        def operator_hits_ctrl_c(name: str, leg: str, direction: str, at: float = 0.5) -> None:
             calls["n"] += 1
             if calls["n"] > 2:  # the operator presses Ctrl-C at the second setup
                 raise KeyboardInterrupt
-            mount(name, leg, direction)
+            mount(name, leg, direction, at=at)
 
         station.mount = operator_hits_ctrl_c
 

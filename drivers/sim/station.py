@@ -84,7 +84,7 @@ from drivers.sim.indicators import SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.motion import DriveMotion
 from drivers.sim.strokes import OutOfStroke, StrokeWatch
-from orthocal import Geometry
+from orthocal import Geometry, plane_at
 
 STANDARD_STROKE_MM = 12.5  # station.config's default stroke_mm (preload: half)
 
@@ -350,7 +350,7 @@ class VirtualStation:
         self._watch.flush()  # what happened so far, with the mounting it happened under
         self._watch.mounted(name)
         # where the stand stands: its plane off L/2, the placement error included
-        plane = self.geometry.leg_length * (0.5 - at) + error
+        plane = plane_at(at, self.geometry) + error
         gauge.mount(self._source_at(name, leg, direction, plane))
         self._mounts[name] = {"leg": leg, "direction": direction, "zero_mm": gauge.zero_mm,
                               "stand_error_mm": error, "plane_offset_mm": plane}

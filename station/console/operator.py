@@ -119,13 +119,12 @@ class ConsoleOperator:
 
 
 class VirtualOperator:
-    """Mounts simulated indicators through ``mount_fn(name, leg, direction)`` (``at=``
-    too, off the middle) and
+    """Mounts simulated indicators through ``mount_fn(name, leg, direction, at=…)`` and
     ``unmount_fn(name)``; says yes to every question. ``place_fn("phase:setup")``,
     if given, is told which placement the next mountings are, so that a simulated
     stand placed again for the same setup after a resume stands where it stood."""
 
-    def __init__(self, mount_fn: Callable[..., None],
+    def __init__(self, mount_fn: Callable[..., None],  # (name, leg, direction, *, at)
                  unmount_fn: Callable[[str], None],
                  say: Callable[[str], None] | None = None,
                  place_fn: Callable[[str], None] | None = None) -> None:
@@ -142,10 +141,7 @@ class VirtualOperator:
         if self._place is not None:
             self._place(f"{phase}:{setup}")
         for name, direction in indicators.items():
-            if at == MIDDLE:
-                self._mount(name, leg, direction)
-            else:
-                self._mount(name, leg, direction, at=at)
+            self._mount(name, leg, direction, at=at)
         if self._say is not None:
             self._say("[virtual operator] " + mount_instruction(
                 phase, setup, leg, indicators, all_names, at))

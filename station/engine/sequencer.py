@@ -31,7 +31,7 @@ import numpy as np
 
 from drivers.base import AxisController
 from orthocal.lost_motion import reversal_gain
-from orthocal.postures import MIDDLE
+from orthocal.postures import MIDDLE, plane_at
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine.guard import PlungerGuard
@@ -382,7 +382,7 @@ class Sequencer:
     def _gain(self, leg: str, axis: str, at: float) -> float:
         if (leg, axis, at) not in self._gains:
             geometry = self.config.machine.geometry()
-            plane = geometry.leg_length * (1.0 - at)  # x_leg of the gauges' plane
+            plane = geometry.mount_plane + plane_at(at, geometry)  # x_leg of the gauges
             self._gains[(leg, axis, at)] = reversal_gain(leg, axis, geometry, mount=plane)
         return self._gains[(leg, axis, at)]
 

@@ -13,7 +13,7 @@ import numpy as np
 
 import orthocal
 from orthocal.measurement import reading_at
-from orthocal.postures import MIDDLE
+from orthocal.postures import plane_at
 from station.config import StationConfig
 from station.errors import BadInput
 from station.plan import motion
@@ -427,7 +427,7 @@ class MotionChecker:
     def plane(self, sp: SetupPlan) -> float:
         """x_leg of the plane ``sp``'s gauges read in: the middle of the leg at Π0
         (L/2), or the fraction ``sp.at`` of it from the carriage's joint."""
-        return self.geometry.mount_plane + self.geometry.leg_length * (MIDDLE - sp.at)
+        return self.geometry.mount_plane + plane_at(sp.at, self.geometry)
 
 
 class PathRefused(BadInput):
