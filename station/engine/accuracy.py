@@ -110,30 +110,29 @@ class Layout:
 def round_layout(phase: str, ident: Any) -> RoundLayout | None:
     """The tilts (and gaps, where it has them) of an identification; None when it
     has no tilts."""
-    names = list(ident.names)
-    if not all(n in names for n in TILT_NAMES):
+    if not all(n in ident.names for n in TILT_NAMES):
         return None
-    held = tuple(n for n in LAYOUT_NAMES if n in names)
+    return _round(phase, ident, tuple(n for n in LAYOUT_NAMES if n in ident.names))
+
+
+def round_form(phase: str, ident: Any) -> RoundLayout | None:
+    """The legs' bows (orthocal.BOW_NAMES, mm) of an identification that fitted them
+    (a second gauge plane), as a round to pool like the layout; None without them."""
+    if not all(n in ident.names for n in BOW_NAMES):
+        return None
+    return _round(phase, ident, BOW_NAMES)
+
+
+def _round(phase: str, ident: Any, held: tuple[str, ...]) -> RoundLayout | None:
+    """The parameters ``held`` of an identification with their covariance block; None
+    where that block is not finite."""
+    names = list(ident.names)
     idx = [names.index(n) for n in held]
     cov = np.asarray(ident.covariance, dtype=float)[np.ix_(idx, idx)]
     if not np.all(np.isfinite(cov)):
         return None
     return RoundLayout(phase, held, np.array([ident.parameters[n] for n in held]), cov,
                        finite(ident.std_error_dof))
-
-
-def round_form(phase: str, ident: Any) -> RoundLayout | None:
-    """The legs' bows (orthocal.BOW_NAMES, mm) of an identification that fitted them
-    (a second gauge plane), as a round to pool like the layout; None without them."""
-    names = list(ident.names)
-    if not all(n in names for n in BOW_NAMES):
-        return None
-    idx = [names.index(n) for n in BOW_NAMES]
-    cov = np.asarray(ident.covariance, dtype=float)[np.ix_(idx, idx)]
-    if not np.all(np.isfinite(cov)):
-        return None
-    return RoundLayout(phase, BOW_NAMES, np.array([ident.parameters[n] for n in BOW_NAMES]),
-                       cov, finite(ident.std_error_dof))
 
 
 def pool_layout(rounds: Sequence[RoundLayout]) -> Layout | None:

@@ -78,9 +78,10 @@ class Flow:
         # Each round's fit of the legs' bows (a second gauge plane): no offset
         # changes them either, so later rounds join them as they join the layout.
         self.form_rounds: list[accuracy.RoundLayout] = []
-        # What the legs' form may leave in each round's layout (one gauge plane per
-        # leg): the tool's intervals carry it (orthocal.budget.form_covariance).
-        self.layout_form: dict[str, tuple[tuple[str, ...], Any]] = {}
+        # The fit each round's layout came from: what the legs' form may leave in the
+        # layout (one gauge plane per leg) is read off it once, for the tool's
+        # intervals (orthocal.budget.form_covariance).
+        self.layout_fits: dict[str, Any] = {}
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
         # the joint errors that leave the least tool error (engine.accuracy)
         self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
@@ -318,8 +319,7 @@ class Flow:
             break
         if layout is not None:
             self.layout_rounds.append(layout)
-            self.layout_form[phase] = (layout.names, budget.form_of_layout(
-                self.ctx.config, source, layout.names))
+            self.layout_fits[phase] = source
 
     def _carried(self, phase: str, ident: Any) -> Any:
         """A verification's identification joined with the axes' layout (tilts, gaps)
@@ -387,15 +387,13 @@ class Flow:
                 f"objective {other} would leave {figures[other]:.1f} µm")
 
     def _layout_form(self, layout: Any) -> tuple[np.ndarray, str] | None:
-        """The legs' form's part of the pooled ``layout``: the latest round of its
-        names' (every round sees the same legs, so it is not averaged)."""
-        if layout is None:
+        """The legs' form's part of the pooled ``layout``, from the latest of its rounds
+        (every round sees the same legs, so it is not averaged)."""
+        if layout is None or not layout.rounds:
             return None
-        for phase in reversed(layout.rounds):
-            names, form = self.layout_form.get(phase, ((), None))
-            if form is not None and names == layout.names:
-                return form
-        return None
+        fit = self.layout_fits.get(layout.rounds[-1])
+        return None if fit is None else budget.form_of_layout(self.ctx.config, fit,
+                                                              layout.names)
 
     def _accuracy(self) -> None:
         """The run's statement at the tool (result ``accuracy``) and model.json."""
