@@ -45,13 +45,12 @@ import numpy as np
 
 from orthocal.geometry import (
     AXIS_INDEX,
-    BOW_NAMES,
     FIT_NAMES,
     MODELS,
     MRAD,
     TILT_PAIRS,
     Geometry,
-    full_params,
+    fit_params,
 )
 from orthocal.measurement import Key, check_key
 from orthocal.postures import split_plane, tilt
@@ -117,14 +116,17 @@ def jacobian(keys: Sequence[Key], geometry: Geometry, model: str = "full") -> np
         col_ji, sign_ji = GAP_OF_ORIGIN[(direction, leg)]
         full[row, col_ij] -= a * sign_ij / 2.0
         full[row, col_ji] -= b * sign_ji / 2.0
-        full[row, FIT_NAMES.index(BOW_NAMES[0]) + BOW_NAMES.index(f"bow_{leg}{direction}")] = e
+        full[row, FIT_NAMES.index(f"bow_{leg}{direction}")] = e
     return full[:, list(MODELS[model])]
 
 
 def linear_deviations(keys: Sequence[Key], geometry: Geometry, params) -> np.ndarray:
     """Deviations predicted by (7'') for ``params`` (12-vector in PARAM_NAMES order,
-    a 9-vector without gaps or a 6-vector without tilts either)."""
-    return jacobian(keys, geometry, "full+tilt+gap") @ full_params(params)
+    a 9-vector without gaps or a 6-vector without tilts either, or an 18-vector of
+    FIT_NAMES with the legs' bows). Summed by parts, Δρ and ΔL first, so that models
+    without tilts, gaps or bows keep the numbers of (7) to the bit."""
+    J, v = jacobian(keys, geometry, "full+tilt+gap+form"), fit_params(params)
+    return J[:, :6] @ v[:6] + J[:, 6:12] @ v[6:12] + J[:, 12:] @ v[12:]
 
 
 def statistical_floor(

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from orthocal.calibration import jacobian
+from orthocal.calibration import jacobian, linear_deviations
 from orthocal.geometry import FIT_NAMES, MODELS, PARAM_NAMES, TILT_NAMES, Geometry, fit_params
 from orthocal.inputs import IdentificationError, flatten_deviations
 from orthocal.measurement import Key, deviations
@@ -305,10 +305,7 @@ def identify(
     if method == "nonlinear":
         model_values = deviations(keys, geometry, full)
     else:
-        # the tilt columns apart, so that models without tilt keep (7)'s numbers
-        J_all = jacobian(keys, geometry, "full+tilt+gap+form")
-        model_values = (J_all[:, :6] @ full[:6] + J_all[:, 6:12] @ full[6:12]
-                        + J_all[:, 12:] @ full[12:])
+        model_values = linear_deviations(keys, geometry, full)
     fit = _Fit.of(y, model_values, len(cols))
     scale = sigma if sigma is not None else fit.sigma_hat
     jtj_inv = np.linalg.inv(J.T @ J)

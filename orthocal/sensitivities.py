@@ -6,7 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from orthocal.calibration import jacobian
+from orthocal.calibration import jacobian, linear_deviations
 from orthocal.geometry import FIT_NAMES, Geometry
 from orthocal.identification import Identification, exact_jacobian
 from orthocal.measurement import Key, deviations
@@ -23,8 +23,7 @@ def check_geometry(ident: Identification, geometry: Geometry) -> None:
     if ident.method == "nonlinear":
         again = deviations(keys, geometry, ident.fit_vector, ident.mount_offsets)
     else:
-        J_all, v = jacobian(keys, geometry, "full+tilt+gap+form"), ident.fit_vector
-        again = J_all[:, :6] @ v[:6] + J_all[:, 6:12] @ v[6:12] + J_all[:, 12:] @ v[12:]
+        again = linear_deviations(keys, geometry, ident.fit_vector)
     model_values = np.asarray(ident.values) - np.asarray(ident.residuals)
     if not np.allclose(again, model_values, rtol=0.0, atol=_GEOMETRY_TOL):
         raise ValueError("this geometry does not reproduce the identification's model values: "
