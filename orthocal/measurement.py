@@ -206,8 +206,8 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
         bow = {**{(n[4], n[5]): float(h) for n, h in zip(BOW_NAMES, fitted, strict=True)},
                **{g: h + float(fitted[BOW_NAMES.index(f"bow_{g[0]}{g[1]}")])
                   for g, h in (bow or {}).items()}}
-    planes = [plane_offset(k[0], geometry) for k in keys]
-    if mount_offsets is not None or bow is not None or any(planes):
+    planes = _key_planes(keys, geometry)
+    if mount_offsets is not None or bow is not None or planes.any():
         offsets = np.zeros(len(keys)) if mount_offsets is None else \
             np.asarray(mount_offsets, dtype=float).reshape(-1)
         if offsets.shape != (len(keys),):
@@ -227,8 +227,13 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
 def row_planes(keys: Sequence[Key], geometry: Geometry, mount_offsets=None) -> np.ndarray:
     """The base-fixed plane x_i = M (mm) each row of ``keys`` is read in: L/2, or
     its posture's second plane, plus its stand's ``mount_offsets`` (None: 0)."""
-    m = geometry.mount_plane + np.array([plane_offset(k[0], geometry) for k in keys])
+    m = geometry.mount_plane + _key_planes(keys, geometry)
     return m if mount_offsets is None else m + np.asarray(mount_offsets, dtype=float)
+
+
+def _key_planes(keys: Sequence[Key], geometry: Geometry) -> np.ndarray:
+    """Each key's gauge plane off L/2 (mm): 0, or its posture's second plane."""
+    return np.array([plane_offset(k[0], geometry) for k in keys])
 
 
 def _row_bows(keys: Sequence[Key], bow: Bows) -> np.ndarray:
