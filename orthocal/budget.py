@@ -194,6 +194,21 @@ def _per(value, names: Sequence, what: str) -> dict:
     return {n: _non_negative(value[n], what) for n in names}
 
 
+def _plane_forms(prop: Propagation, straightness
+                 ) -> tuple[dict[str, float], dict[Gauge, np.ndarray]]:
+    """(each leg's straightness s, each gauge plane's deviations per one standard
+    uncertainty of its bow, g_p·u with u = s/√3: :func:`form_vector` on the plane's
+    keys). ``straightness`` as for :func:`straightness_sources`."""
+    legs = list(dict.fromkeys(g[0] for g in prop.gauges))
+    if isinstance(straightness, Sequence):
+        if len(straightness) != len(AXES):
+            raise ValueError(f"leg straightness: one value or [x, y, z], got {straightness!r}")
+        straightness = dict(zip(AXES, straightness, strict=True))
+    s_of = _per(straightness, legs, "leg straightness")
+    g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
+    return s_of, {gg: g * prop.mask(gg) * s_of[gg[0]] / math.sqrt(3.0) for gg in prop.gauges}
+
+
 def straightness_sources(prop: Propagation, straightness) -> list[Source]:
     """Leg straightness (a), one source: each gauge
     plane (leg, direction) of the leg bowed with a sagitta uniform in ±s
@@ -203,22 +218,14 @@ def straightness_sources(prop: Propagation, straightness) -> list[Source]:
     leg's planes see one bow, and the legs of one machine may bow alike). ``straightness``:
     s in mm, one value, [x, y, z] or leg → s; the sagitta of the bow over the
     whole leg (:func:`sagitta_from_straightness` for one over the plunger's slide)."""
-    legs = list(dict.fromkeys(g[0] for g in prop.gauges))
-    if isinstance(straightness, Sequence):
-        if len(straightness) != len(AXES):
-            raise ValueError(f"leg straightness: one value or [x, y, z], got {straightness!r}")
-        straightness = dict(zip(AXES, straightness, strict=True))
-    s_of = _per(straightness, legs, "leg straightness")
-    g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
+    s_of, planes = _plane_forms(prop, straightness)
     # The legs of one machine are made alike and may bow alike: every plane's part
     # adds with the worst sign (GUM 5.2.2 with r = ±1 where the correlation is not
     # known), one source; the expected lack of fit keeps independent planes' ``cov``.
-    u_of = {leg: s_of[leg] / math.sqrt(3.0) for leg in legs}
-    planes = [gg for gg in prop.gauges if gg[0] in u_of]
-    cov = sum(u_of[gg[0]] ** 2 * np.outer(g * prop.mask(gg), g * prop.mask(gg))
-              for gg in planes)
-    worst = sum(np.abs(prop.K @ (g * prop.mask(gg))) * u_of[gg[0]] for gg in planes)
+    cov = sum(np.outer(gu, gu) for gu in planes.values())
+    worst = sum(np.abs(prop.K @ gu) for gu in planes.values())
     value = max(s_of.values())
+    legs = list(s_of)
     src = _source(prop, "leg straightness", "rectangular", value, value / math.sqrt(3.0),
                   cov, **{f"straightness_{leg}_mm": s_of[leg] for leg in legs})
     return [replace(src, contributions={
@@ -236,12 +243,8 @@ def form_covariance(prop: Propagation, straightness) -> np.ndarray:
     ``straightness`` as for :func:`straightness_sources`. Zero where the fit took
     the bows itself (a second gauge plane: the bows are then parameters, not
     errors)."""
-    legs = list(dict.fromkeys(g[0] for g in prop.gauges))
-    if isinstance(straightness, Sequence):
-        straightness = dict(zip(AXES, straightness, strict=True))
-    s_of = _per(straightness, legs, "leg straightness")
-    g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
-    w = [prop.K @ (g * prop.mask(gg)) * s_of[gg[0]] / math.sqrt(3.0) for gg in prop.gauges]
+    _, planes = _plane_forms(prop, straightness)
+    w = [prop.K @ gu for gu in planes.values()]
     v = sum(w, np.zeros(len(prop.names)))
     return np.outer(v, v) + sum((np.outer(x, x) for x in w),
                                 np.zeros((len(prop.names), len(prop.names))))
