@@ -38,7 +38,7 @@ import numpy as np
 
 from orthocal import AXES
 from orthocal.numbers import finite
-from orthocal.postures import stroke
+from orthocal.postures import MIDDLE, split_plane, stroke
 from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
 from station.plan.checker import MotionChecker, check_plan
@@ -131,7 +131,7 @@ def _separation(plan: Plan, config: StationConfig) -> dict[str, Any]:
             "noise_gain_max": {k: v for k, v in kinds.items()
                                if v is not None and q.identifiable},
             **({} if q.identifiable else {"cannot_separate": design.describe(q)})})
-    middles = [k for k in keys if "@" not in k[0]]
+    middles = [k for k in keys if split_plane(k[0])[1] == MIDDLE]
     form = design.form_separation(middles, geometry)
     finite_form = {k: (v if math.isfinite(v) else None) for k, v in form.items()}
     tells = "cannot tell" if form["middle"] == math.inf else "hardly tells"
@@ -221,7 +221,6 @@ def run_time(plan: Plan, config: StationConfig) -> dict[str, Any]:
 
 def _figures(plan: Plan, config: StationConfig, model: str) -> dict[str, Any]:
     from orthocal import design
-    from orthocal.postures import stroke
 
     geometry = config.machine.geometry()
     keys, indicators = plan_keys(plan)
