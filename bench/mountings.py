@@ -11,6 +11,7 @@ with each mounting costed at ``--mount-s`` seconds of the operator's.
     python bench/mountings.py                     # seeds 1-5, 1 µm noise
     python bench/mountings.py --noise 0.002 --runs 10
     python bench/mountings.py --in-mounting 3     # without more cycles per mounting
+    python bench/mountings.py --drive-profile cosine --runs 3   # a held-out controller
 """
 
 from __future__ import annotations
@@ -28,10 +29,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.runs import run_json
 from orthocal import AXES
-from station.commands.options import RunOptions, SimOptions
+from station.commands.options import DriveOptions, RunOptions, SimOptions
 
 
-def one_run(seed: int, noise: float, in_mounting: int | None, out: Path) -> dict[str, Any]:
+def one_run(seed: int, noise: float, in_mounting: int | None, out: Path,
+            drive_profile: str | None = None) -> dict[str, Any]:
     procedure = None if in_mounting is None else {"max_cycles_in_mounting": in_mounting}
 
     def hook(station: Any) -> None:
@@ -40,7 +42,9 @@ def one_run(seed: int, noise: float, in_mounting: int | None, out: Path) -> dict
             station.config = lambda: {**config(), "procedure": {
                 **config().get("procedure", {}), **procedure}}
 
-    options = RunOptions(sim=SimOptions(seed=seed, noise=noise, station_hook=hook),
+    # A drive of its own timing (the station is told nothing of it): a held-out controller.
+    drive = DriveOptions(profile=drive_profile)
+    options = RunOptions(sim=SimOptions(seed=seed, noise=noise, station_hook=hook, drive=drive),
                          out=out, yes=True, json=True)
     code, result = run_json(options)
     result["exit_code"] = code
@@ -68,16 +72,19 @@ def main() -> None:
     parser.add_argument("--noise", type=float, default=0.001, help="gauge noise σ, mm")
     parser.add_argument("--in-mounting", type=int, default=None,
                         help="[procedure] max_cycles_in_mounting (default: the config's)")
+    parser.add_argument("--drive-profile", default=None,
+                        help="the virtual drive's own motion profile (e.g. cosine)")
     parser.add_argument("--mount-s", type=float, default=60.0,
                         help="the operator's time per mounting, s")
     args = parser.parse_args()
     print(f"noise {1000 * args.noise:g} µm, default procedure, stands by eye, "
           f"max_cycles_in_mounting {args.in_mounting or 'default'}, "
-          f"{args.mount_s:g} s per mounting")
+          f"{args.mount_s:g} s per mounting, drive profile {args.drive_profile or 'default'}")
     rows = []
     with tempfile.TemporaryDirectory(prefix="orthocal-mount-") as tmp:
         for k in range(args.runs):
-            r = judge(one_run(args.seed + k, args.noise, args.in_mounting, Path(tmp)),
+            r = judge(one_run(args.seed + k, args.noise, args.in_mounting, Path(tmp),
+                              args.drive_profile),
                       args.mount_s)
             rows.append(r)
             print(f"  seed {args.seed + k}: {r['stopped']}, {r['write_backs']} write-back(s), "

@@ -110,6 +110,37 @@ def test_significance_takes_k_from_students_t_on_the_noise_dof() -> None:
     assert significant_corrections(both, se, 0.002, previous_std_errors=se, dof=12,
                                    previous_dof=4) == []
 
+@pytest.mark.parametrize("se_prev", [1.4, 0.45, 0.3])
+def test_writing_the_rounds_joined_leaves_less_than_leaving_or_writing_one_look(
+        se_prev: float) -> None:
+    # Why a verification writes the rounds' joined Δρ̂ (station.engine.flow Flow.write):
+    # a written round leaves e ~ N(0, se_prev²); the verification reads e + n, n ~ N(0,
+    # 0.45²). Among the looks seen at 95 % on the rounds joined (the loop writes no
+    # others in its dead zone), writing the joined value leaves less mean square error
+    # than leaving the machine as it stands, and than writing the verification's own
+    # look, which is worse than leaving it where the written round was the quieter.
+    rng = np.random.default_rng(7)
+    se = 0.45
+    e = rng.normal(0.0, se_prev, 1_000_000)
+    look = e + rng.normal(0.0, se, e.size)
+    # joined_with_previous is linear in the look: its weight, from the function itself
+    one, one_se = joined_with_previous({"drho_x": 1.0}, {"drho_x": se}, {"drho_x": 0.0},
+                                       {"drho_x": se_prev}, {}, k=1e9)
+    joined, joined_se = one["drho_x"] * look, one_se["drho_x"]
+    seen = np.abs(joined) > 1.96 * joined_se
+    assert seen.sum() > 1000
+    write_joined = np.mean((e - joined)[seen] ** 2)
+    stand = np.mean(e[seen] ** 2)
+    write_look = np.mean((e - look)[seen] ** 2)
+    assert write_joined < stand and write_joined < write_look
+    # the posterior's variance, whatever was seen
+    assert write_joined == pytest.approx(joined_se ** 2, rel=0.1)
+    if se_prev == se:
+        assert write_look == pytest.approx(stand, rel=0.05)  # one noise for another
+    else:
+        assert bool(write_look < stand) == (se_prev > se)
+
+
 def walk(max_iterations: int, verify: bool, significant: list[bool],
          writes: list[str]) -> list[Step]:
     """Drive next_step with scripted outcomes; returns every step taken."""

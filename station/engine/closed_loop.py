@@ -18,15 +18,14 @@ neither: "suspected" (a correction the round sees at 95 % but not beyond the noi
 of both rounds) or "unproven" (the round's noise hides whatever is left). Each
 setup of a verification has already taken more cycles on its mounted gauges where
 its own scatter said the verdict needed them ([procedure] max_cycles_in_mounting,
-station.engine.sequencer); still undecided, the round is measured again, a further
-pass of the same verification pooled with it (phase "v+1", "v2+1"…), up to
-``max_extra_passes``: what is left beyond the noise then shows as significant and
-is written, a machine within converge_mm shows as converged. Still undecided, the
-loop ends "not-converged", saying why; it never writes what does not stand out of
-both rounds' noise (that would trade one noise for another, and a machine one
-round fixed would be written again). After a write-back, a correction beyond that
-noise but under converge_mm is written where, with no pass left, it keeps
-"converged" out of reach (station.engine.verdict.judge).
+station.engine.sequencer). After a write-back, a leftover under converge_mm that the
+rounds joined see at 95 % where it keeps "converged" out of reach is written (the
+joined Δρ̂, station.engine.verdict.judge): a write and its verification cost the
+mountings a further pass would, and leave the machine closer. Where nothing is seen,
+the round is measured again, a further pass of the same verification pooled with it
+(phase "v+1", "v2+1"…), up to ``max_extra_passes``: what is left beyond the noise
+then shows as significant and is written, a machine within converge_mm shows as
+converged. Still undecided, the loop ends "not-converged", saying why.
 
 States (``len(verdicts)``, ``len(writes)``):
 

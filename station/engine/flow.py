@@ -213,9 +213,13 @@ class Flow:
         first = self.outcomes[0] if self.outcomes else None
         self.target = self._aim()
         note = self._objective_note(ident)
+        # What is written is the round's Δρ̂ joined with the rounds before it (the
+        # first round's own): the least error known, where the rounds agree
+        # (orthocal.loop.joined_with_previous keeps a round's own where they do not).
+        values = {**ident.parameters, **self.joined[round - 1][0]}
         outcome = write_back(
             controller=ctx.devices.controller,
-            identified=correction(ident.parameters, self.target), note=note,
+            identified=correction(values, self.target), note=note,
             max_abs_offset_mm=ctx.config.writeback.max_abs_offset_mm, run_dir=ctx.run_dir,
             journal=ctx.journal, operator=ctx.operator, prior=ctx.state, round=round,
             offsets_at_start=first.before if first is not None else None)

@@ -47,8 +47,9 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
     correction it verifies; None for the first measurement, judged against its
     own noise alone). Significant: beyond k standard errors of both rounds (of
     the first alone) and beyond converge_mm (orthocal.loop.significant_corrections);
-    after a write-back, where the round cannot show the machine within ``limit`` and
-    no further pass of it is left (``passes_left`` False), beyond the noise alone.
+    after a write-back, where the round cannot show the machine within ``limit``: on
+    those axes, a leftover seen at 95 % (the rounds joined), and with no further pass
+    of the round left (``passes_left`` False), any correction beyond the noise alone.
     Converged: every axis shown within ``limit`` at 95 % (orthocal.loop.shown_within):
     for a first measurement, a machine within tolerance that nothing is written
     to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
@@ -65,17 +66,20 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
            if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
     values, ses = joined or (ident.parameters, ident.std_errors)
     shown = shown_within(values, ses, ident.std_error_dof, target=target)
-    if not sig and previous is not None and not passes_left and \
-            any(v > limit for v in shown.values()):
+    out = [n for n, v in shown.items() if v > limit]
+    seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
+    if not sig and previous is not None and out:
         # converge_mm spares a correction too small to matter, where the machine can
-        # be shown within it; where no further pass can show that, a correction beyond
-        # the noise of both rounds is what stands between it and "converged": written.
-        # One only seen at 95 % is not: that would rewrite a fixed machine in one
-        # verification of twenty.
-        sig = beyond_noise
+        # be shown within it. Where it cannot, the next step mounts every setup either
+        # way: a further pass of the same machine, or a write and its verification.
+        # Where the leftover is seen at 95 %, the write is taken: it writes the rounds'
+        # joined Δρ̂ (Flow.write), which leaves the least error that is known, and the
+        # next verification joins on from there as a further pass would. With no pass
+        # left, a correction beyond the noise of both rounds is written too.
+        sig = [n for n in WRITABLE if (n in out and seen.get(n, 0.0) > 0.0)
+               or (not passes_left and n in beyond_noise)]
     verdict = "significant" if sig else "converged"
-    if not sig and any(v > limit for v in shown.values()):
-        seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
+    if not sig and out:
         verdict = "suspected" if any(v > 0 for v in seen.values()) else "unproven"
     return Verdict(verdict, sig, shown)
 
