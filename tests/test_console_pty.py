@@ -83,7 +83,7 @@ def _lines(raw: bytes) -> list[bytes]:
 
 def test_prompts_never_share_a_line_with_the_live_bar(tmp_path: Path) -> None:
     procedure = {"cycles": 1, "readings": 2, "settle_s": 0.05, "verify": True,
-                 "max_extra_passes": 0}  # one verification: six prompts
+                 "max_extra_passes": 0}  # no further pass of a verification
     with VirtualStation(seed=7, true_drho=(0.2, -0.1, 0.3), mount_all=True,
                         indicator_count=6, speed_mm_s=400.0) as station:
         config = tmp_path / "station.toml"
@@ -94,8 +94,12 @@ def test_prompts_never_share_a_line_with_the_live_bar(tmp_path: Path) -> None:
     text = raw.decode("utf-8", "replace")
     # completed: 0, or 3 where its closed loop did not converge (its first line says so)
     assert code == (3 if "orthocal run: NOT CONVERGED" in text else 0), text[-3000:]
-    assert raw.count(b"Press Enter when done") == 6  # 3 setups, measured and verified
-    assert b"[y/N]" in raw  # the write-back question
+    # 3 setups, measured, and verified after each write-back the operator was asked
+    # for (a leftover the verification sees but cannot show within the limit is
+    # written again rather than left: docs/design.md, "Closed loop")
+    writes = raw.count(b"[y/N]")
+    assert writes >= 1  # the write-back question
+    assert raw.count(b"Press Enter when done") == 3 * (1 + writes)
     assert "left" in text  # the live bar with its time estimate was on screen
     assert "\x1b[" in text  # ... drawn as a live display, not plain lines
     for needle in (b"measurement, setup", b"verification, setup", b"Press Enter",
