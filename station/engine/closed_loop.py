@@ -14,8 +14,9 @@ written exactly once.
 A measurement ends in a verdict: "significant" (a correction beyond the noise of
 both rounds and beyond converge_mm: write it), "converged" (the remaining Δρ is
 shown within ±converge_mm at 95 % on every axis: orthocal.loop.shown_within), or
-neither: "suspected" (a correction the round sees at 95 % but not beyond the noise
-of both rounds) or "unproven" (the round's noise hides whatever is left). Each
+neither: "suspected" (a correction the round sees at 95 % that is not written: a
+first measurement's under converge_mm, or one on an axis already shown within the
+limit) or "unproven" (the round's noise hides whatever is left). Each
 setup of a verification has already taken more cycles on its mounted gauges where
 its own scatter said the verdict needed them ([procedure] max_cycles_in_mounting,
 station.engine.sequencer). After a write-back, a leftover under converge_mm that the
