@@ -21,6 +21,7 @@ import numpy as np
 
 from drivers.errors import (
     AlarmError,
+    ControllerConnectionError,
     ControllerError,
     EStopError,
     MoveTimeout,
@@ -109,7 +110,8 @@ class ModbusAxisController(ModbusLink):
                                      f"profile {self.map.name!r} has no soft-limit registers"))
 
     def move(self, targets: Sequence[float], speed_mm_s: float | None = None) -> None:
-        """Write SPEED (if given), the three targets in one write, then the move command.
+        """Write SPEED (if given), the three targets in one write, then the move command
+        (all again, once, if the connection was lost meanwhile).
         Exception 3 on the targets → TargetRefused."""
         rho = _vec3(targets, "targets")
         if not self.map.has_role("SOFT_MIN") and self._given_limits is not None:
@@ -117,13 +119,24 @@ class ModbusAxisController(ModbusLink):
             if np.any(rho < lo - _SLACK) or np.any(rho > hi + _SLACK):
                 raise TargetRefused(self.device, f"targets {format_mm(rho)} outside the soft "
                                     f"limits {format_mm(lo)}..{format_mm(hi)}", 3)
-        if speed_mm_s is not None:
-            self._write_speed(speed_mm_s)
         items = [(reg, reg.encode(v)) for reg, v in
                  zip(self.map.axis_registers("TARGET"), rho, strict=True)]
-        self.write_words(items, "write targets", refused=f"targets {format_mm(rho)}")
-        self.note_target(rho)
-        self.send_command("move")
+        # A drive that lost power while this was being sent holds its power-up targets
+        # (where the axes stand), and perhaps its power-up speed: after a reconnect
+        # everything is written again, once, before the command counts as given (the
+        # same targets, already checked; a second loss fails the move).
+        for _ in range(2):
+            seen = self.reconnects
+            if speed_mm_s is not None:
+                self._write_speed(speed_mm_s)
+            self.write_words(items, "write targets", refused=f"targets {format_mm(rho)}")
+            self.note_target(rho)
+            self.send_command("move")
+            if self.reconnects == seen:
+                return
+        raise ControllerConnectionError(
+            self.device, f"the connection was lost twice while commanding the move to "
+                         f"{format_mm(rho)}")
 
     def as_commanded(self, targets: Sequence[float]) -> np.ndarray:
         """The targets as the drive holds them: rounded to its TARGET registers'

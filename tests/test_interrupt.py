@@ -324,10 +324,16 @@ def test_kill_9_then_resume_gives_the_uninterrupted_result(
     # what the controller holds is what the run reports: the correction applied once
     nvram = json.loads((o.run_dir / "controller_nvram.json").read_text())["offsets_mm"]
     assert nvram == [result["offsets_written"][a] for a in "xyz"]
-    for a in "xyz":  # every round's write is rounded to the drive's 1 µm count
-        assert result["offsets_written"][a] == pytest.approx(
-            result["offsets_before"][a] - result["identified"][f"drho_{a}"],
-            abs=5e-4 * rounds + 1e-4)
+    # every round writes its Δρ̂ joined with the rounds before it (the first round's
+    # own), on top of what the round before wrote, rounded to the drive's 1 µm count
+    held = result["offsets_before"]
+    for it in result["iterations"][:rounds]:
+        used = it["joined"]["drho_mm"] if it.get("joined") else it["identified"]
+        for a in "xyz":
+            assert it["offsets_written"][a] == pytest.approx(
+                held[a] - used[f"drho_{a}"], abs=5e-4 + 1e-6)
+        held = it["offsets_written"]
+    assert held == result["offsets_written"]
 
     records = read_journal(journal_of(o.run_dir))
     for k in range(1, rounds + 1):  # each round's correction applied exactly once

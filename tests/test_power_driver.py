@@ -89,6 +89,33 @@ def test_network_outage_mid_move_reconnects_and_goes_on() -> None:
         sim.close()
 
 
+def test_power_lost_between_the_targets_and_the_command_writes_the_targets_again() -> None:
+    # A drive that lost power forgets the targets just written: the move command the
+    # driver retries after reconnecting would move to its power-up targets (where the
+    # axes stand), and the wait would time out at the start point.
+    sim, ctl, events = _rig(reconnect_s=5.0)
+    send = ctl.send_command
+    cuts: list[str] = []
+
+    def cut_before(command: str) -> None:
+        if command == "move" and not cuts:
+            cuts.append(command)
+            sim.power_cut(0.3, lose_reference=False)
+            _wait_cut(sim)
+        send(command)
+
+    ctl.send_command = cut_before  # type: ignore[method-assign]
+    try:
+        target = PI0 + np.array([20.0, -10.0, 5.0])
+        got = ctl.move_and_wait(target, speed_mm_s=400.0, timeout_s=3.0)
+        assert np.allclose(got, target, atol=2e-3)
+        assert cuts == ["move"] and ctl.reconnects == 1
+        assert [e["event"] for e in events].count("reconnected") == 1
+    finally:
+        ctl.close()
+        sim.close()
+
+
 def test_reset_while_waiting_for_a_reply_is_a_connection_fault() -> None:
     # The reply is late; the power goes while the client waits in recv, where
     # pymodbus lets ConnectionResetError through.
