@@ -5,8 +5,8 @@ faults, pty gauge faults, the virtual machine) while ``orthocal run --simulate``
 runs in-process through ``station.commands.cli.main``: transient faults are retried,
 journaled and give the right answer; persistent ones stop the axes, keep the
 journal and end in one line naming the device (exit 1); a write-back that
-fails is undone; a knock on the stand is rejected and recorded; bad input
-exits 2 naming the field or line.
+fails is undone; a knock on the stand is rejected and recorded (bad input:
+test_bad_input.py).
 """
 
 from __future__ import annotations
@@ -407,53 +407,6 @@ def test_a_knock_on_the_stand_is_rejected_and_recorded(tmp_path: Path, orthocal)
         assert set(r["rejected"]) <= set(raw["values"])  # the raw reading is kept too
     assert result["timing"]["outliers_rejected"] >= len(knocked)
     assert result["verification"]["deviations_rms_mm"] < 0.005  # knocks left no trace
-
-
-# --- bad input -------------------------------------------------------------------------
-
-
-CONFIG_HEAD = ('[[indicators]]\nname = "A"\nport = "/dev/null"\n'
-               '[[setups]]\nleg = "x"\nindicators = { A = "y" }\n')
-BAD_CONFIGS = {
-    "unknown key": (CONFIG_HEAD + "[procedure]\ncyclez = 3\n", "procedure.cyclez"),
-    "wrong type": (CONFIG_HEAD + '[procedure]\nreadings = "five"\n', "procedure.readings"),
-    "out of range": (CONFIG_HEAD + "[writeback]\nmax_abs_offset_mm = -1\n",
-                     "writeback.max_abs_offset_mm"),
-    "not TOML": ("[controller\nport = 502\n", "line 1"),
-}
-
-
-@pytest.mark.parametrize("name", list(BAD_CONFIGS))
-def test_bad_config_exit_2_names_the_field(tmp_path: Path, orthocal, name: str) -> None:
-    text, named = BAD_CONFIGS[name]
-    path = tmp_path / "station.toml"
-    path.write_text(text)
-    o = orthocal("run", "--config", str(path), "--yes", "--out", str(tmp_path / "runs"))
-    assert o.code == 2
-    (line,) = [ln for ln in o.err.splitlines() if ln.startswith("orthocal:")]
-    assert named in line and "Traceback" not in o.err
-    assert not (tmp_path / "runs").exists()
-
-
-def test_bad_csv_exit_2_names_the_line(tmp_path: Path, orthocal) -> None:
-    path = tmp_path / "readings.csv"
-    path.write_text("posture,leg,direction,deviation_mm\n+,x,y,0.1\n+,x,z,zero\n")
-    o = orthocal("identify", str(path))
-    assert o.code == 2 and "line 3" in o.err and "Traceback" not in o.err
-
-
-@pytest.mark.parametrize("argv, named", [
-    (["run", "--simulate", "--true-drho", "1,2"], "--true-drho"),
-    (["run", "--simulate", "--seed", "seven"], "--seed"),
-    (["run", "--simulate", "--config", "x.toml"], "--config"),
-    (["run", "--simulate", "--sim-procedure", '{"cycles": 0}'], "procedure.cycles"),
-])
-def test_bad_arguments_exit_2_naming_them(tmp_path: Path, orthocal, argv: list[str],
-                                          named: str) -> None:
-    o = orthocal(*argv, "--out", str(tmp_path / "runs"))
-    assert o.code == 2
-    assert named in o.err and "Traceback" not in o.err
-    assert not (tmp_path / "runs").exists()
 
 
 # --- a torn journal, reopened ----------------------------------------------------------
