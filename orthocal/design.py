@@ -179,7 +179,7 @@ class Search:
 
     strokes: tuple[float, ...]
     quality: Quality
-    candidates: int  # feasible grid strokes considered
+    candidates: int  # feasible grid strokes the search looked at
 
 
 def search_strokes(
@@ -212,65 +212,115 @@ def search_strokes(
     lo, hi = bounds
     grid_v = np.round(np.arange(np.ceil(lo / step) * step, hi + 1e-9, step), 9)
     grid_v = np.unique(np.concatenate([grid_v, [s for s in current if lo <= s <= hi]]))
-    grid = [float(s) for s in grid_v if s != 0 and (feasible is None or feasible(float(s)))]
-    if not grid:
-        raise ValueError(f"no feasible stroke within [{lo:g}, {hi:g}] mm")
+    grid = _Grid([float(s) for s in grid_v if s != 0], feasible)
+    if not grid.strokes:
+        raise ValueError(f"no stroke within [{lo:g}, {hi:g}] mm")
     per_stop = len(keys_for([1.0], legs, geometry))
-    J = design_matrix(keys_for(grid, legs, geometry), geometry, model)
-    rows = J.reshape(len(grid), per_stop, -1)  # [stroke, indicator, parameter]
+    J = design_matrix(keys_for(grid.strokes, legs, geometry), geometry, model)
+    rows = J.reshape(len(grid.strokes), per_stop, -1)  # [stroke, indicator, parameter]
+    checked: dict[frozenset[int], bool] = {}
 
     def objective(idx: Sequence[int]) -> float:
-        sub = rows[list(idx)]  # [stop, indicator, parameter]
-        A = cycles * np.einsum("smp,smq->pq", sub, sub)
-        lam = np.linalg.eigvalsh(A)
-        # λ = s², so RANK_TOL on singular values would sit below rounding; 1e-12 on
-        # λ (1e-6 on s) still passes the worst well-posed design (full+tilt, ~1/300).
-        if lam[0] <= 1e-12 * lam[-1]:
-            return float("-inf")
-        b = sub.sum(axis=0)  # [indicator, parameter]
-        meat = A + (cycles - 0.5) * b.T @ b
-        # ln det of the information (A meat⁻¹ A) = 2 ln det A − ln det meat
-        return float(2.0 * np.sum(np.log(lam)) - np.linalg.slogdet(meat)[1])
-
-    checked: dict[frozenset[int], bool] = {}
+        return _log_det_information(rows[list(idx)], cycles)
 
     def allowed(idx: Sequence[int]) -> bool:
         key = frozenset(idx)
         if key not in checked:
-            strokes = tuple(sorted((grid[k] for k in idx), reverse=True))
-            checked[key] = feasible_set is None or feasible_set(strokes)
+            checked[key] = feasible_set is None or feasible_set(grid.sorted(idx))
         return checked[key]
 
-    def exchange(idx: list[int]) -> list[int]:
-        # An infeasible start counts as worst: its first feasible exchange is taken.
-        best = objective(idx) if allowed(idx) else float("-inf")
-        improved = True
-        while improved:
-            improved = False
-            for pos in range(len(idx)):
-                for cand in range(len(grid)):
-                    if cand in idx:
-                        continue
-                    trial = [*idx[:pos], cand, *idx[pos + 1:]]
-                    value = objective(trial)
-                    if value > best + 1e-12 and allowed(trial):
-                        idx, best, improved = trial, value, True
-        return idx
-
-    n = max(1, min(len(current), len(grid)))
+    n = max(1, min(len(current), len(grid.strokes)))
     while True:
-        spread = [int(k) for k in np.linspace(0, len(grid) - 1, n).round()]
-        mine = [grid.index(s) for s in current if s in grid][:n]
-        mine += [k for k in spread if k not in mine][: n - len(mine)]
-        starts = [s for s in (mine, spread) if len(set(s)) == n]
-        best = max((exchange(list(s)) for s in starts),
+        starts = grid.starts(current, n)
+        if not starts:
+            raise ValueError(f"fewer than {n} feasible strokes within [{lo:g}, {hi:g}] mm")
+        best = max((_exchange(s, grid, objective, allowed) for s in starts),
                    key=lambda idx: objective(idx) if allowed(idx) else float("-inf"))
-        if np.isfinite(objective(best)) or n >= min(max_stops, len(grid)):
+        if np.isfinite(objective(best)) or n >= min(max_stops, len(grid.strokes)):
             break
         n += 1
-    strokes = tuple(sorted((grid[k] for k in best), reverse=True))
+    strokes = grid.sorted(best)
     return Search(strokes, quality(keys_for(strokes, legs, geometry), geometry, model),
-                  len(grid))
+                  grid.feasible_seen())
+
+
+def _log_det_information(sub: np.ndarray, cycles: int) -> float:
+    """ln det of the information of a run whose stops' rows are ``sub`` [stop,
+    indicator, parameter] (the inverse of :func:`run_covariance`; -inf where the
+    stops cannot identify the model)."""
+    A = cycles * np.einsum("smp,smq->pq", sub, sub)
+    lam = np.linalg.eigvalsh(A)
+    # λ = s², so RANK_TOL on singular values would sit below rounding; 1e-12 on
+    # λ (1e-6 on s) still passes the worst well-posed design (full+tilt, ~1/300).
+    if lam[0] <= 1e-12 * lam[-1]:
+        return float("-inf")
+    b = sub.sum(axis=0)  # [indicator, parameter]
+    meat = A + (cycles - 0.5) * b.T @ b
+    # ln det of the information (A meat⁻¹ A) = 2 ln det A − ln det meat
+    return float(2.0 * np.sum(np.log(lam)) - np.linalg.slogdet(meat)[1])
+
+
+class _Grid:
+    """The search's strokes. A stroke's own check (a plan check of its moves: tens
+    of ms) is asked only of a stroke the search would take, once: most of the grid
+    never improves the objective, and a set is checked whole before it is taken."""
+
+    def __init__(self, strokes: list[float], feasible: Callable[[float], bool] | None):
+        self.strokes = strokes
+        self._feasible = feasible
+        self._ok: dict[int, bool] = {}
+
+    def ok(self, k: int) -> bool:
+        if k not in self._ok:
+            self._ok[k] = self._feasible is None or self._feasible(self.strokes[k])
+        return self._ok[k]
+
+    def feasible_seen(self) -> int:
+        return len(self.strokes) if self._feasible is None else sum(self._ok.values())
+
+    def sorted(self, idx: Sequence[int]) -> tuple[float, ...]:
+        return tuple(sorted((self.strokes[k] for k in idx), reverse=True))
+
+    def nearest(self, k: int, taken: Sequence[int]) -> int | None:
+        """The feasible stroke nearest to index ``k`` that is not ``taken``."""
+        for d in range(len(self.strokes)):
+            for j in (k - d, k + d):
+                if 0 <= j < len(self.strokes) and j not in taken and self.ok(j):
+                    return j
+        return None
+
+    def starts(self, current: Sequence[float], n: int) -> list[list[int]]:
+        """Starting sets of ``n`` strokes: ``current``'s feasible ones completed from
+        the spread, and ``n`` spread evenly (each moved to the nearest feasible)."""
+        spread: list[int] = []
+        for k in np.linspace(0, len(self.strokes) - 1, n).round():
+            j = self.nearest(int(k), spread)
+            if j is not None:
+                spread.append(j)
+        mine = [k for k in (self.strokes.index(s) for s in current if s in self.strokes)
+                if self.ok(k)][:n]
+        mine += [k for k in spread if k not in mine][: n - len(mine)]
+        return [s for s in (mine, spread) if len(set(s)) == n]
+
+
+def _exchange(idx: list[int], grid: _Grid, objective: Callable[[Sequence[int]], float],
+              allowed: Callable[[Sequence[int]], bool]) -> list[int]:
+    """Coordinate exchange from ``idx``: replace one stroke at a time by one that
+    improves the objective and is allowed, until none does."""
+    # An infeasible start counts as worst: its first feasible exchange is taken.
+    best = objective(idx) if allowed(idx) else float("-inf")
+    improved = True
+    while improved:
+        improved = False
+        for pos in range(len(idx)):
+            for cand in range(len(grid.strokes)):
+                if cand in idx:
+                    continue
+                trial = [*idx[:pos], cand, *idx[pos + 1:]]
+                value = objective(trial)
+                if value > best + 1e-12 and grid.ok(cand) and allowed(trial):
+                    idx, best, improved = trial, value, True
+    return idx
 
 
 def drho_error_parts(keys: Sequence[Key], geometry: Geometry, model: str, params,
