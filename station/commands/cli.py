@@ -194,7 +194,10 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="calibrate: measure, identify, write back, verify")
     src = run.add_mutually_exclusive_group(required=True)
     src.add_argument(
-        "--simulate", action="store_true", help="run against the in-process virtual station"
+        "--simulate", nargs="?", const=True, default=None, metavar="SIM.toml",
+        help="run against the in-process virtual station; SIM.toml: a file whose "
+             "[simulation] table describes it (its keys are the options below without "
+             "their dashes; an option given here wins)"
     )
     src.add_argument("--config", metavar="FILE", help="station config (TOML)")
     run.add_argument("--plan", action="store_true", help="print the checked plan and exit")

@@ -111,3 +111,4 @@ class ResumeOptions:
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> ResumeOptions:
         return cls(run_dir=Path(args.run_dir), yes=bool(args.yes), json=bool(args.json))
+

@@ -19,6 +19,7 @@ from typing import Any
 
 from station import report
 from station.commands.options import ResumeOptions, RunOptions
+from station.commands.sim_file import run_options
 from station.config import load_config, parse_config
 from station.console.operator import ConsoleOperator, Operator, VirtualOperator
 from station.engine.closed_loop import mountings_expected
@@ -61,7 +62,7 @@ def _lock(stack: ExitStack, config: Any, command: str, run_dir: Path | None) -> 
 
 
 def run_command(args: argparse.Namespace) -> int:
-    return run(RunOptions.from_args(args))
+    return run(run_options(args))
 
 
 def resume_command(args: argparse.Namespace) -> int:

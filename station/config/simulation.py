@@ -1,0 +1,91 @@
+"""A rehearsal's virtual machine as a file: ``orthocal run --simulate SIM.toml``.
+
+The file holds a ``[simulation]`` table (the hidden errors of the virtual machine,
+its gauges' noise and stands, the register map its drive serves) with a
+``[simulation.drive]`` table (how that drive moves, never told to the station),
+and may hold the station's own ``[procedure]`` and ``[writeback]`` tables for the
+run. Every key is the long option of ``run --simulate`` without its dashes
+(``--true-drho`` is ``true_drho``, ``--drive-profile`` is ``drive.profile``);
+an option given on the command line wins over the file. Values are TOML's own:
+``true_drho = [0.7, -1.1, 0.35]``, ``backlash = 0.01`` or ``[0.01, 0, 0.02]``.
+
+Loading checks the whole of it (the same checks as the options): a wrong key or
+value is one line naming the file and the key, exit 2, before anything starts.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from station.config import format_validation_error
+from station.errors import BadInput, read_input
+
+Triple = tuple[float, float, float]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class DriveTable(_Strict):
+    """``[simulation.drive]``: how the virtual controller moves its axes."""
+
+    motion: Literal["coordinated", "independent"] | None = None
+    profile: str | list[str] | None = Field(
+        None, description="trapezoid, scurve or cosine; one, or one per axis x, y, z")
+    accel: float | list[float] | None = Field(None, description="mm/s², one or x, y, z")
+    delays: list[float] | None = Field(None, description="start delay per axis, s")
+    sequence: str | None = Field(None, description="one axis after another, e.g. zyx")
+
+
+class SimulationTable(_Strict):
+    """``[simulation]``: the virtual machine (mm, tilts in mrad)."""
+
+    seed: int | None = None
+    true_drho: Triple | None = None
+    true_dl: Triple | None = None
+    true_tilt: Triple | None = None
+    true_gap: Triple | None = None
+    noise: float | None = Field(None, ge=0)
+    mount_error: float | None = Field(None, ge=0)
+    backlash: float | Triple | None = None
+    leg_bow: float | Triple | None = None
+    gauge_scale: float | list[float] | None = None
+    profile: str | None = Field(
+        None, description="a built-in map name, or a map file (relative to this file)")
+    drive: DriveTable = DriveTable()
+
+
+class SimulationFile(_Strict):
+    """The whole file: the virtual machine, and the station's procedure and
+    write-back overrides for the run (checked as the station config checks them)."""
+
+    simulation: SimulationTable = SimulationTable()
+    procedure: dict[str, Any] | None = None
+    writeback: dict[str, Any] | None = None
+
+
+def read_simulation(path: Path) -> SimulationFile:
+    """The file at ``path``, checked whole; BadInput naming the file and the key."""
+    source = str(path)
+    try:
+        data = tomllib.loads(read_input(path))
+    except tomllib.TOMLDecodeError as exc:
+        raise BadInput(f"{source}: not valid TOML: {exc}") from None
+    try:
+        return SimulationFile.model_validate(data)
+    except ValidationError as exc:
+        raise BadInput(format_validation_error(source, exc)) from None
+
+
+def as_text(value: Any) -> str | None:
+    """A list or a number as the command line's text ("a,b,c"): one parser for both."""
+    if value is None:
+        return None
+    if isinstance(value, list | tuple):
+        return ",".join(v if isinstance(v, str) else format(float(v), "g") for v in value)
+    return format(value, "g") if isinstance(value, float | int) else str(value)
