@@ -431,3 +431,23 @@ def test_tool_helpers_read_a_missing_block_as_not_stated() -> None:
     assert tool.statement({"accuracy": {"error": "not stated: x"}}) == (None, "x")
     assert tool.tool_clause({}) is None and tool.summary_lines({}) == []
     assert tool.html_section({}) == "" and tool.stands_html({"stands": None}) == ""
+
+
+def test_a_verification_s_correction_is_the_one_its_verdict_and_write_rest_on() -> None:
+    # A verification's own Δρ̂ is one look; what the loop judges and writes after it
+    # is that look joined with the rounds before (iterations[n].joined). The report's
+    # "correction max" is the joined one, so it matches the offsets written next.
+    golden = Path(__file__).parent / "data" / "golden_run" / "result.json"
+    result = json.loads(golden.read_text(encoding="utf-8"))
+    it = result["iterations"][1]
+    joined = max(abs(it["joined"]["drho_mm"][f"drho_{a}"]) for a in "xyz")
+    own = max(abs(it["identified"][f"drho_{a}"]) for a in "xyz")
+    assert report.fmt(1000 * joined, 2) != report.fmt(1000 * own, 2)  # they differ here
+    line = next(ln for ln in report.summary_text(result).splitlines()
+                if ln.strip().startswith("verification 1"))
+    assert f"correction max {report.fmt(1000 * joined, 2)} µm, rounds joined" in line
+    # written next: the offsets before it minus the joined Δρ̂ (1 µm counts)
+    before, after = result["iterations"][0]["offsets_written"], it["offsets_written"]
+    for a in "xyz":
+        assert after[a] == pytest.approx(before[a] - it["joined"]["drho_mm"][f"drho_{a}"],
+                                         abs=5e-4 + 1e-6)

@@ -68,8 +68,12 @@ def aim_of(result: Mapping[str, Any], n: int) -> dict[str, float]:
 def correction_mm(entry: Mapping[str, Any],
                   aim: Mapping[str, float] | None = None) -> float | None:
     """The largest |Δρ − aim| an identification asks to write (mm); the aim is 0
-    unless objective tool set one (aim_of)."""
-    ident = entry.get("identified") or {}
+    unless objective tool set one (aim_of). A verification's Δρ is the one joined
+    with the rounds before it (its ``joined``): what its verdict rests on and what a
+    write-back after it writes, not its own look alone."""
+    joined = entry.get("joined")
+    ident = (joined.get("drho_mm") if isinstance(joined, Mapping) else None) \
+        or entry.get("identified") or {}
     aim = aim or {}
     values = [abs(v - aim.get(n, 0.0)) for n in WRITABLE
               if (v := num(ident.get(n))) is not None]
@@ -172,7 +176,8 @@ def _round_lines(result: Mapping[str, Any]) -> list[str]:
         again = f", {len(passes)} passes pooled" if len(passes) > 1 else ""
         lines.append(f"    {_label(n, e):<15} deviations RMS {_um(e.get('deviations_rms_mm'))}"
                      f" (floor {_um(e.get('noise_floor_mm'))}{again}), correction max "
-                     f"{_um(correction_mm(e, aim_of(result, n)))} ({verdict}{within}) → "
+                     f"{_um(correction_mm(e, aim_of(result, n)))}"
+                     f"{', rounds joined' if n and e.get('joined') else ''} ({verdict}{within}) → "
                      f"{action}")
     if loop.get("max_iterations") is not None:
         lines.append(f"    (at most {loop['max_iterations']} write-backs, a correction counts "
@@ -264,7 +269,8 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
                   else str(it.get("writeback") or "—")),
             )) + "</tr>")
     parts.append("<table><thead><tr><th>measurement</th><th>deviations RMS</th>"
-                 "<th>residual RMS</th><th>noise floor</th><th>correction max</th>"
+                 "<th>residual RMS</th><th>noise floor</th>"
+                 "<th>correction max (a verification's: joined with the rounds before)</th>"
                  f"<th>significant</th><th>offsets {held} (mm)</th></tr></thead><tbody>"
                  + "".join(rows) + "</tbody></table>")
     return "\n".join(parts)
