@@ -109,6 +109,7 @@ def test_a_bad_file_is_one_line_naming_the_key_and_exit_2(
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
     assert said in err and "Traceback" not in err
+    assert " --" not in err  # said in the file's words, not the options'
     assert not (tmp_path / "runs").exists()
 
 

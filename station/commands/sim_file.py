@@ -45,10 +45,10 @@ def load_simulation(path: str | Path) -> SimOptions:
     try:  # the options' own checks, said in the file's words
         sim_params(options)
     except BadInput as exc:
-        said = str(exc)
-        m = re.match(r"^(--[\w-]+): ", said)
-        raise BadInput(f"{source}: {_key_of(m.group(1))}: {said[m.end():]}" if m
-                       else f"{source}: {said}") from None
+        # the options' words made the file's: "--drive-sequence: … give --motion
+        # independent" → "simulation.drive.sequence: … give simulation.drive.motion …"
+        said = re.sub(r"--[a-z][\w-]*", lambda m: _key_of(m.group(0)), str(exc))
+        raise BadInput(f"{source}: {said}") from None
     return options
 
 
