@@ -64,6 +64,29 @@ def load_backup(run_dir: Path) -> dict[str, float] | None:
     return {a: float(v) for a, v in json.loads(path.read_text())["offsets_mm"].items()}
 
 
+@dataclass
+class _Stages:
+    """One write-back round's journaled stages: what a resumed run replays (each
+    stage found in the journal is not done again) and how the next is journaled."""
+
+    journal: Journal
+    round: int
+    done: dict[str, dict[str, Any]]
+
+    def log(self, record: dict[str, Any]) -> None:
+        self.journal.append({"type": "writeback", "round": self.round, **record})
+
+    def final(self) -> WritebackOutcome | None:
+        """The outcome a journaled final stage already gave (None: not ended)."""
+        for final in ("done", "refused", "declined", "failed-restored", "skipped"):
+            if final in self.done:
+                rec = self.done[final]
+                return WritebackOutcome("written" if final == "done" else final,
+                                        rec.get("reason"), rec.get("before"),
+                                        rec.get("written"))
+        return None
+
+
 def write_back(
     *,
     controller: AxisController,
@@ -77,35 +100,50 @@ def write_back(
     offsets_at_start: dict[str, float] | None = None,
     note: str | None = None,
 ) -> WritebackOutcome:
-    stages = prior.writebacks.get(round, {}) if prior is not None else {}
-
-    def log(record: dict[str, Any]) -> None:
-        journal.append({"type": "writeback", "round": round, **record})
-
-    for final in ("done", "refused", "declined", "failed-restored", "skipped"):
-        if final in stages:
-            rec = stages[final]
-            return WritebackOutcome("written" if final == "done" else final, rec.get("reason"),
-                                    rec.get("before"), rec.get("written"))
+    """Write-back round ``round`` as its journaled stages (module docstring): each
+    one the journal already holds (``prior``) is replayed, not done again."""
+    stages = _Stages(journal, round, prior.writebacks.get(round, {}) if prior is not None else {})
+    ended = stages.final()
+    if ended is not None:
+        return ended
     drho = {a: identified.get(f"drho_{a}") for a in AXES}
     if all(v is None for v in drho.values()):
         reason = "the model identifies no joint offsets (model 'L'): nothing to write"
-        log({"stage": "skipped", "reason": reason})
+        stages.log({"stage": "skipped", "reason": reason})
         return WritebackOutcome("skipped", reason, None, None)
     delta = np.array([drho[a] or 0.0 for a in AXES])
+    before = _backup(stages, controller, run_dir)
+    new = _axes(np.array([before[a] for a in AXES]) - delta)
+    reason = _refusal(delta, new, max_abs_offset_mm, offsets_at_start)
+    if reason is not None:
+        stages.log({"stage": "refused", "reason": reason, "before": before})
+        return WritebackOutcome("refused", reason, before, None)
+    intended = _intent(stages, controller, operator, before, new, note)
+    if intended is None:
+        reason = "declined by the operator; offsets unchanged"
+        stages.log({"stage": "declined", "reason": reason, "before": before})
+        return WritebackOutcome("declined", reason, before, None)
+    return _write(stages, controller, run_dir, before, intended)
 
-    if "backup" in stages:
-        before = {a: float(v) for a, v in stages["backup"]["before"].items()}
+
+def _backup(stages: _Stages, controller: AxisController, run_dir: Path) -> dict[str, float]:
+    """The offsets the round starts from: journaled (round 1 also to the backup file,
+    which keeps the offsets from before the first round, for rollback)."""
+    if "backup" in stages.done:
+        return {a: float(v) for a, v in stages.done["backup"]["before"].items()}
+    before = _axes(controller.read_offsets())
+    if stages.round == 1:
+        save_backup(run_dir, before, controller.name)
+        stages.log({"stage": "backup", "before": before, "file": BACKUP_NAME})
     else:
-        before = _axes(controller.read_offsets())
-        if round == 1:
-            save_backup(run_dir, before, controller.name)
-            log({"stage": "backup", "before": before, "file": BACKUP_NAME})
-        else:  # the file keeps the offsets from before the first round, for rollback
-            log({"stage": "backup", "before": before})
-    before_v = np.array([before[a] for a in AXES])
+        stages.log({"stage": "backup", "before": before})
+    return before
 
-    new = _axes(before_v - delta)
+
+def _refusal(delta: np.ndarray, new: dict[str, float], max_abs_offset_mm: float,
+             offsets_at_start: dict[str, float] | None) -> str | None:
+    """Why the correction is refused (None: it is not): a round's |Δρ_i|, or the total
+    since the run started, beyond max_abs_offset_mm."""
     too_big = [f"Δρ_{a} = {d:+.4f} mm" for a, d in zip(AXES, delta, strict=True)
                if abs(d) > max_abs_offset_mm]
     if offsets_at_start is not None:
@@ -113,33 +151,40 @@ def write_back(
                     "started" for a in AXES
                     if abs(offsets_at_start[a] - new[a]) > max_abs_offset_mm
                     and abs(delta[AXES.index(a)]) <= max_abs_offset_mm]
-    if too_big:
-        reason = (f"refused: {', '.join(too_big)} beyond max_abs_offset_mm = "
-                  f"{max_abs_offset_mm:g}; nothing written")
-        log({"stage": "refused", "reason": reason, "before": before})
-        return WritebackOutcome("refused", reason, before, None)
+    if not too_big:
+        return None
+    return (f"refused: {', '.join(too_big)} beyond max_abs_offset_mm = "
+            f"{max_abs_offset_mm:g}; nothing written")
 
-    if "intent" not in stages:
-        # A drive with no OFFSET register: the station holds the offsets, nothing
-        # reaches the drive, and the question must not say otherwise.
-        held = getattr(controller, "held_by", "controller") == "station"
-        verb = "hold" if held else "write"
-        what = f"{verb.capitalize()} offsets " if round == 1 else \
-            f"Closed loop, round {round}: {verb} offsets "
-        where = (" in the station? (the drive takes no zero offset over Modbus: the station "
-                 "holds them, and the report says where to enter them in the drive)"
-                 if held else " to the controller?")
-        question = what + ", ".join(
-            f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + where \
-            + (f" ({note})" if note else "")
-        if not operator.confirm(question):
-            reason = "declined by the operator; offsets unchanged"
-            log({"stage": "declined", "reason": reason, "before": before})
-            return WritebackOutcome("declined", reason, before, None)
-        log({"stage": "intent", "before": before, "written": new})
-    else:
-        new = {a: float(v) for a, v in stages["intent"]["written"].items()}
 
+def _intent(stages: _Stages, controller: AxisController, operator: Operator,
+            before: dict[str, float], new: dict[str, float], note: str | None
+            ) -> dict[str, float] | None:
+    """The offsets to write, asked of the operator and journaled before any write (a
+    journaled intent is written again as it was); None: declined."""
+    if "intent" in stages.done:
+        return {a: float(v) for a, v in stages.done["intent"]["written"].items()}
+    # A drive with no OFFSET register: the station holds the offsets, nothing
+    # reaches the drive, and the question must not say otherwise.
+    held = getattr(controller, "held_by", "controller") == "station"
+    verb = "hold" if held else "write"
+    what = f"{verb.capitalize()} offsets " if stages.round == 1 else \
+        f"Closed loop, round {stages.round}: {verb} offsets "
+    where = (" in the station? (the drive takes no zero offset over Modbus: the station "
+             "holds them, and the report says where to enter them in the drive)"
+             if held else " to the controller?")
+    question = what + ", ".join(
+        f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + where \
+        + (f" ({note})" if note else "")
+    if not operator.confirm(question):
+        return None
+    stages.log({"stage": "intent", "before": before, "written": new})
+    return new
+
+
+def _write(stages: _Stages, controller: AxisController, run_dir: Path,
+           before: dict[str, float], new: dict[str, float]) -> WritebackOutcome:
+    """Write ``new`` and read it back; on a fault, the backup is written back."""
     try:
         readback = _axes(controller.write_offsets([new[a] for a in AXES]))
     except KeyboardInterrupt:
@@ -149,17 +194,17 @@ def write_back(
         # `orthocal resume` writes the whole correction again.
         try:
             controller.write_offsets([before[a] for a in AXES])
-            log({"stage": "interrupted-restored", "before": before})
+            stages.log({"stage": "interrupted-restored", "before": before})
         except DeviceError as exc2:
-            log({"stage": "failed", "reason": f"interrupted; restore failed: {exc2}",
-                 "before": before})
+            stages.log({"stage": "failed", "reason": f"interrupted; restore failed: {exc2}",
+                        "before": before})
         raise
     except DeviceError as exc:
         try:
             controller.write_offsets([before[a] for a in AXES])
         except DeviceError as exc2:
-            log({"stage": "failed", "reason": f"{exc}; restore failed: {exc2}",
-                 "before": before})
+            stages.log({"stage": "failed", "reason": f"{exc}; restore failed: {exc2}",
+                        "before": before})
             from station.errors import RunFailed
 
             raise RunFailed(
@@ -167,9 +212,9 @@ def write_back(
                 f"the controller's offsets are uncertain: run `orthocal rollback {run_dir}`"
             ) from exc2
         reason = f"write-back failed ({exc}); the backed-up offsets were restored"
-        log({"stage": "failed-restored", "reason": reason, "before": before})
+        stages.log({"stage": "failed-restored", "reason": reason, "before": before})
         return WritebackOutcome("failed-restored", reason, before, None)
-    log({"stage": "done", "before": before, "written": readback})
+    stages.log({"stage": "done", "before": before, "written": readback})
     return WritebackOutcome("written", None, before, readback)
 
 
