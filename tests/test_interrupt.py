@@ -298,8 +298,10 @@ def test_kill_9_then_resume_gives_the_uninterrupted_result(
     assert rounds >= o.scenario.round
     if o.scenario.noise == 0:  # where the uninterrupted run ended, for the same reason
         assert result["loop"] == ref["loop"]
-    else:  # noisy gauges may not let a verification show ±converge_mm: it says so
-        assert result["loop"]["stopped"] in ("converged", "not-converged")
+    else:  # noisy gauges may not let a verification show ±converge_mm: it says so,
+        # having measured again (not-converged) or written every round it may (a
+        # leftover seen at 95 % is written: max_iterations)
+        assert result["loop"]["stopped"] in ("converged", "not-converged", "max_iterations")
     assert result["converged"] is (result["loop"]["stopped"] == "converged")
     if "again" in name:  # the pass the kill interrupted was measured once, and pooled
         assert result["iterations"][2]["passes"] == ["v2", "v2+1"]
