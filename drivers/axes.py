@@ -21,7 +21,6 @@ import numpy as np
 
 from drivers.errors import (
     AlarmError,
-    ControllerConnectionError,
     ControllerError,
     EStopError,
     MoveTimeout,
@@ -111,7 +110,7 @@ class ModbusAxisController(ModbusLink):
 
     def move(self, targets: Sequence[float], speed_mm_s: float | None = None) -> None:
         """Write SPEED (if given), the three targets in one write, then the move command
-        (all again, once, if the connection was lost meanwhile).
+        (all again if the drive was unreachable or silent meanwhile).
         Exception 3 on the targets → TargetRefused."""
         rho = _vec3(targets, "targets")
         if not self.map.has_role("SOFT_MIN") and self._given_limits is not None:
@@ -122,21 +121,20 @@ class ModbusAxisController(ModbusLink):
         items = [(reg, reg.encode(v)) for reg, v in
                  zip(self.map.axis_registers("TARGET"), rho, strict=True)]
         # A drive that lost power while this was being sent holds its power-up targets
-        # (where the axes stand), and perhaps its power-up speed: after a reconnect
-        # everything is written again, once, before the command counts as given (the
-        # same targets, already checked; a second loss fails the move).
-        for _ in range(2):
-            seen = self.reconnects
+        # (where the axes stand), and perhaps its power-up speed: after an interruption
+        # (a reconnect, or an answer only after silence) everything is sent again, the
+        # same targets, already checked. Past three sends the wait for the arrival is
+        # the judge: a drive that forgot the move does not arrive, and the wait stops
+        # the axes at its deadline.
+        for _ in range(3):
+            seen = self.interruptions
             if speed_mm_s is not None:
                 self._write_speed(speed_mm_s)
             self.write_words(items, "write targets", refused=f"targets {format_mm(rho)}")
             self.note_target(rho)
             self.send_command("move")
-            if self.reconnects == seen:
+            if self.interruptions == seen:
                 return
-        raise ControllerConnectionError(
-            self.device, f"the connection was lost twice while commanding the move to "
-                         f"{format_mm(rho)}")
 
     def as_commanded(self, targets: Sequence[float]) -> np.ndarray:
         """The targets as the drive holds them: rounded to its TARGET registers'
@@ -155,12 +153,12 @@ class ModbusAxisController(ModbusLink):
             raise ValueError(f"speed {speed_mm_s} mm/s rounds to 0 at the register resolution")
         speed = items[0][0].decode(items[0][1])
         # Written already since the connection last came up: a request per move saved
-        # (a drive that lost power may have reset it, so a reconnect writes it again).
-        if self._speed_written == (speed, self.reconnects):
+        # (a drive that lost power may have reset it, so an interruption writes it again).
+        if self._speed_written == (speed, self.interruptions):
             return
         self.write_words(items, "write speed")
         self._speed = speed
-        self._speed_written = (speed, self.reconnects)
+        self._speed_written = (speed, self.interruptions)
 
     def _current_speed(self) -> float:
         if self._speed is None:

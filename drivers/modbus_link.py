@@ -22,9 +22,10 @@ Wire discipline:
   reconnect, again and again within ``reconnect_s`` (each attempt reported as
   ``{"event": "reconnect", ...}``, success as ``"reconnected"``), then
   :class:`ControllerConnectionError`;
-* after a reconnect, or a request that failed for good (on a serial line a drive
-  that lost power is only silent), the drive's STATUS is read before anything
-  else: a drive
+* after a reconnect, a request that failed for good, or one answered only on a
+  retry after no reply (on a serial line a drive that lost power is only silent,
+  and one off for less than the retries only late), the drive's STATUS is read
+  before anything else: a drive
   that came back with HOMED clear (power cut) raises :class:`ControllerNotHomed`
   for every request but homing and status, so a position counted from a lost
   reference is never returned.
@@ -139,6 +140,10 @@ class ModbusLink:
         #: successful reconnects after a lost connection (the station re-checks the
         #: drive's reference when this changes)
         self.reconnects = 0
+        #: requests answered only after the drive was unreachable or silent (a
+        #: reconnect, or a retry after no reply): it may have restarted in between,
+        #: forgetting what it was just sent (a move re-sends it, drivers.axes)
+        self.interruptions = 0
         # set when a reconnect found HOMED clear; cleared by a completed homing
         # after a reconnect: None until STATUS says whether the reference survived
         self._lost_reference: bool | None = False
@@ -202,10 +207,19 @@ class ModbusLink:
             self._check_reference(op)
             kind, error = "timeout", ""
             attempts = self.retries + 1
+            silent = False
             for attempt in range(1, attempts + 1):
                 rr, kind, error = self._attempt(op, call, fc=fc, count=count, refused=refused)
                 if rr is not None:
+                    if silent and not self._checking:
+                        # An answer after silence: on a serial line a drive that lost
+                        # power for less than the retries is only late. Its reference
+                        # is checked before this answer counts.
+                        self.interruptions += 1
+                        self._lost_reference = None
+                        self._check_reference(op)
                     return rr
+                silent = silent or kind == "timeout"
                 if attempt < attempts:
                     self._event(event="retry", device=self.device, op=op, error=error,
                                 attempt=attempt)
@@ -276,6 +290,7 @@ class ModbusLink:
             elapsed = time.monotonic() - started
             if up:
                 self.reconnects += 1
+                self.interruptions += 1
                 self._event(event="reconnected", device=self.device, op=op,
                             attempts=attempt, elapsed_s=round(elapsed, 3))
                 self._lost_reference = None  # unknown until STATUS is read again

@@ -187,6 +187,8 @@ def expected_protocol(mocker: MockerFixture, transport: str, pairs: Sequence[Pai
 
 POS_UM = (310250, -1, 200251)
 POS_PAYLOAD = b"".join(i32_words(v) for v in POS_UM)
+#: STATUS and ALARM_CODE of a drive that is homed and in position, no alarm
+HOMED_STATUS = struct.pack(">HH", 0b00101, 0)
 
 
 # --- Modbus TCP ------------------------------------------------------------------------------
@@ -309,16 +311,21 @@ def test_tcp_malformed_reply_is_retried(mocker: MockerFixture) -> None:
     pairs = [
         (mbap(1, 1, read_req(20, 6)), bytes(bad)),
         (mbap(2, 1, read_req(20, 6)), mbap(2, 1, read_rsp(POS_PAYLOAD))),
+        # answered only on a retry: the drive may have restarted meanwhile, so its
+        # STATUS is read before the answer counts (HOMED set: it does)
+        (mbap(3, 1, read_req(1, 2)), mbap(3, 1, read_rsp(HOMED_STATUS))),
     ]
     with expected_protocol(mocker, "tcp", pairs, on_event=events.append) as ctl:
         ctl.read_positions()
-    assert len(events) == 1 and events[0]["op"] == "read positions"
+    assert [e["event"] for e in events] == ["retry", "reference-check"]
+    assert events[0]["op"] == "read positions" and events[1]["lost"] is False
 
 
 def test_tcp_wrong_function_in_reply_is_not_trusted(mocker: MockerFixture) -> None:
     pairs = [
         (mbap(1, 1, read_req(20, 6)), mbap(1, 1, bytes([4, 12]) + POS_PAYLOAD)),
         (mbap(2, 1, read_req(20, 6)), mbap(2, 1, read_rsp(POS_PAYLOAD))),
+        (mbap(3, 1, read_req(1, 2)), mbap(3, 1, read_rsp(HOMED_STATUS))),
     ]
     with expected_protocol(mocker, "tcp", pairs) as ctl:
         ctl.read_positions()
@@ -356,11 +363,13 @@ def test_rtu_garbled_reply_is_retried(mocker: MockerFixture) -> None:
     events: list[dict] = []
     good = rtu(1, read_rsp(POS_PAYLOAD))
     garbled = good[:-1] + bytes([good[-1] ^ 0xFF])  # bad CRC
-    pairs = [(rtu(1, read_req(20, 6)), garbled), (rtu(1, read_req(20, 6)), good)]
+    pairs = [(rtu(1, read_req(20, 6)), garbled), (rtu(1, read_req(20, 6)), good),
+             (rtu(1, read_req(1, 2)), rtu(1, read_rsp(HOMED_STATUS)))]
     with expected_protocol(mocker, "rtu", pairs, on_event=events.append) as ctl:
         pos = ctl.read_positions()
     assert pos[2] == pytest.approx(200.251, abs=1e-12)
-    assert [(e["op"], e["attempt"]) for e in events] == [("read positions", 1)]
+    assert [(e["event"], e.get("op"), e.get("attempt")) for e in events] == [
+        ("retry", "read positions", 1), ("reference-check", None, None)]
 
 
 def test_rtu_move_and_exception_3(mocker: MockerFixture) -> None:

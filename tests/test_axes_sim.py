@@ -190,7 +190,10 @@ def test_dropped_reply_is_retried(transport: str) -> None:
     with station(transport, faults=Faults(drop_next=1)) as (sim, ctl, events):
         np.testing.assert_allclose(ctl.read_positions(), PI0, atol=1e-9)
         assert sim.stats.dropped == 1
-        assert [(e["event"], e["op"]) for e in events] == [("retry", "read positions")]
+        # answered on a retry: the drive is checked before the answer counts
+        assert [(e["event"], e.get("op")) for e in events] == [
+            ("retry", "read positions"), ("reference-check", None)]
+        assert events[-1]["lost"] is False and ctl.interruptions == 1
 
 
 def test_random_drops_are_reproducible_and_survived(transport: str) -> None:

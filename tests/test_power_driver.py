@@ -187,3 +187,46 @@ def test_rtu_power_cut_is_silence_then_a_drive_that_must_be_homed() -> None:
     finally:
         ctl.close()
         sim.close()
+
+
+def test_rtu_power_blip_answered_by_a_retry_is_still_a_drive_that_must_be_homed() -> None:
+    # Off for less than the retries last: the request is only late, answered on a
+    # retry, by a drive that restarted counting from zero. That answer must not be
+    # returned as a position: the reference is checked first.
+    sim = SimController(VirtualOrthoglide(GEOMETRY, speed_mm_s=400.0, accel_mm_s2=20000.0),
+                        transport="rtu")
+    sim.start()
+    events: list[dict] = []
+    ctl = ModbusAxisController(**sim.client_kwargs(), timeout_s=0.2, retries=8,
+                               on_event=events.append)
+    try:
+        ctl.connect()
+        assert np.allclose(ctl.read_positions(), PI0, atol=1e-3)
+        sim.power_cut(0.3, count_mm=0.0)
+        _wait_cut(sim)
+        with pytest.raises(ControllerNotHomed, match="HOMED clear"):
+            ctl.read_positions()
+        assert any(e["event"] == "retry" for e in events)
+        assert events[-1]["event"] == "reference-check" and events[-1]["lost"] is True
+        assert ctl.interruptions == 1 and ctl.reconnects == 0
+        ctl.home(timeout_s=5.0)
+        assert np.allclose(ctl.read_positions(), PI0, atol=1e-3)
+    finally:
+        ctl.close()
+        sim.close()
+
+
+def test_a_reply_lost_once_is_retried_and_the_drive_checked_before_it_counts() -> None:
+    sim, ctl, events = _rig(reconnect_s=5.0)
+    try:
+        sim.faults.drop_next = 1
+        assert np.allclose(ctl.read_positions(), PI0, atol=1e-3)
+        kinds = [e["event"] for e in events]
+        assert kinds[-2:] == ["retry", "reference-check"] and events[-1]["lost"] is False
+        target = PI0 + np.array([5.0, 0.0, -5.0])
+        sim.faults.drop_next = 1  # the targets' reply: the move is sent again, whole
+        got = ctl.move_and_wait(target, speed_mm_s=400.0, timeout_s=3.0)
+        assert np.allclose(got, target, atol=2e-3) and ctl.interruptions == 2
+    finally:
+        ctl.close()
+        sim.close()

@@ -217,8 +217,10 @@ def test_faults_are_injected_on_any_map(a_map: RegisterMap) -> None:
         sim.faults.busy_next = 1
         assert ctl.read_status().homed
         assert sim.stats.dropped == 1 and sim.stats.busy == 1
-        assert [e["error"] for e in events] == ["no reply within 0.25 s",
-                                                "Modbus exception 6 (server device busy)"]
+        assert [e["error"] for e in events if e["event"] == "retry"] == [
+            "no reply within 0.25 s", "Modbus exception 6 (server device busy)"]
+        # the answer after no reply counted only once the drive was checked
+        assert [e["lost"] for e in events if e["event"] == "reference-check"] == [False]
         sim.faults.estop = True
         assert ctl.read_status().estop  # the gateway's active-low EMG bit included
         sim.faults.estop = False
