@@ -9,6 +9,7 @@ import dataclasses
 import re
 from pathlib import Path
 
+from drivers.map_files import is_map_file
 from station.commands.options import DriveOptions, RunOptions, SimOptions
 from station.commands.simulation import sim_params
 from station.config.simulation import as_text, read_simulation
@@ -32,7 +33,7 @@ def load_simulation(path: str | Path) -> SimOptions:
     doc = read_simulation(path)
     s, d = doc.simulation, doc.simulation.drive
     profile = s.profile
-    if profile is not None and profile.endswith(".toml") and not Path(profile).is_absolute():
+    if profile is not None and is_map_file(profile) and not Path(profile).is_absolute():
         profile = str((path.parent / profile).resolve())
     options = SimOptions(
         seed=s.seed, true_drho=s.true_drho, true_dl=s.true_dl, true_tilt=s.true_tilt,
