@@ -12,6 +12,8 @@ the nonlinear identification both use these functions.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -233,7 +235,56 @@ def row_planes(keys: Sequence[Key], geometry: Geometry, mount_offsets=None) -> n
 
 def _key_planes(keys: Sequence[Key], geometry: Geometry) -> np.ndarray:
     """Each key's gauge plane off L/2 (mm): 0, or its posture's second plane."""
-    return np.array([plane_offset(k[0], geometry) for k in keys])
+    return KeyTable.of(keys, geometry).planes
+
+
+@dataclass(frozen=True)
+class KeyTable:
+    """What a list of keys means on the nominal machine, whatever the parameters:
+    each key's row among the distinct ones, their leg and direction indices, their
+    nominal joints, Π0's, and each key's gauge plane off L/2. The fit evaluates the
+    same keys hundreds of times with other parameters; parsing and checking them
+    once per list (an LRU cache) is most of what an evaluation cost."""
+
+    rows: np.ndarray
+    legs: np.ndarray
+    dirs: np.ndarray
+    rho_s: np.ndarray
+    rho_0: np.ndarray
+    planes: np.ndarray
+
+    @staticmethod
+    def of(keys: Sequence[Key], geometry: Geometry) -> KeyTable:
+        try:
+            frozen = tuple(tuple(k) for k in keys)
+            hash(frozen)
+        except TypeError:  # not a sequence of keys: let the checks below say so
+            return _key_table(keys, geometry)
+        return _cached_key_table(frozen, geometry)
+
+
+def _key_table(keys: Sequence[Key], geometry: Geometry) -> KeyTable:
+    row_of: dict[Key, int] = {}
+    rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
+    distinct = list(row_of)
+    legs = np.empty(len(distinct), dtype=int)
+    dirs = np.empty(len(distinct), dtype=int)
+    rho_s = np.empty((len(distinct), 3))
+    for n, key in enumerate(distinct):
+        sign, leg, direction = check_key(key)
+        legs[n], dirs[n] = AXIS_INDEX[leg], AXIS_INDEX[direction]
+        rho_s[n] = posture(sign, leg, geometry)
+    planes = np.array([plane_offset(k[0], geometry) for k in keys])
+    table = KeyTable(np.asarray(rows, dtype=int), legs, dirs, rho_s,
+                      posture("0", None, geometry), planes)
+    for array in (table.rows, legs, dirs, rho_s, table.rho_0, planes):
+        array.flags.writeable = False  # shared by every caller of the cache
+    return table
+
+
+@lru_cache(maxsize=256)
+def _cached_key_table(keys: tuple[Key, ...], geometry: Geometry) -> KeyTable:
+    return _key_table(keys, geometry)
 
 
 def _row_bows(keys: Sequence[Key], bow: Bows) -> np.ndarray:
@@ -255,20 +306,11 @@ def _solve(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray, dL: np.nda
     among the distinct ones, their leg and direction indices, their joints, Π0's
     joints, the end points, the axis directions, the axes' points)."""
     # Repeated keys (one per cycle) share one solve: the fit calls this per step.
-    row_of: dict[Key, int] = {}
-    rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
-    distinct = list(row_of)
-    legs = np.empty(len(distinct), dtype=int)
-    dirs = np.empty(len(distinct), dtype=int)
-    rho_s = np.empty((len(distinct), 3))
-    for n, key in enumerate(distinct):
-        sign, leg, direction = check_key(key)
-        legs[n], dirs[n] = AXIS_INDEX[leg], AXIS_INDEX[direction]
-        rho_s[n] = posture(sign, leg, geometry)
-    rho_0 = posture("0", None, geometry)
+    table = KeyTable.of(keys, geometry)
+    rows, legs, dirs, rho_s, rho_0 = table.rows, table.legs, table.dirs, table.rho_s, table.rho_0
     u, c = axis_directions(tilt), axis_origins(gap)
     p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u, c)
-    return np.asarray(rows), legs, dirs, rho_s, rho_0, p_all, u, c
+    return rows, legs, dirs, rho_s, rho_0, p_all, u, c
 
 
 def _deviations_mounted(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray,

@@ -108,13 +108,15 @@ def coverage_factor(dof: float | None, coverage: float = 0.95) -> float:
     t). Two cycles of a six-gauge run give about 12 dof and k95 = 2.18, not 1.96;
     k99.73 = 3.8, not 3: "within 3 standard errors" fails three times as often as
     the normal promises. ``dof`` None or infinite: the normal's k."""
-    from scipy.stats import norm, t  # imported on demand, as in lack_of_fit
+    # scipy.special, not scipy.stats: the same functions (t.ppf is stdtrit) without
+    # scipy.stats' half second of imports and its per-call argument handling.
+    from scipy import special
 
     if not (0.0 < coverage < 1.0):
         raise ValueError(f"coverage must lie in (0, 1), got {coverage!r}")
     tail = (1.0 + coverage) / 2.0
     if dof is None or not math.isfinite(dof):
-        return float(norm.ppf(tail))
+        return float(special.ndtri(tail))
     if dof <= 0:
         raise ValueError(f"coverage_factor needs dof > 0, got {dof!r}")
-    return float(t.ppf(tail, dof))
+    return float(special.stdtrit(dof, tail))

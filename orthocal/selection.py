@@ -130,6 +130,15 @@ def _allowed_rss(result: Identification, geometry: Geometry, noise_sigma: float,
     return fit.rss, fit.to_dict()
 
 
+def f_upper(dfn: float, dfd: float, F: float) -> float:
+    """P(F(dfn, dfd) > F): the upper tail scipy.stats' ``f.sf(F, dfn, dfd)`` gives
+    (1 at F ≤ 0), from scipy.special, without scipy.stats' half second of imports
+    and per-call overhead (a run's model tests call it dozens of times)."""
+    from scipy.special import fdtrc
+
+    return 1.0 if F <= 0 else float(fdtrc(dfn, dfd, F))
+
+
 def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
                 noise_dof: float, shared_zero: bool = True,
                 allowance: Allowance | None = None) -> ModelTest:
@@ -141,8 +150,6 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
     follows F(K − p, ν) whatever the number of cycles per deviation.
     ``allowance``: the stated errors the misfit may be excused by, within their
     bounds and with their shapes (orthocal.misfit)."""
-    from scipy.stats import f as f_dist  # imported on demand, as scipy.optimize
-
     keys = list(result.keys)
     distinct, C = means_covariance(keys, shared_zero)
     p = len(result.names)
@@ -162,11 +169,11 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
         g = J.T @ W @ mean_res
         rss = float(mean_res @ W @ mean_res - g @ np.linalg.solve(J.T @ W @ J, g))
     F = max(rss, 0.0) / dof_model / noise_sigma**2
-    p_value = float(f_dist.sf(F, dof_model, noise_dof))
+    p_value = float(f_upper(dof_model, noise_dof, F))
     if took is not None:  # what the noise alone would have said
-        took["p_without_allowance"] = float(f_dist.sf(
-            took["rss_without_allowance_mm2"] / dof_model / noise_sigma**2, dof_model,
-            noise_dof))
+        took["p_without_allowance"] = float(f_upper(
+            dof_model, noise_dof,
+            took["rss_without_allowance_mm2"] / dof_model / noise_sigma**2))
     return ModelTest(result.model, True, F=float(F), dof_model=dof_model,
                      dof_noise=float(noise_dof), p_value=p_value, passed=False,
                      residual_rms=float(result.residual_rms), allowance=took)
@@ -205,8 +212,6 @@ def nested_test(small: Identification, big: Identification, geometry: Geometry,
     the lack of fit, spread over K − p dof, weighs it against the stands.
     ``allowance``: both residuals those the stated errors can leave, at the least
     (:func:`lack_of_fit`)."""
-    from scipy.stats import f as f_dist
-
     extra = len(big.names) - len(small.names)
     if extra <= 0 or small.stand_model is None or big.stand_model is None:
         return None
@@ -217,7 +222,7 @@ def nested_test(small: Identification, big: Identification, geometry: Geometry,
         drop = (_marginal_rss(small, geometry, noise_sigma, shared_zero)
                 - _marginal_rss(big, geometry, noise_sigma, shared_zero))
     F = max(drop, 0.0) / extra / noise_sigma**2
-    return float(F), extra, float(f_dist.sf(F, extra, noise_dof))
+    return float(F), extra, float(f_upper(extra, noise_dof, F))
 
 
 def select_model(

@@ -95,7 +95,7 @@ def history_main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _read_result(run_dir: str) -> tuple[Path, dict[str, Any]]:
+def read_result(run_dir: str) -> tuple[Path, dict[str, Any]]:
     """RUN_DIR's result.json and its path; bad input said in one line."""
     path = Path(run_dir) / "result.json"
     try:
@@ -107,10 +107,9 @@ def _read_result(run_dir: str) -> tuple[Path, dict[str, Any]]:
 
 
 def _entry_of_dir(run_dir: str) -> dict[str, Any]:
-    from station.history.entry import entry_of
-    from station.history.store import profile_of
+    from station.history.entry import entry_of, profile_of
 
-    path, result = _read_result(run_dir)
+    path, result = read_result(run_dir)
     if not result.get("finished"):
         raise BadInput(f"{path}: the run has not finished")
     return entry_of(result, profile_of(Path(run_dir)))
@@ -138,7 +137,7 @@ def export_main(args: argparse.Namespace) -> int:
     from station.history.export import ExportError, csv_lines, linuxcnc
     from station.history.twincat import twincat
 
-    _, result = _read_result(args.run_dir)
+    _, result = read_result(args.run_dir)
     try:
         if args.to == "csv":
             text = csv_lines(result)

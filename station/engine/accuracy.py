@@ -140,7 +140,7 @@ def pool_layout(rounds: Sequence[RoundLayout]) -> Layout | None:
     the offsets), over the names the most rounds hold. A round inconsistent with the
     pool of the others (χ² test at POOL_LEVEL) is left out: the first round's
     misplaced stands bias it most."""
-    from scipy.stats import chi2
+    from scipy.special import chdtrc  # the χ² upper tail (scipy.stats' chi2.sf)
 
     if not rounds:
         return None
@@ -155,8 +155,8 @@ def pool_layout(rounds: Sequence[RoundLayout]) -> Layout | None:
             others = pool_layout([o for o in kept if o is not r])
             assert others is not None
             d = r.values - others.values
-            p = float(chi2.sf(float(d @ np.linalg.solve(r.covariance + others.covariance, d)),
-                              len(names)))
+            p = float(chdtrc(len(names),
+                             float(d @ np.linalg.solve(r.covariance + others.covariance, d))))
             if p < worst_p:
                 worst, worst_p = r, p
         if worst is None or worst_p >= POOL_LEVEL:

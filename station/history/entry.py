@@ -13,6 +13,7 @@ before; as left, from the last verification's estimate and the offsets the run l
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from orthocal import AXES
@@ -94,3 +95,16 @@ def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str,
         "tool_after_rms_mm": _num(after.get("rms_mm")),
         "reversal": _reversal(result), "instruments": _instruments(result),
     }
+
+
+def profile_of(run_dir: Path) -> str | None:
+    """The register map the run's controller used, from its config.toml (here, not
+    in store.py: `orthocal compare` and `export` read it without SQLAlchemy)."""
+    import tomllib
+
+    try:
+        data = tomllib.loads((Path(run_dir) / "config.toml").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    profile = (data.get("controller") or {}).get("profile")
+    return str(profile) if profile is not None else None

@@ -15,7 +15,7 @@ from sqlalchemy import JSON, Boolean, Float, String, create_engine, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column
 
-from station.history.entry import entry_of
+from station.history.entry import entry_of, profile_of
 
 #: The file the default store lives in, beside the run directories (--out).
 DEFAULT_NAME = "history.sqlite"
@@ -96,15 +96,3 @@ class HistoryStore:
                 self.record(entry_of(result, profile_of(result_path.parent)))
                 count += 1
         return count
-
-
-def profile_of(run_dir: Path) -> str | None:
-    """The register map the run's controller used, from its config.toml."""
-    import tomllib
-
-    try:
-        data = tomllib.loads((Path(run_dir) / "config.toml").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    profile = (data.get("controller") or {}).get("profile")
-    return str(profile) if profile is not None else None
