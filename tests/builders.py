@@ -25,6 +25,21 @@ from station.rundir.journal import read_journal
 #: that rule, in test_closed_loop_run and test_interrupt, allow further passes).
 FAST: dict[str, Any] = {"cycles": 2, "readings": 3, "settle_s": 0.0, "max_extra_passes": 0}
 
+#: The report of the tests' simulated runs: without its figures ([report] figures =
+#: false), unless the test says ``figures=True``. Drawing them costs a second of CPU
+#: per run, most of what a short run costs, and the hundreds of runs whose subject
+#: is not the report would pay it for nothing; the figures have their own tests
+#: (test_report, test_tool_report, test_truth_first, test_unchanged's golden run).
+NO_FIGURES: dict[str, Any] = {"figures": False}
+
+def no_figures_file(folder: Path) -> str:
+    """A SIM.toml (``run --simulate FILE``) holding only :data:`NO_FIGURES` as its
+    ``[report]``: what a test's command line (in a subprocess too) runs with."""
+    path = Path(folder) / "no-figures.sim.toml"
+    path.write_text("[report]\nfigures = false\n", encoding="utf-8")
+    return str(path)
+
+
 #: A station of two gauges moved from leg to leg (config as data).
 BASE: dict[str, Any] = {
     "indicators": [{"name": "A", "port": "/dev/a"}, {"name": "B", "port": "/dev/b"}],
@@ -63,11 +78,13 @@ def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
               writeback: dict[str, Any] | None = None, speed: float | None = None,
               backlash: str | None = None, profile: str | None = None,
               leg_bow: str | None = None, gauge_scale: str | None = None,
-              uncertainty: dict[str, Any] | None = None) -> RunOptions:
+              uncertainty: dict[str, Any] | None = None, figures: bool = False
+              ) -> RunOptions:
     """``orthocal run --simulate`` into ``out``, with the test knobs the command
     line does not offer: ``hook`` (given the running virtual station), ``procedure``
     and ``writeback`` overrides, ``indicators`` (2 or 6), ``speed`` (mm/s),
-    ``uncertainty`` (the config's [uncertainty])."""
+    ``uncertainty`` (the config's [uncertainty]), ``figures`` (the report's,
+    :data:`NO_FIGURES`)."""
     if uncertainty is not None:
         # what a user writes in the config's [uncertainty] (the simulated legs and
         # gauges are as the test makes them)
@@ -86,7 +103,7 @@ def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
         drive=DriveOptions(motion=motion, profile=drive_profile, accel=drive_accel,
                            delays=drive_delays, sequence=drive_sequence),
         indicators=indicators, procedure=procedure, writeback=writeback, speed_mm_s=speed,
-        station_hook=hook)
+        report=None if figures else NO_FIGURES, station_hook=hook)
     return RunOptions(sim=sim, plan=plan, out=Path(out), yes=yes, json=json)
 
 

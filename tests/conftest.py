@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from builders import CliOutcome, Prepare, Rig
+from builders import NO_FIGURES, CliOutcome, Prepare, Rig
 
 from drivers.sim.station import TIME_SCALE_ENV
 
@@ -132,12 +132,13 @@ def orthocal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     """``orthocal(*argv, prepare=fn)`` runs the real command line in-process
     (``station.commands.cli.main``); ``prepare(rig, station)`` gets every virtual
     station the command starts (run, then resume or rollback), whose config gives
-    the devices :data:`CLI_TIMEOUT_S`, and the rig records every register write."""
+    the devices :data:`CLI_TIMEOUT_S` and a report without figures (``figures=True``:
+    with them), and the rig records every register write."""
     from station.commands import simulation
     from station.commands.cli import main
 
     def invoke(*argv: str, prepare: Prepare | None = None, out_dir: Path | None = None,
-               rig: Rig | None = None) -> CliOutcome:
+               rig: Rig | None = None, figures: bool = False) -> CliOutcome:
         rig = rig if rig is not None else Rig()
         real_start = simulation.start_station
 
@@ -151,6 +152,8 @@ def orthocal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
             def config() -> dict[str, Any]:
                 c = describe()
                 c["controller"]["timeout_s"] = CLI_TIMEOUT_S
+                if not figures:  # as the builders' runs (builders.NO_FIGURES)
+                    c.setdefault("report", dict(NO_FIGURES))
                 for ind in c["indicators"]:
                     ind["timeout_s"] = CLI_TIMEOUT_S
                 return c

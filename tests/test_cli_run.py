@@ -9,6 +9,7 @@ import socket
 from pathlib import Path
 
 import pytest
+from builders import no_figures_file
 from truth import assert_truth, drho
 
 from drivers.sim.station import VirtualStation
@@ -129,7 +130,8 @@ def test_kill_9_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
 
     out = tmp_path / "runs"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "station", "run", "--simulate", "--seed", "11",
+        [sys.executable, "-m", "station", "run", "--simulate", no_figures_file(tmp_path),
+         "--seed", "11",
          "--true-drho", "1.1,-0.4,0.6", "--out", str(out), "--json"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:

@@ -40,7 +40,7 @@ def test_a_first_round_that_leaves_more_than_converge_mm_takes_a_second(tmp_path
     # the verification measured again where it cannot yet show ±converge_mm: a bias
     # of several µm left by the first round is then written, whatever the noise drew
     result = run(tmp_path, capsys, true_drho=true, mount_error=8.0,
-                 procedure={**PROCEDURE, "max_extra_passes": 2})
+                 procedure={**PROCEDURE, "max_extra_passes": 2}, figures=True)
     # Two cycles of 1 µm gauges: what the second round leaves (its own error, the
     # drive's rounding) is shown within ±converge_mm in most runs, not all; the run
     # says which, and its statement holds either way.

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from builders import FAST
+from builders import FAST, no_figures_file
 from close import assert_same
 from truth import assert_truth, drho
 
@@ -91,7 +91,8 @@ sys.exit(main(sys.argv[2:]))
 
 def run_argv(out: Path, noise: float, seed: int = 21,
              procedure: dict[str, Any] | None = None) -> list[str]:
-    return ["run", "--simulate", "--seed", str(seed), "--true-drho", TRUE_DRHO,
+    return ["run", "--simulate", no_figures_file(out.parent), "--seed", str(seed),
+            "--true-drho", TRUE_DRHO,
             "--noise", str(noise), "--mount-error", MOUNT_ERROR,
             "--sim-procedure", json.dumps({**PROCEDURE, **(procedure or {})}),
             "--sim-speed", "20000", "--yes", "--json", "--out", str(out)]

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from builders import FAST, CliOutcome, Rig, on_setup
+from builders import FAST, CliOutcome, Rig, no_figures_file, on_setup
 
 from drivers.sim.station import VirtualStation
 from station import report
@@ -39,7 +39,7 @@ def run_args(tmp_path: Path, *extra: str, procedure: dict[str, Any] | None = Non
              drho: tuple[float, float, float] = TRUE_DRHO) -> list[str]:
     # Stands placed exactly (--mount-error 0) and 2 µm gauges: one write-back, two
     # phases, so the faults injected per setup land where these tests count them.
-    return ["run", "--simulate", "--seed", str(SEED), "--true-drho",
+    return ["run", "--simulate", no_figures_file(tmp_path), "--seed", str(SEED), "--true-drho",
             ",".join(str(v) for v in drho), "--mount-error", "0", "--noise", "0.002",
             "--out", str(tmp_path / "runs"),
             "--sim-speed", SPEED, "--sim-procedure", json.dumps(procedure or FAST),

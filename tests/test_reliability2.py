@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from builders import FAST, Rig, on_setup
+from builders import FAST, Rig, no_figures_file, on_setup
 from close import assert_same
 
 from drivers.sim.station import VirtualStation
@@ -35,7 +35,8 @@ SPEED = "20000"
 
 
 def argv(out: Path, *extra: str) -> list[str]:
-    return ["run", "--simulate", "--seed", str(SEED), "--true-drho", TRUE_DRHO, "--noise", "0",
+    return ["run", "--simulate", no_figures_file(out.parent), "--seed", str(SEED),
+            "--true-drho", TRUE_DRHO, "--noise", "0",
             "--out", str(out), "--sim-speed", SPEED, "--sim-procedure", json.dumps(FAST),
             *extra]
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from builders import FAST, simulated, station_data
+from builders import FAST, no_figures_file, simulated, station_data
 from close import assert_same
 
 import orthocal
@@ -97,7 +97,8 @@ TRUE_DRHO = (0.7, -1.1, 0.5)
 
 
 def run_argv(out: Path) -> list[str]:
-    return ["run", "--simulate", "--seed", "11", "--true-drho", ",".join(map(str, TRUE_DRHO)),
+    return ["run", "--simulate", no_figures_file(out.parent), "--seed", "11",
+            "--true-drho", ",".join(map(str, TRUE_DRHO)),
             "--noise", "0", "--sim-procedure", json.dumps(PROCEDURE), "--sim-speed", "20000",
             # stands exact: every phase's cycles counted below
             "--mount-error", "0", "--yes", "--json", "--out", str(out)]

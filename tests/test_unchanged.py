@@ -89,7 +89,8 @@ def normal_html(page: str, run_dir: str) -> str:
 
 
 def seeded_run(out: Path) -> Path:
-    options = simulated(out, seed=21, true_drho=(1.1, -0.7, 0.4), noise=0.0, procedure=FAST)
+    options = simulated(out, seed=21, true_drho=(1.1, -0.7, 0.4), noise=0.0, procedure=FAST,
+                        figures=True)
     with contextlib.redirect_stdout(io.StringIO()):
         assert cmd_run.run(options) == 0
     (run_dir,) = list(out.glob("run-*"))

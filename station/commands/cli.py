@@ -39,6 +39,7 @@ _COMMANDS = {
     "history": "station.commands.history:history_main",
     "compare": "station.commands.history:compare_main",
     "export": "station.commands.history:export_main",
+    "report": "station.commands.report:main",
 }
 
 
@@ -311,6 +312,11 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("run_a", metavar="RUN_A", help="the earlier run's directory")
     compare.add_argument("run_b", metavar="RUN_B", help="the later run's directory")
     compare.add_argument("--json", action="store_true", help="print one JSON document")
+
+    report = sub.add_parser("report", help="draw a run's report.html again from its "
+                            "result.json, figures included")
+    report.add_argument("run_dir", metavar="RUN_DIR")
+    report.add_argument("--no-figures", action="store_true", help="without its figures")
 
     export = sub.add_parser("export", help="a run's final offsets in a controller's terms")
     export.add_argument("run_dir", metavar="RUN_DIR")

@@ -39,7 +39,7 @@ class SimOptions:
     """The virtual station of ``run --simulate``: its hidden errors (None: random
     offsets, no leg-length error, no tilt, axes that meet, straight legs, true
     gauges), noise, stands and drive; and what the command line does not offer: the
-    six-indicator style, procedure and write-back overrides, a faster machine, and a
+    six-indicator style, procedure, write-back and report overrides, a faster machine, and a
     hook that reaches the running station."""
 
     seed: int | None = None
@@ -58,6 +58,7 @@ class SimOptions:
     indicators: int = 2
     procedure: Mapping[str, Any] | None = None
     writeback: Mapping[str, Any] | None = None
+    report: Mapping[str, Any] | None = None  # the config's [report] for the run
     speed_mm_s: float | None = None
     station_hook: StationHook | None = None
 

@@ -42,7 +42,7 @@ def load_simulation(path: str | Path) -> SimOptions:
         gauge_scale=as_text(s.gauge_scale), profile=profile,
         drive=DriveOptions(motion=d.motion, profile=as_text(d.profile), accel=as_text(d.accel),
                            delays=as_text(d.delays), sequence=d.sequence),
-        procedure=doc.procedure, writeback=doc.writeback)
+        procedure=doc.procedure, writeback=doc.writeback, report=doc.report)
     try:  # the options' own checks, said in the file's words
         sim_params(options)
     except BadInput as exc:

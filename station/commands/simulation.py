@@ -88,6 +88,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         "indicators": int(options.indicators),
         "procedure": None if options.procedure is None else dict(options.procedure),
         "writeback": None if options.writeback is None else dict(options.writeback),
+        "report": None if options.report is None else dict(options.report),
         "speed_mm_s": options.speed_mm_s,
     }
 
@@ -320,14 +321,16 @@ def station_config(station: Any, params: dict[str, Any]) -> dict[str, Any]:
     """The config a simulated run uses (station.toml's shape): the virtual station's
     hardware as it describes itself, the procedure (SIM_PROCEDURE, then the
     simulation's ``procedure``) and the write-back (``max_abs_offset_mm`` 3 mm, then
-    the simulation's ``writeback``). What a test hook put in the station's own
-    description wins: it stands for what a user writes in the file."""
+    the simulation's ``writeback``), and the simulation's ``report``. What a test
+    hook put in the station's own description wins: it stands for what a user writes
+    in the file."""
     hardware = station.config()
     return {**hardware,
             "procedure": {**SIM_PROCEDURE, **(params.get("procedure") or {}),
                           **hardware.get("procedure", {})},
             "writeback": {"max_abs_offset_mm": 3.0, **(params.get("writeback") or {}),
-                          **hardware.get("writeback", {})}}
+                          **hardware.get("writeback", {})},
+            "report": {**(params.get("report") or {}), **hardware.get("report", {})}}
 
 
 def restart_station(

@@ -22,6 +22,7 @@ from pydantic import (
     model_validator,
 )
 
+from station.config.messages import format_validation_error
 from station.errors import BadInput, read_input
 
 AxisName = Literal["x", "y", "z"]
@@ -352,6 +353,12 @@ class HistoryConfig(_Strict):
     enabled: bool = True
 
 
+class ReportConfig(_Strict):
+    # report.html's figures cost a second or more of CPU at the end of every run on a
+    # small station PC; false writes the report without them (`orthocal report` draws them).
+    figures: bool = True
+
+
 class StationConfig(_Strict):
     machine: MachineConfig = Field(default_factory=MachineConfig)
     controller: ControllerConfig = Field(default_factory=ControllerConfig)
@@ -361,6 +368,7 @@ class StationConfig(_Strict):
     writeback: WritebackConfig = Field(default_factory=WritebackConfig)
     uncertainty: UncertaintyConfig = Field(default_factory=UncertaintyConfig)
     history: HistoryConfig = Field(default_factory=HistoryConfig)
+    report: ReportConfig = Field(default_factory=ReportConfig)
 
     @model_validator(mode="after")
     def _references(self) -> StationConfig:
@@ -408,49 +416,6 @@ class StationConfig(_Strict):
 
 
 # --- loading -------------------------------------------------------------------------
-
-
-def _loc(loc: tuple[Any, ...]) -> str:
-    out = ""
-    for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        else:
-            out += f".{part}" if out else str(part)
-    return out
-
-
-def _message(err: dict[str, Any]) -> str:
-    kind, ctx = err["type"], err.get("ctx") or {}
-    if kind == "extra_forbidden":
-        return "unknown key"
-    if kind == "missing":
-        return "missing (required)"
-    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        op = {"greater_than": ">", "greater_than_equal": ">=",
-              "less_than": "<", "less_than_equal": "<="}[kind]
-        bound = next(iter(ctx.values()))
-        if isinstance(bound, float) and bound.is_integer():
-            bound = int(bound)
-        return f"must be {op} {bound}"
-    if kind == "value_error":
-        return str(ctx.get("error", err["msg"]))
-    return err["msg"][0].lower() + err["msg"][1:]
-
-
-def format_validation_error(source: str, exc: ValidationError) -> str:
-    """One line for the first error, naming the field path; more are counted."""
-    errors = exc.errors()
-    first = errors[0]
-    loc = _loc(tuple(first["loc"]))
-    msg = _message(first)
-    # A model validator reports "field: problem" itself; fold it into the path.
-    if first["type"] == "value_error" and re.match(r"^[\w\[\].]+: ", msg):
-        sub, _, msg = msg.partition(": ")
-        loc = f"{loc}.{sub}" if loc else sub
-    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
-    where = f"{loc}: " if loc else ""
-    return f"{source}: {where}{msg}{more}"
 
 
 def parse_config(data: dict[str, Any], source: str = "config") -> StationConfig:

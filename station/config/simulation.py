@@ -3,8 +3,8 @@
 The file holds a ``[simulation]`` table (the hidden errors of the virtual machine,
 its gauges' noise and stands, the register map its drive serves) with a
 ``[simulation.drive]`` table (how that drive moves, never told to the station),
-and may hold the station's own ``[procedure]`` and ``[writeback]`` tables for the
-run. Every key is the long option of ``run --simulate`` without its dashes
+and may hold the station's own ``[procedure]``, ``[writeback]`` and ``[report]``
+tables for the run. Every key is the long option of ``run --simulate`` without its dashes
 (``--true-drho`` is ``true_drho``, ``--drive-profile`` is ``drive.profile``);
 an option given on the command line wins over the file. Values are TOML's own:
 ``true_drho = [0.7, -1.1, 0.35]``, ``backlash = 0.01`` or ``[0.01, 0, 0.02]``.
@@ -61,12 +61,13 @@ class SimulationTable(_Strict):
 
 
 class SimulationFile(_Strict):
-    """The whole file: the virtual machine, and the station's procedure and
-    write-back overrides for the run (checked as the station config checks them)."""
+    """The whole file: the virtual machine, and the station's procedure, write-back
+    and report overrides for the run (checked as the station config checks them)."""
 
     simulation: SimulationTable = SimulationTable()
     procedure: dict[str, Any] | None = None
     writeback: dict[str, Any] | None = None
+    report: dict[str, Any] | None = None
 
 
 def read_simulation(path: Path) -> SimulationFile:

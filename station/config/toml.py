@@ -57,7 +57,7 @@ def toml_text(data: dict[str, Any], header: str = "") -> str:
     for array in ("indicators", "setups"):
         for item in data.get(array) or ():
             table(f"[[{array}]]", item)
-    for section in ("procedure", "writeback", "uncertainty"):
+    for section in ("procedure", "writeback", "uncertainty", "history", "report"):
         # an empty [uncertainty] (every input at its default) is left out
         if data.get(section) is not None and (section != "uncertainty" or data[section]):
             table(f"[{section}]", data[section])

@@ -34,14 +34,16 @@ def _done_cycles(records: list[dict[str, Any]]) -> dict[tuple[str, int, int], di
             for r in records if r["type"] == "cycle"}
 
 
-def _import_plotting() -> None:
+def _import_plotting(figures: bool) -> None:
     try:
         # The nonlinear identification's optimiser and the model test's and the loop's
-        # distributions (~0.6 and ~0.5 s of imports), likewise.
+        # distributions (~0.6 s of imports), likewise.
         import scipy.optimize
-        import scipy.stats  # noqa: F401
+        import scipy.special  # noqa: F401
     except Exception:
         pass  # identification imports them again and reports any failure itself
+    if not figures:
+        return  # a report without figures ([report] figures = false) needs no matplotlib
     try:
         import matplotlib
 
@@ -58,8 +60,8 @@ def execute(ctx: Run) -> tuple[int, dict[str, Any]]:
     # scipy.optimize (~0.3 s), which would otherwise load after the last reading,
     # with the operator waiting; loaded now, they overlap the first moves, where
     # the main thread only waits on the drive.
-    warm = threading.Thread(target=_import_plotting, name="orthocal-import-plotting",
-                            daemon=True)
+    warm = threading.Thread(target=_import_plotting, args=(ctx.config.report.figures,),
+                            name="orthocal-import-plotting", daemon=True)
     warm.start()
     try:
         with Progress(ctx.plan, ctx.config.procedure.verify) as progress:
@@ -174,6 +176,6 @@ def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
         say(f"orthocal: result.json not written ({storage_message(ctx.run_dir, exc)})")
         return
     try:
-        report.write_html(result, ctx.run_dir)
+        report.write_html(result, ctx.run_dir, figures=ctx.config.report.figures)
     except Exception as exc:  # the report is a view; result.json and the journal are the record
         say(f"orthocal: report.html not written ({type(exc).__name__}: {exc})")

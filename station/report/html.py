@@ -326,13 +326,15 @@ def _info_list(result: Mapping[str, Any]) -> str:
     return '<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
 
 
-def _loop_section(result: Mapping[str, Any]) -> str:
+def _loop_section(result: Mapping[str, Any], figures: bool = True) -> str:
     """The closed loop's rounds (station.report.rounds): plot and table."""
     from station.report import rounds
     from station.report.plots import pyplot, to_svg
 
+    plot = None
     try:
-        plot = rounds.plot_rounds(result, pyplot, to_svg)
+        if figures:
+            plot = rounds.plot_rounds(result, pyplot, to_svg)
     except Exception:
         plot = None  # the table still tells the rounds
     return rounds.html_section(result, plot)
@@ -350,15 +352,18 @@ def _field_plot(result: Mapping[str, Any]) -> str | None:
         return None  # the section's tables still state the figures
 
 
-def render_html(result: dict) -> str:
-    """The whole report as one HTML string (no external resources)."""
+def render_html(result: dict, figures: bool = True) -> str:
+    """The whole report as one HTML string (no external resources); ``figures``
+    False: without its figures ([report] figures, `orthocal report` draws them)."""
     title = "Calibration report"
     when = format_when(result.get("started"))
+    plot_tool = plot_dev = plot_par = None
     try:
-        plot_tool = _field_plot(result)
-        plot_dev = plot_deviations(result)
-        plot_par = plot_parameters(result)
-        loop_section = _loop_section(result)
+        if figures:
+            plot_tool = _field_plot(result)
+            plot_dev = plot_deviations(result)
+            plot_par = plot_parameters(result)
+        loop_section = _loop_section(result, figures)
     finally:
         if "matplotlib" in sys.modules:
             release_fonts()
@@ -391,9 +396,15 @@ def render_html(result: dict) -> str:
     held = held_by_station(result)
     if held:
         badge += '<span class="status st-refused st-held">Offsets held by the station</span>'
+    meta = ("Orthoglide-type parallel machine · leg-parallelism calibration · "
+            f"{esc(when)}")
+    no_figures = "" if figures else (
+        '<p class="small">Drawn without its figures: '
+        f"<code>orthocal report {esc(result.get('run_dir') or 'RUN_DIR')}</code> draws "
+        "them.</p>")
     body = f"""
 <h1>{esc(title)}{esc(sim_tag)}{badge}</h1>
-<p class="meta">Orthoglide-type parallel machine · leg-parallelism calibration · {esc(when)}</p>
+<p class="meta">{meta}</p>{no_figures}
 {header_boxes(result)}{_info_list(result)}
 <h2>What was done</h2>
 {what_was_done(result)}
@@ -425,8 +436,9 @@ def render_html(result: dict) -> str:
             f"<body>{body}</body></html>\n")
 
 
-def write_html(result: dict, run_dir: Path) -> Path:
-    """Write ``run_dir/report.html``: self-contained, plots inline as SVG."""
+def write_html(result: dict, run_dir: Path, figures: bool = True) -> Path:
+    """Write ``run_dir/report.html``: self-contained, plots inline as SVG (none
+    when ``figures`` is False)."""
     path = Path(run_dir) / "report.html"
-    write_atomic(path, render_html(result))
+    write_atomic(path, render_html(result, figures))
     return path
