@@ -1,7 +1,7 @@
 """``[report] figures`` and ``orthocal report RUN_DIR``: a run may write its report
 without figures (the tests' runs do, builders.NO_FIGURES), and the report command
-draws the whole report again from result.json; the run directory's config.toml
-keeps the choice (and the journal's header, which a resume reads)."""
+draws the whole report again from result.json; the run directory's config.toml,
+which a resumed run reads, keeps the choice."""
 
 from __future__ import annotations
 
