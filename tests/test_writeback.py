@@ -14,6 +14,7 @@ import pytest
 from drivers.axes import ModbusAxisController
 from drivers.errors import ReadbackMismatch
 from drivers.sim.station import VirtualStation
+from station.engine.replay import Replay
 from station.engine.writeback import BACKUP_NAME, rollback, write_back
 from station.rundir.journal import Journal, read_journal, replay
 
@@ -134,10 +135,10 @@ def test_resumed_write_back_does_not_apply_twice(tmp_path: Path, rig) -> None:
                run_dir=tmp_path, journal=journal, operator=Operator())
     # killed after the write, before "done" was journaled: drop that record
     lines = (tmp_path / "journal.jsonl").read_text().splitlines()
-    state = replay([json.loads(x) for x in lines[:-1]])
+    state = Replay.of([json.loads(x) for x in lines[:-1]])
     op = Operator()
     out = write_back(controller=controller, identified=identified, max_abs_offset_mm=3.0,
-                     run_dir=tmp_path, journal=journal, operator=op, prior=state)
+                     run_dir=tmp_path, journal=journal, operator=op, replay=state)
     assert out.status == "written" and op.asked == []  # the intent was already confirmed
     np.testing.assert_allclose(station.offsets, np.array(START) - 0.2, atol=1e-9)
 
@@ -181,7 +182,7 @@ def test_ctrl_c_between_offset_writes_restores_the_backup(tmp_path: Path, rig) -
 
     out = write_back(controller=controller, identified=identified, max_abs_offset_mm=3.0,
                      run_dir=tmp_path, journal=journal, operator=Operator(),
-                     prior=replay(records))
+                     replay=Replay.of(records))
     assert out.status == "written"
     np.testing.assert_allclose(station.offsets, [0.15, -0.3, 0.95], atol=1e-9)
 
@@ -234,15 +235,15 @@ def test_a_resumed_round_two_writes_its_journaled_intent_once(tmp_path: Path, ri
     journal.append({"type": "writeback", "round": 2, "stage": "intent", "before": before2,
                     "written": new2})
     controller.write_offsets([new2[a] for a in "xyz"])
-    state = replay(read_journal(tmp_path / "journal.jsonl"))
+    state = Replay.of(read_journal(tmp_path / "journal.jsonl"))
     again = write_back(controller=controller, identified={**ident, "drho_x": 0.02},
                        max_abs_offset_mm=3.0, run_dir=tmp_path, journal=journal,
-                       operator=Operator(), prior=state, round=2)
+                       operator=Operator(), replay=state, round=2)
     assert again.status == "written"
     np.testing.assert_allclose(station.offsets, [new2[a] for a in "xyz"], atol=1e-9)
     # round 1, replayed, is not redone either
     done = write_back(controller=controller, identified=ident, max_abs_offset_mm=3.0,
                       run_dir=tmp_path, journal=journal, operator=Operator(),
-                      prior=replay(read_journal(tmp_path / "journal.jsonl")), round=1)
+                      replay=Replay.of(read_journal(tmp_path / "journal.jsonl")), round=1)
     assert done.status == "written"
     np.testing.assert_allclose(station.offsets, [new2[a] for a in "xyz"], atol=1e-9)

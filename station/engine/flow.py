@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +29,7 @@ from station.console.operator import Operator
 from station.engine import accuracy, budget, reversal, verdict
 from station.engine.closed_loop import round_phase
 from station.engine.devices import Devices
+from station.engine.replay import Replay
 from station.engine.results import (
     ident_json,
     measurement_fields,
@@ -62,6 +64,12 @@ class Run:
     checker: MotionChecker | None = None
     t0: float = field(default_factory=time.monotonic)
     result: dict[str, Any] = field(default_factory=dict)
+
+    @cached_property
+    def replay(self) -> Replay:
+        """The steps the journal holds (``records`` as the run started or resumed):
+        each one the run does not take again (station.engine.replay)."""
+        return Replay.of(self.records)
 
 
 class Flow:
@@ -221,7 +229,7 @@ class Flow:
             controller=ctx.devices.controller,
             identified=correction(values, self.target), note=note,
             max_abs_offset_mm=ctx.config.writeback.max_abs_offset_mm, run_dir=ctx.run_dir,
-            journal=ctx.journal, operator=ctx.operator, prior=ctx.state, round=round,
+            journal=ctx.journal, operator=ctx.operator, replay=ctx.replay, round=round,
             offsets_at_start=first.before if first is not None else None)
         self.outcomes.append(outcome)
         self.iterations[round - 1]["offsets_written"] = outcome.written

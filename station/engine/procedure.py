@@ -29,11 +29,6 @@ from station.rundir.directory import now_iso
 from station.rundir.journal import JOURNAL_NAME, read_journal
 
 
-def _done_cycles(records: list[dict[str, Any]]) -> dict[tuple[str, int, int], dict[str, Any]]:
-    return {(r["phase"], int(r["setup"]), int(r["cycle"])): r
-            for r in records if r["type"] == "cycle"}
-
-
 def _import_plotting(figures: bool) -> None:
     try:
         # The nonlinear identification's optimiser and the model test's and the loop's
@@ -79,9 +74,7 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
     seq = Sequencer(
         config=ctx.config, plan=ctx.plan, controller=ctx.devices.controller,
         indicators=ctx.devices.indicators, journal=ctx.journal, operator=ctx.operator,
-        checker=checker, done_cycles=_done_cycles(ctx.records),
-        done_setups={(r["phase"], int(r["setup"])) for r in ctx.records
-                     if r["type"] == "setup_done"},
+        checker=checker, replay=ctx.replay,
         progress=progress)
     result = base_result(ctx.run_dir, ctx.config, ctx.sim, ctx.started_iso)
     ctx.result = result

@@ -36,6 +36,7 @@ from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine.guard import PlungerGuard
 from station.engine.mover import Mover, ReadingSource
+from station.engine.replay import Replay
 from station.engine.sizing import VerificationSizing
 from station.engine.statistics import (
     Measurement,
@@ -99,8 +100,7 @@ class Sequencer:
         journal: Journal,
         operator: Operator,
         checker: MotionChecker,
-        done_cycles: Mapping[tuple[str, int, int], dict[str, Any]] | None = None,
-        done_setups: set[tuple[str, int]] | None = None,
+        replay: Replay | None = None,
         progress: Progress | None = None,
     ) -> None:
         self.config = config
@@ -110,9 +110,8 @@ class Sequencer:
         self.journal = journal
         self.operator = operator
         self.checker = checker
-        # (phase, setup, cycle) -> the journal's "cycle" record
-        self.done_cycles = dict(done_cycles or {})
-        self.done_setups = set(done_setups or set())
+        # what a resumed run's journal holds: its cycles' checkpoints and ended setups
+        self.replay = replay if replay is not None else Replay()
         self.progress = progress or _no_progress
         self.counters = Counters()
         # Why the stop after a fault did not reach the drive (None: it did, or no
@@ -223,7 +222,7 @@ class Sequencer:
             if spread <= proc.repeatability_mm or repeats >= proc.max_repeats:
                 break
             repeats += 1
-            if (phase, sp.index, cycle + 1) not in self.done_cycles:
+            if self.replay.cycle(phase, sp.index, cycle + 1) is None:
                 self.journal.append({"type": "repeat", "phase": phase, "setup": sp.index,
                                      "spread_mm": spread, "repeat": repeats})
             self.progress("repeat", phase=phase, setup=sp.index, spread=spread)
@@ -241,7 +240,7 @@ class Sequencer:
             cycles_used=len(used), cycles_max=self.sizing.cycle_limit(phase), repeats=repeats,
             flagged=spread > proc.repeatability_mm, spread_mm=spread,
             cycles=[c for c, *_ in used])
-        if (phase, sp.index) not in self.done_setups:
+        if not self.replay.setup_done(phase, sp.index):
             self.journal.append({"type": "setup_done", "phase": phase, "setup": sp.index,
                                  "cycles": outcome.cycles, "repeats": repeats,
                                  "spread_mm": spread, "flagged": outcome.flagged})
@@ -264,7 +263,7 @@ class Sequencer:
 
     def _cycle(self, phase: str, sp: SetupPlan, cycle: int
                ) -> tuple[dict[str, float], list[float], dict[str, float]]:
-        done = self.done_cycles.get((phase, sp.index, cycle))
+        done = self.replay.cycle(phase, sp.index, cycle)
         if done is not None:
             self.progress("cycle_replayed", phase=phase, setup=sp.index, cycle=cycle)
             return (dict(done["deviations"]), list(done.get("within_std", [])),

@@ -30,7 +30,8 @@ from drivers.errors import DeviceError
 from drivers.files import write_atomic
 from orthocal import AXES
 from station.console.operator import Operator
-from station.rundir.journal import Journal, JournalState
+from station.engine.replay import Replay
+from station.rundir.journal import Journal
 
 BACKUP_NAME = "offsets_backup.json"
 
@@ -95,14 +96,15 @@ def write_back(
     run_dir: Path,
     journal: Journal,
     operator: Operator,
-    prior: JournalState | None = None,
+    replay: Replay | None = None,
     round: int = 1,
     offsets_at_start: dict[str, float] | None = None,
     note: str | None = None,
 ) -> WritebackOutcome:
     """Write-back round ``round`` as its journaled stages (module docstring): each
-    one the journal already holds (``prior``) is replayed, not done again."""
-    stages = _Stages(journal, round, prior.writebacks.get(round, {}) if prior is not None else {})
+    one the journal already holds (``replay``, station.engine.replay) is replayed,
+    not done again."""
+    stages = _Stages(journal, round, replay.stages(round) if replay is not None else {})
     ended = stages.final()
     if ended is not None:
         return ended
