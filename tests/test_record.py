@@ -5,6 +5,7 @@ an independent validator (jsonschema), as another tool reading them would."""
 from __future__ import annotations
 
 import json
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,10 @@ from station.record import schema
 GOLDEN = Path(__file__).parent / "data" / "golden_run"
 
 
+@cache
 def validator(kind: str) -> Draft202012Validator:
+    """One validator per kind (checking the schema and building its validator for
+    each of a run's hundreds of journal lines cost seconds)."""
     doc = json.loads(schema.shipped(kind))
     Draft202012Validator.check_schema(doc)
     return Draft202012Validator(doc)
