@@ -16,7 +16,7 @@ from drivers.errors import ReadbackMismatch
 from drivers.sim.station import VirtualStation
 from station.engine.replay import Replay
 from station.engine.writeback import BACKUP_NAME, rollback, write_back
-from station.rundir.journal import Journal, read_journal, replay
+from station.rundir.journal import Journal, read_journal
 
 START = (0.25, -0.5, 1.0)
 
@@ -216,8 +216,8 @@ def test_a_second_round_keeps_the_first_backup_and_checks_the_total(tmp_path: Pa
     # The backup file still holds the offsets from before the first round ...
     assert json.loads((tmp_path / BACKUP_NAME).read_text())["offsets_mm"] == start
     records = read_journal(tmp_path / "journal.jsonl")
-    state = replay(records)
-    assert sorted(state.writebacks) == [1, 2, 3] and "done" in state.writebacks[3]
+    stages = Replay.of(records)
+    assert sorted(stages.writebacks) == [1, 2, 3] and "done" in stages.stages(3)
     # ... so rollback undoes every round at once.
     rollback(controller, tmp_path, journal)
     np.testing.assert_allclose(station.offsets, START, atol=1e-9)

@@ -196,22 +196,21 @@ class Flow:
             self.iterations.append(entry)
         if n == 0:
             self.result.update(fields)
-            journaled = ctx.state.identification
-            if journaled is None or len(journaled.get("passes", ["m"])) < len(passes):
+            if not ctx.replay.identified(0, passes):
                 ctx.journal.append({"type": "identification", **ident_json(ident),
                                     **({"passes": passes} if again else {})})
-                ctx.state.identification = {"passes": passes}
+                ctx.replay.note_identified(0, passes)
             return judged.verdict
         self.result["verification"] = verification_fields(
             ctx.config, fields, self.idents[n - 1], self.target,
             edge=edge_of(rev, ctx.config.procedure.approach))
-        journaled = ctx.state.verifications.get(n)
-        if journaled is None or len(journaled.get("passes", [phase])) < len(passes):
+        if not ctx.replay.identified(n, passes):
             ctx.journal.append({"type": "verification", "round": n, "phase": phase,
                                 **({"passes": passes} if again else {}),
                                 **ident_json(ident),
                                 "deviations_rms_mm": fields["deviations_rms_mm"],
                                 "significant": sig, "verdict": judged.verdict})
+            ctx.replay.note_identified(n, passes)
         return judged.verdict
 
     def write(self, round: int) -> str:

@@ -151,13 +151,8 @@ class JournalState:
     header: dict[str, Any] | None = None
     readings: dict[tuple[str, str], list[float]] = field(default_factory=dict)
     mounted: list[tuple[str, int]] = field(default_factory=list)  # (phase, setup)
-    identification: dict[str, Any] | None = None
-    writeback: dict[str, dict[str, Any]] = field(default_factory=dict)  # stage -> record
-    # Closed loop: write-back round -> stage -> record (``writeback`` is round 1),
-    # and the identification of each verification by round.
-    writebacks: dict[int, dict[str, dict[str, Any]]] = field(default_factory=dict)
-    verification: dict[str, Any] | None = None
-    verifications: dict[int, dict[str, Any]] = field(default_factory=dict)
+    # The steps a resume does not take again (cycles, identifications, write-back
+    # stages) are indexed by station.engine.replay, not here.
     finished: dict[str, Any] | None = None
     events: int = 0
     retries: int = 0
@@ -180,15 +175,6 @@ def replay(records: list[dict[str, Any]]) -> JournalState:
             state.readings[(rec["stop"], rec["indicator"])] = [float(v) for v in rec["values"]]
         elif kind == "setup":
             state.mounted.append((rec["phase"], int(rec["setup"])))
-        elif kind == "identification":
-            state.identification = rec
-        elif kind == "writeback":
-            # Records from before the closed loop carry no round: they are round 1.
-            state.writebacks.setdefault(int(rec.get("round", 1)), {})[rec["stage"]] = rec
-            state.writeback = state.writebacks[1] if 1 in state.writebacks else {}
-        elif kind == "verification":
-            state.verifications[int(rec.get("round", 1))] = rec
-            state.verification = state.verifications.get(1)
         elif kind == "finished":
             state.finished = rec
         elif kind == "event":
