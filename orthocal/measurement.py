@@ -208,16 +208,17 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
         bow = {**{(n[4], n[5]): float(h) for n, h in zip(BOW_NAMES, fitted, strict=True)},
                **{g: h + float(fitted[BOW_NAMES.index(f"bow_{g[0]}{g[1]}")])
                   for g, h in (bow or {}).items()}}
-    planes = _key_planes(keys, geometry)
+    table = KeyTable.of(keys, geometry)
+    planes = table.planes
     if mount_offsets is not None or bow is not None or planes.any():
         offsets = np.zeros(len(keys)) if mount_offsets is None else \
             np.asarray(mount_offsets, dtype=float).reshape(-1)
         if offsets.shape != (len(keys),):
             raise ValueError(f"mount_offsets needs one value per key ({len(keys)}), "
                              f"got shape {np.shape(mount_offsets)}")
-        return _deviations_mounted(keys, geometry, drho, dL, tilt, gap, offsets + planes,
+        return _deviations_mounted(table, geometry, drho, dL, tilt, gap, offsets + planes,
                                    None if bow is None else _row_bows(keys, bow))
-    rows, legs, dirs, rho_s, rho_0, p_all, u, c = _solve(keys, geometry, drho, dL, tilt, gap)
+    rows, legs, dirs, rho_s, rho_0, p_all, u, c = _solve(table, geometry, drho, dL, tilt, gap)
     p_s, p_0 = p_all[:-1], np.broadcast_to(p_all[-1], rho_s.shape)
     m = geometry.mount_plane
     reading_s = reading_at(rho_s, p_s, legs, dirs, drho, m, u, c)
@@ -229,13 +230,8 @@ def deviations(keys: Sequence[Key], geometry: Geometry, params=None,
 def row_planes(keys: Sequence[Key], geometry: Geometry, mount_offsets=None) -> np.ndarray:
     """The base-fixed plane x_i = M (mm) each row of ``keys`` is read in: L/2, or
     its posture's second plane, plus its stand's ``mount_offsets`` (None: 0)."""
-    m = geometry.mount_plane + _key_planes(keys, geometry)
+    m = geometry.mount_plane + KeyTable.of(keys, geometry).planes
     return m if mount_offsets is None else m + np.asarray(mount_offsets, dtype=float)
-
-
-def _key_planes(keys: Sequence[Key], geometry: Geometry) -> np.ndarray:
-    """Each key's gauge plane off L/2 (mm): 0, or its posture's second plane."""
-    return KeyTable.of(keys, geometry).planes
 
 
 @dataclass(frozen=True)
@@ -299,27 +295,26 @@ def _row_bows(keys: Sequence[Key], bow: Bows) -> np.ndarray:
     return np.array([float(bow.get((k[1], k[2]), 0.0)) for k in keys])
 
 
-def _solve(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray, dL: np.ndarray,
+def _solve(table: KeyTable, geometry: Geometry, drho: np.ndarray, dL: np.ndarray,
            tilt: np.ndarray, gap: np.ndarray) -> tuple[Any, ...]:
-    """The end points of the distinct keys' test postures and of Π0 (its last row),
+    """The end points of the table's distinct keys' test postures and of Π0 (its last row),
     in one solve (Newton when tilted or the axes do not meet): (each key's row
     among the distinct ones, their leg and direction indices, their joints, Π0's
     joints, the end points, the axis directions, the axes' points)."""
     # Repeated keys (one per cycle) share one solve: the fit calls this per step.
-    table = KeyTable.of(keys, geometry)
     rows, legs, dirs, rho_s, rho_0 = table.rows, table.legs, table.dirs, table.rho_s, table.rho_0
     u, c = axis_directions(tilt), axis_origins(gap)
     p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u, c)
     return rows, legs, dirs, rho_s, rho_0, p_all, u, c
 
 
-def _deviations_mounted(keys: Sequence[Key], geometry: Geometry, drho: np.ndarray,
+def _deviations_mounted(table: KeyTable, geometry: Geometry, drho: np.ndarray,
                         dL: np.ndarray, tilt: np.ndarray, gap: np.ndarray,
                         offsets: np.ndarray, bows: np.ndarray | None = None) -> np.ndarray:
     """:func:`deviations` with one indicator plane per row, M = L/2 + offset, and
     (``bows``, one sagitta per row, or None) each row's leg bowed: the same batched
     solves, the readings taken in each row's own plane."""
-    rows, legs, dirs, rho_s, rho_0, p_all, u, c = _solve(keys, geometry, drho, dL, tilt, gap)
+    rows, legs, dirs, rho_s, rho_0, p_all, u, c = _solve(table, geometry, drho, dL, tilt, gap)
     # expand the distinct solves to the rows, each read in its own plane
     p_s, rho_r = p_all[:-1][rows], rho_s[rows]
     rho_0r = np.broadcast_to(rho_0, rho_r.shape)

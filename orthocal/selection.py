@@ -169,11 +169,11 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
         g = J.T @ W @ mean_res
         rss = float(mean_res @ W @ mean_res - g @ np.linalg.solve(J.T @ W @ J, g))
     F = max(rss, 0.0) / dof_model / noise_sigma**2
-    p_value = float(f_upper(dof_model, noise_dof, F))
+    p_value = f_upper(dof_model, noise_dof, F)
     if took is not None:  # what the noise alone would have said
-        took["p_without_allowance"] = float(f_upper(
+        took["p_without_allowance"] = f_upper(
             dof_model, noise_dof,
-            took["rss_without_allowance_mm2"] / dof_model / noise_sigma**2))
+            took["rss_without_allowance_mm2"] / dof_model / noise_sigma**2)
     return ModelTest(result.model, True, F=float(F), dof_model=dof_model,
                      dof_noise=float(noise_dof), p_value=p_value, passed=False,
                      residual_rms=float(result.residual_rms), allowance=took)
@@ -222,7 +222,7 @@ def nested_test(small: Identification, big: Identification, geometry: Geometry,
         drop = (_marginal_rss(small, geometry, noise_sigma, shared_zero)
                 - _marginal_rss(big, geometry, noise_sigma, shared_zero))
     F = max(drop, 0.0) / extra / noise_sigma**2
-    return float(F), extra, float(f_upper(extra, noise_dof, F))
+    return float(F), extra, f_upper(extra, noise_dof, F)
 
 
 def select_model(
