@@ -17,6 +17,7 @@ from typing import Any
 from drivers.sim.station import VirtualStation
 from station.commands.options import DriveOptions, ResumeOptions, RunOptions, SimOptions
 from station.config import StationConfig, parse_config
+from station.config.toml import toml_text
 from station.rundir.journal import read_journal
 
 #: A short simulated procedure: two cycles of three readings, no settling, and a
@@ -32,11 +33,12 @@ FAST: dict[str, Any] = {"cycles": 2, "readings": 3, "settle_s": 0.0, "max_extra_
 #: (test_report, test_tool_report, test_truth_first, test_unchanged's golden run).
 NO_FIGURES: dict[str, Any] = {"figures": False}
 
+
 def no_figures_file(folder: Path) -> str:
     """A SIM.toml (``run --simulate FILE``) holding only :data:`NO_FIGURES` as its
     ``[report]``: what a test's command line (in a subprocess too) runs with."""
     path = Path(folder) / "no-figures.sim.toml"
-    path.write_text("[report]\nfigures = false\n", encoding="utf-8")
+    path.write_text(toml_text({"report": NO_FIGURES}), encoding="utf-8")
     return str(path)
 
 

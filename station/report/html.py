@@ -331,10 +331,10 @@ def _loop_section(result: Mapping[str, Any], figures: bool = True) -> str:
     from station.report import rounds
     from station.report.plots import pyplot, to_svg
 
-    plot = None
+    if not figures:
+        return rounds.html_section(result, None)
     try:
-        if figures:
-            plot = rounds.plot_rounds(result, pyplot, to_svg)
+        plot = rounds.plot_rounds(result, pyplot, to_svg)
     except Exception:
         plot = None  # the table still tells the rounds
     return rounds.html_section(result, plot)
