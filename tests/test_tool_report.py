@@ -127,6 +127,19 @@ def synthetic(**kwargs: Any) -> dict[str, Any]:
     return result
 
 
+_PAGES: dict[str, str] = {}
+
+
+def page_of(result: dict[str, Any]) -> str:
+    """``report.render_html(result)``, drawn once per distinct result and worker: most
+    tests here read the two samples' pages, and drawing a page's figures costs about
+    a second of CPU. The page is a function of the result alone."""
+    key = json.dumps(result, sort_keys=True)
+    if key not in _PAGES:
+        _PAGES[key] = report.render_html(result)
+    return _PAGES[key]
+
+
 def _assert_self_contained(page: str) -> None:
     assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:)?//""", page, re.I)
     assert not re.search(r"<script\b|<link\b|<image\b", page, re.I)
@@ -160,14 +173,14 @@ def test_section_states_before_and_after_in_um_right_after_the_result(
 
 
 def test_the_joints_sample_reads_as_the_engine_states_it() -> None:
-    page = report.render_html(_sample("joints"))
+    page = page_of(_sample("joints"))
     sec = text_of(section(page))
     assert "229.6" in sec and "13.7" in sec and "12.0–15.0" in sec and "28.2–37.5" in sec
 
 
 def test_both_objectives_side_by_side_with_the_written_one_marked(
         sample: dict[str, Any]) -> None:
-    sec = section(report.render_html(sample))
+    sec = section(page_of(sample))
     part = sec[sec.index("<h3>The two objectives</h3>"):]
     rows = {r[0].split(":")[0]: r for r in rows_of(part[:part.index("</table>")])}
     assert set(rows) == {"joints", "tool"}
@@ -181,7 +194,7 @@ def test_both_objectives_side_by_side_with_the_written_one_marked(
 
 def test_squareness_with_its_95_interval_and_the_advice(sample: dict[str, Any]) -> None:
     acc = sample["accuracy"]
-    sec = section(report.render_html(sample))
+    sec = section(page_of(sample))
     part = sec[sec.index("<h3>Squareness of the axes</h3>"):]
     rows = rows_of(part[:part.index("</table>")])
     assert [r[0] for r in rows] == ["XY", "XZ", "YZ"]
@@ -196,7 +209,7 @@ def test_squareness_with_its_95_interval_and_the_advice(sample: dict[str, Any]) 
 
 
 def test_the_error_field_is_an_inline_svg_in_the_section(sample: dict[str, Any]) -> None:
-    page = report.render_html(sample)
+    page = page_of(sample)
     sec = section(page)
     assert sec.count("<svg") == 1 and "<figure><svg" in sec
     assert "Figure 1. The tool-point error E over the workspace" in sec
@@ -209,7 +222,7 @@ def test_the_error_field_is_an_inline_svg_in_the_section(sample: dict[str, Any])
 
 def test_the_headline_says_what_the_tool_does(sample: dict[str, Any]) -> None:
     acc = sample["accuracy"]
-    head = text_of(headline(report.render_html(sample)))
+    head = text_of(headline(page_of(sample)))
     assert "legs now parallel to within" in head  # the fact stays
     assert "the legs' parallelism, the method's means, not the tool's accuracy" in head
     assert (f"at the tool, by the identified model, commanded points land within "
@@ -244,7 +257,7 @@ def test_summary_has_the_tool_line_and_labels_the_legs_parallelism(
 
 
 def test_where_the_stands_were(sample: dict[str, Any]) -> None:
-    page = report.render_html(sample)
+    page = page_of(sample)
     part = page[page.index("<h3>Where the stands were</h3>"):]
     rows = {r[0]: r for r in rows_of(part[:part.index("</table>")])}
     assert set(rows) == set(sample["stands"])
@@ -350,7 +363,8 @@ def test_an_axis_leans_by_the_results_decision_not_by_its_95_interval(
             result["accuracy"].pop("squareness_decision", None)
         else:
             result["accuracy"]["squareness_decision"] = decision
-        page = report.render_html(result)
+        # the squareness table and the summary are the subject: no figures to draw
+        page = report.render_html(result, figures=False)
         part = section(page)[section(page).index("<h3>Squareness of the axes</h3>"):]
         verdicts = {r[-1] for r in rows_of(part[:part.index("</table>")])}
         assert verdicts == {"beyond its uncertainty" if leans else "within its uncertainty"}

@@ -371,9 +371,9 @@ def render_html(result: dict, figures: bool = True) -> str:
     # run states it, comes first.
     number = iter(range(1, 4))
     accuracy = tool_section(result, plot_tool, next(number) if plot_tool else None)
-    figures = []
+    drawn = []
     if plot_dev:
-        figures.append(
+        drawn.append(
             f"<figure>{plot_dev}<figcaption>Figure {next(number)}. The 12 leg deviations: "
             "how far each indicator's reading in a test posture differs from its reading in "
             "Π<sub>0</sub>. Before calibration: measured (blue; error bar = std over the "
@@ -381,7 +381,7 @@ def render_html(result: dict, figures: bool = True) -> str:
             "(orange). After calibration: the verification measurement (green), which "
             "should be close to zero.</figcaption></figure>")
     if plot_par:
-        figures.append(
+        drawn.append(
             f"<figure>{plot_par}<figcaption>Figure {next(number)}. Identified parameters "
             "with ±1σ (thick) and ±3σ (thin) error bars; after calibration the re-identified "
             "values should be near zero. In a simulated run the red bar marks the value "
@@ -415,7 +415,7 @@ def render_html(result: dict, figures: bool = True) -> str:
 {budget.section_html(result)}{since.section_html(result)}
 {"<h2>The measurement: the legs' parallelism</h2>" if accuracy else ""}
 {_fit_box(result)}
-{"".join(figures)}
+{"".join(drawn)}
 {loop_section}
 <h2>Identified parameters</h2>
 {_params_table(result)}
