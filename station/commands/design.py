@@ -282,7 +282,7 @@ def _feasible(config: StationConfig, limits: tuple[Any, Any]):
     def check(strokes: Any) -> bool:
         try:
             check_plan(build_plan(config, list(np.atleast_1d(strokes))), config, limits,
-                       checker=checker)
+                       checker=checker, travel=False)
         except (BadInput, ValueError):
             return False
         return True

@@ -232,7 +232,11 @@ class MotionChecker:
         # The signal over this sub-move: the ramp at the extremes of the progress any
         # point of its set has along the move (the same pairing of worst nominal
         # travel and worst signal as the guard makes ahead of the axes).
-        sig_lo, sig_hi = gauges.signal_range(motion.reachable_points(a, b, self.motion, n=2))
+        if gauges.chord is None:  # no signal: nothing to pair, no points to spread
+            sig_lo = sig_hi = np.zeros(len(gauges.names))
+        else:
+            sig_lo, sig_hi = gauges.signal_range(
+                motion.reachable_points(a, b, self.motion, n=2))
         low = high = None
         if margin is not None:
             low = gauges.low + margin - sig_lo
@@ -448,13 +452,16 @@ def check_plan(
     controller_limits: tuple[Sequence[float], Sequence[float]],
     start: Sequence[float] | None = None,
     checker: MotionChecker | None = None,
+    travel: bool = True,
 ) -> Plan:
     """Refuse (BadInput) a plan that leaves the soft limits or the workspace, or
     that would push a plunger past its stroke or lift it off the leg, anywhere
     along any move; name the posture, setup and indicator. Fills plan.limits and
     plan.travel. ``start``: the current joint positions, to check the first move.
     ``checker``: one made for this config and these limits, shared by the checks of
-    many plans (its bounds remembered; plan.travel then spans all of them)."""
+    many plans (its bounds remembered; plan.travel then spans all of them).
+    ``travel`` False: only whether the plan holds (a search over candidate plans),
+    not the sharp plunger travel of every sub-move that plan.travel lists."""
     checker = checker or MotionChecker(config, controller_limits)
     plan.limits = (checker.lo.tolist(), checker.hi.tolist())
     plan.limits_source = limits_source(config, controller_limits)
@@ -469,7 +476,7 @@ def check_plan(
                 mounted = dict(step.indicators)
             elif isinstance(step, Move):
                 legs = checker.route(position, step.targets, step.label, sp, mounted,
-                                     approach=step.approach)
+                                     approach=step.approach, travel=travel)
                 # the waypoints: the sub-moves' targets before the target (and before
                 # the approach point, which the move itself names)
                 via = legs[:-2] if step.approach is not None else legs[:-1]

@@ -39,6 +39,7 @@ plan cannot know: the travel the offsets themselves cause).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -193,6 +194,17 @@ def cell_bounds(values: np.ndarray, dims: tuple[int, ...]) -> tuple[np.ndarray, 
     return cell_lo - widen, cell_hi + widen
 
 
+@functools.cache
+def _unit_grid(d: int, n: int) -> np.ndarray:
+    """The n points 0, 1/2 (, 1) per dimension of the unit cube [0, 1]^d, as rows
+    ((n^d, d); n = 3: a cell's sample grid, n = 2: its sub-cells' corners). Read
+    only: cached, every branch-and-bound step of every sub-move uses them."""
+    steps = np.array([0.0, 0.5, 1.0][:n])
+    grid = np.stack([m.ravel() for m in np.meshgrid(*[steps] * d, indexing="ij")], axis=-1)
+    grid.setflags(write=False)
+    return grid
+
+
 def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str,
                   low: np.ndarray | None = None, high: np.ndarray | None = None,
                   tolerance: float = TOLERANCE_MM, max_depth: int = MAX_DEPTH
@@ -217,10 +229,7 @@ def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str
         v = _evaluate(f, a_v[None, :])[0]
         return Bound(v, v, v, v)
     deciding = low is not None or high is not None
-    offsets = np.stack([m.ravel() for m in np.meshgrid(*[np.array([0.0, 0.5, 1.0])] * d,
-                                                       indexing="ij")], axis=-1)  # (3^d, d)
-    corners = np.stack([m.ravel() for m in np.meshgrid(*[np.array([0.0, 0.5])] * d,
-                                                       indexing="ij")], axis=-1)  # (2^d, d)
+    offsets, corners = _unit_grid(d, 3), _unit_grid(d, 2)  # (3^d, d), (2^d, d)
     c0, size = np.zeros((1, d)), np.ones((1, d))  # cells in the unit cube
     best_lo = best_hi = None
     final_lo: list[np.ndarray] = []

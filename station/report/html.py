@@ -365,7 +365,10 @@ def render_html(result: dict, figures: bool = True) -> str:
             plot_par = plot_parameters(result)
         loop_section = _loop_section(result, figures)
     finally:
-        if "matplotlib" in sys.modules:
+        # Only where this page drew: release_fonts ends in a full garbage collection,
+        # a tenth of a second in a long-lived process, for fonts a page without
+        # figures never opened.
+        if figures and "matplotlib" in sys.modules:
             release_fonts()
     # Figures are numbered in page order: the error field at the tool, when the
     # run states it, comes first.
