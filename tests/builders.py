@@ -8,7 +8,9 @@ Plain functions and constants (imported as ``from builders import ...``, like
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import io
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -107,6 +109,35 @@ def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
         indicators=indicators, procedure=procedure, writeback=writeback, speed_mm_s=speed,
         report=None if figures else NO_FIGURES, station_hook=hook)
     return RunOptions(sim=sim, plan=plan, out=Path(out), yes=yes, json=json)
+
+
+@dataclass
+class Completed:
+    """What :func:`cli` reports, as ``subprocess.run(..., capture_output=True,
+    text=True)`` does."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def cli(*argv: str, cwd: Path) -> Completed:
+    """``orthocal ARGV`` run from ``cwd`` in this process (station.commands.cli.main,
+    its output captured), for tests whose subject is what a command reads, prints
+    and exits with (history, compare, export). A ``python -m station`` subprocess
+    pays a second and a half of imports the test worker has already paid; the tests
+    whose subject is the process itself (kill -9, Ctrl-C, a second station, a pty)
+    keep their subprocesses."""
+    from station.commands.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.chdir(cwd), contextlib.redirect_stdout(out), \
+            contextlib.redirect_stderr(err):
+        try:
+            code = main(list(argv))
+        except SystemExit as exc:  # argparse reports usage errors by exiting 2
+            code = exc.code if isinstance(exc.code, int) else 1
+    return Completed(code, out.getvalue(), err.getvalue())
 
 
 def parsed_simulate(*argv: str) -> Any:

@@ -6,13 +6,11 @@ from __future__ import annotations
 import configparser
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
-from builders import FAST, simulated
+from builders import FAST, Completed, cli, simulated
 
 from station.commands import run as cmd_run
 from station.history.export import ExportError, csv_lines, linuxcnc
@@ -100,9 +98,8 @@ def test_the_command(tmp_path: Path) -> None:
     (run_dir / "result.json").write_text(json.dumps(result()))
     (tmp_path / "og.ini").write_text(INI)
 
-    def orthocal(*argv: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "station", "export", str(run_dir), *argv],
-                              capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    def orthocal(*argv: str) -> Completed:
+        return cli("export", str(run_dir), *argv, cwd=tmp_path)
 
     ok = orthocal("--to", "linuxcnc", "--ini", str(tmp_path / "og.ini"))
     assert ok.returncode == 0 and home_offsets(ok.stdout)["JOINT_0"] == pytest.approx(9.5)
@@ -174,9 +171,8 @@ def test_twincat_from_a_run_whose_station_held_the_offsets(tmp_path: Path, capsy
     done = json.loads(capsys.readouterr().out)
     assert done["offsets_held_by"] == "station"
     out = tmp_path / "og.csv"
-    made = subprocess.run([sys.executable, "-m", "station", "export", done["run_dir"],
-                           "--to", "twincat", "--backlash", "--out", str(out)],
-                          capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    made = cli("export", done["run_dir"], "--to", "twincat", "--backlash", "--out", str(out),
+               cwd=tmp_path)
     assert made.returncode == 0, made.stderr
     rows = twincat_rows(out.read_text())
     for row in rows:

@@ -6,15 +6,13 @@ that cannot be written never fails a run."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
 import pg
 import pytest
-from builders import simulated
+from builders import Completed, cli, simulated
 from test_record import errors
 
 from station import report
@@ -48,9 +46,8 @@ def _run(out: Path, capsys, machine_id: str | None, true_drho=TRUE, seed: int = 
     return result
 
 
-def orthocal(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "station", *argv], cwd=cwd,
-                          capture_output=True, text=True, timeout=60)
+def orthocal(*argv: str, cwd: Path) -> Completed:
+    return cli(*argv, cwd=cwd)
 
 
 def test_runs_are_recorded_listed_and_rebuilt(tmp_path: Path, capsys) -> None:

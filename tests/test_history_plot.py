@@ -4,14 +4,13 @@ PNG or SVG, with each parameter's drift per month (station.history.trend)."""
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import pytest
+from builders import Completed, cli
 
 from station.history.store import HistoryStore, default_url
 from station.history.trend import MONTH_DAYS, drift, series
@@ -57,9 +56,8 @@ def test_the_drift_is_the_weighted_slope_of_the_as_found_values() -> None:
     assert drift(series(noisy)["drho_x"]).std_error > 10 * d.std_error
 
 
-def orthocal(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "station", "history", *argv], cwd=cwd,
-                          capture_output=True, text=True, timeout=120)
+def orthocal(*argv: str, cwd: Path) -> Completed:
+    return cli("history", *argv, cwd=cwd)
 
 
 @pytest.fixture

@@ -1,14 +1,18 @@
 """Ctrl-C and kill -9 of the real command line, then ``orthocal resume``.
 
-Every run here is a real ``python -m station`` subprocess on the in-process
-virtual station. With indicator noise 0 the simulation is deterministic per
-reading (the virtual machine and the gauges' quantisation are exact), so a
-run killed at any point and resumed must give the result of the same run left
-alone: the same identified offsets (floats within tests/close.py's tolerance: the
-resumed process fits them again), exactly the same offsets in the controller
-(never a correction applied twice). A noisy run must agree within
-the reported uncertainty. The journal written before the kill must be a byte
-prefix of the final one, torn last line included.
+Every run here is a process of its own on its in-process virtual station: the
+uninterrupted references and the kill from outside are fresh ``python -m
+station`` subprocesses, the runs killed from inside and every resume are children
+forked from the test worker (tests/forked.py: the same code in a real separate
+process, killed by a real SIGKILL, without a new interpreter's imports).
+
+With indicator noise 0 the simulation is deterministic per reading (the virtual
+machine and the gauges' quantisation are exact), so a run killed at any point and
+resumed must give the result of the same run left alone: the same identified offsets
+(floats within tests/close.py's tolerance: the resumed process fits them again),
+exactly the same offsets in the controller (never a correction applied twice). A
+noisy run must agree within the reported uncertainty. The journal written before the
+kill must be a byte prefix of the final one, torn last line included.
 
 Kill points are exact where it matters: a small wrapper around ``station.commands.cli``
 SIGKILLs its own process as the journal is about to record (or has recorded)
@@ -36,6 +40,7 @@ from typing import Any
 import pytest
 from builders import FAST, no_figures_file
 from close import assert_same
+from forked import STATION, Forked
 from truth import assert_truth, drho
 
 from station import report
@@ -113,13 +118,16 @@ def _default_ctrl_c() -> None:
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # and not blocked
 
 
+def child_env() -> dict[str, str]:
+    return {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+
 def spawn(args: list[str], cwd: Path) -> subprocess.Popen[str]:
     return subprocess.Popen(args, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-                            preexec_fn=_default_ctrl_c)
+                            text=True, env=child_env(), preexec_fn=_default_ctrl_c)
 
 
-def finish(proc: subprocess.Popen[str], limit_s: float = LIMIT_S) -> Proc:
+def finish(proc: subprocess.Popen[str] | Forked, limit_s: float = LIMIT_S) -> Proc:
     """Wait (bounded) for a subprocess; kill and reap it whatever happens."""
     try:
         out, err = proc.communicate(timeout=limit_s)
@@ -211,8 +219,7 @@ def play(scenario: Scenario, base: Path) -> Outcome:
     out = work / "runs"
     argv = run_argv(out, scenario.noise, procedure=scenario.procedure)
     if scenario.spec is not None:
-        killed = finish(spawn([sys.executable, "-c", KILLER, json.dumps(scenario.spec),
-                               *argv], work))
+        killed = finish(Forked(KILLER, [json.dumps(scenario.spec), *argv], work, child_env()))
     else:
         assert scenario.external_after_readings is not None
         proc = spawn([sys.executable, "-m", "station", *argv], work)
@@ -231,7 +238,7 @@ def play(scenario: Scenario, base: Path) -> Outcome:
     (work / "killed.jsonl").write_bytes(before)  # to parse as the kill left it
     nvram = run_dir / "controller_nvram.json"
     (work / "killed-nvram.json").write_bytes(nvram.read_bytes())
-    resumed = station_cmd("resume", str(run_dir), "--json", cwd=work)
+    resumed = finish(Forked(STATION, ["resume", str(run_dir), "--json"], work, child_env()))
     outcome = Outcome(scenario, killed, run_dir, before, resumed,
                       journal_of(run_dir).read_bytes())
     if resumed.returncode in (0, 3):  # completed, its loop converged or not
@@ -369,7 +376,8 @@ def _interrupt_mid_measurement(out: Path, cwd: Path) -> tuple[Proc, Path | None,
     return interrupted, journal, sent_at
 
 
-def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -> None:
+def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(
+        reference: Callable[[float, dict[str, Any]], dict[str, Any]], tmp_path: Path) -> None:
     for attempt in range(3):
         out = tmp_path / f"runs{attempt}"
         interrupted, journal, sent_at = _interrupt_mid_measurement(out, tmp_path)
@@ -400,13 +408,12 @@ def test_ctrl_c_stops_keeps_the_journal_and_says_how_to_resume(tmp_path: Path) -
     before = journal.read_bytes()
     assert before.endswith(b"\n")
 
-    resumed = station_cmd("resume", str(run_dir), "--json", cwd=tmp_path)
+    resumed = finish(Forked(STATION, ["resume", str(run_dir), "--json"], tmp_path,
+                            child_env()))
     assert resumed.returncode == 0, resumed.err
     assert journal.read_bytes().startswith(before)
     result = json.loads(resumed.out)
-    reference = station_cmd(*run_argv(tmp_path / "reference", 0.0), cwd=tmp_path)
-    assert reference.returncode == 0, reference.err
-    assert_same(result["identified"], json.loads(reference.out)["identified"], "identified")
+    assert_same(result["identified"], reference(0.0, {})["identified"], "identified")
 
 
 def test_a_ctrl_c_whose_raise_was_lost_still_stops_the_next_step() -> None:

@@ -17,7 +17,7 @@ from typing import Any
 
 from station.history.trend import Drift, Point, drift, series
 from station.report.format import param_plain
-from station.report.plots import pyplot
+from station.report.plots import pyplot, release_fonts
 
 #: The figure formats, by the file's suffix.
 FORMATS = {".png": "png", ".svg": "svg"}
@@ -96,3 +96,6 @@ def plot_history(entries: Sequence[Mapping[str, Any]], path: Path, machine_id: s
             fig.savefig(path, format=fmt, dpi=150, metadata=meta)
         finally:
             plt.close(fig)
+            # As a report does: matplotlib's font caches would hold the font files
+            # open for the life of a long-lived process (plots.release_fonts).
+            release_fonts()
