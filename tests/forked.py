@@ -29,6 +29,8 @@ import traceback
 import warnings
 from pathlib import Path
 
+from builders import Completed
+
 #: ``python -m station``, as code for :class:`Forked`.
 STATION = "import sys\nfrom station.commands.cli import main\nsys.exit(main(sys.argv[1:]))\n"
 
@@ -167,3 +169,16 @@ def _child(code: str, argv: list[str], cwd: Path, env: dict[str, str], out_w: in
             sys.stderr.flush()
         finally:
             os._exit(status)
+
+
+def run(argv: list[str], cwd: Path, code: str = STATION, env: dict[str, str] | None = None,
+        timeout: float = LIMIT_S) -> Completed:
+    """subprocess.run(..., capture_output=True, text=True) of a forked child: ``code``
+    (``python -m station`` by default) with ``argv``, from ``cwd``, in ``env`` (this
+    process's by default)."""
+    child = Forked(code, argv, cwd, dict(os.environ) if env is None else env)
+    try:
+        out, err = child.communicate(timeout)
+    finally:
+        child.close()
+    return Completed(child.returncode if child.returncode is not None else -9, out, err)

@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import forked
 import pytest
 from builders import FAST, Rig, no_figures_file, on_setup
 from close import assert_same
@@ -237,8 +238,8 @@ def test_a_full_disk_stops_the_run_and_resume_finishes_it(tmp_path: Path, refere
         p, s, k = c["phase"], c["setup"], c["cycle"]
         assert {f"{p}:{s}:{k}:+", f"{p}:{s}:{k}:-", f"{p}:{s}:{k}:0"} <= stops
 
-    freed = subprocess.run([sys.executable, "-m", "station", "resume", str(run_dir), "--json"],
-                           capture_output=True, text=True, cwd=ROOT, timeout=300, env=env)
+    # the resume: a child forked from this worker (tests/forked.py)
+    freed = forked.run(["resume", str(run_dir), "--json"], ROOT, env=env, timeout=300)
     assert freed.returncode == 0, freed.stderr
     assert_uninterrupted(json.loads(freed.stdout), run_dir, reference)
 

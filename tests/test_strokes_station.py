@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import forked
 import numpy as np
 import pytest
 from builders import FAST, no_figures_file, simulated, station_data
@@ -151,9 +152,9 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
-def station(argv: list[str], cwd: Path, *code: str) -> subprocess.CompletedProcess[str]:
-    cmd = [sys.executable, "-c", *code] if code else [sys.executable, "-m", "station"]
-    return subprocess.run([*cmd, *argv], cwd=cwd, capture_output=True, text=True, timeout=120)
+def station(argv: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "station", *argv], cwd=cwd,
+                          capture_output=True, text=True, timeout=120)
 
 
 def test_killed_run_with_strokes_resumes_to_the_same_result(tmp_path: Path) -> None:
@@ -164,11 +165,13 @@ def test_killed_run_with_strokes_resumes_to_the_same_result(tmp_path: Path) -> N
     ref = station(run_argv(tmp_path / "ref"), tmp_path)
     assert ref.returncode in (0, 3), ref.stderr
     assert ref.returncode == (3 if not_converged(json.loads(ref.stdout)) else 0), ref.stderr
-    killed = station(run_argv(tmp_path / "killed"), tmp_path, KILLER)
+    # the killed run and its resume: children forked from this worker (tests/forked.py),
+    # compared with the reference, a fresh interpreter
+    killed = forked.run(run_argv(tmp_path / "killed"), tmp_path, KILLER)
     assert killed.returncode == -signal.SIGKILL, killed.stderr
     (run_dir,) = list((tmp_path / "killed").glob("run-*"))
     before = (run_dir / "journal.jsonl").read_bytes()
-    resumed = station(["resume", str(run_dir), "--json"], tmp_path)
+    resumed = forked.run(["resume", str(run_dir), "--json"], tmp_path)
     assert resumed.returncode in (0, 3), resumed.stderr
     expected, got = json.loads(ref.stdout), json.loads(resumed.stdout)
     assert resumed.returncode == (3 if not_converged(got) else 0), resumed.stderr
