@@ -27,10 +27,9 @@ class AxisStatus:
 
 
 @runtime_checkable
-class AxisController(Protocol):
-    """Three linear axes moved together (joint coordinates ρ_x, ρ_y, ρ_z in mm)."""
-
-    name: str
+class Motion(Protocol):
+    """Three linear axes moved together (joint coordinates ρ_x, ρ_y, ρ_z in mm): what
+    the sequencer, the mover and the plunger guard use."""
 
     def read_status(self) -> AxisStatus: ...
 
@@ -73,6 +72,15 @@ class AxisController(Protocol):
 
     def reset_alarm(self) -> None: ...
 
+
+@runtime_checkable
+class ZeroOffsets(Protocol):
+    """The joints' zero offsets o, where the drive keeps them or the station holds
+    them (drivers.held_offsets): what write-back, rollback and the result use.
+    ``name``: the controller's, as a backup of its offsets records it."""
+
+    name: str
+
     def read_offsets(self) -> np.ndarray:
         """Joint zero offsets o (mm, shape (3,))."""
         ...
@@ -87,6 +95,12 @@ class AxisController(Protocol):
         A correction is rounded to it, so no verification can show the joint zero
         closer than half of it."""
         ...
+
+
+@runtime_checkable
+class AxisController(Motion, ZeroOffsets, Protocol):
+    """A controller of the three axes as a run opens it: its motion, its zero
+    offsets, and close()."""
 
     def close(self) -> None: ...
 

@@ -16,7 +16,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from drivers.base import AxisController
+from drivers.base import Motion
 from station.config import StationConfig
 from station.engine.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.errors import BadInput, RunFailed
@@ -50,7 +50,7 @@ class Mover:
     None: unknown); ``setup``/``mounted``: the setup in progress and its gauges
     (set by the sequencer); ``recovered``: the journal records of recovered trips."""
 
-    def __init__(self, *, config: StationConfig, plan: Plan, controller: AxisController,
+    def __init__(self, *, config: StationConfig, plan: Plan, controller: Motion,
                  indicators: ReadingSource, checker: MotionChecker, guard: PlungerGuard,
                  journal: Callable[[dict[str, Any]], None],
                  journal_safe: Callable[[dict[str, Any]], None],

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.base import AxisController
+from drivers.base import ZeroOffsets
 from station.config import StationConfig
 from station.engine.statistics import cycle_std_error
 from station.engine.verdict import converge_limit
@@ -19,7 +19,7 @@ from station.plan.steps import Plan
 class VerificationSizing:
     """The cycles of one mounting, decided from the cycles it has taken so far."""
 
-    def __init__(self, config: StationConfig, plan: Plan, controller: AxisController) -> None:
+    def __init__(self, config: StationConfig, plan: Plan, controller: ZeroOffsets) -> None:
         self.config, self.plan, self.controller = config, plan, controller
         # The machine a verification expects, (model, 12-vector of its parameters): the
         # last round's fit, offsets at their aim after a write-back (set by the flow).

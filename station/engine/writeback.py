@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.base import AxisController
+from drivers.base import ZeroOffsets
 from drivers.errors import DeviceError
 from drivers.files import write_atomic
 from orthocal import AXES
@@ -90,7 +90,7 @@ class _Stages:
 
 def write_back(
     *,
-    controller: AxisController,
+    controller: ZeroOffsets,
     identified: dict[str, float],
     max_abs_offset_mm: float,
     run_dir: Path,
@@ -128,7 +128,7 @@ def write_back(
     return _write(stages, controller, run_dir, before, intended)
 
 
-def _backup(stages: _Stages, controller: AxisController, run_dir: Path) -> dict[str, float]:
+def _backup(stages: _Stages, controller: ZeroOffsets, run_dir: Path) -> dict[str, float]:
     """The offsets the round starts from: journaled (round 1 also to the backup file,
     which keeps the offsets from before the first round, for rollback)."""
     if "backup" in stages.done:
@@ -159,7 +159,7 @@ def _refusal(delta: np.ndarray, new: dict[str, float], max_abs_offset_mm: float,
             f"{max_abs_offset_mm:g}; nothing written")
 
 
-def _intent(stages: _Stages, controller: AxisController, operator: Operator,
+def _intent(stages: _Stages, controller: ZeroOffsets, operator: Operator,
             before: dict[str, float], new: dict[str, float], note: str | None
             ) -> dict[str, float] | None:
     """The offsets to write, asked of the operator and journaled before any write (a
@@ -184,7 +184,7 @@ def _intent(stages: _Stages, controller: AxisController, operator: Operator,
     return new
 
 
-def _write(stages: _Stages, controller: AxisController, run_dir: Path,
+def _write(stages: _Stages, controller: ZeroOffsets, run_dir: Path,
            before: dict[str, float], new: dict[str, float]) -> WritebackOutcome:
     """Write ``new`` and read it back; on a fault, the backup is written back."""
     try:
@@ -238,7 +238,7 @@ def held_after(records: list[dict[str, Any]], start: Sequence[float] | None
     return held
 
 
-def rollback(controller: AxisController, run_dir: Path, journal: Journal) -> dict[str, float]:
+def rollback(controller: ZeroOffsets, run_dir: Path, journal: Journal) -> dict[str, float]:
     """Write the backed-up offsets back; returns them (as read back)."""
     from station.errors import BadInput
 
