@@ -17,6 +17,7 @@ the rig of the CLI fixture below) are plain functions in builders.py.
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -35,6 +36,14 @@ SIM_TIME_SCALE = "20"
 #: Device timeouts of the ``orthocal`` fixture's runs: each lost reply costs little
 #: (a reply takes ~15 ms at 9600 baud in real time).
 CLI_TIMEOUT_S = 0.25
+
+
+# pytest keeps the test modules it has rewritten (their asserts) as bytecode, and reads
+# it back next session, unless Python is told not to write bytecode
+# (PYTHONDONTWRITEBYTECODE, set on some machines, CI images among them): every worker
+# then parses and rewrites every test module again, about six seconds of CPU each. The
+# project's own modules are compiled anyway (_compile_the_project); so are the tests'.
+sys.dont_write_bytecode = False
 
 
 def pytest_configure(config: pytest.Config) -> None:

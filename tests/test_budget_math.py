@@ -8,11 +8,11 @@ from __future__ import annotations
 import itertools
 import json
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 from builders import station_deviations
-from scipy.stats import t as student_t
 
 import orthocal
 from orthocal import (
@@ -49,6 +49,16 @@ UM = 1e-3
 KEYS = [(s, i, j) for s in "+-" for i in "xyz" for j in "xyz" if i != j]  # the paper's 12
 TRUTH = np.r_[0.6, -0.4, 0.9, 0, 0, 0, 0, 0, 0]  # the budget's check machine: Δρ only
 STANDS_MM = [3.0, -4.0, 2.5, -1.0, 4.5, -2.0]  # GAUGES order
+
+
+def student_t() -> Any:
+    """scipy.stats' Student t, an independent check of the budget's coverage factor
+    (the station computes it with scipy.special). Imported here, not with the module:
+    every test worker imports each test module to collect it, and scipy.stats costs
+    a second and a half of CPU to import."""
+    from scipy.stats import t
+
+    return t
 
 
 def every_plane(h: float) -> dict[tuple[str, str], float]:
@@ -359,7 +369,7 @@ def test_the_expanded_uncertainty_is_k_times_the_combined(fit):
         nu = b["effective_dof"][n]
         assert nu == pytest.approx(uc2**2 / (fit.std_errors[n] ** 4 / fit.std_error_dof))
         k = b["coverage_factor"][n]
-        assert k == pytest.approx(float(student_t.ppf(0.975, nu)), rel=1e-12)
+        assert k == pytest.approx(float(student_t().ppf(0.975, nu)), rel=1e-12)
         assert b["expanded_95_mm"][n] == pytest.approx(k * b["combined_mm"][n], rel=1e-12)
         assert 1.959963 < k < 2.1  # Student from above the normal's 1.959964
     # a leg's planes drive the offsets of the other axes: straighter leg z, smaller Δρ_x
