@@ -82,7 +82,7 @@ def sim_time(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) ->
 
 def _priority(real_time: bool) -> None:
     """A timing test (the plunger guard polling while the axes move) measures the
-    station's latency, and on 2 cores with three workers the other tests' CPU (a
+    station's latency, and on 2 cores with four workers the other tests' CPU (a
     design search, a dozen simulators) can stretch it past what a real station
     sees. So the worker's main thread, whose threads and subprocesses the test
     starts and which inherit it, runs at the normal priority for a timing test and
