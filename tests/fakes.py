@@ -30,6 +30,7 @@ from drivers.indicators import IndicatorGroup
 from drivers.sim.drive import default_soft_limits
 from drivers.sim.machine import VirtualOrthoglide
 from orthocal import Geometry, plane_at
+from station.commands.run import exit_status
 from station.config import StationConfig
 from station.console.operator import VirtualOperator
 from station.engine.devices import Devices
@@ -193,13 +194,19 @@ class FakeRig:
     def __init__(self, *, true_drho: Sequence[float] = (0.0, 0.0, 0.0),
                  true_tilt: Sequence[float] = (0.0, 0.0, 0.0),
                  true_gap: Sequence[float] = (0.0, 0.0, 0.0),
+                 backlash: Sequence[float] = (0.0, 0.0, 0.0), mount_error_mm: float = 0.0,
                  noise_mm: float = 0.0, seed: int = 1) -> None:
         self.geometry = Geometry()
         self.clock = SteppedClock()
         self.machine = VirtualOrthoglide(self.geometry, true_drho, (0.0, 0.0, 0.0),
                                          true_tilt=true_tilt, true_gap=true_gap,
                                          speed_mm_s=1000.0, accel_mm_s2=20000.0,
-                                         motion="coordinated", clock=self.clock)
+                                         motion="coordinated", clock=self.clock,
+                                         backlash=backlash)
+        # stands placed by eye: each mounting off the leg's middle by a draw uniform
+        # in ±mount_error_mm (a stream of its own: the gauges' noise is unchanged)
+        self.mount_error_mm = mount_error_mm
+        self._stands = np.random.default_rng([seed, 7])
         self.axes = FakeAxes(self.machine, self.clock)
         self.gauges = {n: FakeGauge(n, noise_mm, seed * 101 + i)
                        for i, n in enumerate(("A", "B"))}
@@ -207,7 +214,8 @@ class FakeRig:
     def mount(self, name: str, leg: str, direction: str, at: float = 0.5) -> None:
         sign = -1.0 if direction.startswith("-") else 1.0
         # the gauge's plane: L/2 along the leg, moved by plane_at for another fraction
-        plane = self.geometry.mount_plane + plane_at(at, self.geometry)
+        plane = self.geometry.mount_plane + plane_at(at, self.geometry) + \
+            self.mount_error_mm * float(self._stands.uniform(-1.0, 1.0))
         read = self.machine.source(leg, direction.lstrip("-"), plane)
         self.gauges[name].mount(lambda: sign * read())
 
@@ -233,7 +241,8 @@ def fake_config(**procedure: Any) -> StationConfig:
 def run_on(rig: FakeRig, out: Path, config: StationConfig) -> tuple[int, dict[str, Any]]:
     """A whole run of the engine (station.engine.procedure.execute) on the rig, as
     ``orthocal run`` starts one: the plan checked before anything moves, from where
-    the axes stand, then the run directory and its journal."""
+    the axes stand, then the run directory and its journal. Returns the command's
+    exit status (3: completed, the loop not converged) and the result."""
     devices = rig.devices()
     try:
         limits = rig.axes.soft_limits()
@@ -249,7 +258,8 @@ def run_on(rig: FakeRig, out: Path, config: StationConfig) -> tuple[int, dict[st
                             "argv": []})
             ctx = Run(run_dir, config, plan, journal, devices, rig.operator(), None,
                       JournalState(), [], now_iso(), checker=checker)
-            return execute(ctx)
+            code, result = execute(ctx)
+            return exit_status(result, code), result
     finally:
         devices.close()
 
@@ -270,6 +280,7 @@ def resume_on(rig: FakeRig, run_dir: Path, config: StationConfig
             ctx = Run(run_dir, config, plan, journal, devices, rig.operator(), None,
                       state, records, state.header.get("started") or now_iso(),
                       checker=checker)
-            return execute(ctx)
+            code, result = execute(ctx)
+            return exit_status(result, code), result
     finally:
         devices.close()

@@ -1,19 +1,21 @@
 """Lost motion: the joints' dead band measured, never taken for tilt or
 offset. The maths (orthocal.lost_motion), the simulator's play operator, the plan
-(every stop approached from one side, a reversal stop per cycle), and whole runs
-through the real station on machines whose joints have lost motion."""
+(every stop approached from one side, a reversal stop per cycle), whole runs of the
+engine on machines whose joints have lost motion (the virtual machine behind the
+Protocol-level fakes, tests/fakes.py), and a run through the real station over the
+simulators whose reversal the approach cannot take up."""
 
 from __future__ import annotations
 
 import contextlib
 import io
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from builders import FAST, simulated, station_config
+from fakes import FakeRig, fake_config, run_on
 from truth import assert_truth, drho
 
 from drivers.sim.machine import VirtualOrthoglide
@@ -150,18 +152,17 @@ def test_the_approach_point_is_checked_against_the_soft_limits() -> None:
 
 # --- whole runs ---------------------------------------------------------------------------
 
-BACKLASH = "0.012,0.008,0.015"
+BACKLASH_MM = (0.012, 0.008, 0.015)
 TRUE = (0.6, -0.4, 0.9)
 
 
 def run(tmp_path: Path, **extra: Any) -> dict[str, Any]:
-    options = simulated(tmp_path / "runs", **{
-        "seed": 11, "noise": 0.001, "true_drho": TRUE, "mount_error": 5.0,
-        "procedure": {**FAST, "cycles": 3, "max_extra_passes": 1}, **extra})
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
-        code = cmd_run.run(options)
-    result = json.loads(buf.getvalue())
+    # What the engine makes of lost motion: its run on the Protocol-level fakes
+    # (tests/fakes.py), the virtual machine's joints with their dead bands, stands by eye.
+    procedure = extra.pop("procedure", {**FAST, "cycles": 3, "max_extra_passes": 1})
+    rig = FakeRig(**{"true_drho": TRUE, "noise_mm": 0.001, "mount_error_mm": 5.0,
+                     "seed": 11, **extra})
+    code, result = run_on(rig, tmp_path / "runs", fake_config(**procedure))
     # completed: 0, or 3 where its closed loop did not converge (it says why)
     assert code == (3 if report.not_converged(result) else 0), result.get("message")
     return result
@@ -177,7 +178,7 @@ def test_a_square_machine_with_lost_motion_keeps_square_and_its_offsets(tmp_path
     # Joints with 12, 8 and 15 µm of reversal, stands by eye, model auto: the
     # approach keeps every stop on one edge of each band, so no tilt is claimed, the
     # offsets written are the bands' middles, and each reversal is stated.
-    result = run(tmp_path, backlash=BACKLASH)
+    result = run(tmp_path, backlash=BACKLASH_MM)
     assert "tilt" not in result["model"]
     np.testing.assert_allclose(held(result), TRUE, atol=0.003)
     rev = result["reversal"]
@@ -205,7 +206,7 @@ def test_a_square_machine_with_lost_motion_keeps_square_and_its_offsets(tmp_path
 
 def test_real_tilts_come_out_through_lost_motion(tmp_path: Path) -> None:
     tilt = (0.3, -0.2, 0.25)
-    result = run(tmp_path, backlash=BACKLASH, true_tilt=tilt,
+    result = run(tmp_path, backlash=BACKLASH_MM, true_tilt=tilt,
                  procedure={**FAST, "cycles": 3, "model": "rho+tilt", "max_extra_passes": 1})
     # the run's statement of the tilts (pooled over its rounds: the first alone also
     # carries the stands' bias, with lost motion or without)
