@@ -195,14 +195,19 @@ class FakeRig:
                  true_tilt: Sequence[float] = (0.0, 0.0, 0.0),
                  true_gap: Sequence[float] = (0.0, 0.0, 0.0),
                  backlash: Sequence[float] = (0.0, 0.0, 0.0), mount_error_mm: float = 0.0,
-                 noise_mm: float = 0.0, seed: int = 1) -> None:
+                 leg_bow: Sequence[float] = (0.0, 0.0, 0.0), noise_mm: float = 0.0,
+                 seed: int = 1) -> None:
+        self.params = {"seed": seed, "true_drho": list(true_drho), "true_dl": [0.0] * 3,
+                       "true_tilt": list(true_tilt), "true_gap": list(true_gap),
+                       "noise_mm": noise_mm, "mount_error_mm": mount_error_mm,
+                       "backlash_mm": list(backlash), "leg_bow_mm": list(leg_bow)}
         self.geometry = Geometry()
         self.clock = SteppedClock()
         self.machine = VirtualOrthoglide(self.geometry, true_drho, (0.0, 0.0, 0.0),
                                          true_tilt=true_tilt, true_gap=true_gap,
                                          speed_mm_s=1000.0, accel_mm_s2=20000.0,
                                          motion="coordinated", clock=self.clock,
-                                         backlash=backlash)
+                                         backlash=backlash, leg_bow=leg_bow)
         # stands placed by eye: each mounting off the leg's middle by a draw uniform
         # in ±mount_error_mm (a stream of its own: the gauges' noise is unchanged)
         self.mount_error_mm = mount_error_mm
@@ -230,12 +235,24 @@ class FakeRig:
     def operator(self) -> VirtualOperator:
         return VirtualOperator(self.mount, self.unmount)
 
+    def simulation(self) -> dict[str, Any]:
+        """The hidden machine as a simulated run's journal header keeps it
+        (station.record.simulation): the result states it beside what was found."""
+        return dict(self.params)
 
-def fake_config(**procedure: Any) -> StationConfig:
+
+def fake_config(*, uncertainty: dict[str, Any] | None = None,
+                writeback: dict[str, Any] | None = None, **procedure: Any) -> StationConfig:
     """The tests' two-gauge station (builders.BASE), coordinated axes, no figures,
-    no history store: what the engine needs and nothing it does not."""
+    no history store, with these [procedure] keys (and [uncertainty], [writeback]
+    where given): what the engine needs and nothing it does not."""
+    sections: dict[str, Any] = {}
+    if uncertainty is not None:
+        sections["uncertainty"] = uncertainty
+    if writeback is not None:
+        sections["writeback"] = writeback
     return station_config(controller={"motion": "coordinated"}, procedure=procedure,
-                          report={"figures": False}, history={"enabled": False})
+                          report={"figures": False}, history={"enabled": False}, **sections)
 
 
 def run_on(rig: FakeRig, out: Path, config: StationConfig) -> tuple[int, dict[str, Any]]:
@@ -251,12 +268,13 @@ def run_on(rig: FakeRig, out: Path, config: StationConfig) -> tuple[int, dict[st
         check_plan(plan, config, limits, checker=checker)
         check_plan(plan, config, limits, start=rig.axes.read_positions(), checker=checker)
         run_dir = new_run_dir(out)
-        write_run_files(run_dir, config, plan, None)
+        write_run_files(run_dir, config, plan, rig.simulation())
         with Journal(run_dir / JOURNAL_NAME) as journal:
+            sim = rig.simulation()
             journal.append({"type": "header", "version": "test", "config": config.model_dump(),
-                            "plan": plan.to_json(), "simulation": None, "started": now_iso(),
+                            "plan": plan.to_json(), "simulation": sim, "started": now_iso(),
                             "argv": []})
-            ctx = Run(run_dir, config, plan, journal, devices, rig.operator(), None,
+            ctx = Run(run_dir, config, plan, journal, devices, rig.operator(), sim,
                       JournalState(), [], now_iso(), checker=checker)
             code, result = execute(ctx)
             return exit_status(result, code), result
@@ -277,9 +295,9 @@ def resume_on(rig: FakeRig, run_dir: Path, config: StationConfig
         check_plan(plan, config, limits, checker=checker)
         with Journal(run_dir / JOURNAL_NAME) as journal:
             journal.append({"type": "resumed", "version": "test", "argv": []})
-            ctx = Run(run_dir, config, plan, journal, devices, rig.operator(), None,
-                      state, records, state.header.get("started") or now_iso(),
-                      checker=checker)
+            ctx = Run(run_dir, config, plan, journal, devices, rig.operator(),
+                      rig.simulation(), state, records,
+                      state.header.get("started") or now_iso(), checker=checker)
             code, result = execute(ctx)
             return exit_status(result, code), result
     finally:

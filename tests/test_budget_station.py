@@ -1,4 +1,5 @@
-"""The uncertainty budget in a whole run, over the simulators: on a
+"""The uncertainty budget in a whole run of the engine (on the Protocol-level fakes,
+tests/fakes.py, in front of the virtual machine with stands placed by eye): on a
 machine whose legs are bowed by 8 µm, with the legs stated straight to 10 µm, the
 statement with its expanded uncertainty contains the truth on every axis, the
 budget names the legs' form, and the interval stays a useful size; a run without
@@ -6,15 +7,15 @@ budget names the legs' form, and the interval stays a useful size; a run without
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import pytest
-from builders import FAST, simulated
+from builders import FAST
+from fakes import FakeRig, fake_config, run_on
 
+from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
 from station import report
-from station.commands import run as cmd_run
 
 TRUE = (0.6, -0.4, 0.9)
 PROCEDURE = {**FAST, "cycles": 3, "model": "auto", "max_extra_passes": 2}
@@ -22,10 +23,10 @@ PROCEDURE = {**FAST, "cycles": 3, "model": "auto", "max_extra_passes": 2}
 
 def run(tmp_path: Path, capsys: pytest.CaptureFixture[str], uncertainty: dict | None = None,
         **extra: Any) -> dict[str, Any]:
-    code = cmd_run.run(simulated(tmp_path / "runs", **{
-        "seed": 5, "noise": 0.001, "true_drho": TRUE, "procedure": PROCEDURE,
-        "uncertainty": uncertainty, **extra}))
-    result = json.loads(capsys.readouterr().out)
+    rig = FakeRig(**{"seed": 5, "noise_mm": 0.001, "true_drho": TRUE,
+                     "mount_error_mm": DEFAULT_MOUNT_ERROR_MM, **extra})
+    code, result = run_on(rig, tmp_path / "runs",
+                          fake_config(uncertainty=uncertainty, **PROCEDURE))
     # completed: 0, or 3 where its closed loop did not converge (it says why)
     assert code == (3 if report.not_converged(result) else 0), result.get("message")
     return result
@@ -40,7 +41,7 @@ def statement(result: dict[str, Any]) -> dict[str, float]:
 
 def test_a_bowed_machine_is_within_its_stated_budget(tmp_path: Path,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    result = run(tmp_path, capsys, {"leg_straightness_mm": 0.010}, leg_bow="0.008")
+    result = run(tmp_path, capsys, {"leg_straightness_mm": 0.010}, leg_bow=(0.008,) * 3)
     assert result["simulation"]["leg_bow_mm"] == {"x": 0.008, "y": 0.008, "z": 0.008}
     b = result["uncertainty_budget"]
     values = statement(result)
