@@ -31,6 +31,7 @@ from drivers.sim.drive import default_soft_limits
 from drivers.sim.machine import VirtualOrthoglide
 from orthocal import Geometry, plane_at
 from station.commands.run import exit_status
+from station.commands.simulation import SIM_PROCEDURE
 from station.config import StationConfig
 from station.console.operator import VirtualOperator
 from station.engine.devices import Devices
@@ -244,14 +245,15 @@ class FakeRig:
 def fake_config(*, uncertainty: dict[str, Any] | None = None,
                 writeback: dict[str, Any] | None = None, **procedure: Any) -> StationConfig:
     """The tests' two-gauge station (builders.BASE), coordinated axes, no figures,
-    no history store, with these [procedure] keys (and [uncertainty], [writeback]
-    where given): what the engine needs and nothing it does not."""
+    no history store, and what a simulated run starts from (station.commands.
+    simulation: SIM_PROCEDURE, offsets up to 3 mm) with these [procedure] keys, and
+    [uncertainty] and [writeback] keys where given."""
     sections: dict[str, Any] = {}
     if uncertainty is not None:
         sections["uncertainty"] = uncertainty
-    if writeback is not None:
-        sections["writeback"] = writeback
-    return station_config(controller={"motion": "coordinated"}, procedure=procedure,
+    return station_config(controller={"motion": "coordinated"},
+                          procedure={**SIM_PROCEDURE, **procedure},
+                          writeback={"max_abs_offset_mm": 3.0, **(writeback or {})},
                           report={"figures": False}, history={"enabled": False}, **sections)
 
 

@@ -1,4 +1,5 @@
-"""Accuracy at the tool in a whole run: the run states where the tool
+"""Accuracy at the tool in a whole run of the engine (on the Protocol-level fakes,
+tests/fakes.py, in front of the virtual machine): the run states where the tool
 goes before and after, with intervals that hold the hidden machine's truth, for
 both objectives; objective "tool" writes the offsets that leave less tool error
 than the paper's Δρ; the run directory exports the identified machine; misplaced
@@ -6,8 +7,6 @@ stands are modelled, not taken for tilt."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
 from pathlib import Path
@@ -15,12 +14,12 @@ from typing import Any
 
 import numpy as np
 import pytest
-from builders import simulated
+from fakes import FakeRig, fake_config, run_on
 
+from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
 from orthocal import AXES, Geometry
 from orthocal.accuracy import error_field, optimal_offsets
 from station import report
-from station.commands import run as cmd_run
 from station.config import parse_config
 from station.errors import BadInput
 
@@ -28,13 +27,15 @@ TILT = (0.2, 0.1, -0.15)
 DRHO = (0.5, -0.3, 0.8)
 
 
-def run(out: Path, **kw: Any) -> dict[str, Any]:
-    options = simulated(out, **{"seed": 5, "noise": 0.001, "yes": True,
-                                "procedure": {"settle_s": 0.0, "cycles": 2}, **kw})
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
-        code = cmd_run.run(options)
-    result = json.loads(buf.getvalue())
+def run(out: Path, *, uncertainty: dict[str, Any] | None = None,
+        writeback: dict[str, Any] | None = None, **machine: Any) -> dict[str, Any]:
+    # What the engine states at the tool: its run on the Protocol-level fakes
+    # (tests/fakes.py), 1 µm gauges, stands placed by eye as a simulated run's.
+    rig = FakeRig(**{"seed": 5, "noise_mm": 0.001,
+                     "mount_error_mm": DEFAULT_MOUNT_ERROR_MM, **machine})
+    config = fake_config(uncertainty=uncertainty, writeback=writeback, settle_s=0.0,
+                         cycles=2)
+    code, result = run_on(rig, out, config)
     # completed: 0, or 3 where its closed loop did not converge (it says why)
     assert code == (3 if report.not_converged(result) else 0), result.get("message")
     return result
