@@ -1,7 +1,9 @@
-"""The closed loop end to end over the simulators (real Modbus server, pty gauges):
-misplaced stands bias the first round and the loop removes it; a machine that one
-round fixes gets exactly one write-back; the loop says when and why it stopped
-without converging; rollback restores the offsets from before the first round."""
+"""The closed loop: misplaced stands bias the first round and the loop removes it, and
+rollback restores the offsets from before the first round, end to end over the
+simulators (real Modbus server, pty gauges); a machine that one round fixes gets
+exactly one write-back, and the loop says when and why it stopped without
+converging, in whole runs of the engine on the Protocol-level fakes (tests/fakes.py,
+the same virtual machine without the wire)."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ from typing import Any
 
 import pytest
 from builders import FAST, resumed, simulated
+from fakes import FakeRig, fake_config, run_on
 from truth import assert_truth, drho
 
 from station import report
@@ -25,6 +28,19 @@ def run(tmp_path: Path, capsys, **extra: Any) -> dict[str, Any]:
         "seed": 5, "noise": 0.001, "procedure": PROCEDURE, "mount_error": 0.0, **extra}))
     result = json.loads(capsys.readouterr().out)
     # completed: 0, or 3 where the loop did not converge (the run says why)
+    assert result["status"] == "ok", result.get("message")
+    assert code == (3 if report.not_converged(result) else 0), result.get("message")
+    return result
+
+
+def engine_run(tmp_path: Path, *, seed: int = 5, noise: float = 0.001,
+               mount_error: float = 0.0, procedure: dict[str, Any] = PROCEDURE,
+               **machine: Any) -> dict[str, Any]:
+    """The loop's decisions are the engine's: a whole run of it on the Protocol-level
+    fakes (tests/fakes.py), in front of the same virtual machine, with ``run``'s
+    defaults and checks."""
+    rig = FakeRig(seed=seed, noise_mm=noise, mount_error_mm=mount_error, **machine)
+    code, result = run_on(rig, tmp_path / "runs", fake_config(**procedure))
     assert result["status"] == "ok", result.get("message")
     assert code == (3 if report.not_converged(result) else 0), result.get("message")
     return result
@@ -103,7 +119,7 @@ def test_a_machine_one_round_fixes_gets_exactly_one_write_back(tmp_path: Path, c
     # measured again (a further pass, pooled): still one write-back. Without the
     # plunger guard, whose polls take gauge draws as often as the timing allows, each
     # seed reads the same every run.
-    result = run(tmp_path, capsys, seed=seed, true_drho=(0.3, -0.2, 0.4), mount_error=0.0,
+    result = engine_run(tmp_path, seed=seed, true_drho=(0.3, -0.2, 0.4), mount_error=0.0,
                  noise=0.0005, procedure={**PROCEDURE, "stand_tolerance_mm": 0,
                                           "max_extra_passes": 2, "plunger_guard": False})
     assert writes(result) == 1 and len(result["iterations"]) == 2
@@ -122,7 +138,7 @@ def test_a_verification_too_noisy_to_show_convergence_is_measured_again(
     # where it ends. (More cycles in the mounting come first by default,
     # test_mountings.py; off here, to see the passes.)
     true = (0.4, -0.3, 0.2)
-    result = run(tmp_path, capsys, true_drho=true, noise=0.004, mount_error=0.0,
+    result = engine_run(tmp_path, true_drho=true, noise=0.004, mount_error=0.0,
                  procedure={**PROCEDURE, "max_extra_passes": 1,
                             "max_cycles_in_mounting": 2, "plunger_guard": False})
     ver = result["iterations"][1]
@@ -153,7 +169,7 @@ def test_a_verification_too_noisy_to_show_convergence_is_measured_again(
 def test_max_iterations_stops_the_loop_and_says_why(tmp_path: Path, capsys) -> None:
     # the stands' bias of the first round stands out once the verification is
     # measured enough (further passes pooled)
-    result = run(tmp_path, capsys, true_drho=(2.5, -2.9, 2.2), mount_error=8.0,
+    result = engine_run(tmp_path, true_drho=(2.5, -2.9, 2.2), mount_error=8.0,
                  procedure={**PROCEDURE, "max_iterations": 1, "max_extra_passes": 2})
     assert writes(result) == 1 and result["converged"] is False
     assert result["loop"]["stopped"] == "max_iterations"
@@ -169,7 +185,7 @@ def test_max_iterations_stops_the_loop_and_says_why(tmp_path: Path, capsys) -> N
 
 def test_without_verification_nothing_is_claimed_about_what_is_left(tmp_path: Path,
                                                                    capsys) -> None:
-    result = run(tmp_path, capsys, true_drho=(0.3, -0.2, 0.4),
+    result = engine_run(tmp_path, true_drho=(0.3, -0.2, 0.4),
                  procedure={**PROCEDURE, "verify": False})
     assert writes(result) == 1 and len(result["iterations"]) == 1
     assert result["remaining"] is None and "left over" not in report.summary_text(result)
@@ -200,7 +216,7 @@ def test_a_tilted_machine_is_verified_against_the_tilts_it_keeps(tmp_path: Path,
     # the model Δρ is known 1.6 times less well, and one round must leave it within
     # what the verification can show inside ±converge_mm (stands modelled within ±5
     # mm couple with the tilts and leave Δρ a floor of about 1 µm no pass lowers).
-    result = run(tmp_path, capsys, true_drho=(1.5, -1.0, 0.8), true_tilt=(0.4, -0.3, 0.2),
+    result = engine_run(tmp_path, true_drho=(1.5, -1.0, 0.8), true_tilt=(0.4, -0.3, 0.2),
                  noise=0.0002, procedure={**PROCEDURE, "model": "rho+tilt",
                                           "max_extra_passes": 2, "stand_tolerance_mm": 0})
     ver = result["verification"]
@@ -215,7 +231,7 @@ def test_a_tilted_machine_is_verified_against_the_tilts_it_keeps(tmp_path: Path,
 
 def test_a_calibrated_machine_is_left_alone(tmp_path: Path, capsys) -> None:
     # its offsets exactly right: a recheck writes nothing and says so
-    result = run(tmp_path, capsys, true_drho=(0.0, 0.0, 0.0),
+    result = engine_run(tmp_path, true_drho=(0.0, 0.0, 0.0),
                  procedure={**PROCEDURE, "cycles": 3, "readings": 5, "max_extra_passes": 2})
     assert result["loop"]["stopped"] == "converged" and result["converged"] is True
     assert writes(result) == 0 and result["loop"]["write_backs"] == 0
