@@ -20,6 +20,7 @@ import serial
 from pymodbus.client import ModbusTcpClient
 from truth import assert_truth, drho
 
+from station import report
 from station.config import load_config
 
 
@@ -110,8 +111,14 @@ def test_run_from_another_process_calibrates_it(sim_process, tmp_path):
          "--json", "--out", str(tmp_path / "runs")],
         capture_output=True, text=True, timeout=180,
     )  # fmt: skip
-    assert run.returncode == 0, run.stderr
+    assert run.returncode in (0, 3), run.stderr
     result = json.loads(run.stdout)
+    # completed: 0, or 3 where its closed loop did not converge and says why, as every
+    # simulated run's test allows. With the plunger guard polling, the gauges' noise
+    # draws depend on timing, and a verification of 1 µm gauges can find µm-level
+    # corrections round after round (once in about ten runs of the suite on a loaded
+    # machine: three write-backs, max_iterations). What the run states must hold either way.
+    assert run.returncode == (3 if report.not_converged(result) else 0), run.stderr
     assert_truth(result, drho((0.5, -0.3, 0.8)))
     assert result["verification"]["deviations_rms_mm"] < 0.005
     proc.send_signal(signal.SIGINT)
