@@ -82,14 +82,22 @@ def test_a_run_finds_the_hidden_offsets_writes_them_and_verifies(tmp_path: Path)
                for r in records if r["type"] == "reading")
 
 
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, int]:
+    """The run left alone: its result, and how many moves came before its first
+    write-back."""
+    left_alone = FakeRig(true_drho=TRUE)
+    _, whole = run_on(left_alone, tmp_path_factory.mktemp("whole"), fake_config(**PROCEDURE))
+    return whole, left_alone.axes.moves_at_writes[0]
+
+
 @pytest.mark.parametrize("when", ["measuring", "verifying"])
 def test_an_alarm_stops_the_run_and_the_resume_gives_the_uninterrupted_result(
-        tmp_path: Path, when: str) -> None:
+        tmp_path: Path, when: str, uninterrupted: tuple[dict, int]) -> None:
     config = fake_config(**PROCEDURE)
-    left_alone = FakeRig(true_drho=TRUE)
-    _, whole = run_on(left_alone, tmp_path / "whole", config)
+    whole, moves_before_write = uninterrupted
     # the 7th move, or the 5th after the first write-back
-    alarm_on_move = 7 if when == "measuring" else left_alone.axes.moves_at_writes[0] + 5
+    alarm_on_move = 7 if when == "measuring" else moves_before_write + 5
 
     rig = FakeRig(true_drho=TRUE)
     rig.axes.alarm_on_move = alarm_on_move

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from builders import resumed, simulated
+from fakes import FakeRig, fake_config, run_on
 
 import orthocal
 from drivers.sim.machine import VirtualOrthoglide
@@ -94,13 +95,13 @@ def test_identify_cli_refuses_auto_without_noise_and_full_tilt_naming_why(tmp_pa
 
 
 def test_simulated_tilted_run_with_auto_writes_offsets_within_4_um(tmp_path, capsys):
+    # The engine's run on the Protocol-level fakes (tests/fakes.py) in front of the
+    # tilted virtual machine; stands exact: their misfit would blur the tilts (and the
+    # station told so: stand_tolerance_mm 0 takes them at L/2, as the paper)
     true_drho = (1.3, -0.9, 2.1)
-    args = simulated(tmp_path / "runs", seed=11, true_drho=true_drho, true_tilt=TILT,
-                     noise=0.001, yes=True, procedure={"settle_s": 0.0, "stand_tolerance_mm": 0},
-                     mount_error=0.0)  # stands exact: their misfit would blur the tilts
-    # (and the station told so: stand_tolerance_mm 0 takes them at L/2, as the paper)
-    code = cmd_run.run(args)
-    result = json.loads(capsys.readouterr().out)
+    rig = FakeRig(seed=11, true_drho=true_drho, true_tilt=TILT, noise_mm=0.001)
+    code, result = run_on(rig, tmp_path / "runs",
+                          fake_config(settle_s=0.0, stand_tolerance_mm=0))
     assert result["status"] == "ok" and result["model"] == "rho+tilt"
     # completed: 0, or 3 where its closed loop did not converge (it says why)
     assert code == (3 if report.not_converged(result) else 0), result.get("message")
