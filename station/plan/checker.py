@@ -232,11 +232,7 @@ class MotionChecker:
         # The signal over this sub-move: the ramp at the extremes of the progress any
         # point of its set has along the move (the same pairing of worst nominal
         # travel and worst signal as the guard makes ahead of the axes).
-        if gauges.chord is None:  # no signal: nothing to pair, no points to spread
-            sig_lo = sig_hi = np.zeros(len(gauges.names))
-        else:
-            sig_lo, sig_hi = gauges.signal_range(
-                motion.reachable_points(a, b, self.motion, n=2))
+        sig_lo, sig_hi = gauges.signal_range(a, b, self.motion)
         low = high = None
         if margin is not None:
             low = gauges.low + margin - sig_lo

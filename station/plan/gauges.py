@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.plan.motion import NotCrossing
+from station.plan.motion import NotCrossing, reachable_points
 from station.plan.steps import SetupPlan
 
 __all__ = ["SIGNAL_BULGE", "Gauges", "NotCrossing"]
@@ -32,13 +32,17 @@ class Gauges:
     pad: float = 0.0
     chord: tuple[np.ndarray, np.ndarray] | None = None
 
-    def signal_range(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(m,) lowest and highest signal over the progress that joint positions
-        ``points`` span along the chord: the ramp, ± the pad, ± SIGNAL_BULGE × the
-        ramp's change where the progress is away from both ends (4u(1 − u))."""
+    def signal_range(self, start: np.ndarray, end: np.ndarray, motion: str
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """(m,) lowest and highest signal over the progress that the joint positions a
+        sub-move from ``start`` to ``end`` can pass through (reachable_points, by the
+        ``motion`` model) span along the chord: the ramp, ± the pad, ± SIGNAL_BULGE ×
+        the ramp's change where the progress is away from both ends (4u(1 − u)).
+        Without a chord there is no signal, and no points are spread."""
         if self.chord is None:
             zero = np.zeros(len(self.names))
             return zero, zero
+        points = reachable_points(start, end, motion, n=2)
         a, b = self.chord
         d = b - a
         norm = float(d @ d)
