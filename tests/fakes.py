@@ -262,44 +262,50 @@ def run_on(rig: FakeRig, out: Path, config: StationConfig) -> tuple[int, dict[st
     ``orthocal run`` starts one: the plan checked before anything moves, from where
     the axes stand, then the run directory and its journal. Returns the command's
     exit status (3: completed, the loop not converged) and the result."""
-    devices = rig.devices()
-    try:
-        limits = rig.axes.soft_limits()
-        plan = build_plan(config)
-        checker = MotionChecker(config, limits)
-        check_plan(plan, config, limits, checker=checker)
-        check_plan(plan, config, limits, start=rig.axes.read_positions(), checker=checker)
-        run_dir = new_run_dir(out)
-        write_run_files(run_dir, config, plan, rig.simulation())
-        with Journal(run_dir / JOURNAL_NAME) as journal:
-            sim = rig.simulation()
-            journal.append({"type": "header", "version": "test", "config": config.model_dump(),
-                            "plan": plan.to_json(), "simulation": sim, "started": now_iso(),
-                            "argv": []})
-            ctx = Run(run_dir, config, plan, journal, devices, rig.operator(), sim,
-                      JournalState(), [], now_iso(), checker=checker)
-            code, result = execute(ctx)
-            return exit_status(result, code), result
-    finally:
-        devices.close()
+    plan, checker = _checked(rig, config, from_where_they_stand=True)
+    run_dir = new_run_dir(out)
+    write_run_files(run_dir, config, plan, rig.simulation())
+    header = {"type": "header", "version": "test", "config": config.model_dump(),
+              "plan": plan.to_json(), "simulation": rig.simulation(), "started": now_iso(),
+              "argv": []}
+    return _execute(rig, config, plan, checker, run_dir, header, JournalState(), [],
+                    now_iso())
 
 
 def resume_on(rig: FakeRig, run_dir: Path, config: StationConfig
               ) -> tuple[int, dict[str, Any]]:
     """The rest of a run from its journal (``orthocal resume``'s engine part)."""
     run_dir, records, state = reopen(run_dir)
-    records = drop_redone(records)
+    plan, checker = _checked(rig, config, from_where_they_stand=False)
+    return _execute(rig, config, plan, checker, run_dir,
+                    {"type": "resumed", "version": "test", "argv": []}, state,
+                    drop_redone(records), state.header.get("started") or now_iso())
+
+
+def _checked(rig: FakeRig, config: StationConfig, *, from_where_they_stand: bool
+             ) -> tuple[Any, MotionChecker]:
+    """The plan, checked before anything moves (and from where the axes stand, as a
+    new run checks it), with the checker the run goes on with."""
+    limits = rig.axes.soft_limits()
+    plan = build_plan(config)
+    checker = MotionChecker(config, limits)
+    check_plan(plan, config, limits, checker=checker)
+    if from_where_they_stand:
+        check_plan(plan, config, limits, start=rig.axes.read_positions(), checker=checker)
+    return plan, checker
+
+
+def _execute(rig: FakeRig, config: StationConfig, plan: Any, checker: MotionChecker,
+             run_dir: Path, first: dict[str, Any], state: JournalState,
+             records: list[dict[str, Any]], started: str) -> tuple[int, dict[str, Any]]:
+    """The engine on the rig's devices, its journal opened with ``first``: the
+    command's exit status and the result."""
     devices = rig.devices()
     try:
-        limits = rig.axes.soft_limits()
-        plan = build_plan(config)
-        checker = MotionChecker(config, limits)
-        check_plan(plan, config, limits, checker=checker)
         with Journal(run_dir / JOURNAL_NAME) as journal:
-            journal.append({"type": "resumed", "version": "test", "argv": []})
+            journal.append(first)
             ctx = Run(run_dir, config, plan, journal, devices, rig.operator(),
-                      rig.simulation(), state, records,
-                      state.header.get("started") or now_iso(), checker=checker)
+                      rig.simulation(), state, records, started, checker=checker)
             code, result = execute(ctx)
             return exit_status(result, code), result
     finally:
