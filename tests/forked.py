@@ -75,6 +75,9 @@ class Forked:
         self.returncode: int | None = None
         self._pipes = {out_r: bytearray(), err_r: bytearray()}
         self._out, self._err = out_r, err_r
+        # Which of the two are still open: a closed fd's number may be handed to
+        # another file at once, so "is it open?" cannot be asked of the number.
+        self._open = {out_r, err_r}
 
     def poll(self) -> int | None:
         if self.returncode is None:
@@ -93,15 +96,15 @@ class Forked:
     def communicate(self, timeout: float | None = None) -> tuple[str, str]:
         """Both pipes read to their end and the child reaped, within ``timeout``
         seconds (TimeoutError beyond it; the caller kills)."""
-        deadline = time.monotonic() + (LIMIT_S if timeout is None else timeout)
+        limit = LIMIT_S if timeout is None else timeout
+        deadline = time.monotonic() + limit
         with selectors.DefaultSelector() as sel:
-            for fd in self._pipes:
-                if not _closed(fd):
-                    sel.register(fd, selectors.EVENT_READ)
+            for fd in self._open:
+                sel.register(fd, selectors.EVENT_READ)
             while sel.get_map():
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    raise TimeoutError(f"child {self.pid} still running after {timeout} s")
+                    raise TimeoutError(f"child {self.pid} still running after {limit} s")
                 for key, _ in sel.select(left):
                     chunk = os.read(key.fd, 65536)
                     if chunk:
@@ -109,9 +112,10 @@ class Forked:
                     else:
                         sel.unregister(key.fd)
                         os.close(key.fd)
+                        self._open.discard(key.fd)
         while self.poll() is None:
             if time.monotonic() > deadline:
-                raise TimeoutError(f"child {self.pid} still running after {timeout} s")
+                raise TimeoutError(f"child {self.pid} still running after {limit} s")
             time.sleep(0.005)
         return (self._pipes[self._out].decode(errors="replace"),
                 self._pipes[self._err].decode(errors="replace"))
@@ -122,17 +126,9 @@ class Forked:
             os.kill(self.pid, signal.SIGKILL)
             os.waitpid(self.pid, 0)
             self.returncode = -signal.SIGKILL
-        for fd in self._pipes:
-            if not _closed(fd):
-                os.close(fd)
-
-
-def _closed(fd: int) -> bool:
-    try:
-        os.fstat(fd)
-    except OSError:
-        return True
-    return False
+        for fd in self._open:
+            os.close(fd)
+        self._open.clear()
 
 
 def _child(code: str, argv: list[str], cwd: Path, env: dict[str, str], out_w: int,
