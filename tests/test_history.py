@@ -5,8 +5,11 @@ that cannot be written never fails a run."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,11 +40,21 @@ def _with(machine_id: str | None, history: dict[str, Any] | None = None) -> Any:
     return hook
 
 
-def _run(out: Path, capsys, machine_id: str | None, true_drho=TRUE, seed: int = 4,
+def _run(out: Path, capsys: Any, machine_id: str | None, true_drho=TRUE, seed: int = 4,
          history: dict[str, Any] | None = None) -> dict[str, Any]:
-    code = cmd_run.run(simulated(out, seed=seed, noise=0.001, true_drho=true_drho,
-                                 mount_error=0.0, hook=_with(machine_id, history)))
-    result = json.loads(capsys.readouterr().out)
+    """A simulated run of machine ``machine_id`` into ``out``, its JSON result (read
+    from ``capsys``, or from stdout captured here where a fixture has no capsys)."""
+    options = simulated(out, seed=seed, noise=0.001, true_drho=true_drho, mount_error=0.0,
+                        hook=_with(machine_id, history))
+    if capsys is None:
+        buffer = io.StringIO()
+        with contextlib.redirect_stdout(buffer):
+            code = cmd_run.run(options)
+        printed = buffer.getvalue()
+    else:
+        code = cmd_run.run(options)
+        printed = capsys.readouterr().out
+    result = json.loads(printed)
     assert code in (0, 3) and result["status"] == "ok", result.get("message")
     return result
 
@@ -50,22 +63,46 @@ def orthocal(*argv: str, cwd: Path) -> Completed:
     return cli(*argv, cwd=cwd)
 
 
-def test_runs_are_recorded_listed_and_rebuilt(tmp_path: Path, capsys) -> None:
-    out = tmp_path / "runs"
-    a = _run(out, capsys, "OG-0042")
-    b = _run(out, capsys, "OG-0042", seed=5)
-    other = _run(out, capsys, "OG-0007", seed=6)
-    assert a["machine"]["id"] == "OG-0042"
-    with HistoryStore(default_url(out)) as store:
-        mine = store.entries("OG-0042")
-        assert [e["run_dir"] for e in mine] == [a["run_dir"], b["run_dir"]]
-        assert [e["run_dir"] for e in store.entries()] == \
-            [a["run_dir"], b["run_dir"], other["run_dir"]]
-    listed = orthocal("history", "--out", str(out), "--machine", "OG-0042", "--json",
+@dataclass
+class Machines:
+    """Five finished runs recorded in one ``--out``: machine OG-1 three times (``a``,
+    ``same``: the machine unchanged, ``moved``: its x joint drifted 20 µm), OG-2
+    once, and a run that names no machine."""
+
+    out: Path
+    a: dict[str, Any]
+    same: dict[str, Any]
+    moved: dict[str, Any]
+    other: dict[str, Any]
+    anonymous: dict[str, Any]
+
+
+@pytest.fixture(scope="module")
+def machines(tmp_path_factory: pytest.TempPathFactory) -> Machines:
+    """The runs the listing, rebuild and compare tests read (none of them writes to
+    the store: a rebuild goes to a store of its own)."""
+    out = tmp_path_factory.mktemp("machines") / "runs"
+    return Machines(out, _run(out, None, "OG-1"), _run(out, None, "OG-1", seed=5),
+                    _run(out, None, "OG-1", seed=6,
+                         true_drho=(TRUE[0] + 0.02, TRUE[1], TRUE[2])),
+                    _run(out, None, "OG-2", seed=5), _run(out, None, None, seed=6))
+
+
+def test_runs_are_recorded_listed_and_rebuilt(machines: Machines, tmp_path: Path) -> None:
+    m = machines
+    a, same, moved = m.a, m.same, m.moved
+    assert a["machine"]["id"] == "OG-1"
+    everyone = [r["run_dir"] for r in (a, same, moved, m.other, m.anonymous)]
+    with HistoryStore(default_url(m.out)) as store:
+        mine = store.entries("OG-1")
+        assert [e["run_dir"] for e in mine] == [a["run_dir"], same["run_dir"], moved["run_dir"]]
+        assert [e["run_dir"] for e in store.entries()] == everyone
+    listed = orthocal("history", "--out", str(m.out), "--machine", "OG-1", "--json",
                       cwd=tmp_path)
     assert listed.returncode == 0, listed.stderr
     doc = json.loads(listed.stdout)
-    assert [e["run_dir"] for e in doc["runs"]] == [a["run_dir"], b["run_dir"]]
+    assert [e["run_dir"] for e in doc["runs"]] == \
+        [a["run_dir"], same["run_dir"], moved["run_dir"]]
     found = doc["runs"][0]["as_found"]["joint_error_mm"]
     # the machine's joint error in the controller's zero frame: Δρ − o, o = 0 here
     for axis, true in zip("xyz", TRUE, strict=True):
@@ -76,20 +113,20 @@ def test_runs_are_recorded_listed_and_rebuilt(tmp_path: Path, capsys) -> None:
         row["reversal"]["x"]["value_mm"] == a["reversal"]["value_mm"]["x"]
     assert [i["name"] for i in row["instruments"]] == \
         [i["name"] for i in a["uncertainty_budget"]["instruments"]]
-    (out / DEFAULT_NAME).unlink()  # the run directories are the record
-    rebuilt = orthocal("history", "--out", str(out), "--rebuild", str(out), "--json",
-                       cwd=tmp_path)
+    # the run directories are the record: a store made again from them alone
+    rebuilt_out = tmp_path / "rebuilt"
+    rebuilt_out.mkdir()
+    rebuilt = orthocal("history", "--out", str(rebuilt_out), "--rebuild", str(m.out),
+                       "--json", cwd=tmp_path)
     assert rebuilt.returncode == 0, rebuilt.stderr
-    assert len(json.loads(rebuilt.stdout)["runs"]) == 3
-    text = orthocal("history", "--out", str(out), cwd=tmp_path)
-    assert text.returncode == 0 and "OG-0007" in text.stdout and "OG-0042" in text.stdout
+    assert [e["run_dir"] for e in json.loads(rebuilt.stdout)["runs"]] == everyone
+    assert (rebuilt_out / DEFAULT_NAME).exists()
+    text = orthocal("history", "--out", str(rebuilt_out), cwd=tmp_path)
+    assert text.returncode == 0 and "OG-1" in text.stdout and "OG-2" in text.stdout
 
 
-def test_compare_finds_drift_and_not_noise(tmp_path: Path, capsys) -> None:
-    out = tmp_path / "runs"
-    a = _run(out, capsys, "OG-1")
-    same = _run(out, capsys, "OG-1", seed=5)
-    moved = _run(out, capsys, "OG-1", seed=6, true_drho=(TRUE[0] + 0.02, TRUE[1], TRUE[2]))
+def test_compare_finds_drift_and_not_noise(machines: Machines, tmp_path: Path) -> None:
+    a, same, moved = machines.a, machines.same, machines.moved
     unchanged = orthocal("compare", a["run_dir"], same["run_dir"], "--json", cwd=tmp_path)
     assert unchanged.returncode == 0, unchanged.stderr
     for axis, c in json.loads(unchanged.stdout)["joint_error_mm"].items():
@@ -106,11 +143,8 @@ def test_compare_finds_drift_and_not_noise(tmp_path: Path, capsys) -> None:
     assert "joint x" in said and "(significant)" in said
 
 
-def test_compare_refuses_other_machines_in_one_line(tmp_path: Path, capsys) -> None:
-    out = tmp_path / "runs"
-    a = _run(out, capsys, "OG-1")
-    b = _run(out, capsys, "OG-2", seed=5)
-    anonymous = _run(out, capsys, None, seed=6)
+def test_compare_refuses_other_machines_in_one_line(machines: Machines, tmp_path: Path) -> None:
+    a, b, anonymous = machines.a, machines.other, machines.anonymous
     # no section without an earlier run of the same id, nor without an id
     assert "since_last" not in b and "since_last" not in anonymous
     for other, words in ((b, "different machines"), (anonymous, "names no machine")):
