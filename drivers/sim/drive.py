@@ -119,6 +119,7 @@ class DriveRegisters:
         self._status_regs = [m[n] for n in dict.fromkeys(
             n for spec in m.status.values() for n in spec.registers)]
         self._alarm_regs = [m[n] for n in m.alarm_code]
+        self._actuals = m.axis_registers("ACTUAL")
         # Each register's part of each command: (command, the values it is written).
         self._parts: dict[str, list[tuple[str, list[int]]]] = {}
         for command in COMMANDS:
@@ -139,6 +140,10 @@ class DriveRegisters:
                        for name, parts in self._parts.items()
                        if not m[name].is_bit and all(
                            len(m.commands[c]) == 1 for c, _ in parts)}
+        # ... per unit id, as a read of that unit finds them
+        self._code_regs = {dev: [m[n] for n in self._codes
+                                 if self.layout.device_of(m[n]) == dev]
+                           for dev in self.layout.devices}
 
     # --- hooks for the server ---------------------------------------------------------------
 
@@ -201,9 +206,8 @@ class DriveRegisters:
         result = None
         if set_values is None:
             if function_code in _READ_CODES:
-                for name in self._codes:  # taken: reads 0
-                    if self.layout.device_of(self.map[name]) == device_id:
-                        self._store.put_counts(self.map[name], 0)
+                for reg in self._code_regs.get(device_id, ()):  # taken: reads 0
+                    self._store.put_counts(reg, 0)
         else:
             self._at = (device_id, table)
             result = self._write(start, address, [int(v) for v in set_values], registers)
@@ -243,7 +247,7 @@ class DriveRegisters:
             self._store.put_counts(reg, bits[reg.name] & 1 if reg.is_bit else bits[reg.name])
         for reg in self._alarm_regs:
             self._store.put_counts(reg, st.alarm_code)
-        for reg, rho in zip(self.map.axis_registers("ACTUAL"), m.actual(), strict=True):
+        for reg, rho in zip(self._actuals, m.actual(), strict=True):
             self._store.put(reg, rho)
         if self._offsets:
             for reg, o in zip(self._offsets, m.offsets, strict=True):
@@ -258,14 +262,15 @@ class DriveRegisters:
         old = self._store
         new = old.written(device_id, table, address, values)
         touched = self.layout.touched(device_id, table, address, len(values))
+        hit = {reg.name for reg in touched}  # names: a Register's == compares every field
 
         for reg, lo, hi in zip(self._targets, self.soft_min, self.soft_max, strict=True):
-            if reg in touched and not lo - 1e-9 <= new.value(reg) <= hi + 1e-9:
+            if reg.name in hit and not lo - 1e-9 <= new.value(reg) <= hi + 1e-9:
                 return ExcCodes.ILLEGAL_VALUE
-        speeds = [reg for reg in self._speeds if reg in touched]
+        speeds = [reg for reg in self._speeds if reg.name in hit]
         if any(new.value(reg) <= 0 for reg in speeds):
             return ExcCodes.ILLEGAL_VALUE
-        offsets_hit = any(reg in touched for reg in self._offsets)
+        offsets_hit = any(reg.name in hit for reg in self._offsets)
         offsets = np.array([new.value(reg) for reg in self._offsets])
         if offsets_hit and np.any(np.abs(offsets) > self.max_offset_mm):
             return ExcCodes.ILLEGAL_VALUE
@@ -293,7 +298,8 @@ class DriveRegisters:
                    ) -> list[str] | None:
         """The commands this write completes, in order; None: an unknown code."""
         commands: list[str] = []
-        if not self.map.commands["move"] and any(reg in touched for reg in self._targets):
+        if not self.map.commands["move"] and any(
+                reg.name in {t.name for t in touched} for reg in self._targets):
             commands.append("move")  # writing a target starts the move (IAI)
         for reg in touched:
             value = new.counts(reg)

@@ -70,8 +70,11 @@ class MapLayout:
     def __init__(self, registers: Iterable[Register], device_id: int) -> None:
         self.device_id = device_id
         self.registers = list(registers)
+        # Every request of a run looks up the same registers' words: found once.
+        self._keys: dict[str, tuple[Register, list[Key]]] = {}
         self._at: dict[Key, tuple[Register, int]] = {}
         for reg in self.registers:
+            self._keys[reg.name] = (reg, self._keys_of(reg))
             for i, key in enumerate(self.keys(reg)):
                 if key in self._at:
                     raise ValueError(f"registers {self._at[key][0].name} and {reg.name} "
@@ -85,6 +88,13 @@ class MapLayout:
         return self.device_id if reg.device_id is None else reg.device_id
 
     def keys(self, reg: Register) -> list[Key]:
+        """The (device, table, address) of each word of ``reg``, in word order."""
+        known = self._keys.get(reg.name)
+        if known is not None and known[0] is reg:
+            return known[1]
+        return self._keys_of(reg)
+
+    def _keys_of(self, reg: Register) -> list[Key]:
         dev = self.device_of(reg)
         return [(dev, reg.table, reg.address + i) for i in range(reg.words)]
 
@@ -103,12 +113,12 @@ class MapLayout:
     def touched(self, device_id: int, table: str, address: int, count: int) -> list[Register]:
         """The registers a request on ``count`` words (bits) from ``address`` touches,
         in address order, each once."""
-        out: list[Register] = []
+        out: dict[str, Register] = {}  # by name: a Register's == compares every field
         for a in range(address, address + count):
             entry = self._at.get((device_id, table, a))
-            if entry is not None and entry[0] not in out:
-                out.append(entry[0])
-        return out
+            if entry is not None:
+                out.setdefault(entry[0].name, entry[0])
+        return list(out.values())
 
     def sim_devices(self, action_for: Callable[[int], SimAction]) -> list[SimDevice]:
         """One pymodbus SimDevice per unit id, its four tables laid out register by
@@ -178,7 +188,9 @@ class WordStore:
             self._words[key] = w
 
     def put(self, reg: Register, value: float) -> None:
-        self.put_counts(reg, to_counts(value, reg.scale))
+        # float(): the machine's values are numpy scalars, several times slower to
+        # round than a float, and every request of a run stores a dozen of them
+        self.put_counts(reg, to_counts(float(value), reg.scale))
 
     def copy_into(self, device_id: int, table: str, start: int, registers: list[int]) -> None:
         """Show the stored words in a SimDevice block of ``table`` starting at
