@@ -37,7 +37,8 @@ from station.console.operator import VirtualOperator
 from station.engine.devices import Devices
 from station.engine.procedure import Run, execute
 from station.engine.recovery import drop_redone
-from station.plan.checker import MotionChecker, check_plan
+from station.plan.check import check_plan
+from station.plan.checker import MotionChecker
 from station.plan.steps import build_plan
 from station.rundir.directory import new_run_dir, now_iso, reopen, write_run_files
 from station.rundir.journal import JOURNAL_NAME, Journal, JournalState

@@ -14,7 +14,7 @@ from station.commands.cli import main
 from station.commands.design import design_summary, plan_keys, run_time
 from station.commands.simulation import station_config as sim_station_config
 from station.config import parse_config
-from station.plan.checker import check_plan
+from station.plan.check import check_plan
 from station.plan.steps import build_plan
 
 G = orthocal.Geometry()

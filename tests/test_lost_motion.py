@@ -30,7 +30,7 @@ from orthocal.lost_motion import (
 from station import report
 from station.commands import run as cmd_run
 from station.errors import RunFailed
-from station.plan.checker import check_plan
+from station.plan.check import check_plan
 from station.plan.steps import REVERSAL, Move, build_plan
 from station.rundir.journal import read_journal
 

@@ -23,7 +23,8 @@ from station import report
 from station.commands import run as cmd_run
 from station.config import StationConfig, parse_config
 from station.errors import BadInput, RunFailed
-from station.plan.checker import MotionChecker, check_plan
+from station.plan.check import check_plan
+from station.plan.checker import MotionChecker
 from station.plan.limits import motion_model
 from station.plan.motion import reachable_points
 from station.plan.steps import build_plan

@@ -13,7 +13,7 @@ from builders import station_config, station_data
 import orthocal
 from station.config import StationConfig, parse_config
 from station.errors import BadInput
-from station.plan.checker import check_plan
+from station.plan.check import check_plan
 from station.plan.steps import Move, Prompt, Read, build_plan
 
 PROCEDURE = {"cycles": 2, "readings": 3}  # the builders' station, two cycles of three
@@ -144,3 +144,39 @@ def test_plan_json_lists_steps() -> None:
     kinds = {s["kind"] for s in data["steps"]}
     assert kinds == {"move", "prompt", "settle", "read", "checkpoint"}
     assert data["soft_limits"]["upper"] == WIDE[1]
+
+
+def test_an_identical_check_is_remembered_and_gives_what_the_check_gives() -> None:
+    """A check with a fresh checker is kept (station.plan.check): the same plan checked
+    again with another fresh checker gets the plan and the checker's state the check
+    itself gives, and goes on from copies of them; a checker that has worked already,
+    or a plan refused, is checked afresh."""
+    from station.plan import check
+    from station.plan.checker import MotionChecker
+
+    cfg = config()
+    start = [310.25, 310.25, 310.25]
+    check._kept.clear()
+    first_checker = MotionChecker(cfg, WIDE)
+    first = check_plan(build_plan(cfg), cfg, WIDE, start=start, checker=first_checker)
+    assert len(check._kept) == 1
+    again_checker = MotionChecker(cfg, WIDE)
+    again = check_plan(build_plan(cfg), cfg, WIDE, start=start, checker=again_checker)
+    assert len(check._kept) == 1  # recalled, not checked again
+    assert again.to_json() == first.to_json() and again.routes == first.routes
+    assert again.format() == first.format() and again.start == first.start
+    travel, routes, bounds = again_checker.state()
+    assert travel == first_checker.travel and bounds.keys() == first_checker.state()[2].keys()
+    assert routes.keys() == first_checker.state()[1].keys()
+    # the run goes on with its own copies: what it adds is not what was kept
+    again_checker.route(start, [300.0, 310.25, 310.25], "elsewhere")
+    assert len(again_checker.state()[1]) > len(check._kept.popitem()[1].checker[1])
+    # a checker that has worked already: its check is not kept
+    check_plan(build_plan(cfg), cfg, WIDE, start=start, checker=again_checker)
+    assert not check._kept
+    # a refused plan: refused each time, never kept
+    narrow = ([0.0, 0.0, 0.0], [300.0, 1000.0, 1000.0])
+    for _ in range(2):
+        with pytest.raises(BadInput):
+            check_plan(build_plan(cfg), cfg, narrow)
+    assert not check._kept

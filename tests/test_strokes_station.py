@@ -19,7 +19,7 @@ import orthocal
 from station.commands import run as cmd_run
 from station.config import parse_config
 from station.errors import BadInput
-from station.plan.checker import check_plan
+from station.plan.check import check_plan
 from station.plan.steps import Move, Read, build_plan
 from station.report import not_converged
 from station.rundir.journal import read_journal

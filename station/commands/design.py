@@ -41,7 +41,8 @@ from orthocal.numbers import finite
 from orthocal.postures import MIDDLE, split_plane, stroke
 from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
-from station.plan.checker import MotionChecker, check_plan
+from station.plan.check import check_plan
+from station.plan.checker import MotionChecker
 from station.plan.limits import effective_limits
 from station.plan.steps import Plan, Read, Settle, build_plan
 

@@ -30,7 +30,8 @@ from station.engine.results import AXES
 from station.engine.writeback import held_after
 from station.engine.writeback import rollback as do_rollback
 from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
-from station.plan.checker import MotionChecker, check_plan
+from station.plan.check import check_plan
+from station.plan.checker import MotionChecker
 from station.plan.steps import build_plan
 from station.rundir.directory import (
     NVRAM_NAME,

@@ -18,8 +18,8 @@ from station.config import StationConfig
 from station.errors import BadInput
 from station.plan import motion
 from station.plan.gauges import Gauges, NotCrossing
-from station.plan.limits import effective_limits, limits_source, motion_model
-from station.plan.steps import AXES, Move, Plan, Prompt, SetupPlan, route_key
+from station.plan.limits import effective_limits, motion_model
+from station.plan.steps import AXES, SetupPlan
 
 # Most waypoints put on one move to keep the plungers in their strokes; each is a
 # rest-to-rest sub-move (bench/cycle.py measures what they cost).
@@ -68,6 +68,23 @@ class MotionChecker:
     def check(self, start: Sequence[float] | None, target: Sequence[float], label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
         self.route(start, target, label, setup, mounted)
+
+    def fresh(self) -> bool:
+        """Nothing checked yet: what a check does depends on its arguments alone."""
+        return not (self.travel or self._routes or self._bounds)
+
+    def state(self) -> tuple[dict, dict, dict]:
+        """Copies of the travel, routes and bounds found so far (station.plan.check
+        keeps them for an identical check)."""
+        return (dict(self.travel), {k: list(v) for k, v in self._routes.items()},
+                dict(self._bounds))
+
+    def resume_from(self, state: tuple[dict, dict, dict]) -> None:
+        """Go on from :meth:`state` of an identical checker (copies taken here)."""
+        travel, routes, bounds = state
+        self.travel = dict(travel)
+        self._routes = {k: list(v) for k, v in routes.items()}
+        self._bounds = dict(bounds)
 
     def route(self, start: Sequence[float] | None, target: Sequence[float], label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None,
@@ -440,47 +457,3 @@ class PathRefused(BadInput):
         self.indicator = indicator
         self.pushed = pushed
         self.detail = detail
-
-
-def check_plan(
-    plan: Plan,
-    config: StationConfig,
-    controller_limits: tuple[Sequence[float], Sequence[float]],
-    start: Sequence[float] | None = None,
-    checker: MotionChecker | None = None,
-    travel: bool = True,
-) -> Plan:
-    """Refuse (BadInput) a plan that leaves the soft limits or the workspace, or
-    that would push a plunger past its stroke or lift it off the leg, anywhere
-    along any move; name the posture, setup and indicator. Fills plan.limits and
-    plan.travel. ``start``: the current joint positions, to check the first move.
-    ``checker``: one made for this config and these limits, shared by the checks of
-    many plans (its bounds remembered; plan.travel then spans all of them).
-    ``travel`` False: only whether the plan holds (a search over candidate plans),
-    not the sharp plunger travel of every sub-move that plan.travel lists."""
-    checker = checker or MotionChecker(config, controller_limits)
-    plan.limits = (checker.lo.tolist(), checker.hi.tolist())
-    plan.limits_source = limits_source(config, controller_limits)
-    position = None if start is None else np.asarray(start, dtype=float)
-    for sp in plan.setups:
-        mounted: dict[str, str] = {}
-        # The listing's order plus one extra Π+ move, which follows a cycle's
-        # final Π0 when the next cycle (or a repeat) starts: all moves of a setup.
-        for step in sp.start_steps("m", 0, 0.0, 1) + sp.cycle_steps("m", 1, 0.0, 1) \
-                + sp.cycle_steps("m", 2, 0.0, 1)[:1]:
-            if isinstance(step, Prompt):
-                mounted = dict(step.indicators)
-            elif isinstance(step, Move):
-                legs = checker.route(position, step.targets, step.label, sp, mounted,
-                                     approach=step.approach, travel=travel)
-                # the waypoints: the sub-moves' targets before the target (and before
-                # the approach point, which the move itself names)
-                via = legs[:-2] if step.approach is not None else legs[:-1]
-                if position is not None and via:
-                    plan.routes[route_key(position, step.targets)] = [
-                        tuple(float(v) for v in leg) for leg in via]
-                position = np.asarray(step.targets)
-    plan.travel = checker.travel
-    plan.motion = checker.motion
-    plan.start = None if start is None else tuple(float(v) for v in start)
-    return plan

@@ -1,0 +1,128 @@
+"""The whole plan checked before anything moves: every move of every setup through
+a :class:`~station.plan.checker.MotionChecker`, the plan's limits, routes and
+plunger travel filled in.
+
+A check made with a fresh checker is a pure function of the plan, the config, the
+controller's soft limits, the start and what it is asked (travel, spread): it fills
+the plan's limits, routes and travel and the checker's caches, and nothing else. So
+the process keeps the last few such checks, and an identical one (``orthocal
+resume`` after ``run`` in one long-lived process, the test suite's hundreds of
+runs of a few configs) gets both back as the first check left them: the same plan
+and the same checker state, everything after it running exactly as it would have
+after the check itself. A check that refused its plan is not kept (it raises again,
+saying why), nor one made with a checker that had already worked (its result
+depends on what that checker did before).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from station.config import StationConfig
+from station.plan.checker import MotionChecker
+from station.plan.limits import limits_source
+from station.plan.steps import Move, Plan, Prompt, route_key
+
+#: Checks kept (a run checks one plan, or two: from its postures, then from where the
+#: axes stand).
+KEPT = 8
+
+
+@dataclass(frozen=True)
+class _Checked:
+    """What a check left: the plan's fields it filled, and the checker's state."""
+
+    limits: tuple[list[float], list[float]]
+    limits_source: str
+    routes: dict[tuple, list[tuple[float, float, float]]]
+    start: tuple[float, ...] | None
+    checker: tuple[dict, dict, dict]
+
+
+_kept: OrderedDict[str, _Checked] = OrderedDict()
+
+
+def check_plan(
+    plan: Plan,
+    config: StationConfig,
+    controller_limits: tuple[Sequence[float], Sequence[float]],
+    start: Sequence[float] | None = None,
+    checker: MotionChecker | None = None,
+    travel: bool = True,
+) -> Plan:
+    """Refuse (BadInput) a plan that leaves the soft limits or the workspace, or
+    that would push a plunger past its stroke or lift it off the leg, anywhere
+    along any move; name the posture, setup and indicator. Fills plan.limits and
+    plan.travel. ``start``: the current joint positions, to check the first move.
+    ``checker``: one made for this config and these limits, shared by the checks of
+    many plans (its bounds remembered; plan.travel then spans all of them).
+    ``travel`` False: only whether the plan holds (a search over candidate plans),
+    not the sharp plunger travel of every sub-move that plan.travel lists."""
+    checker = checker or MotionChecker(config, controller_limits)
+    key = _key(plan, config, controller_limits, start, travel, checker) \
+        if checker.fresh() else None
+    if key is not None and key in _kept:
+        _kept.move_to_end(key)
+        return _restore(_kept[key], plan, checker)
+    plan.limits = (checker.lo.tolist(), checker.hi.tolist())
+    plan.limits_source = limits_source(config, controller_limits)
+    position = None if start is None else np.asarray(start, dtype=float)
+    for sp in plan.setups:
+        mounted: dict[str, str] = {}
+        # The listing's order plus one extra Π+ move, which follows a cycle's
+        # final Π0 when the next cycle (or a repeat) starts: all moves of a setup.
+        for step in sp.start_steps("m", 0, 0.0, 1) + sp.cycle_steps("m", 1, 0.0, 1) \
+                + sp.cycle_steps("m", 2, 0.0, 1)[:1]:
+            if isinstance(step, Prompt):
+                mounted = dict(step.indicators)
+            elif isinstance(step, Move):
+                legs = checker.route(position, step.targets, step.label, sp, mounted,
+                                     approach=step.approach, travel=travel)
+                # the waypoints: the sub-moves' targets before the target (and before
+                # the approach point, which the move itself names)
+                via = legs[:-2] if step.approach is not None else legs[:-1]
+                if position is not None and via:
+                    plan.routes[route_key(position, step.targets)] = [
+                        tuple(float(v) for v in leg) for leg in via]
+                position = np.asarray(step.targets)
+    plan.start = None if start is None else tuple(float(v) for v in start)
+    if key is not None:
+        _kept[key] = _Checked((list(plan.limits[0]), list(plan.limits[1])),
+                              plan.limits_source, {k: list(v) for k, v in plan.routes.items()},
+                              plan.start, checker.state())
+        while len(_kept) > KEPT:
+            _kept.popitem(last=False)
+    plan.travel = checker.travel
+    plan.motion = checker.motion
+    return plan
+
+
+def _key(plan: Plan, config: StationConfig,
+         controller_limits: tuple[Sequence[float], Sequence[float]],
+         start: Sequence[float] | None, travel: bool, checker: MotionChecker) -> str:
+    """Everything a check with a fresh checker depends on, as text (the checker's
+    own config and limits too: a caller may have made it for others)."""
+    doc: list[Any] = [plan.to_json(), plan.routes and sorted(map(str, plan.routes.items())),
+                      config.model_dump(mode="json"),
+                      [[float(v) for v in side] for side in controller_limits],
+                      None if start is None else [float(v) for v in start], travel,
+                      checker.config is config or checker.config.model_dump(mode="json"),
+                      checker.lo.tolist(), checker.hi.tolist(), checker.spread]
+    return json.dumps(doc, sort_keys=True, default=str)
+
+
+def _restore(done: _Checked, plan: Plan, checker: MotionChecker) -> Plan:
+    checker.resume_from(done.checker)
+    plan.limits = (list(done.limits[0]), list(done.limits[1]))
+    plan.limits_source = done.limits_source
+    plan.routes = {k: list(v) for k, v in done.routes.items()}
+    plan.start = done.start
+    plan.travel = checker.travel
+    plan.motion = checker.motion
+    return plan
