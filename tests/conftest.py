@@ -16,6 +16,7 @@ the rig of the CLI fixture below) are plain functions in builders.py.
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 import threading
@@ -55,6 +56,29 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers", "real_time: the virtual stations of this test run at real time "
         "(its subject is timing: guard polls during moves, deadlines, line time)")
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    _settle_the_heap()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    yield
+    _settle_the_heap()
+
+
+def _settle_the_heap() -> None:
+    """Collect what the test (or the collection) left as garbage, then freeze what
+    survives: Python's full collections, which run every few hundred thousand
+    allocations and once per report drawn (plots.release_fonts), then walk only the
+    objects the running test made, not the hundreds of thousands every test before
+    it left alive (modules, fixtures, caches). Measured on the report and closed-loop
+    files: 6.1 s of their 42 s went to the collector, 2.3 s with this. Objects alive
+    now and garbage later in a cycle stay in memory: a few MB over a session. The
+    leak check (no_leaks) has run by now: what it judged is not hidden from it."""
+    gc.collect()
+    gc.freeze()
 
 
 def _compile_the_project() -> None:
