@@ -90,7 +90,7 @@ def inverse(p, geometry: Geometry, drho=None, dL=None, tilt=None, gap=None) -> n
         perp = d - along[..., :, None] * u
         others = (perp**2).sum(axis=-1)
     radicand = L**2 - others
-    if np.any(radicand < 0):
+    if (radicand < 0).any():
         raise ValueError("point outside the reach of a leg")
     return along + np.sqrt(radicand) - drho
 
@@ -103,7 +103,7 @@ def _forward_orthogonal(q: np.ndarray, L: np.ndarray) -> np.ndarray:
     B = 2.0 * (k * w).sum(axis=-1) - 1.0
     C = (k**2 * w).sum(axis=-1)
     disc = B**2 - 4.0 * A * C
-    if np.any(disc < 0) or np.any(B >= 0):
+    if (disc < 0).any() or (B >= 0).any():  # methods: no wrapper per call
         raise ValueError("joint coordinates outside the assembly domain")
     s = 2.0 * C / (-B + np.sqrt(disc))
     return (s[..., None] + k) / (2.0 * q)

@@ -64,6 +64,8 @@ class MotionChecker:
         self._routes: dict[tuple, list[tuple[np.ndarray, list[np.ndarray]]]] = {}
         # Nominal travel bounds of sub-moves already bounded (_segment_bound).
         self._bounds: dict[tuple, motion.Bound | type[Exception]] = {}
+        # Each mounting's reading at Π0 (nominal_travel).
+        self._zeros: dict[tuple, float] = {}
 
     def check(self, start: Sequence[float] | None, target: Sequence[float], label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
@@ -415,7 +417,7 @@ class MotionChecker:
         lo, hi = self.lo, self.hi
         for i, axis in enumerate(AXES):
             excess = np.maximum(lo[i] - points[:, i], points[:, i] - hi[i])
-            if np.any(excess > 1e-9):
+            if (excess > 1e-9).any():
                 value = float(points[np.argmax(excess), i])
                 raise BadInput(
                     f"plan: {where}: ρ_{axis} = {value:.3f} mm is outside the soft "
@@ -435,10 +437,15 @@ class MotionChecker:
         i, j = AXES.index(sp.leg), AXES.index(direction.lstrip("-"))
         path = np.asarray(path, dtype=float)
         p = orthocal.forward(path, self.geometry) if end_points is None else end_points
-        rho0 = np.asarray(sp.postures["0"], dtype=float)
         plane = self.plane(sp)
-        zero = float(reading_at(rho0, orthocal.forward(rho0, self.geometry), i, j,
-                                np.zeros(3), plane))
+        # The reading at Π0 (the gauge's zero): one per mounting, asked for at every
+        # bound of every sub-move.
+        key = (tuple(sp.postures["0"]), i, j, plane)
+        zero = self._zeros.get(key)
+        if zero is None:
+            rho0 = np.asarray(sp.postures["0"], dtype=float)
+            zero = self._zeros[key] = float(reading_at(
+                rho0, orthocal.forward(rho0, self.geometry), i, j, np.zeros(3), plane))
         return sign * (reading_at(path, p, i, j, np.zeros(3), plane) - zero)
 
     def plane(self, sp: SetupPlan) -> float:

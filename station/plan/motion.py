@@ -250,8 +250,8 @@ def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str
         sub_lo, sub_hi = sub_lo.reshape(-1, m), sub_hi.reshape(-1, m)  # (B·2^d, m)
         sub_c0 = (c0[:, None, :] + size[:, None, :] * corners[None, :, :]).reshape(-1, d)
         sub_size = np.repeat(size / 2.0, len(corners), axis=0)
-        split = np.any(sub_lo < best_lo - tolerance, axis=1) | \
-            np.any(sub_hi > best_hi + tolerance, axis=1)
+        split = (sub_lo < best_lo - tolerance).any(axis=1) | \
+            (sub_hi > best_hi + tolerance).any(axis=1)
         if deciding:
             # A decision: only a cell that may cross a limit needs a sharper bound.
             split &= _crosses(sub_lo, sub_hi, low, high)
@@ -259,7 +259,7 @@ def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str
             split[:] = False  # the budget is spent: these bounds stand as they are
         final_lo.append(sub_lo[~split].min(axis=0, initial=np.inf))
         final_hi.append(sub_hi[~split].max(axis=0, initial=-np.inf))
-        if not np.any(split):
+        if not split.any():
             break
         c0, size = sub_c0[split], sub_size[split]
     lo, hi = np.min(final_lo, axis=0), np.max(final_hi, axis=0)
@@ -283,17 +283,17 @@ def _crosses(lo: np.ndarray, hi: np.ndarray, low: np.ndarray | None,
     """Per cell (rows of lo/hi), whether its bound reaches beyond a limit."""
     out = np.zeros(len(lo), dtype=bool)
     if low is not None:
-        out |= np.any(lo < low - 1e-9, axis=1)
+        out |= (lo < low - 1e-9).any(axis=1)
     if high is not None:
-        out |= np.any(hi > high + 1e-9, axis=1)
+        out |= (hi > high + 1e-9).any(axis=1)
     return out
 
 
 def _outside(lo: np.ndarray, hi: np.ndarray, low: np.ndarray | None,
              high: np.ndarray | None) -> bool:
     # 1e-9: a bound that touches its limit (a stop, where the travel is exact) holds
-    return bool((low is not None and np.any(lo < low - 1e-9))
-                or (high is not None and np.any(hi > high + 1e-9)))
+    return bool((low is not None and (lo < low - 1e-9).any())
+                or (high is not None and (hi > high + 1e-9).any()))
 
 
 def line_point(a: Sequence[float], b: Sequence[float],
