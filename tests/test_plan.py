@@ -170,7 +170,21 @@ def test_an_identical_check_is_remembered_and_gives_what_the_check_gives() -> No
     assert routes.keys() == first_checker.state()[1].keys()
     # the run goes on with its own copies: what it adds is not what was kept
     again_checker.route(start, [300.0, 310.25, 310.25], "elsewhere")
-    assert len(again_checker.state()[1]) > len(check._kept.popitem()[1].checker[1])
+    assert len(again_checker.state()[1]) > len(next(iter(check._kept.values())).checker[1])
+    # where the devices are reached is not what the check reads: recalled; a gauge's
+    # stroke is: checked afresh
+    data = station_data(procedure=PROCEDURE)
+    data["controller"] = {"port": 5021, "timeout_s": 0.5}
+    data["indicators"][0]["port"] = "/dev/pts/9"
+    moved = parse_config(data)
+    check_plan(build_plan(moved), moved, WIDE, start=start, checker=MotionChecker(moved, WIDE))
+    assert len(check._kept) == 1
+    data["indicators"][0]["stroke_mm"] = 25.0
+    longer = parse_config(data)
+    check_plan(build_plan(longer), longer, WIDE, start=start,
+               checker=MotionChecker(longer, WIDE))
+    assert len(check._kept) == 2
+    check._kept.clear()
     # a checker that has worked already: its check is not kept
     check_plan(build_plan(cfg), cfg, WIDE, start=start, checker=again_checker)
     assert not check._kept

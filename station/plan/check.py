@@ -103,17 +103,39 @@ def check_plan(
     return plan
 
 
+#: What a check reads of a config: the machine, the controller's profile, limits and
+#: motion, the gauges' names and strokes, the setups and the procedure. Not where the
+#: devices are reached nor how long to wait for them (a simulated station's ports
+#: change from run to run; the plan check does not).
+_SECTIONS = {"machine", "controller", "indicators", "setups", "procedure"}
+_CONNECTION = {"host", "port", "baudrate", "bytesize", "parity", "stopbits", "serial",
+               "timeout_s", "reconnect_s", "reopen_s", "home_timeout_s"}
+
+
+def _config_doc(config: StationConfig) -> dict[str, Any]:
+    doc = config.model_dump(mode="json", include=_SECTIONS)
+    for part in (doc["controller"], *doc["indicators"]):
+        for name in _CONNECTION & set(part):
+            del part[name]
+    return doc
+
+
 def _key(plan: Plan, config: StationConfig,
          controller_limits: tuple[Sequence[float], Sequence[float]],
          start: Sequence[float] | None, travel: bool, checker: MotionChecker) -> str:
     """Everything a check with a fresh checker depends on, as text (the checker's
     own config and limits too: a caller may have made it for others)."""
     doc: list[Any] = [plan.to_json(), plan.routes and sorted(map(str, plan.routes.items())),
-                      config.model_dump(mode="json"),
+                      _config_doc(config),
                       [[float(v) for v in side] for side in controller_limits],
+                      # where the controller's limits came from (absent ones are the
+                      # config's), as station.plan.limits reads it
+                      str(getattr(controller_limits, "source", None)),
+                      str(getattr(controller_limits, "reason", None)),
                       None if start is None else [float(v) for v in start], travel,
-                      checker.config is config or checker.config.model_dump(mode="json"),
-                      checker.lo.tolist(), checker.hi.tolist(), checker.spread]
+                      checker.config is config or _config_doc(checker.config),
+                      checker.lo.tolist(), checker.hi.tolist(), checker.motion,
+                      checker.margin, checker.spread]
     return json.dumps(doc, sort_keys=True, default=str)
 
 
