@@ -113,8 +113,14 @@ def test_runs_are_recorded_listed_and_rebuilt(machines: Machines, tmp_path: Path
         row["reversal"]["x"]["value_mm"] == a["reversal"]["value_mm"]["x"]
     assert [i["name"] for i in row["instruments"]] == \
         [i["name"] for i in a["uncertainty_budget"]["instruments"]]
-    # the run directories are the record: a store made again from them alone
+    # the run directories are the record: a store made again from them alone, in a
+    # folder that must exist (said in one line naming --out, not the URL it makes)
     rebuilt_out = tmp_path / "rebuilt"
+    missing = orthocal("history", "--out", str(rebuilt_out), "--rebuild", str(m.out),
+                       cwd=tmp_path)
+    assert missing.returncode == 2 and missing.stdout == ""
+    assert missing.stderr.startswith("orthocal: error: --out: ") and \
+        "not a directory" in missing.stderr and missing.stderr.count("\n") == 1
     rebuilt_out.mkdir()
     rebuilt = orthocal("history", "--out", str(rebuilt_out), "--rebuild", str(m.out),
                        "--json", cwd=tmp_path)

@@ -20,10 +20,13 @@ def _store(args: argparse.Namespace) -> Any:
     if args.db is None and args.rebuild is None and not (runs / "history.sqlite").exists():
         raise BadInput(f"--out: no history in {runs} (history.sqlite); runs record there "
                        "as they finish, or make it with --rebuild RUNS_DIR")
+    if args.db is None and not runs.is_dir():  # the store's folder: the user's to make
+        raise BadInput(f"--out: {runs} is not a directory")
     try:
         return HistoryStore(url)
     except Exception as exc:  # a bad URL or an unreachable server: one line
-        raise BadInput(f"--db: cannot open {url} ({type(exc).__name__}: {exc})") from None
+        which = "--db" if args.db is not None else "--out"  # the option that gave the URL
+        raise BadInput(f"{which}: cannot open {url} ({type(exc).__name__}: {exc})") from None
 
 
 def _plot(path: Path, entries: list[dict[str, Any]], machine: str | None) -> None:
