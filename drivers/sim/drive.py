@@ -262,15 +262,14 @@ class DriveRegisters:
         old = self._store
         new = old.written(device_id, table, address, values)
         touched = self.layout.touched(device_id, table, address, len(values))
-        hit = {reg.name for reg in touched}  # names: a Register's == compares every field
 
         for reg, lo, hi in zip(self._targets, self.soft_min, self.soft_max, strict=True):
-            if reg.name in hit and not lo - 1e-9 <= new.value(reg) <= hi + 1e-9:
+            if reg.name in touched and not lo - 1e-9 <= new.value(reg) <= hi + 1e-9:
                 return ExcCodes.ILLEGAL_VALUE
-        speeds = [reg for reg in self._speeds if reg.name in hit]
+        speeds = [reg for reg in self._speeds if reg.name in touched]
         if any(new.value(reg) <= 0 for reg in speeds):
             return ExcCodes.ILLEGAL_VALUE
-        offsets_hit = any(reg.name in hit for reg in self._offsets)
+        offsets_hit = any(reg.name in touched for reg in self._offsets)
         offsets = np.array([new.value(reg) for reg in self._offsets])
         if offsets_hit and np.any(np.abs(offsets) > self.max_offset_mm):
             return ExcCodes.ILLEGAL_VALUE
@@ -294,14 +293,13 @@ class DriveRegisters:
             self._command(command, new)
         return None
 
-    def _triggered(self, touched: list[Register], old: WordStore, new: WordStore
+    def _triggered(self, touched: dict[str, Register], old: WordStore, new: WordStore
                    ) -> list[str] | None:
         """The commands this write completes, in order; None: an unknown code."""
         commands: list[str] = []
-        if not self.map.commands["move"] and any(
-                reg.name in {t.name for t in touched} for reg in self._targets):
+        if not self.map.commands["move"] and any(reg.name in touched for reg in self._targets):
             commands.append("move")  # writing a target starts the move (IAI)
-        for reg in touched:
+        for reg in touched.values():
             value = new.counts(reg)
             codes = self._codes.get(reg.name)
             if codes is not None and value and value not in codes:

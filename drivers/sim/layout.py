@@ -110,15 +110,17 @@ class MapLayout:
                     return ExcCodes.ILLEGAL_ADDRESS
         return None
 
-    def touched(self, device_id: int, table: str, address: int, count: int) -> list[Register]:
+    def touched(self, device_id: int, table: str, address: int, count: int
+                ) -> dict[str, Register]:
         """The registers a request on ``count`` words (bits) from ``address`` touches,
-        in address order, each once."""
-        out: dict[str, Register] = {}  # by name: a Register's == compares every field
+        by name, in address order, each once (asked by name: a Register's == compares
+        every field)."""
+        out: dict[str, Register] = {}
         for a in range(address, address + count):
             entry = self._at.get((device_id, table, a))
             if entry is not None:
                 out.setdefault(entry[0].name, entry[0])
-        return list(out.values())
+        return out
 
     def sim_devices(self, action_for: Callable[[int], SimAction]) -> list[SimDevice]:
         """One pymodbus SimDevice per unit id, its four tables laid out register by
