@@ -69,7 +69,21 @@ def check_plan(
         if checker.fresh() else None
     if key is not None and key in _kept:
         _kept.move_to_end(key)
-        return _restore(_kept[key], plan, checker)
+        _restore(_kept[key], plan, checker)
+    else:
+        _check_moves(plan, config, controller_limits, start, checker, travel)
+        if key is not None:
+            _keep(key, plan, checker)
+    plan.travel = checker.travel
+    plan.motion = checker.motion
+    return plan
+
+
+def _check_moves(plan: Plan, config: StationConfig,
+                 controller_limits: tuple[Sequence[float], Sequence[float]],
+                 start: Sequence[float] | None, checker: MotionChecker, travel: bool) -> None:
+    """Every move of every setup through ``checker``: the plan's limits, routes and
+    start filled in (its travel is the checker's)."""
     plan.limits = (checker.lo.tolist(), checker.hi.tolist())
     plan.limits_source = limits_source(config, controller_limits)
     position = None if start is None else np.asarray(start, dtype=float)
@@ -92,15 +106,6 @@ def check_plan(
                         tuple(float(v) for v in leg) for leg in via]
                 position = np.asarray(step.targets)
     plan.start = None if start is None else tuple(float(v) for v in start)
-    if key is not None:
-        _kept[key] = _Checked((list(plan.limits[0]), list(plan.limits[1])),
-                              plan.limits_source, {k: list(v) for k, v in plan.routes.items()},
-                              plan.start, checker.state())
-        while len(_kept) > KEPT:
-            _kept.popitem(last=False)
-    plan.travel = checker.travel
-    plan.motion = checker.motion
-    return plan
 
 
 #: What a check reads of a config: the machine, the controller's profile, limits and
@@ -139,12 +144,20 @@ def _key(plan: Plan, config: StationConfig,
     return json.dumps(doc, sort_keys=True, default=str)
 
 
-def _restore(done: _Checked, plan: Plan, checker: MotionChecker) -> Plan:
+def _keep(key: str, plan: Plan, checker: MotionChecker) -> None:
+    """Keep copies of what the check left (the run goes on changing its own)."""
+    assert plan.limits is not None  # filled by _check_moves
+    _kept[key] = _Checked((list(plan.limits[0]), list(plan.limits[1])), plan.limits_source,
+                          {k: list(v) for k, v in plan.routes.items()}, plan.start,
+                          checker.state())
+    while len(_kept) > KEPT:
+        _kept.popitem(last=False)
+
+
+def _restore(done: _Checked, plan: Plan, checker: MotionChecker) -> None:
+    """Put copies of a kept check into ``plan`` and ``checker``."""
     checker.resume_from(done.checker)
     plan.limits = (list(done.limits[0]), list(done.limits[1]))
     plan.limits_source = done.limits_source
     plan.routes = {k: list(v) for k, v in done.routes.items()}
     plan.start = done.start
-    plan.travel = checker.travel
-    plan.motion = checker.motion
-    return plan
