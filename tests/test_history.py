@@ -40,21 +40,15 @@ def _with(machine_id: str | None, history: dict[str, Any] | None = None) -> Any:
     return hook
 
 
-def _run(out: Path, capsys: Any, machine_id: str | None, true_drho=TRUE, seed: int = 4,
+def _run(out: Path, machine_id: str | None, true_drho=TRUE, seed: int = 4,
          history: dict[str, Any] | None = None) -> dict[str, Any]:
-    """A simulated run of machine ``machine_id`` into ``out``, its JSON result (read
-    from ``capsys``, or from stdout captured here where a fixture has no capsys)."""
-    options = simulated(out, seed=seed, noise=0.001, true_drho=true_drho, mount_error=0.0,
-                        hook=_with(machine_id, history))
-    if capsys is None:
-        buffer = io.StringIO()
-        with contextlib.redirect_stdout(buffer):
-            code = cmd_run.run(options)
-        printed = buffer.getvalue()
-    else:
-        code = cmd_run.run(options)
-        printed = capsys.readouterr().out
-    result = json.loads(printed)
+    """A simulated run of machine ``machine_id`` into ``out``: its JSON result, from
+    the stdout captured here (a module fixture has no capsys)."""
+    buffer = io.StringIO()
+    with contextlib.redirect_stdout(buffer):
+        code = cmd_run.run(simulated(out, seed=seed, noise=0.001, true_drho=true_drho,
+                                     mount_error=0.0, hook=_with(machine_id, history)))
+    result = json.loads(buffer.getvalue())
     assert code in (0, 3) and result["status"] == "ok", result.get("message")
     return result
 
@@ -82,10 +76,10 @@ def machines(tmp_path_factory: pytest.TempPathFactory) -> Machines:
     """The runs the listing, rebuild and compare tests read (none of them writes to
     the store: a rebuild goes to a store of its own)."""
     out = tmp_path_factory.mktemp("machines") / "runs"
-    return Machines(out, _run(out, None, "OG-1"), _run(out, None, "OG-1", seed=5),
-                    _run(out, None, "OG-1", seed=6,
+    return Machines(out, _run(out, "OG-1"), _run(out, "OG-1", seed=5),
+                    _run(out, "OG-1", seed=6,
                          true_drho=(TRUE[0] + 0.02, TRUE[1], TRUE[2])),
-                    _run(out, None, "OG-2", seed=5), _run(out, None, None, seed=6))
+                    _run(out, "OG-2", seed=5), _run(out, None, seed=6))
 
 
 def test_runs_are_recorded_listed_and_rebuilt(machines: Machines, tmp_path: Path) -> None:
@@ -193,7 +187,7 @@ def _entry(run_dir: str, machine: str | None, started: str, **extra: Any) -> dic
                 "x": {"value_mm": 0.4, "std_error_mm": 0.0005}}, "dof": 30.0}, **extra}
 
 
-def test_the_store_on_each_database(store_url: str, tmp_path: Path, capsys) -> None:
+def test_the_store_on_each_database(store_url: str, tmp_path: Path) -> None:
     with HistoryStore(store_url) as store:
         for entry in store.entries():  # the module's server is shared by its tests
             assert entry["run_dir"].startswith("/")
@@ -209,7 +203,7 @@ def test_the_store_on_each_database(store_url: str, tmp_path: Path, capsys) -> N
         assert mine[1]["stopped"] == "not-converged"
         assert mine[0]["as_found"]["joint_error_mm"]["x"]["value_mm"] == 0.4  # JSON kept
     # a whole run recorded there through [history] url, and listed by the command
-    result = _run(tmp_path / "runs", capsys, "OG-PG", history={"url": store_url})
+    result = _run(tmp_path / "runs", "OG-PG", history={"url": store_url})
     listed = orthocal("history", "--db", store_url, "--machine", "OG-PG", "--json",
                       cwd=tmp_path)
     assert listed.returncode == 0, listed.stderr
@@ -222,7 +216,7 @@ def test_a_machine_recalibrated_from_the_offsets_it_was_left_with(tmp_path: Path
     drifted 10 µm between the runs, the second run starting from the offsets the first
     left in the drive (the virtual drive's memory set to them)."""
     out = tmp_path / "runs"
-    first = _run(out, capsys, "OG-0007")
+    first = _run(out, "OG-0007")
     left = [first["offsets_final"][a] for a in "xyz"]
     drifted = (TRUE[0] + 0.010, TRUE[1], TRUE[2])
 
