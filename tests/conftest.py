@@ -51,6 +51,12 @@ def pytest_configure(config: pytest.Config) -> None:
     # A session default, so that module-scoped fixtures and subprocesses get it too;
     # an ORTHOCAL_SIM_TIME_SCALE given to pytest wins.
     os.environ.setdefault(TIME_SCALE_ENV, SIM_TIME_SCALE)
+    # One BLAS thread per process: the station's matrices are a few dozen rows, too
+    # small for OpenBLAS to split, yet its pool of one thread per core spins up in
+    # every process that imports numpy or scipy (each has its own pool). With four
+    # workers and their subprocesses on two cores that is CPU taken from the tests
+    # (~4 % of the suite's), never given back. Workers and subprocesses inherit it.
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     if not hasattr(config, "workerinput"):  # once, in pytest's own process
         _compile_the_project()
     config.addinivalue_line(
