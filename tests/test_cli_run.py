@@ -19,8 +19,8 @@ from station.config.toml import toml_text
 
 
 def test_simulated_run_then_rollback(tmp_path: Path, capsys) -> None:
-    code = main(["run", "--simulate", "--seed", "3", "--true-drho", "0.4,-0.7,1.2",
-                 "--out", str(tmp_path), "--json"])
+    code = main(["run", "--simulate", no_figures_file(tmp_path), "--seed", "3",
+                 "--true-drho", "0.4,-0.7,1.2", "--out", str(tmp_path), "--json"])
     out, err = capsys.readouterr()
     assert code == 0, err
     result = json.loads(out)  # exactly one JSON document on stdout
@@ -40,8 +40,8 @@ def test_simulated_run_then_rollback(tmp_path: Path, capsys) -> None:
 
 
 def test_writeback_beyond_the_limit_is_refused_exit_1(tmp_path: Path, capsys) -> None:
-    code = main(["run", "--simulate", "--seed", "4", "--true-drho", "3.6,0.2,-0.3",
-                 "--out", str(tmp_path), "--json"])
+    code = main(["run", "--simulate", no_figures_file(tmp_path), "--seed", "4",
+                 "--true-drho", "3.6,0.2,-0.3", "--out", str(tmp_path), "--json"])
     out, _err = capsys.readouterr()
     assert code == 1
     result = json.loads(out)

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from builders import NO_FIGURES
 
 from drivers.sim.station import VirtualStation
 from station.commands.simulation import station_config
@@ -87,8 +88,8 @@ def test_prompts_never_share_a_line_with_the_live_bar(tmp_path: Path) -> None:
     with VirtualStation(seed=7, true_drho=(0.2, -0.1, 0.3), mount_all=True,
                         indicator_count=6, speed_mm_s=400.0) as station:
         config = tmp_path / "station.toml"
-        config.write_text(toml_text(station_config(station, {"procedure": procedure}),
-                                    "pty test"))
+        sections = {"procedure": procedure, "report": NO_FIGURES}
+        config.write_text(toml_text(station_config(station, sections), "pty test"))
         code, raw = _drive([sys.executable, "-m", "station", "run", "--config", str(config),
                             "--out", str(tmp_path / "runs")])
     text = raw.decode("utf-8", "replace")

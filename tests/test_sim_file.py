@@ -36,6 +36,9 @@ cycles = 2
 readings = 3
 settle_s = 0.0
 max_extra_passes = 0
+
+[report]
+figures = false
 """
 
 

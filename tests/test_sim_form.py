@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from builders import FAST, parsed_simulate, resumed, simulated
+from builders import FAST, no_figures_file, parsed_simulate, resumed, simulated
 
 import orthocal
 from drivers.indicators import SerialIndicator
@@ -318,9 +318,10 @@ def test_a_whole_simulated_run_with_bowed_legs_completes(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # Through the command line's own parsing; how far the bow biases the result is
     # the error budget's to say, not this test's.
-    code = cli.main(["run", "--simulate", "--seed", "11", "--leg-bow", "0.008",
-                     "--gauge-scale", "0.001", "--out", str(tmp_path / "runs"), "--json",
-                     "--yes", "--sim-procedure", json.dumps(FAST)])
+    code = cli.main(["run", "--simulate", no_figures_file(tmp_path), "--seed", "11",
+                     "--leg-bow", "0.008", "--gauge-scale", "0.001", "--out",
+                     str(tmp_path / "runs"), "--json", "--yes",
+                     "--sim-procedure", json.dumps(FAST)])
     result = json.loads(capsys.readouterr().out)
     # "ok" even where the loop could not prove convergence (its message says so, and
     # the exit status is 3)

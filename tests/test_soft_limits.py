@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from builders import NO_FIGURES
 
 from drivers.axes import ModbusAxisController
 from drivers.sim.controller import SimController
@@ -49,7 +50,7 @@ def _station(tmp_path: Path, soft_limit_registers: Any, controller: dict[str, An
     station = VirtualStation(seed=5, true_drho=(0.3, -0.2, 0.1), mount_all=True,
                              indicator_count=6,
                              controller_options={"soft_limit_registers": soft_limit_registers})
-    config = station_config(station, {"procedure": SHORT})
+    config = station_config(station, {"procedure": SHORT, "report": NO_FIGURES})
     config["controller"].update(controller)
     path = tmp_path / "station.toml"
     path.write_text(toml_text(config, "test"))
