@@ -1,10 +1,12 @@
 """The house rules that import-linter does not check: a name used by another file
 is public (no ``from x import _y``, no ``module._y``), no file sets another
-object's private attribute, and every package says what lives in it."""
+object's private attribute, every package says what lives in it, and every
+document the code cites is in the repo."""
 
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -85,3 +87,26 @@ def test_no_function_is_more_complex_than_mccabe_15() -> None:
          "--config", "lint.mccabe.max-complexity=15", "orthocal", "drivers", "station"],
         cwd=ROOT, capture_output=True, text=True, check=False)
     assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_every_document_the_code_cites_is_in_the_repo() -> None:
+    # A user's clone holds the repo and nothing else: "docs/model.md, (12)" in a
+    # docstring must lead to a file of it, and an "issue N" of a tracker the clone does
+    # not have leads nowhere (the docs and BENCHMARKS.md keep the history instead).
+    texts = sources() + sorted((ROOT / "tests").rglob("*.py")) + [
+        ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    cited: dict[str, set[str]] = {}
+    trackers: list[str] = []
+    for path in texts:
+        text = path.read_text(encoding="utf-8")
+        for m in re.finditer(r"[\w./-]*\w\.md\b", text):
+            cited.setdefault(m.group(0), set()).add(str(path.relative_to(ROOT)))
+        if path.suffix == ".py":
+            trackers += [f"{path.relative_to(ROOT)}: {m.group(0)}"
+                         for m in re.finditer(r"\b[Ii]ssues? #?\d+", text)]
+    missing = [f"{name} (cited by {', '.join(sorted(where)[:3])})"
+               for name, where in sorted(cited.items())
+               if not (ROOT / name).is_file() and not (ROOT / "docs" / name).is_file()]
+    assert {"docs/model.md", "docs/design.md"} <= set(cited)  # the scan sees citations
+    assert not missing, missing
+    assert not trackers, trackers
