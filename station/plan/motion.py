@@ -156,13 +156,27 @@ def _cell_extremes(values: np.ndarray, dims: tuple[int, ...]) -> tuple[np.ndarra
     ``dims`` (each of size ≥ 2) of ``values``."""
     lo, hi = values, values
     for axis in dims:
-        n = values.shape[axis]
-        a = [slice(None)] * values.ndim
-        b = [slice(None)] * values.ndim
-        a[axis], b[axis] = slice(0, n - 1), slice(1, n)
-        lo = np.minimum(lo[tuple(a)], lo[tuple(b)])
-        hi = np.maximum(hi[tuple(a)], hi[tuple(b)])
+        a, b = _halves(values.ndim, axis, values.shape[axis])
+        lo = np.minimum(lo[a], lo[b])
+        hi = np.maximum(hi[a], hi[b])
     return lo, hi
+
+
+def _cell_max(values: np.ndarray, dims: tuple[int, ...]) -> np.ndarray:
+    """:func:`_cell_extremes`' max alone."""
+    hi = values
+    for axis in dims:
+        a, b = _halves(values.ndim, axis, values.shape[axis])
+        hi = np.maximum(hi[a], hi[b])
+    return hi
+
+
+def _halves(ndim: int, axis: int, n: int) -> tuple[tuple[slice, ...], tuple[slice, ...]]:
+    """Index tuples of a cell's lower and upper corners along ``axis`` (size n)."""
+    a = [slice(None)] * ndim
+    b = [slice(None)] * ndim
+    a[axis], b[axis] = slice(0, n - 1), slice(1, n)
+    return tuple(a), tuple(b)
 
 
 def cell_bounds(values: np.ndarray, dims: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -180,18 +194,29 @@ def cell_bounds(values: np.ndarray, dims: tuple[int, ...]) -> tuple[np.ndarray, 
     cell_lo, cell_hi = _cell_extremes(values, dims)
     widen = np.zeros(cell_lo.shape)
     for axis in dims:
-        n = values.shape[axis]
-        # |second difference| at every node (the ends take their neighbour's), then
-        # per cell the larger over its nodes
-        d2 = np.abs(np.diff(values, n=2, axis=axis))
-        d2 = np.concatenate([np.take(d2, [0], axis=axis), d2, np.take(d2, [n - 3], axis=axis)],
-                            axis=axis)
-        d2_cell = CURVATURE_SAFETY * _cell_extremes(d2, dims)[1]
         others = tuple(a for a in dims if a != axis)
+        d2_cell = CURVATURE_SAFETY * _second_difference_max(values, axis, others)
         d_lo, d_hi = _cell_extremes(np.diff(values, axis=axis), others)  # the cells' edges
         monotone = (d_lo >= d2_cell / 2.0) | (d_hi <= -d2_cell / 2.0)
         widen = widen + np.where(monotone, 0.0, d2_cell / 8.0)
     return cell_lo - widen, cell_hi + widen
+
+
+def _second_difference_max(values: np.ndarray, axis: int, others: tuple[int, ...]
+                           ) -> np.ndarray:
+    """Per cell, the largest |second difference| along ``axis`` over the cell's nodes
+    (the grid's ends take their neighbour's). On the 3-point grid of every
+    branch-and-bound step there is one second difference per line, every node's: its
+    cells' max along ``axis`` is that value itself (broadcast over the axis' two
+    cells), and only the ``others`` axes are reduced. The same numbers as the
+    general case, a third of the numpy calls."""
+    n = values.shape[axis]
+    d2 = np.abs(np.diff(values, n=2, axis=axis))
+    if n == 3:
+        return _cell_max(d2, others)
+    d2 = np.concatenate([np.take(d2, [0], axis=axis), d2, np.take(d2, [n - 3], axis=axis)],
+                        axis=axis)
+    return _cell_max(d2, (axis, *others))
 
 
 @functools.cache
