@@ -54,8 +54,10 @@ def pytest_configure(config: pytest.Config) -> None:
     # One BLAS thread per process: the station's matrices are a few dozen rows, too
     # small for OpenBLAS to split, yet its pool of one thread per core spins up in
     # every process that imports numpy or scipy (each has its own pool). With four
-    # workers and their subprocesses on two cores that is CPU taken from the tests
-    # (~4 % of the suite's), never given back. Workers and subprocesses inherit it.
+    # workers and their subprocesses on two cores that is CPU taken from the tests,
+    # never given back: a simulated run in a subprocess took 4.2-4.4 s of CPU with
+    # one thread against 4.6 s without (BENCHMARKS.md). Workers and subprocesses
+    # inherit it.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     if not hasattr(config, "workerinput"):  # once, in pytest's own process
         _compile_the_project()

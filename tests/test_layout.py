@@ -21,6 +21,11 @@ def sources() -> list[Path]:
     return sorted(p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py"))
 
 
+def python_files() -> list[Path]:
+    """The packages' sources and the tests."""
+    return sources() + sorted((ROOT / "tests").rglob("*.py"))
+
+
 def project_module(name: str | None) -> bool:
     return bool(name) and name.split(".")[0] in PACKAGES  # type: ignore[union-attr]
 
@@ -72,7 +77,7 @@ def test_every_station_package_says_what_lives_in_it(package: Path) -> None:
 
 def test_a_file_holds_one_job() -> None:
     # Past 500 lines a file usually holds two jobs (the house's style); the tests too.
-    files = sources() + sorted((ROOT / "tests").rglob("*.py"))
+    files = python_files()
     long = [f"{p.relative_to(ROOT)}: {n} lines" for p in files
             if (n := len(p.read_text(encoding="utf-8").splitlines())) > 500]
     assert not long, "\n".join(long)
@@ -93,8 +98,7 @@ def test_every_document_the_code_cites_is_in_the_repo() -> None:
     # A user's clone holds the repo and nothing else: "docs/model.md, (12)" in a
     # docstring must lead to a file of it, and an "issue N" of a tracker the clone does
     # not have leads nowhere (the docs and BENCHMARKS.md keep the history instead).
-    texts = sources() + sorted((ROOT / "tests").rglob("*.py")) + [
-        ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    texts = [*python_files(), ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
     cited: dict[str, set[str]] = {}
     trackers: list[str] = []
     for path in texts:
