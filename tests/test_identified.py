@@ -1,0 +1,115 @@
+"""The machine a run identified, as a controller is told it (station/record/identified.py):
+what the kept model holds, with its 95 % interval; what it does not, nominal and said;
+runs that identified nothing refused in one line naming the file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from orthocal import PARAM_NAMES, coverage_factor
+from station.record.identified import NotACalibration, identified_machine
+from station.record.model import MachineModel
+
+LAYOUT = {"tilt_yx": 0.2, "tilt_zx": 0.1, "tilt_zy": -0.15, "gap_xy": 0.15,
+          "gap_xz": -0.1, "gap_yz": 0.12}
+NOW = {"drho_x": 0.002, "drho_y": -0.001, "drho_z": 0.0005}
+
+
+def model_json(model: str) -> dict[str, Any]:
+    estimated = ["drho_x", "drho_y", "drho_z", *LAYOUT]
+    se = {n: 0.004 if n.startswith("drho") else 0.01 if n.startswith("tilt") else 0.002
+          for n in estimated}
+    doc = {
+        "format": "orthocal machine model 1",
+        "geometry": {"leg_length_mm": 310.25, "rho_min_mm": -100.0, "rho_max_mm": 60.0},
+        "conventions": {k: "docs/model.md" for k in ("model", "axes", "gaps", "drho",
+                                                     "parameters")},
+        "units": {"drho": "mm", "dL": "mm", "tilt": "mrad", "gap": "mm"},
+        "model": model,
+        "parameters": {n: LAYOUT.get(n, 0.6 if n == "drho_x" else 0.0) for n in PARAM_NAMES},
+        "estimated": estimated,
+        "not_estimated": {f"dL_{a}": "taken as 0: not identifiable beside the tilts and gaps "
+                                     "from two postures per leg" for a in "xyz"},
+        "std_errors": se,
+        "covariance": {"names": estimated,
+                       "matrix": np.diag([se[n] ** 2 for n in estimated]).tolist()},
+        "std_errors_dof": 40.0,
+        "drho_now": NOW,
+        "offsets_before": {"x": 0.0, "y": 0.0, "z": 0.0},
+        "offsets_written": {"x": -0.6, "y": 0.4, "z": -0.9},
+    }
+    return MachineModel.model_validate(doc).model_dump(mode="json")
+
+
+def run_dir(tmp_path: Path, model: str = "rho+tilt+gap", status: str = "ok",
+            with_model: bool = True) -> Path:
+    d = tmp_path / f"run-{model}-{status}"
+    d.mkdir()
+    result = {"run_dir": str(d), "status": status, "message": None,
+              "machine": {"id": "OG-7", "leg_length": 310.25, "rho_min": -100.0,
+                          "rho_max": 60.0},
+              "offsets_held_by": "controller",
+              "remaining": {"std_errors": {n: 0.0008 for n in NOW}, "std_errors_dof": 60.0}}
+    (d / "result.json").write_text(json.dumps(result))
+    if with_model:
+        (d / "model.json").write_text(json.dumps(model_json(model)))
+    return d
+
+
+def test_the_kept_model_is_told_with_its_intervals(tmp_path: Path) -> None:
+    m = identified_machine(run_dir(tmp_path))
+    told = {v.name: v for v in m.values if v.identified}
+    assert sorted(told) == sorted([*NOW, *LAYOUT])
+    k = coverage_factor(40.0)
+    lo, hi = told["tilt_yx"].interval_95
+    assert lo == pytest.approx(0.2 - k * 0.01) and hi == pytest.approx(0.2 + k * 0.01)
+    assert told["drho_x"].value == pytest.approx(0.002)  # what the offsets did not correct
+    lo, hi = told["drho_x"].interval_95
+    assert hi - lo == pytest.approx(2 * coverage_factor(60.0) * 0.0008)
+    assert [v.pin for v in m.values] == [
+        "drho-x", "drho-y", "drho-z", "leg-length-x", "leg-length-y", "leg-length-z",
+        "tilt-yx", "tilt-zx", "tilt-zy", "gap-xy", "gap-xz", "gap-yz"]
+    legs = [v for v in m.values if v.pin.startswith("leg-length")]
+    assert all(v.value == 310.25 and not v.identified and "two postures" in v.note
+               for v in legs)
+    theta = m.theta_c()
+    assert theta[3:6].tolist() == [0.0, 0.0, 0.0]  # ΔL, not L + ΔL
+    assert theta[6:].tolist() == pytest.approx(list(LAYOUT.values()))
+    assert "OG-7" in m.describe() and "rho+tilt+gap" in m.describe()
+
+
+def test_what_the_model_test_did_not_keep_stays_nominal_and_says_so(tmp_path: Path) -> None:
+    m = identified_machine(run_dir(tmp_path, "rho+gap"))
+    tilts = [v for v in m.values if v.name.startswith("tilt")]
+    assert all(v.value == 0.0 and not v.identified for v in tilts)
+    assert "rho+gap" in tilts[0].note and "+0.2000 mrad" in tilts[0].note
+    assert m.theta_c()[6:9].tolist() == [0.0, 0.0, 0.0]
+    assert m.theta_c()[9:].tolist() == pytest.approx([0.15, -0.1, 0.12])
+    assert m.estimate[6] == pytest.approx(0.2)  # the run's best value is kept beside
+
+
+@pytest.mark.parametrize("status", ["failed", "aborted"])
+def test_a_run_that_did_not_finish_is_refused(tmp_path: Path, status: str) -> None:
+    with pytest.raises(NotACalibration, match=f"the run {status}"):
+        identified_machine(run_dir(tmp_path, status=status))
+
+
+def test_a_run_that_identified_nothing_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(NotACalibration, match="identified nothing"):
+        identified_machine(run_dir(tmp_path, with_model=False))
+    with pytest.raises(NotACalibration, match="no result document"):
+        identified_machine(tmp_path / "nowhere")
+
+
+def test_a_damaged_model_is_named(tmp_path: Path) -> None:
+    d = run_dir(tmp_path)
+    doc = json.loads((d / "model.json").read_text())
+    del doc["drho_now"]
+    (d / "model.json").write_text(json.dumps(doc))
+    with pytest.raises(NotACalibration, match=r"model\.json: drho_now"):
+        identified_machine(d)
