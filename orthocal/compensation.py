@@ -137,9 +137,16 @@ def _draws(k: int, dof: float | None, draws: int, seed: int) -> np.ndarray:
 
 
 def _root(cov: np.ndarray) -> np.ndarray:
-    """R with R·Rᵀ = cov for a symmetric positive semi-definite cov."""
-    w, V = np.linalg.eigh(cov)
-    return V * np.sqrt(np.clip(w, 0.0, None))
+    """L with L·Lᵀ = cov (+ 1e-12 of its largest variance on the diagonal, so that a
+    covariance singular by an exact correlation factors too): Cholesky, which is
+    unique and continuous in cov, so the Monte Carlo draws are the same machines on
+    every CPU and BLAS (an eigenvector basis is not: near-equal eigenvalues turn it)."""
+    scale = float(np.max(np.diag(cov)))
+    try:
+        return np.linalg.cholesky(cov + np.eye(len(cov)) * 1e-12 * scale)
+    except np.linalg.LinAlgError:  # not positive semi-definite beyond rounding: its part
+        w, V = np.linalg.eigh(cov)  # that is, which any root gives alike
+        return V * np.sqrt(np.clip(w, 0.0, None))
 
 
 def compensated_interval(theta_c, estimate, covariance, dof: float | None, points,
@@ -187,15 +194,17 @@ def compensated_interval(theta_c, estimate, covariance, dof: float | None, point
                                    np.linalg.norm(base.field, axis=1), (base.rms_mm,) * 2,
                                    (base.max_mm,) * 2, level, None, "no parameter error")
     G = truth_jacobian(p, geometry, estimate, theta_c, frame, columns)
-    sub = np.ix_(columns, columns)
+    stat = [k for k, c in enumerate(columns) if cov[c, c] > 0]
     t_var = 1.0 if dof is None or not np.isfinite(dof) or dof <= 2 else dof / (dof - 2.0)
-    B = G @ _root(cov[sub])
+    B = G[:, stat] @ _root(cov[np.ix_(*[[columns[k] for k in stat]] * 2)]) if stat else \
+        np.zeros((G.shape[0], 1))
     point_var = t_var * (B**2).reshape(n, -1).sum(axis=1)  # each point's 3 rows
     point_rms = np.sqrt(np.linalg.norm(base.field, axis=1)**2 + point_var)
     rms = float(np.sqrt(np.mean(point_rms**2)))
-    z = _draws(len(columns), dof, draws, seed)
-    stat_rms, stat_max = _field_draws(F0, B, z, n)
-    wide_rms, wide_max = _field_draws(F0, G @ _root(wide[sub]), z, n)
+    stat_rms, stat_max = _field_draws(F0, B, _draws(B.shape[1], dof, draws, seed), n)
+    wide_root = G @ _root(wide[np.ix_(columns, columns)])
+    wide_rms, wide_max = _field_draws(F0, wide_root, _draws(len(columns), dof, draws, seed),
+                                      n)
     lo, hi = (1.0 - level) / 2.0, (1.0 + level) / 2.0
     law = "normal" if dof is None or not np.isfinite(dof) else f"Student t, {dof:g} dof"
     return CompensatedInterval(

@@ -206,7 +206,7 @@ def _stats(field: Any) -> dict[str, float]:
     return {"rms_mm": float(field.rms_mm), "max_mm": float(field.max_mm)}
 
 
-def _covariance(now_cov: np.ndarray | None, layout: Layout | None,
+def covariance(now_cov: np.ndarray | None, layout: Layout | None,
                 form_cov: np.ndarray | None = None) -> np.ndarray:
     """12×12: Δρ now (the last round's) and the pooled layout; the two come from
     different fits and are taken as independent. ``form_cov``: what the legs' form
@@ -265,8 +265,8 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
     lay_v = layout.vector() if layout is not None else np.zeros(len(LAYOUT_NAMES))
     zero = np.zeros(3)
     before = error_field(points, geometry, params(drho_start, lay_v), zero, frame)
-    cov = _covariance(drho_now_cov, layout)
-    with_form = cov if form is None else _covariance(drho_now_cov, layout, form[0])
+    cov = covariance(drho_now_cov, layout)
+    with_form = cov if form is None else covariance(drho_now_cov, layout, form[0])
     after = after_interval(params(drho_now, lay_v), with_form, dof, zero, points, geometry,
                            frame)
     # Each objective's offsets written exactly: the machine's Δρ at its target.
@@ -374,7 +374,8 @@ def squareness_advice(tilts: Layout | None, rail_mm: float,
         out.append(f"axis {axis} leans {'toward +' if value > 0 else 'away from +'}{toward} "
                    f"by {abs(value):.3f} ± {k * se:.3f} mm/m ({name}): offsets cannot fix "
                    f"it; shim its rail by {1000 * shim:.0f} µm over its {rail_mm:g} mm of "
-                   "travel, or compensate in the controller's kinematics (model.json)")
+                   "travel, or put the geometry into the controller (orthocal export "
+                   "--kinematics, or orthocal compensate)")
     return out
 
 
@@ -402,8 +403,9 @@ def gap_advice(layout: Layout | None, decision: Mapping[str, Any] | None) -> lis
             continue
         out.append(f"axis {a} passes axis {b} {1000 * abs(value):.0f} ± "
                    f"{1000 * k * se[name]:.0f} µm {'above' if value > 0 else 'below'} it "
-                   f"along {along} ({name}): offsets cannot fix it; compensate in the "
-                   f"controller's kinematics (model.json), or move a rail across by the gap")
+                   f"along {along} ({name}): offsets cannot fix it; put the geometry into "
+                   "the controller (orthocal export --kinematics, or orthocal compensate), or "
+                   "move a rail across by the gap")
     return out
 
 
@@ -416,7 +418,7 @@ def model_export(config: StationConfig, *, drho_start: Mapping[str, float],
     compensates kinematics (parameters, standard errors, covariance, conventions
     and units)."""
     m = config.machine
-    cov = _covariance(drho_start_cov, tilts)
+    cov = covariance(drho_start_cov, tilts)
     values = params(drho_start, tilts.vector() if tilts is not None else np.zeros(6))
     estimated = [n for n, c in zip(PARAM_NAMES, np.diag(cov), strict=True) if c > 0]
     idx = [PARAM_NAMES.index(n) for n in estimated]

@@ -26,7 +26,7 @@ from orthocal.lost_motion import band_middle, edge_of
 from orthocal.numbers import finite
 from station.config import StationConfig
 from station.console.operator import Operator
-from station.engine import accuracy, budget, reversal, verdict
+from station.engine import accuracy, budget, compensated, reversal, verdict
 from station.engine.closed_loop import round_phase
 from station.engine.devices import Devices
 from station.engine.replay import Replay
@@ -424,12 +424,17 @@ class Flow:
             now = dict(self.target)
         now_cov = np.asarray(last.covariance)[np.ix_(idx, idx)] if len(idx) == 3 else None
         before = self.result.get("offsets_before")
+        limits, form = (self.seq.checker.lo, self.seq.checker.hi), self._layout_form(layout)
         try:
-            self.result["accuracy"] = accuracy.statement(
-                cfg, (self.seq.checker.lo, self.seq.checker.hi), drho_start=start,
-                drho_now=now, drho_now_cov=now_cov, dof=finite(last.std_error_dof),
-                layout=layout, model=last.model, in_model=names, offsets_before=before,
-                target_tool=self._tool_target(), form=self._layout_form(layout))
+            acc = self.result["accuracy"] = accuracy.statement(
+                cfg, limits, drho_start=start, drho_now=now, drho_now_cov=now_cov,
+                dof=finite(last.std_error_dof), layout=layout, model=last.model,
+                in_model=names, offsets_before=before, target_tool=self._tool_target(),
+                form=form)
+            acc["compensated"] = compensated.of_run(
+                cfg, limits, acc, drho_now=now, drho_now_cov=now_cov,
+                dof=finite(last.std_error_dof), layout=layout, in_model=names,
+                model=last.model, form=form)
         except (ValueError, np.linalg.LinAlgError) as exc:
             self.result["accuracy"] = {"error": f"not stated: {exc}"}
             return

@@ -138,6 +138,13 @@ def _machine(run: Path, result: dict[str, Any], model: MachineModel) -> Identifi
     if kept not in MODELS:
         raise NotACalibration(f"{run / 'model.json'}: model {kept!r} is not one of orthocal's")
     columns = {c for c in MODELS[kept] if c < len(PARAM_NAMES)}
+    # the record's model types these as open maps: a name missing is one line here,
+    # not a KeyError further down
+    for field, names in (("parameters", PARAM_NAMES),
+                         ("drho_now", [n for n in PARAM_NAMES if n.startswith("drho")])):
+        missing = [n for n in names if n not in getattr(model, field)]
+        if missing:
+            raise NotACalibration(f"{run / 'model.json'}: {field}: no {', '.join(missing)}")
     remaining = result.get("remaining") or {}
     now_se = remaining.get("std_errors") or {}
     k_now = orthocal.coverage_factor(remaining.get("std_errors_dof"))

@@ -120,6 +120,40 @@ class SinceLast(_Open):
         None, description="why the two runs could not be compared (then no changes)")
 
 
+class Compensated(BaseModel):
+    """accuracy.compensated: the tool error with the identified machine in the
+    controller's kinematics (orthoglidekins) or in the program (``orthocal
+    compensate``), beside "offsets only" (accuracy.after) (docs/design.md, "The
+    geometry in the controller"; docs/model.md, (K3))."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    rms_mm: float = Field(description="RMS of |E| expected over the parameters' error "
+                                      "(their statistical covariance), mm")
+    max_mm: float = Field(description="max of |E|, the median over the parameters' error, mm")
+    rms_interval_95_mm: tuple[float, float] = Field(
+        description="95 % interval of the RMS, the stated systematic errors included")
+    max_interval_95_mm: tuple[float, float]
+    offsets_only_rms_mm: float = Field(description="accuracy.after's RMS, for comparison")
+    offsets_only_max_mm: float
+    told: list[str] = Field(description="the parameters the controller is told, "
+                                        "PARAM_NAMES (Δρ: what the offsets did not correct)")
+    nominal: dict[str, str] = Field(description="the parameters left at their nominal "
+                                                "values, and why")
+    routes: list[str] = Field(description="how to put the machine into the controller")
+    method: str
+    assumes: list[str]
+    field_rms_mm: list[float] = Field(
+        description="per grid point (accuracy.field.points_mm), the |E| expected, mm")
+
+
+class Accuracy(_Open):
+    """accuracy: the run's statement at the tool (docs/design.md, "Accuracy at the tool");
+    its older sections are documented there, the compensated route is modelled."""
+
+    compensated: Compensated | None = None
+
+
 class RunResult(BaseModel):
     """result.json: one calibration run, as written at its end (or when it stopped)."""
 
@@ -166,7 +200,7 @@ class RunResult(BaseModel):
     converged: bool | None = None
     loop: Loop | None = None
     remaining: Remaining | None = None
-    accuracy: dict[str, Any] | None = None
+    accuracy: Accuracy | None = None
     uncertainty_budget: dict[str, Any] | None = None
     reversal: dict[str, Any] | None = None
     plunger_guard: dict[str, Any] | None = None

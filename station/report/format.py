@@ -37,7 +37,8 @@ MODEL_TEXT = {
 NOT_WRITTEN_TEXT = ("Axis tilts, gaps between the axes and leg-length errors cannot be written "
                     "to a controller's offsets: only the joint offsets Δρ were corrected; the "
                     "rest stays in the machine (and in the verification's deviations) until "
-                    "the controller's kinematics takes it (model.json) or the axes are "
+                    "the controller's kinematics takes it (orthocal export --kinematics; "
+                    "orthocal compensate for a program) or the axes are "
                     "re-squared and re-aligned mechanically.")
 STATUS_TEXT = {
     "ok": "Completed",

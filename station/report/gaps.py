@@ -50,8 +50,9 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
                      for n, v, iv, _ in rows)
     advice = [str(a) for a in acc.get("gap_advice") or []]
     acting = [a for a in advice if "offsets cannot fix it" in a]
-    tail = (": offsets cannot fix them; compensate in the controller's kinematics "
-            "(model.json) or move a rail across by the gap") if acting else \
+    tail = (": offsets cannot fix them; put the geometry into the controller (orthocal "
+            "export --kinematics, or orthocal compensate) or move a rail across by the gap") \
+        if acting else \
         ": none beyond its uncertainty"
     return [f"  axes' gaps    {text} µm (95 %; how far each pair of axes passes the other)"
             + tail]

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import re
 from collections.abc import Mapping
@@ -313,6 +314,13 @@ def plot_field(acc: Mapping[str, Any]) -> str | None:
     rows = [(lbl, e) for lbl, e in rows if e.shape == pts.shape and np.all(np.isfinite(e))]
     if not rows:
         return None
+    # The geometry in the controller: |E| expected per point, no direction (its
+    # mean field is zero; what is left is the identification's error).
+    comp = as_dict(acc.get("compensated")).get("field_rms_mm")
+    with contextlib.suppress(TypeError, ValueError):
+        mags = np.asarray(comp, dtype=float) if comp is not None else None
+        if mags is not None and mags.shape == (len(pts),) and np.all(np.isfinite(mags)):
+            rows.append(("compensated", mags))
     zs = _levels(pts[:, 2])
     slices = sorted({float(zs[0]), float(zs[len(zs) // 2]), float(zs[-1])})
     xs, ys = _levels(pts[:, 0]), _levels(pts[:, 1])
@@ -322,7 +330,8 @@ def plot_field(acc: Mapping[str, Any]) -> str | None:
     ix = np.searchsorted(xs, np.round(pts[:, 0], 3))
     iy = np.searchsorted(ys, np.round(pts[:, 1], 3))
     iz = np.round(pts[:, 2], 3)
-    titles = {"before": "before calibration", "after": "after calibration"}
+    titles = {"before": "before calibration", "after": "after calibration",
+              "compensated": "geometry in the\ncontroller (expected)"}
 
     plt = pyplot()
     from matplotlib import colormaps
@@ -338,9 +347,10 @@ def plot_field(acc: Mapping[str, Any]) -> str | None:
         gridspec_kw={"width_ratios": [1.0] * n + [0.05], "wspace": 0.08, "hspace": 0.3})
     for r, (label, err) in enumerate(rows):
         axes, cax = grid_axes[r][:n], grid_axes[r][n]
+        arrows = err.ndim == 2
         um_err = 1000.0 * err
-        mag = np.linalg.norm(um_err, axis=1)
-        xy = np.linalg.norm(um_err[:, :2], axis=1)
+        mag = np.linalg.norm(um_err, axis=1) if arrows else um_err
+        xy = np.linalg.norm(um_err[:, :2], axis=1) if arrows else np.zeros(1)
         vmax = float(mag.max()) if mag.max() > 0 else 1.0
         # The longest x–y arrow spans 0.9 cells: arrows of a row compare, and stay
         # inside their neighbourhood.
@@ -354,9 +364,10 @@ def plot_field(acc: Mapping[str, Any]) -> str | None:
             cells[iy[sel], ix[sel]] = mag[sel]
             mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(cells), cmap=cmap,
                                  vmin=0.0, vmax=vmax, shading="flat")
-            q = ax.quiver(pts[sel, 0], pts[sel, 1], um_err[sel, 0], um_err[sel, 1],
-                          angles="xy", scale_units="xy", scale=scale, width=0.006,
-                          color="#1d2330", pivot="middle")
+            if arrows:
+                q = ax.quiver(pts[sel, 0], pts[sel, 1], um_err[sel, 0], um_err[sel, 1],
+                              angles="xy", scale_units="xy", scale=scale, width=0.006,
+                              color="#1d2330", pivot="middle")
             ax.set_xlim(xe[0], xe[-1])
             ax.set_ylim(ye[0], ye[-1])
             ax.set_aspect("equal", adjustable="box")
@@ -370,6 +381,8 @@ def plot_field(acc: Mapping[str, Any]) -> str | None:
         bar = fig.colorbar(mesh, cax=cax)
         bar.set_label("|E| (µm)", fontsize=9)
         cax.tick_params(labelsize=8)
+        if not arrows:
+            continue
         key = _nice(longest)
         axes[-1].quiverkey(q, 1.0, 1.06, key, f"arrow {key:g} µm (x–y)", labelpos="W",
                            coordinates="axes", fontproperties={"size": 8})

@@ -164,7 +164,8 @@ def summary_text(result: dict) -> str:
                      + ("; ΔL beside the tilts (two postures per leg)" if two else ""))
     if any(not n.startswith("drho_") for n in names):
         lines.append("  not written   tilts, gaps and ΔL (a controller's offsets take only Δρ; "
-                     "its kinematics can take the rest, model.json)")
+                     "its kinematics can take the rest: orthocal export --kinematics, or "
+                     "orthocal compensate for a program)")
     lines += guard_lines(result)
     if (line := timing_line(result)) is not None:
         lines.append(line)

@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from station.report import form, gaps
+from station.report import form, gaps, in_controller
 from station.report.format import (
     AXES,
     as_dict,
@@ -267,8 +267,8 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     if alt_name and alt_after:
         line += (f"; objective {alt_name} would leave {um(alt_after.get('rms_mm'))} µm RMS "
                  f"(max {um(alt_after.get('max_mm'))} µm)")
-    return [line, _squareness_line(acc), *gaps.summary_lines(result),
-            *form.summary_lines(result)]
+    return [line, *in_controller.summary_lines(acc), _squareness_line(acc),
+            *gaps.summary_lines(result), *form.summary_lines(result)]
 
 
 def _squareness_line(acc: Mapping[str, Any]) -> str:
@@ -283,8 +283,8 @@ def _squareness_line(acc: Mapping[str, Any]) -> str:
     band = f" (95 %, k = {ks.pop():.2f})" if len(ks) == 1 else " (95 %)"
     text = f"  squareness    {values} mm/m{band if any(s.half for s in rows) else ''}"
     if state:
-        text += (": offsets cannot fix it; shim the rails or compensate in the controller's "
-                 "kinematics (model.json)")
+        text += (": offsets cannot fix it; shim the rails or put the geometry into the "
+                 "controller (orthocal export --kinematics, or orthocal compensate)")
     elif state is False:
         text += ": square within its uncertainty"
     return text
@@ -318,7 +318,8 @@ def html_section(result: Mapping[str, Any], figure: str | None = None,
         return (f'{head}<div class="box warn"><p>Accuracy at the tool is <b>not stated</b> '
                 f"for this run: {_e(why_not)}. The legs' parallelism reported here is the "
                 "method's means and does not say where the tool goes.</p></div>")
-    parts = [head, _intro(result, acc), _before_after(result, acc), _objectives(result, acc),
+    parts = [head, _intro(result, acc), _before_after(result, acc), in_controller.html_section(acc),
+             _objectives(result, acc),
              _squareness_html(acc), gaps.html_section(acc)]
     if bows := form.html_section(result):
         parts.append(bows)
@@ -447,8 +448,11 @@ def _squareness_html(acc: Mapping[str, Any]) -> str:
 def _field_caption(acc: Mapping[str, Any]) -> str:
     frame = str(acc.get("frame", "—"))
     return ("The tool-point error E over the workspace, in three horizontal slices of the "
-            "grid (lowest, middle and highest z), before calibration (top row) and after "
-            "(bottom row). Colour: |E| in µm, each row on its own scale; arrows: the x–y part "
+            "grid (lowest, middle and highest z), before calibration (top row), after "
+            "(second row) and, where the run states it, with the identified geometry in the "
+            "controller (bottom row: the |E| expected, no arrows, since what is left there is "
+            "the identification's error). Colour: |E| in µm, each row on its own scale; "
+            "arrows: the x–y part "
             "of E, to the scale of the arrow in the corner (its z part shows in the colour "
             f"only); after fitting away {_e(FRAME_TEXT.get(frame, frame))}. Blank cells are "
             "grid points outside the soft limits.")
