@@ -38,8 +38,9 @@ _COMMANDS = {
     "schema": "station.commands.schema:main",
     "history": "station.commands.history:history_main",
     "compare": "station.commands.history:compare_main",
-    "export": "station.commands.history:export_main",
+    "export": "station.commands.export:export_main",
     "report": "station.commands.report:main",
+    "compensate": "station.commands.compensate:main",
 }
 
 
@@ -331,7 +332,28 @@ def build_parser() -> argparse.ArgumentParser:
                         "MC_BacklashCompensation, from the run's measured reversal, where it "
                         "stands out of its noise")
     export.add_argument("--out", metavar="FILE", help="write here instead of stdout (for "
-                        "LinuxCNC the whole INI, HOME_OFFSETs calibrated, the rest as it was)")
+                        "LinuxCNC the whole INI, HOME_OFFSETs calibrated, the rest as it was; "
+                        "with --kinematics the folder for the three files)")
+    export.add_argument("--kinematics", action="store_true", help="LinuxCNC: the whole "
+                        "identified geometry, in the orthoglidekins kinematics component (the "
+                        "INI, orthoglide-geometry.hal and orthoglidekins.comp into --out)")
+
+    comp = sub.add_parser("compensate", help="rewrite a G-code program for a controller "
+                          "with the nominal kinematics, so that the identified machine's "
+                          "tool follows the programmed path")
+    comp.add_argument("program", metavar="PROGRAM", help="the G-code program (RS274/NGC)")
+    comp.add_argument("--run", metavar="RUN_DIR", required=True,
+                      help="the run whose identified machine (model.json) to compensate for")
+    comp.add_argument("--out", metavar="FILE", help="the program to write (default "
+                      "PROGRAM's <stem>.compensated<suffix> beside it; never overwrites a "
+                      "file compensate did not write)")
+    comp.add_argument("--tolerance", type=float, default=0.001, metavar="MM",
+                      help="how far the tool may stray from the programmed path, between "
+                           "the points written as well as at them (default 0.001 mm)")
+    comp.add_argument("--work-offset", type=_triple, default=(0.0, 0.0, 0.0),
+                      metavar="X,Y,Z", help="where the program's work origin sits in machine "
+                      "coordinates, mm (P = 0 at the mechanical zero Π0; default 0,0,0)")
+    comp.add_argument("--debug", action="store_true", help="show tracebacks of failures")
     return parser
 
 
