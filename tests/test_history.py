@@ -16,6 +16,7 @@ from typing import Any
 import pg
 import pytest
 from builders import Completed, cli, simulated
+from system import require
 from test_record import errors
 
 from station import report
@@ -174,8 +175,7 @@ def store_url(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathF
     if request.param == "sqlite":
         yield default_url(tmp_path_factory.mktemp("sqlite"))
         return
-    if not pg.available():
-        pytest.skip("no PostgreSQL binaries (initdb, pg_ctl) on this machine")
+    require(pg.available(), "PostgreSQL's server (initdb, pg_ctl)")
     with pg.server() as url:
         yield url
 
