@@ -4,48 +4,26 @@ Protocol-level fakes, tests/fakes.py, in front of the virtual machine): the run'
 geometry in its controller (station.record.identified reads it from the run
 directory, as ``orthocal export --kinematics`` and ``orthocal compensate`` do).
 
-The held-out machine: axes 0.15 / −0.10 / 0.12 mm apart, leaning 0.2 / 0.1 / −0.15
-mrad, Δρ (0.6, −0.4, 0.9) mm, 1 µm gauges, stands by eye, legs stated straight to
-2 µm. Offsets alone leave tens of µm there (docs/model.md, "Axes that do not meet");
-the geometry in the controller about a micrometre."""
+The held-out machine (tests/heldout.py): axes 0.15 / −0.10 / 0.12 mm apart, leaning
+0.2 / 0.1 / −0.15 mrad, Δρ (0.6, −0.4, 0.9) mm, 1 µm gauges, stands by eye, legs
+stated straight to 2 µm. Offsets alone leave tens of µm there (docs/model.md, "Axes
+that do not meet"); the geometry in the controller about a micrometre."""
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
+import heldout
 import numpy as np
 import pytest
-from fakes import FakeRig, fake_config, run_on
+from heldout import truth_now
 
-from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
-from orthocal import AXES, Geometry
+from orthocal import Geometry
 from orthocal.accuracy import error_field
 from orthocal.compensation import compensated_field
 from station import report
 from station.record.identified import identified_machine
 from station.record.result import RunResult
-
-GAP = (0.15, -0.10, 0.12)
-TILT = (0.2, 0.1, -0.15)
-DRHO = (0.6, -0.4, 0.9)
-
-
-def run(out: Path, seed: int, **machine: Any) -> dict[str, Any]:
-    rig = FakeRig(**{"seed": seed, "noise_mm": 0.001, "true_drho": DRHO,
-                     "mount_error_mm": DEFAULT_MOUNT_ERROR_MM, **machine})
-    config = fake_config(uncertainty={"leg_straightness_mm": 0.002}, settle_s=0.0)
-    code, result = run_on(rig, out, config)
-    assert code == (3 if report.not_converged(result) else 0), result.get("message")
-    return result
-
-
-def truth_now(result: dict[str, Any]) -> np.ndarray:
-    """The hidden machine in the joint frame of the offsets the run left."""
-    sim = result["simulation"]
-    o = np.array([result["offsets_final"][a] - result["offsets_before"][a] for a in AXES])
-    return np.array([*(sim["true_drho"][a] + o[i] for i, a in enumerate(AXES)), 0, 0, 0,
-                     *sim["true_tilt"].values(), *sim["true_gap"].values()])
 
 
 def true_figures(result: dict[str, Any]) -> dict[str, float]:
@@ -63,13 +41,12 @@ def true_figures(result: dict[str, Any]) -> dict[str, float]:
 
 @pytest.fixture(scope="module")
 def held_out(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    out = tmp_path_factory.mktemp("held-out")
-    return run(out, 7, true_tilt=TILT, true_gap=GAP)
+    return heldout.held_out(tmp_path_factory.mktemp("held-out"))
 
 
 @pytest.fixture(scope="module")
 def square(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    return run(tmp_path_factory.mktemp("square"), 8)
+    return heldout.square(tmp_path_factory.mktemp("square"))
 
 
 def test_the_geometry_in_the_controller_takes_the_tool_to_a_micrometre(held_out) -> None:

@@ -135,39 +135,3 @@ def compare_main(args: argparse.Namespace) -> int:
         print(f"  {line}")
     return 0
 
-
-def export_main(args: argparse.Namespace) -> int:
-    from station.history.export import ExportError, csv_lines, linuxcnc
-    from station.history.twincat import twincat
-
-    _, result = read_result(args.run_dir)
-    try:
-        if args.to == "csv":
-            text = csv_lines(result)
-        elif args.to == "twincat":
-            text = twincat(result, args.axes.split(","), backlash=args.backlash)
-        else:
-            if args.ini is None:
-                raise BadInput("--ini: LinuxCNC takes HOME_OFFSET as a value, not a "
-                               "correction; give the machine's INI file")
-            try:
-                ini_text = Path(args.ini).read_text(encoding="utf-8")
-            except OSError as exc:
-                raise BadInput(f"--ini: cannot read {args.ini} ({exc.strerror})") from None
-            joints = [int(j) for j in args.joints.split(",")]
-            if len(joints) != 3:
-                raise BadInput(f"--joints: three joint numbers for x,y,z, got {args.joints}")
-            text = linuxcnc(result, ini_text, joints, source=str(args.ini),
-                            backlash=args.backlash)
-    except ExportError as exc:
-        raise BadInput(str(exc)) from None
-    except ValueError as exc:
-        raise BadInput(f"--joints: {exc}") from None
-    if args.out:
-        try:
-            Path(args.out).write_text(text, encoding="utf-8")
-        except OSError as exc:
-            raise BadInput(f"--out: cannot write {args.out} ({exc.strerror})") from None
-    else:
-        sys.stdout.write(text)
-    return 0

@@ -194,7 +194,15 @@ def _layout_value(name: str, kind: str, model: MachineModel, told: bool,
         return GeometryValue(name=name, pin=PINS[name], unit=unit, value=base, nominal=base,
                              identified=False, interval_95=None, note=why)
     shown = f"{base + value:+.4f} {unit} [{iv[0]:+.4f}, {iv[1]:+.4f}] (95 %)" if iv else ""
+    # The interval is the run's estimate's, not the nominal value's: say which, and
+    # whether it holds the nominal value, so the comment never claims "within its
+    # noise" for an estimate whose interval excludes it.
+    holds = iv is None or iv[0] <= base <= iv[1]
+    where = ("its interval holds the nominal value" if holds else
+             "its interval does not hold the nominal value, but the model test over the "
+             "whole run did not keep it")
     return GeometryValue(name=name, pin=PINS[name], unit=unit, value=base, nominal=base,
                          identified=False, interval_95=iv,
                          note=f"nominal: the model test kept {model.model!r}, which holds no "
-                              f"{name} (the run puts it at {shown}, within its noise)")
+                              f"{name}; the run's estimate is {shown} ({where}), carried in "
+                              "accuracy.compensated's interval")

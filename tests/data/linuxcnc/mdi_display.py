@@ -95,11 +95,30 @@ class Machine:
         # double back exactly.
         words = " ".join(f"{a}{v:.17f}" for a, v in zip("XYZ", target, strict=True))
         self.mdi(f"G0 {words}" if feed is None else f"G1 {words} F{feed:.6f}")
-        s = self.poll()
+        s = self.settled()
         return {"target": list(target),
                 "joints": [s.joint[n]["output"] for n in range(s.joints)],
                 "position": list(s.position[:3]),
                 "actual_position": list(s.actual_position[:3])}
+
+    def settled(self):
+        """The status once the feedback stands still: in position is reached a servo
+        cycle or two before actual_position (the kinematics' forward of the joints'
+        feedback) has caught up, so two polls in a row must agree (poll() refreshes
+        one stat object: its values are copied to compare)."""
+        def seen(s):
+            return (list(s.actual_position[:3]),
+                    [s.joint[n]["output"] for n in range(s.joints)])
+
+        deadline = time.monotonic() + self.timeout_s
+        last = seen(self.poll())
+        while time.monotonic() < deadline:
+            time.sleep(POLL_S)
+            now = seen(self.poll())
+            if now == last:
+                return self.stat
+            last = now
+        raise Failed(f"the feedback did not settle within {self.timeout_s:.0f} s")
 
     def stop(self):
         """E-stop, so that the machine is off before LinuxCNC unloads it."""
