@@ -152,7 +152,7 @@ def _root(cov: np.ndarray) -> np.ndarray:
 def compensated_interval(theta_c, estimate, covariance, dof: float | None, points,
                          geometry: Geometry | None = None, frame: str = "translation",
                          systematic=None, level: float = 0.95, draws: int = 4000,
-                         seed: int = 0) -> CompensatedInterval:
+                         seed: int = 0, absent=None) -> CompensatedInterval:
     """The tool error (K3) a controller with the machine ``theta_c`` leaves on the
     real machine, which the run knows as ``estimate`` (12-vector: θ_c where the
     controller was told a parameter, the run's best value where it was not) with
@@ -172,6 +172,16 @@ def compensated_interval(theta_c, estimate, covariance, dof: float | None, point
       (1 + level)/2 quantile over δ drawn from Σ + ``systematic`` (what bounded
       systematic errors, the legs' form, may leave in the parameters: anywhere
       from none to their bound), Monte Carlo with ``draws`` seeded draws.
+
+    ``absent`` (12 booleans, default none): the parameters the controller is not told
+    because the model test did not keep them, whose estimate is then noise about a
+    value that may well be nominal. Their estimate's own noise is in F₀ already, so
+    ``rms_mm`` takes |F₀|² less its expectation tr(G_a·Σ_a·G_aᵀ) (an unbiased
+    estimate of their field, never below zero) where it would otherwise count that
+    noise twice; and the interval's lower end is also taken where they are exactly
+    nominal (the model test's hypothesis, drawn over the told parameters' error
+    alone), the lesser of the two, since a quantile of |F₀ + G·δ| over δ never reaches
+    a field the Gaussian cannot draw.
 
     ``field`` is F₀, ``point_rms_mm`` sqrt(|F₀_k|² + tr(G_k·Σ·G_kᵀ)) at each point k.
     A parameter with no variance is taken as exactly known."""
@@ -206,14 +216,51 @@ def compensated_interval(theta_c, estimate, covariance, dof: float | None, point
     wide_rms, wide_max = _field_draws(F0, wide_root, _draws(len(columns), dof, draws, seed),
                                       n)
     lo, hi = (1.0 - level) / 2.0, (1.0 + level) / 2.0
+    if absent is not None and np.any(absent):
+        rms, low_rms, low_max = _absent(p, geometry, estimate, theta_c, frame, cov, dof,
+                                        np.asarray(absent, dtype=bool), F0, t_var,
+                                        draws, seed, lo)
+        lower = (min(float(np.quantile(stat_rms, lo)), low_rms),
+                 min(float(np.quantile(stat_max, lo)), low_max))
+    else:
+        lower = (float(np.quantile(stat_rms, lo)), float(np.quantile(stat_max, lo)))
     law = "normal" if dof is None or not np.isfinite(dof) else f"Student t, {dof:g} dof"
     return CompensatedInterval(
         field=base, rms_mm=rms, max_mm=float(np.median(stat_max)), point_rms_mm=point_rms,
-        rms_interval_mm=(float(np.quantile(stat_rms, lo)), float(np.quantile(wide_rms, hi))),
-        max_interval_mm=(float(np.quantile(stat_max, lo)), float(np.quantile(wide_max, hi))),
+        rms_interval_mm=(lower[0], float(np.quantile(wide_rms, hi))),
+        max_interval_mm=(lower[1], float(np.quantile(wide_max, hi))),
         level=level, dof=None if dof is None or not np.isfinite(dof) else float(dof),
         method=("the real machine's error propagated through the exact model, linearised "
                 f"({law}; Monte Carlo quantiles, {draws} draws)"))
+
+
+def _absent(p: np.ndarray, geometry: Geometry, estimate: np.ndarray, theta_c: np.ndarray,
+            frame: str, cov: np.ndarray, dof: float | None, absent: np.ndarray,
+            F0: np.ndarray, t_var: float, draws: int, seed: int,
+            lo: float) -> tuple[float, float, float]:
+    """For :func:`compensated_interval`'s ``absent``: the expected RMS with their noise
+    counted once, (|F₀|² − tr_a)⁺ + tr_t over the points (a: absent, t: told; F₀
+    holds the absent ones' noise, the told ones' error is the controller's), and
+    the lower quantiles of RMS and max where they are exactly nominal."""
+    n = len(p)
+    nominal = np.where(absent, theta_c, estimate)
+    told = [c for c in range(len(PARAM_NAMES)) if not absent[c] and cov[c, c] > 0]
+    cols = [c for c in np.flatnonzero(absent) if cov[c, c] > 0]
+    tr_a = tr_t = 0.0
+    if cols:
+        G_a = truth_jacobian(p, geometry, estimate, theta_c, frame, cols)
+        tr_a = t_var * float(np.sum((G_a @ _root(cov[np.ix_(cols, cols)]))**2))
+    F_nom = compensated_field(p, geometry, nominal, theta_c, frame).field.ravel()
+    if not told:
+        norms = np.linalg.norm(F_nom.reshape(n, 3), axis=1)
+        rms = float(np.sqrt(max(float(F0 @ F0) - tr_a, 0.0) / n))
+        return rms, float(np.sqrt(np.mean(norms**2))), float(norms.max())
+    G_t = truth_jacobian(p, geometry, nominal, theta_c, frame, told)
+    B = G_t @ _root(cov[np.ix_(told, told)])
+    tr_t = t_var * float(np.sum(B**2))
+    rms = float(np.sqrt((max(float(F0 @ F0) - tr_a, 0.0) + tr_t) / n))
+    low_rms, low_max = _field_draws(F_nom, B, _draws(B.shape[1], dof, draws, seed + 1), n)
+    return rms, float(np.quantile(low_rms, lo)), float(np.quantile(low_max, lo))
 
 
 def _field_draws(F0: np.ndarray, B: np.ndarray, z: np.ndarray,

@@ -77,8 +77,11 @@ def statement(points: np.ndarray, frame: str, *, drho_now: Mapping[str, float],
     told = told_names(layout, in_model)
     theta_c = np.array([v if n in told else 0.0 for n, v in
                         zip(PARAM_NAMES, estimate, strict=True)])
+    # not told because the kept model holds them not: their pooled values are noise
+    # about what may be nominal (Δρ is always told; ΔL has no variance)
+    absent = [n not in told and n in LAYOUT_NAMES for n in PARAM_NAMES]
     iv = compensated_interval(theta_c, estimate, cov, dof, points, frame=frame,
-                              systematic=wide - cov)
+                              systematic=wide - cov, absent=absent)
     nominal = _nominal(layout, told, model)
     laid = [n for n in told if n not in DRHO]
     assumes = [
