@@ -10,13 +10,14 @@ independent bitwise implementation), not produced by the code under test.
 from __future__ import annotations
 
 import contextlib
-import socket
 import struct
 from collections.abc import Iterator, Sequence
 
 import numpy as np
 import pytest
+import wire
 from pytest_mock import MockerFixture
+from wire import ScriptedSerial, ScriptedSocket
 
 from drivers.axes import ModbusAxisController
 from drivers.errors import (
@@ -87,82 +88,11 @@ def exception(fc: int, code: int) -> bytes:
 # --- scripted transports ---------------------------------------------------------------------
 
 
-class ScriptedSocket:
-    """Stands in for the socket pymodbus's ModbusTcpClient creates. Replies are
-    pushed through a real socketpair so pymodbus's select()/recv() run unchanged."""
-
-    def __init__(self, pairs: Sequence[Pair]) -> None:
-        self.pairs = list(pairs)
-        self._ours, self._theirs = socket.socketpair()
-
-    def send(self, data: bytes) -> int:
-        assert self.pairs, f"unexpected request {data.hex(' ')}"
-        request, reply = self.pairs.pop(0)
-        assert data.hex(" ") == request.hex(" ")
-        if reply is not None:
-            self._theirs.sendall(reply)
-        return len(data)
-
-    def recv(self, size: int) -> bytes:
-        return self._ours.recv(size)
-
-    def setblocking(self, flag: bool) -> None:
-        self._ours.setblocking(flag)
-
-    def fileno(self) -> int:
-        return self._ours.fileno()
-
-    def getsockname(self) -> tuple[str, int]:
-        return ("127.0.0.1", 50000)
-
-    def unread(self) -> bytes:
-        self._ours.setblocking(False)
-        with contextlib.suppress(BlockingIOError):
-            return self._ours.recv(4096)
-        return b""
-
-    def close(self) -> None:
-        self._ours.close()
-        self._theirs.close()
-
-
-class ScriptedSerial:
-    """Stands in for the pyserial port pymodbus's ModbusSerialClient opens."""
-
-    def __init__(self, pairs: Sequence[Pair]) -> None:
-        self.pairs = list(pairs)
-        self.buffer = bytearray()
-        self.is_open = True
-        self.inter_byte_timeout = 0.0
-
-    @property
-    def in_waiting(self) -> int:
-        return len(self.buffer)
-
-    def read(self, size: int) -> bytes:
-        data = bytes(self.buffer[:size])
-        del self.buffer[:size]
-        return data
-
-    def write(self, data: bytes) -> int:
-        assert self.pairs, f"unexpected request {data.hex(' ')}"
-        request, reply = self.pairs.pop(0)
-        assert data.hex(" ") == request.hex(" ")
-        if reply is not None:
-            self.buffer += reply
-        return len(data)
-
-    def unread(self) -> bytes:
-        return bytes(self.buffer)
-
-    def close(self) -> None:
-        self.is_open = False
-
-
 @contextlib.contextmanager
 def expected_protocol(mocker: MockerFixture, transport: str, pairs: Sequence[Pair],
                       **kwargs: object) -> Iterator[ModbusAxisController]:
-    """A connected controller whose wire is ``pairs``; checks all used, none left."""
+    """A connected controller whose wire is ``pairs`` (tests/wire.py); checks all
+    used, none left."""
     fake: ScriptedSocket | ScriptedSerial
     if transport == "tcp":
         fake = ScriptedSocket(pairs)
@@ -173,16 +103,14 @@ def expected_protocol(mocker: MockerFixture, transport: str, pairs: Sequence[Pai
         mocker.patch("pymodbus.client.serial.serial.serial_for_url", return_value=fake)
         port = "/dev/ttyFAKE0"
     options: dict = {"timeout_s": 0.05, "retries": 2, "baudrate": 115200, **kwargs}
-    ctl = ModbusAxisController(transport=transport, host="10.0.0.7", port=port, **options)
-    try:
+
+    def connected() -> ModbusAxisController:
+        ctl = ModbusAxisController(transport=transport, host="10.0.0.7", port=port, **options)
         ctl.connect()
+        return ctl
+
+    with wire.expected_protocol(fake, connected, ModbusAxisController.close) as ctl:
         yield ctl
-        assert fake.pairs == [], f"{len(fake.pairs)} expected request(s) never sent"
-        assert fake.unread() == b"", "reply bytes left unread"
-    finally:
-        ctl.close()
-        if isinstance(fake, ScriptedSocket):
-            fake.close()
 
 
 POS_UM = (310250, -1, 200251)

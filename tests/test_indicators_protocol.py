@@ -14,6 +14,8 @@ from typing import Any
 
 import pytest
 import serial
+import wire
+from wire import Pair, ScriptedSerial
 
 from drivers.base import Indicator
 from drivers.errors import (
@@ -26,55 +28,9 @@ from drivers.indicator_protocols import BUILTIN_PROTOCOLS, IndicatorProtocol, ma
 from drivers.indicators import IndicatorGroup, SerialIndicator
 
 PORT = "/dev/ttyFAKE0"
-Pair = tuple[bytes | None, bytes]
 
 
-class FakeSerial:
-    """A serial port that plays a scripted conversation.
-
-    ``(None, reply)`` pairs are bytes that arrive unasked: at the start, or
-    right after the previous reply. ``chunk`` > 0 hides the input buffer
-    (``in_waiting`` = 0) and delivers at most ``chunk`` bytes per read, like a
-    slow line.
-    """
-
-    def __init__(self, pairs: Sequence[Pair], chunk: int = 0) -> None:
-        self.pairs = list(pairs)
-        self.rx = bytearray()
-        self.flushed = bytearray()
-        self.chunk = chunk
-        self.closed = False
-        self._arrive_unasked()
-
-    def _arrive_unasked(self) -> None:
-        while self.pairs and self.pairs[0][0] is None:
-            self.rx += self.pairs.pop(0)[1]
-
-    def reset_input_buffer(self) -> None:
-        self.flushed += self.rx
-        self.rx.clear()
-
-    def write(self, data: bytes) -> int:
-        assert self.pairs, f"unexpected write {data!r}: conversation is over"
-        sent, reply = self.pairs.pop(0)
-        assert data == sent, f"sent {data!r}, expected {sent!r}"
-        self.rx += reply
-        self._arrive_unasked()
-        return len(data)
-
-    @property
-    def in_waiting(self) -> int:
-        return 0 if self.chunk else len(self.rx)
-
-    def read(self, size: int = 1) -> bytes:
-        if self.chunk:
-            size = min(size, self.chunk)
-        out = bytes(self.rx[:size])
-        del self.rx[:size]
-        return out  # b"" = the port's timeout elapsed with nothing received
-
-    def close(self) -> None:
-        self.closed = True
+FakeSerial = ScriptedSerial  # tests/wire.py: the one scripted wire of every byte-exact test
 
 
 @contextmanager
@@ -89,23 +45,25 @@ def expected_protocol(
     fake = FakeSerial(pairs, chunk=chunk)
     factory = mocker.Mock(return_value=fake)
     events: list[dict[str, Any]] = []
-    ind = SerialIndicator(
-        "A", PORT, protocol, serial_factory=factory, on_event=events.append, **kwargs
-    )
-    proto = ind.protocol
-    factory.assert_called_once_with(
-        PORT,
-        baudrate=proto.baudrate,
-        bytesize=proto.bytesize,
-        parity=proto.parity,
-        stopbits=proto.stopbits,
-        timeout=ind.timeout_s,
-        write_timeout=ind.timeout_s,
-    )
-    yield ind, events
-    assert not fake.pairs, f"unused pairs: {fake.pairs}"
-    assert not fake.rx, f"bytes left unread: {bytes(fake.rx)!r}"
-    ind.close()
+
+    def opened() -> SerialIndicator:
+        ind = SerialIndicator(
+            "A", PORT, protocol, serial_factory=factory, on_event=events.append, **kwargs
+        )
+        proto = ind.protocol
+        factory.assert_called_once_with(
+            PORT,
+            baudrate=proto.baudrate,
+            bytesize=proto.bytesize,
+            parity=proto.parity,
+            stopbits=proto.stopbits,
+            timeout=ind.timeout_s,
+            write_timeout=ind.timeout_s,
+        )
+        return ind
+
+    with wire.expected_protocol(fake, opened, SerialIndicator.close) as ind:
+        yield ind, events
     assert fake.closed
 
 
