@@ -9,6 +9,7 @@ import random
 import numpy as np
 
 from station import report
+from station.record.result import SCHEMA_VERSION
 
 L, RHO_MIN, RHO_MAX = 310.25, -100.0, 60.0
 AXES = "xyz"
@@ -68,6 +69,20 @@ def _measure(truth: dict[str, float], rng: random.Random, noise: float, cycles: 
     return out
 
 
+NO_GUARD_STOPS = {"stops": 0, "recovered": [], "retakes": 0, "refused": 0}
+
+
+def simulation(seed: int, true_drho: dict[str, float], true_dl: dict[str, float],
+               noise: float) -> dict:
+    """result.json's ``simulation``: the hidden machine, no other error simulated."""
+    zero = dict.fromkeys(AXES, 0.0)
+    return {"seed": seed, "true_drho": true_drho, "true_dl": true_dl,
+            "true_tilt": dict.fromkeys(("tilt_yx", "tilt_zx", "tilt_zy"), 0.0),
+            "true_gap": dict.fromkeys(("gap_xy", "gap_xz", "gap_yz"), 0.0),
+            "noise_mm": noise, "mount_error_mm": 0.0, "backlash_mm": zero,
+            "leg_bow_mm": zero, "gauge_scale": {"A": 0.0, "B": 0.0}}
+
+
 def make_result(
     *, model: str = "rho", seed: int = 7, noise: float = 0.004, verify: bool = True,
     measured: dict[str, float] | None = None, run_dir: str = "runs/2024-05-02T10-15-00",
@@ -91,12 +106,12 @@ def make_result(
     before = {"x": 0.125, "y": -0.040, "z": 0.310}
     written = {a: before[a] - fit["identified"].get(f"drho_{a}", 0.0) for a in AXES}
     result = {
+        "schema_version": SCHEMA_VERSION,
         "run_dir": run_dir, "status": "ok", "message": None,
         "started": "2024-05-02T10:15:00+02:00", "finished": "2024-05-02T10:21:42+02:00",
         "duration_s": 402.3, "simulated": True,
-        "simulation": {"seed": seed, "true_drho": true_drho, "true_dl": true_dl,
-                       "noise_mm": noise},
-        "machine": {"leg_length": L, "rho_min": RHO_MIN, "rho_max": RHO_MAX},
+        "simulation": simulation(seed, true_drho, true_dl, noise),
+        "machine": {"id": None, "leg_length": L, "rho_min": RHO_MIN, "rho_max": RHO_MAX},
         "model": model, "method": "nonlinear",
         "identified": fit["identified"], "std_errors": fit["std_errors"],
         "correlation": fit["correlation"],
@@ -109,10 +124,13 @@ def make_result(
         "setups": [{"leg": a, "indicators": {"A": b, "B": c}, "cycles_used": 3,
                     "cycles_max": 5, "repeats": 0, "flagged": False, "spread_mm": 0.006}
                    for a, b, c in (("x", "y", "z"), ("y", "x", "z"), ("z", "x", "y"))],
-        "offsets_before": before, "offsets_written": written,
+        "offsets_before": before, "offsets_written": written, "offsets_final": written,
+        "offsets_held_by": "controller",
         "writeback": {"status": "written", "reason": None},
         "verification": None,
-        "timing": {"wall_s": 402.3, "moves": 74, "readings": 370, "retries": 1},
+        "plunger_guard": NO_GUARD_STOPS,
+        "timing": {"wall_s": 402.3, "moves": 74, "readings": 370, "retries": 1,
+                   "outliers_rejected": 0, "mountings": 3, "operator_s": 60.0},
     }
     if verify:
         left = {n: truth[n] - fit["identified"].get(n, 0.0) for n in truth}
@@ -120,9 +138,12 @@ def make_result(
         vfit = _fit({k: d["mean"] for k, d in vdevs.items()}, names)
         for k, d in vdevs.items():
             d["model"] = vfit["model"][k]
+            d["expected"] = 0.0  # the model's prediction once Δρ is written
         result["verification"] = {
             "identified": vfit["identified"], "std_errors": vfit["std_errors"],
+            "std_errors_dof": None,
             "residual_rms_mm": vfit["residual_rms_mm"], "deviations_rms_mm": vfit["rms"],
-            "deviations": vdevs,
+            "expected_rms_mm": 0.0, "vs_expected_rms_mm": vfit["rms"], "noise_floor_mm": noise,
+            "deviations": vdevs, "setups": result["setups"],
         }
     return result

@@ -15,9 +15,13 @@ from jsonschema import Draft202012Validator
 
 from station.commands import run as cmd_run
 from station.commands.cli import main
+from station.commands.history import read_result
 from station.record import schema
+from station.record.migrate import migrate
+from station.record.result import SCHEMA_VERSION, RunResult
 
-GOLDEN = Path(__file__).parent / "data" / "golden_run"
+DATA = Path(__file__).parent / "data"
+GOLDEN = DATA / "golden_run"
 
 
 @cache
@@ -40,7 +44,7 @@ def test_the_shipped_schema_is_the_models(kind: str, capsys) -> None:
     assert schema.shipped(kind) == schema.dumps(kind)
     assert main(["schema", kind]) == 0
     assert capsys.readouterr().out == schema.shipped(kind)
-    assert json.loads(schema.shipped(kind))["schema_version"] == 1
+    assert json.loads(schema.shipped(kind))["schema_version"] == SCHEMA_VERSION == 2
 
 
 def _check_run_dir(run_dir: Path) -> dict[str, Any]:
@@ -57,7 +61,7 @@ def test_a_run_and_a_refused_write_back_validate(tmp_path: Path, capsys) -> None
     cmd_run.run(simulated(tmp_path / "ok", seed=3, true_drho=(0.3, -0.2, 0.1)))
     capsys.readouterr()
     (ok,) = (tmp_path / "ok").glob("run-*")
-    assert _check_run_dir(ok)["schema_version"] == 1
+    assert _check_run_dir(ok)["schema_version"] == SCHEMA_VERSION
     machine = json.loads((ok / "model.json").read_text())
     assert machine["format"] == "orthocal machine model 1"
     # a field the record does not declare, or a unit it does not know, is caught
@@ -82,6 +86,32 @@ def test_the_golden_run_validates_and_drift_does_not() -> None:
     # a journal line of an unknown type, or a reading without values
     assert errors("journal", {"type": "mystery", "t": 0.0})
     assert errors("journal", {"type": "reading", "t": 0.0, "stop": "m:0:0:0", "indicator": "A"})
+
+
+#: Results written by older versions: the golden run as version 1 wrote it (times and
+#: the run directory taken out, as tests/test_unchanged.py does), and two runs from
+#: before the schema (no schema_version).
+OLDER = {"result_v1.json": 1, "result_tilted_joints.json": None,
+         "result_tilted_tool.json": None}
+
+
+@pytest.mark.parametrize("name", sorted(OLDER))
+def test_an_older_result_is_read_as_the_current_version(name: str, tmp_path: Path) -> None:
+    old = json.loads((DATA / name).read_text())
+    assert old.get("schema_version") == OLDER[name]
+    snapshot = json.dumps(old)
+    doc = migrate(old)
+    assert json.dumps(old) == snapshot  # the caller's document is left as it was
+    assert doc["schema_version"] == SCHEMA_VERSION and migrate(doc) == doc
+    for key, value in (("run_dir", "RUN_DIR"), ("started", "WHEN"), ("finished", "WHEN"),
+                       ("duration_s", 1.0)):
+        doc.setdefault(key, value)
+    doc["timing"].setdefault("wall_s", 1.0)
+    assert errors("result", doc) == []
+    RunResult.model_validate_json(json.dumps(doc), strict=True)
+    # every reader of a run directory reads it so (orthocal report, compare, export)
+    (tmp_path / "result.json").write_text(json.dumps(old))
+    assert read_result(str(tmp_path))[1]["schema_version"] == SCHEMA_VERSION
 
 
 def test_an_old_journals_simulation_is_read_with_what_that_run_had() -> None:

@@ -12,25 +12,38 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from result_builders import AXES, PAPER_BEFORE, RHO_MAX, RHO_MIN, L, make_result
+from pydantic import ValidationError
+from result_builders import (
+    AXES,
+    NO_GUARD_STOPS,
+    PAPER_BEFORE,
+    RHO_MAX,
+    RHO_MIN,
+    L,
+    make_result,
+)
 
 from station import report
+from station.record.result import SCHEMA_VERSION
 
 
 def failed_result() -> dict:
     """Died on a device fault in the second setup: no fit, no write-back."""
     return {
+        "schema_version": SCHEMA_VERSION,
         "run_dir": "runs/failed", "status": "failed",
         "message": "axis y alarm 17 (following error) at posture Π_y^+",
         "started": "2024-05-02T11:00:00+02:00", "finished": "2024-05-02T11:01:10+02:00",
         "duration_s": 70.0, "simulated": False, "simulation": None,
-        "machine": {"leg_length": L, "rho_min": RHO_MIN, "rho_max": RHO_MAX},
-        "model": "rho", "method": "nonlinear",
+        "machine": {"id": None, "leg_length": L, "rho_min": RHO_MIN, "rho_max": RHO_MAX},
+        "model": "rho", "method": "nonlinear", "identified": {}, "std_errors": {},
         "setups": [{"leg": "x", "indicators": {"A": "y", "B": "z"}, "cycles_used": 3,
                     "cycles_max": 5, "repeats": 0, "flagged": False, "spread_mm": 0.004}],
         "offsets_before": {"x": 0.0, "y": 0.0, "z": 0.0}, "offsets_written": None,
-        "writeback": None, "verification": None,
-        "timing": {"wall_s": 70.0, "moves": 13, "readings": 60, "retries": 0},
+        "offsets_final": {"x": 0.0, "y": 0.0, "z": 0.0}, "offsets_held_by": "controller",
+        "writeback": None, "verification": None, "plunger_guard": NO_GUARD_STOPS,
+        "timing": {"wall_s": 70.0, "moves": 13, "readings": 60, "retries": 0,
+                   "outliers_rejected": 0, "mountings": 1, "operator_s": 20.0},
     }
 
 
@@ -76,7 +89,7 @@ def test_result_json_has_no_nan_tokens_and_keeps_schema_order(tmp_path: Path) ->
     result["sigma_mm"] = float("nan")
     result["deviations"]["+xy"]["std"] = float("inf")
     result["identified"] = {k: np.float64(v) for k, v in result["identified"].items()}
-    result["extra_field"] = np.array([1.0, float("nan")])
+    result["correlation"]["matrix"] = np.array([[1.0, float("nan"), 0.0]] * 3)
     text = report.write_result(result, tmp_path).read_text(encoding="utf-8")
     assert not re.search(r"\b(NaN|Infinity)\b", text)
 
@@ -86,12 +99,26 @@ def test_result_json_has_no_nan_tokens_and_keeps_schema_order(tmp_path: Path) ->
     loaded = json.loads(text, parse_constant=strict)
     assert loaded["sigma_mm"] is None
     assert loaded["deviations"]["+xy"]["std"] is None
-    assert loaded["extra_field"] == [1.0, None]
+    assert loaded["correlation"]["matrix"][0] == [1.0, None, 0.0]
     assert loaded["identified"]["drho_z"] == pytest.approx(float(result["identified"]["drho_z"]))
     keys = list(loaded)
-    assert keys[:2] == ["run_dir", "status"]
-    assert keys.index("identified") < keys.index("verification") < keys.index("extra_field")
+    assert keys[:3] == ["schema_version", "run_dir", "status"]
+    assert keys.index("identified") < keys.index("verification") < keys.index("timing")
     assert list(loaded["deviations"]) == list(report.DEVIATION_KEYS)
+
+
+def test_result_json_is_validated_as_it_is_written(tmp_path: Path) -> None:
+    """A field the record (station.record.result) does not declare, one it requires
+    missing, or a value of another type is the engine's bug: it raises, no file."""
+    for broken in ({**make_result(), "extra_field": 1.0},
+                   {k: v for k, v in make_result().items() if k != "timing"},
+                   {**make_result(), "writeback": {"status": "written", "reason": None,
+                                                   "round": "1"}}):
+        with pytest.raises(ValidationError):
+            report.write_result(broken, tmp_path)
+        with pytest.raises(ValidationError):
+            report.jsonable(broken)
+    assert not (tmp_path / "result.json").exists()
 
 
 def test_jsonable_matches_the_file(tmp_path: Path) -> None:

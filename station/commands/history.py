@@ -99,10 +99,16 @@ def history_main(args: argparse.Namespace) -> int:
 
 
 def read_result(run_dir: str) -> tuple[Path, dict[str, Any]]:
-    """RUN_DIR's result.json and its path; bad input said in one line."""
+    """RUN_DIR's result.json (of any version, as the current one: station.record.
+    migrate) and its path; bad input said in one line."""
+    from station.record.migrate import migrate
+
     path = Path(run_dir) / "result.json"
     try:
-        return path, json.loads(path.read_text(encoding="utf-8"))
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(doc, dict):
+            raise ValueError("not a JSON object")
+        return path, migrate(doc)
     except OSError as exc:
         raise BadInput(f"{path}: cannot read ({exc.strerror})") from None
     except ValueError as exc:
@@ -134,4 +140,3 @@ def compare_main(args: argparse.Namespace) -> int:
     for line in change_lines(doc):
         print(f"  {line}")
     return 0
-

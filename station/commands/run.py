@@ -33,6 +33,7 @@ from station.errors import BadInput, RunFailed, StorageFull, say, storage_messag
 from station.plan.check import check_plan
 from station.plan.checker import MotionChecker
 from station.plan.steps import build_plan
+from station.record.migrate import migrate
 from station.rundir.directory import (
     NVRAM_NAME,
     new_run_dir,
@@ -216,7 +217,7 @@ def resume(options: ResumeOptions) -> int:
         raise BadInput(f"{run_dir / JOURNAL_NAME}: no run header (not a run journal)")
     if state.finished is not None:
         result_path = run_dir / "result.json"
-        result = json.loads(result_path.read_text()) if result_path.exists() else {}
+        result = migrate(json.loads(result_path.read_text())) if result_path.exists() else {}
         say(f"orthocal: {run_dir} already finished ({state.finished.get('status')})")
         print_result(options.json, result)
         return exit_status(result, 0 if state.finished.get("status") == "ok" else 1)

@@ -16,6 +16,7 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column
 
 from station.history.entry import entry_of, profile_of
+from station.record.migrate import migrate
 
 #: The file the default store lives in, beside the run directories (--out).
 DEFAULT_NAME = "history.sqlite"
@@ -92,7 +93,8 @@ class HistoryStore:
                 result = json.loads(result_path.read_text(encoding="utf-8"))
             except (OSError, ValueError):
                 continue  # not a finished run's record: the run directory says why
-            if result.get("finished"):
+            if isinstance(result, dict) and result.get("finished"):
+                result = migrate(result)
                 self.record(entry_of(result, profile_of(result_path.parent)))
                 count += 1
         return count

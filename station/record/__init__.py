@@ -1,3 +1,6 @@
-"""The run's record as typed models: result.json (:mod:`station.record.result`) and
-the journal's records (:mod:`station.record.journal`), with the JSON Schema other
-tools validate them against (:mod:`station.record.schema`, ``orthocal schema``)."""
+"""The run's record as typed models: result.json (:mod:`station.record.result`, its
+larger sections in result_accuracy.py and result_sections.py, their common parts in
+result_base.py; a file of an older version read through :mod:`station.record.migrate`),
+the journal's records (:mod:`station.record.journal`) and model.json
+(:mod:`station.record.model`), with the JSON Schema other tools validate them against
+(:mod:`station.record.schema`, ``orthocal schema``)."""

@@ -22,14 +22,16 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, JsonValue, ValidationError
 
 import orthocal
 from orthocal import AXES, MODELS, PARAM_NAMES
+from station.record.migrate import migrate
 from station.record.model import MachineModel
+from station.record.result_base import JsonObject
 
 #: orthoglidekins' pins in PARAM_NAMES order (docs/design.md, "The geometry in the
 #: controller"): leg-length-i is L + ΔL_i, the others the parameters themselves.
@@ -99,7 +101,7 @@ class IdentifiedMachine(_Closed):
                 f"model {self.model}")
 
 
-def _read(path: Path, what: str) -> dict[str, Any]:
+def _read(path: Path, what: str) -> JsonObject:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -117,7 +119,7 @@ def identified_machine(run_dir: str | Path) -> IdentifiedMachine:
     """The machine the run in ``run_dir`` identified; NotACalibration (one line) for a run
     that failed, was aborted or identified nothing."""
     run = Path(run_dir)
-    result = _read(run / "result.json", "result document")
+    result = migrate(_read(run / "result.json", "result document"))
     status = result.get("status")
     if status in ("failed", "aborted"):
         raise NotACalibration(f"{run}: the run {status} ({result.get('message') or 'no message'})"
@@ -133,7 +135,7 @@ def identified_machine(run_dir: str | Path) -> IdentifiedMachine:
     return _machine(run, result, model)
 
 
-def _machine(run: Path, result: dict[str, Any], model: MachineModel) -> IdentifiedMachine:
+def _machine(run: Path, result: JsonObject, model: MachineModel) -> IdentifiedMachine:
     kept = model.model
     if kept not in MODELS:
         raise NotACalibration(f"{run / 'model.json'}: model {kept!r} is not one of orthocal's")
@@ -145,26 +147,37 @@ def _machine(run: Path, result: dict[str, Any], model: MachineModel) -> Identifi
         missing = [n for n in names if n not in getattr(model, field)]
         if missing:
             raise NotACalibration(f"{run / 'model.json'}: {field}: no {', '.join(missing)}")
-    remaining = result.get("remaining") or {}
-    now_se = remaining.get("std_errors") or {}
-    k_now = orthocal.coverage_factor(remaining.get("std_errors_dof"))
+    remaining = _section(result, "remaining")
+    now_se = _section(remaining, "std_errors")
+    k_now = orthocal.coverage_factor(_number(remaining.get("std_errors_dof")))
     k = orthocal.coverage_factor(model.std_errors_dof)
     values = []
     for c, name in enumerate(PARAM_NAMES):
         kind = name.split("_")[0]
         if kind == "drho":
-            values.append(_drho(name, model.drho_now[name], now_se.get(name), k_now))
+            values.append(_drho(name, model.drho_now[name], _number(now_se.get(name)), k_now))
             continue
         told = c in columns and name in model.estimated
         values.append(_layout_value(name, kind, model, told, k))
     estimate = [model.drho_now[n] if n.startswith("drho") else model.parameters[n]
                 for n in PARAM_NAMES]
-    machine = result.get("machine") or {}
-    return IdentifiedMachine(
-        run_dir=str(result.get("run_dir") or run), machine_id=machine.get("id"), model=kept,
+    machine_id = _section(result, "machine").get("id")
+    return IdentifiedMachine.model_validate(dict(
+        run_dir=str(result.get("run_dir") or run), machine_id=machine_id, model=kept,
         leg_length=model.geometry.leg_length_mm, rho_min=model.geometry.rho_min_mm,
         rho_max=model.geometry.rho_max_mm, offsets_held_by=result.get("offsets_held_by"),
-        values=tuple(values), estimate=tuple(float(v) for v in estimate))
+        values=tuple(values), estimate=tuple(float(v) for v in estimate)))
+
+
+def _section(doc: JsonObject, key: str) -> JsonObject:
+    """``doc[key]`` where it is an object, else empty (a section the run did not reach)."""
+    value = doc.get(key)
+    return value if isinstance(value, dict) else {}
+
+
+def _number(value: JsonValue) -> float | None:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
+        else None
 
 
 def _drho(name: str, value: float, se: float | None, k: float) -> GeometryValue:

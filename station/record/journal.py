@@ -2,28 +2,35 @@
 ``type`` (docs/design.md, "The run record"). Every record carries ``t`` (Unix time,
 s) and is fsynced before the station moves on; a resumed run replays them.
 
-The fields every consumer relies on are typed; a record may carry more (an event's
-own fields, a write-back stage's), which the models keep."""
+Every record is closed: its fields are declared. What is a document of its own is a
+JSON object here: the header's config, plan and simulation (station.config,
+station.plan, station.record.simulation read them) and an event's body (retries,
+the plunger guard's stops and recoveries, …: ``{"event": name, …}``)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
+from station.record.result_base import JsonObject
+
 
 class _Record(BaseModel):
-    model_config = ConfigDict(extra="allow")
+    model_config = ConfigDict(extra="forbid")
 
     t: float = Field(description="when it was written, Unix time (s)")
 
 
 class Header(_Record):
     type: Literal["header"]
-    config: dict[str, Any]
-    plan: dict[str, Any]
-    simulation: dict[str, Any] | None = None
+    version: str = Field(description="orthocal's version")
+    config: JsonObject = Field(description="the station config (config.toml's model)")
+    plan: JsonObject
+    simulation: JsonObject | None = Field(
+        None, description="a simulated run's parameters (station.record.simulation)")
     started: str
+    argv: list[str] | None = None
 
 
 class Setup(_Record):
@@ -38,6 +45,7 @@ class Setup(_Record):
     operator_s: float | None = None
     at: float | None = Field(None, description="a second gauge plane: the fraction of "
                              "the leg from its carriage's joint (absent: 0.5, the middle)")
+    position: list[float] | None = Field(None, description="the joints when mounted, mm")
 
 
 class Reading(_Record):
@@ -51,6 +59,8 @@ class Outlier(_Record):
     type: Literal["outlier"]
     stop: str
     indicator: str
+    rejected: list[float] | None = None
+    median: float | None = None
 
 
 class Cycle(_Record):
@@ -59,6 +69,8 @@ class Cycle(_Record):
     setup: int
     cycle: int
     deviations: dict[str, float]
+    within_std: list[float] | None = Field(None, description="each stop's reading scatter")
+    reversal_mm: dict[str, float] | None = Field(None, description="per joint, measured")
 
 
 class SetupDone(_Record):
@@ -66,47 +78,133 @@ class SetupDone(_Record):
     phase: str
     setup: int
     cycles: list[int]
+    repeats: int | None = None
+    spread_mm: float | None = None
+    flagged: bool | None = None
 
 
 class Repeat(_Record):
     type: Literal["repeat"]
     phase: str
     setup: int
+    spread_mm: float | None = None
+    repeat: int | None = None
 
 
-class Identification(_Record):
-    type: Literal["identification", "verification"]
+class _Fit(_Record):
+    """A round's identification (station.engine.results.ident_json)."""
+
     model: str
+    method: str | None = None
     parameters: dict[str, float | None]
     std_errors: dict[str, float | None]
+    std_errors_dof: float | None = None
+    residual_rms_mm: float | None = None
+    passes: list[str] | None = Field(None, description="a round measured again")
+
+
+class Identification(_Fit):
+    """The first measurement's identification."""
+
+    type: Literal["identification"]
+
+
+class Verification(_Fit):
+    """A verification round's identification and its verdict."""
+
+    type: Literal["verification"]
+    round: int | None = None
+    phase: str | None = None
+    deviations_rms_mm: float | None = None
+    significant: list[str] | None = None
+    verdict: str | None = None
 
 
 class Writeback(_Record):
+    """One stage of a write-back round (backup, intent, done, …)."""
+
     type: Literal["writeback"]
     stage: str
     round: int | None = None
+    reason: str | None = None
+    before: dict[str, float] | None = None
+    written: dict[str, float] | None = None
+    file: str | None = Field(None, description="the backup file")
 
 
 class Event(_Record):
     type: Literal["event"]
-    event: dict[str, Any]
+    event: JsonObject = Field(description='{"event": its name, and its own fields}')
+
+
+class Finished(_Record):
+    type: Literal["finished"]
+    status: str | None = None
+    message: str | None = None
 
 
 class Stopped(_Record):
-    """The run ended (``finished``) or stopped on a fault or Ctrl-C."""
+    """The run stopped on Ctrl-C (``aborted``) or a fault."""
 
-    type: Literal["finished", "aborted", "fault"]
+    type: Literal["aborted", "fault"]
+    error: str | None = None
+    device: str | None = None
 
 
-class Other(_Record):
-    """Records of the run's recovery and the operator's rollback."""
+class Resumed(_Record):
+    type: Literal["resumed"]
+    version: str | None = None
+    argv: list[str] | None = None
 
-    type: Literal["resumed", "homed", "reference-check", "setup-redo", "rollback"]
+
+class Homed(_Record):
+    type: Literal["homed"]
+    position: list[float] | None = None
+    elapsed_s: float | None = None
+
+
+class GaugeCheck(BaseModel):
+    """A gauge at Π0 after homing against its last reading there."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    now_mm: float
+    then_mm: float
+    difference_mm: float
+    tolerance_mm: float
+
+
+class ReferenceCheck(_Record):
+    type: Literal["reference-check"]
+    result: str
+    phase: str | None = None
+    setup: int | None = None
+    gauges: dict[str, GaugeCheck] | None = None
+    cycles: list[int] | None = None
+
+
+class SetupRedo(_Record):
+    type: Literal["setup-redo"]
+    phase: str
+    setup: int
+    reason: str | None = None
+    cycles_dropped: list[int] | None = None
+
+
+class Rollback(_Record):
+    """The operator's rollback to the backed-up offsets."""
+
+    type: Literal["rollback"]
+    stage: Literal["intent", "done"]
+    current: dict[str, float] | None = None
+    restore: dict[str, float] | None = None
+    restored: dict[str, float] | None = None
 
 
 JournalRecord = Annotated[
     Header | Setup | Reading | Outlier | Cycle | SetupDone | Repeat | Identification
-    | Writeback | Event | Stopped | Other,
+    | Verification | Writeback | Event | Finished | Stopped | Resumed | Homed
+    | ReferenceCheck | SetupRedo | Rollback,
     Field(discriminator="type"),
 ]
 

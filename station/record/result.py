@@ -1,166 +1,206 @@
-"""result.json as pydantic models (docs/design.md, "The run record").
+"""result.json as pydantic models (docs/design.md, "Run JSON" and "The run record").
 
-Every top-level field is declared (a field the engine adds and this model does not
-know fails the test that validates real runs against it); sections whose inner
-shape is documented elsewhere (accuracy, the budget, model selection, lost motion,
-the plunger guard) are typed as objects here and described in docs/design.md.
-Floats that were NaN or infinite are written as null."""
+Every field of every section is declared and every section is closed: a field the
+engine adds and these models do not know fails as result.json is written
+(station.report.io.write_result validates it). Floats that were NaN or infinite are
+written as null. The larger sections live beside this file: ``accuracy`` in
+result_accuracy.py; ``model_selection``, ``stands``, ``uncertainty_budget``,
+``reversal``, ``plunger_guard`` and ``since_last`` in result_sections.py. Files
+written by an older version are read through station.record.migrate.
+
+schema_version, bumped when a field changes meaning, goes away, or a file of the
+older version no longer validates (adding an optional field does not):
+
+- 1: the top level declared, its larger sections open objects.
+- 2: every section typed and closed; a field the engine always writes is required
+  (nullable where it may be null), so older files are read through
+  ``migrate()``, which fills what they lack.
+"""
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-#: Bumped when a field changes meaning or goes away (adding one does not).
-SCHEMA_VERSION = 1
+from station.record.result_accuracy import Accuracy, Compensated
+from station.record.result_base import Axis3, Closed, NotStated, Params
+from station.record.result_sections import (
+    ModelSelection,
+    NotCompared,
+    PlungerGuard,
+    Reversal,
+    SinceLast,
+    StandEstimate,
+    UncertaintyBudget,
+)
 
-Axis3 = dict[str, float | None]  # {"x": …, "y": …, "z": …}, mm
-Params = dict[str, float | None]  # parameter name (docs/model.md) → value
+__all__ = ["SCHEMA_VERSION", "Compensated", "RunResult", "Setup"]
 
+SCHEMA_VERSION = 2
 
-class _Open(BaseModel):
-    """A section whose further fields are documented, not yet modelled."""
-
-    model_config = ConfigDict(extra="allow")
-
-
-class Timing(_Open):
-    wall_s: float = Field(description="the run's wall time in this process, s")
-    moves: int
-    readings: int
-    retries: int
-    outliers_rejected: int
-    mountings: int | None = Field(None, description="setup records: the operator mounted gauges")
-    operator_s: float | None = Field(None, description="time waited at the mounting prompts, s")
+Stopped = Literal["converged", "max_iterations", "not-converged", "refused", "declined",
+                  "failed", "skipped", "not-verified"]
+Verdict = Literal["significant", "converged", "suspected", "unproven"]
 
 
-class Loop(_Open):
-    stopped: Literal["converged", "max_iterations", "not-converged", "refused", "declined",
-                     "failed", "skipped", "not-verified"]
-    detail: str | None = None
-    write_backs: int
-    max_iterations: int
-    converge_mm: float
-    converged_within_mm: float | None = None
-    extra_passes: int = 0
-    max_extra_passes: int = 0
-
-
-class Writeback(_Open):
-    status: str
-    reason: str | None = None
-    round: int | None = None
-
-
-class Iteration(_Open):
-    phase: str = Field(description='"m", then "v", "v2", … one per write-back')
-    model: str
-    identified: Params
-    std_errors: Params
-    std_errors_dof: float | None = None
-    offsets_written: Axis3 | None = None
-    writeback: str | None = None
-    verdict: Literal["significant", "converged", "suspected", "unproven"] | None = None
-    significant: list[str] = []
-    passes: list[str] | None = None
-    joined: dict[str, Params] | None = Field(
-        None, description="a verification's Δρ joined with the rounds before it, each moved "
-                          "by the offsets written since (drho_mm, std_errors_mm): what "
-                          "shown_within_95_mm and the verdict's converged rest on")
-    stands_part_mm: Params | None = Field(
-        None, description="of each Δρ standard error, the part the stands set by eye make "
-                          "(more cycles in a mounting do not shrink it, more mountings do)")
-
-
-class Remaining(_Open):
-    phase: str
-    round: int
-    estimate: Params
-    total: Params
-    std_errors: Params
-    std_errors_dof: float | None = None
-    coverage_factor_95: float | None = None
-
-
-class Setup(_Open):
-    """One setup of a measurement: how many cycles it used of how many it could, its
-    repeats, and whether its spread was flagged (built by the engine as
-    station.engine.statistics.SetupOutcome, which adds what the record leaves out)."""
-
-    leg: str
-    indicators: dict[str, str]
-    cycles_used: int
-    cycles_max: int
-    repeats: int
-    flagged: bool
-    spread_mm: float | None = None
-
-
-class Machine(_Open):
+class Machine(Closed):
+    id: str | None = Field(description="[machine] id, the machine's serial (null: none)")
     leg_length: float
     rho_min: float
     rho_max: float
 
 
-class SinceLast(_Open):
-    """What changed since the machine's last run in the history (docs/design.md,
-    "Machine history"): that run's as left (as found where it verified nothing)
-    against this run's as found, through station.history.compare."""
+class Simulation(Closed):
+    """simulation: the hidden machine of a simulated run, named for the report."""
 
-    previous_run: str = Field(description="the last earlier run of this machine id")
-    previous_started: str | None = None
-    previous_state: Literal["as left", "as found"] | None = None
-    joint_error_mm: dict[str, dict[str, Any]] | None = Field(
-        None, description="per axis e = Δρ − o: before, after, change, std_error, "
-        "interval_95 (mm), significant")
-    layout: dict[str, dict[str, Any]] | None = Field(
-        None, description="per tilt (mrad) and gap (mm), the same fields")
-    not_compared: str | None = Field(
-        None, description="why the two runs could not be compared (then no changes)")
-
-
-class Compensated(BaseModel):
-    """accuracy.compensated: the tool error with the identified machine in the
-    controller's kinematics (orthoglidekins) or in the program (``orthocal
-    compensate``), beside "offsets only" (accuracy.after) (docs/design.md, "The
-    geometry in the controller"; docs/model.md, (K3))."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    rms_mm: float = Field(description="RMS of |E| expected over the parameters' error "
-                                      "(their statistical covariance), mm")
-    max_mm: float = Field(description="max of |E|, the median over the parameters' error, mm")
-    rms_interval_95_mm: tuple[float, float] = Field(
-        description="95 % interval of the RMS, the stated systematic errors included")
-    max_interval_95_mm: tuple[float, float]
-    offsets_only_rms_mm: float = Field(description="accuracy.after's RMS, for comparison")
-    offsets_only_max_mm: float
-    told: list[str] = Field(description="the parameters the controller is told, "
-                                        "PARAM_NAMES (Δρ: what the offsets did not correct)")
-    nominal: dict[str, str] = Field(description="the parameters left at their nominal "
-                                                "values, and why")
-    routes: list[str] = Field(description="how to put the machine into the controller")
-    method: str
-    assumes: list[str]
-    field_rms_mm: list[float] = Field(
-        description="per grid point (accuracy.field.points_mm), the |E| expected, mm")
+    seed: int | None
+    true_drho: Axis3
+    true_dl: Axis3
+    true_tilt: Params = Field(description="tilt_yx, tilt_zx, tilt_zy, mrad")
+    true_gap: Params = Field(description="gap_xy, gap_xz, gap_yz: how far the axes pass "
+                                         "each other, mm")
+    noise_mm: float
+    mount_error_mm: float = Field(description="stands placed by eye: each mounting off the "
+                                              "leg's middle by up to this, mm")
+    backlash_mm: Axis3 = Field(description="each joint's lost motion (ISO 230-2's reversal "
+                                           "value), mm")
+    leg_bow_mm: Axis3 = Field(description="each leg's bow, the sagitta at its middle, mm")
+    gauge_scale: dict[str, float] = Field(description="each gauge's scale error, relative")
 
 
-class Accuracy(_Open):
-    """accuracy: the run's statement at the tool (docs/design.md, "Accuracy at the tool");
-    its older sections are documented there, the compensated route is modelled."""
+class Timing(Closed):
+    wall_s: float = Field(description="the run's wall time in this process, s")
+    moves: int
+    readings: int
+    retries: int
+    outliers_rejected: int
+    mountings: int | None = Field(description="setup records: the operator mounted gauges")
+    operator_s: float | None = Field(description="time waited at the mounting prompts, s")
 
-    compensated: Compensated | None = None
+
+class Loop(Closed):
+    """loop: how the closed loop stopped (docs/design.md, "Closed loop")."""
+
+    stopped: Stopped
+    detail: str | None
+    write_backs: int
+    max_iterations: int
+    converge_mm: float
+    converged_within_mm: float | None = Field(
+        description="converge_mm plus half a count of the drive's offsets: what "
+                    '"converged" claims at 95 %')
+    extra_passes: int = Field(description="further passes of a verification measured")
+    max_extra_passes: int
 
 
-class RunResult(BaseModel):
-    """result.json: one calibration run, as written at its end (or when it stopped)."""
+class Writeback(Closed):
+    status: Literal["written", "refused", "declined", "skipped", "failed-restored"]
+    reason: str | None
+    round: int | None = Field(None, description="the write-back round, from 1")
 
-    model_config = ConfigDict(extra="forbid")
 
-    schema_version: Literal[1] | None = Field(
-        None, description="absent in results written before the schema")
+class Joined(Closed):
+    """A verification's Δρ joined with the rounds before it, each moved by the offsets
+    written since: what shown_within_95_mm and the verdict rest on."""
+
+    drho_mm: Params
+    std_errors_mm: Params
+
+
+class Iteration(Closed):
+    """iterations[]: one identification round."""
+
+    phase: str = Field(description='"m", then "v", "v2", … one per write-back')
+    model: str
+    identified: Params
+    std_errors: Params
+    std_errors_dof: float | None
+    offsets_written: Axis3 | None = Field(description="null: nothing written after it")
+    writeback: str | None = Field(description="the write-back's status")
+    deviations_rms_mm: float | None
+    residual_rms_mm: float | None
+    noise_floor_mm: float | None
+    fit_ok: bool | None
+    significant: list[str] = Field(description="the corrections beyond the noise")
+    shown_within_95_mm: Params | None = Field(
+        description="per axis, how far the machine may be off at 95 %")
+    verdict: Verdict | None
+    passes: list[str] | None = Field(None, description="a verification measured again")
+    joined: Joined | None = Field(None, description="from the second round on")
+    stands_part_mm: Params | None = Field(
+        None, description="of each Δρ standard error, the part the stands set by eye make "
+                          "(more cycles in a mounting do not shrink it, more mountings do)")
+    target_drho: Params | None = Field(None, description="the Δρ aimed at, objective tool")
+
+
+class Remaining(Closed):
+    """remaining: what the last verification found left of Δρ and did not write."""
+
+    phase: str
+    round: int
+    estimate: Params
+    total: Params = Field(description="the correction the controller holds plus the "
+                                      "estimate: the machine's Δρ at the start of the run")
+    std_errors: Params
+    std_errors_dof: float | None
+    coverage_factor_95: float | None
+
+
+class Setup(Closed):
+    """One setup of a measurement: how many cycles it used of how many it could, its
+    repeats, and whether its spread was flagged (built by the engine as
+    station.engine.statistics.SetupOutcome, which adds what the record leaves out)."""
+
+    leg: str
+    indicators: dict[str, str] = Field(description="indicator name → its direction")
+    cycles_used: int
+    cycles_max: int
+    repeats: int
+    flagged: bool
+    spread_mm: float | None
+
+
+class Deviation(Closed):
+    """A deviation key's cycles ("+xy", "+30xy", "+@0.75xy"), mm."""
+
+    mean: float
+    std: float | None = Field(description="over the cycles (null: one cycle)")
+    n: int = Field(description="cycles")
+    model: float | None = Field(description="the identified model's value")
+
+
+class VerifiedDeviation(Deviation):
+    expected: float = Field(description="what the model predicts once Δρ is written")
+
+
+class Correlation(Closed):
+    names: list[str]
+    matrix: list[list[float | None]]
+
+
+class Verification(Closed):
+    """verification: the last round, judged against what the model predicts once Δρ
+    is written (ΔL, tilts and gaps cannot be written and still show)."""
+
+    identified: Params
+    std_errors: Params
+    std_errors_dof: float | None
+    residual_rms_mm: float | None
+    deviations_rms_mm: float | None
+    expected_rms_mm: float | None
+    vs_expected_rms_mm: float | None
+    noise_floor_mm: float | None
+    deviations: dict[str, VerifiedDeviation]
+    setups: list[Setup]
+
+
+class RunResult(Closed):
+    """result.json: one calibration run, as written at its end (or when it stopped).
+    Required fields are those every run writes; the others are absent where the run
+    did not get that far (no identification, no write-back, …)."""
+
+    schema_version: Literal[2]
     run_dir: str
     status: Literal["ok", "failed", "refused", "aborted"]
     message: str | None
@@ -168,15 +208,16 @@ class RunResult(BaseModel):
     finished: str | None
     duration_s: float | None
     simulated: bool
-    simulation: dict[str, Any] | None
+    simulation: Simulation | None
     machine: Machine
     model: str
     method: Literal["linear", "nonlinear"]
-    model_selection: dict[str, Any] | None = None
-    identified: Params
+    model_selection: ModelSelection | None = Field(None, description="model auto")
+    identified: Params = Field(description="the total Δρ written since the run started (the "
+                                           "other parameters as the first round found them)")
     std_errors: Params
     std_errors_dof: float | None = None
-    correlation: dict[str, Any] | None = None
+    correlation: Correlation | None = None
     residual_rms_mm: float | None = None
     sigma_mm: float | None = None
     condition_number: float | None = None
@@ -184,26 +225,27 @@ class RunResult(BaseModel):
     noise_floor_mm: float | None = None
     fit_ok: bool | None = None
     fit_note: str | None = None
-    deviations: dict[str, dict[str, Any]] | None = None
+    deviations: dict[str, Deviation] | None = None
     deviations_rms_mm: float | None = None
     not_identifiable: list[str] | None = None
     setups: list[Setup] | None = None
-    stands: dict[str, dict[str, Any]] | None = None
+    stands: dict[str, StandEstimate] | None = Field(None, description="stands modelled")
     offsets_before: Axis3 | None
     offsets_written: Axis3 | None
-    offsets_final: Axis3 | None = None
-    offsets_held_by: Literal["controller", "station"] | None = None
-    offsets_note: str | None = None
+    offsets_final: Axis3 | None = Field(description="the journal's last write-back or "
+                                                    "rollback, else the offsets before")
+    offsets_held_by: Literal["controller", "station"] | None
+    offsets_note: str | None = Field(None, description="offsets the station holds")
     writeback: Writeback | None
-    verification: dict[str, Any] | None
+    verification: Verification | None
     iterations: list[Iteration] | None = None
     converged: bool | None = None
     loop: Loop | None = None
     remaining: Remaining | None = None
-    accuracy: Accuracy | None = None
-    uncertainty_budget: dict[str, Any] | None = None
-    reversal: dict[str, Any] | None = None
-    plunger_guard: dict[str, Any] | None = None
-    timing: Timing | None = None
-    since_last: SinceLast | None = Field(
+    accuracy: Accuracy | NotStated | None = None
+    uncertainty_budget: UncertaintyBudget | NotStated | None = None
+    reversal: Reversal | None = None
+    plunger_guard: PlungerGuard
+    timing: Timing
+    since_last: SinceLast | NotCompared | None = Field(
         None, description="absent without [machine] id or an earlier run in the history")

@@ -5,21 +5,21 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 from station.record.journal import RECORD
 from station.record.model import MachineModel
 from station.record.result import SCHEMA_VERSION, RunResult
+from station.record.result_base import JsonObject
 
 KINDS = ("result", "journal", "model")
 SHIPPED = Path(__file__).parent / "schemas"
 
 
-def json_schema(kind: str) -> dict[str, Any]:
+def json_schema(kind: str) -> JsonObject:
     """The JSON Schema (2020-12) of ``kind``: "result" (result.json), "journal" (one
     line of journal.jsonl) or "model" (model.json)."""
     if kind == "result":
-        body = RunResult.model_json_schema()
+        body: JsonObject = RunResult.model_json_schema()
     elif kind == "model":
         body = MachineModel.model_json_schema()
     elif kind == "journal":

@@ -19,7 +19,9 @@ class SimulationParams(BaseModel):
     old journal is what that run had: no tilts, axes that meet, perfect stands, no
     lost motion, straight legs, true gauges, the plain coordinated drive."""
 
-    model_config = ConfigDict(extra="allow", frozen=True)
+    # The header holds more (the drive's motion and timing, the procedure's overrides),
+    # read from it where the virtual drive and the config are built: not these fields.
+    model_config = ConfigDict(extra="ignore", frozen=True)
 
     seed: int
     true_drho: Triple

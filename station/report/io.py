@@ -1,5 +1,6 @@
-"""The run's result document on disk: result.json, written atomically, in the
-schema's key order, NaN and infinities as null."""
+"""The run's result document on disk: result.json, validated against the record
+(station.record.result.RunResult) as it is written, atomically, in the record's
+field order, NaN and infinities as null."""
 
 from __future__ import annotations
 
@@ -11,20 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from drivers.files import write_atomic
+from station.record.result import RunResult
 from station.report.format import dev_keys
-
-# Key order of result.json: the schema's order, so that a person opening the file
-# finds status and identified values at the top, not buried alphabetically.
-_TOP_ORDER = (
-    "schema_version", "run_dir", "status", "message", "started", "finished", "duration_s",
-    "simulated", "simulation", "machine", "model", "method", "model_selection", "identified",
-    "std_errors", "correlation", "residual_rms_mm", "sigma_mm", "condition_number", "noise_mm",
-    "fit_ok", "fit_note",
-    "deviations", "deviations_rms_mm", "setups", "stands", "offsets_before", "offsets_written",
-    "writeback", "verification", "iterations", "converged", "loop", "remaining", "accuracy",
-    "timing",
-)
-
 
 # --------------------------------------------------------------------------- json
 
@@ -51,19 +40,27 @@ def jsonable_value(value: Any) -> Any:
 
 
 def jsonable(result: Mapping[str, Any]) -> dict[str, Any]:
-    """The result as written to result.json (schema key order, NaN → None), for
-    callers that print it, e.g. ``--json``, so stdout and the file agree."""
-    return jsonable_value(_ordered(result))
+    """The result as written to result.json (the record's field order, NaN → None),
+    for callers that print it, e.g. ``--json``, so stdout and the file agree.
+    Validated against the record: a field it does not declare, or a value of another
+    type, raises pydantic's ValidationError (a bug of the engine, never a run's fault)."""
+    return as_record(result).model_dump(mode="json", exclude_unset=True)
+
+
+def as_record(result: Mapping[str, Any]) -> RunResult:
+    """The result as the record's model, validated as strictly as another tool reading
+    the file would (JSON types, no coercion of strings to numbers)."""
+    text = json.dumps(jsonable_value(_ordered(result)), allow_nan=False)
+    return RunResult.model_validate_json(text, strict=True)
 
 
 def _ordered(result: Mapping[str, Any]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key in _TOP_ORDER:
-        if key in result:
-            out[key] = result[key]
-    for key in sorted(k for k in result if k not in out):
-        out[key] = result[key]
-    for section in (out, out.get("verification")):
+    """The deviations in the report's order (the record keeps a map's order)."""
+    out = dict(result)
+    verification = out.get("verification")
+    if isinstance(verification, dict):
+        out["verification"] = verification = dict(verification)
+    for section in (out, verification):
         if isinstance(section, dict) and isinstance(section.get("deviations"), dict):
             devs = section["deviations"]
             section["deviations"] = {k: devs[k] for k in dev_keys(devs)}
@@ -71,7 +68,8 @@ def _ordered(result: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def write_result(result: dict, run_dir: Path) -> Path:
-    """Write ``run_dir/result.json`` atomically; NaN and infinities become null."""
+    """Write ``run_dir/result.json`` atomically, validated (:func:`jsonable`); NaN
+    and infinities become null."""
     path = Path(run_dir) / "result.json"
     data = jsonable(result)
     write_atomic(path, json.dumps(data, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
