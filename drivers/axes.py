@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.base import HeldBy, Vec3
 from drivers.errors import (
     AlarmError,
     ControllerError,
@@ -45,6 +46,10 @@ class ModbusAxisController(ModbusLink):
     limits for maps that cannot read them. Use as a context manager, or call
     ``connect()`` / ``close()``.
     """
+
+    # The offsets are the drive's own registers; a map without OFFSET registers reads
+    # and writes none, and the station wraps it in drivers.held_offsets.HeldOffsets.
+    held_by: HeldBy = "controller"
 
     def __init__(
         self,
@@ -108,7 +113,7 @@ class ModbusAxisController(ModbusLink):
             self.map.unsupported.get("soft_limits",
                                      f"profile {self.map.name!r} has no soft-limit registers"))
 
-    def move(self, targets: Sequence[float], speed_mm_s: float | None = None) -> None:
+    def move(self, targets: Vec3, speed_mm_s: float | None = None) -> None:
         """Write SPEED (if given), the three targets in one write, then the move command
         (all again if the drive was unreachable or silent meanwhile).
         Exception 3 on the targets → TargetRefused."""
@@ -136,7 +141,7 @@ class ModbusAxisController(ModbusLink):
             if self.interruptions == seen:
                 return
 
-    def as_commanded(self, targets: Sequence[float]) -> np.ndarray:
+    def as_commanded(self, targets: Vec3) -> np.ndarray:
         """The targets as the drive holds them: rounded to its TARGET registers'
         count (IAI: 0.01 mm), where its carriages go and the arrival is judged."""
         return np.array([reg.decode(reg.encode(float(v))) for reg, v in
@@ -181,7 +186,7 @@ class ModbusAxisController(ModbusLink):
         t = sum(move_time(float(d), speed_mm_s, self.acceleration_mm_s2) for d in distances)
         return t * self.timeout_factor + self.timeout_margin_s
 
-    def wait_in_position(self, targets: Sequence[float], timeout_s: float,
+    def wait_in_position(self, targets: Vec3, timeout_s: float,
                          tolerance_mm: float = 0.002, expected_s: float | None = None,
                          watch: Callable[[], None] | None = None) -> np.ndarray:
         """Poll until IN_POSITION (and not MOVING) and every axis within tolerance.
@@ -230,9 +235,9 @@ class ModbusAxisController(ModbusLink):
             if interval > 0 and remaining > 0:
                 time.sleep(min(interval, remaining))
 
-    def move_and_wait(self, targets: Sequence[float], speed_mm_s: float | None = None,
+    def move_and_wait(self, targets: Vec3, speed_mm_s: float | None = None,
                       timeout_s: float | None = None,
-                      start: Sequence[float] | None = None,
+                      start: Vec3 | None = None,
                       watch: Callable[[], None] | None = None) -> np.ndarray:
         """move() then wait_in_position(); the deadline comes from the distances, the
         speed and the acceleration with a margin (the axes one after another, see
@@ -297,7 +302,7 @@ class ModbusAxisController(ModbusLink):
         role = "OFFSET" if self.map.has_role("OFFSET") else "TARGET"
         return max(1.0 / reg.scale for reg in self.map.axis_registers(role))
 
-    def write_offsets(self, offsets: Sequence[float]) -> np.ndarray:
+    def write_offsets(self, offsets: Vec3) -> np.ndarray:
         """Write o in one request, read it back, raise ReadbackMismatch unless every
         axis reads back the written count. Returns what was read back (mm)."""
         if not self.map.has_role("OFFSET"):
@@ -317,7 +322,7 @@ class ModbusAxisController(ModbusLink):
 
 
 
-def _vec3(values: Sequence[float] | np.ndarray, what: str) -> np.ndarray:
+def _vec3(values: Vec3, what: str) -> np.ndarray:
     arr = np.asarray(values, dtype=float).reshape(-1)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
         raise ValueError(f"{what} must be three finite numbers (x, y, z), got {values!r}")

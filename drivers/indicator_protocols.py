@@ -43,7 +43,8 @@ class IndicatorProtocol(BaseModel):
     baudrate: int = 9600
     bytesize: Literal[5, 6, 7, 8] = 8
     parity: Literal["N", "E", "O", "M", "S"] = "N"
-    stopbits: Literal[1, 1.5, 2] = 1
+    # A float has no Literal type (PEP 586); pydantic validates 1.5 all the same.
+    stopbits: Literal[1, 1.5, 2] = 1  # type: ignore[valid-type]
     request: bytes
     terminator: bytes = b"\r"
     reply_pattern: str

@@ -38,7 +38,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, Self
+from typing import Any, Self, TypedDict
 
 import numpy as np
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -85,6 +85,15 @@ _REFERENCE_FREE_OPS = frozenset({"read status", "home", "stop", "reset_alarm",
 _JUMP_MM = 0.05
 
 
+class _SerialSettings(TypedDict):
+    """The serial line's settings (RTU), as pymodbus's serial client takes them."""
+
+    baudrate: int
+    bytesize: int
+    parity: str
+    stopbits: int
+
+
 class ModbusLink:
     """One Modbus controller (or one device per axis) behind ``port``: the TCP port
     for ``transport="tcp"`` or the serial device for ``"rtu"``.
@@ -128,8 +137,8 @@ class ModbusLink:
         self.map = load_map(profile, overrides)
         self.timeout_s = float(timeout_s)
         self.retries = int(retries)
-        self.serial = {"baudrate": baudrate, "bytesize": bytesize, "parity": parity,
-                       "stopbits": stopbits}
+        self.serial: _SerialSettings = {"baudrate": baudrate, "bytesize": bytesize,
+                                        "parity": parity, "stopbits": stopbits}
         self.on_event = on_event
         self.device = (f"controller {host}:{port}" if transport == "tcp"
                        else f"controller {port}")
@@ -169,7 +178,7 @@ class ModbusLink:
                 where = f"{self.host}:{self.port}"
             else:
                 client = ModbusSerialClient(str(self.port), timeout=self.timeout_s, retries=0,
-                                            **self.serial)  # type: ignore[arg-type]
+                                            **self.serial)
                 where = f"serial port {self.port}"
             if not client.connect():
                 client.close()
@@ -314,7 +323,9 @@ class ModbusLink:
             try:
                 homed = self.read_status().homed
                 jump = None
-                if homed and self._last_positions is not None:
+                # the target is set whenever the positions are (read_positions)
+                if (homed and self._last_positions is not None
+                        and self._last_target is not None):
                     now = self.read_positions()
                     lo = np.minimum(self._last_positions, self._last_target) - _JUMP_MM
                     hi = np.maximum(self._last_positions, self._last_target) + _JUMP_MM
@@ -378,19 +389,28 @@ class ModbusLink:
             device_id = self.device_id if dev is None else dev
             if table == "coil":
                 for reg in members:
-                    on = bool(words_of[reg.name][0])
-                    self._execute(op, lambda c, a=reg.address, v=on, d=device_id:
-                                  c.write_coil(a, v, device_id=d), fc=5)
+                    def write_coil(c: Any, a: int = reg.address,
+                                   v: bool = bool(words_of[reg.name][0]),
+                                   d: int = device_id) -> ModbusPDU:
+                        return c.write_coil(a, v, device_id=d)
+
+                    self._execute(op, write_coil, fc=5)
                 continue
             if table != "holding":
                 raise ControllerError(self.device, f"{op}: cannot write the {table} table")
             values = [w for reg in members for w in words_of[reg.name]]
             if len(values) == 1:
-                self._execute(op, lambda c, a=start, v=values[0], d=device_id:
-                              c.write_register(a, v, device_id=d), fc=6, refused=refused)
+                def write_one(c: Any, a: int = start, v: int = values[0],
+                              d: int = device_id) -> ModbusPDU:
+                    return c.write_register(a, v, device_id=d)
+
+                self._execute(op, write_one, fc=6, refused=refused)
             else:
-                self._execute(op, lambda c, a=start, v=values, d=device_id:
-                              c.write_registers(a, v, device_id=d), fc=16, refused=refused)
+                def write_many(c: Any, a: int = start, v: list[int] = values,
+                               d: int = device_id) -> ModbusPDU:
+                    return c.write_registers(a, v, device_id=d)
+
+                self._execute(op, write_many, fc=16, refused=refused)
 
     def send_command(self, command: str) -> None:
         """Write the map's steps for ``command`` ("move", "stop", "home",

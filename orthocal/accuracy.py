@@ -325,6 +325,8 @@ def _motion_jacobian_at_zero(geometry: Geometry, theta: np.ndarray, o: np.ndarra
     rho0 = np.full(3, geometry.leg_length) + o
     P = forward(rho0, geometry, drho, dL, tilt, gap)
     u = axis_directions(tilt)
+    if u is None:  # no tilt: the axes are e_x, e_y, e_z (axis_directions' None)
+        u = np.eye(3)
     d = P[None, :] - carriages(rho0 + drho, u, axis_origins(gap))
     return np.linalg.solve(d, np.diag(np.einsum("ij,ij->i", d, u)))
 

@@ -222,7 +222,8 @@ def straightness_sources(prop: Propagation, straightness) -> list[Source]:
     # The legs of one machine are made alike and may bow alike: every plane's part
     # adds with the worst sign (GUM 5.2.2 with r = ±1 where the correlation is not
     # known), one source; the expected lack of fit keeps independent planes' ``cov``.
-    cov = sum(np.outer(gu, gu) for gu in planes.values())
+    cov = sum((np.outer(gu, gu) for gu in planes.values()),
+              np.zeros((len(prop.keys), len(prop.keys))))
     worst = sum(np.abs(prop.K @ gu) for gu in planes.values())
     value = max(s_of.values())
     legs = list(s_of)
@@ -295,8 +296,8 @@ def plunger_angle_source(prop: Propagation, angle_deg: float) -> Source:
     Δ_gauge its measured deviations, the source the quadrature over the gauges."""
     theta = _non_negative(angle_deg, "plunger angle")
     c = 1.0 - math.cos(math.radians(theta))
-    cov = sum(np.outer(c * prop.measured * prop.mask(gg), c * prop.measured * prop.mask(gg))
-              for gg in prop.gauges) / 3.0
+    cov = sum((np.outer(c * prop.measured * prop.mask(gg), c * prop.measured * prop.mask(gg))
+               for gg in prop.gauges), np.zeros((len(prop.keys), len(prop.keys)))) / 3.0
     return _source(prop, "plunger angle", "rectangular", None, None, cov,
                    plunger_angle_deg=theta, scale_error=c)
 

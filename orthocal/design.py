@@ -22,7 +22,7 @@ standard errors). The stroke search here is D-optimal; A is reported beside it.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -122,7 +122,7 @@ def describe(q: Quality) -> list[str]:
             f"combination is {combo(q.weakest)} (largest noise gain {gain:.3g})."]
 
 
-def keys_for(strokes: Sequence[float], legs: dict[str, Sequence[str]],
+def keys_for(strokes: Sequence[float], legs: Mapping[str, Sequence[str]],
              geometry: Geometry) -> list[Key]:
     """Deviation keys of the stops at ``strokes`` for legs → measured directions."""
     names = [posture_name(float(s), geometry) for s in strokes]
@@ -184,7 +184,7 @@ class Search:
 
 def search_strokes(
     current: Sequence[float],
-    legs: dict[str, Sequence[str]],
+    legs: Mapping[str, Sequence[str]],
     geometry: Geometry,
     model: str,
     bounds: tuple[float, float],

@@ -25,7 +25,7 @@ def flatten_deviations(deviations_in) -> tuple[list[Key], np.ndarray]:
     for key, value in items:
         key = tuple(key)
         try:
-            check_key(key)  # type: ignore[arg-type]
+            check_key(key)
         except ValueError as exc:
             raise IdentificationError(str(exc)) from None
         repeats = np.atleast_1d(np.asarray(value, dtype=float))
@@ -33,6 +33,6 @@ def flatten_deviations(deviations_in) -> tuple[list[Key], np.ndarray]:
             raise IdentificationError(f"deviation {key!r} has no value")
         if not np.all(np.isfinite(repeats)):
             raise IdentificationError(f"deviation {key!r} is not a finite number: {value!r}")
-        keys.extend([key] * repeats.size)  # type: ignore[list-item]
+        keys.extend([key] * repeats.size)
         values.extend(repeats.tolist())
     return keys, np.asarray(values)

@@ -74,7 +74,7 @@ def fraction_at(
 
 
 def reading_at(
-    rho: np.ndarray, p: np.ndarray, i, j, drho: np.ndarray, mount: float,
+    rho: np.ndarray, p: np.ndarray, i, j, drho: np.ndarray, mount: float | np.ndarray,
     u: np.ndarray | None = None, c: np.ndarray | None = None,
 ) -> np.ndarray:
     """The reading of leg i along j given the joints ``rho`` and the end point ``p``
@@ -261,6 +261,7 @@ class KeyTable:
 
 def _key_table(keys: Sequence[Key], geometry: Geometry) -> KeyTable:
     row_of: dict[Key, int] = {}
+    # tuple(): a key may come as a list; mypy types tuple() of it as of any length
     rows = [row_of.setdefault(tuple(k), len(row_of)) for k in keys]  # type: ignore[arg-type]
     distinct = list(row_of)
     legs = np.empty(len(distinct), dtype=int)

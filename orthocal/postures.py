@@ -139,5 +139,7 @@ def posture_point(sign: str, leg: str | None, geometry: Geometry) -> np.ndarray:
     """Nominal end point P of a test posture: 0 at Π0, s·e_i at Π_i(s)."""
     p = np.zeros(3)
     if sign != "0":
+        if leg not in AXIS_INDEX:
+            raise ValueError(f"leg must be one of x, y, z, got {leg!r}")
         p[AXIS_INDEX[leg]] = stroke(sign, geometry)
     return p

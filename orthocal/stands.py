@@ -107,6 +107,7 @@ class Stands:
 
     def mounting_of(self, key: Key, row: int) -> int:
         """Which mounting (0: the first) the ``row``-th row of ``key`` was read in."""
+        # tuple(): a key may come as a list; mypy types tuple() of it as of any length
         counts = (self.mounts or {}).get(tuple(key))  # type: ignore[arg-type]
         if not counts:
             return 0

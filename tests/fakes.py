@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from builders import station_config
 
-from drivers.base import AxisStatus
+from drivers.base import AxisStatus, HeldBy, Vec3
 from drivers.errors import AlarmError, MoveTimeout, ReadbackMismatch
 from drivers.indicators import IndicatorGroup
 from drivers.sim.drive import default_soft_limits
@@ -68,6 +68,7 @@ class FakeAxes:
     does not take what it is given)."""
 
     name = "fake axes"
+    held_by: HeldBy = "controller"  # the drive keeps its offsets (ZeroOffsets.held_by)
 
     def __init__(self, machine: VirtualOrthoglide, clock: SteppedClock) -> None:
         self.machine, self.clock = machine, clock
@@ -91,7 +92,7 @@ class FakeAxes:
     def soft_limits(self) -> tuple[np.ndarray, np.ndarray]:
         return self.lo.copy(), self.hi.copy()
 
-    def move(self, targets: Sequence[float], speed_mm_s: float | None = None) -> None:
+    def move(self, targets: Vec3, speed_mm_s: float | None = None) -> None:
         t = _counts(targets)
         if np.any(t < self.lo) or np.any(t > self.hi):
             raise MoveTimeout(self.name, f"target {t.tolist()} outside the soft limits")
@@ -100,7 +101,7 @@ class FakeAxes:
             self.machine.raise_alarm(0x31)
         self.clock.t += self.machine.move_to(t)
 
-    def wait_in_position(self, targets: Sequence[float], timeout_s: float,
+    def wait_in_position(self, targets: Vec3, timeout_s: float,
                          tolerance_mm: float = 0.002) -> np.ndarray:
         status = self.read_status()
         if status.alarm:
@@ -110,8 +111,8 @@ class FakeAxes:
             raise MoveTimeout(self.name, f"not in position at {here.tolist()}")
         return here
 
-    def move_and_wait(self, targets: Sequence[float], speed_mm_s: float | None = None,
-                      timeout_s: float | None = None, start: Sequence[float] | None = None,
+    def move_and_wait(self, targets: Vec3, speed_mm_s: float | None = None,
+                      timeout_s: float | None = None, start: Vec3 | None = None,
                       watch: Callable[[], None] | None = None) -> np.ndarray:
         self.move(targets, speed_mm_s)
         if watch is not None:
@@ -132,7 +133,7 @@ class FakeAxes:
     def read_offsets(self) -> np.ndarray:
         return _counts(self.machine.offsets)
 
-    def write_offsets(self, offsets: Sequence[float]) -> np.ndarray:
+    def write_offsets(self, offsets: Vec3) -> np.ndarray:
         wanted = _counts(offsets)
         self.offset_writes.append(wanted.tolist())
         self.moves_at_writes.append(self.moves)
@@ -280,7 +281,7 @@ def resume_on(rig: FakeRig, run_dir: Path, config: StationConfig
     plan, checker = _checked(rig, config, from_where_they_stand=False)
     return _execute(rig, config, plan, checker, run_dir,
                     {"type": "resumed", "version": "test", "argv": []}, state,
-                    drop_redone(records), state.header.get("started") or now_iso())
+                    drop_redone(records), (state.header or {}).get("started") or now_iso())
 
 
 def _checked(rig: FakeRig, config: StationConfig, *, from_where_they_stand: bool

@@ -102,7 +102,7 @@ class MismatchOnce:
 
     def __init__(self, real: ModbusAxisController) -> None:
         self.real = real
-        self.name = real.name
+        self.name, self.held_by = real.name, real.held_by
         self.failed = False
 
     def read_offsets(self) -> np.ndarray:

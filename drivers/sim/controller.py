@@ -38,7 +38,7 @@ import random
 import socket
 import struct
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -80,8 +80,8 @@ class _Handler(ServerRequestHandler):
             self._exception(pdu, code)
             return
         # Outside the map (device, table, address): exception 2 before the datastore.
-        if (code := self.sim.refusal(pdu.dev_id, pdu)) is not None:
-            self._exception(pdu, code)
+        if (refused := self.sim.refusal(pdu.dev_id, pdu)) is not None:
+            self._exception(pdu, refused)
             return
         await super().handle_request()
 
@@ -120,9 +120,13 @@ class _SimConnections:
     """Gives every new connection of a pymodbus server our fault-aware handler."""
 
     sim: SimController
+    # the server's (ModbusBaseServer), beside which this mixin is inherited
+    trace_packet: Callable[[bool, bytes], bytes] | None
+    trace_pdu: Callable[[bool, ModbusPDU], ModbusPDU] | None
+    trace_connect: Callable[[bool], None] | None
 
     def callback_new_connection(self) -> _Handler:
-        handler = _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)  # type: ignore[attr-defined]
+        handler = _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
         handler.sim = self.sim
         return handler
 
@@ -282,7 +286,10 @@ class SimController(DriveRegisters):
         try:
             await self._server.serve_forever(background=True)
             if self.transport == "tcp":
-                self._port = self._server.transport.sockets[0].getsockname()[1]
+                # pymodbus types transport as a BaseTransport; a listener's is the
+                # asyncio.Server its loop.create_server returned
+                listener = self._server.transport
+                self._port = listener.sockets[0].getsockname()[1]  # type: ignore[attr-defined]
             self._ready.set()
             await self._stop.wait()
         finally:

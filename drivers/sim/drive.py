@@ -226,9 +226,9 @@ class DriveRegisters:
             self._store.put(reg, rho)
         if not self._limits:
             return
-        shown = (self.soft_min, self.soft_max) if self.soft_limit_registers is True else \
-            tuple(np.asarray(v, dtype=float).reshape(3)
-                  for v in self.soft_limit_registers)  # type: ignore[union-attr]
+        registers = self.soft_limit_registers  # not False here: self._limits is empty then
+        shown = (self.soft_min, self.soft_max) if isinstance(registers, bool) else \
+            tuple(np.asarray(v, dtype=float).reshape(3) for v in registers)
         for reg, value in zip(self._limits, np.concatenate(shown), strict=True):
             self._store.put(reg, value)
 

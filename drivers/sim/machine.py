@@ -56,6 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import orthocal
+from drivers.base import Vec3
 from drivers.sim.legs import GaugeView
 from drivers.sim.motion import (
     EPS,
@@ -120,12 +121,12 @@ class VirtualOrthoglide(GaugeView):
     def __init__(
         self,
         geometry: Geometry | None = None,
-        true_drho: Sequence[float] | None = None,
-        true_dl: Sequence[float] | None = None,
+        true_drho: Vec3 | None = None,
+        true_dl: Vec3 | None = None,
         *,
         true_params: Sequence[float] | None = None,
-        true_tilt: Sequence[float] | None = None,
-        true_gap: Sequence[float] | None = None,
+        true_tilt: Vec3 | None = None,
+        true_gap: Vec3 | None = None,
         offsets: Sequence[float] = (0.0, 0.0, 0.0),
         speed_mm_s: float = 50.0,
         accel_mm_s2: float = 500.0,
@@ -337,7 +338,7 @@ class VirtualOrthoglide(GaugeView):
         with self._lock:
             return self._o.copy()
 
-    def set_offsets(self, offsets: Sequence[float]) -> None:
+    def set_offsets(self, offsets: Vec3) -> None:
         """Change o. The carriage stays where it is; the controller's count ρ = m − o
         changes, as on a real drive."""
         o = _vec(offsets, 3, "offsets")
@@ -364,7 +365,7 @@ class VirtualOrthoglide(GaugeView):
             return MachineStatus(self._homed, moving, in_pos, self._alarm != 0,
                                  self._estop, self._alarm)
 
-    def move_to(self, targets: Sequence[float]) -> float:
+    def move_to(self, targets: Vec3) -> float:
         """Start a move of all axes to controller targets ρ; returns its duration (s).
 
         Ignored (returns 0) in alarm or e-stop, like a drive that is not enabled; a
@@ -387,7 +388,7 @@ class VirtualOrthoglide(GaugeView):
                 listener(self.moves_started, now, duration)
             return duration
 
-    def power_cycle(self, count_mm: Sequence[float] | None = None,
+    def power_cycle(self, count_mm: Vec3 | None = None,
                     seed: int | None = None) -> None:
         """Power lost and back: the carriages stop where they are, the alarm and any
         pending fault clear, HOMED clears and the count restarts at ``count_mm``

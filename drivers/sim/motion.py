@@ -266,6 +266,7 @@ class DriveMotion:
     def accels(self, default: float) -> tuple[float, float, float]:
         """Per-axis acceleration, ``default`` where none is given."""
         given = _three(self.accel_mm_s2, "accel_mm_s2")
+        # _three types its items object; here each is the field's float | None
         x, y, z = (default if a is None else float(a) for a in given)  # type: ignore[arg-type]
         return (x, y, z)
 

@@ -75,6 +75,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.base import Vec3
 from drivers.files import write_atomic
 from drivers.indicator_protocols import make_protocol
 from drivers.registers import RegisterMap
@@ -152,11 +153,11 @@ class _PersistentMachine(VirtualOrthoglide):
 
     nvram_path: Path | None = None
 
-    def set_offsets(self, offsets: Sequence[float]) -> None:
+    def set_offsets(self, offsets: Vec3) -> None:
         super().set_offsets(offsets)
         self.save_offsets()
 
-    def power_cycle(self, count_mm: Sequence[float] | None = None,
+    def power_cycle(self, count_mm: Vec3 | None = None,
                     seed: int | None = None) -> None:
         super().power_cycle(count_mm, seed)
         self.save_offsets()

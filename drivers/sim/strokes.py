@@ -182,8 +182,8 @@ class StrokeWatch:
         for name, mount, gauge in gauges:
             direction: str = mount["direction"]
             sign = -1.0 if direction.startswith("-") else 1.0
-            plane = self.geometry.mount_plane + float(
-                mount.get("plane_offset_mm", mount.get("stand_error_mm", 0.0)))
+            offset_key = "plane_offset_mm" if "plane_offset_mm" in mount else "stand_error_mm"
+            plane = self.geometry.mount_plane + float(mount.get(offset_key, 0.0))
             # the machine's own readings: a bowed leg pushes the plunger too
             reading = m.readings(rho, mount["leg"], direction.lstrip("-"), mount=plane)
             travel = gauge.travel_mm(sign * np.asarray(reading, dtype=float))

@@ -52,7 +52,7 @@ def _triple(text: str) -> tuple[float, float, float]:
         raise argparse.ArgumentTypeError(f"expected X,Y,Z in mm, got {text!r}") from None
     if len(values) != 3:
         raise argparse.ArgumentTypeError(f"expected three values X,Y,Z, got {text!r}")
-    return values  # type: ignore[return-value]
+    return values
 
 
 def _json_table(text: str) -> dict:

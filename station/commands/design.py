@@ -44,7 +44,7 @@ from station.errors import BadInput
 from station.plan.check import check_plan
 from station.plan.checker import MotionChecker
 from station.plan.limits import effective_limits
-from station.plan.steps import Plan, Read, Settle, build_plan
+from station.plan.steps import Move, Plan, Read, Settle, build_plan
 
 # No controller is contacted: "controller limits" wide open, narrowed by the config.
 _OPEN = ([-1e6] * 3, [1e6] * 3)
@@ -192,11 +192,11 @@ def run_time(plan: Plan, config: StationConfig) -> dict[str, Any]:
     n_moves = n_stops = 0
     line = {name: _line_time_s(config, name) for sp in plan.setups for name in sp.indicators}
     for step, via in plan.waypoints_of():
-        if step.kind == "move":
+        if isinstance(step, Move):
             # the waypoints the plan check put on the move and its approach point: each
             # a move of its own
-            approach = [step.approach] if step.approach is not None else []  # type: ignore[union-attr]
-            for leg in [*via, *approach, step.targets]:  # type: ignore[union-attr]
+            approach = [step.approach] if step.approach is not None else []
+            for leg in [*via, *approach, step.targets]:
                 target = np.asarray(leg)
                 if position is not None:
                     distance = float(np.max(np.abs(target - position)))

@@ -17,6 +17,7 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
+from drivers.base import Moves
 from station import report
 from station.commands.options import ResumeOptions, RunOptions
 from station.commands.sim_file import run_options
@@ -305,7 +306,7 @@ def _restart_station(stack: ExitStack, options: ResumeOptions, sim: dict[str, An
     return simulation.restart_station(stack, options.station_hook, sim, run_dir, config)
 
 
-def _stop_quietly(controller: Any) -> None:
+def _stop_quietly(controller: Moves) -> None:
     """Axes stopped on any fault of homing or of the Π0 check."""
     try:
         controller.stop()

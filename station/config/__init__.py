@@ -402,11 +402,11 @@ class StationConfig(_Strict):
                 planes.setdefault((setup.leg, direction.lstrip("-")), set()).add(setup.at)
         if all(at == 0.5 for seen in planes.values() for at in seen):
             return
-        for (leg, direction), seen in planes.items():
+        for (leg, along), seen in planes.items():
             if len(seen) < 2:
                 idx = next(n for n, s in enumerate(self.setups) if s.leg == leg)
                 raise ValueError(
-                    f"setups[{idx}]: the gauge of leg {leg} along {direction} is read in one "
+                    f"setups[{idx}]: the gauge of leg {leg} along {along} is read in one "
                     f"plane (at = {min(seen):g}) while other setups have a second one: give "
                     "every gauge a setup at 0.5 and one at a second plane (0.25 or 0.75), "
                     "or leave every setup at the middle")

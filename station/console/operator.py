@@ -18,7 +18,7 @@ from station.errors import BadInput, RunFailed
 try:
     import termios
 except ImportError:  # pragma: no cover - not POSIX
-    termios = None  # type: ignore[assignment]
+    termios = None  # type: ignore[assignment]  # the module where there is one
 
 
 class Operator(Protocol):

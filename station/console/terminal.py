@@ -15,7 +15,14 @@ from types import TracebackType
 from typing import TextIO
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    SpinnerColumn,
+    TaskID,
+    TextColumn,
+)
 from rich.text import Text
 
 
@@ -84,7 +91,7 @@ class RunProgress:
         self._started_at: float | None = None
         self._steps_done = 0
         self._progress: Progress | None = None
-        self._task = None
+        self._task: TaskID | None = None
 
     # -- context -------------------------------------------------------------
 

@@ -21,17 +21,24 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 import orthocal
 from orthocal import AXES, BOW_NAMES, GAP_NAMES, PARAM_NAMES, TILT_NAMES
-from orthocal.accuracy import error_field, optimal_offsets, squareness, workspace_grid
+from orthocal.accuracy import (
+    ErrorField,
+    Grid,
+    error_field,
+    optimal_offsets,
+    squareness,
+    workspace_grid,
+)
 from orthocal.loop import FALSE_ALARM
 from orthocal.numbers import finite
 from orthocal.tool_interval import after_interval, assumes
 from station.config import StationConfig
+from station.engine.documents import JsonObject
 
 #: Grid nodes per axis of the workspace box (docs/model.md's check values use 7³).
 GRID_POINTS = 7
@@ -45,6 +52,8 @@ LAYOUT_NAMES: tuple[str, ...] = (*TILT_NAMES, *GAP_NAMES)
 #: The layout's fits, largest first: a round whose own model lacks part of the
 #: layout is fitted again with the first of these its deviations identify.
 LAYOUT_MODELS = ("rho+tilt+gap", "rho+tilt")
+#: The soft limits a statement's grid leaves out: (lower, upper) joint mm.
+Limits = tuple[np.ndarray, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -107,7 +116,7 @@ class Layout:
         return out
 
 
-def round_layout(phase: str, ident: Any) -> RoundLayout | None:
+def round_layout(phase: str, ident: orthocal.Identification) -> RoundLayout | None:
     """The tilts (and gaps, where it has them) of an identification; None when it
     has no tilts."""
     if not all(n in ident.names for n in TILT_NAMES):
@@ -115,7 +124,7 @@ def round_layout(phase: str, ident: Any) -> RoundLayout | None:
     return _round(phase, ident, tuple(n for n in LAYOUT_NAMES if n in ident.names))
 
 
-def round_form(phase: str, ident: Any) -> RoundLayout | None:
+def round_form(phase: str, ident: orthocal.Identification) -> RoundLayout | None:
     """The legs' bows (orthocal.BOW_NAMES, mm) of an identification that fitted them
     (a second gauge plane), as a round to pool like the layout; None without them."""
     if not all(n in ident.names for n in BOW_NAMES):
@@ -123,7 +132,8 @@ def round_form(phase: str, ident: Any) -> RoundLayout | None:
     return _round(phase, ident, BOW_NAMES)
 
 
-def _round(phase: str, ident: Any, held: tuple[str, ...]) -> RoundLayout | None:
+def _round(phase: str, ident: orthocal.Identification, held: tuple[str, ...]
+           ) -> RoundLayout | None:
     """The parameters ``held`` of an identification with their covariance block; None
     where that block is not finite."""
     names = list(ident.names)
@@ -181,7 +191,7 @@ def params(drho: Mapping[str, float] | Sequence[float], layout: np.ndarray) -> n
     return np.array([*d, 0.0, 0.0, 0.0, *v], dtype=float)
 
 
-def grid(config: StationConfig, limits: tuple[Any, Any] | None) -> Any:
+def grid(config: StationConfig, limits: Limits | None) -> Grid:
     """The workspace grid (soft limits excluded)."""
     return workspace_grid(config.machine.workspace_box(), GRID_POINTS,
                           config.machine.geometry(), limits)
@@ -202,7 +212,7 @@ def tool_target(config: StationConfig, layout: Layout | None, points: np.ndarray
     return {n: float(v) for n, v in zip(DRHO, best.offsets, strict=True)}
 
 
-def _stats(field: Any) -> dict[str, float]:
+def _stats(field: ErrorField) -> dict[str, float]:
     return {"rms_mm": float(field.rms_mm), "max_mm": float(field.max_mm)}
 
 
@@ -245,12 +255,12 @@ def _layout_words(layout: Layout | None, model: str, in_model: Sequence[str]) ->
             + (f"; left out: {'; '.join(layout.dropped)}" if layout.dropped else ""))
 
 
-def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
+def statement(config: StationConfig, limits: Limits | None, *,
               drho_start: Mapping[str, float], drho_now: Mapping[str, float],
               drho_now_cov: np.ndarray | None, dof: float | None, layout: Layout | None,
               model: str, in_model: Sequence[str], offsets_before: Mapping[str, float] | None,
               target_tool: Mapping[str, float], form: tuple[np.ndarray, str] | None = None
-              ) -> dict[str, Any]:
+              ) -> JsonObject:
     """The run JSON's ``accuracy`` (docs/design.md): before and after over the workspace
     with 95 % intervals for the after-figures, both objectives' predicted after-
     figures side by side, squareness and the gaps with what to do, what it all
@@ -332,7 +342,7 @@ def statement(config: StationConfig, limits: tuple[Any, Any] | None, *,
 _LEANS = {"tilt_yx": ("y", "x"), "tilt_zx": ("z", "x"), "tilt_zy": ("z", "y")}
 
 
-def squareness_decision(tilts: Layout | None, tilts_in_model: bool) -> dict[str, Any] | None:
+def squareness_decision(tilts: Layout | None, tilts_in_model: bool) -> JsonObject | None:
     """When an axis counts as leaning (what the advice and the report judge by):
     beyond k standard errors, k from Student's t on the tilts' dof for one false
     alarm in a thousand square machines over the three axes (the closed loop's
@@ -351,7 +361,7 @@ def squareness_decision(tilts: Layout | None, tilts_in_model: bool) -> dict[str,
 
 
 def squareness_advice(tilts: Layout | None, rail_mm: float,
-                      decision: Mapping[str, Any] | None) -> list[str]:
+                      decision: JsonObject | None) -> list[str]:
     """What to do about each axis that leans (``decision``: squareness_decision's; the tilts, the
     axes' own: the squareness of the tool's motions also holds what the offsets
     written shear them by): shim the rail (tilt × its travel) or compensate in the
@@ -382,12 +392,12 @@ def squareness_advice(tilts: Layout | None, rail_mm: float,
 _PASSES = {"gap_xy": ("x", "y", "z"), "gap_xz": ("x", "z", "y"), "gap_yz": ("y", "z", "x")}
 
 
-def gap_advice(layout: Layout | None, decision: Mapping[str, Any] | None) -> list[str]:
+def gap_advice(layout: Layout | None, decision: JsonObject | None) -> list[str]:
     """What to do about each pair of axes that pass each other (the gaps' rule is the
     tilts', ``decision``): offsets cannot fix a gap; the controller's kinematics can
     (model.json holds the machine), and so can moving a rail across by the gap."""
     gaps = None if layout is None else layout.gaps()
-    if not gaps:
+    if layout is None or not gaps:
         return ["the gaps between the axes were not identified: not stated"]
     se = layout.gap_std_errors() or {}
     k = orthocal.coverage_factor(layout.dof)
@@ -413,7 +423,7 @@ def model_export(config: StationConfig, *, drho_start: Mapping[str, float],
                  drho_start_cov: np.ndarray | None, drho_now: Mapping[str, float],
                  tilts: Layout | None, model: str, offsets_before: Mapping[str, float] | None,
                  offsets_written: Mapping[str, float] | None, dof: float | None
-                 ) -> dict[str, Any]:
+                 ) -> JsonObject:
     """model.json: the identified machine, for a controller or a tool that
     compensates kinematics (parameters, standard errors, covariance, conventions
     and units)."""

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 
 import orthocal
 from orthocal import budget as gum
 from station.config import StationConfig
+from station.engine.documents import JsonObject
 
 # Defaults where the config says nothing, each named in the budget as assumed.
 # A ground steel leg straight to 10 µm over its length: good practice, not a given.
@@ -28,13 +28,13 @@ DEFAULT_TEMPERATURE_CHANGE_C = 0.5
 DEFAULT_PLUNGER_ANGLE_DEG = 2.0
 
 
-def inputs(config: StationConfig) -> dict[str, Any]:
+def inputs(config: StationConfig) -> JsonObject:
     """Every Type B input with its value and whether the config gave it (else the
     default above): what the budget assumed, in its own words."""
     u = config.uncertainty
     gauges = {ind.name: ind for ind in config.indicators}
 
-    def entry(value: Any, default: Any, why: str) -> dict[str, Any]:
+    def entry(value: object, default: object, why: str) -> JsonObject:
         given = value is not None
         return {"value": value if given else default, "given": given,
                 **({} if given else {"assumed": why})}
@@ -65,7 +65,8 @@ def _gauge_names(config: StationConfig) -> dict[tuple[str, str], str]:
             for name, d in sp.indicators.items()}
 
 
-def _at_its_parameters(ident: Any, geometry: orthocal.Geometry) -> Any:
+def _at_its_parameters(ident: orthocal.Identification, geometry: orthocal.Geometry
+                       ) -> orthocal.Identification:
     """``ident`` with its residuals those of its own parameters: a fit moved to the
     middle of the joints' lost-motion bands (orthocal.lost_motion.band_middle) keeps
     the residuals of the band's edge, µm away, where its sensitivity is the same."""
@@ -75,7 +76,7 @@ def _at_its_parameters(ident: Any, geometry: orthocal.Geometry) -> Any:
     return replace(ident, residuals=np.asarray(ident.values) - model)
 
 
-def sources(config: StationConfig, ident: Any) -> list[gum.Source]:
+def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.Source]:
     """The Type B sources of ``ident`` (a round's identification), named by the
     indicators (not by their gauge planes) where they are a gauge's."""
     ident = _at_its_parameters(ident, config.machine.geometry())
@@ -103,8 +104,9 @@ def sources(config: StationConfig, ident: Any) -> list[gum.Source]:
     return renamed
 
 
-def fields(config: StationConfig, ident: Any, type_a_se: dict[str, float],
-           type_a_dof: float | None, statement: str) -> dict[str, Any] | None:
+def fields(config: StationConfig, ident: orthocal.Identification,
+           type_a_se: dict[str, float], type_a_dof: float | None, statement: str
+           ) -> JsonObject | None:
     """The run JSON's ``uncertainty_budget`` for the Δρ of ``statement`` (where the
     run states them: "remaining.total" or "identified"), from the identification
     of the round that measured them; None where the model has no Δρ."""
@@ -141,7 +143,7 @@ def fields(config: StationConfig, ident: Any, type_a_se: dict[str, float],
                        "a deviation spans (0.2 mm, in proportion below)")}
 
 
-def form_of_layout(config: StationConfig, ident: Any, names: Sequence[str]
+def form_of_layout(config: StationConfig, ident: orthocal.Identification, names: Sequence[str]
                    ) -> tuple[np.ndarray, str] | None:
     """What the legs' form ([uncertainty] leg_straightness_mm, stated or assumed) may
     leave in the layout ``names`` as ``ident`` (the fit that gave them) identifies
@@ -181,8 +183,8 @@ def allowance(config: StationConfig) -> orthocal.Allowance:
         temperature_change=float(given["temperature_change_c"]["value"]))
 
 
-def of_run(config: StationConfig, idents: list[Any], result: dict[str, Any]
-           ) -> dict[str, Any] | None:
+def of_run(config: StationConfig, idents: list[orthocal.Identification], result: JsonObject
+           ) -> JsonObject | None:
     """``uncertainty_budget`` of the run's statement: the last verification's
     (``remaining.total``: its Type A part the remaining's standard errors) when the
     loop measured after its last write-back, else the last identification's."""

@@ -14,14 +14,14 @@ did not keep costs what it may be, not nothing.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
 
 import numpy as np
 
 from orthocal import GAP_NAMES, PARAM_NAMES, TILT_NAMES
 from orthocal.compensation import compensated_interval
 from station.config import StationConfig
-from station.engine.accuracy import DRHO, LAYOUT_NAMES, Layout, covariance, grid, params
+from station.engine.accuracy import DRHO, LAYOUT_NAMES, Layout, Limits, covariance, grid, params
+from station.engine.documents import JsonObject
 from station.record.result import Compensated
 
 #: How the identified machine reaches the controller, as the advice names them.
@@ -106,10 +106,10 @@ def statement(points: np.ndarray, frame: str, *, drho_now: Mapping[str, float],
 
 
 
-def of_run(config: StationConfig, limits: tuple[Any, Any] | None, acc: Mapping[str, Any], *,
+def of_run(config: StationConfig, limits: Limits | None, acc: JsonObject, *,
            drho_now: Mapping[str, float], drho_now_cov: np.ndarray | None, dof: float | None,
            layout: Layout | None, in_model: Sequence[str], model: str,
-           form: tuple[np.ndarray, str] | None) -> dict[str, Any]:
+           form: tuple[np.ndarray, str] | None) -> JsonObject:
     """:func:`statement` for a run, on the grid and frame of its statement ``acc``
     (station.engine.accuracy.statement's), as result.json holds it."""
     cov = covariance(drho_now_cov, layout)

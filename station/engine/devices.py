@@ -6,10 +6,16 @@ from __future__ import annotations
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
+from drivers.base import AxisController, Gauges
 from station.config import StationConfig
+from station.engine.documents import JsonObject
 from station.errors import BadInput
+
+if TYPE_CHECKING:
+    from drivers.indicators import IndicatorGroup, SerialIndicator
+    from drivers.sim.station import VirtualStation
 
 # Attempts after the first, per request, for the controller and each gauge. A run
 # makes ~1000 controller requests and ~600 readings: on a bus where one request in
@@ -21,16 +27,20 @@ DEVICE_RETRIES = 5
 
 @dataclass
 class Devices:
-    controller: Any
-    indicators: Any  # IndicatorGroup
-    station: Any = None  # VirtualStation when simulated
+    """What a run moves and reads; ``stack`` closes them. ``station``: the virtual
+    station whose servers they talk to, when simulated."""
+
+    controller: AxisController
+    indicators: Gauges
+    station: VirtualStation | None = None
     stack: ExitStack = field(default_factory=ExitStack)
 
     def close(self) -> None:
         self.stack.close()
 
 
-def build_controller(config: StationConfig, on_event: Callable[[dict], None] | None) -> Any:
+def build_controller(config: StationConfig, on_event: Callable[[JsonObject], None] | None
+                     ) -> AxisController:
     from drivers.axes import ModbusAxisController
 
     c = config.controller
@@ -56,16 +66,16 @@ def build_controller(config: StationConfig, on_event: Callable[[dict], None] | N
 
 
 def build_indicators(config: StationConfig, names: list[str] | None,
-                     on_event: Callable[[dict], None] | None) -> Any:
+                     on_event: Callable[[JsonObject], None] | None) -> IndicatorGroup:
     from drivers.indicator_protocols import make_protocol
     from drivers.indicators import IndicatorGroup, SerialIndicator
 
-    opened: list[Any] = []
+    opened: list[SerialIndicator] = []
     try:
         for ind in config.indicators:
             if names is not None and ind.name not in names:
                 continue
-            overrides: dict[str, Any] = {}
+            overrides: dict[str, object] = {}
             for key, target in (("baudrate", "baudrate"), ("bytesize", "bytesize"),
                                 ("parity", "parity"), ("stopbits", "stopbits"),
                                 ("request", "request"), ("terminator", "terminator"),
@@ -84,21 +94,21 @@ def build_indicators(config: StationConfig, names: list[str] | None,
                                           on_event=on_event, reopen_s=ind.reopen_s))
         return IndicatorGroup(opened)
     except BaseException:
-        for ind in opened:
-            ind.close()
+        for each in opened:
+            each.close()
         raise
 
 
-def open_devices(config: StationConfig, on_event: Callable[[dict], None] | None,
-                 station: Any = None) -> Devices:
-    devices = Devices(None, None, station)
+def open_devices(config: StationConfig, on_event: Callable[[JsonObject], None] | None,
+                 station: VirtualStation | None = None) -> Devices:
+    stack = ExitStack()
     try:
-        devices.controller = build_controller(config, on_event)
-        devices.stack.callback(devices.controller.close)
+        controller = build_controller(config, on_event)
+        stack.callback(controller.close)
         used = sorted({n for s in config.setups for n in s.indicators})
-        devices.indicators = build_indicators(config, used, on_event)
-        devices.stack.callback(devices.indicators.close)
+        indicators = build_indicators(config, used, on_event)
+        stack.callback(indicators.close)
     except BaseException:
-        devices.close()
+        stack.close()
         raise
-    return devices
+    return Devices(controller, indicators, station, stack)

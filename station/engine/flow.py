@@ -10,25 +10,25 @@ import time
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from drivers.files import write_atomic
-from orthocal import carry
+from orthocal import Identification, carry
 from orthocal.geometry import BOW_NAMES, params_vector
 from orthocal.loop import (
     WRITABLE,
     after_correction,
     correction,
 )
-from orthocal.lost_motion import band_middle, edge_of
+from orthocal.lost_motion import Reversal, band_middle, edge_of
 from orthocal.numbers import finite
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine import accuracy, budget, compensated, reversal, verdict
 from station.engine.closed_loop import round_phase
 from station.engine.devices import Devices
+from station.engine.documents import JsonObject
 from station.engine.replay import Replay
 from station.engine.results import (
     ident_json,
@@ -57,13 +57,13 @@ class Run:
     journal: Journal
     devices: Devices
     operator: Operator
-    sim: dict[str, Any] | None
+    sim: JsonObject | None
     state: JournalState
-    records: list[dict[str, Any]]
+    records: list[JsonObject]
     started_iso: str
     checker: MotionChecker | None = None
     t0: float = field(default_factory=time.monotonic)
-    result: dict[str, Any] = field(default_factory=dict)
+    result: JsonObject = field(default_factory=dict)
 
     @cached_property
     def replay(self) -> Replay:
@@ -76,11 +76,11 @@ class Flow:
     """The steps of station.engine.closed_loop against the devices, each one replayed from the
     journal when a resumed run already did it; fills the result as it goes."""
 
-    def __init__(self, ctx: Run, seq: Sequencer, result: dict[str, Any]) -> None:
+    def __init__(self, ctx: Run, seq: Sequencer, result: JsonObject) -> None:
         self.ctx, self.seq, self.result = ctx, seq, result
-        self.idents: list[Any] = []  # identification of each round, in order
+        self.idents: list[Identification] = []  # identification of each round, in order
         self.measurements: list[Measurement] = []  # each round's, its passes pooled
-        self.reversal: Any = None  # the joints' lost motion (orthocal.lost_motion)
+        self.reversal: Reversal | None = None  # the joints' lost motion
         # each round's rho+tilt fit, for the tilts the run states (engine.accuracy)
         self.layout_rounds: list[accuracy.RoundLayout] = []
         # Each round's fit of the legs' bows (a second gauge plane): no offset
@@ -89,16 +89,16 @@ class Flow:
         # The fit each round's layout came from: what the legs' form may leave in the
         # layout (one gauge plane per leg) is read off it once, for the tool's
         # intervals (orthocal.budget.form_covariance).
-        self.layout_fits: dict[str, Any] = {}
+        self.layout_fits: dict[str, Identification] = {}
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
         # the joint errors that leave the least tool error (engine.accuracy)
         self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
-        self._grid: Any = None
-        self.model: dict[str, Any] | None = None  # model.json, once the run stops
+        self._grid: np.ndarray | None = None
+        self.model: JsonObject | None = None  # model.json, once the run stops
         self.outcomes: list[WritebackOutcome] = []
-        self.iterations: list[dict[str, Any]] = result.setdefault("iterations", [])
+        self.iterations: list[JsonObject] = result.setdefault("iterations", [])
         # each round's Δρ̂ and standard errors joined with the rounds before (_joined)
-        self.joined: list[tuple[dict[str, float], dict[str, float | None]]] = []
+        self.joined: list[verdict.Joined] = []
 
     def measure(self, phase: str) -> str:
         """Measure (or replay) a round's first pass and identify it: its verdict
@@ -131,7 +131,7 @@ class Flow:
             else ident.parameters
         self.seq.sizing.expected = (ident.model, params_vector(values))
 
-    def _joined(self, n: int, ident: Any) -> tuple[dict[str, float], dict[str, float | None]]:
+    def _joined(self, n: int, ident: Identification) -> verdict.Joined:
         """Round ``n``'s Δρ̂ joined with the rounds before it (verdict.joined_round),
         kept per round."""
         outcome = self.outcomes[n - 1] if 0 < n <= len(self.outcomes) else None
@@ -179,7 +179,7 @@ class Flow:
                                passes_left=len(passes) - 1 < proc.max_extra_passes,
                                joined=joined if n else None)
         sig = judged.significant
-        entry: dict[str, Any] = {
+        entry: JsonObject = {
             "phase": phase, "model": ident.model, "identified": fields["identified"],
             "std_errors": fields["std_errors"], "std_errors_dof": fields["std_errors_dof"],
             "offsets_written": None, "writeback": None,
@@ -308,7 +308,7 @@ class Flow:
 
     # --- accuracy at the tool ------------------------------------------------------
 
-    def _layout_of(self, phase: str, m: Measurement, ident: Any) -> None:
+    def _layout_of(self, phase: str, m: Measurement, ident: Identification) -> None:
         """The round's axes layout (tilts and gaps): from its own fit if it has them
         all, else from a rho+tilt+gap fit of the same measurement (what the run could
         not rule out; rho+tilt where the gaps cannot be told); a round measured again
@@ -332,7 +332,7 @@ class Flow:
             self.layout_rounds.append(layout)
             self.layout_fits[phase] = source
 
-    def _carried(self, phase: str, ident: Any) -> Any:
+    def _carried(self, phase: str, ident: Identification) -> Identification:
         """A verification's identification joined with the axes' layout (tilts, gaps)
         and the legs' bows the earlier rounds measured, which no offset changed
         (orthocal.carry; the two are independent measurements, joined one after the
@@ -343,8 +343,8 @@ class Flow:
             ident = self._carry(phase, ident, rounds, names)
         return ident
 
-    def _carry(self, phase: str, ident: Any, rounds: list[accuracy.RoundLayout],
-               names: tuple[str, ...]) -> Any:
+    def _carry(self, phase: str, ident: Identification, rounds: list[accuracy.RoundLayout],
+               names: tuple[str, ...]) -> Identification:
         held = [n for n in names if n in ident.names]
         prior = accuracy.pool_layout([r for r in rounds if r.phase != phase])
         if not held or prior is None or not set(held) <= set(prior.names):
@@ -356,7 +356,7 @@ class Flow:
         except (ValueError, np.linalg.LinAlgError):
             return ident  # the round's own fit stands
 
-    def _points(self) -> Any:
+    def _points(self) -> np.ndarray:
         if self._grid is None:
             c = self.seq.checker
             self._grid = accuracy.grid(self.ctx.config, (c.lo, c.hi)).points
@@ -377,7 +377,7 @@ class Flow:
         return accuracy.tool_target(self.ctx.config, accuracy.pool_layout(self.layout_rounds),
                                     self._points(), () if last is None else last.names)
 
-    def _objective_note(self, ident: Any) -> str:
+    def _objective_note(self, ident: Identification) -> str:
         """What the write-back prompt says of the objective and what each buys."""
         cfg = self.ctx.config
         layout = accuracy.pool_layout(self.layout_rounds)
@@ -397,7 +397,7 @@ class Flow:
                 f"{figures[chosen]:.1f} µm RMS over the workspace ({frame} frame); "
                 f"objective {other} would leave {figures[other]:.1f} µm")
 
-    def _layout_form(self, layout: Any) -> tuple[np.ndarray, str] | None:
+    def _layout_form(self, layout: accuracy.Layout | None) -> tuple[np.ndarray, str] | None:
         """The legs' form's part of the pooled ``layout``, from the latest of its rounds
         (every round sees the same legs, so it is not averaged)."""
         if layout is None or not layout.rounds:
@@ -472,7 +472,7 @@ def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
 
 
 def _identify(ctx: Run, m: Measurement,
-              model: str | None = None) -> tuple[Any, dict[str, Any] | None]:
+              model: str | None = None) -> tuple[Identification, JsonObject | None]:
     from station.engine.identify import identify_measurement
 
     return identify_measurement(ctx.config, m, model)

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
 
 import numpy as np
 
+from drivers.base import Vec3
 from station.config import StationConfig
+from station.engine.documents import JsonObject
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker, PathRefused
 from station.plan.guard import (
@@ -19,7 +20,7 @@ from station.plan.guard import (
     stop_of,
     travel_ahead,
 )
-from station.plan.steps import posture_label
+from station.plan.steps import SetupPlan, posture_label
 
 # Nominal travel change within one poll window below which the signal estimate is
 # taken as exact (the gauge's sampling instant no longer matters).
@@ -54,7 +55,7 @@ class PlungerGuard:
     def __init__(self, config: StationConfig, checker: MotionChecker,
                  positions: Callable[[], np.ndarray],
                  read: Callable[[list[str]], dict[str, list[float]]],
-                 stop: Callable[[], None], journal: Callable[[dict[str, Any]], None]
+                 stop: Callable[[], None], journal: Callable[[JsonObject], None]
                  ) -> None:
         self.config = config
         self.enabled = config.procedure.plunger_guard
@@ -70,7 +71,7 @@ class PlungerGuard:
         self._read = read
         self._stop = stop
         self._journal = journal
-        self._setup: Any = None
+        self._setup: SetupPlan | None = None
         self._where = ""
         self._gauges: dict[str, Gauge] = {}
         self.watching = False
@@ -86,7 +87,14 @@ class PlungerGuard:
 
     # --- a mounting --------------------------------------------------------------------
 
-    def mount(self, setup: Any, phase: str, mounted: Mapping[str, str],
+    @property
+    def _sp(self) -> SetupPlan:
+        """The setup of the mounting watched (``mount`` sets it before any watch)."""
+        if self._setup is None:
+            raise RuntimeError("plunger guard: no mounting")
+        return self._setup
+
+    def mount(self, setup: SetupPlan, phase: str, mounted: Mapping[str, str],
               baseline: Mapping[str, float]) -> None:
         """Start watching a new mounting; ``baseline``: each gauge's Π0 reading."""
         self._setup = setup
@@ -127,7 +135,7 @@ class PlungerGuard:
 
     # --- while moving ------------------------------------------------------------------
 
-    def begin_move(self, start: Sequence[float], legs: Sequence[Sequence[float]],
+    def begin_move(self, start: Vec3, legs: Sequence[Vec3],
                    signal: Mapping[str, tuple[float, float]] | None = None,
                    margin: float | None = None) -> None:
         """A move from a stop (``start``) through its sub-moves' targets ``legs``: the
@@ -146,7 +154,7 @@ class PlungerGuard:
         self._route_a, self._route_d = a, b - a
         self._route_legs = [np.asarray(leg, dtype=float) for leg in legs]
         starts = [a, *self._route_legs[:-1]]
-        self._route_bounds = [self._checker.travel_bound(self._setup, self._mounting(), u, v)
+        self._route_bounds = [self._checker.travel_bound(self._sp, self._mounting(), u, v)
                               for u, v in zip(starts, self._route_legs, strict=True)]
         self._route_u = [(float(self._progress(u)), float(self._progress(v)))
                          for u, v in zip(starts, self._route_legs, strict=True)]
@@ -168,7 +176,7 @@ class PlungerGuard:
             return np.zeros(np.shape(p)[:-1])
         return np.clip((np.asarray(p) - self._route_a) @ d / norm, 0.0, 1.0)
 
-    def watch(self, start: Sequence[float], target: Sequence[float], label: str
+    def watch(self, start: Vec3, target: Vec3, label: str
               ) -> Callable[[], None] | None:
         """The poll for the next sub-move of the move begun by begin_move (None: not
         watching)."""
@@ -210,7 +218,7 @@ class PlungerGuard:
             # The gauge sampled somewhere between the two positions: the nominal travel
             # over their box (a poll's few mm: one round of the bound is exact to
             # microns) says whether that instant matters.
-            window = self._checker.travel_bound(self._setup, mounting, before, after,
+            window = self._checker.travel_bound(self._sp, mounting, before, after,
                                                 coarse=True)
             travels, slopes, within = {}, {}, {}
             u1 = self._route_u[index][1]
@@ -222,7 +230,7 @@ class PlungerGuard:
                 record.travel[name] = (min(lo_hi[0], travel), max(lo_hi[1], travel))
                 w_lo, w_hi = window[name]
                 if w_hi - w_lo <= QUIET_MM:
-                    t_b, t_a = self._nominal(self._setup, name, g.direction, ends)
+                    t_b, t_a = self._nominal(self._sp, name, g.direction, ends)
                     g.signal = travel - 0.5 * float(t_a + t_b)
                     g.samples.append((u, g.signal - g.start_signal))
                 else:
@@ -236,10 +244,10 @@ class PlungerGuard:
                                 g.high - self._move_margin - max(s0, s1))
             # What is still ahead: from here to this sub-move's target (decided: a
             # bound only as sharp as telling it keeps the margin needs), then the rest.
-            here_bounds = self._checker.travel_keeps(self._setup, mounting, after, target_v,
+            here_bounds = self._checker.travel_keeps(self._sp, mounting, after, target_v,
                                                      within)
             if here_bounds is None:  # it may not: the full bound, for the trip's figures
-                here_bounds = self._checker.travel_bound(self._setup, mounting, after,
+                here_bounds = self._checker.travel_bound(self._sp, mounting, after,
                                                          target_v)
             for name, g in self._gauges.items():
                 travel, slope = travels[name], slopes[name]
@@ -324,7 +332,7 @@ class PlungerGuard:
         return {n: (a[n], b[n]) for n in self._gauges if n in a and n in b}
 
 
-    def at_rest(self, position: Sequence[float], means: Mapping[str, float],
+    def at_rest(self, position: Vec3, means: Mapping[str, float],
                 sign: str | None = None) -> None:
         """A stop's mean readings at ``position``: the signal there, exactly. At the
         stop of posture ``sign`` it is also what moves to and from that stop are
@@ -335,7 +343,7 @@ class PlungerGuard:
         here = np.asarray(position, dtype=float)[None, :]
         for name, g in self._gauges.items():
             if name in means:
-                nominal = float(self._nominal(self._setup, name, g.direction, here)[0])
+                nominal = float(self._nominal(self._sp, name, g.direction, here)[0])
                 g.signal = float(means[name]) - g.baseline - nominal
                 g.rest_nominal = nominal
         if sign is not None:
@@ -430,7 +438,7 @@ class PlungerGuard:
                     f"{abs(end - value):.3f} mm of the end of its stroke ({end:+.3f} mm; "
                     f"margin {self.margin:g} mm), as the first cycle showed"),
                     {"predicted_mm": value, "end_mm": end})
-        sp = self._setup
+        sp = self._sp
         signs = [sp.signs[-1], *sp.signs]  # from where the cycle before ended
         for a, b in itertools.pairwise(signs):
             label = posture_label(b, sp.leg)
@@ -440,16 +448,16 @@ class PlungerGuard:
                                     self._mounting(), signal=self.route_signal(a, b),
                                     strict=True, travel=False, approach=move.approach)
             except PathRefused as exc:
-                g = self._gauges.get(exc.indicator or "")
-                if g is None:
+                refused = self._gauges.get(exc.indicator or "")
+                if refused is None:
                     raise
-                self._refuse(cycle, label, g, exc.pushed, (
+                self._refuse(cycle, label, refused, exc.pushed, (
                     f"cannot keep its plunger {self.margin:g} mm from the ends of its "
                     f"stroke with the travel the first cycle measured at the stops "
                     f"({exc.detail})"), {})
 
     def _refuse(self, cycle: int, label: str, g: Gauge, pushed: bool, what: str,
-                extra: dict[str, Any]) -> None:
+                extra: JsonObject) -> None:
         self._journal({"type": "event", "event": {
             "event": "plunger-guard-refused", "indicator": g.name, "where": self._where,
             "move": label, "cycle": cycle, "margin_mm": self.margin, **extra}})

@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import orthocal
 from orthocal.covariance import with_measured_noise
@@ -13,6 +12,7 @@ from orthocal.noise import noise_from_cycles, noise_from_readings
 from orthocal.postures import MIDDLE, split_plane
 from orthocal.selection import CANDIDATES, LEVEL, lack_of_fit
 from station.config import StationConfig
+from station.engine.documents import JsonObject
 from station.engine.statistics import Measurement
 from station.errors import RunFailed
 
@@ -58,7 +58,8 @@ def with_form(model: str, keys) -> str:
 
 
 def identify_measurement(config: StationConfig, m: Measurement,
-                         model: str | None = None) -> tuple[Any, dict[str, Any] | None]:
+                         model: str | None = None
+                         ) -> tuple[orthocal.Identification, JsonObject | None]:
     """The identification of ``m`` with ``model`` (default: the config's) and, for
     auto, the selection's JSON (the run JSON's ``model_selection``).
 
@@ -90,7 +91,8 @@ def identify_measurement(config: StationConfig, m: Measurement,
                                       stands=stands if noise else None)
             test = lack_of_fit(ident, geometry, noise[0], noise[1]) if noise else None
         else:
-            sigma, dof, source = noise  # type: ignore[misc]
+            assert noise is not None  # auto: measurement_noise's failure raised above
+            sigma, dof, source = noise
             # The model test excuses what the stated leg form and gauge errors can
             # make, within their bounds and with their shapes (orthocal.misfit): a
             # bowed leg does not buy tilts, and a gap is not taken for a bow.
@@ -114,10 +116,11 @@ def identify_measurement(config: StationConfig, m: Measurement,
         # the statement's inflation: the misfit beyond the noise alone
         test = lack_of_fit(ident, geometry, noise[0], noise[1])
     if noise is not None:
-        rejected = (test is not None and test.F is not None and test.p_value is not None
-                    and test.p_value < LEVEL and test.F > 1.0)
-        ident = with_measured_noise(ident, geometry, noise[0],
-                                    inflate=math.sqrt(test.F) if rejected else 1.0,
+        inflate = 1.0
+        if (test is not None and test.F is not None and test.p_value is not None
+                and test.p_value < LEVEL and test.F > 1.0):  # rejected
+            inflate = math.sqrt(test.F)
+        ident = with_measured_noise(ident, geometry, noise[0], inflate=inflate,
                                     noise_dof=noise[1])
     return ident, selection
 

@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
-from drivers.base import Motion
+from drivers.base import Arrivals, AxisReadout, GaugeReadings
 from station.config import StationConfig
+from station.engine.documents import JsonObject
 from station.engine.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.errors import BadInput, RunFailed
 from station.plan.checker import SIGNAL_PAD_MM, MotionChecker, PathRefused
@@ -37,11 +38,9 @@ RECOVERY_WAYPOINTS = 40
 STOP_TIMEOUT_S = 10.0
 
 
-class ReadingSource(Protocol):
-    """What the mover and the sequencer need of an indicator group
-    (drivers.indicators.IndicatorGroup)."""
-
-    def read(self, n: int = 1, names: Sequence[str] | None = None) -> dict[str, list[float]]: ...
+class MoverAxes(AxisReadout, Arrivals, Protocol):
+    """What the mover asks of the axes: where they stand and whether they still move,
+    and moves waited for (each watched by the guard)."""
 
 
 class Mover:
@@ -50,10 +49,10 @@ class Mover:
     None: unknown); ``setup``/``mounted``: the setup in progress and its gauges
     (set by the sequencer); ``recovered``: the journal records of recovered trips."""
 
-    def __init__(self, *, config: StationConfig, plan: Plan, controller: Motion,
-                 indicators: ReadingSource, checker: MotionChecker, guard: PlungerGuard,
-                 journal: Callable[[dict[str, Any]], None],
-                 journal_safe: Callable[[dict[str, Any]], None],
+    def __init__(self, *, config: StationConfig, plan: Plan, controller: MoverAxes,
+                 indicators: GaugeReadings, checker: MotionChecker, guard: PlungerGuard,
+                 journal: Callable[[JsonObject], None],
+                 journal_safe: Callable[[JsonObject], None],
                  progress: Callable[..., None]) -> None:
         self.config, self.plan = config, plan
         self.controller, self.indicators = controller, indicators
@@ -70,7 +69,7 @@ class Mover:
         self.touched = False
         self.moves = 0
         self.guard_recoveries = 0
-        self.recovered: list[dict[str, Any]] = []
+        self.recovered: list[JsonObject] = []
         self._leg_start: np.ndarray | None = None  # where the sub-move in progress began
         self._speed_factor = 1.0
         self._recoveries = 0
@@ -164,9 +163,11 @@ class Mover:
             self._leg_start = start
             self.position = None  # unknown until the move has arrived
             watch = None if start is None else self.guard.watch(start, leg, label)
-            extra = {} if watch is None else {"watch": watch}
-            actual = self.controller.move_and_wait(
-                list(leg), speed_mm_s=speed, start=start, **extra)
+            if watch is None:
+                actual = self.controller.move_and_wait(list(leg), speed_mm_s=speed, start=start)
+            else:
+                actual = self.controller.move_and_wait(list(leg), speed_mm_s=speed, start=start,
+                                                       watch=watch)
             self.position = np.asarray(actual, dtype=float)
             self.moves += 1
 
@@ -181,7 +182,7 @@ class Mover:
         trip (the run stops) when no safe path is left; returns the sub-moves on."""
         self._recoveries += 1
         here, means = self._at_rest_after_stop()
-        record: dict[str, Any] = {
+        record: JsonObject = {
             "event": "plunger-guard-recovery", "indicator": trip.indicator,
             "where": self.guard.where, "move": trip.label, "from": [float(v) for v in here],
             "readings_mm": means}

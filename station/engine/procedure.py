@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any
 
 from drivers.errors import DeviceError
 from station.console.progress import Progress
 from station.engine.closed_loop import LoopState, next_step
+from station.engine.documents import JsonObject
 from station.engine.flow import Flow, Run
 from station.engine.recovery import resume_hint
 from station.engine.results import (
@@ -48,7 +48,7 @@ def _import_plotting(figures: bool) -> None:
         pass  # the report says so itself when it cannot plot
 
 
-def execute(ctx: Run) -> tuple[int, dict[str, Any]]:
+def execute(ctx: Run) -> tuple[int, JsonObject]:
     """The whole flow of a run (or the rest of a resumed one): its exit status and
     result document."""
     # The report's plots need matplotlib (~0.4 s of imports) and identification
@@ -67,7 +67,7 @@ def execute(ctx: Run) -> tuple[int, dict[str, Any]]:
     return code, result
 
 
-def _execute_with(ctx: Run, progress: Progress) -> tuple[int, dict[str, Any]]:
+def _execute_with(ctx: Run, progress: Progress) -> tuple[int, JsonObject]:
     # The plan check's checker, where the command made one: its routes and bounds
     # are the first cycle's (each sub-move decided again from where the axes stand).
     checker = ctx.checker or MotionChecker(ctx.config, ctx.devices.controller.soft_limits())
@@ -118,7 +118,7 @@ def _stopped(seq: Sequencer) -> str:
             "stopped")
 
 
-def _since_last(ctx: Run, result: dict[str, Any]) -> None:
+def _since_last(ctx: Run, result: JsonObject) -> None:
     """What changed since the machine's last calibration (station.history), into the
     result before result.json and report.html are written: written once, not again."""
     from station import report
@@ -129,14 +129,14 @@ def _since_last(ctx: Run, result: dict[str, Any]) -> None:
         result["since_last"] = since
 
 
-def _finish(ctx: Run, seq: Sequencer, result: dict[str, Any], status: str,
+def _finish(ctx: Run, seq: Sequencer, result: JsonObject, status: str,
             message: str | None, final: bool) -> None:
     result["status"], result["message"] = status, message
     result["finished"] = now_iso()
     wall = time.monotonic() - ctx.t0
     started = ctx.state.started
     result["duration_s"] = round(time.time() - started, 3) if started else round(wall, 3)
-    records: list[dict[str, Any]] = []
+    records: list[JsonObject] = []
     try:
         records = read_journal(ctx.run_dir / JOURNAL_NAME)
     except BadInput:

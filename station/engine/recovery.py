@@ -26,12 +26,15 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 
+from drivers.base import Alarms, AxisReadout, GaugeReadings, Homing
 from station.config import StationConfig
 from station.console.operator import Operator
+from station.engine.documents import JsonObject
+from station.engine.mover import MoverAxes
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan, stop_id
@@ -41,7 +44,15 @@ K_SIGMA = 4.0  # a false redo costs a setup; a kept bad setup costs the answer
 _CYCLE_RECORDS = ("cycle", "setup_done", "repeat")
 
 
-def drop_redone(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+class Rehoming(AxisReadout, Homing, Alarms, Protocol):
+    """What homing after a lost reference asks of the controller; ``name``: the device
+    the journal names."""
+
+    @property
+    def name(self) -> str: ...
+
+
+def drop_redone(records: list[JsonObject]) -> list[JsonObject]:
     """The journal's records without the cycles of setups redone after them: a
     ``setup-redo`` record voids every earlier cycle/setup_done/repeat record of its
     (phase, setup), so replaying measures that setup again from its first cycle."""
@@ -56,7 +67,7 @@ def drop_redone(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
                     and i < last_redo.get((r["phase"], int(r["setup"])), -1))]
 
 
-def interrupted_setup(records: list[dict[str, Any]]) -> tuple[str, int, dict[str, str]] | None:
+def interrupted_setup(records: list[JsonObject]) -> tuple[str, int, dict[str, str]] | None:
     """(phase, setup, mounted indicators) of the setup that was live when the run
     stopped: the last one mounted and not finished."""
     mounted = None
@@ -69,12 +80,12 @@ def interrupted_setup(records: list[dict[str, Any]]) -> tuple[str, int, dict[str
     return mounted
 
 
-def _readings(records: list[dict[str, Any]]) -> dict[tuple[str, str], list[float]]:
+def _readings(records: list[JsonObject]) -> dict[tuple[str, str], list[float]]:
     return {(r["stop"], r["indicator"]): [float(v) for v in r["values"]]
             for r in records if r["type"] == "reading"}
 
 
-def home_if_needed(controller: Any, config: StationConfig, journal: Journal | None,
+def home_if_needed(controller: Rehoming, config: StationConfig, journal: Journal | None,
                    operator: Operator, say: Callable[[str], None]) -> bool:
     """Home the machine if it lost its reference (HOMED clear), with the operator's
     consent. True if it was homed now. ``journal``: None before a run has one."""
@@ -85,7 +96,7 @@ def home_if_needed(controller: Any, config: StationConfig, journal: Journal | No
         "cut): positions it counts cannot be used until it is homed")
     if journal is not None:
         journal.append({"type": "event", "event": {"event": "not-homed",
-                                                   "device": controller.device}})
+                                                   "device": controller.name}})
     if not operator.confirm("Home the machine now (COMMAND 3)? The axes move to their home "
                             "switches; gauges may stay mounted"):
         raise RunFailed("the machine must be homed before the run can go on; homing "
@@ -102,9 +113,9 @@ def home_if_needed(controller: Any, config: StationConfig, journal: Journal | No
     return True
 
 
-def check_reference(controller: Any, indicators: Any, config: StationConfig, plan: Plan,
-                    journal: Journal, records: list[dict[str, Any]],
-                    say: Callable[[str], None]) -> list[dict[str, Any]]:
+def check_reference(controller: MoverAxes, indicators: GaugeReadings, config: StationConfig,
+                    plan: Plan, journal: Journal, records: list[JsonObject],
+                    say: Callable[[str], None]) -> list[JsonObject]:
     """After homing: move to Π0 with the interrupted setup's gauges still mounted and
     compare their readings with the journaled Π0 readings. Returns the records to
     resume from (the setup's cycles dropped if the reference moved)."""

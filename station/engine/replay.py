@@ -20,9 +20,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
 
-Record = dict[str, Any]
+from station.engine.documents import JsonObject
+
+Record = JsonObject  # one journal record
 
 
 @dataclass

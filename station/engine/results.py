@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 import orthocal
+from drivers.base import ZeroOffsets
 from orthocal import AXES, coverage_factor
 from orthocal.loop import WRITABLE, predicted_after_correction
 from orthocal.numbers import finite
@@ -152,7 +153,7 @@ def guard_fields(records: list[dict[str, Any]]) -> dict[str, Any]:
             "refused": sum(1 for e in events if e.get("event") == "plunger-guard-refused")}
 
 
-def offsets_fields(controller: Any, result: dict[str, Any],
+def offsets_fields(controller: ZeroOffsets, result: dict[str, Any],
                    records: list[dict[str, Any]]) -> dict[str, Any]:
     """Where the offsets live and what they are when the run stops (docs/design.md,
     "Offsets held by the station"): ``offsets_held_by`` "controller" | "station",
@@ -160,7 +161,7 @@ def offsets_fields(controller: Any, result: dict[str, Any],
     before), and for a station that holds them what to do with them."""
     from station.engine.writeback import held_after
 
-    held_by = getattr(controller, "held_by", "controller")
+    held_by = controller.held_by
     before = result.get("offsets_before")
     start = [before[a] for a in AXES] if isinstance(before, dict) else None
     final = held_after(records, start)

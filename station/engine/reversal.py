@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
@@ -14,6 +13,7 @@ import orthocal
 from orthocal.lost_motion import Reversal, estimate_reversal, reversal_gain, tool_reversal_mm
 from orthocal.numbers import finite
 from station.config import StationConfig
+from station.engine.documents import JsonObject
 from station.engine.statistics import Measurement
 from station.errors import RunFailed
 
@@ -72,7 +72,7 @@ def check_overrun(config: StationConfig, rev: Reversal) -> None:
             "(nothing was written)")
 
 
-def fields(config: StationConfig, rev: Reversal) -> dict[str, Any]:
+def fields(config: StationConfig, rev: Reversal) -> JsonObject:
     """The run JSON's ``reversal`` (docs/design.md)."""
     proc = config.procedure
     side = {"below": "from below", "above": "from above"}.get(proc.approach)
@@ -100,7 +100,7 @@ def _stated(approach: str, side: str | None, rev: Reversal) -> str:
             "edge, shifted by half the reversal")
 
 
-def at_the_tool(config: StationConfig, rev: Reversal, points: np.ndarray) -> dict[str, Any]:
+def at_the_tool(config: StationConfig, rev: Reversal, points: np.ndarray) -> JsonObject:
     """What the reversal leaves where the side a point is reached from is not known:
     each joint off by up to ±B/2, through the machine's Jacobian, worst over the
     workspace grid; and what to do (the run JSON's ``accuracy.reversal``)."""

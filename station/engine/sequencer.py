@@ -25,17 +25,18 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 
-from drivers.base import AxisController
+from drivers.base import GaugeReadings, Moves, OffsetResolution
 from orthocal.lost_motion import reversal_gain
 from orthocal.postures import MIDDLE, plane_at
 from station.config import StationConfig
 from station.console.operator import Operator
+from station.engine.documents import JsonObject
 from station.engine.guard import PlungerGuard
-from station.engine.mover import Mover, ReadingSource
+from station.engine.mover import Mover, MoverAxes
 from station.engine.replay import Replay
 from station.engine.sizing import VerificationSizing
 from station.engine.statistics import (
@@ -72,8 +73,13 @@ ZERO_MOVED_MM = 0.005
 Progress = Callable[..., None]
 
 
-def _no_progress(event: str, **info: Any) -> None:
+def _no_progress(event: str, **info: object) -> None:
     del event, info
+
+
+class SequencedAxes(MoverAxes, Moves, OffsetResolution, Protocol):
+    """What a sequencer asks of the axes: the mover's, the stop (after a fault, and the
+    guard's), and their offsets' count, by which a verification is sized."""
 
 
 @dataclass
@@ -95,8 +101,8 @@ class Sequencer:
         *,
         config: StationConfig,
         plan: Plan,
-        controller: AxisController,
-        indicators: ReadingSource,
+        controller: SequencedAxes,
+        indicators: GaugeReadings,
         journal: Journal,
         operator: Operator,
         checker: MotionChecker,
@@ -167,7 +173,7 @@ class Sequencer:
         except Exception:
             pass  # nothing more can be saved; the original fault is re-raised
 
-    def _journal_safe(self, record: dict[str, Any]) -> None:
+    def _journal_safe(self, record: JsonObject) -> None:
         try:
             self.journal.append(record)
         except Exception:

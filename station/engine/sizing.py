@@ -5,11 +5,10 @@ the verdict it must give needs, up to [procedure] max_cycles_in_mounting (docs/d
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
-from drivers.base import ZeroOffsets
+from drivers.base import OffsetResolution
 from station.config import StationConfig
 from station.engine.statistics import cycle_std_error
 from station.engine.verdict import converge_limit
@@ -19,11 +18,11 @@ from station.plan.steps import Plan
 class VerificationSizing:
     """The cycles of one mounting, decided from the cycles it has taken so far."""
 
-    def __init__(self, config: StationConfig, plan: Plan, controller: ZeroOffsets) -> None:
+    def __init__(self, config: StationConfig, plan: Plan, controller: OffsetResolution) -> None:
         self.config, self.plan, self.controller = config, plan, controller
         # The machine a verification expects, (model, 12-vector of its parameters): the
         # last round's fit, offsets at their aim after a write-back (set by the flow).
-        self.expected: tuple[str, Any] | None = None
+        self.expected: tuple[str, np.ndarray] | None = None
         self._target: float | None = None  # see verdict_se
 
     def cycle_limit(self, phase: str) -> int:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 from pydantic import Field
@@ -113,6 +113,15 @@ class SetupOutcome(SetupRecord):
     cycles: list[int] = Field(default_factory=list, exclude=True)
 
 
+class DeviationStats(TypedDict):
+    """One deviation over its cycles: mean (mm), sample standard deviation (mm; None
+    from one cycle) and the number of cycles."""
+
+    mean: float
+    std: float | None
+    n: int
+
+
 @dataclass
 class Measurement:
     phase: str
@@ -126,8 +135,8 @@ class Measurement:
     # one per pass); the stands were set again for each (orthocal.Stands.mounts)
     mounts: dict[str, list[int]] = field(default_factory=dict)
 
-    def stats(self) -> dict[str, dict[str, Any]]:
-        out = {}
+    def stats(self) -> dict[str, DeviationStats]:
+        out: dict[str, DeviationStats] = {}
         for key, vals in self.deviations.items():
             arr = np.asarray(vals)
             out[key] = {"mean": float(arr.mean()),

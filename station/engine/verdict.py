@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
+from orthocal import Identification
 from orthocal.geometry import AXES, Geometry
 from orthocal.loop import (
     FALSE_ALARM,
@@ -18,6 +18,7 @@ from orthocal.loop import (
 )
 from orthocal.noise import coverage_factor
 from orthocal.numbers import finite
+from station.engine.documents import JsonObject
 
 Joined = tuple[dict[str, float], dict[str, float | None]]  # Δρ̂ and standard errors
 
@@ -28,7 +29,7 @@ class Verdict:
     significant: list[str]  # the writable parameters beyond the noise of both rounds
     shown_mm: dict[str, float]  # per axis, how far the machine may be off at 95 %
 
-    def fields(self) -> dict[str, Any]:
+    def fields(self) -> JsonObject:
         """The round's entry in the result's ``iterations``."""
         return {"shown_within_95_mm": {k: finite(v) for k, v in self.shown_mm.items()},
                 "verdict": self.verdict}
@@ -40,7 +41,7 @@ def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
     return converge_mm + 0.5 * offset_count_mm
 
 
-def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
+def judge(ident: Identification, previous: Identification | None, converge_mm: float, limit: float,
           target: dict[str, float] | None, passes_left: bool = False,
           joined: Joined | None = None) -> Verdict:
     """The verdict on round ``ident`` (``previous``: the identification whose
@@ -84,13 +85,14 @@ def judge(ident: Any, previous: Any | None, converge_mm: float, limit: float,
     return Verdict(verdict, sig, shown)
 
 
-def joined_round(ident: Any, before: Joined | None, offsets_before: dict[str, float] | None,
+def joined_round(ident: Identification, before: Joined | None,
+                 offsets_before: dict[str, float] | None,
                  offsets_written: dict[str, float] | None) -> Joined:
     """A round's Δρ̂ joined with ``before`` (the rounds before it, joined alike; None:
     the first round), moved by the offsets its write-back changed from
     ``offsets_before`` to ``offsets_written`` (read back; None: nothing written), by
     orthocal.loop.joined_with_previous at the loop's false-alarm k."""
-    own = (dict(ident.parameters), dict(ident.std_errors))
+    own: Joined = (dict(ident.parameters), dict(ident.std_errors))
     if before is None:
         return own
     moved = {} if offsets_before is None or offsets_written is None else \
@@ -98,21 +100,21 @@ def joined_round(ident: Any, before: Joined | None, offsets_before: dict[str, fl
     return joined_with_previous(*own, *before, moved, coverage_factor(None, 1.0 - FALSE_ALARM))
 
 
-def stands_part(ident: Any, geometry: Geometry) -> dict[str, Any]:
+def stands_part(ident: Identification, geometry: Geometry) -> JsonObject:
     """A round's entry ``stands_part_mm``: how much of each Δρ standard error the stands
     set by eye make (orthocal.design.drho_error_parts at the round's fit), where they
     were modelled; read by :func:`not_converged`."""
-    stands = getattr(ident, "stand_model", None)
-    if stands is None or not (ident.stand_sigma or 0.0) > 0.0:
+    stands, sigma = ident.stand_model, ident.stand_sigma or 0.0
+    if stands is None or not sigma > 0.0:
         return {}
     from orthocal import design
 
     _, part = design.drho_error_parts(ident.keys, geometry, ident.model, ident.fit_vector,
-                                      ident.stand_sigma, stands.prior_sd, stands)
+                                      sigma, stands.prior_sd, stands)
     return {"stands_part_mm": {f"drho_{a}": float(v) for a, v in zip(AXES, part, strict=True)}}
 
 
-def not_converged(entry: dict[str, Any], converge_mm: float, offset_count_mm: float) -> str:
+def not_converged(entry: JsonObject, converge_mm: float, offset_count_mm: float) -> str:
     """Why the last verification (its ``iterations`` entry) could not show the machine
     converged, in words: how far the worst axis may still be off, and what to change."""
     shown = entry.get("shown_within_95_mm") or {}

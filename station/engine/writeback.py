@@ -18,10 +18,9 @@ the run) beyond max_abs_offset_mm.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -30,6 +29,7 @@ from drivers.errors import DeviceError
 from drivers.files import write_atomic
 from orthocal import AXES
 from station.console.operator import Operator
+from station.engine.documents import JsonObject
 from station.engine.replay import Replay
 from station.rundir.journal import Journal
 
@@ -43,11 +43,11 @@ class WritebackOutcome:
     before: dict[str, float] | None
     written: dict[str, float] | None
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
         return {"status": self.status, "reason": self.reason}
 
 
-def _axes(values: Any) -> dict[str, float]:
+def _axes(values: Iterable[float]) -> dict[str, float]:
     return {a: float(v) for a, v in zip(AXES, values, strict=True)}
 
 
@@ -72,9 +72,9 @@ class _Stages:
 
     journal: Journal
     round: int
-    done: dict[str, dict[str, Any]]
+    done: dict[str, JsonObject]
 
-    def log(self, record: dict[str, Any]) -> None:
+    def log(self, record: JsonObject) -> None:
         self.journal.append({"type": "writeback", "round": self.round, **record})
 
     def final(self) -> WritebackOutcome | None:
@@ -116,10 +116,10 @@ def write_back(
     delta = np.array([drho[a] or 0.0 for a in AXES])
     before = _backup(stages, controller, run_dir)
     new = _axes(np.array([before[a] for a in AXES]) - delta)
-    reason = _refusal(delta, new, max_abs_offset_mm, offsets_at_start)
-    if reason is not None:
-        stages.log({"stage": "refused", "reason": reason, "before": before})
-        return WritebackOutcome("refused", reason, before, None)
+    refusal = _refusal(delta, new, max_abs_offset_mm, offsets_at_start)
+    if refusal is not None:
+        stages.log({"stage": "refused", "reason": refusal, "before": before})
+        return WritebackOutcome("refused", refusal, before, None)
     intended = _intent(stages, controller, operator, before, new, note)
     if intended is None:
         reason = "declined by the operator; offsets unchanged"
@@ -168,7 +168,7 @@ def _intent(stages: _Stages, controller: ZeroOffsets, operator: Operator,
         return {a: float(v) for a, v in stages.done["intent"]["written"].items()}
     # A drive with no OFFSET register: the station holds the offsets, nothing
     # reaches the drive, and the question must not say otherwise.
-    held = getattr(controller, "held_by", "controller") == "station"
+    held = controller.held_by == "station"
     verb = "hold" if held else "write"
     what = f"{verb.capitalize()} offsets " if stages.round == 1 else \
         f"Closed loop, round {stages.round}: {verb} offsets "
@@ -220,7 +220,7 @@ def _write(stages: _Stages, controller: ZeroOffsets, run_dir: Path,
     return WritebackOutcome("written", None, before, readback)
 
 
-def held_after(records: list[dict[str, Any]], start: Sequence[float] | None
+def held_after(records: list[JsonObject], start: Sequence[float] | None
                ) -> list[float] | None:
     """The offsets a station holding them holds once the journal's write-backs and
     rollbacks are done (``start``: what the run began with, None for zeros): what a

@@ -15,6 +15,7 @@ block's own units remembered for writing it back.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -212,6 +213,7 @@ def _arc(block: Block, state: Modal, axes: dict[str, Word], arc_words: list[Word
          removed: list[Word]) -> Move:
     """G2/G3: the centre (I, J, K) or radius (R) and the turns (P)."""
     assert start is not None  # the first motion is a G0
+    assert state.motion is not None  # G2 or G3 (_motion)
     first, second, normal = PLANES[state.plane]
     if AXES[first] not in axes and AXES[second] not in axes:
         raise GcodeError(block.lineno, label, f"{AXES[first]} and {AXES[second]} both "
@@ -230,17 +232,18 @@ def _arc(block: Block, state: Modal, axes: dict[str, Word], arc_words: list[Word
                              f"the {named('G', state.plane)} plane")
     turns = _turns(block, g)
     removed = [*removed, *arc_words, *block.of("P")]
-    common = dict(lineno=block.lineno, code=state.motion, start=start, end=end,
-                  plane=state.plane, inches=state.inches, absolute=state.absolute,
-                  removed=tuple(removed), turns=turns, label=label)
+    move = functools.partial(Move, lineno=block.lineno, code=state.motion, start=start,
+                             end=end, plane=state.plane, inches=state.inches,
+                             absolute=state.absolute, removed=tuple(removed), turns=turns,
+                             label=label)
     if radius:
-        return Move(radius=radius[0].value * state.scale, **common)  # type: ignore[arg-type]
+        return move(radius=radius[0].value * state.scale)
     centre = start.copy()
     for k in (first, second):
-        w = next((w for w in offsets if w.letter == "IJK"[k]), None)
-        value = 0.0 if w is None else w.value * state.scale
+        word = next((w for w in offsets if w.letter == "IJK"[k]), None)
+        value = 0.0 if word is None else word.value * state.scale
         centre[k] = value if state.arc_absolute else start[k] + value
-    return Move(centre=centre, **common)  # type: ignore[arg-type]
+    return move(centre=centre)
 
 
 def _turns(block: Block, g: dict[str, Word]) -> int:

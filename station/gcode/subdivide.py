@@ -210,8 +210,9 @@ def _refuse_point(label: tuple[int, str], ends: np.ndarray, sent: np.ndarray,
 def _check_limits(rho: np.ndarray, ci: np.ndarray, limits: Limits,
                   labels: Sequence[tuple[int, str]]) -> None:
     """GcodeError for the first segment whose joints leave the soft limits."""
-    low = (rho < limits.lower).any(axis=(1, 2))
-    high = (rho > limits.upper).any(axis=(1, 2))
+    # per segment (numpy's stubs type a reduction over axes as maybe a scalar)
+    low = np.asarray((rho < limits.lower).any(axis=(1, 2)))
+    high = np.asarray((rho > limits.upper).any(axis=(1, 2)))
     out = low | high
     if not out.any():
         return

@@ -141,12 +141,12 @@ def since_last(earlier: Sequence[Mapping[str, Any]],
     machine, start = entry.get("machine_id"), started_at(entry)
     if not machine or start is None:
         return None
-    prior = [e for e in earlier if e.get("machine_id") == machine
+    prior = [(when, e) for e in earlier if e.get("machine_id") == machine
              and e.get("run_dir") != entry.get("run_dir")  # a resumed run's own row
              and (when := started_at(e)) is not None and when < start]
     if not prior:
         return None
-    last = max(prior, key=lambda e: started_at(e))  # type: ignore[arg-type,return-value]
+    _, last = max(prior, key=lambda p: p[0])
     head = {"previous_run": last["run_dir"], "previous_started": last.get("started")}
     try:
         doc = compare(last, entry)

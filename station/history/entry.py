@@ -24,6 +24,11 @@ def _num(value: Any) -> float | None:
         else None
 
 
+def _mapping(value: Any) -> Mapping[str, Any]:
+    """``value`` where it is a mapping, else an empty one (a key missing or malformed)."""
+    return value if isinstance(value, Mapping) else {}
+
+
 def _frame(drho: Mapping[str, Any], se: Mapping[str, Any], offsets: Mapping[str, Any] | None,
            dof: Any) -> dict[str, Any] | None:
     """Per axis e = Δρ − o with Δρ's standard error; None when any is missing."""
@@ -39,11 +44,11 @@ def _frame(drho: Mapping[str, Any], se: Mapping[str, Any], offsets: Mapping[str,
 
 
 def _layout(result: Mapping[str, Any]) -> dict[str, Any]:
-    acc = result.get("accuracy") if isinstance(result.get("accuracy"), Mapping) else {}
+    acc = _mapping(result.get("accuracy"))
     out: dict[str, Any] = {}
     for values, errors in (("tilts", "tilt_std_errors"), ("gaps", "gap_std_errors")):
-        got = acc.get(values) if isinstance(acc.get(values), Mapping) else {}
-        ses = acc.get(errors) if isinstance(acc.get(errors), Mapping) else {}
+        got = _mapping(acc.get(values))
+        ses = _mapping(acc.get(errors))
         for name, value in got.items():
             if _num(value) is not None:
                 out[name] = {"value": float(value), "std_error": _num(ses.get(name))}
@@ -52,9 +57,9 @@ def _layout(result: Mapping[str, Any]) -> dict[str, Any]:
 
 def _reversal(result: Mapping[str, Any]) -> dict[str, Any]:
     """Each joint's lost motion as the run measured it (mm, with its standard error)."""
-    rev = result.get("reversal") if isinstance(result.get("reversal"), Mapping) else {}
-    values = rev.get("value_mm") if isinstance(rev.get("value_mm"), Mapping) else {}
-    ses = rev.get("std_errors_mm") if isinstance(rev.get("std_errors_mm"), Mapping) else {}
+    rev = _mapping(result.get("reversal"))
+    values = _mapping(rev.get("value_mm"))
+    ses = _mapping(rev.get("std_errors_mm"))
     return {a: {"value_mm": _num(values.get(a)), "std_error_mm": _num(ses.get(a))}
             for a in AXES if _num(values.get(a)) is not None}
 
@@ -70,8 +75,8 @@ def _instruments(result: Mapping[str, Any]) -> list[dict[str, Any]]:
 def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str, Any]:
     """The history entry of a finished run's ``result`` (its result.json);
     ``profile``: the register map its controller used (from its config)."""
-    machine = result.get("machine") if isinstance(result.get("machine"), Mapping) else {}
-    rem = result.get("remaining") if isinstance(result.get("remaining"), Mapping) else {}
+    machine = _mapping(result.get("machine"))
+    rem = _mapping(result.get("remaining"))
     found_drho = rem.get("total") or result.get("identified") or {}
     found_se = rem.get("std_errors") if rem.get("total") else result.get("std_errors") or {}
     found_dof = rem.get("std_errors_dof") if rem.get("total") else result.get("std_errors_dof")
@@ -79,9 +84,9 @@ def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str,
     as_left = None if not rem.get("estimate") else _frame(
         rem["estimate"], rem.get("std_errors") or {}, result.get("offsets_final"),
         rem.get("std_errors_dof"))
-    acc = result.get("accuracy") if isinstance(result.get("accuracy"), Mapping) else {}
-    after = acc.get("after") if isinstance(acc.get("after"), Mapping) else {}
-    loop = result.get("loop") if isinstance(result.get("loop"), Mapping) else {}
+    acc = _mapping(result.get("accuracy"))
+    after = _mapping(acc.get("after"))
+    loop = _mapping(result.get("loop"))
     return {
         "run_dir": str(result.get("run_dir")), "machine_id": machine.get("id"),
         "started": result.get("started"), "finished": result.get("finished"),

@@ -91,6 +91,7 @@ def drift(points: Sequence[Point]) -> Drift | None:
         return None
     t0 = fit[0].when
     x = [(p.when - t0).total_seconds() / 86400.0 / MONTH_DAYS for p in fit]
+    # mypy does not narrow std_error through fit's filter (every one is > 0)
     w = [1.0 / p.std_error ** 2 for p in fit]  # type: ignore[operator]
     sw = sum(w)
     xm = sum(wi * xi for wi, xi in zip(w, x, strict=True)) / sw

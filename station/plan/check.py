@@ -18,16 +18,16 @@ from __future__ import annotations
 
 import json
 from collections import OrderedDict
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from drivers.base import Vec3
 from station.config import StationConfig
 from station.plan.checker import MotionChecker
 from station.plan.limits import limits_source
-from station.plan.steps import Move, Plan, Prompt, route_key
+from station.plan.steps import Move, Plan, Prompt, joint_triple, route_key
 
 #: Checks kept (a run checks one plan, or two: from its postures, then from where the
 #: axes stand).
@@ -51,8 +51,8 @@ _kept: OrderedDict[str, _Checked] = OrderedDict()
 def check_plan(
     plan: Plan,
     config: StationConfig,
-    controller_limits: tuple[Sequence[float], Sequence[float]],
-    start: Sequence[float] | None = None,
+    controller_limits: tuple[Vec3, Vec3],
+    start: Vec3 | None = None,
     checker: MotionChecker | None = None,
     travel: bool = True,
 ) -> Plan:
@@ -80,8 +80,8 @@ def check_plan(
 
 
 def _check_moves(plan: Plan, config: StationConfig,
-                 controller_limits: tuple[Sequence[float], Sequence[float]],
-                 start: Sequence[float] | None, checker: MotionChecker, travel: bool) -> None:
+                 controller_limits: tuple[Vec3, Vec3],
+                 start: Vec3 | None, checker: MotionChecker, travel: bool) -> None:
     """Every move of every setup through ``checker``: the plan's limits, routes and
     start filled in (its travel is the checker's)."""
     plan.limits = (checker.lo.tolist(), checker.hi.tolist())
@@ -103,7 +103,7 @@ def _check_moves(plan: Plan, config: StationConfig,
                 via = legs[:-2] if step.approach is not None else legs[:-1]
                 if position is not None and via:
                     plan.routes[route_key(position, step.targets)] = [
-                        tuple(float(v) for v in leg) for leg in via]
+                        joint_triple(leg) for leg in via]
                 position = np.asarray(step.targets)
     plan.start = None if start is None else tuple(float(v) for v in start)
 
@@ -126,8 +126,8 @@ def _config_doc(config: StationConfig) -> dict[str, Any]:
 
 
 def _key(plan: Plan, config: StationConfig,
-         controller_limits: tuple[Sequence[float], Sequence[float]],
-         start: Sequence[float] | None, travel: bool, checker: MotionChecker) -> str:
+         controller_limits: tuple[Vec3, Vec3],
+         start: Vec3 | None, travel: bool, checker: MotionChecker) -> str:
     """Everything a check with a fresh checker depends on, as text (the checker's
     own config and limits too: a caller may have made it for others)."""
     doc: list[Any] = [plan.to_json(), plan.routes and sorted(map(str, plan.routes.items())),

@@ -7,11 +7,12 @@ mounted plunger within its stroke; the soft limits the plan uses.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
 import orthocal
+from drivers.base import Vec3
 from orthocal.measurement import reading_at
 from orthocal.postures import plane_at
 from station.config import StationConfig
@@ -48,7 +49,7 @@ class MotionChecker:
     after it stopped the axes, with the travel it measured (``signal``)."""
 
     def __init__(self, config: StationConfig,
-                 controller_limits: tuple[Sequence[float], Sequence[float]],
+                 controller_limits: tuple[Vec3, Vec3],
                  spread: bool = True) -> None:
         """``spread`` False: routes with the fewest waypoints as found, not spread for
         the largest slack (a search that asks only whether a plan holds)."""
@@ -67,7 +68,7 @@ class MotionChecker:
         # Each mounting's reading at Π0 (nominal_travel).
         self._zeros: dict[tuple, float] = {}
 
-    def check(self, start: Sequence[float] | None, target: Sequence[float], label: str,
+    def check(self, start: Vec3 | None, target: Vec3, label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
         self.route(start, target, label, setup, mounted)
 
@@ -88,12 +89,12 @@ class MotionChecker:
         self._routes = {k: list(v) for k, v in routes.items()}
         self._bounds = dict(bounds)
 
-    def route(self, start: Sequence[float] | None, target: Sequence[float], label: str,
+    def route(self, start: Vec3 | None, target: Vec3, label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None,
               signal: Mapping[str, tuple[float, float]] | None = None,
               max_waypoints: int = MAX_WAYPOINTS, strict: bool = False,
               margin: float | None = None, travel: bool = True,
-              approach: Sequence[float] | None = None) -> list[np.ndarray]:
+              approach: Vec3 | None = None) -> list[np.ndarray]:
         """The targets of the sub-moves that reach ``target`` (waypoints, then the
         target itself); raises BadInput when no route of up to ``max_waypoints``
         holds. ``signal``: per mounted gauge, the travel beyond the nominal model
@@ -141,26 +142,27 @@ class MotionChecker:
                 if travel:
                     self._commit(self._route_travel(gauges, start_v, legs, where))
                 return [leg.copy() for leg in legs]
-        legs = None
+        routed: list[np.ndarray] | None = None
         for kept in (keep,) if strict else (keep, 0.0):
-            legs = motion.route(
-                lambda a, b, slack, m=kept: self._feasible(gauges, a, b, m + slack, where),
-                start_v, target_v, self.geometry, max_waypoints,
-                max_slack=self._room(gauges, kept) if self.spread else 0.0)
-            if legs is not None:
+            def feasible(a: np.ndarray, b: np.ndarray, slack: float, m: float = kept) -> bool:
+                return self._feasible(gauges, a, b, m + slack, where)
+
+            routed = motion.route(feasible, start_v, target_v, self.geometry, max_waypoints,
+                                  max_slack=self._room(gauges, kept) if self.spread else 0.0)
+            if routed is not None:
                 break
-        if legs is None:
+        if routed is None:
             raise self._refusal(gauges, start_v, target_v, where, max_waypoints,
                                 keep if strict else 0.0)
         if margin is None:  # a re-plan's route (its own margin) is no route to reuse
             self._routes.setdefault(key, []).append(
-                (start_v.copy(), [leg.copy() for leg in legs]))
+                (start_v.copy(), [leg.copy() for leg in routed]))
         if travel:
-            self._commit(self._route_travel(gauges, start_v, legs, where))
-        return legs
+            self._commit(self._route_travel(gauges, start_v, routed, where))
+        return routed
 
-    def _approached(self, start: Sequence[float] | None, target: Sequence[float],
-                    approach: Sequence[float], label: str, setup: SetupPlan | None,
+    def _approached(self, start: Vec3 | None, target: Vec3,
+                    approach: Vec3, label: str, setup: SetupPlan | None,
                     mounted: dict[str, str] | None,
                     signal: Mapping[str, tuple[float, float]] | None, max_waypoints: int,
                     strict: bool, margin: float | None, travel: bool) -> list[np.ndarray]:
@@ -322,8 +324,8 @@ class MotionChecker:
             here = leg
         return travel
 
-    def travel_bound(self, sp: SetupPlan, mounted: Mapping[str, str], a: Sequence[float],
-                     b: Sequence[float], coarse: bool = False) -> dict[str, tuple[float, float]]:
+    def travel_bound(self, sp: SetupPlan, mounted: Mapping[str, str], a: Vec3,
+                     b: Vec3, coarse: bool = False) -> dict[str, tuple[float, float]]:
         """Nominal (min, max) travel of each mounted gauge over every position one
         COMMAND 1 from a to b may pass through (the guard's look ahead). ``coarse``:
         one round of the branch and bound (for a set of a few mm, such as a poll's
@@ -333,8 +335,8 @@ class MotionChecker:
             return {n: (-np.inf, np.inf) for n in mounted}
         return found
 
-    def travel_keeps(self, sp: SetupPlan, mounted: Mapping[str, str], a: Sequence[float],
-                     b: Sequence[float], within: Mapping[str, tuple[float, float]]
+    def travel_keeps(self, sp: SetupPlan, mounted: Mapping[str, str], a: Vec3,
+                     b: Vec3, within: Mapping[str, tuple[float, float]]
                      ) -> dict[str, tuple[float, float]] | None:
         """Whether the nominal travel of each mounted gauge keeps within its (low,
         high) of ``within`` over every position one COMMAND 1 from a to b may pass
@@ -342,8 +344,8 @@ class MotionChecker:
         not (or the set leaves the workspace)."""
         return self._travel(sp, mounted, a, b, within, motion.MAX_DEPTH)
 
-    def _travel(self, sp: SetupPlan, mounted: Mapping[str, str], a: Sequence[float],
-                b: Sequence[float], within: Mapping[str, tuple[float, float]] | None,
+    def _travel(self, sp: SetupPlan, mounted: Mapping[str, str], a: Vec3,
+                b: Vec3, within: Mapping[str, tuple[float, float]] | None,
                 max_depth: int) -> dict[str, tuple[float, float]] | None:
         gauges = self._gauges(sp, dict(mounted), None)
         if gauges is None:

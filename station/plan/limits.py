@@ -4,16 +4,15 @@ path model of its moves (docs/design.md, "Register map"; station.plan.motion).""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 
+from drivers.base import Vec3
 from station.config import StationConfig
 from station.errors import BadInput
 
 
 def effective_limits(
-    config: StationConfig, controller_limits: tuple[Sequence[float], Sequence[float]]
+    config: StationConfig, controller_limits: tuple[Vec3, Vec3]
 ) -> tuple[np.ndarray, np.ndarray]:
     """The controller's soft limits, narrowed (never widened) by the config.
 

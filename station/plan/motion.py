@@ -40,13 +40,14 @@ plan cannot know: the travel the offsets themselves cause).
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
 import orthocal
+from drivers.base import Vec3
 from orthocal import Geometry
 
 MotionModel = Literal["coordinated", "independent"]
@@ -111,10 +112,11 @@ class Bound:
     def merge(self, other: Bound) -> Bound:
         """What two searches of the same set know: the tighter bound of the two (each
         holds), the extremes of all values sampled."""
-        seen = [b for b in (self, other) if b.seen_lo is not None and b.seen_hi is not None]
+        seen = [(b.seen_lo, b.seen_hi) for b in (self, other)
+                if b.seen_lo is not None and b.seen_hi is not None]
         return Bound(np.maximum(self.lo, other.lo), np.minimum(self.hi, other.hi),
-                     np.min([b.seen_lo for b in seen], axis=0) if seen else None,
-                     np.max([b.seen_hi for b in seen], axis=0) if seen else None,
+                     np.min([lo for lo, _ in seen], axis=0) if seen else None,
+                     np.max([hi for _, hi in seen], axis=0) if seen else None,
                      self.sharp or other.sharp)
 
 
@@ -138,7 +140,7 @@ def _space(a: np.ndarray, b: np.ndarray,
     return len(active), joints
 
 
-def reachable_points(a: Sequence[float], b: Sequence[float], motion: str,
+def reachable_points(a: Vec3, b: Vec3, motion: str,
                      n: int = 5) -> np.ndarray:
     """A grid of n points per dimension over the joint positions one COMMAND 1 from
     a to b can pass through: the box of its ends (independent) or the straight
@@ -230,7 +232,7 @@ def _unit_grid(d: int, n: int) -> np.ndarray:
     return grid
 
 
-def segment_bound(f: Values, a: Sequence[float], b: Sequence[float], motion: str,
+def segment_bound(f: Values, a: Vec3, b: Vec3, motion: str,
                   low: np.ndarray | None = None, high: np.ndarray | None = None,
                   tolerance: float = TOLERANCE_MM, max_depth: int = MAX_DEPTH
                   ) -> Bound:
@@ -321,7 +323,7 @@ def _outside(lo: np.ndarray, hi: np.ndarray, low: np.ndarray | None,
                 or (high is not None and (hi > high + 1e-9).any()))
 
 
-def line_point(a: Sequence[float], b: Sequence[float],
+def line_point(a: Vec3, b: Vec3,
                geometry: Geometry) -> Callable[[float], np.ndarray]:
     """λ ↦ the joints that put the end point at fraction λ of its straight line
     from P(a) to P(b) (nominal kinematics); the joint-space line where an end has
@@ -373,7 +375,7 @@ def _greedy(feasible: Feasible, at: Callable[[float], np.ndarray], slack: float,
         t0 = lo
 
 
-def route(feasible: Feasible, a: Sequence[float], b: Sequence[float], geometry: Geometry,
+def route(feasible: Feasible, a: Vec3, b: Vec3, geometry: Geometry,
           max_waypoints: int, max_slack: float = 0.0) -> list[np.ndarray] | None:
     """The targets of the sub-moves from a to b (waypoints, then b), fewest first
     (module docstring), or None when no route of up to ``max_waypoints`` holds.

@@ -24,11 +24,13 @@ postures).
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 
 import orthocal
+from drivers.base import Vec3
 from orthocal import AXES, postures
+from orthocal.postures import MIDDLE
 from station.config import StationConfig
 from station.plan import motion
 
@@ -122,7 +124,8 @@ class SetupPlan:
     overrun: float | None = None
     reversal_overrun: float | None = None
     # Where along the leg the gauges touch it (fraction from the carriage's joint).
-    at: float = postures.MIDDLE
+    # (MIDDLE by name: the field ``postures`` above hides the module in this body.)
+    at: float = MIDDLE
 
     def key_posture(self, sign: str) -> str:
         """The deviation key's posture of test posture ``sign`` read by this setup's
@@ -133,8 +136,8 @@ class SetupPlan:
         """The move to posture ``sign`` ("r": Π0 from the side opposite the stops')."""
         targets = self.postures["0" if sign == REVERSAL else sign]
         over = self.reversal_overrun if sign == REVERSAL else self.overrun
-        approach = None if over is None else tuple(float(v) + over for v in targets)
-        return Move(targets, posture_label(sign, self.leg), approach=approach)  # type: ignore[arg-type]
+        approach = None if over is None else joint_triple(float(v) + over for v in targets)
+        return Move(targets, posture_label(sign, self.leg), approach=approach)
 
     @property
     def signs(self) -> tuple[str, ...]:
@@ -304,7 +307,13 @@ def approach_words(overrun: float | None, reversal: float | None) -> str:
             " as well: the joints' reversal, in no deviation")
 
 
-def route_key(start: Sequence[float], target: Sequence[float]) -> tuple:
+def joint_triple(values: Iterable[float]) -> tuple[float, float, float]:
+    """Three joint values (x, y, z) as a tuple of floats."""
+    x, y, z = (float(v) for v in values)
+    return x, y, z
+
+
+def route_key(start: Vec3, target: Vec3) -> tuple:
     """Routes are keyed by their ends (to the µm): a move with gauges mounted
     joins two postures of one leg, so it belongs to one setup."""
     return (*(round(float(v), 3) for v in start), *(round(float(v), 3) for v in target))
@@ -319,10 +328,10 @@ def build_plan(config: StationConfig, strokes: Sequence[float] | None = None) ->
     setups = []
     for idx, setup in enumerate(config.setups):
         targets = {
-            s: tuple(float(v) for v in orthocal.posture(s, setup.leg, geometry))
+            s: joint_triple(orthocal.posture(s, setup.leg, geometry))
             for s in ("0", *order)
         }
-        setups.append(SetupPlan(idx, setup.leg, dict(setup.indicators), targets,  # type: ignore[arg-type]
+        setups.append(SetupPlan(idx, setup.leg, dict(setup.indicators), targets,
                                 order, *approach_overruns(config), at=setup.at))
     return Plan(setups, proc.cycles, proc.readings, proc.settle_s)
 
