@@ -1,4 +1,4 @@
-"""Identification accuracy against the statistical floor (issue: the maths).
+"""Identification accuracy against the statistical floor.
 
 For hidden offsets of 0.5, 2 and 5 mm and indicator noise σ = 5 µm on each of
 the 12 deviations, a Monte Carlo of identifications prints, for each method,

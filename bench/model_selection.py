@@ -62,7 +62,8 @@ CASES = [
     Case("no tilt", lambda rng: np.zeros(3), wants_tilt=False),
     Case("0.2 mrad on one pair of axes", one_pair(0.2), wants_tilt=True),
     Case("0.2 mrad on all three pairs", lambda rng: 0.2 * rng.choice([-1.0, 1.0], 3), True),
-    Case("issue's machine 0.5, -0.5, 0.3 mrad", lambda rng: np.array([0.5, -0.5, 0.3]), True),
+    Case("0.5, -0.5, 0.3 mrad on the three pairs", lambda rng: np.array([0.5, -0.5, 0.3]),
+         True),
 ]
 
 

@@ -4,9 +4,10 @@ Whole simulated calibrations (``orthocal run --simulate`` in-process, stands pla
 by eye up to 5 mm off, the default procedure: three cycles of five readings, model
 ``auto``, closed loop) over seeds. For every run: how the loop stopped, its
 write-backs, the mountings the journal records (``timing.mountings``) against the
-issue's bound of 3 × (write-backs + 1), the joint error the offsets leave against
-the hidden truth (µm), the machine's wall time, and the whole calibration's time
-with each mounting costed at ``--mount-s`` seconds of the operator's.
+bound of 3 × (write-backs + 1) (one per leg in each measurement), the joint error
+the offsets leave against the hidden truth (µm), the machine's wall time, and the
+whole calibration's time with each mounting costed at ``--mount-s`` seconds of the
+operator's.
 
     python bench/mountings.py                     # seeds 1-5, 1 µm noise
     python bench/mountings.py --noise 0.002 --runs 10

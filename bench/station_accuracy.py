@@ -17,7 +17,8 @@ the machine once the closed loop stopped: the truth is ``remaining.total``
 (the correction the controller holds plus what the last verification found
 left, not written) ± its standard errors; printed with how many values lie
 inside the 95 % interval (k95 from Student's t on the dof the run reports;
-target 95 %).
+target 95 %: the binomial range an honest statement falls in 99 % of the time,
+printed with it).
 
     python bench/station_accuracy.py [--runs 20] [--noise 0.005] [--seed 1]
 """
@@ -67,6 +68,17 @@ def statement_z(r: dict, truth: dict[str, float]) -> list[tuple[float, bool]]:
     return out
 
 
+def coverage_range(n: int, level: float = 0.95, keep: float = 0.99) -> tuple[int, int]:
+    """The counts of n values an honest ``level`` interval holds with probability at
+    least ``keep``, half the rest in each tail of the binomial: (lo, hi). Two-sided,
+    so that intervals too wide fail too; with few values hi is n, and only the RMS
+    of error/SE can show them too wide."""
+    from scipy.stats import binom  # a second to import; only when printing
+
+    tail = (1.0 - keep) / 2
+    return int(binom.ppf(tail, n, level)), int(binom.ppf(1.0 - tail, n, level))
+
+
 def calibrate(seed: int, noise: float, out: Path) -> dict:
     # A fast virtual axis and no settle: neither changes a reading, both the wall time.
     return simulated_run(seed, out, "--noise", str(noise), "--sim-speed", "20000",
@@ -108,9 +120,11 @@ def main() -> None:
           f"{per_value:.3f} (± ~{100 / np.sqrt(2 * n):.0f} % from {n} values; target 0.8–1.2)")
     if zs:
         z = np.asarray(zs)
+        lo, hi = coverage_range(z.size)
         print(f"final statement (remaining.total): RMS(error/SE) = "
               f"{float(np.sqrt(np.mean(z**2))):.3f}, max {float(np.max(np.abs(z))):.2f}; "
-              f"inside its 95 % interval {inside}/{z.size} ({100 * inside / z.size:.0f} %)")
+              f"inside its 95 % interval {inside}/{z.size} ({100 * inside / z.size:.0f} %; "
+              f"an honest one: {lo}-{hi}, 99 % of the time)")
 
 
 if __name__ == "__main__":

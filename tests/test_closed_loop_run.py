@@ -151,18 +151,19 @@ def test_a_verification_too_noisy_to_show_convergence_is_measured_again(
         [None, ["v", "v+1"]]
     # the pooled pass has the cycles of both
     assert all(st["n"] == 4 for st in result["verification"]["deviations"].values())
+    # The engine on the fakes with the plunger guard off reads the same draws every run:
+    # after the second write-back the verification, measured twice, shows the offsets
+    # within ±3.6 to ±4.8 µm, not within converge_mm and half the drive's count (2.5
+    # µm), and the run says so with its numbers.
     last = result["iterations"][-1]
     bounds = last["shown_within_95_mm"]
-    if result["converged"]:
-        assert all(b <= 0.002 for b in bounds.values())
-    else:
-        stopped = result["loop"]["stopped"]
-        assert stopped in ("not-converged", "max_iterations"), stopped
-        if stopped == "not-converged":
-            assert any(b is None or b > 0.002 for b in bounds.values())
-            assert "converge_mm = 2 µm" in result["message"] and \
-                "more cycles or readings" in result["loop"]["detail"]
-            assert "NOT CONVERGED" in report.summary_text(result)
+    assert result["converged"] is False and result["loop"]["stopped"] == "not-converged"
+    worst = max(bounds.values())
+    assert worst > result["loop"]["converged_within_mm"] >= 0.002
+    assert f"by up to {1000 * worst:.1f} µm" in result["message"]
+    assert "converge_mm = 2 µm" in result["message"] and \
+        "more cycles or readings" in result["loop"]["detail"]
+    assert "NOT CONVERGED" in report.summary_text(result)
     assert_truth(result, drho(true))
 
 

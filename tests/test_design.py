@@ -244,14 +244,14 @@ def test_a_verification_s_error_splits_into_noise_and_stands() -> None:
     g = orthocal.Geometry()
     keys = design.keys_for((g.rho_max, g.rho_min), {"x": "yz", "y": "xz", "z": "xy"}, g)
     sd = 5.0 / np.sqrt(3.0)
-    issue = np.zeros(12)
-    issue[6:] = (0.2, 0.1, -0.15, 0.15, -0.10, 0.12)  # tilts mrad, gaps mm
-    few = design.drho_error_parts(keys, g, "rho+tilt+gap", issue, 0.55e-3 / np.sqrt(3), sd)
-    many = design.drho_error_parts(keys, g, "rho+tilt+gap", issue, 0.55e-3 / np.sqrt(27), sd)
+    machine = np.zeros(12)  # the held-out machine of bench/gaps.py
+    machine[6:] = (0.2, 0.1, -0.15, 0.15, -0.10, 0.12)  # tilts mrad, gaps mm
+    few = design.drho_error_parts(keys, g, "rho+tilt+gap", machine, 0.55e-3 / np.sqrt(3), sd)
+    many = design.drho_error_parts(keys, g, "rho+tilt+gap", machine, 0.55e-3 / np.sqrt(27), sd)
     assert np.allclose(many[0], few[0] / 3.0, rtol=1e-9)
     assert np.all(many[1] > 0.75 * few[1]) and many[1][1] > 0.5e-3
     # the noise part is the design's noise gain times the deviation's error (the
-    # gain at the nominal machine, linear; here exact at the issue's: 2e-5 apart)
+    # gain at the nominal machine, linear; here exact at the held-out one: 2e-5 apart)
     q = design.quality(keys, g, "rho+tilt+gap")
     assert few[0][0] == pytest.approx(q.noise_gain["drho_x"] * 0.55e-3 / np.sqrt(3), rel=1e-3)
     square = design.drho_error_parts(keys, g, "rho", np.zeros(12), 0.3e-3, sd)

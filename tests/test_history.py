@@ -212,7 +212,7 @@ def test_the_store_on_each_database(store_url: str, tmp_path: Path) -> None:
 
 def test_a_machine_recalibrated_from_the_offsets_it_was_left_with(tmp_path: Path,
                                                                    capsys) -> None:
-    """The issue's case: one machine calibrated twice into one --out, its x joint
+    """The case history is for: one machine calibrated twice into one --out, its x joint
     drifted 10 µm between the runs, the second run starting from the offsets the first
     left in the drive (the virtual drive's memory set to them)."""
     out = tmp_path / "runs"

@@ -38,7 +38,7 @@ def measured(true: np.ndarray, mount_error: dict[str, float]) -> dict:
 
 
 def test_misplaced_stands_bias_one_round_and_a_second_removes_it() -> None:
-    # The issue's figure: offsets 2-3 mm, stands 8 mm off the legs' middles.
+    # What the closed loop is for: offsets 2-3 mm, stands 8 mm off the legs' middles.
     true = np.array([2.4, -2.9, 2.1, 0.0, 0.0, 0.0])
     mounts = {"x": 8.0, "y": 8.0, "z": 8.0}
     left = true.copy()

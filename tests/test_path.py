@@ -93,8 +93,8 @@ def planned_moves(plan_json: dict, setup: int) -> list[list[np.ndarray]]:
     return moves
 
 
-def test_issue_figure_independent_axes_keep_plungers_in_stroke() -> None:
-    # The issue's figure: an independent controller, standard 12.5 mm gauges
+def test_independent_axes_keep_plungers_in_stroke() -> None:
+    # The case the plan must survive: an independent controller, standard 12.5 mm gauges
     # preloaded by half. A single COMMAND 1 from Π_x^+ to Π_x^− swings the gauges of
     # leg x by ~8.8 mm (the short axes arrive long before x): past the 6.25 mm of
     # preload, the leg leaves the plunger. The plan must route the move so that,

@@ -21,9 +21,9 @@ from station.report import form
 TILT = (0.2, 0.1, -0.15)
 BOW = 0.008
 # One round, no verification: what the identification states is under test here.
-# Six cycles of five readings: a bow's standard error is then about 0.7 µm, so the
-# issue's 3 µm is a test that fails for a wrong bow, not for an unlucky draw (at
-# the default three cycles it is ~1 µm; bench/second_plane.py runs the default).
+# Six cycles of five readings: a bow's standard error is then about 0.7 µm, so asking
+# each bow within 3 µm is a test that fails for a wrong bow, not for an unlucky draw
+# (at the default three cycles it is ~1 µm; bench/second_plane.py runs the default).
 PROCEDURE = {**FAST, "cycles": 6, "readings": 5, "model": "auto", "max_iterations": 1,
              "verify": False}
 

@@ -211,6 +211,34 @@ def test_measured_noise_and_lack_of_fit_with_stands():
     assert lack_of_fit(plain, G, sigma, dof).F > test.F
 
 
+def test_the_stated_standard_errors_are_the_spread_of_the_estimates():
+    """What the station states by default (station.engine.identify: the stands modelled
+    within ±5 mm, the standard errors from the noise the run measured) against the
+    truth over 100 seeded runs: Δρ uniform in ±2 mm, each stand uniform within ±5 mm
+    as the prior says, 1 µm gauges, three cycles of five readings. RMS(error) over
+    RMS(stated standard error) must be 1 from both sides: a statement too small
+    fails, and so does one inflated to be safe, which tests/truth.py cannot see in a
+    single run."""
+    rng = np.random.default_rng(29)
+    tolerance, names = 5.0, ("drho_x", "drho_y", "drho_z")
+    err, se = [], []
+    for _ in range(100):
+        truth = np.r_[rng.uniform(-2, 2, 3), np.zeros(6)]
+        data = station_run(truth, rng.uniform(-tolerance, tolerance, 6), rng, noise=0.001)
+        sigma, dof = noise_from_cycles(data)
+        r = with_measured_noise(identify(data, G, "rho", sigma=sigma,
+                                         stands=Stands(tolerance=tolerance)),
+                                G, sigma, noise_dof=dof)
+        err.append([r.parameters[n] - t for n, t in zip(names, truth[:3], strict=True)])
+        se.append([r.std_errors[n] for n in names])
+    honesty = np.sqrt(np.mean(np.square(err)) / np.mean(np.square(se)))
+    # 300 values: an honest ratio is sqrt(χ²₃₀₀/300), within [0.87, 1.15] with
+    # probability 0.9992 (16 other seeds of this test: 1.015 ± 0.041, as χ² says). A
+    # statement inflated by 25 % (0.8) passes with probability 0.016, one 20 % too
+    # small (1.25) with 0.025.
+    assert 0.87 <= honesty <= 1.15
+
+
 def test_stands_shared_by_the_gauges_of_a_leg():
     groups = {("x", "y"): "stand_x", ("x", "z"): "stand_x"}
     option = Stands(tolerance=5.0, groups=groups)

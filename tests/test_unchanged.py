@@ -1,7 +1,10 @@
-"""Behaviour unchanged by the restructure of the house: a seeded
-simulated run (noise 0, so every reading is deterministic) gives the same
-result.json, the same journal and the same report.html as the code gave before
-station/ moved into its rooms (tests/data/golden_run/, made by that code).
+"""Behaviour unchanged unless changed on purpose: a seeded simulated run (noise 0,
+so every reading is deterministic) gives the same result.json, journal, report.html
+and plan.txt as the golden files in tests/data/golden_run/. Those are that same run's
+files with what cannot repeat taken out (below), written by ``python
+tests/make_golden.py`` with this module's :func:`seeded_run` and normalisations, and
+by nothing else: they are made again only when a change of the result, the journal,
+the report or the plan is intended, and the diff of the files is the review of it.
 
 "The same" on any machine: floats within close.py's tolerance (relative 1e-6,
 absolute 1e-7, far below any figure printed, far above what another CPU's SIMD

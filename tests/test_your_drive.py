@@ -30,8 +30,8 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "maps"
 GATEWAY = EXAMPLES / "gateway-3x1.toml"
 GATEWAY_NO_OFFSETS = EXAMPLES / "gateway-3x1-no-offsets.toml"
 TRUE = (0.8, -1.2, 0.5)
-# What the issue asks of an unseen layout: the offsets the run leaves within 3 µm of
-# the truth (o = −Δρ from a start at zero).
+# The requirement on a layout the project has never seen: the offsets the run leaves
+# within 3 µm of the truth (o = −Δρ from a start at zero).
 WITHIN_MM = 0.003
 PROCEDURE = {**FAST, "model": "rho", "max_extra_passes": 2}
 
@@ -63,20 +63,22 @@ def final_offsets(result: dict[str, Any], station: VirtualStation) -> np.ndarray
 @pytest.mark.parametrize("name", sorted(builtin_maps()))
 def test_every_builtin_map_runs_a_whole_calibration(name: str, tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    result, stations = calibrate(tmp_path, capsys, name)
+    # Without the plunger guard, whose polls during the moves draw the gauges' noise as
+    # often as the machine's load allows (test_any_timing.py and test_guard.py test it),
+    # each map's run reads the same draws every time: every map converges at this seed.
+    result, stations = calibrate(tmp_path, capsys, name,
+                                 procedure={**PROCEDURE, "plunger_guard": False})
     (station,) = stations
     assert station.controller.map == builtin_maps()[name]  # the drive served that map
     assert result["status"] == "ok" and station.out_of_stroke_count == 0
     held = not builtin_maps()[name].has_role("OFFSET")
     assert result["offsets_held_by"] == ("station" if held else "controller")
     assert_truth(result, drho(TRUE))
-    # a drive counting 0.01 mm (IAI) holds its targets, and so the offsets, to ±5 µm;
-    # where the loop could not show that (it stopped not converged, saying why), the
-    # statement above is what the run promises
+    assert result["converged"] is True, result["message"]
+    # a drive counting 0.01 mm (IAI) holds its targets, and so the offsets, to ±5 µm
     count = 1.0 / builtin_maps()[name]["TARGET_X"].scale
-    if result["converged"]:
-        np.testing.assert_allclose(final_offsets(result, station), -np.array(TRUE),
-                                   atol=WITHIN_MM + count / 2)
+    np.testing.assert_allclose(final_offsets(result, station), -np.array(TRUE),
+                               atol=WITHIN_MM + count / 2)
     # a drive holding no offsets was still moved by them: the carriages at Π0 + o
     if held:
         assert np.all(station.machine.offsets == 0)
