@@ -3,14 +3,17 @@ linearised model (no station, no devices): the report tests' input."""
 
 from __future__ import annotations
 
+import json
 import math
 import random
+from pathlib import Path
 
 import numpy as np
 
 from station import report
 from station.record.result import SCHEMA_VERSION
 
+GOLDEN = Path(__file__).parent / "data" / "golden_run"
 L, RHO_MIN, RHO_MAX = 310.25, -100.0, 60.0
 AXES = "xyz"
 PAPER_BEFORE = dict(zip(
@@ -146,4 +149,15 @@ def make_result(
             "expected_rms_mm": 0.0, "vs_expected_rms_mm": vfit["rms"], "noise_floor_mm": noise,
             "deviations": vdevs, "setups": result["setups"],
         }
+    return result
+
+
+def golden_result() -> dict:
+    """The golden run's result.json (tests/data/golden_run) as a record the report
+    takes: what tests/test_unchanged.py took out as unrepeatable (the run directory,
+    the times, the wall and operator time) put back, fixed."""
+    result = json.loads((GOLDEN / "result.json").read_text(encoding="utf-8"))
+    result.update(run_dir="RUN_DIR", started="2024-05-02T10:15:00+02:00",
+                  finished="2024-05-02T10:21:42+02:00", duration_s=402.3)
+    result["timing"].update(wall_s=402.3, operator_s=60.0)
     return result

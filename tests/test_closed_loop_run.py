@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 from builders import FAST, resumed, simulated
 from fakes import FakeRig, fake_config, run_on
+from result_builders import make_result
 from truth import assert_truth, drho
 
 from station import report
@@ -193,20 +194,28 @@ def test_without_verification_nothing_is_claimed_about_what_is_left(tmp_path: Pa
 
 
 def test_report_says_why_the_loop_did_not_go_on() -> None:
-    it = {"phase": "m", "identified": {"drho_x": 0.5}, "std_errors": {"drho_x": 0.001},
+    it = {"phase": "m", "model": "rho", "identified": {"drho_x": 0.5},
+          "std_errors": {"drho_x": 0.001}, "std_errors_dof": None,
           "deviations_rms_mm": 0.2, "residual_rms_mm": 0.001, "noise_floor_mm": 0.001,
-          "significant": ["drho_x"], "offsets_written": {"x": -0.5}, "writeback": "written"}
+          "fit_ok": True, "significant": ["drho_x"], "shown_within_95_mm": None,
+          "verdict": None, "offsets_written": {"x": -0.5}, "writeback": "written"}
     second = {**it, "phase": "v", "identified": {"drho_x": 0.02}, "offsets_written": None,
               "writeback": "declined"}
-    declined = {"status": "ok", "iterations": [it, second], "converged": False,
-                "loop": {"stopped": "declined", "detail": "declined by the operator",
-                         "max_iterations": 3, "converge_mm": 0.002}}
+
+    def loop(stopped: str, detail: str | None) -> dict[str, Any]:
+        return {"stopped": stopped, "detail": detail, "write_backs": 1, "max_iterations": 3,
+                "converge_mm": 0.002, "converged_within_mm": None, "extra_passes": 0,
+                "max_extra_passes": 0}
+
+    # a run's record (result_builders) with these rounds
+    declined = {**make_result(), "iterations": [it, second], "converged": False,
+                "loop": loop("declined", "declined by the operator")}
     text = report.summary_text(declined)
     assert "NOT CONVERGED" in text and "the operator declined a correction" in text
     html = report.render_html(declined)
     assert "did not converge" in html and "declined by the operator" in html
-    off = {"status": "ok", "iterations": [it], "converged": False,
-           "loop": {"stopped": "not-verified"}}
+    off = {**make_result(), "iterations": [it], "converged": False,
+           "loop": loop("not-verified", None)}
     assert "closed loop   off: verification is off" in report.summary_text(off)
     assert "NOT CONVERGED" not in report.summary_text(off)
 

@@ -228,11 +228,13 @@ def test_html_survives_nan_and_missing_fields() -> None:
     result = make_result()
     result["std_errors"]["drho_y"] = float("nan")
     result["deviations"]["+yx"]["std"] = None
-    del result["correlation"], result["timing"], result["machine"]
+    # what the record lets be missing: the correlation, the mountings' count and time
+    del result["correlation"]
+    result["timing"].update(mountings=None, operator_s=None)
     page = report.render_html(result)
     assert "nan" not in page.lower().replace("nanometre", "")
     assert page.count("<svg") == 2
-    assert report.render_html({"status": "aborted"}).count("Aborted") >= 1
+    assert report.render_html({**failed_result(), "status": "aborted"}).count("Aborted") >= 1
 
 
 # ------------------------------------------------------------------ summary

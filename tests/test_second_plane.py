@@ -144,12 +144,18 @@ def test_the_form_a_single_plane_cannot_see_is_carried_into_the_tilts():
 
 def test_the_summary_writes_signs_as_the_rest_of_it_does():
     """The gaps' and bows' lines use the typographic minus, as the statement does."""
-    from station.report import form, gaps
+    import json
+    from pathlib import Path
 
-    result = {"accuracy": {"gaps": {"gap_xy": -0.0012, "gap_xz": 0.0004},
-                           "gap_interval_95": {"gap_xy": [-0.004, 0.0016]}},
-              "identified": {"bow_xy": -0.0031}, "std_errors": {"bow_xy": 0.0007}}
-    (gap_line,) = gaps.summary_lines(result)
+    from station.report import as_result, form, gaps
+
+    # a run's record (a tilted machine's) with these gaps and this bow stated
+    doc = json.loads((Path(__file__).parent / "data" / "result_tilted_joints.json").read_text())
+    doc["accuracy"].update(gaps={"gap_xy": -0.0012, "gap_xz": 0.0004},
+                           gap_interval_95={"gap_xy": [-0.004, 0.0016]})
+    doc["identified"]["bow_xy"], doc["std_errors"]["bow_xy"] = -0.0031, 0.0007
+    result = as_result(doc)
+    (gap_line,) = gaps.summary_lines(result.accuracy)
     assert "XY −1 ± 3, XZ +0" in gap_line and "-" not in gap_line.split("µm")[0]
     (bow_line,) = form.summary_lines(result)
     assert "XY −3.1 ± 0.7 µm" in bow_line

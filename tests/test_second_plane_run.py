@@ -16,7 +16,7 @@ from builders import FAST, simulated
 from orthocal import BOW_NAMES, TILT_NAMES
 from station.commands import run as cmd_run
 from station.errors import BadInput
-from station.report import form
+from station.report import as_result, form
 
 TILT = (0.2, 0.1, -0.15)
 BOW = 0.008
@@ -62,7 +62,7 @@ def test_a_second_plane_tells_the_bow_from_the_tilts(tmp_path: Path,
     assert [r.get("at", 0.5) for r in setups] == [0.5] * 3 + [0.75] * 3
     assert any(k.startswith("+@0.75") for k in result["deviations"])
     # the summary and the report state the bows, and name the plane of each deviation
-    (line,) = form.summary_lines(result)
+    (line,) = form.summary_lines(as_result(result))
     assert line.startswith("  legs' bows    XY +") and "nothing to write" in line
     page = (Path(result["run_dir"]) / "report.html").read_text()
     assert "The legs' form" in page and "at 0.75 of the leg" in page

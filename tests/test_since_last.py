@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from builders import simulated
+from result_builders import make_result
 from test_history import TRUE, _with
 
 from station import report
@@ -45,9 +46,10 @@ def test_the_last_earlier_run_of_the_machine_is_the_one_compared() -> None:
     assert since_last(earlier[4:], now) is None  # only its own earlier row
     moved = since_last(earlier[:2], {**now, "geometry": {"leg_length": 300.0}})
     assert moved is not None and "different geometry" in moved["not_compared"]
-    text = report.summary_text({"since_last": moved})
+    compared = {**make_result(), "since_last": moved}  # a run's record with it
+    text = report.summary_text(compared)
     assert "not compared with /runs/feb: different geometry" in text
-    assert "Not compared" in report.render_html({"since_last": moved})
+    assert "Not compared" in report.render_html(compared)
 
 
 def test_an_earlier_entry_it_cannot_read_never_fails_the_run(tmp_path: Path,

@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from result_builders import make_result
+from pydantic import ValidationError
+from result_builders import golden_result, make_result
 
 from station import report
 from station.report import tool
@@ -107,6 +108,11 @@ def synthetic_accuracy(*, tilted: bool = True, objective: str = "joints") -> dic
         "tilts": {"tilt_yx": sq["xy"], "tilt_zx": sq["xz"], "tilt_zy": sq["yz"]},
         "tilt_std_errors": {"tilt_yx": 0.01, "tilt_zx": 0.01, "tilt_zy": 0.01},
         "tilt_interval_95": None,
+        # stated by the engine, none here: no best offsets, no decision, no gaps, not
+        # in the controller
+        "best_offsets_can_do": None, "squareness_decision": None, "gaps": None,
+        "gap_std_errors": None, "gap_interval_95": None, "gap_advice": None,
+        "compensated": None,
         "field": {"points_mm": points, "before_mm": before, "after_mm": after},
         "assumes": ["ΔL = 0 (leg lengths nominal; not identifiable beside the tilts)",
                     "frame 'translation': the tool offset is set by touching off"],
@@ -390,41 +396,57 @@ def test_offsets_not_written_say_the_after_figures_are_what_writing_would_give()
     assert "objective joints (the paper's Δρ: legs parallel) NOT written" in at
 
 
+@pytest.mark.parametrize("damage", ["bad-field", "no-tilts", "nan"])
+def test_odd_accuracy_blocks_never_raise(damage: str) -> None:
+    """Blocks the record admits but the report cannot use all of: a field of no
+    usable shape, no tilts, a squareness that was not finite (written as null)."""
+    result = synthetic()
+    acc = result["accuracy"]
+    if damage == "bad-field":
+        acc["field"] = {"points_mm": [[1, 2]], "before_mm": [[0.0]], "after_mm": []}
+    elif damage == "no-tilts":
+        acc.update(tilts=None, tilt_std_errors=None, squareness_std_errors={},
+                   squareness_advice=["the tilts were not identified: squareness not stated"])
+    elif damage == "nan":
+        acc["squareness_mm_per_m"]["xy"] = float("inf")
+    page = report.render_html(result)
+    text = report.summary_text(result)
+    assert page.rstrip().endswith("</html>") and "nan" not in text.lower()
+    if damage == "bad-field":
+        assert section(page).count("<svg") == 0 and page.count("<svg") == 2
+    if damage == "no-tilts":
+        assert "Squareness is not stated" in page and "squareness    not stated" in text
+        assert "is most of it" not in page
+    if damage == "nan":
+        assert "XY" not in next(ln for ln in text.splitlines() if "squareness" in ln)
+
+
 @pytest.mark.parametrize("damage", [
-    "no-field", "bad-field", "no-tilts", "no-intervals", "no-objectives", "nan", "not-a-dict",
-    "empty",
+    "no-field", "bad-field", "no-intervals", "no-objectives", "nan", "not-a-dict", "empty",
 ])
-def test_broken_accuracy_blocks_never_raise(damage: str) -> None:
+def test_broken_accuracy_blocks_are_refused_before_a_line_is_drawn(damage: str) -> None:
+    """A block that is not the record's (station.record.result_accuracy) is the
+    engine's bug or a damaged file: the report's boundary refuses the document."""
     result = synthetic()
     acc = result["accuracy"]
     if damage == "no-field":
         del acc["field"]
     elif damage == "bad-field":
         acc["field"] = {"points_mm": [[1, 2]], "before_mm": "x", "after_mm": None}
-    elif damage == "no-tilts":
-        acc.update(tilts=None, tilt_std_errors=None, squareness_std_errors={},
-                   squareness_advice=["the tilts were not identified: squareness not stated"])
     elif damage == "no-intervals":
         acc["after"] = {"rms_mm": 0.0123}
     elif damage == "no-objectives":
         del acc["objectives"], acc["alternative"]
     elif damage == "nan":
-        acc["after"]["rms_mm"] = float("nan")
-        acc["squareness_mm_per_m"]["xy"] = float("inf")
+        acc["after"]["rms_mm"] = float("nan")  # null where a figure is required
     elif damage == "not-a-dict":
         result["accuracy"] = ["what"]
     elif damage == "empty":
         result["accuracy"] = {}
-    page = report.render_html(result)
-    text = report.summary_text(result)
-    assert page.rstrip().endswith("</html>") and "nan" not in text.lower()
-    if damage in ("no-field", "bad-field"):
-        assert section(page).count("<svg") == 0 and page.count("<svg") == 2
-    if damage == "no-tilts":
-        assert "Squareness is not stated" in page and "squareness    not stated" in text
-        assert "is most of it" not in page
-    if damage in ("not-a-dict", "empty"):
-        assert "commanded points land" not in page and "not stated" in text
+    with pytest.raises(ValidationError):
+        report.render_html(result)
+    with pytest.raises(ValidationError):
+        report.summary_text(result)
 
 
 def test_old_and_failed_results_have_no_false_statement() -> None:
@@ -432,27 +454,31 @@ def test_old_and_failed_results_have_no_false_statement() -> None:
     page = report.render_html(old)
     assert "commanded points land" not in page and "Where the stands were" not in page
     assert "not stated" in section(page) and page.count("<svg") == 2
-    aborted = report.render_html({"status": "aborted"})
-    assert "Accuracy at the tool" not in aborted
+    aborted = make_result(verify=False)
+    aborted.update(status="aborted", identified={}, std_errors={}, offsets_written=None,
+                   writeback=None)
+    assert "Accuracy at the tool" not in report.render_html(aborted)
     failed = make_result()
-    failed.update(status="failed", identified=None, accuracy=None)
+    failed.update(status="failed", identified={}, accuracy=None)  # as base_result has it
     assert "Accuracy at the tool" not in report.render_html(failed)
     assert "at the tool" not in report.summary_text(failed)
 
 
 def test_tool_helpers_read_a_missing_block_as_not_stated() -> None:
-    assert tool.statement({}) == (None, None)
-    assert tool.statement({"accuracy": {"error": "not stated: x"}}) == (None, "x")
-    assert tool.tool_clause({}) is None and tool.summary_lines({}) == []
-    assert tool.html_section({}) == "" and tool.stands_html({"stands": None}) == ""
+    bare = report.as_result(make_result())  # no accuracy block, no stands
+    assert tool.statement(bare) == (None, None)
+    failed = report.as_result({**make_result(), "accuracy": {"error": "not stated: x"}})
+    assert tool.statement(failed) == (None, "x")
+    assert tool.tool_clause(bare) is None and tool.summary_lines(bare) == []
+    no_drho = report.as_result(make_result(model="L"))  # nothing to state it of
+    assert tool.html_section(no_drho) == "" and tool.stands_html(bare) == ""
 
 
 def test_a_verification_s_correction_is_the_one_its_verdict_and_write_rest_on() -> None:
     # A verification's own Δρ̂ is one look; what the loop judges and writes after it
     # is that look joined with the rounds before (iterations[n].joined). The report's
     # "correction max" is the joined one, so it matches the offsets written next.
-    golden = Path(__file__).parent / "data" / "golden_run" / "result.json"
-    result = json.loads(golden.read_text(encoding="utf-8"))
+    result = golden_result()
     it = result["iterations"][1]
     joined = max(abs(it["joined"]["drho_mm"][f"drho_{a}"]) for a in "xyz")
     own = max(abs(it["identified"][f"drho_{a}"]) for a in "xyz")

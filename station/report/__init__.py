@@ -1,19 +1,26 @@
 """The run report: result.json, a self-contained report.html and the short summary.
 
-The input is the run's result document (station.engine.results). Every section may
-be missing (a run that failed halfway, no verification, write-back refused), so
-everything reads with ``.get`` and shows "—" rather than raising: a report
-that crashes on the failed run is the one report the operator needed most.
+The input is the run's record, station.record.result.RunResult: each public entry
+point (summary_text, render_html, write_html, write_result, jsonable, not_converged)
+also takes a mapping (the engine's result as it builds it, a result.json of any
+version) and makes it the record once, in boundary.as_result; everything behind
+reads the typed record. Its sections may be absent (a run that failed halfway, no
+verification, write-back refused): a section that is absent is not said, a figure
+that is not stated shows "—", and nothing raises on a record that validated: a
+report that crashes on the failed run is the one report the operator needed most.
 
-Split by job: io.py (result.json), format.py (names and formatting), text.py (the
-text summary), tool.py (accuracy at the tool: the headline's clause, the summary's
-lines, the page's section, where the stands were), rounds.py (the closed loop's
-rounds), since.py (what changed since the machine's last run), plots.py (figures),
-html.py (the page). The report reads the result document only, never the engine.
+Split by job: boundary.py (the record from what the caller hands in), io.py
+(result.json), format.py (names and formatting), text.py (the text summary),
+tool.py (accuracy at the tool: the headline's clause, the summary's lines, the
+page's section, where the stands were), rounds.py (the closed loop's rounds),
+since.py (what changed since the machine's last run), plots.py (figures),
+tables.py (the measurement's tables), html.py (the page). The report reads the
+record only, never the engine.
 """
 
 from __future__ import annotations
 
+from station.report.boundary import ResultLike, as_result
 from station.report.format import (
     AXES,
     DEVIATION_KEYS,
@@ -32,6 +39,8 @@ __all__ = [
     "DEVIATION_KEYS",
     "PARAM_NAMES",
     "STATUS_TEXT",
+    "ResultLike",
+    "as_result",
     "fmt",
     "jsonable",
     "jsonable_value",

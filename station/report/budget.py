@@ -6,123 +6,127 @@ assumed, and a certificate block."""
 from __future__ import annotations
 
 import html
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Callable
 
-from station.report.format import as_dict, fmt, num
+from station.record.result import RunResult
+from station.record.result_base import NotStated
+from station.record.result_sections import BudgetSource, UncertaintyBudget
+from station.report.format import at, fmt, num
 
 NAMES = ("drho_x", "drho_y", "drho_z")
 
 
-def _um(v: Any) -> str:
+def _um(v: float | None) -> str:
     x = num(v)
     return "—" if x is None else f"{1000 * x:.1f}"
 
 
-def _largest(source: Mapping[str, Any]) -> tuple[float, str]:
+def _top(source: BudgetSource) -> float:
+    """The source's largest contribution to a Δρ, mm."""
+    return max((num(v) or 0.0 for v in source.contributions_mm.values()), default=0.0)
+
+
+def _largest(source: BudgetSource) -> tuple[float, str]:
     """Sort key: the source's largest contribution first (to a nanometre), then name."""
-    top = max((num(v) or 0.0 for v in as_dict(source.get("contributions_mm")).values()),
-              default=0.0)
-    return -round(1e6 * top), str(source.get("source"))
+    return -round(1e6 * _top(source)), source.source
 
 
-def _statement(result: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, float | None]:
-    where = str(b.get("statement", "identified"))
-    if where == "remaining.total":
-        return dict(as_dict(as_dict(result.get("remaining")).get("total")))
-    return dict(as_dict(result.get("identified")))
+def _statement(result: RunResult, b: UncertaintyBudget) -> dict[str, float | None]:
+    """The figures the budget is of: remaining.total, or the identified Δρ."""
+    if b.statement == "remaining.total":
+        return dict(result.remaining.total) if result.remaining is not None else {}
+    return dict(result.identified)
 
 
-def summary_lines(result: Mapping[str, Any]) -> list[str]:
-    b = as_dict(result.get("uncertainty_budget"))
-    if not b or "expanded_95_mm" not in b:
-        return [f"  uncertainty   {b['error']}"] if b.get("error") else []
+def summary_lines(result: RunResult) -> list[str]:
+    b = result.uncertainty_budget
+    if isinstance(b, NotStated):
+        return [f"  uncertainty   {b.error}"] if b.error else []
+    if b is None:
+        return []
     values = _statement(result, b)
-    k = as_dict(b.get("coverage_factor"))
     line = "  statement     " + "   ".join(
-        f"Δρ{n[-1]} = {fmt(values.get(n), signed=True)} ± {_um(b['expanded_95_mm'].get(n))} µm"
-        for n in NAMES if n in b["expanded_95_mm"])
-    kk = [num(v) for v in k.values() if num(v) is not None]
+        f"Δρ{n[-1]} = {fmt(at(values, n), signed=True)} ± {_um(at(b.expanded_95_mm, n))} µm"
+        for n in NAMES if n in b.expanded_95_mm)
+    kk = [x for x in map(num, b.coverage_factor.values()) if x is not None]
     line += (f" (95 %, k = {min(kk):.2f}–{max(kk):.2f}: the scatter and the uncertainty "
              "budget, GUM)" if kk else "")
-    srcs = [s for s in b.get("sources") or [] if isinstance(s, dict)]
-    top = sorted(srcs, key=_largest)[:3]
+    top = sorted(b.sources, key=_largest)[:3]
     lines = [line, "  budget        largest: " + ", ".join(
-        f"{s['source']} {_um(max(num(v) or 0.0 for v in s['contributions_mm'].values()))} µm"
-        for s in top)]
-    if b.get("assumed"):
-        lines.append(f"  assumed       {len(b['assumed'])} input(s) at their defaults "
+        f"{s.source} {_um(_top(s))} µm" for s in top)]
+    if b.assumed:
+        lines.append(f"  assumed       {len(b.assumed)} input(s) at their defaults "
                      "(report.html, Uncertainty budget): " + "; ".join(
-                         str(a).split(" (")[0] for a in b["assumed"]))
+                         a.split(" (")[0] for a in b.assumed))
     return lines
 
 
-def section_html(result: Mapping[str, Any]) -> str:
-    b = as_dict(result.get("uncertainty_budget"))
-    if not b:
+def section_html(result: RunResult) -> str:
+    b = result.uncertainty_budget
+    if b is None:
         return ""
-    if "expanded_95_mm" not in b:
-        return f"<h2>Uncertainty budget</h2><p>{html.escape(str(b.get('error', '')))}</p>"
-    names = [n for n in NAMES if n in b["expanded_95_mm"]]
-    srcs = [s for s in b.get("sources") or [] if isinstance(s, dict)]
-    srcs.sort(key=_largest)
+    if isinstance(b, NotStated):
+        return f"<h2>Uncertainty budget</h2><p>{html.escape(b.error)}</p>"
+    names = [n for n in NAMES if n in b.expanded_95_mm]
     head = "".join(f"<th>u(Δρ<sub>{n[-1]}</sub>) µm</th>" for n in names)
     rows = []
-    for s in srcs:
-        c = as_dict(s.get("contributions_mm"))
-        value = "—" if s.get("value_mm") is None else f"{_um(s['value_mm'])} µm"
-        rows.append(f"<tr><td>{html.escape(str(s['source']))}</td><td>{s.get('type')}</td>"
-                    f"<td>{html.escape(str(s.get('distribution')))}</td><td>{value}</td>"
-                    + "".join(f"<td class='num'>{_um(c.get(n))}</td>" for n in names) + "</tr>")
-    total = lambda key: "".join(  # noqa: E731
-        f"<td class='num'>{v}</td>" for v in (
-            _um(b[key].get(n)) if key != "coverage_factor" else fmt(b[key].get(n), 2)
-            for n in names))
-    nus = [b["effective_dof"].get(n) for n in names]
-    dof = "".join(f"<td class='num'>{'∞' if v is None else fmt(v, 1)}</td>" for v in nus)
+    for s in sorted(b.sources, key=_largest):
+        value = "—" if s.value_mm is None else f"{_um(s.value_mm)} µm"
+        rows.append(f"<tr><td>{html.escape(s.source)}</td><td>{s.type}</td>"
+                    f"<td>{html.escape(s.distribution)}</td><td>{value}</td>"
+                    + "".join(f"<td class='num'>{_um(at(s.contributions_mm, n))}</td>"
+                              for n in names) + "</tr>")
+    dof = "".join(f"<td class='num'>{'∞' if v is None else fmt(v, 1)}</td>"
+                  for v in (at(b.effective_dof, n) for n in names))
     table = (f"<table><tr><th>source</th><th>type</th><th>distribution</th><th>value</th>"
              f"{head}</tr>{''.join(rows)}"
              f"<tr><th colspan='4'>combined standard uncertainty u<sub>c</sub></th>"
-             f"{total('combined_mm')}</tr>"
+             f"{_cells(b.combined_mm, names, _um)}</tr>"
              f"<tr><th colspan='4'>effective degrees of freedom</th>{dof}</tr>"
-             f"<tr><th colspan='4'>coverage factor k (95 %)</th>{total('coverage_factor')}</tr>"
+             f"<tr><th colspan='4'>coverage factor k (95 %)</th>"
+             f"{_cells(b.coverage_factor, names, lambda v: fmt(v, 2))}</tr>"
              f"<tr><th colspan='4'>expanded uncertainty U = k·u<sub>c</sub></th>"
-             f"{total('expanded_95_mm')}</tr></table>")
-    assumed = "".join(f"<li>{html.escape(str(a))}</li>" for a in b.get("assumed") or [])
-    return (f"<h2>Uncertainty budget</h2><p>{html.escape(str(b.get('method', '')))}. It "
-            f"states {html.escape(str(b.get('statement')))}.</p>{table}"
+             f"{_cells(b.expanded_95_mm, names, _um)}</tr></table>")
+    assumed = "".join(f"<li>{html.escape(a)}</li>" for a in b.assumed)
+    return (f"<h2>Uncertainty budget</h2><p>{html.escape(b.method)}. It "
+            f"states {html.escape(b.statement)}.</p>{table}"
             + (f"<p>Assumed (not given in the config):</p><ul>{assumed}</ul>" if assumed
                else "") + _certificate(result, b, names))
 
 
-def _certificate(result: Mapping[str, Any], b: Mapping[str, Any], names: list[str]) -> str:
-    m = as_dict(result.get("machine"))
+def _cells(values: dict[str, float | None], names: list[str],
+           show: Callable[[float | None], str]) -> str:
+    """A table row's figures, one per Δρ of ``names``."""
+    return "".join(f"<td class='num'>{show(at(values, n))}</td>" for n in names)
+
+
+def _certificate(result: RunResult, b: UncertaintyBudget, names: list[str]) -> str:
+    m = result.machine
     values = _statement(result, b)
     inst = "".join(
-        f"<li>{html.escape(str(i.get('name')))}: {html.escape(str(i.get('protocol')))} dial "
+        f"<li>{html.escape(i.name)}: {html.escape(i.protocol)} dial "
         f"indicator, serial "
-        f"{html.escape(str(i.get('serial') or 'not given'))}, resolution "
-        f"{_um(i.get('resolution_mm'))} µm, MPE {_um(i.get('mpe_mm'))} µm</li>"
-        for i in b.get("instruments") or [] if isinstance(i, dict))
-    inputs = as_dict(b.get("inputs"))
-    env = as_dict(inputs.get("temperature_change_c"))
+        f"{html.escape(i.serial or 'not given')}, resolution "
+        f"{_um(i.resolution_mm)} µm, MPE {_um(i.mpe_mm)} µm</li>"
+        for i in b.instruments)
+    env = b.inputs.temperature_change_c
     stmt = "; ".join(
-        f"Δρ<sub>{n[-1]}</sub> = {fmt(values.get(n), signed=True)} mm ± "
-        f"{_um(b['expanded_95_mm'].get(n))} µm" for n in names)
-    sim = " (simulated machine)" if result.get("simulated") else ""
+        f"Δρ<sub>{n[-1]}</sub> = {fmt(at(values, n), signed=True)} mm ± "
+        f"{_um(at(b.expanded_95_mm, n))} µm" for n in names)
+    sim = " (simulated machine)" if result.simulated else ""
     return (
         "<h3>Certificate</h3><table class='cert'>"
-        f"<tr><th>machine</th><td>Orthoglide-type, leg length {fmt(m.get('leg_length'))} mm, "
-        f"joints {fmt(m.get('rho_min'))} … {fmt(m.get('rho_max'))} mm{sim}</td></tr>"
+        f"<tr><th>machine</th><td>Orthoglide-type, leg length {fmt(m.leg_length)} mm, "
+        f"joints {fmt(m.rho_min)} … {fmt(m.rho_max)} mm{sim}</td></tr>"
         f"<tr><th>instruments</th><td><ul>{inst}</ul></td></tr>"
         f"<tr><th>environment</th><td>temperature change during the run ≤ "
-        f"{fmt(env.get('value'))} K ({'stated' if env.get('given') else 'assumed'})</td></tr>"
-        f"<tr><th>date</th><td>{html.escape(str(result.get('started') or '—'))}</td></tr>"
+        f"{fmt(env.value)} K ({'stated' if env.given else 'assumed'})</td></tr>"
+        f"<tr><th>date</th><td>{html.escape(result.started or '—')}</td></tr>"
         "<tr><th>operator</th><td>not recorded by the station</td></tr>"
         "<tr><th>method</th><td>joint offsets from the legs' parallelism at the test "
         "postures Π0, Π<sub>i</sub><sup>±</sup> (Orthoglide calibration, dial indicators), "
         "closed loop; uncertainty after GUM (JCGM 100:2008)</td></tr>"
         f"<tr><th>statement</th><td>{stmt} (95 %; the machine's joint offsets at the start "
         "of the run as the run measured them)</td></tr>"
-        f"<tr><th>assumed</th><td>{len(b.get('assumed') or [])} input(s) at their defaults "
+        f"<tr><th>assumed</th><td>{len(b.assumed)} input(s) at their defaults "
         "(above)</td></tr></table>")

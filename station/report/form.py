@@ -2,31 +2,28 @@
 where a second gauge plane let the fit take each gauge plane's bow (``bow_xy`` …
 ``bow_zy`` in ``identified``), the summary's line and report.html's table beside
 the gaps, each with its standard error. Every field may be missing (a run with one
-gauge plane, a result from before the bows): then nothing is said, never raised."""
+gauge plane, a result from before the bows): then nothing is said."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
-from station.report.format import as_dict, num, param_html
+from station.record.result import RunResult
+from station.report.format import at, param_html
 
 #: FIT_NAMES' bows, spelled out: the report is read without the maths loaded.
 BOWS = ("bow_xy", "bow_xz", "bow_yx", "bow_yz", "bow_zx", "bow_zy")
 
 
-def _rows(result: Mapping[str, Any]) -> list[tuple[str, float, float | None]]:
+def _rows(result: RunResult) -> list[tuple[str, float, float | None]]:
     """(name, sagitta mm, its standard error) of every bow the result states."""
-    ident, se = as_dict(result.get("identified")), as_dict(result.get("std_errors"))
     out = []
     for name in BOWS:
-        v = num(ident.get(name))
+        v = at(result.identified, name)
         if v is not None:
-            out.append((name, v, num(se.get(name))))
+            out.append((name, v, at(result.std_errors, name)))
     return out
 
 
-def summary_lines(result: Mapping[str, Any]) -> list[str]:
+def summary_lines(result: RunResult) -> list[str]:
     """The summary's "legs' bows" line (µm, ± one standard error)."""
     rows = _rows(result)
     if not rows:
@@ -38,7 +35,7 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
             "nothing to write)"]
 
 
-def html_section(result: Mapping[str, Any]) -> str:
+def html_section(result: RunResult) -> str:
     """report.html's "The legs' form" table; empty without bows."""
     rows = _rows(result)
     if not rows:

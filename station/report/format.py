@@ -1,7 +1,7 @@
 """The report's vocabulary: parameter and deviation names in text, HTML and TeX,
-number, time and duration formatting, and the tolerant readers of a result
-(every section may be missing: a run that failed halfway), shared by the text
-summary, the plots and the page.
+number, time and duration formatting, and the readers of the record shared by the
+text summary, the plots and the page (the record's sections may be absent, None: a
+run that failed halfway).
 """
 
 
@@ -10,12 +10,15 @@ from __future__ import annotations
 import html
 import math
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from datetime import datetime
-from typing import Any
 
 from orthocal import AXES, PARAM_NAMES
 from orthocal.numbers import finite
+from station.record.result import Deviation, RunResult, Simulation
+from station.record.result_accuracy import Accuracy
+from station.record.result_base import Interval
+from station.report.boundary import ResultLike, as_result
 
 # Grouped by leg, then posture, then direction: the order an operator measures in
 # (one setup per leg), so the plot and the tables read setup by setup.
@@ -77,12 +80,12 @@ HELD_WRITEBACK_TEXT = {
 num = finite  # the report's short name for it
 
 
-def esc(value: Any) -> str:
+def esc(value: object) -> str:
     """Any value as text safe inside report.html's markup and attributes."""
     return html.escape(str(value), quote=True)
 
 
-def fmt(value: Any, digits: int = 3, signed: bool = False) -> str:
+def fmt(value: object, digits: int = 3, signed: bool = False) -> str:
     v = num(value)
     if v is None:
         return "—"
@@ -152,106 +155,115 @@ def dev_tex(key: str) -> str:
     return rf"$\Pi_{leg}^{{{sign}}}$" + f"\nalong {d}{at}"
 
 
-def true_value(result: Mapping[str, Any], name: str) -> float | None:
-    sim = result.get("simulation")
-    if not result.get("simulated") or not isinstance(sim, Mapping):
+def hidden(result: RunResult) -> Simulation | None:
+    """The simulated machine of a simulated run (None: a real machine)."""
+    return result.simulation if result.simulated else None
+
+
+def true_value(sim: Simulation | None, name: str) -> float | None:
+    """The hidden value of parameter ``name`` in the simulated machine ``sim`` (None:
+    no simulation, or a parameter it does not name)."""
+    if sim is None:
         return None
     kind, axis = name.split("_", 1)
+    # Tilts and gaps by full name, Δρ and ΔL by axis.
     if kind in ("tilt", "gap"):
-        # Tables by full name; a result from before the gaps has none: no truth shown.
-        table = sim.get(f"true_{kind}")
-        return num(table.get(name)) if isinstance(table, Mapping) else None
-    table = sim.get("true_drho" if kind == "drho" else "true_dl")
-    if not isinstance(table, Mapping):
-        return None
-    return num(table.get(axis))
+        return at(sim.true_tilt if kind == "tilt" else sim.true_gap, name)
+    return at(sim.true_drho if kind == "drho" else sim.true_dl, axis)
 
 
-def as_dict(value: Any) -> dict:
-    return value if isinstance(value, dict) else {}
+def at(table: Mapping[str, float | None] | None, key: str) -> float | None:
+    """``table[key]`` of a map keyed by axis or name (Axis3, Params): None where the
+    map or the key is absent, or the value is not a finite number."""
+    return None if table is None else num(table.get(key))
 
 
-def not_converged(result: Mapping[str, Any]) -> bool:
+def not_converged(result: ResultLike) -> bool:
     """A run that completed but whose closed loop did not converge (exit status 3)."""
-    loop = result.get("loop")
-    return (result.get("status") == "ok" and isinstance(loop, Mapping)
-            and loop.get("stopped") in NOT_CONVERGED_STOPS)
+    return stalled(as_result(result))
 
 
-def run_state(result: Mapping[str, Any]) -> str:
+def stalled(result: RunResult) -> bool:
+    """:func:`not_converged` of the record."""
+    return (result.status == "ok" and result.loop is not None
+            and result.loop.stopped in NOT_CONVERGED_STOPS)
+
+
+def run_state(result: RunResult) -> str:
     """What the run came to, for the first line and the badge: the result's status
     ("ok", "failed", …), or "not-converged" for a completed run whose loop did not."""
-    return "not-converged" if not_converged(result) else str(result.get("status", "unknown"))
+    return "not-converged" if stalled(result) else result.status
 
 
 _NOT_CONVERGED_PREFIX = "closed loop did not converge: "
 
 
-def not_converged_why(result: Mapping[str, Any]) -> str:
+def not_converged_why(result: RunResult) -> str:
     """Why the loop did not converge, in words: ``loop.detail``, else the run's
     message without its "closed loop did not converge" prefix."""
-    loop = as_dict(result.get("loop"))
-    if loop.get("detail"):
-        return str(loop["detail"])
-    message = str(result.get("message") or "")
+    loop = result.loop
+    if loop is not None and loop.detail:
+        return loop.detail
+    message = result.message or ""
     if message.startswith(_NOT_CONVERGED_PREFIX):
         message = message[len(_NOT_CONVERGED_PREFIX):]
     if message:
         return message
-    if loop.get("stopped") == "max_iterations":
-        return (f"{loop.get('max_iterations', 'max_iterations')} write-back(s) done and the "
+    if loop is not None and loop.stopped == "max_iterations":
+        return (f"{loop.max_iterations} write-back(s) done and the "
                 "last verification still finds a significant correction")
     return "the last verification could not show every joint offset within converge_mm"
 
 
-def held_by_station(result: Mapping[str, Any]) -> bool:
+def held_by_station(result: RunResult) -> bool:
     """The station holds the offsets (the drive's map has no OFFSET registers)."""
-    return result.get("offsets_held_by") == "station"
+    return result.offsets_held_by == "station"
 
 
-def held_offsets_text(result: Mapping[str, Any]) -> str | None:
+def held_offsets_text(result: RunResult) -> str | None:
     """The offsets the station holds when the run stops ("x +1.3553, y −0.7808,
     z −0.9890 mm"), or None when the result does not say."""
-    final = as_dict(result.get("offsets_final"))
-    values = [(a, num(final.get(a))) for a in AXES]
+    final = result.offsets_final
+    values = [(a, at(final, a)) for a in AXES]
     if not final or any(v is None for _, v in values):
         return None
     return ", ".join(f"{a} {fmt(v, 4, signed=True)}" for a, v in values) + " mm"
 
 
-def writeback_text(result: Mapping[str, Any], status: str) -> str:
+def writeback_text(result: RunResult, status: str) -> str:
     """What a write-back status means for this run: written to the controller, or
     held by the station where the drive takes no offsets."""
     table = HELD_WRITEBACK_TEXT if held_by_station(result) else WRITEBACK_TEXT
     return table.get(status, f"write-back: {status}")
 
 
-def machine_parameters(result: Mapping[str, Any]) -> dict:
+def machine_parameters(result: RunResult) -> dict[str, float | None]:
     """The identified parameters as the machine has them. ``identified`` holds the
     total correction written; with objective "tool" that aims the joint errors at
     a target instead of 0, so the machine's Δρ at the start is the run's statement
     ``remaining.total`` (the correction written plus what is left from the aim)."""
-    ident = dict(as_dict(result.get("identified")))
-    total = as_dict(as_dict(result.get("remaining")).get("total"))
-    if as_dict(result.get("accuracy")).get("objective") == "tool" and total:
+    ident = dict(result.identified)
+    total = result.remaining.total if result.remaining is not None else {}
+    if isinstance(result.accuracy, Accuracy) and result.accuracy.objective == "tool" and total:
         ident.update({n: v for n, v in total.items() if n in ident})
     return ident
 
 
-def params_of(result: Mapping[str, Any]) -> list[str]:
-    ident = as_dict(result.get("identified"))
+def params_of(result: RunResult) -> list[str]:
+    ident = result.identified
     names = [n for n in PARAM_NAMES if n in ident]
     return names + sorted(n for n in ident if n not in PARAM_NAMES)
 
 
-def dev_keys(*tables: Mapping[str, Any]) -> list[str]:
+def dev_keys(*tables: Iterable[str]) -> list[str]:
+    """The deviation keys of ``tables`` (maps keyed by them), in :func:`dev_order`."""
     present: set[str] = set()
     for t in tables:
         present.update(t)
     return sorted(present, key=dev_order)
 
 
-def dev_order(key: str) -> tuple:
+def dev_order(key: str) -> tuple[object, ...]:
     """Leg, then its gauge plane (the middle first), then posture from ρmax down to
     ρmin ('+', '+30', '-50', '-'), then direction: DEVIATION_KEYS' order, with
     intermediate strokes and second planes in their place."""
@@ -264,8 +276,8 @@ def dev_order(key: str) -> tuple:
     return (0, leg, float(plane) if plane else 0.5, -(float(posture) if s is None else s), d)
 
 
-def format_when(iso: Any) -> str:
-    if not isinstance(iso, str):
+def format_when(iso: str | None) -> str:
+    if iso is None:
         return "—"
     try:
         dt = datetime.fromisoformat(iso)
@@ -277,7 +289,7 @@ def format_when(iso: Any) -> str:
     return text
 
 
-def format_duration(seconds: Any) -> str:
+def format_duration(seconds: float | None) -> str:
     s = num(seconds)
     if s is None:
         return "—"
@@ -290,8 +302,8 @@ def format_duration(seconds: Any) -> str:
     return f"{hours} h {minutes:02d} min"
 
 
-def max_abs(devs: Mapping[str, Any]) -> float | None:
-    values = [num(as_dict(v).get("mean")) for v in devs.values()]
+def max_abs(devs: Mapping[str, Deviation]) -> float | None:
+    values = [num(d.mean) for d in devs.values()]
     finite = [abs(v) for v in values if v is not None]
     return max(finite) if finite else None
 
@@ -299,11 +311,11 @@ def max_abs(devs: Mapping[str, Any]) -> float | None:
 # -------------------------------------------------------------------- summary
 
 
-def param_line(result: Mapping[str, Any], names: Iterable[str]) -> str:
+def param_line(result: RunResult, names: Iterable[str]) -> str:
     ident = machine_parameters(result)
-    errs = as_dict(result.get("std_errors"))
     return "   ".join(
-        f"{param_plain(n)} = {fmt(ident.get(n), signed=True)} ± {fmt(errs.get(n))} {unit(n)}"
+        f"{param_plain(n)} = {fmt(at(ident, n), signed=True)} ± {fmt(at(result.std_errors, n))}"
+        f" {unit(n)}"
         for n in names
     )
 
@@ -311,32 +323,28 @@ def param_line(result: Mapping[str, Any], names: Iterable[str]) -> str:
 # ------------------------------------------------------------ accuracy at the tool
 
 
-def um(value_mm: Any, digits: int = 1) -> str:
+def um(value_mm: float | None, digits: int = 1) -> str:
     """A length given in mm, written in µm: the tool's error is tens of µm, and
     "0.014 mm" hides the one digit the reader compares before and after."""
     v = num(value_mm)
     return "—" if v is None else fmt(1000.0 * v, digits)
 
 
-def um_interval(pair: Any, digits: int = 1) -> str | None:
+def um_interval(pair: Interval | None, digits: int = 1) -> str | None:
     """A 95 % interval [lo, hi] given in mm as "lo–hi" in µm (None: none given)."""
-    if not isinstance(pair, list | tuple) or len(pair) != 2:
-        return None
-    lo, hi = num(pair[0]), num(pair[1])
+    lo, hi = (None, None) if pair is None else (num(pair[0]), num(pair[1]))
     if lo is None or hi is None:
         return None
     return f"{um(lo, digits)}–{um(hi, digits)}"
 
 
-def box_text(box: Any) -> str:
+def box_text(box: Sequence[Interval]) -> str:
     """The workspace box [[xmin, xmax], ...] as "[−100, 60]³ mm" when it is a
-    cube, else axis by axis; "—" when the result has none."""
-    if not isinstance(box, list | tuple) or len(box) != 3:
+    cube, else axis by axis; "—" when it is not a box of three spans."""
+    if len(box) != 3:
         return "—"
     spans = []
     for span in box:
-        if not isinstance(span, list | tuple) or len(span) != 2:
-            return "—"
         lo, hi = num(span[0]), num(span[1])
         if lo is None or hi is None:
             return "—"

@@ -2,53 +2,48 @@
 not meet"): the result's ``accuracy.gaps`` as the summary's line and report.html's
 table, beside the squareness, each with its 95 % interval and what to do. Every
 field may be missing (a result from before the gaps, a run that failed halfway):
-then nothing is said, never raised."""
+then nothing is said."""
 
 from __future__ import annotations
 
 import html
-from collections.abc import Mapping
-from typing import Any
 
-from station.report.format import as_dict, num, param_html
+from station.record.result_accuracy import Accuracy
+from station.record.result_base import Interval
+from station.report.format import at, num, param_html
 
 #: Which axis passes which, and along what (gap_xy: x passes y along +z).
 PASSES = {"gap_xy": ("x", "y", "z"), "gap_xz": ("x", "z", "y"), "gap_yz": ("y", "z", "x")}
 
 
-def _rows(acc: Mapping[str, Any]) -> list[tuple[str, float, list[float] | None, float | None]]:
+def _rows(acc: Accuracy) -> list[tuple[str, float, Interval | None, float | None]]:
     """(name, gap mm, its 95 % interval, its standard error) of every gap stated."""
-    gaps, se = as_dict(acc.get("gaps")), as_dict(acc.get("gap_std_errors"))
-    ivs = as_dict(acc.get("gap_interval_95"))
+    ivs = acc.gap_interval_95 or {}
     out = []
     for name in PASSES:
-        v = num(gaps.get(name))
+        v = at(acc.gaps, name)
         if v is None:
             continue
-        iv = ivs.get(name)
-        interval = [float(iv[0]), float(iv[1])] if isinstance(iv, (list, tuple)) \
-            and len(iv) == 2 and all(num(x) is not None for x in iv) else None
-        out.append((name, v, interval, num(se.get(name))))
+        iv = ivs[name] if name in ivs else None
+        interval = iv if iv is not None and all(num(x) is not None for x in iv) else None
+        out.append((name, v, interval, at(acc.gap_std_errors, name)))
     return out
 
 
-def _half(interval: list[float] | None, value: float) -> float | None:
+def _half(interval: Interval | None, value: float) -> float | None:
     return None if interval is None else max(interval[1] - value, value - interval[0])
 
 
-def summary_lines(result: Mapping[str, Any]) -> list[str]:
+def summary_lines(acc: Accuracy) -> list[str]:
     """The summary's "gaps" line: each pair of axes, how far they pass each other
     (µm, ± its 95 % half-width) and, where one counts (gap_advice), what to do."""
-    acc = result.get("accuracy")
-    if not isinstance(acc, Mapping):
-        return []
     rows = _rows(acc)
     if not rows:
         return []
     text = ", ".join(f"{n[4:].upper()} {1000 * v:+.0f}".replace("-", "−")
                      + (f" ± {1000 * h:.0f}" if (h := _half(iv, v)) is not None else "")
                      for n, v, iv, _ in rows)
-    advice = [str(a) for a in acc.get("gap_advice") or []]
+    advice = acc.gap_advice or []
     acting = [a for a in advice if "offsets cannot fix it" in a]
     tail = (": offsets cannot fix them; put the geometry into the controller (orthocal "
             "export --kinematics, or orthocal compensate) or move a rail across by the gap") \
@@ -58,7 +53,7 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
             + tail]
 
 
-def html_section(acc: Mapping[str, Any]) -> str:
+def html_section(acc: Accuracy) -> str:
     """report.html's "Gaps between the axes" beside the squareness; empty without gaps."""
     rows = _rows(acc)
     if not rows:
@@ -71,7 +66,7 @@ def html_section(acc: Mapping[str, Any]) -> str:
             f"<tr><td class=\"l\">{param_html(name)}: axis {a} past axis {b}, along +{along}"
             f"</td><td class=\"num\">{1000 * v:+.1f}</td><td class=\"num\">{span}</td>"
             f"<td class=\"num\">{'—' if se is None else f'{1000 * se:.1f}'}</td></tr>")
-    advice = [str(a) for a in acc.get("gap_advice") or []]
+    advice = acc.gap_advice or []
     return ("<h3>Gaps between the axes</h3>"
             "<table><thead><tr><th class=\"l\">pair</th><th>gap (µm)</th>"
             "<th>95 % interval (µm)</th><th>σ (µm)</th></tr></thead><tbody>"

@@ -4,9 +4,7 @@ enter them), so that nothing below can be read against it."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
+from station.record.result import RunResult
 from station.report.format import (
     esc,
     held_by_station,
@@ -16,17 +14,17 @@ from station.report.format import (
 )
 
 
-def held_box(result: Mapping[str, Any]) -> str:
+def held_box(result: RunResult) -> str:
     """Where the station holds the offsets: their values and where to enter them
     (the result's ``offsets_final`` and ``offsets_note``)."""
     values = held_offsets_text(result)
-    note = str(result.get("offsets_note") or "the drive takes no zero offset over Modbus: "
-               "enter them in the drive's own home-offset parameter").rstrip(".")
+    note = (result.offsets_note or "the drive takes no zero offset over Modbus: "
+            "enter them in the drive's own home-offset parameter").rstrip(".")
     return ('<div class="box warn"><b>Offsets held by the station, not by the drive</b>'
             + (f": {esc(values)}" if values else "") + f" — {esc(note)}.</div>")
 
 
-def header_boxes(result: Mapping[str, Any]) -> str:
+def header_boxes(result: RunResult) -> str:
     """What happened, at the top of the page: a closed loop that did not converge
     and why; offsets the station holds and where to enter them ("" for neither)."""
     out = []

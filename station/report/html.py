@@ -3,39 +3,37 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 from drivers.files import write_atomic
-from orthocal import coverage_factor
-from station.report import budget, reversal, since
+from station.record.result import RunResult
+from station.report import budget, reversal, rounds, since
+from station.report.boundary import ResultLike, as_result
+from station.report.field_plot import plot_field
 from station.report.format import (
     AXES,
     MODEL_TEXT,
-    PARAM_NAMES,
     STATE_TEXT,
-    as_dict,
-    dev_html,
-    dev_keys,
+    at,
     esc,
     fmt,
     format_duration,
     format_when,
     held_by_station,
-    machine_parameters,
-    num,
-    param_html,
-    params_of,
     run_state,
-    true_value,
-    unit,
     writeback_text,
 )
 from station.report.header import header_boxes, held_box
-from station.report.plots import plot_deviations, plot_field, plot_parameters, release_fonts
+from station.report.plots import plot_deviations, plot_parameters, release_fonts
 from station.report.story import result_paragraph, what_was_done
-from station.report.text import model_notes
+from station.report.tables import (
+    correlation_table,
+    deviations_table,
+    model_section,
+    params_table,
+    setups_table,
+    table,
+)
 from station.report.tool import html_section as tool_section
 from station.report.tool import stands_html, statement
 
@@ -72,210 +70,60 @@ code{font-family:ui-monospace,Menlo,Consolas,monospace;font-size:.88em;word-brea
 """
 
 
-
-def _table(head: list[str], rows: list[list[str]], left: int = 1, caption: str = "") -> str:
-    """Cells are trusted HTML fragments: callers escape text with esc()."""
-    ths = "".join(
-        f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(head)
-    )
-    body = "".join(
-        "<tr>" + "".join(
-            f'<td class="l">{c}</td>' if i < left else f'<td class="num">{c}</td>'
-            for i, c in enumerate(row)
-        ) + "</tr>"
-        for row in rows
-    )
-    cap = f'<p class="small">{caption}</p>' if caption else ""
-    return f"<table><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>{cap}"
-
-
-def _fit_box(result: Mapping[str, Any]) -> str:
-    if result.get("residual_rms_mm") is None and not result.get("fit_note"):
+def _fit_box(result: RunResult) -> str:
+    if result.residual_rms_mm is None and not result.fit_note:
         return ""
     rows = [
-        ("residual RMS (measured − model)", f"{fmt(result.get('residual_rms_mm'))} mm"),
-        ("σ = √(RSS / (n − p))", f"{fmt(result.get('sigma_mm'))} mm"),
-        ("indicator noise (spread of readings at a stop)", f"{fmt(result.get('noise_mm'))} mm"),
+        ("residual RMS (measured − model)", f"{fmt(result.residual_rms_mm)} mm"),
+        ("σ = √(RSS / (n − p))", f"{fmt(result.sigma_mm)} mm"),
+        ("indicator noise (spread of readings at a stop)", f"{fmt(result.noise_mm)} mm"),
         ("condition number (sensitivity of the fit to noise)",
-         fmt(result.get("condition_number"), 2)),
-        ("deviations RMS before calibration", f"{fmt(result.get('deviations_rms_mm'))} mm"),
+         fmt(result.condition_number, 2)),
+        ("deviations RMS before calibration", f"{fmt(result.deviations_rms_mm)} mm"),
     ]
     dl = "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in rows)
-    ok = result.get("fit_ok")
+    ok = result.fit_ok
     cls = "box" if ok is not False else "box warn"
     verdict = ("The model explains the data: the residual is at the level of the indicator "
                "noise." if ok else "Warning: the residual is larger than the indicator noise "
                "explains; the machine may have errors this model does not include."
                if ok is False else "")
-    note = (f"<p><b>Fit quality:</b> {esc(result['fit_note'])}</p>"
-            if result.get("fit_note") else "")
+    note = (f"<p><b>Fit quality:</b> {esc(result.fit_note)}</p>" if result.fit_note else "")
     return f'<div class="{cls}">{note}<p>{esc(verdict)}</p><dl class="kv">{dl}</dl></div>'
 
 
-def _params_table(result: Mapping[str, Any]) -> str:
-    names = params_of(result)
-    if not names:
-        return "<p>No parameters were identified.</p>"
-    ident, errs = machine_parameters(result), as_dict(result.get("std_errors"))
-    ver = as_dict(result.get("verification"))
-    v_ident, v_errs = as_dict(ver.get("identified")), as_dict(ver.get("std_errors"))
-    has_truth = any(true_value(result, n) is not None for n in names)
-    dof = num(result.get("std_errors_dof"))
-    k = coverage_factor(dof) if dof is not None and dof > 0 else coverage_factor(None)
-    head = ["parameter", "unit", "identified", "σ",
-            f"95 % interval (k = {k:.2f}" + (f", {dof:g} dof)" if dof is not None else ")")]
-    if has_truth:
-        head.append("hidden truth")
-    if v_ident:
-        head += ["after calibration", "σ after"]
-    rows = []
-    for n in names:
-        v, s = num(ident.get(n)), num(errs.get(n))
-        interval = (f"{fmt(v - k * s, signed=True)} … {fmt(v + k * s, signed=True)}"
-                    if v is not None and s is not None else "—")
-        row = [param_html(n), unit(n), fmt(v, signed=True), fmt(s), interval]
-        if has_truth:
-            row.append(fmt(true_value(result, n), signed=True))
-        if v_ident:
-            row += [fmt(v_ident.get(n), signed=True), fmt(v_errs.get(n))]
-        rows.append(row)
-    return _table(head, rows)
-
-
-def _model_section(result: Mapping[str, Any]) -> str:
-    """Why this model (auto's test), what these measurements can never identify,
-    what cannot be written: said, not silently fixed."""
-    notes = model_notes(result)
-    if not notes:
+def _writeback_box(result: RunResult) -> str:
+    """What became of the correction: written, held by the station, or why not."""
+    wb = result.writeback
+    if wb is None:
         return ""
-    out = "".join(f"<p>{esc(n)}</p>" for n in notes)
-    sel = as_dict(result.get("model_selection"))
-    cands = [c for c in sel.get("candidates") or [] if isinstance(c, dict)]
-    if cands:
-        rows = [[esc(c.get("model")), "yes" if c.get("identifiable") else "no",
-                 fmt(c.get("F"), 2), esc(", ".join(f"{d:g}" for d in c["dof"])
-                                         if isinstance(c.get("dof"), list) else "—"),
-                 (f"{c['p_value']:.2g}" if num(c.get("p_value")) is not None else "—"),
-                 fmt(c.get("residual_rms_mm"), 4),
-                 "chosen" if c.get("model") == result.get("model") else
-                 ("rejected" if c.get("F") is not None else esc(c.get("note") or ""))]
-                for c in cands]
-        out += _table(["candidate", "identifiable", "F", "dof", "p", "residual RMS (mm)",
-                       "verdict"], rows, caption=(
-            f"Lack-of-fit F test of each candidate against the noise measured in this run "
-            f"(σ = {fmt(sel.get('noise_sigma_mm'), 5)} mm per deviation, "
-            f"{esc(sel.get('noise_source'))}); the first with p ≥ {esc(sel.get('level'))} "
-            "is used."))
-    return out
-
-
-def _correlation_table(result: Mapping[str, Any]) -> str:
-    corr = as_dict(result.get("correlation"))
-    names, matrix = corr.get("names"), corr.get("matrix")
-    if not isinstance(names, list) or not isinstance(matrix, list) or not names:
-        return ""
-    head = "".join(f"<th>{param_html(str(n)) if str(n) in PARAM_NAMES else esc(n)}</th>"
-                   for n in names)
-    rows = []
-    for i, n in enumerate(names):
-        row = matrix[i] if i < len(matrix) and isinstance(matrix[i], list) else []
-        cells = []
-        for j in range(len(names)):
-            r = num(row[j]) if j < len(row) else None
-            # Shade by |r|: strongly correlated pairs (|r| near 1) are the ones the
-            # measurement cannot tell apart, and should jump out at the reader.
-            shade = "" if r is None or i == j else (
-                f' style="background:rgba(192,57,43,{min(abs(r), 1.0) * 0.55:.2f})"')
-            # 0.9997 would print as "1.00", which reads as "identical" rather than
-            # "almost inseparable"; give such values their digits.
-            digits = 4 if r is not None and i != j and abs(r) >= 0.995 else 2
-            cells.append(f'<td class="num"{shade}>{fmt(r, digits)}</td>')
-        label = param_html(str(n)) if str(n) in PARAM_NAMES else esc(n)
-        rows.append(f'<tr><th class="l">{label}</th>{"".join(cells)}</tr>')
-    return (f'<h3>Correlation of the estimates</h3><table><thead><tr><th></th>{head}</tr>'
-            f'</thead><tbody>{"".join(rows)}</tbody></table>'
-            '<p class="small">Values near ±1 mean the measurement cannot separate the two '
-            "parameters: an error in one is absorbed by the other.</p>")
-
-
-def _deviations_table(result: Mapping[str, Any]) -> str:
-    before = as_dict(result.get("deviations"))
-    after = as_dict(as_dict(result.get("verification")).get("deviations"))
-    keys = dev_keys(before, after)
-    if not keys:
-        return "<p>No deviations were measured.</p>"
-    head = ["deviation", "measured (mm)", "std (mm)", "n", "model (mm)", "residual (mm)"]
-    if after:
-        head += ["after: measured (mm)", "after: std (mm)"]
-    rows = []
-    for k in keys:
-        b, a = as_dict(before.get(k)), as_dict(after.get(k))
-        m, f = num(b.get("mean")), num(b.get("model"))
-        resid = m - f if m is not None and f is not None else None
-        n = b.get("n")
-        row = [dev_html(k), fmt(m, signed=True), fmt(b.get("std")),
-               esc(n) if isinstance(n, int) else "—", fmt(f, signed=True),
-               fmt(resid, signed=True)]
-        if after:
-            row += [fmt(a.get("mean"), signed=True), fmt(a.get("std"))]
-        rows.append(row)
-    return _table(head, rows, caption=(
-        "Π<sub>i</sub><sup>±</sup> along j: reading of the indicator touching leg i in "
-        "direction j, in test posture Π<sub>i</sub><sup>±</sup>, minus its reading in "
-        "Π<sub>0</sub>. std: spread over the measurement cycles; n: number of cycles."))
-
-
-def _setups_table(result: Mapping[str, Any]) -> str:
-    setups = result.get("setups")
-    if not isinstance(setups, list) or not setups:
-        return "<p>No setup was measured.</p>"
-    rows = []
-    for s in setups:
-        s = as_dict(s)
-        inds = ", ".join(f"{esc(k)} → {esc(v)}" for k, v in as_dict(s.get("indicators")).items())
-        cu, cm = s.get("cycles_used"), s.get("cycles_max")
-        cycles = f"{esc(cu)} of {esc(cm)}" if cm is not None else esc(cu if cu is not None else "—")
-        flagged = s.get("flagged")
-        rows.append([
-            f"leg {esc(s.get('leg', '—'))}", inds or "—", cycles, esc(s.get("repeats", "—")),
-            fmt(s.get("spread_mm")),
-            "<b>yes</b> — spread above the repeatability limit" if flagged else "no",
-        ])
-    return _table(["setup", "indicators (name → direction)", "cycles used", "repeats",
-                   "spread (mm)", "flagged"], rows, left=2)
-
-
-def _offsets_section(result: Mapping[str, Any]) -> str:
-    before = as_dict(result.get("offsets_before"))
-    written = result.get("offsets_written")
-    written = written if isinstance(written, dict) else {}
-    wb = as_dict(result.get("writeback"))
     held = held_by_station(result)
-    out = []
-    if wb:
-        status = str(wb.get("status", "—"))
-        cls = "box" if status == "written" and not held else "box warn"
-        text = writeback_text(result, status) if status in (
-            "written", "refused", "declined", "skipped", "failed-restored") else status
-        label = "held by the station" if held and status == "written" else status
-        reason = f"<br>Reason: {esc(wb['reason'])}" if wb.get("reason") else ""
-        out.append(f'<div class="{cls}"><b>Write-back: {esc(label)}</b> — {esc(text)}.'
-                   f"{reason}</div>")
+    cls = "box" if wb.status == "written" and not held else "box warn"
+    label = "held by the station" if held and wb.status == "written" else wb.status
+    reason = f"<br>Reason: {esc(wb.reason)}" if wb.reason else ""
+    return (f'<div class="{cls}"><b>Write-back: {esc(label)}</b> — '
+            f"{esc(writeback_text(result, wb.status))}.{reason}</div>")
+
+
+def _offsets_section(result: RunResult) -> str:
+    before, written = result.offsets_before or {}, result.offsets_written or {}
+    held = held_by_station(result)
+    out = [_writeback_box(result)]
     if before or written:
         rows = []
         for a in AXES:
             if a not in before and a not in written:
                 continue
-            b, w = num(before.get(a)), num(written.get(a))
+            b, w = at(before, a), at(written, a)
             change = fmt(w - b, signed=True) if b is not None and w is not None else "—"
             rows.append([f"axis {a}", fmt(b, signed=True),
                          fmt(w, signed=True) if written else "not written", change])
         whose = ("The joint zero offset o<sub>i</sub> the station holds (the drive takes "
                  "none over Modbus)" if held else
                  "The controller's joint zero offset o<sub>i</sub>")
-        out.append(_table(["axis", "offset before (mm)",
-                           "offset held (mm)" if held else "offset written (mm)",
-                           "change (mm)"], rows, caption=(
+        out.append(table(["axis", "offset before (mm)",
+                          "offset held (mm)" if held else "offset written (mm)",
+                          "change (mm)"], rows, caption=(
             f"{whose}; the correction is "
             "o<sub>i</sub> ← o<sub>i</sub> − Δρ<sub>i</sub>. The old values are saved in "
             "the run directory, so <code>orthocal rollback</code> can restore them.")))
@@ -284,51 +132,55 @@ def _offsets_section(result: Mapping[str, Any]) -> str:
     return "".join(out) or "<p>The controller's offsets were not read.</p>"
 
 
-def _info_list(result: Mapping[str, Any]) -> str:
-    machine = as_dict(result.get("machine"))
-    timing = as_dict(result.get("timing"))
+def _machine_text(result: RunResult) -> str:
+    m = result.machine
+    return ((f"{m.id}: " if m.id else "")
+            + f"leg length L = {fmt(m.leg_length, 2)} mm, joint stroke "
+            f"ρmin = {fmt(m.rho_min, 1)} mm … ρmax = {fmt(m.rho_max, 1)} mm")
+
+
+def _where_text(result: RunResult) -> tuple[str, str]:
+    """(what ran, on what): the virtual machine of a simulated run, else the devices."""
+    if not result.simulated:
+        return "devices", "as configured in the station config (config.toml)"
+    desc = "virtual machine (no hardware)"
+    if (sim := result.simulation) is not None:
+        desc += (f"; seed {sim.seed if sim.seed is not None else 'random'}"
+                 f", indicator noise σ = {fmt(sim.noise_mm, 4)} mm")
+    return "simulation", esc(desc)
+
+
+def _timing_text(result: RunResult) -> str:
+    t = result.timing
+    return (f"wall {format_duration(t.wall_s)}, {t.moves} moves, "
+            f"{t.readings} readings, retries: {t.retries}"
+            + (f"; {t.mountings} mountings, {t.operator_s or 0:.0f} s at the "
+               "machine" if t.mountings is not None else ""))
+
+
+def _info_list(result: RunResult) -> str:
     rows = [
-        ("run directory", f"<code>{esc(result.get('run_dir', '—'))}</code>"),
-        ("started", esc(format_when(result.get("started")))),
-        ("finished", esc(format_when(result.get("finished")))),
-        ("duration", esc(format_duration(result.get("duration_s", timing.get("wall_s"))))),
-        ("machine", esc(
-            (f"{machine['id']}: " if machine.get("id") else "")
-            + f"leg length L = {fmt(machine.get('leg_length'), 2)} mm, joint stroke "
-            f"ρmin = {fmt(machine.get('rho_min'), 1)} mm … ρmax = "
-            f"{fmt(machine.get('rho_max'), 1)} mm") if machine else "—"),
-        ("model", esc(f"{MODEL_TEXT.get(str(result.get('model')), result.get('model', '—'))}"
-                     f" ({result.get('method', '—')})")),
+        ("run directory", f"<code>{esc(result.run_dir)}</code>"),
+        ("started", esc(format_when(result.started))),
+        ("finished", esc(format_when(result.finished))),
+        ("duration", esc(format_duration(result.duration_s))),
+        ("machine", esc(_machine_text(result))),
+        ("model", esc(f"{MODEL_TEXT.get(result.model, result.model)} ({result.method})")),
+        _where_text(result),
+        ("timing", esc(_timing_text(result))),
     ]
-    if result.get("simulated"):
-        sim = as_dict(result.get("simulation"))
-        desc = "virtual machine (no hardware)"
-        if sim:
-            desc += (f"; seed {sim.get('seed') if sim.get('seed') is not None else 'random'}"
-                     f", indicator noise σ = {fmt(sim.get('noise_mm'), 4)} mm")
-        rows.append(("simulation", esc(desc)))
-    else:
-        rows.append(("devices", "as configured in the station config (config.toml)"))
-    if timing:
-        rows.append(("timing", esc(
-            f"wall {format_duration(timing.get('wall_s'))}, {timing.get('moves', '—')} moves, "
-            f"{timing.get('readings', '—')} readings, retries: {timing.get('retries', '—')}"
-            + (f"; {timing['mountings']} mountings, {timing.get('operator_s', 0):.0f} s at the "
-               "machine" if isinstance(timing.get("mountings"), int) else ""))))
-    guard = as_dict(result.get("plunger_guard"))
-    recovered = [r for r in guard.get("recovered") or [] if isinstance(r, dict)]
+    recovered = result.plunger_guard.recovered
     if recovered:
         rows.append(("plunger guard", "<br>".join(esc(
-            f"stopped the axes: indicator {r.get('indicator')} on {r.get('where')}, move to "
-            f"{r.get('move')}; re-planned from where they stood via {r.get('waypoints')} "
-            f"waypoint(s) at {fmt(r.get('speed_mm_s'), 1)} mm/s, the cycle taken again")
+            f"stopped the axes: indicator {r.indicator} on {r.where}, move to "
+            f"{r.move}; re-planned from where they stood via {r.waypoints} "
+            f"waypoint(s) at {fmt(r.speed_mm_s, 1)} mm/s, the cycle taken again")
             for r in recovered)))
     return '<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>"
 
 
-def _loop_section(result: Mapping[str, Any], figures: bool = True) -> str:
+def _loop_section(result: RunResult, figures: bool = True) -> str:
     """The closed loop's rounds (station.report.rounds): plot and table."""
-    from station.report import rounds
     from station.report.plots import pyplot, to_svg
 
     if not figures:
@@ -340,8 +192,8 @@ def _loop_section(result: Mapping[str, Any], figures: bool = True) -> str:
     return rounds.html_section(result, plot)
 
 
-def _field_plot(result: Mapping[str, Any]) -> str | None:
-    """The error field at the tool (plots.plot_field), or None: a field the
+def _field_plot(result: RunResult) -> str | None:
+    """The error field at the tool (field_plot.plot_field), or None: a field the
     figure cannot draw must not cost the operator the rest of the report."""
     acc, _ = statement(result)
     if acc is None:
@@ -352,28 +204,27 @@ def _field_plot(result: Mapping[str, Any]) -> str | None:
         return None  # the section's tables still state the figures
 
 
-def render_html(result: dict, figures: bool = True) -> str:
-    """The whole report as one HTML string (no external resources); ``figures``
-    False: without its figures ([report] figures, `orthocal report` draws them)."""
-    title = "Calibration report"
-    when = format_when(result.get("started"))
+def _drawn(result: RunResult, figures: bool) -> tuple[str | None, str | None, str | None, str]:
+    """The page's figures (the error field at the tool, the deviations, the
+    parameters; None each where not drawn) and the closed loop's section."""
     plot_tool = plot_dev = plot_par = None
     try:
         if figures:
             plot_tool = _field_plot(result)
             plot_dev = plot_deviations(result)
             plot_par = plot_parameters(result)
-        loop_section = _loop_section(result, figures)
+        return plot_tool, plot_dev, plot_par, _loop_section(result, figures)
     finally:
         # Only where this page drew: release_fonts ends in a full garbage collection,
         # a tenth of a second in a long-lived process, for fonts a page without
         # figures never opened.
         if figures and "matplotlib" in sys.modules:
             release_fonts()
-    # Figures are numbered in page order: the error field at the tool, when the
-    # run states it, comes first.
-    number = iter(range(1, 4))
-    accuracy = tool_section(result, plot_tool, next(number) if plot_tool else None)
+
+
+def _legs_figures(plot_dev: str | None, plot_par: str | None, first: int) -> str:
+    """The deviations' and the parameters' figures, numbered from ``first``."""
+    number = iter(range(first, first + 2))
     drawn = []
     if plot_dev:
         drawn.append(
@@ -389,59 +240,81 @@ def render_html(result: dict, figures: bool = True) -> str:
             "with ±1σ (thick) and ±3σ (thin) error bars; after calibration the re-identified "
             "values should be near zero. In a simulated run the red bar marks the value "
             "hidden in the virtual machine.</figcaption></figure>")
+    return "".join(drawn)
+
+
+def _title(result: RunResult, figures: bool) -> str:
+    """The page's heading with its badges, the meta line, and how to draw the
+    figures of a page drawn without them."""
     state = run_state(result)
     # A loop that did not converge, offsets the station holds: the warning colour
     # (st-refused's), never the green of a run that did all it set out to.
     status_cls = ("st-refused st-not-converged" if state == "not-converged" else
                   f"st-{state}" if state in STATE_TEXT else "st-failed")
-    sim_tag = " (simulated)" if result.get("simulated") else ""
-    badge = f'<span class="status {status_cls}">{esc(STATE_TEXT.get(state, state))}</span>'
-    held = held_by_station(result)
-    if held:
+    sim_tag = " (simulated)" if result.simulated else ""
+    badge = f'<span class="status {status_cls}">{esc(STATE_TEXT[state])}</span>'
+    if held_by_station(result):
         badge += '<span class="status st-refused st-held">Offsets held by the station</span>'
     meta = ("Orthoglide-type parallel machine · leg-parallelism calibration · "
-            f"{esc(when)}")
+            f"{esc(format_when(result.started))}")
     no_figures = "" if figures else (
         '<p class="small">Drawn without its figures: '
-        f"<code>orthocal report {esc(result.get('run_dir') or 'RUN_DIR')}</code> draws "
+        f"<code>orthocal report {esc(result.run_dir or 'RUN_DIR')}</code> draws "
         "them.</p>")
+    return (f"<h1>{esc(_TITLE)}{esc(sim_tag)}{badge}</h1>\n"
+            f'<p class="meta">{meta}</p>{no_figures}')
+
+
+_TITLE = "Calibration report"
+
+
+def render_html(result: ResultLike, figures: bool = True) -> str:
+    """The whole report as one HTML string (no external resources); ``figures``
+    False: without its figures ([report] figures, `orthocal report` draws them).
+    ``result``: the record, or a document that becomes it (station.report.boundary)."""
+    record = as_result(result)
+    plot_tool, plot_dev, plot_par, loop_section = _drawn(record, figures)
+    # Figures are numbered in page order: the error field at the tool, when the
+    # run states it, comes first.
+    accuracy = tool_section(record, plot_tool, 1 if plot_tool else None)
+    held = held_by_station(record)
     body = f"""
-<h1>{esc(title)}{esc(sim_tag)}{badge}</h1>
-<p class="meta">{meta}</p>{no_figures}
-{header_boxes(result)}{_info_list(result)}
+{_title(record, figures)}
+{header_boxes(record)}{_info_list(record)}
 <h2>What was done</h2>
-{what_was_done(result)}
+{what_was_done(record)}
 <h2>Result</h2>
-{result_paragraph(result)}
+{result_paragraph(record)}
 {accuracy}
-{reversal.section_html(result)}
-{budget.section_html(result)}{since.section_html(result)}
+{reversal.section_html(record)}
+{budget.section_html(record)}{since.section_html(record)}
 {"<h2>The measurement: the legs' parallelism</h2>" if accuracy else ""}
-{_fit_box(result)}
-{"".join(drawn)}
+{_fit_box(record)}
+{_legs_figures(plot_dev, plot_par, 2 if plot_tool else 1)}
 {loop_section}
 <h2>Identified parameters</h2>
-{_params_table(result)}
-{_model_section(result)}
-{stands_html(result)}
-{_correlation_table(result)}
+{params_table(record)}
+{model_section(record)}
+{stands_html(record)}
+{correlation_table(record)}
 <h2>Deviations</h2>
-{_deviations_table(result)}
+{deviations_table(record)}
 <h2>Setups</h2>
-{_setups_table(result)}
+{setups_table(record)}
 <h2>{"Offsets (held by the station)" if held else "Controller offsets"}</h2>
-{_offsets_section(result)}
+{_offsets_section(record)}
 <p class="small">Generated by orthocal. All lengths in millimetres.</p>
 """
+    when = format_when(record.started)
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">'
-            f"<title>{esc(title)} — {esc(when)}</title><style>{_CSS}</style></head>"
+            f"<title>{esc(_TITLE)} — {esc(when)}</title><style>{_CSS}</style></head>"
             f"<body>{body}</body></html>\n")
 
 
-def write_html(result: dict, run_dir: Path, figures: bool = True) -> Path:
+def write_html(result: ResultLike, run_dir: Path, figures: bool = True) -> Path:
     """Write ``run_dir/report.html``: self-contained, plots inline as SVG (none
-    when ``figures`` is False)."""
+    when ``figures`` is False); ``result`` as :func:`render_html` takes it."""
     path = Path(run_dir) / "report.html"
     write_atomic(path, render_html(result, figures))
     return path

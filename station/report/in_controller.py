@@ -7,20 +7,19 @@ Said only where the run states it; advice only where it stands out of the noise.
 from __future__ import annotations
 
 import html
-from collections.abc import Mapping
-from typing import Any
 
-from station.report.format import as_dict, num, um, um_interval
+from station.record.result_accuracy import Accuracy, Compensated
+from station.report.format import num, um, um_interval
 
 
-def _e(value: Any) -> str:
+def _e(value: object) -> str:
     return html.escape(str(value), quote=True)
 
 
-def _grouped(nominal: Mapping[str, Any]) -> dict[str, list[str]]:
+def _grouped(nominal: dict[str, str]) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     for name, why in nominal.items():
-        out.setdefault(str(why), []).append(str(name))
+        out.setdefault(why, []).append(name)
     return out
 
 
@@ -34,69 +33,65 @@ def table(head: list[str], rows: list[list[str]]) -> str:
     return f"<table><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>"
 
 
-def gains(acc: Mapping[str, Any]) -> bool | None:
+def stated(acc: Accuracy) -> Compensated | None:
+    """The run's figure with the geometry in the controller (None: not stated)."""
+    comp = acc.compensated
+    return comp if comp is not None and num(comp.rms_mm) is not None else None
+
+
+def gains(acc: Accuracy) -> bool | None:
     """Whether the geometry in the controller stands out of the offsets alone: its
     95 % interval of the RMS lies wholly below the after-figure's (None: either is
     not stated)."""
-    comp, after = as_dict(acc.get("compensated")), as_dict(acc.get("after"))
-    c_iv, a_iv = comp.get("rms_interval_95_mm"), after.get("rms_interval_95_mm")
-    a_rms = num(after.get("rms_mm"))
-    if not isinstance(c_iv, list | tuple) or len(c_iv) != 2 or a_rms is None:
+    comp, after = acc.compensated, acc.after
+    if comp is None or num(after.rms_mm) is None:
         return None
-    a_lo = num(a_iv[0]) if isinstance(a_iv, list | tuple) and len(a_iv) == 2 else a_rms
-    c_hi = num(c_iv[1])
+    a_lo, c_hi = num(after.rms_interval_95_mm[0]), num(comp.rms_interval_95_mm[1])
     return None if c_hi is None or a_lo is None else c_hi < a_lo
 
 
-def compensation_advice(acc: Mapping[str, Any]) -> str | None:
-    """What the geometry in the controller buys, as advice naming the route; None
-    where the run states no compensated figure."""
-    comp = as_dict(acc.get("compensated"))
-    if num(comp.get("rms_mm")) is None:
-        return None
-    after = as_dict(acc.get("after"))
+def compensation_advice(acc: Accuracy, comp: Compensated) -> str:
+    """What the geometry in the controller (``comp``, :func:`stated`) buys, as
+    advice naming the route."""
     if gains(acc):
         return (f"the kinematics component (orthocal export --kinematics) or orthocal "
-                f"compensate take it from {um(after.get('rms_mm'))} to "
-                f"{um(comp.get('rms_mm'))} µm RMS")
+                f"compensate take it from {um(acc.after.rms_mm)} to "
+                f"{um(comp.rms_mm)} µm RMS")
     return (f"the identified geometry in the controller would leave "
-            f"{um(comp.get('rms_mm'))} µm RMS, not clearly less than the offsets' "
-            f"{um(after.get('rms_mm'))}: nothing to gain from it")
+            f"{um(comp.rms_mm)} µm RMS, not clearly less than the offsets' "
+            f"{um(acc.after.rms_mm)}: nothing to gain from it")
 
 
-def summary_lines(acc: Mapping[str, Any]) -> list[str]:
+def summary_lines(acc: Accuracy) -> list[str]:
     """The summary's line on the geometry in the controller (accuracy.compensated)."""
-    comp = as_dict(acc.get("compensated"))
-    if num(comp.get("rms_mm")) is None:
+    comp = stated(acc)
+    if comp is None:
         return []
     ivs = [f"{iv} µm {what}" for iv, what in (
-        (um_interval(comp.get("rms_interval_95_mm")), "RMS"),
-        (um_interval(comp.get("max_interval_95_mm")), "max")) if iv]
-    figures = (f"{um(comp.get('rms_mm'))} µm RMS (max {um(comp.get('max_mm'))} µm"
+        (um_interval(comp.rms_interval_95_mm), "RMS"),
+        (um_interval(comp.max_interval_95_mm), "max")) if iv]
+    figures = (f"{um(comp.rms_mm)} µm RMS (max {um(comp.max_mm)} µm"
                + (f"; 95 %: {', '.join(ivs)}" if ivs else "") + ")")
     return [f"  in the controller  the identified geometry would leave {figures}; "
-            f"{compensation_advice(acc)}"]
+            f"{compensation_advice(acc, comp)}"]
 
 
-def html_section(acc: Mapping[str, Any]) -> str:
+def html_section(acc: Accuracy) -> str:
     """What the identified geometry in the controller buys, beside the offsets alone."""
-    comp = as_dict(acc.get("compensated"))
-    if num(comp.get("rms_mm")) is None:
+    comp = stated(acc)
+    if comp is None:
         return ""
-    after = as_dict(acc.get("after"))
-    rows = [["RMS |E|", um(after.get("rms_mm")), um(comp.get("rms_mm")),
-             um_interval(comp.get("rms_interval_95_mm")) or "—"],
-            ["max |E|", um(after.get("max_mm")), um(comp.get("max_mm")),
-             um_interval(comp.get("max_interval_95_mm")) or "—"]]
+    after = acc.after
+    rows = [["RMS |E|", um(after.rms_mm), um(comp.rms_mm),
+             um_interval(comp.rms_interval_95_mm) or "—"],
+            ["max |E|", um(after.max_mm), um(comp.max_mm),
+             um_interval(comp.max_interval_95_mm) or "—"]]
     grid = table(["tool-point error (µm)", "offsets only", "geometry in the controller",
-                    "geometry in the controller: 95 % interval"], rows)
-    told = ", ".join(str(n) for n in comp.get("told") or [])
-    nominal = as_dict(comp.get("nominal"))
-    routes = "".join(f"<li><code>{_e(r)}</code></li>" for r in comp.get("routes") or [])
+                  "geometry in the controller: 95 % interval"], rows)
+    routes = "".join(f"<li><code>{_e(r)}</code></li>" for r in comp.routes)
+    nominal = "; ".join(f"{', '.join(names)} ({why})"
+                        for why, names in _grouped(comp.nominal).items())
     return ("<h3>The geometry in the controller</h3>" + grid
-            + f"<p><b>{_e(compensation_advice(acc))}</b>.</p>"
-            + f'<p class="small">The controller is told {_e(told)}; left nominal: '
-            + _e("; ".join(f"{', '.join(names)} ({why})" for why, names in
-                           _grouped(nominal).items()) or "nothing")
-            + f". {_e(comp.get('method', ''))}.</p><ul>{routes}</ul>")
-
+            + f"<p><b>{_e(compensation_advice(acc, comp))}</b>.</p>"
+            + f'<p class="small">The controller is told {_e(", ".join(comp.told))}; left '
+            f"nominal: {_e(nominal or 'nothing')}. {_e(comp.method)}.</p><ul>{routes}</ul>")

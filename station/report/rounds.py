@@ -1,19 +1,22 @@
 """The closed loop in the report: the rounds' summary lines, a plot and a table.
 
 Reads the result's ``iterations`` (one entry per measurement: the first
-measurement, then each verification), ``converged`` and ``loop``; everything is
-read with ``.get`` (a run stopped halfway has fewer entries). Kept apart from
-station.report so the two can change independently.
+measurement, then each verification), ``converged`` and ``loop``; a run stopped
+halfway has fewer entries, or none. Kept apart from station.report so the two can
+change independently.
 """
 
 from __future__ import annotations
 
 import html
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from orthocal.loop import WRITABLE
-from station.report.format import num
+from station.record.result import Iteration, RunResult
+from station.record.result_accuracy import Accuracy
+from station.report.format import at, num
+from station.report.tool import objective
 
 #: What each of the closed loop's stop reasons (the run JSON's ``loop.stopped``)
 #: says: the first is success; the others say plainly what happened.
@@ -42,91 +45,82 @@ VERDICT_TEXT = {
 }
 
 
-def _um(value: Any) -> str:
+def _um(value: float | None) -> str:
     v = num(value)
     return "—" if v is None else f"{v * 1000:.2f} µm"
 
 
-def aim_of(result: Mapping[str, Any], n: int) -> dict[str, float]:
+def aim_of(result: RunResult, n: int) -> dict[str, float]:
     """The Δρ the loop aimed at in measurement ``n`` (mm): 0 for objective joints;
     for objective tool the round's ``target_drho``, and for a last round that
     wrote nothing the aim the run states (``accuracy.objectives``). Without it a
     tool run's intended Δρ of tens of µm would read as a correction left undone."""
-    iterations = result.get("iterations") or []
-    entry = iterations[n] if 0 <= n < len(iterations) else {}
-    target = entry.get("target_drho") if isinstance(entry, Mapping) else None
-    if not isinstance(target, Mapping) and n == len(iterations) - 1:
-        acc = result.get("accuracy")
-        if isinstance(acc, Mapping) and not acc.get("error"):
-            chosen = (acc.get("objectives") or {}).get(str(acc.get("objective")))
-            target = chosen.get("target_drho_mm") if isinstance(chosen, Mapping) else None
-    if not isinstance(target, Mapping):
-        return {}
-    return {k: v for k in WRITABLE if (v := num(target.get(k))) is not None}
+    iterations = result.iterations or []
+    target = iterations[n].target_drho if 0 <= n < len(iterations) else None
+    acc = result.accuracy
+    if target is None and n == len(iterations) - 1 and isinstance(acc, Accuracy):
+        target = objective(acc, acc.objective).target_drho_mm
+    return {k: v for k in WRITABLE if (v := at(target, k)) is not None}
 
 
-def correction_mm(entry: Mapping[str, Any],
-                  aim: Mapping[str, float] | None = None) -> float | None:
+def correction_mm(entry: Iteration, aim: Mapping[str, float] | None = None) -> float | None:
     """The largest |Δρ − aim| an identification asks to write (mm); the aim is 0
     unless objective tool set one (aim_of). A verification's Δρ is the one joined
     with the rounds before it (its ``joined``): what its verdict rests on and what a
     write-back after it writes, not its own look alone."""
-    joined = entry.get("joined")
-    ident = (joined.get("drho_mm") if isinstance(joined, Mapping) else None) \
-        or entry.get("identified") or {}
+    ident = (entry.joined.drho_mm if entry.joined is not None else None) or entry.identified
     aim = aim or {}
-    values = [abs(v - aim.get(n, 0.0)) for n in WRITABLE
-              if (v := num(ident.get(n))) is not None]
+    values = [abs(v - aim.get(n, 0.0)) for n in WRITABLE if (v := at(ident, n)) is not None]
     return max(values) if values else None
 
 
-def _label(n: int, entry: Mapping[str, Any]) -> str:
+def _label(n: int, entry: Iteration) -> str:
     return "measurement" if n == 0 else f"verification {n}"
 
 
-def stop_text(result: Mapping[str, Any]) -> str:
-    loop = result.get("loop") or {}
-    reason = loop.get("stopped")
-    text = STOP_TEXT.get(reason, str(reason))
-    if loop.get("detail"):
-        text += f" ({loop['detail']})"
+def stop_text(result: RunResult) -> str:
+    loop = result.loop
+    if loop is None:
+        return "—"
+    text = STOP_TEXT[loop.stopped]
+    if loop.detail:
+        text += f" ({loop.detail})"
     return text
 
 
-def judged_line(result: Mapping[str, Any]) -> str | None:
+def judged_line(result: RunResult) -> str | None:
     """With ΔL or tilts in the model the verification cannot go to zero: say what it
     was judged against (the model's prediction after writing Δρ)."""
-    ver = result.get("verification") or {}
-    expected = num(ver.get("expected_rms_mm"))
-    if expected is None or expected < 1e-4:
+    ver = result.verification
+    expected = num(ver.expected_rms_mm) if ver is not None else None
+    if ver is None or expected is None or expected < 1e-4:
         return None
     return (f"verification judged against the model after correction: deviations RMS "
-            f"{_um(ver.get('deviations_rms_mm'))}, predicted {_um(expected)} (ΔL, tilts "
+            f"{_um(ver.deviations_rms_mm)}, predicted {_um(expected)} (ΔL, tilts "
             f"and the joints' lost motion cannot be written), measured − predicted "
-            f"{_um(ver.get('vs_expected_rms_mm'))}")
+            f"{_um(ver.vs_expected_rms_mm)}")
 
 
-def remaining_text(result: Mapping[str, Any]) -> str | None:
+def remaining_text(result: RunResult) -> str | None:
     """What the last verification found left of Δρ, not written, with its 95 %
     interval (k from Student's t on the noise's dof): how far the machine now is
     from the truth. None before any write-back or without a measurement after it."""
-    rem = result.get("remaining") or {}
-    iterations = result.get("iterations") or []
-    if not rem or not any(e.get("offsets_written") for e in iterations):
+    rem = result.remaining
+    iterations = result.iterations or []
+    if rem is None or not any(e.offsets_written for e in iterations):
         return None
-    k = num(rem.get("coverage_factor_95"))
-    est, ses = rem.get("estimate") or {}, rem.get("std_errors") or {}
+    k = num(rem.coverage_factor_95)
     aim = aim_of(result, len(iterations) - 1)
     parts = []
     for n in WRITABLE:
-        v, se = num(est.get(n)), num(ses.get(n))
+        v, se = at(rem.estimate, n), at(rem.std_errors, n)
         if v is None:
             continue
         band = f" ± {1000 * k * se:.2f}" if k is not None and se is not None else ""
         parts.append(f"Δρ_{n[-1]} {1000 * (v - aim.get(n, 0.0)):+.2f}{band}")
     if not parts:
         return None
-    dof = num(rem.get("std_errors_dof"))
+    dof = num(rem.std_errors_dof)
     how = (f" µm (95 %, k = {k:.2f} on {dof:.3g} dof)" if k is not None and dof is not None
            else " µm")
     if any(abs(a) > 0 for a in aim.values()):
@@ -135,7 +129,7 @@ def remaining_text(result: Mapping[str, Any]) -> str | None:
     return ", ".join(parts) + how
 
 
-def summary_lines(result: Mapping[str, Any]) -> list[str]:
+def summary_lines(result: RunResult) -> list[str]:
     """The rounds for the text summary: one line per measurement, then the verdict
     and what is left."""
     judged = judged_line(result)
@@ -149,53 +143,68 @@ def summary_lines(result: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def _round_lines(result: Mapping[str, Any]) -> list[str]:
-    iterations = result.get("iterations") or []
-    if len(iterations) < 2 and not (result.get("loop") or {}).get("stopped"):
+def _looped(result: RunResult) -> bool:
+    """Whether the run has rounds to tell: two measurements, or a loop that stopped."""
+    return len(result.iterations or []) >= 2 or result.loop is not None
+
+
+def _round_lines(result: RunResult) -> list[str]:
+    iterations = result.iterations or []
+    loop = result.loop
+    if not _looped(result):
         return []
-    loop = result.get("loop") or {}
-    if loop.get("stopped") in ("not-verified", "skipped"):
+    if loop is not None and loop.stopped in ("not-verified", "skipped"):
         return [f"  closed loop   off: {stop_text(result)}"]
-    writes = sum(1 for e in iterations if e.get("offsets_written"))
+    writes = sum(1 for e in iterations if e.offsets_written)
     head = f"  closed loop   {writes} write-back(s), {len(iterations)} measurement(s): "
-    if result.get("converged"):
+    if result.converged:
         head += "converged — " + stop_text(result)
     else:
         head += "NOT CONVERGED — " + stop_text(result)
-    lines = [head]
-    for n, e in enumerate(iterations):
-        sig = e.get("significant") or []
-        verdict = VERDICT_TEXT.get(str(e.get("verdict")), "significant" if sig else "noise") \
-            if n else "first identification"
-        action = "written" if e.get("offsets_written") else (e.get("writeback") or "not written")
-        shown = [v for v in (e.get("shown_within_95_mm") or {}).values()]
-        within = "" if not n or sig or not shown else \
-            (", within " + ("an unknown bound" if None in shown else _um(max(shown)))
-             + " at 95 %")
-        passes = e.get("passes") or []
-        again = f", {len(passes)} passes pooled" if len(passes) > 1 else ""
-        lines.append(f"    {_label(n, e):<15} deviations RMS {_um(e.get('deviations_rms_mm'))}"
-                     f" (floor {_um(e.get('noise_floor_mm'))}{again}), correction max "
-                     f"{_um(correction_mm(e, aim_of(result, n)))}"
-                     f"{', rounds joined' if n and e.get('joined') else ''} ({verdict}{within}) → "
-                     f"{action}")
-    if loop.get("max_iterations") is not None:
-        lines.append(f"    (at most {loop['max_iterations']} write-backs, a correction counts "
+    lines = [head] + [_round_line(result, n, e) for n, e in enumerate(iterations)]
+    if loop is not None:
+        lines.append(f"    (at most {loop.max_iterations} write-backs, a correction counts "
                      f"beyond k σ, k from Student's t on the noise's dof for one false alarm "
-                     f"in a thousand runs, and beyond {_um(loop.get('converge_mm'))}; "
+                     f"in a thousand runs, and beyond {_um(loop.converge_mm)}; "
                      f"converged: every axis shown within "
-                     f"{_um(loop.get('converged_within_mm') or loop.get('converge_mm'))} at "
+                     f"{_um(loop.converged_within_mm or loop.converge_mm)} at "
                      f"95 %, a verification measured again up to "
-                     f"{loop.get('max_extra_passes', 0)} more time(s) to show it)")
+                     f"{loop.max_extra_passes} more time(s) to show it)")
     return lines
 
 
-def plot_rounds(result: Mapping[str, Any], pyplot: Any, svg: Any) -> str | None:
+def _round_line(result: RunResult, n: int, e: Iteration) -> str:
+    """One measurement of the loop: what it found, its verdict, what was written."""
+    sig = e.significant
+    if not n:
+        verdict = "first identification"
+    elif e.verdict is not None:
+        verdict = VERDICT_TEXT[e.verdict]
+    else:
+        verdict = "significant" if sig else "noise"
+    action = "written" if e.offsets_written else (e.writeback or "not written")
+    shown = list((e.shown_within_95_mm or {}).values())
+    within = ""
+    if n and not sig and shown:
+        bound = [v for v in shown if v is not None]
+        within = (", within " + ("an unknown bound" if len(bound) < len(shown)
+                                 else _um(max(bound))) + " at 95 %")
+    passes = e.passes or []
+    again = f", {len(passes)} passes pooled" if len(passes) > 1 else ""
+    return (f"    {_label(n, e):<15} deviations RMS {_um(e.deviations_rms_mm)}"
+            f" (floor {_um(e.noise_floor_mm)}{again}), correction max "
+            f"{_um(correction_mm(e, aim_of(result, n)))}"
+            f"{', rounds joined' if n and e.joined else ''} ({verdict}{within}) → "
+            f"{action}")
+
+
+def plot_rounds(result: RunResult, pyplot: Callable[[], Any],
+                svg: Callable[[Any], str]) -> str | None:
     """Deviations RMS, correction and noise floor per measurement, log scale (µm).
     None after a single write-back: the deviations' figure already shows before and
     after, and a figure costs ~0.2 s with the operator waiting at the end of the run."""
-    iterations = result.get("iterations") or []
-    if sum(1 for e in iterations if e.get("offsets_written")) < 2:
+    iterations = result.iterations or []
+    if sum(1 for e in iterations if e.offsets_written) < 2:
         return None
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 3.8))
@@ -206,15 +215,15 @@ def plot_rounds(result: Mapping[str, Any], pyplot: Any, svg: Any) -> str | None:
                if v is not None and v > 0]
         return [p[0] for p in pts], [p[1] for p in pts]
 
-    dev = series([num(e.get("deviations_rms_mm")) for e in iterations])
+    dev = series([num(e.deviations_rms_mm) for e in iterations])
     cor = series([correction_mm(e, aim_of(result, n)) for n, e in enumerate(iterations)])
-    floor = series([num(e.get("noise_floor_mm")) for e in iterations])
+    floor = series([num(e.noise_floor_mm) for e in iterations])
     ax.plot(*dev, "o-", color="#1f5fa8", label="deviations RMS")
     aimed = any(any(abs(a) > 0 for a in aim_of(result, n).values()) for n in xs)
     ax.plot(*cor, "s-", color="#e08a00",
             label="correction max |Δρ − aim|" if aimed else "correction max |Δρ|")
     ax.plot(*floor, "--", color="#777777", label="noise floor (scatter)")
-    converge = num((result.get("loop") or {}).get("converge_mm"))
+    converge = num(result.loop.converge_mm) if result.loop is not None else None
     if converge:
         ax.axhline(converge * 1000, color="#c0392b", lw=0.8, ls=":",
                    label="converge_mm")
@@ -226,15 +235,14 @@ def plot_rounds(result: Mapping[str, Any], pyplot: Any, svg: Any) -> str | None:
     return svg(fig)
 
 
-def html_section(result: Mapping[str, Any], plot: str | None) -> str:
+def html_section(result: RunResult, plot: str | None) -> str:
     """The "Closed loop" section of report.html (empty when there was one measurement)."""
-    iterations = result.get("iterations") or []
-    if len(iterations) < 2 and not (result.get("loop") or {}).get("stopped"):
+    if not _looped(result):
         return ""
     e = html.escape
-    if (result.get("loop") or {}).get("stopped") in ("not-verified", "skipped"):
+    if result.loop is not None and result.loop.stopped in ("not-verified", "skipped"):
         return f"<h2>Closed loop</h2><p>Off: {e(stop_text(result))}.</p>"
-    verdict = ("converged" if result.get("converged") else "<b>did not converge</b>")
+    verdict = ("converged" if result.converged else "<b>did not converge</b>")
     parts = [f"<h2>Closed loop</h2><p>The loop {verdict}: {e(stop_text(result))}.</p>"]
     judged = judged_line(result)
     if judged:
@@ -254,23 +262,29 @@ def html_section(result: Mapping[str, Any], plot: str | None) -> str:
                      f"offsets are off {'from their aim ' if 'from the aim' in left else ''}"
                      f"by this much; its Δρ is the correction applied plus what the last "
                      f"verification measured (the JSON's remaining.total).</p>")
+    parts.append(_rounds_table(result))
+    return "\n".join(parts)
+
+
+def _rounds_table(result: RunResult) -> str:
+    e = html.escape
     # where the station holds the offsets, none of them reached the drive
-    held = "held" if result.get("offsets_held_by") == "station" else "written"
+    held = "held" if result.offsets_held_by == "station" else "written"
     rows = []
-    for n, it in enumerate(iterations):
-        written = it.get("offsets_written")
+    for n, it in enumerate(result.iterations or []):
+        written = it.offsets_written
         rows.append(
             "<tr>" + "".join(f"<td>{c}</td>" for c in (
-                e(_label(n, it)), _um(it.get("deviations_rms_mm")),
-                _um(it.get("residual_rms_mm")), _um(it.get("noise_floor_mm")),
+                e(_label(n, it)), _um(it.deviations_rms_mm),
+                _um(it.residual_rms_mm), _um(it.noise_floor_mm),
                 _um(correction_mm(it, aim_of(result, n))),
-                e(", ".join(it.get("significant") or []) or "—"),
-                e(", ".join(f"{a} {v:+.4f}" for a, v in written.items()) if written
-                  else str(it.get("writeback") or "—")),
+                e(", ".join(it.significant) or "—"),
+                e(", ".join(f"{a} {'—' if v is None else f'{v:+.4f}'}"
+                            for a, v in written.items()) if written
+                  else str(it.writeback or "—")),
             )) + "</tr>")
-    parts.append("<table><thead><tr><th>measurement</th><th>deviations RMS</th>"
-                 "<th>residual RMS</th><th>noise floor</th>"
-                 "<th>correction max (a verification's: joined with the rounds before)</th>"
-                 f"<th>significant</th><th>offsets {held} (mm)</th></tr></thead><tbody>"
-                 + "".join(rows) + "</tbody></table>")
-    return "\n".join(parts)
+    return ("<table><thead><tr><th>measurement</th><th>deviations RMS</th>"
+            "<th>residual RMS</th><th>noise floor</th>"
+            "<th>correction max (a verification's: joined with the rounds before)</th>"
+            f"<th>significant</th><th>offsets {held} (mm)</th></tr></thead><tbody>"
+            + "".join(rows) + "</tbody></table>")

@@ -3,14 +3,13 @@ report.html (station.report.html lays out the rest)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
+from station.record.result import RunResult
 from station.report.format import (
     MODEL_TEXT,
-    as_dict,
+    at,
     esc,
     fmt,
+    hidden,
     machine_parameters,
     max_abs,
     num,
@@ -23,20 +22,18 @@ from station.report.format import (
 from station.report.tool import statement, tool_clause
 
 
-def what_was_done(result: Mapping[str, Any]) -> str:
-    setups = result.get("setups") if isinstance(result.get("setups"), list) else []
-    cycles = sorted({s.get("cycles_used") for s in setups if isinstance(s, dict)
-                     and isinstance(s.get("cycles_used"), int)})
+def what_was_done(result: RunResult) -> str:
+    setups = result.setups or []
+    cycles = sorted({s.cycles_used for s in setups})
     cyc = ""
     if cycles:
         cyc = (f" ({cycles[0]} cycle{'s' if cycles[0] != 1 else ''} per leg)"
                if len(cycles) == 1 else f" ({cycles[0]}–{cycles[-1]} cycles per leg)")
-    model = MODEL_TEXT.get(str(result.get("model")), str(result.get("model", "—")))
+    model = MODEL_TEXT.get(result.model, result.model)
     method = {"linear": "the linearised calibration equations",
-              "nonlinear": "the exact kinematic model (iterative least squares)"}.get(
-        str(result.get("method")), str(result.get("method", "—")))
+              "nonlinear": "the exact kinematic model (iterative least squares)"}[result.method]
     # [procedure] strokes: intermediate stops Π_i(s) beside or instead of Π_i^±.
-    kinds = {k[:-2] for k in as_dict(result.get("deviations"))} or {"+", "-"}
+    kinds = {k[:-2] for k in result.deviations or {}} or {"+", "-"}
     n_post = len(kinds)
     count = 3 * n_post * 2
     postures = ("the two test postures Π<sub>i</sub><sup>+</sup> and Π<sub>i</sub><sup>−</sup> "
@@ -44,7 +41,7 @@ def what_was_done(result: Mapping[str, Any]) -> str:
         f"{n_post} test postures Π<sub>i</sub>(s) along leg i's axis, at the strokes s of "
         "<code>[procedure] strokes</code>")
     stopped = ""
-    if result.get("status") in ("failed", "aborted"):
+    if result.status in ("failed", "aborted"):
         # The paragraph below describes the whole procedure; say plainly that this
         # run did not get through it, or a reader takes it for a completed calibration.
         done = len(setups)
@@ -71,70 +68,85 @@ def what_was_done(result: Mapping[str, Any]) -> str:
     )
 
 
-def result_paragraph(result: Mapping[str, Any]) -> str:
-    status = str(result.get("status"))
+def result_paragraph(result: RunResult) -> str:
+    parts = [*_found(result), *_written(result), *_verified(result)]
+    if not parts:
+        parts.append("No measurement results were recorded.")
+    return "<p>" + " ".join(parts) + "</p>"
+
+
+def _found(result: RunResult) -> list[str]:
+    """Whether the run completed, and what it identified."""
     parts: list[str] = []
     names = params_of(result)
-    ident, errs = machine_parameters(result), as_dict(result.get("std_errors"))
-    if status in ("failed", "aborted"):
-        msg = result.get("message") or "no reason recorded"
+    ident = machine_parameters(result)
+    if result.status in ("failed", "aborted"):
+        msg = result.message or "no reason recorded"
         parts.append(f"<b>The run did not complete</b>: {esc(msg)}. "
                      "Everything measured up to that point is kept in the run directory; "
                      "the controller's offsets were only changed if stated below.")
-    if names:
-        vals = "; ".join(
-            f"{param_html(n)} = {fmt(ident.get(n), signed=True)} ± {fmt(errs.get(n))} "
-            f"{unit(n)}" for n in names
-        )
-        what = "joint offsets" if all(n.startswith("drho") for n in names) else "parameters"
-        parts.append(f"The {what} were identified as {vals}.")
-        resid, noise = num(result.get("residual_rms_mm")), num(result.get("noise_mm"))
-        if resid is not None:
-            s = f"The fitted model reproduces the measured deviations to {fmt(resid)} mm RMS"
-            if noise is not None:
-                s += f" (indicator noise: {fmt(noise)} mm)"
-            parts.append(s + ".")
-        truths = [(n, true_value(result, n)) for n in names]
-        diffs = {u: [abs(num(ident.get(n)) - t) for n, t in truths if unit(n) == u
-                     and t is not None and num(ident.get(n)) is not None]
-                 for u in ("mm", "mrad")}
-        if diffs["mm"] or diffs["mrad"]:
-            parts.append("This was a simulated run; the identified values differ from the "
-                         "virtual machine's hidden ones by at most " + " and ".join(
-                             f"{fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
-    wb = as_dict(result.get("writeback"))
-    if wb.get("status"):
-        text = writeback_text(result, str(wb["status"]))
-        reason = f" ({esc(wb['reason'])})" if wb.get("reason") else ""
-        parts.append(f"{esc(text[0].upper() + text[1:])}{reason}.")
-    ver = as_dict(result.get("verification"))
+    if not names:
+        return parts
+    vals = "; ".join(
+        f"{param_html(n)} = {fmt(at(ident, n), signed=True)} ± "
+        f"{fmt(at(result.std_errors, n))} {unit(n)}" for n in names
+    )
+    what = "joint offsets" if all(n.startswith("drho") for n in names) else "parameters"
+    parts.append(f"The {what} were identified as {vals}.")
+    resid, noise = num(result.residual_rms_mm), num(result.noise_mm)
+    if resid is not None:
+        s = f"The fitted model reproduces the measured deviations to {fmt(resid)} mm RMS"
+        if noise is not None:
+            s += f" (indicator noise: {fmt(noise)} mm)"
+        parts.append(s + ".")
+    sim = hidden(result)
+    found = [(n, at(ident, n), true_value(sim, n)) for n in names]
+    diffs = {u: [abs(v - t) for n, v, t in found if unit(n) == u
+                 and t is not None and v is not None]
+             for u in ("mm", "mrad")}
+    if diffs["mm"] or diffs["mrad"]:
+        parts.append("This was a simulated run; the identified values differ from the "
+                     "virtual machine's hidden ones by at most " + " and ".join(
+                         f"{fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
+    return parts
+
+
+def _written(result: RunResult) -> list[str]:
+    wb = result.writeback
+    if wb is None:
+        return []
+    text = writeback_text(result, wb.status)
+    reason = f" ({esc(wb.reason)})" if wb.reason else ""
+    return [f"{esc(text[0].upper() + text[1:])}{reason}."]
+
+
+def _verified(result: RunResult) -> list[str]:
+    """The verification, and beside it what the tool does (or that it is not stated)."""
     # Parallel legs are the method's means, not the tool's accuracy: whatever the
     # verification shows, the same sentence says what the tool does (or that the
     # run does not state it), so that one is never read for the other.
     tool = tool_clause(result)
     _, why_not = statement(result)
-    if ver:
-        after = num(ver.get("deviations_rms_mm"))
-        worst = max_abs(as_dict(ver.get("deviations")))
-        s = ("A verification measurement shows the legs now parallel to within "
-             f"{fmt(after)} mm RMS")
-        if worst is not None:
-            s += f" (largest deviation {fmt(worst)} mm)"
-        before = num(result.get("deviations_rms_mm"))
-        if before is not None:
-            s += f", against {fmt(before)} mm RMS before calibration"
-        s += ": that is the legs' parallelism, the method's means, not the tool's accuracy"
-        if tool:
-            s += f"; {esc(tool)}"
-        else:
-            s += ("; accuracy at the tool is not stated"
-                  + (f" ({esc(why_not)})" if why_not else " by this result"))
-        parts.append(s + ".")
-    else:
-        if names and status == "ok":
+    ver = result.verification
+    if ver is None:
+        parts = []
+        if params_of(result) and result.status == "ok":
             parts.append("No verification measurement was made.")
         if tool:
             parts.append(f"{esc(tool[0].upper() + tool[1:])}.")
-    if not parts:
-        parts.append("No measurement results were recorded.")
-    return "<p>" + " ".join(parts) + "</p>"
+        return parts
+    worst = max_abs(ver.deviations)
+    s = ("A verification measurement shows the legs now parallel to within "
+         f"{fmt(ver.deviations_rms_mm)} mm RMS")
+    if worst is not None:
+        s += f" (largest deviation {fmt(worst)} mm)"
+    before = num(result.deviations_rms_mm)
+    if before is not None:
+        s += f", against {fmt(before)} mm RMS before calibration"
+    s += ": that is the legs' parallelism, the method's means, not the tool's accuracy"
+    if tool:
+        s += f"; {esc(tool)}"
+    else:
+        s += ("; accuracy at the tool is not stated"
+              + (f" ({esc(why_not)})" if why_not else " by this result"))
+    return [s + "."]

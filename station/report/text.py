@@ -3,22 +3,23 @@ written, the verification (the legs' parallelism), the accuracy at the tool and
 the squareness (station.report.tool), the closed loop's rounds, what the plunger
 guard did.
 
-Every section of the result may be missing (a run that failed halfway), so
-everything here reads with ``.get`` and shows "—" rather than raising.
+The record's sections may be absent (a run that failed halfway): a line whose
+section is absent is left out, a figure that is not stated shows "—".
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
-from station.report import budget, reversal, since, tool
+from station.record.result import RunResult
+from station.report import budget, reversal, rounds, since, tool
+from station.report.boundary import ResultLike, as_result
 from station.report.format import (
     AXES,
     NOT_WRITTEN_TEXT,
     STATE_TEXT,
-    as_dict,
+    at,
     fmt,
     held_by_station,
     held_offsets_text,
@@ -32,48 +33,45 @@ from station.report.format import (
 )
 
 
-def model_notes(result: Mapping[str, Any]) -> list[str]:
+def model_notes(result: RunResult) -> list[str]:
     """What the report must say about the model: why auto chose it, what cannot
     be identified from these measurements, what cannot be written."""
     notes = []
-    sel = as_dict(result.get("model_selection"))
-    if sel.get("reason"):
-        notes.append(f"Model chosen by auto ({sel.get('test', 'F test')}, level "
-                     f"{sel.get('level')}): {sel['reason']}.")
-    for line in result.get("not_identifiable") or []:
-        notes.append(str(line))
-    names = params_of(result)
-    if any(not n.startswith("drho_") for n in names):
+    sel = result.model_selection
+    if sel is not None and sel.reason:
+        notes.append(f"Model chosen by auto ({sel.test}, level "
+                     f"{sel.level}): {sel.reason}.")
+    notes += result.not_identifiable or []
+    if any(not n.startswith("drho_") for n in params_of(result)):
         notes.append(NOT_WRITTEN_TEXT)
     return notes
 
 
-def guard_lines(result: dict) -> list[str]:
+def guard_lines(result: RunResult) -> list[str]:
     """The plunger guard's stops that the run recovered from (or none)."""
-    guard = as_dict(result.get("plunger_guard"))
-    recovered = [r for r in guard.get("recovered") or [] if isinstance(r, dict)]
-    if not recovered:
+    guard = result.plunger_guard
+    if not guard.recovered:
         return []
-    lines = [f"  plunger guard stopped the axes {guard.get('stops')} time(s) and the run "
-             f"recovered ({guard.get('retakes', 0)} cycle(s) taken again):"]
-    for r in recovered:
-        lines.append(f"    indicator {r.get('indicator')} on {r.get('where')}, move to "
-                     f"{r.get('move')}: re-planned from where the axes stopped via "
-                     f"{r.get('waypoints')} waypoint(s) at {fmt(r.get('speed_mm_s'), 1)} mm/s")
+    lines = [f"  plunger guard stopped the axes {guard.stops} time(s) and the run "
+             f"recovered ({guard.retakes} cycle(s) taken again):"]
+    for r in guard.recovered:
+        lines.append(f"    indicator {r.indicator} on {r.where}, move to "
+                     f"{r.move}: re-planned from where the axes stopped via "
+                     f"{r.waypoints} waypoint(s) at {fmt(r.speed_mm_s, 1)} mm/s")
     return lines
 
 
-def headline(result: Mapping[str, Any]) -> str:
+def headline(result: RunResult) -> str:
     """The summary's first line: what happened, before anything else. A completed
     run whose closed loop did not converge says NOT CONVERGED and why (exit status
     3); offsets the station holds say so, with their values, to be entered in the
     drive (the "offsets held" line below says where)."""
     state = run_state(result)
-    head = f"orthocal run: {STATE_TEXT.get(state, state).upper()}"
+    head = f"orthocal run: {STATE_TEXT[state].upper()}"
     if state == "not-converged":
         head += f" — {not_converged_why(result)}"
-    elif result.get("message"):
-        head += f" — {result['message']}"
+    elif result.message:
+        head += f" — {result.message}"
     if held_by_station(result):
         values = held_offsets_text(result)
         head += (" — offsets HELD BY THE STATION, not by the drive"
@@ -89,89 +87,97 @@ def mountings_line(expected: Mapping[str, int]) -> str:
             f"{expected['most']} if every round takes all its passes")
 
 
-def timing_line(result: Mapping[str, Any]) -> str | None:
+def timing_line(result: RunResult) -> str | None:
     """The mountings the run took and the operator's time at them, or None (an older
     result without them)."""
-    timing = as_dict(result.get("timing"))
-    count = num(timing.get("mountings"))
-    if count is None:
+    timing = result.timing
+    if timing.mountings is None:
         return None
-    operator = num(timing.get("operator_s"))
+    operator = num(timing.operator_s)
     took = f", {operator:.0f} s at the machine" if operator is not None else ""
-    wall = num(timing.get("wall_s"))
+    wall = num(timing.wall_s)
     total = f"; the whole run {wall:.0f} s" if wall is not None else ""
-    return f"  mountings     {int(count)}{took}{total}"
+    return f"  mountings     {timing.mountings}{took}{total}"
 
 
-def summary_text(result: dict) -> str:
+def summary_text(result: ResultLike) -> str:
     """A few lines for the end of a run: status, identified values, residual,
-    offsets written, verification before → after, where the report is."""
-    lines = [headline(result)]
-    names = params_of(result)
-    if names:
-        model = str(result.get("model", ""))
-        sel = as_dict(result.get("model_selection"))
-        chosen = [c for c in sel.get("candidates") or [] if isinstance(c, dict)
-                  and c.get("model") == model and c.get("F") is not None]
-        why = (f" (auto: F = {fmt(chosen[0]['F'], 2)}, p = {fmt(chosen[0].get('p_value'))}"
-               f" against the measured noise, level {sel.get('level')})" if chosen else
-               " (auto: no candidate explains the data)" if sel else "")
-        lines.append(f"  model         {model}{why}")
-        lines.append(f"  identified    {param_line(result, names)}")
-        noise = num(result.get("noise_mm"))
-        resid = f"  residual      {fmt(result.get('residual_rms_mm'))} mm RMS"
-        if noise is not None:
-            resid += f" (indicator noise {fmt(noise)} mm)"
-        if result.get("fit_note"):
-            resid += f": {result['fit_note']}"
-        lines.append(resid)
-    before = as_dict(result.get("offsets_before"))
-    written = result.get("offsets_written")
-    wb = as_dict(result.get("writeback"))
-    if isinstance(written, dict) and written:
-        pairs = ", ".join(
-            f"{a} {fmt(before.get(a))} → {fmt(written.get(a))}" for a in AXES if a in written
-        )
-        status = wb.get("status", "written")
-        if result.get("offsets_held_by") == "station" and status == "written":
-            status = "held by the station"
-        lines.append(f"  offsets       {pairs} mm ({status})")
-    elif wb:
-        reason = f": {wb['reason']}" if wb.get("reason") else ""
-        lines.append(f"  offsets       not written ({wb.get('status')}{reason})")
-    if result.get("offsets_held_by") == "station":
-        lines.append(f"  offsets held  by the station: {result.get('offsets_note', '')}")
-    ver = result.get("verification")
-    if isinstance(ver, dict) and ver:
-        # The verification measures the legs' parallelism (the method's means);
-        # the tool's accuracy is the "at the tool" line's, and the two differ.
-        lines.append(
-            f"  verification  legs' parallelism (the method's means, not the tool's accuracy):"
-            f" deviations RMS {fmt(result.get('deviations_rms_mm'))} → "
-            f"{fmt(ver.get('deviations_rms_mm'))} mm; re-identified "
-            + "  ".join(
-                f"{param_plain(n)} = {fmt(v, signed=True)} {unit(n)}"
-                for n, v in as_dict(ver.get("identified")).items()
-            )
-        )
-    lines += tool.summary_lines(result)
-    lines += reversal.summary_lines(result)
-    lines += budget.summary_lines(result)
-    lines += since.summary_lines(result)
-    if names and result.get("not_identifiable"):
-        two = any("ΔL cannot be separated" in str(n) for n in result["not_identifiable"])
+    offsets written, verification before → after, where the report is. ``result``:
+    the record, or a document that becomes it (station.report.boundary)."""
+    record = as_result(result)
+    lines = [headline(record), *_fit_lines(record), *_offsets_lines(record)]
+    lines += _verification_lines(record)
+    lines += tool.summary_lines(record)
+    lines += reversal.summary_lines(record)
+    lines += budget.summary_lines(record)
+    lines += since.summary_lines(record)
+    names = params_of(record)
+    if names and record.not_identifiable:
+        two = any("ΔL cannot be separated" in n for n in record.not_identifiable)
         lines.append("  not identifiable  a rotation of the whole machine"
                      + ("; ΔL beside the tilts (two postures per leg)" if two else ""))
     if any(not n.startswith("drho_") for n in names):
         lines.append("  not written   tilts, gaps and ΔL (a controller's offsets take only Δρ; "
                      "its kinematics can take the rest: orthocal export --kinematics, or "
                      "orthocal compensate for a program)")
-    lines += guard_lines(result)
-    if (line := timing_line(result)) is not None:
+    lines += guard_lines(record)
+    if (line := timing_line(record)) is not None:
         lines.append(line)
-    from station.report import rounds
-
-    lines += rounds.summary_lines(result)
-    if result.get("run_dir"):
-        lines.append(f"  report        {Path(str(result['run_dir'])) / 'report.html'}")
+    lines += rounds.summary_lines(record)
+    if record.run_dir:
+        lines.append(f"  report        {Path(record.run_dir) / 'report.html'}")
     return "\n".join(lines)
+
+
+def _fit_lines(result: RunResult) -> list[str]:
+    """The model (and why auto chose it), the identified values, the residual."""
+    names = params_of(result)
+    if not names:
+        return []
+    sel = result.model_selection
+    chosen = [c for c in (sel.candidates if sel is not None else [])
+              if c.model == result.model and c.F is not None]
+    why = (f" (auto: F = {fmt(chosen[0].F, 2)}, p = {fmt(chosen[0].p_value)}"
+           f" against the measured noise, level {sel.level})" if chosen and sel else
+           " (auto: no candidate explains the data)" if sel else "")
+    resid = f"  residual      {fmt(result.residual_rms_mm)} mm RMS"
+    if (noise := num(result.noise_mm)) is not None:
+        resid += f" (indicator noise {fmt(noise)} mm)"
+    if result.fit_note:
+        resid += f": {result.fit_note}"
+    return [f"  model         {result.model}{why}",
+            f"  identified    {param_line(result, names)}", resid]
+
+
+def _offsets_lines(result: RunResult) -> list[str]:
+    """The offsets before → written (or why not written), and who holds them."""
+    lines = []
+    written, wb = result.offsets_written, result.writeback
+    if written:
+        pairs = ", ".join(f"{a} {fmt(at(result.offsets_before, a))} → {fmt(written[a])}"
+                          for a in AXES if a in written)
+        status: str = wb.status if wb is not None else "written"
+        if held_by_station(result) and status == "written":
+            status = "held by the station"
+        lines.append(f"  offsets       {pairs} mm ({status})")
+    elif wb is not None:
+        reason = f": {wb.reason}" if wb.reason else ""
+        lines.append(f"  offsets       not written ({wb.status}{reason})")
+    if held_by_station(result):
+        lines.append(f"  offsets held  by the station: {result.offsets_note or ''}")
+    return lines
+
+
+def _verification_lines(result: RunResult) -> list[str]:
+    ver = result.verification
+    if ver is None:
+        return []
+    # The verification measures the legs' parallelism (the method's means);
+    # the tool's accuracy is the "at the tool" line's, and the two differ.
+    return [
+        f"  verification  legs' parallelism (the method's means, not the tool's accuracy):"
+        f" deviations RMS {fmt(result.deviations_rms_mm)} → "
+        f"{fmt(ver.deviations_rms_mm)} mm; re-identified "
+        + "  ".join(f"{param_plain(n)} = {fmt(v, signed=True)} {unit(n)}"
+                    for n, v in ver.identified.items())
+    ]
