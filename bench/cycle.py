@@ -70,9 +70,10 @@ from bench.floor import (
     physical_floor,
 )
 from drivers.sim.motion import DriveMotion
-from drivers.sim.station import VirtualStation
+from drivers.sim.specs import DriveSpec, GaugeSpec, MachineTruth
 from orthocal import AXES
 from station.commands import simulation
+from station.commands.sim_config import SimulatedStation, gauges_for
 from station.config.toml import toml_text
 from station.rundir.journal import read_journal
 
@@ -134,7 +135,7 @@ class Outcome:
         return [s["cycles_used"] for s in block.get("setups", [])]
 
 
-def station_config(station: VirtualStation, timing: Timing, cycles: int,
+def station_config(station: SimulatedStation, timing: Timing, cycles: int,
                    target_se: float | None, strokes: list[float] | None = None
                    ) -> dict[str, Any]:
     config = simulation.station_config(station, {})
@@ -165,12 +166,12 @@ def run_once(*, seed: int, noise_mm: float, cycles: int, target_se: float | None
     rng = np.random.default_rng(seed)
     drho = true_drho if true_drho is not None else \
         [round(float(v), 4) for v in rng.uniform(-2.0, 2.0, 3)]
-    with VirtualStation(drho, (0.0, 0.0, 0.0), noise_mm, seed, speed_mm_s=timing.speed_mm_s,
-                        accel_mm_s2=timing.accel_mm_s2, protocol=timing.protocol,
-                        baud=timing.baud, line_time=True, indicator_count=6,
-                        mount_all=True, mount_error_mm=mount_error_mm,
-                        motion=timing.motion, drive_accel_mm_s2=timing.drive_accel
-                        ) as station:
+    drive = DriveSpec(motion=timing.motion, speed_mm_s=timing.speed_mm_s,
+                      accel_mm_s2=timing.accel_mm_s2, actual_accel_mm_s2=timing.drive_accel)
+    gauges = gauges_for(6, GaugeSpec(protocol=timing.protocol, baud=timing.baud,
+                                     line_time=True, noise_mm=noise_mm,
+                                     mount_error_mm=mount_error_mm), mounted=True)
+    with SimulatedStation(MachineTruth(drho=drho), drive, gauges, seed=seed) as station:
         machine = station.machine
         started: list[float] = []
         began: list[float] = []

@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 from fakes import FakeRig, fake_config, run_on
 
-from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
 from orthocal import AXES
 from station import report
+from station.commands.simulation import DEFAULT_MOUNT_ERROR_MM
 
 GAP = (0.15, -0.10, 0.12)
 TILT = (0.2, 0.1, -0.15)

@@ -14,8 +14,8 @@ import pytest
 from builders import FAST
 from fakes import FakeRig, fake_config, run_on
 
-from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
 from station import report
+from station.commands.simulation import DEFAULT_MOUNT_ERROR_MM
 
 TRUE = (0.6, -0.4, 0.9)
 PROCEDURE = {**FAST, "cycles": 3, "model": "auto", "max_extra_passes": 2}

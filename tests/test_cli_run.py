@@ -12,8 +12,8 @@ import pytest
 from builders import no_figures_file
 from truth import assert_truth, drho
 
-from drivers.sim.station import VirtualStation
 from station.commands.cli import main
+from station.commands.sim_config import SimulatedStation, gauges_for
 from station.commands.simulation import station_config
 from station.config.toml import toml_text
 
@@ -64,7 +64,7 @@ def test_bad_config_exit_2_names_the_field(tmp_path: Path, capsys) -> None:
 
 @pytest.fixture
 def station_toml(tmp_path: Path):
-    with VirtualStation(seed=2, mount_all=True, indicator_count=6) as station:
+    with SimulatedStation(gauges=gauges_for(6, mounted=True), seed=2) as station:
         config = station_config(station, {})
         path = tmp_path / "station.toml"
 

@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 from builders import NO_FIGURES
 
-from drivers.sim.station import VirtualStation
+from drivers.sim.specs import DriveSpec, MachineTruth
+from station.commands.sim_config import SimulatedStation, gauges_for
 from station.commands.simulation import station_config
 from station.config.toml import toml_text
 
@@ -85,8 +86,8 @@ def _lines(raw: bytes) -> list[bytes]:
 def test_prompts_never_share_a_line_with_the_live_bar(tmp_path: Path) -> None:
     procedure = {"cycles": 1, "readings": 2, "settle_s": 0.05, "verify": True,
                  "max_extra_passes": 0}  # no further pass of a verification
-    with VirtualStation(seed=7, true_drho=(0.2, -0.1, 0.3), mount_all=True,
-                        indicator_count=6, speed_mm_s=400.0) as station:
+    with SimulatedStation(MachineTruth(drho=(0.2, -0.1, 0.3)), DriveSpec(speed_mm_s=400.0),
+                          gauges_for(6, mounted=True), seed=7) as station:
         config = tmp_path / "station.toml"
         sections = {"procedure": procedure, "report": NO_FIGURES}
         config.write_text(toml_text(station_config(station, sections), "pty test"))

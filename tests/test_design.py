@@ -208,11 +208,11 @@ def test_cli_design_auto_shows_the_largest_model_the_postures_identify(capsys) -
 def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
     """``orthocal run --plan`` asks the controller for its soft limits: the search
     stays inside them and inside the plungers' travel (the whole plan check)."""
-    from drivers.sim.station import VirtualStation
+    from station.commands.sim_config import SimulatedStation, gauges_for
     from station.config import load_config
     from station.config.toml import toml_text
 
-    with VirtualStation(seed=2, mount_all=True, indicator_count=6) as station:
+    with SimulatedStation(gauges=gauges_for(6, mounted=True), seed=2) as station:
         path = tmp_path / "station.toml"
         path.write_text(toml_text(sim_station_config(station, {}), "test"))
         code, out, err = run_cli(capsys, "run", "--config", str(path), "--plan", "--out",

@@ -8,6 +8,7 @@ import pytest
 
 import orthocal
 from drivers.sim.machine import VirtualOrthoglide
+from drivers.sim.specs import GaugeSpec
 from drivers.sim.station import VirtualStation
 from orthocal import Geometry
 from orthocal.loop import (
@@ -264,15 +265,16 @@ def test_machine_reading_follows_the_stand_plane() -> None:
 
 
 def test_every_mounting_draws_a_new_stand_error_within_the_bound() -> None:
-    with VirtualStation(noise_mm=0.0, seed=3, line_time=False, mount_error_mm=8.0) as st:
+    with VirtualStation(gauges=GaugeSpec(noise_mm=0.0, line_time=False, mount_error_mm=8.0),
+                        seed=3) as st:
         for where in ("m:0", "v:0", "v2:0", "m:0"):
             st.place(where)
             st.mount("A", "x", "y")
         errors = [e for *_, e in st.mount_log]
         assert len(set(errors)) == 3 and all(abs(e) <= 8.0 for e in errors)
         assert errors[3] == errors[0]  # the same placement, replayed after a resume
-    with VirtualStation(noise_mm=0.0, seed=3, line_time=False,
-                        mount_errors={"A": -6.0}) as st:
+    with VirtualStation(gauges=GaugeSpec(noise_mm=0.0, line_time=False,
+                                         mount_errors={"A": -6.0}), seed=3) as st:
         st.mount("A", "x", "y")
         assert st.mount_log == [("A", "x", "y", -6.0)]
 

@@ -20,8 +20,9 @@ from pathlib import Path
 import pytest
 
 from drivers.map_files import builtin_maps, read_map, resolve_map
-from drivers.sim.station import VirtualStation
+from drivers.sim.specs import DriveSpec, GaugeSpec
 from station.commands.cli import main
+from station.commands.sim_config import SimulatedStation
 from station.config import (
     ControllerConfig,
     MachineConfig,
@@ -150,8 +151,9 @@ def test_init_config_probes_its_devices_and_writes_a_config_run_accepts(
     shutil.copy(HELD, tmp_path / "a" / "maps" / "gateway.toml")
     (tmp_path / "b").mkdir()
     source, out = tmp_path / "a" / "station.toml", tmp_path / "b" / "station.toml"
-    with VirtualStation(seed=1, line_time=False, motion="independent",
-                        register_map=read_map(HELD), profile="maps/gateway.toml") as vs:
+    drive = DriveSpec(motion="independent", register_map=read_map(HELD),
+                      profile="maps/gateway.toml")
+    with SimulatedStation(drive=drive, gauges=GaugeSpec(line_time=False), seed=1) as vs:
         given = vs.config()
         given["controller"]["offsets"] = [0.01, -0.02, 0.03]
         source.write_text(toml_text(given))

@@ -20,12 +20,15 @@ import pytest
 import orthocal
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.motion import DriveMotion
+from drivers.sim.specs import DriveSpec, GaugeSpec
 from drivers.sim.station import VirtualStation
+from station.commands.sim_config import SimulatedStation
 from station.config import parse_config
 
 GEOMETRY = orthocal.Geometry()
 PI0 = orthocal.posture("0", None, GEOMETRY)
 SPEED, ACCEL = 100.0, 1000.0
+INDEPENDENT = DriveSpec(motion="independent", speed_mm_s=SPEED, accel_mm_s2=ACCEL)
 DT = 0.0005  # the stepped clock's tick (s)
 # A move of three axes: x cruises at the speed, y only just reaches it, z never does.
 DELTA = np.array([40.0, -9.0, 2.5])
@@ -271,9 +274,8 @@ def short_station() -> Iterator[tuple[VirtualStation, Clock]]:
     by −3.0 mm (within), Π_x^− → Π0 by +2.5 mm (within), a single Π_x^+ → Π_x^−
     by −8.8 mm (a figure from a held-out controller): 5.3 mm past the end."""
     clock = Clock()
-    with VirtualStation(noise_mm=0.0, motion="independent", speed_mm_s=SPEED,
-                        accel_mm_s2=ACCEL, clock=clock, line_time=False,
-                        strokes={"A": (7.0, 3.5), "B": (7.0, 3.5)}) as st:
+    gauges = GaugeSpec(noise_mm=0.0, line_time=False, strokes={"A": (7.0, 3.5), "B": (7.0, 3.5)})
+    with VirtualStation(drive=INDEPENDENT, gauges=gauges, clock=clock) as st:
         st.mount("A", "x", "y")
         st.mount("B", "x", "z")
         yield st, clock
@@ -384,8 +386,8 @@ def test_only_mounted_gauges_count_with_their_mounting_in_force(
 
 def test_a_knocked_stand_is_seen_by_the_readings_and_the_count() -> None:
     clock = Clock()
-    with VirtualStation(noise_mm=0.0, motion="independent", speed_mm_s=SPEED,
-                        accel_mm_s2=ACCEL, clock=clock, line_time=False) as st:
+    with VirtualStation(drive=INDEPENDENT, gauges=GaugeSpec(noise_mm=0.0, line_time=False),
+                        clock=clock) as st:
         st.mount("A", "x", "y")
         st.mount("B", "x", "z")
         a, unknocked = st.indicators["A"], st.source("x", "y")
@@ -418,12 +420,12 @@ def test_a_knocked_stand_is_seen_by_the_readings_and_the_count() -> None:
 def test_config_tells_the_station_nothing_of_the_drives_timing() -> None:
     drives: list[tuple[Any, dict[str, Any]]] = [
         ("independent", {}),
-        (DriveMotion(shape="scurve", sequence="zyx"), {"drive_accel_mm_s2": 5000.0}),
+        (DriveMotion(shape="scurve", sequence="zyx"), {"actual_accel_mm_s2": 5000.0}),
         ("coordinated", {}),
         (DriveMotion(coordinated=True, shape="cosine"), {}),
     ]
     for drive, extra in drives:
-        with VirtualStation(motion=drive, **extra) as st:
+        with SimulatedStation(drive=DriveSpec(motion=drive, **extra)) as st:
             controller = st.config()["controller"]
             coordinated = st.machine.drive.coordinated
             assert ("motion" in controller) == coordinated
@@ -438,8 +440,9 @@ def test_config_tells_the_station_nothing_of_the_drives_timing() -> None:
 
 def test_the_drives_own_acceleration_is_the_one_it_moves_with() -> None:
     clock = Clock()
-    with VirtualStation(motion="independent", speed_mm_s=SPEED, accel_mm_s2=ACCEL,
-                        drive_accel_mm_s2=ACCEL / 4, clock=clock) as st:
+    drive = DriveSpec(motion="independent", speed_mm_s=SPEED, accel_mm_s2=ACCEL,
+                      actual_accel_mm_s2=ACCEL / 4)
+    with SimulatedStation(drive=drive, clock=clock) as st:
         d = 2.0  # a triangle at either acceleration
         duration = st.machine.move_to(st.machine.actual() + np.array([d, 0.0, 0.0]))
         assert duration == pytest.approx(2 * math.sqrt(d / (ACCEL / 4)))

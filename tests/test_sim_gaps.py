@@ -22,13 +22,17 @@ from builders import parsed_simulate
 
 import orthocal
 from drivers.indicators import SerialIndicator
+from drivers.sim.specs import GaugeSpec, MachineTruth
 from drivers.sim.station import VirtualStation
 from station.commands import cli
 from station.commands.options import SimOptions
+from station.commands.sim_config import gauges_for
 from station.commands.simulation import gaps_mm, sim_params, start_station
 from station.config import parse_config
 from station.engine.results import base_result
 from station.errors import BadInput
+from station.record.migrate import migrate
+from station.record.result import Simulation
 from station.report.format import true_value
 
 G = orthocal.Geometry()
@@ -60,10 +64,10 @@ def six_gauges(gap: Any) -> Iterator[tuple[VirtualStation, Clock, dict[str, Seri
     pseudo-terminal."""
     clock = Clock()
     with ExitStack() as stack:
-        st = stack.enter_context(VirtualStation(
-            true_drho=DRHO, true_gap=gap, noise_mm=0.0, line_time=False, clock=clock,
-            indicator_count=6, mount_all=True, mount_errors=STANDS,
-            strokes={n: LONG for n in "ABCDEF"}))
+        gauges = gauges_for(6, GaugeSpec(noise_mm=0.0, line_time=False, mount_errors=STANDS,
+                                         strokes={n: LONG for n in "ABCDEF"}), mounted=True)
+        st = stack.enter_context(VirtualStation(MachineTruth(drho=DRHO, gap=gap),
+                                                gauges=gauges, clock=clock))
         gauges = {n: stack.enter_context(SerialIndicator(n, ind.port, "mitutoyo",
                                                          timeout_s=2.0))
                   for n, ind in st.indicators.items()}
@@ -129,9 +133,9 @@ def test_the_gauges_see_the_gaps_that_leg_reading_predicts() -> None:
 
 
 def test_the_station_hands_its_gaps_to_the_machine() -> None:
-    with VirtualStation(true_gap=GAP, line_time=False) as st:
+    with VirtualStation(MachineTruth(gap=GAP), gauges=GaugeSpec(line_time=False)) as st:
         assert st.machine.true_gap.tolist() == list(GAP)
-    with VirtualStation(line_time=False) as st:
+    with VirtualStation(gauges=GaugeSpec(line_time=False)) as st:
         assert st.machine.true_gap.tolist() == [0.0, 0.0, 0.0]
 
 
@@ -163,11 +167,15 @@ def test_the_option_survives_the_journal_round_trip() -> None:
             list(result["simulation"]).index("true_tilt") + 1
         # the report's hidden truth of an identified gap
         doc = json.loads(json.dumps(result))
-        assert [true_value(doc, n) for n in GAP_NAMES] == gap
-    # a result from before the gaps states no truth for them
-    doc["simulation"].pop("true_gap")
-    assert true_value(doc, "gap_xy") is None
-    assert true_value(doc, "tilt_zy") == -0.1
+        sim = Simulation.model_validate(doc["simulation"])
+        assert [true_value(sim, n) for n in GAP_NAMES] == gap
+    # a result from before the gaps is read as one whose axes met (station.record.
+    # migrate): their truth is 0
+    del doc["schema_version"], doc["simulation"]["true_gap"]
+    sim = Simulation.model_validate(migrate(doc)["simulation"])
+    assert true_value(sim, "gap_xy") == 0.0
+    assert true_value(sim, "tilt_zy") == -0.1
+    assert true_value(None, "tilt_zy") is None  # not a simulated run
 
 
 BAD = [

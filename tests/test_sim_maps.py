@@ -36,13 +36,15 @@ from drivers.registers import (
 from drivers.sim.controller import SimController
 from drivers.sim.faults import Faults
 from drivers.sim.machine import VirtualOrthoglide
-from drivers.sim.station import VirtualStation
+from drivers.sim.specs import DriveSpec, GaugeSpec
+from station.commands.sim_config import SimulatedStation
 
 IAI_PCON = builtin_maps()["iai-pcon-direct"]
 GEOMETRY = orthocal.Geometry()
 PI0 = orthocal.posture("0", None, GEOMETRY)
 LIMITS = ([200.25] * 3, [380.25] * 3)  # the drive's default soft limits
 TIMEOUT_S = 0.25
+QUIET = GaugeSpec(noise_mm=0.0)  # the virtual station's gauges, without noise
 COUNTS_PER_MM = 2000.0  # the gateway map's encoders
 
 
@@ -284,17 +286,18 @@ def test_iai_home_needs_the_rising_edge() -> None:
 
 
 def test_virtual_station_serves_the_map_and_says_so() -> None:
-    with VirtualStation(noise_mm=0.0, register_map=IAI_PCON) as vs:
+    with SimulatedStation(drive=DriveSpec(register_map=IAI_PCON), gauges=QUIET) as vs:
         c = vs.config()["controller"]
         assert (c["profile"], c["device_id"]) == ("iai-pcon-direct", 1)
         assert (c["soft_min"], c["soft_max"]) == LIMITS  # the map has no soft-limit registers
         keys = ("transport", "host", "port", "device_id", "profile")
         with ModbusAxisController(**{k: c[k] for k in keys}, timeout_s=1.0) as ctl:
             np.testing.assert_allclose(ctl.read_positions(), PI0, atol=0.01)
-    with VirtualStation(noise_mm=0.0, register_map=GATEWAY, profile="bench-gateway") as vs:
+    gateway = DriveSpec(register_map=GATEWAY, profile="bench-gateway")
+    with SimulatedStation(drive=gateway, gauges=QUIET) as vs:
         assert vs.config()["controller"]["profile"] == "bench-gateway"
         assert vs.controller.client_kwargs()["profile"] is GATEWAY  # not a built-in
-    with VirtualStation(noise_mm=0.0) as vs:
+    with SimulatedStation(gauges=QUIET) as vs:
         c = vs.config()["controller"]
         assert c["profile"] == GENERIC.name and "soft_min" not in c
 

@@ -14,8 +14,9 @@ from builders import NO_FIGURES
 
 from drivers.axes import ModbusAxisController
 from drivers.sim.controller import SimController
-from drivers.sim.station import VirtualStation
+from drivers.sim.specs import DriveSpec, MachineTruth
 from station.commands.cli import main
+from station.commands.sim_config import SimulatedStation, gauges_for
 from station.commands.simulation import station_config
 from station.config.toml import toml_text
 
@@ -46,10 +47,10 @@ def test_all_zero_registers_read_as_nonsense() -> None:
 
 
 def _station(tmp_path: Path, soft_limit_registers: Any, controller: dict[str, Any]
-             ) -> tuple[VirtualStation, Path]:
-    station = VirtualStation(seed=5, true_drho=(0.3, -0.2, 0.1), mount_all=True,
-                             indicator_count=6,
-                             controller_options={"soft_limit_registers": soft_limit_registers})
+             ) -> tuple[SimulatedStation, Path]:
+    drive = DriveSpec(controller_options={"soft_limit_registers": soft_limit_registers})
+    station = SimulatedStation(MachineTruth(drho=(0.3, -0.2, 0.1)), drive,
+                               gauges_for(6, mounted=True), seed=5)
     config = station_config(station, {"procedure": SHORT, "report": NO_FIGURES})
     config["controller"].update(controller)
     path = tmp_path / "station.toml"

@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 from fakes import FakeRig, fake_config, run_on
 
-from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
 from orthocal import AXES, Geometry
 from orthocal.accuracy import error_field, optimal_offsets
 from station import report
+from station.commands.simulation import DEFAULT_MOUNT_ERROR_MM
 from station.config import parse_config
 from station.errors import BadInput
 

@@ -18,10 +18,12 @@ from builders import FAST, on_setup, resumed, simulated
 from truth import assert_truth, drho
 
 from drivers.map_files import builtin_maps, read_map
+from drivers.sim.specs import DriveSpec, GaugeSpec
 from drivers.sim.station import VirtualStation
 from station import report
 from station.commands import run as cmd_run
 from station.commands.cli import main
+from station.commands.sim_config import SimulatedStation
 from station.config.toml import toml_text
 from station.errors import RunFailed
 from station.rundir.journal import read_journal
@@ -169,7 +171,8 @@ def test_offsets_held_by_the_station_resume_roll_back_and_carry_on(
 def test_probe_reads_every_register_of_the_unseen_layout(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     the_map = read_map(GATEWAY)
-    with VirtualStation(noise_mm=0.0, register_map=the_map, profile=str(GATEWAY)) as vs:
+    with SimulatedStation(drive=DriveSpec(register_map=the_map, profile=str(GATEWAY)),
+                          gauges=GaugeSpec(noise_mm=0.0)) as vs:
         config = tmp_path / "station.toml"
         config.write_text(toml_text(vs.config()), encoding="utf-8")
         code = main(["probe", "--config", str(config), "--json", "--timeout", "0.3"])

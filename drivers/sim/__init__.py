@@ -5,5 +5,7 @@ gauges as :mod:`drivers.sim.legs` says) behind a real pymodbus server
 the drive's registers of :mod:`drivers.sim.drive` for any register map, laid out on
 the wire by :mod:`drivers.sim.layout`), simulated dial indicators
 (:mod:`drivers.sim.indicators`), the devices' fault knobs (:mod:`drivers.sim.faults`),
-and the whole virtual station (:mod:`drivers.sim.station`, its out-of-stroke count in
-:mod:`drivers.sim.strokes`)."""
+the whole virtual station (:mod:`drivers.sim.station`, built from the specs of
+:mod:`drivers.sim.specs`, its out-of-stroke count in :mod:`drivers.sim.strokes`),
+and in-process fakes at the Protocol level, no server nor pty, for tests of what
+drives the devices (:mod:`drivers.sim.fake`)."""

@@ -27,9 +27,11 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM, VirtualStation
+from drivers.sim.specs import DriveSpec, GaugeSpec, MachineTruth
 from station.commands.options import DriveOptions
+from station.commands.sim_config import SimulatedStation, gauges_for
 from station.commands.simulation import (
+    DEFAULT_MOUNT_ERROR_MM,
     backlash_mm,
     drive_motion,
     drive_params,
@@ -51,12 +53,46 @@ SIX_GAUGES = 6  # A..F, two per leg: what a separate process mounts (module docs
 
 def main(args: argparse.Namespace) -> int:
     seed = args.seed if args.seed is not None else random.randrange(2**31)
+    truth, drive_spec, gauges, drive = _specs(args, seed)
+    out = Path(args.config_out)
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: object) -> None:
+        del signum, frame
+        stop.set()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        try:
+            station = SimulatedStation(truth, drive_spec, gauges, seed=seed)
+        except OSError as exc:
+            raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
+        with station:
+            header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, "
+                      f"{_hidden(truth, gauges)}, drive {_describe(drive)}\n"
+                      f"Use: orthocal run --config {out}")
+            # Validated like any operator's config: what we hand out must load, and
+            # its motion be one run accepts (checked by run's own rule).
+            config = parse_config(station_config(station, {}), "orthocal sim")
+            motion_model(config)
+            out.write_text(dump_toml(config, header))
+            _announce(args, station, out, truth)
+            while not stop.wait(0.5):
+                pass
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+    print("orthocal sim: stopped", file=sys.stderr)
+    return 0
+
+
+def _specs(args: argparse.Namespace, seed: int
+           ) -> tuple[MachineTruth, DriveSpec, GaugeSpec, dict[str, Any]]:
+    """The virtual station the options ask for (BadInput naming the option), and
+    its drive's behaviour as drive_params gives it."""
     rng = random.Random(seed)
     drho = list(args.true_drho) if args.true_drho is not None else \
         [round(rng.uniform(-2.0, 2.0), 4) for _ in range(3)]
-    dl = list(args.true_dl) if args.true_dl is not None else [0.0, 0.0, 0.0]
-    tilt = list(args.true_tilt) if args.true_tilt is not None else [0.0, 0.0, 0.0]
-    gap = gaps_mm(args.true_gap)
     noise = 0.002 if args.noise is None else args.noise
     if noise < 0:
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
@@ -68,60 +104,43 @@ def main(args: argparse.Namespace) -> int:
     profile = map_profile(args.profile)
     # As run --simulate: axes on separate drives cannot move on one line.
     drive = drive_params(DriveOptions.from_args(args), separate_drives=separate_drives(profile))
-    backlash = backlash_mm(args.backlash)
-    bow = leg_bow_mm(args.leg_bow)
+    zero = (0.0, 0.0, 0.0)
+    truth = MachineTruth(drho=drho, dl=zero if args.true_dl is None else args.true_dl,
+                         tilt=zero if args.true_tilt is None else args.true_tilt,
+                         gap=gaps_mm(args.true_gap),
+                         backlash=backlash_mm(args.backlash), leg_bow=leg_bow_mm(args.leg_bow))
     scale = gauge_scales(args.gauge_scale, SIX_GAUGES)
     kwargs: dict[str, Any] = served_map(profile)
     if args.speed is not None:
         kwargs["speed_mm_s"] = args.speed
-    out = Path(args.config_out)
-    stop = threading.Event()
+    drive_spec = DriveSpec(motion=drive_motion(drive), port=args.port,
+                           controller_options={"transport": args.transport}, **kwargs)
+    gauges = gauges_for(SIX_GAUGES, GaugeSpec(protocol=args.protocol, noise_mm=noise,
+                                              mount_error_mm=mount_error, scale=scale),
+                        mounted=True)
+    return truth, drive_spec, gauges, drive
 
-    def on_signal(signum: int, frame: object) -> None:
-        del signum, frame
-        stop.set()
 
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        try:
-            station = VirtualStation(drho, dl, noise, seed, protocol=args.protocol,
-                                     indicator_count=SIX_GAUGES, port=args.port, mount_all=True,
-                                     mount_error_mm=mount_error,
-                                     motion=drive_motion(drive),
-                                     controller_options={"transport": args.transport},
-                                     true_tilt=tilt, true_gap=gap, backlash=backlash,
-                                     leg_bow=bow, gauge_scale=scale, **kwargs)
-        except OSError as exc:
-            raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
-        with station:
-            header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, hidden Δρ = {drho} mm, "
-                      f"ΔL = {dl} mm, tilts = {tilt} mrad, axis gaps = {gap} mm, noise "
-                      f"{noise} mm, stands off by up to {mount_error} mm, lost motion "
-                      f"{backlash} mm, legs bowed {bow} mm, gauge scale errors {scale}, "
-                      f"drive {_describe(drive)}\n"
-                      f"Use: orthocal run --config {out}")
-            # Validated like any operator's config: what we hand out must load, and
-            # its motion be one run accepts (checked by run's own rule).
-            config = parse_config(station_config(station, {}), "orthocal sim")
-            motion_model(config)
-            out.write_text(dump_toml(config, header))
-            link = (f"Modbus TCP on 127.0.0.1:{station.controller.port}"
-                    if args.transport == "tcp" else
-                    f"Modbus RTU on {station.controller.serial_port} "
-                    f"({station.controller.baudrate} 8N1, a pseudo-terminal)")
-            print(f"orthocal sim: {link}, "
-                  f"{len(station.indicators)} indicators ({args.protocol}); "
-                  f"config written to {out}", file=sys.stderr, flush=True)
-            gaps = f", axis gaps = {gap} mm" if any(gap) else ""
-            print(f"orthocal sim: hidden Δρ = {drho} mm, tilts = {tilt} mrad{gaps}; "
-                  "stop with Ctrl-C", file=sys.stderr, flush=True)
-            while not stop.wait(0.5):
-                pass
-    finally:
-        for s, handler in old.items():
-            signal.signal(s, handler)
-    print("orthocal sim: stopped", file=sys.stderr)
-    return 0
+def _hidden(truth: MachineTruth, gauges: GaugeSpec) -> str:
+    """The hidden machine and gauges, for the config's header line."""
+    t = truth
+    return (f"hidden Δρ = {list(t.drho)} mm, ΔL = {list(t.dl)} mm, tilts = {list(t.tilt)} "
+            f"mrad, axis gaps = {list(t.gap)} mm, noise {gauges.noise_mm} mm, stands off by "
+            f"up to {gauges.mount_error_mm} mm, lost motion {list(t.backlash)} mm, legs "
+            f"bowed {list(t.leg_bow)} mm, gauge scale errors {gauges.scale}")
+
+
+def _announce(args: argparse.Namespace, station: SimulatedStation, out: Path,
+              truth: MachineTruth) -> None:
+    """Where the station serves and what it hides, on stderr."""
+    ctl = station.controller
+    link = (f"Modbus TCP on 127.0.0.1:{ctl.port}" if args.transport == "tcp" else
+            f"Modbus RTU on {ctl.serial_port} ({ctl.baudrate} 8N1, a pseudo-terminal)")
+    print(f"orthocal sim: {link}, {len(station.indicators)} indicators ({args.protocol}); "
+          f"config written to {out}", file=sys.stderr, flush=True)
+    gaps = f", axis gaps = {list(truth.gap)} mm" if any(truth.gap) else ""
+    print(f"orthocal sim: hidden Δρ = {list(truth.drho)} mm, tilts = {list(truth.tilt)} "
+          f"mrad{gaps}; stop with Ctrl-C", file=sys.stderr, flush=True)
 
 
 def _describe(drive: dict[str, Any]) -> str:

@@ -31,6 +31,7 @@ from station.rundir.directory import MAP_NAME, NVRAM_NAME
 
 if TYPE_CHECKING:
     from drivers.sim.motion import DriveMotion
+    from drivers.sim.specs import MachineTruth
 
 # The virtual gauges' noise unless --noise says otherwise: a 1 µm digital indicator
 # flickering by about a digit. With such gauges the default procedure's verification
@@ -38,6 +39,9 @@ if TYPE_CHECKING:
 # the run says so ("not-converged").
 DEFAULT_NOISE_MM = 0.001
 DEFAULT_SIM_DRHO_MM = 2.0  # random hidden Δρ are drawn uniform in ±this
+# How far off the leg's middle an operator sets a stand by eye (docs/model.md: 5-10 mm);
+# the command line's default, so that a default simulated run shows the closed loop.
+DEFAULT_MOUNT_ERROR_MM = 5.0
 # Beyond these, the value is a slip of the unit, not an error of a machine: 8 for
 # 8 µm is an 8 mm bow; 0.2 for 0.2 % a gauge reading a fifth too much.
 MAX_LEG_BOW_MM = 1.0
@@ -57,8 +61,6 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
     noise = options.noise if options.noise is not None else DEFAULT_NOISE_MM
     if not (math.isfinite(noise) and noise >= 0):
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
-    from drivers.sim.station import DEFAULT_MOUNT_ERROR_MM
-
     mount = DEFAULT_MOUNT_ERROR_MM if options.mount_error is None else options.mount_error
     if not (math.isfinite(mount) and mount >= 0):
         raise BadInput(f"--mount-error: must be >= 0 mm, got {mount}")
@@ -94,21 +96,30 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
 
 
 def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
-    from drivers.sim.station import SIM_ACCEL_MM_S2, SIM_SPEED_MM_S, VirtualStation
+    """The virtual station of a simulated run's parameters (:func:`sim_params`, or a
+    journal header), its drive's memory in ``nvram``."""
+    from drivers.sim.specs import SIM_ACCEL_MM_S2, SIM_SPEED_MM_S, DriveSpec, GaugeSpec
+    from station.commands.sim_config import SimulatedStation, gauges_for
 
     sim = SimulationParams.from_header(params)  # an old journal's gaps, in one place
     # A faster virtual machine (tests) keeps the default's speed/acceleration ratio,
     # so its moves stay physical: trapezoids, in-position waits, derived deadlines.
     speed = sim.speed_mm_s or SIM_SPEED_MM_S
-    return VirtualStation(
-        true_drho=sim.true_drho, true_dl=sim.true_dl, true_tilt=sim.true_tilt,
-        true_gap=sim.true_gap, noise_mm=sim.noise_mm, seed=sim.seed,
-        indicator_count=sim.indicators, nvram_path=nvram,
-        speed_mm_s=speed, accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
-        mount_error_mm=sim.mount_error_mm, motion=drive_motion(params),
-        backlash=sim.backlash_mm, leg_bow=sim.leg_bow_mm, gauge_scale=sim.gauge_scale,
-        **served_map(params.get("profile")),
-    )
+    drive = DriveSpec(motion=drive_motion(params), speed_mm_s=speed,
+                      accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
+                      **served_map(params.get("profile")))
+    gauges = gauges_for(sim.indicators, GaugeSpec(
+        noise_mm=sim.noise_mm, mount_error_mm=sim.mount_error_mm, scale=sim.gauge_scale))
+    return SimulatedStation(machine_truth(sim), drive, gauges, seed=sim.seed,
+                            nvram_path=nvram)
+
+
+def machine_truth(sim: SimulationParams) -> MachineTruth:
+    """The hidden machine of a simulated run's parameters."""
+    from drivers.sim.specs import MachineTruth
+
+    return MachineTruth(drho=sim.true_drho, dl=sim.true_dl, tilt=sim.true_tilt,
+                        gap=sim.true_gap, backlash=sim.backlash_mm, leg_bow=sim.leg_bow_mm)
 
 
 def map_profile(profile: str | None) -> str | None:
