@@ -12,7 +12,8 @@ import pytest
 
 from drivers.held_offsets import HELD_BY_STATION, HeldOffsets
 from drivers.limits import SoftLimits
-from station.engine.writeback import held_after
+from station.record.journal import RECORD
+from station.rundir.state import RunState
 
 TOL = 1e-12  # plain float sums of a few mm: far below a count
 
@@ -90,13 +91,19 @@ def _wb(stage: str, **fields: dict[str, float]) -> dict:
     return {"type": "writeback", "stage": stage, **fields}
 
 
+def held_after(records: list[dict], start: list[float] | None) -> list[float] | None:
+    """What the run state of ``records`` says the station holds (station.rundir.state)."""
+    state = RunState.of(RECORD.validate_python({"t": 0.0, **r}) for r in records)
+    return state.held_offsets(start)
+
+
 def test_the_journal_says_what_the_station_holds() -> None:
     before = {"x": 0.1, "y": 0.2, "z": 0.3}
     first = {"x": 0.11, "y": 0.19, "z": 0.31}
     second = {"x": 0.12, "y": 0.18, "z": 0.32}
     assert held_after([], None) is None
     assert held_after([], [0.1, 0.2, 0.3]) == [0.1, 0.2, 0.3]
-    records = [_wb("started", before=before, written=first), _wb("done", written=first)]
+    records = [_wb("intent", before=before, written=first), _wb("done", written=first)]
     assert held_after(records, [0.1, 0.2, 0.3]) == [0.11, 0.19, 0.31]
     records += [_wb("done", written=second)]
     assert held_after(records, None) == [0.12, 0.18, 0.32]

@@ -1,5 +1,6 @@
-"""The journal: every record on disk (fsynced) when append returns; replay
-rebuilds the state; a torn last line is tolerated and resuming only appends."""
+"""The journal: every record on disk (fsynced) when append returns, typed, and folded
+into the run state (station.rundir.state) as it is saved or read back; a torn last
+line is tolerated and resuming only appends."""
 
 from __future__ import annotations
 
@@ -10,9 +11,13 @@ from pathlib import Path
 import pytest
 
 import station.rundir.journal as journal_mod
-from station.engine.replay import Replay
 from station.errors import BadInput
-from station.rundir.journal import Journal, read_journal, replay
+from station.record.journal import Header, Reading, Setup
+from station.rundir.journal import Journal, read_journal, read_records
+from station.rundir.state import RunState
+
+HEADER = {"type": "header", "version": "test", "config": {"a": 1}, "plan": {},
+          "started": "2026-01-01T00:00:00+00:00"}
 
 
 def test_each_append_is_flushed_and_fsynced(tmp_path: Path, monkeypatch) -> None:
@@ -26,7 +31,7 @@ def test_each_append_is_flushed_and_fsynced(tmp_path: Path, monkeypatch) -> None
     path = tmp_path / "journal.jsonl"
     monkeypatch.setattr(journal_mod.os, "fsync", spy)
     with Journal(path) as j:
-        j.append({"type": "header", "config": {}})
+        j.append(HEADER)
         size_after_first = os.path.getsize(path)
         j.append({"type": "reading", "stop": "m:0:0:0", "indicator": "A", "values": [0.001]})
         size_after_second = os.path.getsize(path)
@@ -35,46 +40,67 @@ def test_each_append_is_flushed_and_fsynced(tmp_path: Path, monkeypatch) -> None
     assert size_after_second > size_after_first
 
 
-def test_replay_rebuilds_state(tmp_path: Path) -> None:
+def test_the_state_saved_is_the_state_read_back(tmp_path: Path) -> None:
     path = tmp_path / "journal.jsonl"
     with Journal(path) as j:
-        j.append({"type": "header", "config": {"a": 1}})
-        j.append({"type": "setup", "phase": "m", "setup": 0})
+        j.append(HEADER)
+        j.append({"type": "setup", "phase": "m", "setup": 0, "leg": "x",
+                  "indicators": {"A": "y"}, "operator_s": 1.5})
         j.append({"type": "reading", "stop": "m:0:0:0", "indicator": "A", "values": [0.1, 0.2]})
         j.append({"type": "event", "event": {"event": "retry", "device": "indicator A"}})
         j.append({"type": "writeback", "stage": "backup", "before": {"x": 0.0}})
-    state = replay(read_journal(path))
-    assert state.header is not None and state.header["config"] == {"a": 1}
-    assert state.mounted == [("m", 0)]
-    assert state.readings[("m:0:0:0", "A")] == [0.1, 0.2]
-    assert state.retries == 1
-    assert state.finished is None
-    assert "backup" in Replay.of(read_journal(path)).stages(1)  # round 1 without a round
+        saved = j.state
+    records = read_records(path)
+    assert [type(r) for r in records[:3]] == [Header, Setup, Reading]  # each its type
+    state = RunState.of(records)
+    assert state == saved  # folded as saved, and folded again from the file: the same
+    assert state.header is not None and state.header.config == {"a": 1}
+    assert state.live is not None and (state.live.phase, state.live.setup) == ("m", 0)
+    assert state.live.readings[("m:0:0:0", "A")] == [0.1, 0.2]
+    assert (state.mountings, state.operator_s, state.retries) == (1, 1.5, 1)
+    assert state.finished is None and state.resumes == 0
+    assert "backup" in state.writebacks[1]  # round 1 without a round
+    assert Journal(path).state == state  # a journal reopened folds the file
+
+
+def test_a_record_of_no_type_is_refused_unwritten(tmp_path: Path) -> None:
+    path = tmp_path / "journal.jsonl"
+    with Journal(path) as j:
+        j.append(HEADER)
+        with pytest.raises(ValueError, match="'setup' is not of the journal's schema"):
+            j.append({"type": "setup", "phase": "m", "setup": 0})  # no leg, no gauges
+    assert [r["type"] for r in read_journal(path)] == ["header"]
+    path.write_text(path.read_text() + json.dumps({"type": "mystery", "t": 1.0}) + "\n")
+    with pytest.raises(BadInput, match="line 2 is not a journal record"):
+        read_records(path)
 
 
 def test_torn_last_line_is_tolerated_and_resume_only_appends(tmp_path: Path) -> None:
     path = tmp_path / "journal.jsonl"
     with Journal(path) as j:
-        j.append({"type": "header"})
-        j.append({"type": "reading", "stop": "s", "indicator": "A", "values": [1.0]})
+        j.append(HEADER)
+        j.append({"type": "setup", "phase": "m", "setup": 0, "leg": "x",
+                  "indicators": {"A": "y"}})
+        j.append({"type": "reading", "stop": "m:0:0:0", "indicator": "A", "values": [1.0]})
     with open(path, "ab") as fh:  # killed in the middle of writing a record
         fh.write(b'{"type":"reading","stop":"t","indi')
     before = path.read_bytes()
     records = read_journal(path)
-    assert [r["type"] for r in records] == ["header", "reading"]
+    assert [r["type"] for r in records] == ["header", "setup", "reading"]
 
     with Journal(path) as j:
         j.append({"type": "resumed"})
-        j.append({"type": "reading", "stop": "t", "indicator": "A", "values": [2.0]})
+        j.append({"type": "reading", "stop": "m:0:1:+", "indicator": "A", "values": [2.0]})
     after = path.read_bytes()
     assert after.startswith(before)
-    state = replay(read_journal(path))
-    assert state.readings[("t", "A")] == [2.0] and state.resumes == 1
+    state = RunState.of(read_records(path))
+    assert state.live is not None and state.resumes == 1
+    assert state.live.readings == {("m:0:0:0", "A"): [1.0], ("m:0:1:+", "A"): [2.0]}
 
 
 def test_corruption_in_the_middle_is_an_error(tmp_path: Path) -> None:
     path = tmp_path / "journal.jsonl"
-    lines = [json.dumps({"type": "header"}), "garbage{", json.dumps({"type": "reading"})]
+    lines = [json.dumps(HEADER), "garbage{", json.dumps({"type": "reading"})]
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(BadInput, match="line 2 is corrupt"):
         read_journal(path)

@@ -23,7 +23,9 @@ import pytest
 from builders import FAST, Rig, no_figures_file, on_setup
 from close import assert_same
 
+from drivers.sim.specs import GaugeSpec, MachineTruth
 from drivers.sim.station import VirtualStation
+from station.commands.sim_config import SimulatedStation
 from station.commands.simulation import station_config
 from station.config import parse_config
 from station.config.toml import dump_toml
@@ -258,7 +260,8 @@ sys.stdin.readline()
 
 def test_a_second_station_on_the_same_machine_is_refused_at_once(
         tmp_path: Path, orthocal) -> None:
-    with VirtualStation(true_drho=(0.3, 0.2, -0.1), noise_mm=0.0) as station:
+    with SimulatedStation(MachineTruth(drho=(0.3, 0.2, -0.1)),
+                          gauges=GaugeSpec(noise_mm=0.0)) as station:
         config = parse_config(station_config(station, {"procedure": FAST}), "test")
         cfg = tmp_path / "station.toml"
         cfg.write_text(dump_toml(config))
@@ -267,7 +270,8 @@ def test_a_second_station_on_the_same_machine_is_refused_at_once(
         run_dir.mkdir(parents=True)
         (run_dir / "config.toml").write_text(dump_toml(config))
         with Journal(run_dir / "journal.jsonl") as j:
-            j.append({"type": "header", "config": config.model_dump(), "simulation": None})
+            j.append({"type": "header", "version": "test", "config": config.model_dump(),
+                      "plan": {}, "simulation": None, "started": "2026-01-01T00:00:00+00:00"})
         holder = subprocess.Popen(
             [sys.executable, "-c", HOLDER, str(station.controller.port), "/runs/other-run"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)

@@ -93,7 +93,7 @@ def test_a_run_against_a_sequenced_drive_resumes_with_the_same_drive(
     # plunger ever left its stroke, read or not.
     from station.commands import run as cmd_run
     from station.errors import RunFailed
-    from station.rundir.journal import read_journal, replay
+    from station.rundir.journal import read_journal
 
     expected = DriveMotion(shape=("scurve", "cosine", "trapezoid"), accel_mm_s2=12000.0,
                            start_delay_s=(0.0, 0.004, 0.008), sequence="zyx")
@@ -110,7 +110,7 @@ def test_a_run_against_a_sequenced_drive_resumes_with_the_same_drive(
     with pytest.raises(RunFailed, match="alarm 17"):
         cmd_run.run(args)
     (run_dir,) = list((tmp_path / "runs").glob("run-*"))
-    header = replay(read_journal(run_dir / "journal.jsonl")).header
+    header = read_journal(run_dir / "journal.jsonl")[0]  # the run's header
     assert drive_motion(header["simulation"]) == expected
     capsys.readouterr()
     code = cmd_run.resume(resumed(run_dir, hook=keep))

@@ -25,13 +25,15 @@ from drivers.indicators import SerialIndicator
 from drivers.sim.form import contact_fraction
 from drivers.sim.indicators import SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
+from drivers.sim.specs import GaugeSpec, MachineTruth
 from drivers.sim.station import VirtualStation
 from station import report
 from station.commands import cli
 from station.commands.options import SimOptions
+from station.commands.sim_config import SimulatedStation
 from station.commands.simulation import sim_params, start_station
 from station.errors import BadInput
-from station.rundir.journal import read_journal, replay
+from station.rundir.journal import read_journal
 
 G = orthocal.Geometry()
 M = G.mount_plane
@@ -62,13 +64,16 @@ def parabola(t: float, h: float = BOW) -> float:
 
 
 @contextmanager
-def station(**kw: Any) -> Iterator[tuple[VirtualStation, Clock, dict[str, SerialIndicator]]]:
+def station(leg_bow: Any = (0.0, 0.0, 0.0), strokes: Any = None, gauge_scale: Any = 0.0
+            ) -> Iterator[tuple[SimulatedStation, Clock, dict[str, SerialIndicator]]]:
     """A virtual station on a stepped clock, A and B on leg x along y and z, each
     read by the real driver over its pseudo-terminal."""
     clock = Clock()
+    gauges_spec = GaugeSpec(noise_mm=0.0, line_time=False, strokes=strokes or {},
+                            scale=gauge_scale)
     with ExitStack() as stack:
-        st = stack.enter_context(VirtualStation(true_drho=DRHO, noise_mm=0.0,
-                                                line_time=False, clock=clock, **kw))
+        st = stack.enter_context(SimulatedStation(MachineTruth(drho=DRHO, leg_bow=leg_bow),
+                                                  gauges=gauges_spec, clock=clock))
         st.mount("A", "x", "y")
         st.mount("B", "x", "z")
         gauges = {n: stack.enter_context(SerialIndicator(n, st.indicators[n].port, "mitutoyo",
@@ -205,11 +210,11 @@ def test_the_station_gives_each_gauge_its_scale_in_the_configs_order() -> None:
             assert abs(travel) > 0.2  # so that the scale shows: > 4 µm
             assert gauges[name].read() == pytest.approx((1 + s) * travel,
                                                         abs=DIGIT / 2 + 1e-9)
-    with VirtualStation(gauge_scale={"B": 0.001}, line_time=False) as st:
+    with VirtualStation(gauges=GaugeSpec(scale={"B": 0.001}, line_time=False)) as st:
         assert st.gauge_scale == {"A": 0.0, "B": 0.001}
     for bad in ((0.1, 0.2, 0.3), {"Q": 0.1}):
         with pytest.raises(ValueError):
-            VirtualStation(gauge_scale=bad, line_time=False)
+            VirtualStation(gauges=GaugeSpec(scale=bad, line_time=False))
 
 
 # --- the command line, the journal, resume ---------------------------------------------
@@ -300,7 +305,7 @@ def test_an_interrupted_run_resumes_with_the_same_bow_and_scales(
     with pytest.raises(RunFailed, match="alarm 17"):
         cmd_run.run(args)
     (run_dir,) = list((tmp_path / "runs").glob("run-*"))
-    header = replay(read_journal(run_dir / "journal.jsonl")).header
+    header = read_journal(run_dir / "journal.jsonl")[0]  # the run's header
     assert header["simulation"]["leg_bow_mm"] == [0.004, 0.008, -0.006]
     assert header["simulation"]["gauge_scale"] == [0.001, -0.002]
     capsys.readouterr()
@@ -329,7 +334,7 @@ def test_a_whole_simulated_run_with_bowed_legs_completes(
     assert code == (3 if report.not_converged(result) else 0), result["message"]
     assert result["verification"] is not None
     (run_dir,) = list((tmp_path / "runs").glob("run-*"))
-    header = replay(read_journal(run_dir / "journal.jsonl")).header
+    header = read_journal(run_dir / "journal.jsonl")[0]  # the run's header
     assert header["simulation"]["leg_bow_mm"] == [0.008] * 3
     assert header["simulation"]["gauge_scale"] == [0.001] * 2
 

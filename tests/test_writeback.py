@@ -13,8 +13,8 @@ import pytest
 
 from drivers.axes import ModbusAxisController
 from drivers.errors import ReadbackMismatch
+from drivers.sim.specs import GaugeSpec
 from drivers.sim.station import VirtualStation
-from station.engine.replay import Replay
 from station.engine.writeback import BACKUP_NAME, rollback, write_back
 from station.rundir.journal import Journal, read_journal
 
@@ -36,7 +36,7 @@ class Operator:
 
 @pytest.fixture
 def rig(tmp_path: Path) -> Iterator[tuple[VirtualStation, ModbusAxisController, Journal]]:
-    station = VirtualStation(noise_mm=0.0, seed=1)
+    station = VirtualStation(gauges=GaugeSpec(noise_mm=0.0), seed=1)
     controller = ModbusAxisController(port=station.controller.port, timeout_s=1.0).connect()
     journal = Journal(tmp_path / "journal.jsonl")
     try:
@@ -134,11 +134,13 @@ def test_resumed_write_back_does_not_apply_twice(tmp_path: Path, rig) -> None:
     write_back(controller=controller, identified=identified, max_abs_offset_mm=3.0,
                run_dir=tmp_path, journal=journal, operator=Operator())
     # killed after the write, before "done" was journaled: drop that record
-    lines = (tmp_path / "journal.jsonl").read_text().splitlines()
-    state = Replay.of([json.loads(x) for x in lines[:-1]])
+    path = tmp_path / "journal.jsonl"
+    path.write_text("".join(path.read_text().splitlines(keepends=True)[:-1]))
     op = Operator()
-    out = write_back(controller=controller, identified=identified, max_abs_offset_mm=3.0,
-                     run_dir=tmp_path, journal=journal, operator=op, replay=state)
+    with Journal(path) as resumed:  # the resumed run's: what the file says, folded
+        out = write_back(controller=controller, identified=identified,
+                         max_abs_offset_mm=3.0, run_dir=tmp_path, journal=resumed,
+                         operator=op)
     assert out.status == "written" and op.asked == []  # the intent was already confirmed
     np.testing.assert_allclose(station.offsets, np.array(START) - 0.2, atol=1e-9)
 
@@ -180,9 +182,10 @@ def test_ctrl_c_between_offset_writes_restores_the_backup(tmp_path: Path, rig) -
     records = read_journal(tmp_path / "journal.jsonl")
     assert [r["stage"] for r in records] == ["backup", "intent", "interrupted-restored"]
 
-    out = write_back(controller=controller, identified=identified, max_abs_offset_mm=3.0,
-                     run_dir=tmp_path, journal=journal, operator=Operator(),
-                     replay=Replay.of(records))
+    with Journal(tmp_path / "journal.jsonl") as resumed:
+        out = write_back(controller=controller, identified=identified,
+                         max_abs_offset_mm=3.0, run_dir=tmp_path, journal=resumed,
+                         operator=Operator())
     assert out.status == "written"
     np.testing.assert_allclose(station.offsets, [0.15, -0.3, 0.95], atol=1e-9)
 
@@ -215,9 +218,8 @@ def test_a_second_round_keeps_the_first_backup_and_checks_the_total(tmp_path: Pa
                                atol=1e-9)
     # The backup file still holds the offsets from before the first round ...
     assert json.loads((tmp_path / BACKUP_NAME).read_text())["offsets_mm"] == start
-    records = read_journal(tmp_path / "journal.jsonl")
-    stages = Replay.of(records)
-    assert sorted(stages.writebacks) == [1, 2, 3] and "done" in stages.stages(3)
+    state = journal.state
+    assert sorted(state.writebacks) == [1, 2, 3] and "done" in state.writebacks[3]
     # ... so rollback undoes every round at once.
     rollback(controller, tmp_path, journal)
     np.testing.assert_allclose(station.offsets, START, atol=1e-9)
@@ -235,15 +237,14 @@ def test_a_resumed_round_two_writes_its_journaled_intent_once(tmp_path: Path, ri
     journal.append({"type": "writeback", "round": 2, "stage": "intent", "before": before2,
                     "written": new2})
     controller.write_offsets([new2[a] for a in "xyz"])
-    state = Replay.of(read_journal(tmp_path / "journal.jsonl"))
-    again = write_back(controller=controller, identified={**ident, "drho_x": 0.02},
-                       max_abs_offset_mm=3.0, run_dir=tmp_path, journal=journal,
-                       operator=Operator(), replay=state, round=2)
-    assert again.status == "written"
-    np.testing.assert_allclose(station.offsets, [new2[a] for a in "xyz"], atol=1e-9)
-    # round 1, replayed, is not redone either
-    done = write_back(controller=controller, identified=ident, max_abs_offset_mm=3.0,
-                      run_dir=tmp_path, journal=journal, operator=Operator(),
-                      replay=Replay.of(read_journal(tmp_path / "journal.jsonl")), round=1)
+    with Journal(tmp_path / "journal.jsonl") as resumed:
+        again = write_back(controller=controller, identified={**ident, "drho_x": 0.02},
+                           max_abs_offset_mm=3.0, run_dir=tmp_path, journal=resumed,
+                           operator=Operator(), round=2)
+        assert again.status == "written"
+        np.testing.assert_allclose(station.offsets, [new2[a] for a in "xyz"], atol=1e-9)
+        # round 1, replayed, is not redone either
+        done = write_back(controller=controller, identified=ident, max_abs_offset_mm=3.0,
+                          run_dir=tmp_path, journal=resumed, operator=Operator(), round=1)
     assert done.status == "written"
     np.testing.assert_allclose(station.offsets, [new2[a] for a in "xyz"], atol=1e-9)

@@ -1,6 +1,7 @@
 """One run's steps against the devices (:class:`Flow`): measure, identify, write back,
-verify, each replayed from the journal when a resumed run already did it, filling the
-result as it goes; :class:`Run`, what a run holds. station.engine.procedure drives it.
+verify, each replayed from the journal when a resumed run already did it (through
+station.engine.replay's :class:`~station.engine.replay.Steps`), filling the result as
+it goes; :class:`Run`, what a run holds. station.engine.procedure drives it.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from station.engine import accuracy, budget, compensated, reversal, verdict
 from station.engine.closed_loop import round_phase
 from station.engine.devices import Devices
 from station.engine.documents import JsonObject
-from station.engine.replay import Replay
+from station.engine.replay import RoundFit, Steps
 from station.engine.results import (
     ident_json,
     measurement_fields,
@@ -46,7 +47,8 @@ from station.plan.steps import Plan
 from station.record.model import MachineModel
 from station.report.io import jsonable_value
 from station.rundir.directory import MODEL_NAME
-from station.rundir.journal import Journal, JournalState
+from station.rundir.journal import Journal
+from station.rundir.state import RunState
 
 
 @dataclass
@@ -58,18 +60,20 @@ class Run:
     devices: Devices
     operator: Operator
     sim: JsonObject | None
-    state: JournalState
-    records: list[JsonObject]
     started_iso: str
     checker: MotionChecker | None = None
     t0: float = field(default_factory=time.monotonic)
     result: JsonObject = field(default_factory=dict)
 
+    @property
+    def state(self) -> RunState:
+        """The journal so far, every session's (station.rundir.state)."""
+        return self.journal.state
+
     @cached_property
-    def replay(self) -> Replay:
-        """The steps the journal holds (``records`` as the run started or resumed):
-        each one the run does not take again (station.engine.replay)."""
-        return Replay.of(self.records)
+    def steps(self) -> Steps:
+        """Takes each step the journal does not hold yet (station.engine.replay)."""
+        return Steps(self.journal)
 
 
 class Flow:
@@ -196,21 +200,18 @@ class Flow:
             self.iterations.append(entry)
         if n == 0:
             self.result.update(fields)
-            if not ctx.replay.identified(0, passes):
-                ctx.journal.append({"type": "identification", **ident_json(ident),
-                                    **({"passes": passes} if again else {})})
-                ctx.replay.note_identified(0, passes)
+            ctx.steps.once(RoundFit(0, len(passes)),
+                           {"type": "identification", **ident_json(ident),
+                            **({"passes": passes} if again else {})})
             return judged.verdict
         self.result["verification"] = verification_fields(
             ctx.config, fields, self.idents[n - 1], self.target,
             edge=edge_of(rev, ctx.config.procedure.approach))
-        if not ctx.replay.identified(n, passes):
-            ctx.journal.append({"type": "verification", "round": n, "phase": phase,
-                                **({"passes": passes} if again else {}),
-                                **ident_json(ident),
-                                "deviations_rms_mm": fields["deviations_rms_mm"],
-                                "significant": sig, "verdict": judged.verdict})
-            ctx.replay.note_identified(n, passes)
+        ctx.steps.once(RoundFit(n, len(passes)),
+                       {"type": "verification", "round": n, "phase": phase,
+                        **({"passes": passes} if again else {}), **ident_json(ident),
+                        "deviations_rms_mm": fields["deviations_rms_mm"],
+                        "significant": sig, "verdict": judged.verdict})
         return judged.verdict
 
     def write(self, round: int) -> str:
@@ -228,7 +229,7 @@ class Flow:
             controller=ctx.devices.controller,
             identified=correction(values, self.target), note=note,
             max_abs_offset_mm=ctx.config.writeback.max_abs_offset_mm, run_dir=ctx.run_dir,
-            journal=ctx.journal, operator=ctx.operator, replay=ctx.replay, round=round,
+            journal=ctx.journal, operator=ctx.operator, round=round,
             offsets_at_start=first.before if first is not None else None)
         self.outcomes.append(outcome)
         self.iterations[round - 1]["offsets_written"] = outcome.written

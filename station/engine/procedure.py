@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import asdict
 
 from drivers.errors import DeviceError
 from station.console.progress import Progress
@@ -17,16 +18,11 @@ from station.engine.closed_loop import LoopState, next_step
 from station.engine.documents import JsonObject
 from station.engine.flow import Flow, Run
 from station.engine.recovery import resume_hint
-from station.engine.results import (
-    base_result,
-    guard_fields,
-    offsets_fields,
-)
+from station.engine.results import base_result, offsets_fields
 from station.engine.sequencer import Sequencer
 from station.errors import BadInput, RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
 from station.rundir.directory import now_iso
-from station.rundir.journal import JOURNAL_NAME, read_journal
 
 
 def _import_plotting(figures: bool) -> None:
@@ -74,8 +70,7 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, JsonObject]:
     seq = Sequencer(
         config=ctx.config, plan=ctx.plan, controller=ctx.devices.controller,
         indicators=ctx.devices.indicators, journal=ctx.journal, operator=ctx.operator,
-        checker=checker, replay=ctx.replay,
-        progress=progress)
+        checker=checker, progress=progress)
     result = base_result(ctx.run_dir, ctx.config, ctx.sim, ctx.started_iso)
     ctx.result = result
     proc = ctx.config.procedure
@@ -134,25 +129,20 @@ def _finish(ctx: Run, seq: Sequencer, result: JsonObject, status: str,
     result["status"], result["message"] = status, message
     result["finished"] = now_iso()
     wall = time.monotonic() - ctx.t0
-    started = ctx.state.started
+    # The journal as saved so far, every session's (its state, not the file again).
+    state = ctx.state
+    # A resumed run lasts from its header, its sessions and the pauses between; a run
+    # never resumed, this session's wall time.
+    started = state.started if state.resumes else None
     result["duration_s"] = round(time.time() - started, 3) if started else round(wall, 3)
-    records: list[JsonObject] = []
-    try:
-        records = read_journal(ctx.run_dir / JOURNAL_NAME)
-    except BadInput:
-        pass
-    retries = sum(1 for r in records if r["type"] == "event"
-                  and r.get("event", {}).get("event") == "retry")
-    mounts = [r for r in records if r["type"] == "setup"]
     result["timing"] = {"wall_s": round(wall, 3), "moves": seq.counters.moves,
-                        "readings": seq.counters.readings, "retries": retries,
+                        "readings": seq.counters.readings, "retries": state.retries,
                         "outliers_rejected": seq.counters.rejected,
                         # what the operator paid: each mounting and the time it took
-                        "mountings": len(mounts),
-                        "operator_s": round(sum(float(r.get("operator_s") or 0.0)
-                                                for r in mounts), 3)}
-    result["plunger_guard"] = guard_fields(records)
-    result.update(offsets_fields(ctx.devices.controller, result, records))
+                        "mountings": state.mountings,
+                        "operator_s": round(state.operator_s, 3)}
+    result["plunger_guard"] = asdict(state.guard)
+    result.update(offsets_fields(ctx.devices.controller, result, state))
     if final:
         ctx.journal.append({"type": "finished", "status": status, "message": message})
         _since_last(ctx, result)

@@ -13,12 +13,14 @@ with σ the pooled scatter of single readings within the setup's stops, n the
 readings averaged now and then, s_Π0 the standard deviation of the setup's Π0
 stop means across its cycles (drift, temperature). A larger difference means
 the new reference differs: the setup's cycles are dropped and it is redone (the
-journal's ``setup-redo`` record says so; see :func:`drop_redone`).
+journal's ``setup-redo`` record says so: the run state, station.rundir.state, voids
+that setup's cycles when it is journaled, so the setup is measured again from its
+first cycle).
 
 Only the setup the power cut interrupted can be checked (its gauges are the
-mounted ones). A reference that moved also invalidates setups finished before
-the cut; homing switches repeat to a few µm, which is what this check confirms
-for the axes the mounted gauges see.
+mounted ones: the run state's live setup, with its journaled readings). A reference
+that moved also invalidates setups finished before the cut; homing switches repeat
+to a few µm, which is what this check confirms for the axes the mounted gauges see.
 """
 
 from __future__ import annotations
@@ -33,7 +35,6 @@ import numpy as np
 from drivers.base import Alarms, AxisReadout, GaugeReadings, Homing
 from station.config import StationConfig
 from station.console.operator import Operator
-from station.engine.documents import JsonObject
 from station.engine.mover import MoverAxes
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker
@@ -41,7 +42,6 @@ from station.plan.steps import Plan, stop_id
 from station.rundir.journal import Journal
 
 K_SIGMA = 4.0  # a false redo costs a setup; a kept bad setup costs the answer
-_CYCLE_RECORDS = ("cycle", "setup_done", "repeat")
 
 
 class Rehoming(AxisReadout, Homing, Alarms, Protocol):
@@ -50,39 +50,6 @@ class Rehoming(AxisReadout, Homing, Alarms, Protocol):
 
     @property
     def name(self) -> str: ...
-
-
-def drop_redone(records: list[JsonObject]) -> list[JsonObject]:
-    """The journal's records without the cycles of setups redone after them: a
-    ``setup-redo`` record voids every earlier cycle/setup_done/repeat record of its
-    (phase, setup), so replaying measures that setup again from its first cycle."""
-    last_redo: dict[tuple[str, int], int] = {}
-    for i, r in enumerate(records):
-        if r["type"] == "setup-redo":
-            last_redo[(r["phase"], int(r["setup"]))] = i
-    if not last_redo:
-        return records
-    return [r for i, r in enumerate(records)
-            if not (r["type"] in _CYCLE_RECORDS
-                    and i < last_redo.get((r["phase"], int(r["setup"])), -1))]
-
-
-def interrupted_setup(records: list[JsonObject]) -> tuple[str, int, dict[str, str]] | None:
-    """(phase, setup, mounted indicators) of the setup that was live when the run
-    stopped: the last one mounted and not finished."""
-    mounted = None
-    for r in records:
-        if r["type"] == "setup":
-            mounted = (r["phase"], int(r["setup"]), dict(r["indicators"]))
-        elif r["type"] == "setup_done" and mounted is not None and \
-                (r["phase"], int(r["setup"])) == mounted[:2]:
-            mounted = None
-    return mounted
-
-
-def _readings(records: list[JsonObject]) -> dict[tuple[str, str], list[float]]:
-    return {(r["stop"], r["indicator"]): [float(v) for v in r["values"]]
-            for r in records if r["type"] == "reading"}
 
 
 def home_if_needed(controller: Rehoming, config: StationConfig, journal: Journal | None,
@@ -114,23 +81,22 @@ def home_if_needed(controller: Rehoming, config: StationConfig, journal: Journal
 
 
 def check_reference(controller: MoverAxes, indicators: GaugeReadings, config: StationConfig,
-                    plan: Plan, journal: Journal, records: list[JsonObject],
-                    say: Callable[[str], None]) -> list[JsonObject]:
+                    plan: Plan, journal: Journal, say: Callable[[str], None]) -> None:
     """After homing: move to Π0 with the interrupted setup's gauges still mounted and
-    compare their readings with the journaled Π0 readings. Returns the records to
-    resume from (the setup's cycles dropped if the reference moved)."""
-    live = interrupted_setup(records)
+    compare their readings with the journaled Π0 readings. If the reference moved,
+    the journaled ``setup-redo`` drops the setup's cycles from the journal's state,
+    which the run resumes from."""
+    live = journal.state.live
     if live is None:
         journal.append({"type": "reference-check", "result": "no setup in progress"})
-        return records
-    phase, index, mounted = live
-    cycles = sorted(int(r["cycle"]) for r in records if r["type"] == "cycle"
-                    and r["phase"] == phase and int(r["setup"]) == index)
+        return
+    phase, index, mounted = live.phase, live.setup, dict(live.indicators)
+    cycles = sorted(c for p, s, c in journal.state.cycles if (p, s) == (phase, index))
     if not cycles:
         journal.append({"type": "reference-check", "phase": phase, "setup": index,
                         "result": "no cycle to keep"})
-        return records
-    readings = _readings(records)
+        return
+    readings = dict(live.readings)
     names = list(mounted)
     sp = plan.setups[index]
     # The journaled Π0 stops of the kept cycles (cycle c ends at stop c:0).
@@ -139,7 +105,7 @@ def check_reference(controller: MoverAxes, indicators: GaugeReadings, config: St
     if not p0:
         journal.append({"type": "reference-check", "phase": phase, "setup": index,
                         "result": "no Π0 reading journaled"})
-        return records
+        return
     move = sp.move("0")  # approached as the journaled Π0 stops were
     start = np.asarray(controller.read_positions(), dtype=float)
     legs = MotionChecker(config, controller.soft_limits()).route(
@@ -157,7 +123,7 @@ def check_reference(controller: MoverAxes, indicators: GaugeReadings, config: St
         stops = [readings[(stop_id(phase, index, c, "0"), name)] for c in p0]
         # pooled within-stop scatter of this gauge over every stop of the setup
         own = [v for (stop, n), v in readings.items() if n == name and
-               stop.startswith(f"{phase}:{index}:") and len(v) > 1]
+               stop.startswith(live.prefix) and len(v) > 1]
         dof = sum(len(v) - 1 for v in own)
         sigma = math.sqrt(sum(float(np.sum((np.asarray(v) - np.mean(v)) ** 2)) for v in own)
                           / dof) if dof else 0.0
@@ -181,13 +147,12 @@ def check_reference(controller: MoverAxes, indicators: GaugeReadings, config: St
     if ok:
         say(f"orthocal: same reference after homing ({detail}): keeping the "
             f"{len(cycles)} cycle(s) of setup {index + 1} measured before")
-        return records
+        return
     journal.append({"type": "setup-redo", "phase": phase, "setup": index,
                     "reason": f"reference moved by homing: {detail}",
                     "cycles_dropped": cycles})
     say(f"orthocal: the reference moved with homing ({detail}): setup {index + 1} is "
         f"redone; its {len(cycles)} earlier cycle(s) are dropped")
-    return drop_redone([*records, {"type": "setup-redo", "phase": phase, "setup": index}])
 
 
 def resume_hint(exc: BaseException) -> str:

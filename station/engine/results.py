@@ -19,6 +19,7 @@ from station.engine.statistics import Measurement, split_key
 from station.engine.writeback import WritebackOutcome
 from station.record.result import SCHEMA_VERSION
 from station.record.simulation import SimulationParams
+from station.rundir.state import RunState
 
 
 def ident_json(ident: Any) -> dict[str, Any]:
@@ -136,35 +137,16 @@ def remaining_fields(iterations: list[dict[str, Any]],
     }
 
 
-def guard_fields(records: list[dict[str, Any]]) -> dict[str, Any]:
-    """What the plunger guard did, from the journal (every session of a resumed run):
-    each time it stopped the axes, how the run went on, and the cycles taken again."""
-    events = [r["event"] for r in records if r.get("type") == "event"
-              and isinstance(r.get("event"), dict)]
-    # zero_shift_mm: only where the way back found a gauge's zero moved (a step)
-    recovered = [{**{k: e.get(k) for k in ("where", "move", "indicator", "waypoints",
-                                           "speed_mm_s")},
-                  **({"zero_shift_mm": e["zero_shift_mm"]} if "zero_shift_mm" in e else {})}
-                 for e in events if e.get("event") == "plunger-guard-recovery"
-                 and e.get("result") == "recovered"]
-    return {"stops": sum(1 for e in events if e.get("event") == "plunger-guard"),
-            "recovered": recovered,
-            "retakes": sum(1 for e in events if e.get("event") == "retake"),
-            "refused": sum(1 for e in events if e.get("event") == "plunger-guard-refused")}
-
-
 def offsets_fields(controller: ZeroOffsets, result: dict[str, Any],
-                   records: list[dict[str, Any]]) -> dict[str, Any]:
+                   state: RunState) -> dict[str, Any]:
     """Where the offsets live and what they are when the run stops (docs/design.md,
     "Offsets held by the station"): ``offsets_held_by`` "controller" | "station",
     ``offsets_final`` (the journal's last write-back or rollback, else the offsets
     before), and for a station that holds them what to do with them."""
-    from station.engine.writeback import held_after
-
     held_by = controller.held_by
     before = result.get("offsets_before")
     start = [before[a] for a in AXES] if isinstance(before, dict) else None
-    final = held_after(records, start)
+    final = state.held_offsets(start)
     out: dict[str, Any] = {"offsets_held_by": held_by,
                            "offsets_final": None if final is None else
                            {a: float(v) for a, v in zip(AXES, final, strict=True)}}

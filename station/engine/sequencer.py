@@ -14,7 +14,9 @@ Resume: each completed cycle is journaled with its deviations; replaying the
 journal gives the same decisions (repeats, adaptive stop) without touching a
 device, and the run goes live at the first cycle the journal does not hold. A
 cycle interrupted half-way is redone whole after remounting: its readings
-belong to a mounting that may have moved.
+belong to a mounting that may have moved. Which cycles, repeats and setup ends are
+journaled is station.engine.replay's to say (:class:`~station.engine.replay.Steps`),
+never this module's.
 
 On any fault or Ctrl-C the axes are stopped (the stop itself guarded), the
 fault journaled, and the exception re-raised for the command to report.
@@ -37,7 +39,7 @@ from station.console.operator import Operator
 from station.engine.documents import JsonObject
 from station.engine.guard import PlungerGuard
 from station.engine.mover import Mover, MoverAxes
-from station.engine.replay import Replay
+from station.engine.replay import CycleStep, RepeatStep, SetupEnd, Steps
 from station.engine.sizing import VerificationSizing
 from station.engine.statistics import (
     Measurement,
@@ -106,7 +108,6 @@ class Sequencer:
         journal: Journal,
         operator: Operator,
         checker: MotionChecker,
-        replay: Replay | None = None,
         progress: Progress | None = None,
     ) -> None:
         self.config = config
@@ -116,17 +117,14 @@ class Sequencer:
         self.journal = journal
         self.operator = operator
         self.checker = checker
-        # what a resumed run's journal holds: its cycles' checkpoints and ended setups
-        self.replay = replay if replay is not None else Replay()
+        # a cycle, a repeat or a setup's end the journal holds is not taken again
+        self.steps = Steps(journal)
         self.progress = progress or _no_progress
         self.counters = Counters()
         # Why the stop after a fault did not reach the drive (None: it did, or no
         # fault), so that the operator is never told the axes stopped when unknown.
         self.stop_error: str | None = None
         self._setup: SetupPlan | None = None
-        # What the last Checkpoint step journaled: the cycle's deviations, the
-        # readings' scatter at its stops and its reversal (see _finish_cycle).
-        self._finished: tuple[dict[str, float], list[float], dict[str, float]] = ({}, [], {})
         self._live_setup = False
         self._stops: dict[str, dict[str, StopStat]] = {}
         self._all_names = [ind.name for ind in config.indicators]
@@ -228,9 +226,9 @@ class Sequencer:
             if spread <= proc.repeatability_mm or repeats >= proc.max_repeats:
                 break
             repeats += 1
-            if self.replay.cycle(phase, sp.index, cycle + 1) is None:
-                self.journal.append({"type": "repeat", "phase": phase, "setup": sp.index,
-                                     "spread_mm": spread, "repeat": repeats})
+            self.steps.once(RepeatStep(phase, sp.index, repeats),
+                            {"type": "repeat", "phase": phase, "setup": sp.index,
+                             "spread_mm": spread, "repeat": repeats})
             self.progress("repeat", phase=phase, setup=sp.index, spread=spread)
         used = passes[-1]
         spread = self._spread([d for _, d, _, _ in used])
@@ -246,10 +244,10 @@ class Sequencer:
             cycles_used=len(used), cycles_max=self.sizing.cycle_limit(phase), repeats=repeats,
             flagged=spread > proc.repeatability_mm, spread_mm=spread,
             cycles=[c for c, *_ in used])
-        if not self.replay.setup_done(phase, sp.index):
-            self.journal.append({"type": "setup_done", "phase": phase, "setup": sp.index,
-                                 "cycles": outcome.cycles, "repeats": repeats,
-                                 "spread_mm": spread, "flagged": outcome.flagged})
+        self.steps.once(SetupEnd(phase, sp.index),
+                        {"type": "setup_done", "phase": phase, "setup": sp.index,
+                         "cycles": outcome.cycles, "repeats": repeats,
+                         "spread_mm": spread, "flagged": outcome.flagged})
         self.progress("setup_done", phase=phase, setup=sp.index, outcome=outcome)
         return outcome, devs_by_key, within, reversal
 
@@ -269,11 +267,17 @@ class Sequencer:
 
     def _cycle(self, phase: str, sp: SetupPlan, cycle: int
                ) -> tuple[dict[str, float], list[float], dict[str, float]]:
-        done = self.replay.cycle(phase, sp.index, cycle)
-        if done is not None:
-            self.progress("cycle_replayed", phase=phase, setup=sp.index, cycle=cycle)
-            return (dict(done["deviations"]), list(done.get("within_std", [])),
-                    dict(done.get("reversal_mm", {})))
+        """The cycle's deviations, the readings' scatter at its stops and its reversal,
+        from its record: journaled before, or by its Checkpoint now."""
+        done = self.steps.take(
+            CycleStep(phase, sp.index, cycle), lambda: self._measure_cycle(phase, sp, cycle),
+            replayed=lambda _: self.progress("cycle_replayed", phase=phase, setup=sp.index,
+                                             cycle=cycle))
+        assert done is not None, "a cycle measured is journaled by its checkpoint"
+        return (dict(done.deviations), list(done.within_std or []),
+                dict(done.reversal_mm or {}))
+
+    def _measure_cycle(self, phase: str, sp: SetupPlan, cycle: int) -> None:
         if not self._live_setup:
             # Going live in this setup: mount (or remount after a resume) at Π0 and
             # read the Π0 that opens this cycle under the current mounting.
@@ -294,7 +298,7 @@ class Sequencer:
             if moved is None:
                 # the cycle's readings stand: its checkpoint journals the cycle
                 self._execute(phase, checkpoint)
-                return self._finished
+                return
             retakes += 1
             if retakes > MAX_RETAKES:
                 raise RunFailed(
@@ -339,8 +343,7 @@ class Sequencer:
                      Read(stops[0], sp.index, cycle - 1, "0", names, self.plan.readings)):
             self._execute(phase, step)
 
-    def _finish_cycle(self, phase: str, sp: SetupPlan, cycle: int
-                      ) -> tuple[dict[str, float], list[float], dict[str, float]]:
+    def _finish_cycle(self, phase: str, sp: SetupPlan, cycle: int) -> None:
         start = self._stops[stop_id(phase, sp.index, cycle - 1, "0")]
         tests = [(p, self._stops[stop_id(phase, sp.index, cycle, p)]) for p in sp.order]
         end = self._stops[stop_id(phase, sp.index, cycle, "0")]
@@ -363,7 +366,6 @@ class Sequencer:
                              "cycle": cycle, "deviations": devs, "within_std": within,
                              **({"reversal_mm": reversal} if reversal else {})})
         self.progress("cycle", phase=phase, setup=sp.index, cycle=cycle, deviations=devs)
-        return devs, within, reversal
 
     def _reversal(self, phase: str, sp: SetupPlan, cycle: int,
                   end: Mapping[str, StopStat]) -> dict[str, float]:
@@ -408,7 +410,7 @@ class Sequencer:
             # The cycle's record (its deviations, fsynced) is what a resumed run
             # replays the cycle from: once it is on disk, the cycle is done.
             assert self._setup is not None and self._setup.index == step.setup
-            self._finished = self._finish_cycle(phase, self._setup, step.cycle)
+            self._finish_cycle(phase, self._setup, step.cycle)
 
     def _move(self, step: Move) -> None:
         self.mover.move(step)

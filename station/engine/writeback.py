@@ -13,12 +13,16 @@ offsets it starts from as its own ``backup`` stage but leaves offsets_backup.jso
 alone, so rollback always restores the offsets from before the first round; it
 also refuses a total correction (from ``offsets_at_start``, the offsets before
 the run) beyond max_abs_offset_mm.
+
+Resume: a round, and its backup and intent stages, are steps of
+station.engine.replay; each one the journal holds is not taken again, its record
+stands for it (a round whose final stage is journaled gives the outcome it gave).
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,7 +34,9 @@ from drivers.files import write_atomic
 from orthocal import AXES
 from station.console.operator import Operator
 from station.engine.documents import JsonObject
-from station.engine.replay import Replay
+from station.engine.replay import Steps, WritebackRound, WritebackStage
+from station.errors import RunFailed
+from station.record.journal import Writeback
 from station.rundir.journal import Journal
 
 BACKUP_NAME = "offsets_backup.json"
@@ -67,25 +73,27 @@ def load_backup(run_dir: Path) -> dict[str, float] | None:
 
 @dataclass
 class _Stages:
-    """One write-back round's journaled stages: what a resumed run replays (each
-    stage found in the journal is not done again) and how the next is journaled."""
+    """One write-back round's stages: how each is journaled, and taken once."""
 
-    journal: Journal
+    steps: Steps
     round: int
-    done: dict[str, JsonObject]
 
     def log(self, record: JsonObject) -> None:
-        self.journal.append({"type": "writeback", "round": self.round, **record})
+        self.steps.journal.append({"type": "writeback", "round": self.round, **record})
 
-    def final(self) -> WritebackOutcome | None:
-        """The outcome a journaled final stage already gave (None: not ended)."""
-        for final in ("done", "refused", "declined", "failed-restored", "skipped"):
-            if final in self.done:
-                rec = self.done[final]
-                return WritebackOutcome("written" if final == "done" else final,
-                                        rec.get("reason"), rec.get("before"),
-                                        rec.get("written"))
-        return None
+    def take(self, stage: str, act: Callable[[], object]) -> Writeback | None:
+        """The stage's record (station.engine.replay.Steps.take)."""
+        return self.steps.take(WritebackStage(self.round, stage), act)
+
+
+def _outcome(final: Writeback) -> WritebackOutcome:
+    """What a round's final stage says of it, taken now or journaled before."""
+    return WritebackOutcome("written" if final.stage == "done" else final.stage,
+                            final.reason, _copy(final.before), _copy(final.written))
+
+
+def _copy(offsets: dict[str, float] | None) -> dict[str, float] | None:
+    return None if offsets is None else dict(offsets)
 
 
 def write_back(
@@ -96,50 +104,58 @@ def write_back(
     run_dir: Path,
     journal: Journal,
     operator: Operator,
-    replay: Replay | None = None,
     round: int = 1,
     offsets_at_start: dict[str, float] | None = None,
     note: str | None = None,
 ) -> WritebackOutcome:
-    """Write-back round ``round`` as its journaled stages (module docstring): each
-    one the journal already holds (``replay``, station.engine.replay) is replayed,
-    not done again."""
-    stages = _Stages(journal, round, replay.stages(round) if replay is not None else {})
-    ended = stages.final()
-    if ended is not None:
-        return ended
+    """Write-back round ``round`` as its journaled stages (module docstring); the
+    outcome is its final stage's, journaled now or by an earlier session."""
+    stages = _Stages(Steps(journal), round)
+    final = stages.steps.take(WritebackRound(round), lambda: _round(
+        stages, controller, identified, max_abs_offset_mm, run_dir, operator,
+        offsets_at_start, note))
+    assert final is not None, "every way through a round journals its final stage"
+    return _outcome(final)
+
+
+def _round(stages: _Stages, controller: ZeroOffsets, identified: dict[str, float],
+           max_abs_offset_mm: float, run_dir: Path, operator: Operator,
+           offsets_at_start: dict[str, float] | None, note: str | None) -> None:
+    """The round's stages up to the final one it journals (or a fault it raises)."""
     drho = {a: identified.get(f"drho_{a}") for a in AXES}
     if all(v is None for v in drho.values()):
         reason = "the model identifies no joint offsets (model 'L'): nothing to write"
         stages.log({"stage": "skipped", "reason": reason})
-        return WritebackOutcome("skipped", reason, None, None)
+        return
     delta = np.array([drho[a] or 0.0 for a in AXES])
     before = _backup(stages, controller, run_dir)
     new = _axes(np.array([before[a] for a in AXES]) - delta)
     refusal = _refusal(delta, new, max_abs_offset_mm, offsets_at_start)
     if refusal is not None:
         stages.log({"stage": "refused", "reason": refusal, "before": before})
-        return WritebackOutcome("refused", refusal, before, None)
+        return
     intended = _intent(stages, controller, operator, before, new, note)
     if intended is None:
         reason = "declined by the operator; offsets unchanged"
         stages.log({"stage": "declined", "reason": reason, "before": before})
-        return WritebackOutcome("declined", reason, before, None)
-    return _write(stages, controller, run_dir, before, intended)
+        return
+    _write(stages, controller, run_dir, before, intended)
 
 
 def _backup(stages: _Stages, controller: ZeroOffsets, run_dir: Path) -> dict[str, float]:
     """The offsets the round starts from: journaled (round 1 also to the backup file,
     which keeps the offsets from before the first round, for rollback)."""
-    if "backup" in stages.done:
-        return {a: float(v) for a, v in stages.done["backup"]["before"].items()}
-    before = _axes(controller.read_offsets())
-    if stages.round == 1:
-        save_backup(run_dir, before, controller.name)
-        stages.log({"stage": "backup", "before": before, "file": BACKUP_NAME})
-    else:
-        stages.log({"stage": "backup", "before": before})
-    return before
+    def backup() -> None:
+        before = _axes(controller.read_offsets())
+        if stages.round == 1:
+            save_backup(run_dir, before, controller.name)
+            stages.log({"stage": "backup", "before": before, "file": BACKUP_NAME})
+        else:
+            stages.log({"stage": "backup", "before": before})
+
+    record = stages.take("backup", backup)
+    assert record is not None and record.before is not None
+    return {a: float(v) for a, v in record.before.items()}
 
 
 def _refusal(delta: np.ndarray, new: dict[str, float], max_abs_offset_mm: float,
@@ -164,8 +180,17 @@ def _intent(stages: _Stages, controller: ZeroOffsets, operator: Operator,
             ) -> dict[str, float] | None:
     """The offsets to write, asked of the operator and journaled before any write (a
     journaled intent is written again as it was); None: declined."""
-    if "intent" in stages.done:
-        return {a: float(v) for a, v in stages.done["intent"]["written"].items()}
+    record = stages.take("intent", lambda: _ask(stages, controller, operator, before, new,
+                                                note))
+    if record is None:
+        return None
+    assert record.written is not None
+    return {a: float(v) for a, v in record.written.items()}
+
+
+def _ask(stages: _Stages, controller: ZeroOffsets, operator: Operator,
+         before: dict[str, float], new: dict[str, float], note: str | None) -> None:
+    """Ask the operator; journal the intent if they confirm."""
     # A drive with no OFFSET register: the station holds the offsets, nothing
     # reaches the drive, and the question must not say otherwise.
     held = controller.held_by == "station"
@@ -178,14 +203,12 @@ def _intent(stages: _Stages, controller: ZeroOffsets, operator: Operator,
     question = what + ", ".join(
         f"o_{a} {before[a]:+.4f} → {new[a]:+.4f}" for a in AXES) + where \
         + (f" ({note})" if note else "")
-    if not operator.confirm(question):
-        return None
-    stages.log({"stage": "intent", "before": before, "written": new})
-    return new
+    if operator.confirm(question):
+        stages.log({"stage": "intent", "before": before, "written": new})
 
 
 def _write(stages: _Stages, controller: ZeroOffsets, run_dir: Path,
-           before: dict[str, float], new: dict[str, float]) -> WritebackOutcome:
+           before: dict[str, float], new: dict[str, float]) -> None:
     """Write ``new`` and read it back; on a fault, the backup is written back."""
     try:
         readback = _axes(controller.write_offsets([new[a] for a in AXES]))
@@ -207,35 +230,14 @@ def _write(stages: _Stages, controller: ZeroOffsets, run_dir: Path,
         except DeviceError as exc2:
             stages.log({"stage": "failed", "reason": f"{exc}; restore failed: {exc2}",
                         "before": before})
-            from station.errors import RunFailed
-
             raise RunFailed(
                 f"write-back failed ({exc}) and restoring the backup failed too ({exc2}); "
                 f"the controller's offsets are uncertain: run `orthocal rollback {run_dir}`"
             ) from exc2
         reason = f"write-back failed ({exc}); the backed-up offsets were restored"
         stages.log({"stage": "failed-restored", "reason": reason, "before": before})
-        return WritebackOutcome("failed-restored", reason, before, None)
+        return
     stages.log({"stage": "done", "before": before, "written": readback})
-    return WritebackOutcome("written", None, before, readback)
-
-
-def held_after(records: list[JsonObject], start: Sequence[float] | None
-               ) -> list[float] | None:
-    """The offsets a station holding them holds once the journal's write-backs and
-    rollbacks are done (``start``: what the run began with, None for zeros): what a
-    resumed run, a rollback or ``--offsets-from`` starts from. None when the journal
-    shows none of its own (the start stands)."""
-    held = None if start is None else [float(v) for v in start]
-    for rec in records:
-        kind, stage = rec.get("type"), rec.get("stage")
-        if kind == "writeback" and stage == "done":
-            held = [float(rec["written"][a]) for a in AXES]
-        elif kind == "writeback" and stage in ("interrupted-restored", "failed-restored"):
-            held = [float(rec["before"][a]) for a in AXES]
-        elif kind == "rollback" and stage == "done":
-            held = [float(rec["restored"][a]) for a in AXES]
-    return held
 
 
 def rollback(controller: ZeroOffsets, run_dir: Path, journal: Journal) -> dict[str, float]:

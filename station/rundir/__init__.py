@@ -1,2 +1,3 @@
 """The run directory: the journal (every reading fsynced before the machine moves
-on), what a run directory holds, and the lock that keeps one station per machine."""
+on) and what it says, folded once (state), what a run directory holds, and the lock
+that keeps one station per machine."""

@@ -20,7 +20,8 @@ from station.config import StationConfig
 from station.config.toml import dump_toml
 from station.errors import BadInput, RunFailed
 from station.plan.steps import Plan
-from station.rundir.journal import JOURNAL_NAME, JournalState, read_journal, replay
+from station.rundir.journal import JOURNAL_NAME, read_records
+from station.rundir.state import RunState
 
 SIM_NAME = "simulation.json"
 NVRAM_NAME = "controller_nvram.json"
@@ -80,9 +81,9 @@ def write_run_files(run_dir: Path, config: StationConfig, plan: Plan,
     (run_dir / "plan.json").write_text(json.dumps(plan.to_json(), indent=1) + "\n")
 
 
-def reopen(run_dir: Path) -> tuple[Path, list[dict[str, Any]], JournalState]:
-    """A run directory (named on the command line), its journal and replayed state."""
+def reopen(run_dir: Path) -> tuple[Path, RunState]:
+    """A run directory (named on the command line) and its journal's state, for the
+    run's :class:`~station.rundir.journal.Journal` to go on from."""
     if not run_dir.is_dir():
         raise BadInput(f"{run_dir}: no such run directory")
-    records = read_journal(run_dir / JOURNAL_NAME)
-    return run_dir, records, replay(records)
+    return run_dir, RunState.of(read_records(run_dir / JOURNAL_NAME))

@@ -21,6 +21,11 @@ A record that cannot be saved (disk full: ENOSPC, or EFBIG under a file-size
 limit) is cut off again: the file is truncated back to its last whole record
 and :class:`~station.errors.StorageFull` raised, so the caller never uses what
 it could not journal and a later reader never meets half a record.
+
+Each record is one of station.record.journal's types: it is parsed into its type
+before it is written (one that is not is refused, unwritten) and folded, once saved,
+into the journal's :class:`~station.rundir.state.RunState`, which is what the run
+reads back instead of the file.
 """
 
 from __future__ import annotations
@@ -29,23 +34,32 @@ import json
 import os
 import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
 from drivers.files import fsync_dir
 from station.errors import BadInput, StorageFull, storage_message
+from station.record.journal import RECORD, JournalRecord
+from station.rundir.state import RunState
 
 JOURNAL_NAME = "journal.jsonl"
 
 
 class Journal:
-    """Appends records; thread-safe (driver events may arrive from reader threads)."""
+    """Appends records; thread-safe (driver events may arrive from reader threads).
+    ``state``: the run state of the records already in the file (a reopened run's);
+    without it the file's records are folded now. Every record saved is folded into
+    it (:attr:`state`)."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, state: RunState | None = None) -> None:
         self.path = Path(path)
         self._lock = threading.Lock()
         new = not self.path.exists()
+        if state is None:
+            state = RunState() if new else RunState.of(read_records(self.path))
+        self.state = state
         # Unbuffered: a failed write must not leave bytes in a buffer that a later
         # flush or close would write after the truncation.
         self._fd: int | None = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
@@ -65,6 +79,13 @@ class Journal:
     def append(self, record: dict[str, Any]) -> None:
         record = {"t": round(time.time(), 6), **record}
         line = (json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n").encode()
+        # Parsed from the very line a reader will parse; a record of no journal type
+        # is a bug, refused before a reader could meet it.
+        try:
+            typed = RECORD.validate_json(line)
+        except ValidationError as exc:
+            raise ValueError(f"journal record {record.get('type')!r} is not of the "
+                             f"journal's schema: {_why(exc)}") from None
         with self._lock:
             if self._fd is None:
                 raise RuntimeError("journal is closed")
@@ -81,6 +102,7 @@ class Journal:
                                   f"{record.get('type')!r} was not saved") from exc
             self._good += len(data)
             self.torn = False
+            self.state.apply(typed)  # under the lock: records fold in the order saved
 
     def _cut_back(self) -> None:
         """Remove whatever part of a failed append reached the file."""
@@ -113,18 +135,42 @@ class Journal:
 
 
 def read_journal(path: str | Path) -> list[dict[str, Any]]:
-    """All intact records. A line that does not parse is tolerated only if it is
-    the last one (torn by a kill) or is followed by a ``resumed`` or ``rollback``
-    record (the journal reopened after the kill)."""
+    """All intact records, as JSON objects. A line that does not parse is tolerated
+    only if it is the last one (torn by a kill) or is followed by a ``resumed`` or
+    ``rollback`` record (the journal reopened after the kill)."""
+    return [record for _, record in _lines(Path(path))]
+
+
+def read_records(path: str | Path) -> list[JournalRecord]:
+    """All intact records (as :func:`read_journal`), each parsed into its record type
+    (station.record.journal): BadInput names a line that is not one."""
     path = Path(path)
+    records: list[JournalRecord] = []
+    for number, record in _lines(path):
+        try:
+            records.append(RECORD.validate_python(record))
+        except ValidationError as exc:
+            raise BadInput(f"{path}: line {number} is not a journal record "
+                           f"({_why(exc)})") from None
+    return records
+
+
+def _why(exc: ValidationError) -> str:
+    first = exc.errors()[0]
+    where = ".".join(str(part) for part in first["loc"])
+    more = f", and {exc.error_count() - 1} more" if exc.error_count() > 1 else ""
+    return f"{where}: {first['msg']}{more}"
+
+
+def _lines(path: Path) -> list[tuple[int, dict[str, Any]]]:
+    """(line number, record) of every intact line (:func:`read_journal`)."""
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
         raise BadInput(f"{path}: no journal here") from None
-    lines = raw.split(b"\n")
-    records: list[dict[str, Any]] = []
+    records: list[tuple[int, dict[str, Any]]] = []
     pending_bad: int | None = None
-    for number, line in enumerate(lines, start=1):
+    for number, line in enumerate(raw.split(b"\n"), start=1):
         if not line.strip():
             continue
         try:
@@ -140,45 +186,5 @@ def read_journal(path: str | Path) -> list[dict[str, Any]]:
         if pending_bad is not None and record["type"] not in ("resumed", "rollback"):
             raise BadInput(f"{path}: line {pending_bad} is corrupt") from None
         pending_bad = None
-        records.append(record)
+        records.append((number, record))
     return records
-
-
-@dataclass
-class JournalState:
-    """What a journal says happened, rebuilt by replaying its records."""
-
-    header: dict[str, Any] | None = None
-    readings: dict[tuple[str, str], list[float]] = field(default_factory=dict)
-    mounted: list[tuple[str, int]] = field(default_factory=list)  # (phase, setup)
-    # The steps a resume does not take again (cycles, identifications, write-back
-    # stages) are indexed by station.engine.replay, not here.
-    finished: dict[str, Any] | None = None
-    events: int = 0
-    retries: int = 0
-    resumes: int = 0
-
-    @property
-    def started(self) -> float | None:
-        return None if self.header is None else self.header.get("t")
-
-
-def replay(records: list[dict[str, Any]]) -> JournalState:
-    state = JournalState()
-    for rec in records:
-        kind = rec["type"]
-        if kind == "header":
-            state.header = rec
-        elif kind == "resumed":
-            state.resumes += 1
-        elif kind == "reading":
-            state.readings[(rec["stop"], rec["indicator"])] = [float(v) for v in rec["values"]]
-        elif kind == "setup":
-            state.mounted.append((rec["phase"], int(rec["setup"])))
-        elif kind == "finished":
-            state.finished = rec
-        elif kind == "event":
-            state.events += 1
-            if rec.get("event", {}).get("event") == "retry":
-                state.retries += 1
-    return state
