@@ -17,6 +17,7 @@ the indicator waits for its port within the same budget.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -46,8 +47,35 @@ except ImportError:  # pragma: no cover - not POSIX
 
 EventSink = Callable[[dict[str, Any]], None]
 
+
+def port_missing(port: str) -> bool:
+    """Whether ``port`` names a local serial device that is not there now. A
+    pyserial URL (``rfc2217://…``, ``socket://…``) is reached over the network and
+    cannot be told missing before it is opened: never missing here. A path that
+    resolves nowhere (a ``/dev/serial/by-id`` link whose adapter is unplugged) is
+    missing: the driver waits ``reopen_s`` for one that vanishes mid-run, but
+    before a run nothing is coming back, and the caller says so at once."""
+    if "://" in port:
+        return False
+    if os.name == "nt":  # COM3 is no file; the system's list says what is plugged in
+        from serial.tools import list_ports
+
+        wanted = port.removeprefix("\\\\.\\").upper()
+        return wanted not in {p.device.upper() for p in list_ports.comports()}
+    return not os.path.exists(port)
+
 # A reply longer than this without its terminator is a babbling line, not a slow gauge.
 MAX_REPLY_BYTES = 256
+
+
+def _os_reason(e: BaseException) -> str:
+    """What the OS said, once: pyserial wraps the OSError of open() as "[Errno 2]
+    could not open port P: [Errno 2] No such file or directory: 'P'", which says the
+    errno twice and the port the device's name already gives."""
+    cause = e.__context__
+    if isinstance(cause, OSError) and cause.strerror:
+        return cause.strerror
+    return str(e)
 
 
 class SerialIndicator:
@@ -109,7 +137,7 @@ class SerialIndicator:
                 **self.protocol.serial_settings(),
             )
         except PORT_ERRORS as e:
-            raise IndicatorPortError(self.device, f"cannot open port: {e}") from e
+            raise IndicatorPortError(self.device, f"cannot open port: {_os_reason(e)}") from e
         return self._serial
 
     def _open_within(self, why: str, announce: bool = False) -> Any:

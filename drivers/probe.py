@@ -21,7 +21,10 @@ import serial
 
 from drivers.errors import DeviceError, ExceptionResponse
 from drivers.indicator_protocols import BUILTIN_PROTOCOLS, IndicatorProtocol
-from drivers.indicators import PORT_ERRORS
+from drivers.indicators import PORT_ERRORS, port_missing
+
+#: why a port that names no device was not tried
+MISSING = "the port does not exist"
 
 #: the built-in protocols a probe tries, in this order
 PROBED = ("mitutoyo", "sylvac", "mahr")
@@ -67,6 +70,9 @@ class PortProbe:
     reply: str | None = None
     reason: str | None = None
     tried: list[str] = field(default_factory=list)
+    # False: the port names no device at all (a typo, an adapter unplugged), which
+    # the command refuses as bad input; a silent port that exists is a finding.
+    exists: bool = True
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -94,7 +100,11 @@ def _exchange(port: str, p: IndicatorProtocol, timeout_s: float,
 
 def probe_port(port: str, timeout_s: float = 0.5,
                factory: Callable[..., Any] = serial.serial_for_url) -> PortProbe:
-    """Try each built-in protocol on ``port`` at its usual line settings."""
+    """Try each built-in protocol on ``port`` at its usual line settings; a
+    port that does not exist (drivers.indicators.port_missing) is not tried. A
+    ``factory`` other than pyserial's opens names of its own: all exist."""
+    if factory is serial.serial_for_url and port_missing(port):
+        return PortProbe(port, reason=MISSING, exists=False)
     result = PortProbe(port)
     replies: list[str] = []
     for name in PROBED:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import shutil
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -141,7 +142,22 @@ def test_compare_finds_drift_and_not_noise(machines: Machines, tmp_path: Path) -
     assert {"tilt_yx", "tilt_zx", "tilt_zy"} <= set(drift)  # the layout too
     assert "change_mrad" in drift["tilt_yx"]
     said = orthocal("compare", a["run_dir"], moved["run_dir"], cwd=tmp_path).stdout
-    assert "joint x" in said and "(significant)" in said
+    # every change says whether it is significant, and by which criterion
+    rows = [line for line in said.splitlines() if line.startswith("  ") and " → " in line]
+    assert len(rows) == 9 and all(line.endswith("significant") for line in rows)
+    assert next(r for r in rows if "joint x" in r).endswith("  significant")
+    assert "excludes zero" in said
+
+
+def test_compare_refuses_a_run_compared_with_itself(machines: Machines,
+                                                    tmp_path: Path) -> None:
+    a = machines.a["run_dir"]
+    copy = tmp_path / "copy-of-a"
+    shutil.copytree(a, copy)
+    for other in (a, str(copy)):  # the directory itself, or a copy of it
+        refused = orthocal("compare", a, other, cwd=tmp_path)
+        assert refused.returncode == 2 and refused.stdout == ""
+        assert refused.stderr.count("\n") == 1 and "same run" in refused.stderr
 
 
 def test_compare_refuses_other_machines_in_one_line(machines: Machines, tmp_path: Path) -> None:
@@ -259,7 +275,8 @@ def test_a_machine_recalibrated_from_the_offsets_it_was_left_with(tmp_path: Path
     assert "Since the last calibration" not in (Path(first["run_dir"]) / "report.html") \
         .read_text()
     summary = report.summary_text(second)
-    assert "since last" in summary and "joint x" in summary and "(significant)" in summary
+    x_line = next(line for line in summary.splitlines() if "joint x e " in line)
+    assert "since last" in summary and x_line.endswith("  significant")
     # a figure of the two runs for the machine's file
     figure = tmp_path / "og7.svg"
     drawn = orthocal("history", "--out", str(out), "--machine", "OG-0007", "--plot",

@@ -3,6 +3,7 @@ PNG or SVG, with each parameter's drift per month (station.history.trend)."""
 
 from __future__ import annotations
 
+import json
 import math
 import xml.etree.ElementTree as ET
 from datetime import UTC, datetime, timedelta
@@ -12,10 +13,12 @@ from typing import Any
 import pytest
 from builders import Completed, cli
 
+from station.history.entry import entry_of
 from station.history.store import HistoryStore, default_url
-from station.history.trend import MONTH_DAYS, drift, series
+from station.history.trend import MIN_SPAN_DAYS, MONTH_DAYS, drift, series, why_no_drift
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+DATA = Path(__file__).resolve().parent / "data"
 
 
 def _frame(x: float, se: float = 0.0005) -> dict[str, Any]:
@@ -102,3 +105,77 @@ def test_what_cannot_be_plotted_is_said_in_one_line(runs: Path, tmp_path: Path) 
         assert bad.returncode == 2 and words in bad.stderr, (argv, bad.stderr)
         assert len(bad.stderr.strip().splitlines()) == 1 and "Traceback" not in bad.stderr
         assert not (tmp_path / "h.svg").exists()
+
+
+def _close(name: str, machine: str, seconds: float, x: float) -> dict[str, Any]:
+    """A run ``seconds`` after the first of :func:`_entry`'s day 0 (a test rerun)."""
+    entry = _entry(name, machine, 0, x)
+    started = datetime.fromisoformat(entry["started"]) + timedelta(seconds=seconds)
+    return {**entry, "started": started.isoformat(),
+            "finished": (started + timedelta(seconds=30)).isoformat()}
+
+
+def test_no_drift_from_runs_less_than_a_week_apart(tmp_path: Path) -> None:
+    # two runs 35 s apart once gave +3.54e+04 ± 1.4e+05 µm/month
+    close = [_close("a", "OG-5", 0, 0.400), _close("b", "OG-5", 35, 0.4014)]
+    points = series(close)["drho_x"]
+    assert drift(points) is None and why_no_drift(points) == "runs span less than 7 days"
+    week = [_entry("a", "OG-5", 0, 0.400), _entry("b", "OG-5", MIN_SPAN_DAYS, 0.401)]
+    assert drift(series(week)["drho_x"]) is not None  # a week: stated
+    out = tmp_path / "runs"
+    out.mkdir()
+    with HistoryStore(default_url(out)) as store:
+        for entry in close:
+            store.record(entry)
+    svg = tmp_path / "h.svg"
+    done = orthocal("--out", str(out), "--machine", "OG-5", "--plot", str(svg), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "machine OG-5: drift of e per month ± 95 %: not stated, runs span less than " \
+        "7 days" in done.stdout
+    text = " ".join(ET.parse(svg).getroot().itertext())
+    assert "e x: drift not stated, runs span less than 7 days" in text
+    assert "/month (" not in text  # no slope drawn anywhere
+
+
+def test_error_bars_are_the_certificates_expanded_uncertainty() -> None:
+    result = json.loads((DATA / "golden_run" / "result.json").read_text())
+    budget = result["uncertainty_budget"]
+    assert budget["statement"] == "remaining.total"
+    entry = {**entry_of(result), "machine_id": "OG-1", "started": "2026-01-01T10:00:00+00:00",
+             "finished": "2026-01-01T10:20:00+00:00"}
+    found = [p for p in series([entry])["drho_x"] if p.state == "as found"]
+    assert found[0].certified and \
+        found[0].expanded_95 == pytest.approx(budget["expanded_95_mm"]["drho_x"])  # 11.8 µm
+    assert found[0].expanded_95 > 10 * 2.2 * found[0].std_error  # not the scatter's
+    # a run whose budget states nothing: the statistical interval, and said to be one
+    bare = {**entry, "as_found": entry_of({**result, "uncertainty_budget": {
+        "error": "not stated: a model without Δρ"}})["as_found"]}
+    fallback = next(p for p in series([bare])["drho_x"] if p.state == "as found")
+    assert not fallback.certified and fallback.expanded_95 < 0.002
+
+
+def test_the_figure_labels_its_error_bars_and_says_what_e_is(tmp_path: Path) -> None:
+    # a calibrated machine: e = −1818.6 µm is minus the offset it holds, Δρ is 0.4 µm
+    held = {"x": 1.8190, "y": 0.0, "z": 0.0}
+    first = _entry("a", "OG-6", 0, -1.8186, offsets_before=held)
+    second = _entry("b", "OG-6", 10, -1.8185, offsets_before=held)
+    for entry in (first, second):  # x's certificate stated, y's and z's not (older runs)
+        entry["as_found"]["joint_error_mm"]["x"]["expanded_95_mm"] = 0.0119
+    out = tmp_path / "runs"
+    out.mkdir()
+    with HistoryStore(default_url(out)) as store:
+        store.record(first)
+        store.record(second)
+    svg = tmp_path / "h.svg"
+    done = orthocal("--out", str(out), "--machine", "OG-6", "--plot", str(svg), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    row = next(line for line in done.stdout.splitlines() if "/runs/a" in line)
+    assert "+0.4, -300.0, +200.0" in row and "-1818.6, -300.0, +200.0" in row  # Δρ, e
+    assert "Δρ as found: each joint's zero error at the run's start" in done.stdout
+    assert "e = Δρ − o: the same error without any offset" in done.stdout
+    text = " ".join(ET.parse(svg).getroot().itertext())
+    assert "e x as found, ± U95 of its certificate" in text
+    assert "e x as left, ± 95 % statistical interval" in text
+    assert "e y as found, ± 95 % statistical interval" in text
+    assert "error bars 95 % expanded uncertainty" not in text  # what they were called
+    assert "e = Δρ − o: each joint's zero error without the controller's offsets" in text

@@ -10,6 +10,7 @@ from __future__ import annotations
 import termios
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -424,3 +425,11 @@ def test_group_refuses_duplicate_names(mocker: Any) -> None:
     with pytest.raises(ValueError, match="two indicators named 'A'"):
         IndicatorGroup([a, a])
     a.close()
+
+
+def test_a_port_that_is_not_there_is_said_once(tmp_path: Path) -> None:
+    # pyserial's own text repeats the errno and the port: the OS's words, once
+    gone = tmp_path / "ttyUSB99"
+    with pytest.raises(IndicatorPortError) as info:
+        SerialIndicator("D", str(gone), "mitutoyo", reopen_s=0.0)
+    assert str(info.value) == f"indicator D ({gone}): cannot open port: No such file or directory"

@@ -4,21 +4,25 @@ by `orthocal run --plan` as written, never overwriting a file."""
 from __future__ import annotations
 
 import json
+import re
 import tomllib
 from pathlib import Path
 
 import pytest
 
+from drivers.sim.specs import DriveSpec, GaugeSpec
 from drivers.sim.station import VirtualStation
 from station.commands.cli import main
 from station.commands.init import propose_setups
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.mark.parametrize("count", [2, 6])
 def test_init_then_plan_against_the_simulator(tmp_path: Path, capsys, count: int) -> None:
     out = tmp_path / "station.toml"
-    with VirtualStation(seed=1, indicator_count=count, protocol="sylvac", line_time=False) \
-            as station:
+    gauges = GaugeSpec(names=tuple("ABCDEF"[:count]), protocol="sylvac", line_time=False)
+    with VirtualStation(gauges=gauges, seed=1) as station:
         ports = [s.port for s in station.indicators.values()]
         assert main(["init", "--out", str(out), *ports, "--timeout", "0.3",
                      "--controller", f"127.0.0.1:{station.controller.port}"]) == 0
@@ -40,8 +44,8 @@ def test_init_then_plan_against_the_simulator(tmp_path: Path, capsys, count: int
 
 def test_init_without_limit_registers_marks_them_required(tmp_path: Path, capsys) -> None:
     out = tmp_path / "station.toml"
-    with VirtualStation(seed=1, controller_options={"soft_limit_registers": False}) \
-            as station:
+    drive = DriveSpec(controller_options={"soft_limit_registers": False})
+    with VirtualStation(drive=drive, seed=1) as station:
         ports = [s.port for s in station.indicators.values()]
         assert main(["init", "--out", str(out), *ports, "--timeout", "0.3",
                      "--controller", f"127.0.0.1:{station.controller.port}"]) == 0
@@ -75,3 +79,28 @@ def test_proposed_setups_cover_every_leg_and_direction_pair() -> None:
     one = propose_setups(["A"])
     assert sorted((leg, d) for leg, inds in one for d in inds.values()) == [
         ("x", "y"), ("x", "z"), ("y", "x"), ("y", "z"), ("z", "x"), ("z", "y")]
+
+
+def test_init_config_keeps_reversed_mounts_motion_and_gauges(tmp_path: Path) -> None:
+    # examples/station.toml as a user has it: a reversed mount (D = "-z"), the drive's
+    # motion said, a gauge's own preload and a generic gauge's line settings. Its ports
+    # answer nothing here (/dev/null) and its controller is not there: init still
+    # writes what that config says, under the config's own names.
+    text = (ROOT / "examples" / "station.toml").read_text()
+    text = re.sub(r'port = "/dev/ttyUSB\d"', 'port = "/dev/null"', text)
+    text = (text.replace("# motion = ", "motion = ")
+            .replace('host = "192.168.0.10"', 'host = "127.0.0.1"')
+            .replace("port = 502 ", "port = 1 ").replace("timeout_s = 2.0 ", "timeout_s = 0.2 "))
+    source, out = tmp_path / "station.toml", tmp_path / "new.toml"
+    source.write_text(text)
+    given = tomllib.loads(text)
+    assert {"C": "x", "D": "-z"} in [s["indicators"] for s in given["setups"]]
+    assert main(["init", "--config", str(source), "--out", str(out), "--timeout", "0.1"]) == 0
+    data = tomllib.loads(out.read_text())
+    assert data["setups"] == given["setups"]  # every sign as given
+    assert data["controller"]["motion"] == "coordinated"
+    assert [i["name"] for i in data["indicators"]] == [i["name"] for i in given["indicators"]]
+    assert data["indicators"][2]["preload_mm"] == 6.0
+    generic = data["indicators"][5]
+    assert {k: generic[k] for k in ("protocol", "baudrate", "pattern", "stroke_mm")} == \
+        {k: given["indicators"][5][k] for k in ("protocol", "baudrate", "pattern", "stroke_mm")}

@@ -5,12 +5,16 @@ naming the indicator, the setup and the posture."""
 from __future__ import annotations
 
 import itertools
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from builders import station_config, station_data
 
 import orthocal
+from drivers.sim.controller import SimController
+from station.commands.cli import main
 from station.config import StationConfig, parse_config
 from station.errors import BadInput
 from station.plan.check import check_plan
@@ -194,3 +198,46 @@ def test_an_identical_check_is_remembered_and_gives_what_the_check_gives() -> No
         with pytest.raises(BadInput):
             check_plan(build_plan(cfg), cfg, narrow)
     assert not check._kept
+
+
+def _missing_port_config(tmp_path: Path, controller_port: int) -> tuple[Path, Path]:
+    """A config whose gauge D is on a port that is not there (an adapter unplugged)."""
+    missing = tmp_path / "ttyUSB99"
+    path = tmp_path / "station.toml"
+    path.write_text(f"[controller]\nport = {controller_port}\ntimeout_s = 0.5\n"
+                    '[[indicators]]\nname = "C"\nport = "/dev/null"\n'
+                    f'[[indicators]]\nname = "D"\nport = "{missing}"\nreopen_s = 0.5\n'
+                    '[[setups]]\nleg = "y"\nindicators = { C = "x", D = "-z" }\n')
+    return path, missing
+
+
+def test_a_gauge_port_that_does_not_exist_is_refused_before_anything_moves(
+        tmp_path: Path, capsys) -> None:
+    with SimController() as sim:
+        path, missing = _missing_port_config(tmp_path, sim.port)
+        for extra in (["--plan"], ["--yes"]):
+            code = main(["run", "--config", str(path), *extra, "--out", str(tmp_path / "r")])
+            err = capsys.readouterr().err
+            assert code == 2, (extra, err)
+            assert err.splitlines() == [f"orthocal: error: indicator D: port {missing} does "
+                                        "not exist (plug its adapter in, or correct "
+                                        "[[indicators]] port)"]
+        assert sim.stats.writes == 0 and sim.stats.commands == {}  # nothing moved
+    assert not (tmp_path / "r").exists()
+
+
+def test_resume_refuses_a_gauge_port_that_does_not_exist(tmp_path: Path, capsys) -> None:
+    # An interrupted run on real devices (no simulation in its header) whose gauge's
+    # adapter is not plugged in again: refused at once, before homing or any check.
+    with SimController() as sim:
+        path, missing = _missing_port_config(tmp_path, sim.port)
+        run_dir = tmp_path / "run-1"
+        run_dir.mkdir()
+        (run_dir / "config.toml").write_text(path.read_text())
+        (run_dir / "journal.jsonl").write_text(json.dumps(
+            {"type": "header", "t": 0.0, "version": "test", "config": {}, "plan": {},
+             "simulation": None, "started": "2026-01-01T00:00:00+00:00"}) + "\n")
+        assert main(["resume", str(run_dir), "--yes"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"orthocal: error: indicator D: port {missing} does not exist")
+        assert sim.stats.writes == 0 and sim.stats.commands == {}

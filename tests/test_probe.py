@@ -129,3 +129,17 @@ def test_unreachable_controller_exit_1(ports, capsys) -> None:
 def test_bad_controller_argument_exit_2(capsys) -> None:
     assert main(["probe", "--controller", "nohostport", "--json"]) == 2
     assert "--controller: expected HOST:PORT" in capsys.readouterr().err
+
+
+def test_a_port_that_does_not_exist_exits_2_after_the_findings(ports, tmp_path, capsys) -> None:
+    missing = str(tmp_path / "ttyUSB99")
+    assert main(["probe", missing, ports["silent"], "--timeout", "0.2", "--json"]) == 2
+    out, err = capsys.readouterr()
+    by_port = {ind["port"]: ind for ind in json.loads(out)["indicators"]}
+    assert by_port[missing]["exists"] is False and by_port[missing]["reason"] == \
+        "the port does not exist"
+    assert by_port[ports["silent"]]["exists"] is True  # silent, but there: a finding
+    assert err.splitlines() == [f"orthocal: error: probe: port {missing} does not exist"]
+    assert main(["probe", missing, "--timeout", "0.2"]) == 2  # the table, then the line
+    out, err = capsys.readouterr()
+    assert out.startswith("indicators") and err.count("\n") == 1

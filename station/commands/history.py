@@ -69,6 +69,50 @@ def _plot_path(args: argparse.Namespace) -> Path | None:
     return path
 
 
+#: Under the listing: what its two joint columns mean (docs/design.md "Machine
+#: history"). A calibrated machine shows e ≈ −o, minus the offsets its controller
+#: holds (e.g. −1818.6 µm), which alone would read as a machine 1.8 mm off.
+LEGEND = ("Δρ as found: each joint's zero error at the run's start, with the offsets o "
+          "the controller held then: what the run set out to correct (near 0 on a machine "
+          "still in calibration).\n"
+          "e = Δρ − o: the same error without any offset, the machine's own (≈ −o on a "
+          "machine in calibration): only e "
+          "compares across runs whatever offsets were written in between, and its drift "
+          "is the machine's.")
+
+
+def _found_drho(entry: dict[str, Any]) -> list[float | None]:
+    """Δρ as found per axis: e + o with the offsets the run started from."""
+    found = (entry.get("as_found") or {}).get("joint_error_mm") or {}
+    held = entry.get("offsets_before") or {}
+    out: list[float | None] = []
+    for a in "xyz":
+        e, o = (found.get(a) or {}).get("value_mm"), held.get(a)
+        out.append(None if e is None or o is None else e + o)
+    return out
+
+
+def drift_lines(entries: list[dict[str, Any]]) -> list[str]:
+    """Per named machine, the drift of e per month ± 95 % (station.history.trend),
+    or why none is stated."""
+    from station.history.trend import drift, series, why_no_drift
+
+    lines: list[str] = []
+    for machine in sorted({str(e["machine_id"]) for e in entries if e.get("machine_id")}):
+        points = series([e for e in entries if e.get("machine_id") == machine])
+        found = {a: points.get(f"drho_{a}", []) for a in "xyz"}
+        drifts = {a: drift(p) for a, p in found.items()}
+        reasons = {why_no_drift(found[a]) for a, d in drifts.items() if d is None}
+        if all(d is None for d in drifts.values()) and len(reasons) == 1:
+            text = f"not stated, {reasons.pop()}"  # the usual case: said once
+        else:
+            text = "; ".join(f"{a} not stated, {why_no_drift(found[a])}" if d is None else
+                             f"{a} {1000 * d.per_month:+.3g} ± {1000 * d.expanded_95:.2g} µm"
+                             for a, d in drifts.items())
+        lines.append(f"machine {machine}: drift of e per month ± 95 %: {text}")
+    return lines
+
+
 def history_main(args: argparse.Namespace) -> int:
     from station.history.compare import microns
 
@@ -84,17 +128,22 @@ def history_main(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"machine_id": args.machine, "runs": entries}, indent=2))
         return 0
-    print(f"{'started':<26} {'machine':<12} {'state':<14} as found e = Δρ − o (µm) x, y, z"
-          f"   tool after (µm RMS)   run")
+    print(f"{'started':<26} {'machine':<12} {'state':<14} "
+          f"{'as found Δρ (µm) x, y, z':<26} {'e = Δρ − o (µm) x, y, z':<26} "
+          "tool after (µm RMS)   run")
     for e in entries:
         found = (e.get("as_found") or {}).get("joint_error_mm") or {}
         state = e.get("stopped") or e.get("status") or "—"
         tool = e.get("tool_after_rms_mm")
+        drho = ", ".join(microns(v) for v in _found_drho(e))
+        joint = ", ".join(microns((found.get(a) or {}).get("value_mm")) for a in "xyz")
         print(f"{e.get('started') or '—':<26} {e.get('machine_id') or '—':<12} {state:<14} "
-              + ", ".join(microns((found.get(a) or {}).get("value_mm")) for a in "xyz")
-              + f"   {'—' if tool is None else f'{1000 * tool:.1f}'}   {e['run_dir']}")
+              f"{drho:<26} {joint:<26} {'—' if tool is None else f'{1000 * tool:.1f}':<19}"
+              f"   {e['run_dir']}")
     if not entries:
         print("(no runs" + (f" of machine {args.machine!r})" if args.machine else ")"))
+        return 0
+    print("\n".join(["", *drift_lines(entries), LEGEND]))
     return 0
 
 
@@ -125,8 +174,12 @@ def _entry_of_dir(run_dir: str) -> dict[str, Any]:
 
 
 def compare_main(args: argparse.Namespace) -> int:
-    from station.history.compare import Incomparable, change_lines, compare
+    from station.history.compare import CRITERION, Incomparable, change_lines, compare
 
+    if Path(args.run_a).resolve() == Path(args.run_b).resolve():
+        # (a copy of one run directory is caught by compare: one run_dir in both)
+        raise BadInput(f"compare: RUN_A and RUN_B are the same run ({args.run_a}): give "
+                       "two runs of one machine")
     a, b = _entry_of_dir(args.run_a), _entry_of_dir(args.run_b)
     try:
         doc = compare(a, b)
@@ -139,4 +192,5 @@ def compare_main(args: argparse.Namespace) -> int:
           "(as found)")
     for line in change_lines(doc):
         print(f"  {line}")
+    print(f"  {CRITERION}")
     return 0

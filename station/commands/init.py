@@ -15,7 +15,12 @@ accepts it as written. An existing file is never overwritten.
 code: :func:`station.commands.probe.gather`), and the starter config points at
 that controller (its connection, map and ``[controller.registers]``) and keeps
 what only the operator knows and that config already says: the machine's
-geometry, the soft limits and the offsets the station holds.
+geometry, the soft limits, the offsets the station holds, how the drive moves
+(``motion``) and its timings, the gauges under their own names with what it says
+of each (stroke, preload, serial, line settings; the protocol the port answers),
+and its setups as given: which gauge on which leg, along which direction, with
+its sign (``"-z"``, a reversed mount: dropping the sign would turn every reading
+of that gauge over).
 
 Every other value is the default of station.config (the documented one), read
 from there rather than written again here.
@@ -118,9 +123,13 @@ def _controller_lines(found: dict[str, Any] | None, args: argparse.Namespace,
                   "port = 502"]
     device_id = given.device_id if given is not None else args.device_id
     profile = given.profile if given is not None else getattr(args, "profile", None)
-    lines += [f"device_id = {device_id}", _profile_line(profile, Path(args.out)),
-              *_defaults(ControllerConfig, ("timeout_s", "per Modbus request"),
-                         ("speed_mm_s", "axis speed of the test moves"))]
+    lines += [f"device_id = {device_id}", _profile_line(profile, Path(args.out))]
+    for key, comment in (("timeout_s", "per Modbus request"),
+                         ("speed_mm_s", "axis speed of the test moves")):
+        value = _default(ControllerConfig, key) if given is None else getattr(given, key)
+        lines.append(_line(key, value, comment))
+    if given is not None:
+        lines += _kept_controller(given)
     if given is not None and given.offsets is not None:
         lines.append(_line("offsets", given.offsets, "the offsets the station holds"))
     limits = (found or {}).get("soft_limits_mm") or {}
@@ -155,6 +164,86 @@ def _controller_lines(found: dict[str, Any] | None, args: argparse.Namespace,
         lines += ["", "[controller.registers]         # single addresses overriding the map's",
                   *(f"{name} = {address}" for name, address in given.registers.items())]
     return lines
+
+
+#: [controller] keys a --config gives that init writes back as given, where given:
+#: how the drive moves (``motion``: the plan's model of every move, which only the
+#: operator knows for a real drive) and the timings the operator set for it.
+_KEPT_CONTROLLER = {"motion": "how COMMAND 1 moves the axes",
+                    "accel_mm_s2": "the acceleration deadlines assume",
+                    "reconnect_s": "how long a lost connection is retried",
+                    "home_timeout_s": "deadline of homing"}
+
+
+def _kept_controller(given: ControllerConfig) -> list[str]:
+    return [_line(key, getattr(given, key), comment)
+            for key, comment in _KEPT_CONTROLLER.items()
+            if key in given.model_fields_set and getattr(given, key) is not None]
+
+
+#: Settings of an [[indicators]] entry that belong to its protocol: kept only while
+#: the gauge answers the protocol the config names.
+_LINE_KEYS = {"protocol", "baudrate", "bytesize", "parity", "stopbits", "request",
+              "terminator", "pattern", "error_pattern", "unit", "scale"}
+
+
+def _config_gauges(found: dict[str, Any], config: StationConfig, source: str) -> list[str]:
+    """--config: that config's gauges under their own names (its setups name them),
+    each with what the config says of it (stroke, preload, serial, line settings);
+    the protocol the one its port answered where that is another (then without the
+    config's line settings, which were for the other protocol). A gauge that did not
+    answer is kept as given, with why: it may be unplugged for now."""
+    by_port = {ind["port"]: ind for ind in found["indicators"]}
+    out: list[str] = []
+    for ind in config.indicators:
+        seen = by_port.get(ind.port) or {}
+        keys = ind.model_fields_set - {"name", "port"}
+        if ind.preload_mm == ind.stroke_mm / 2:
+            keys.discard("preload_mm")  # the validator's default: stroke/2 follows stroke
+        given = ind.model_dump(include=keys, exclude_none=True)
+        given.setdefault("stroke_mm", ind.stroke_mm)  # EDIT-worthy: always written
+        if seen.get("protocol") is None:
+            head = [f"# {ind.port}: no gauge ({seen.get('reason') or 'not probed'}); "
+                    f"as {source} gives it", "[[indicators]]"]
+            given.setdefault("protocol", ind.protocol)
+        else:
+            reading = "" if seen["reading_mm"] is None else \
+                f", reading {seen['reading_mm']:+.4f} mm"
+            head = [f"[[indicators]]                 # answered at {seen['line']}{reading}"]
+            if seen["protocol"] != ind.protocol:
+                head.insert(0, f"# {source} said protocol {ind.protocol!r}; the gauge "
+                            f"answers {seen['protocol']!r}")
+                given = {k: v for k, v in given.items() if k not in _LINE_KEYS}
+            given["protocol"] = seen["protocol"]
+        order = ["protocol", *(k for k in IndicatorConfig.model_fields if k in given
+                               and k != "protocol")]
+        out += ["", *head, f"name = {v(ind.name)}", f"port = {v(ind.port)}",
+                *(_line(k, given[k]) for k in order)]
+    return out
+
+
+def _setup_lines(config: StationConfig | None, names: list[str],
+                 source: str | None) -> list[str]:
+    """The [[setups]]: --config's as it gives them, each gauge's direction with its
+    sign (a reversed mount stays reversed), and the plane where not the middle; else
+    proposed for the gauges found."""
+    if config is None:
+        out = ["", "# Setups proposed for the gauges found: one [[setups]] per mounting; the",
+               "# operator is prompted before each to mount its gauges at the middle of the",
+               "# leg at Π0 and remove the others. EDIT which gauge sits on which leg, and",
+               '# the direction each measures along ("-y" if mounted reversed).']
+        for leg, inds in propose_setups(names):
+            out += ["[[setups]]", f"leg = {v(leg)}", f"indicators = {v(inds)}", ""]
+        return out
+    out = ["", f"# The setups of {source}, as it gives them: which gauge sits on which leg,",
+           '# and the direction each measures along ("-y": mounted reversed).']
+    for setup in config.setups:
+        out += ["[[setups]]", f"leg = {v(setup.leg)}",
+                f"indicators = {v(dict(setup.indicators))}"]
+        if "at" in setup.model_fields_set:
+            out.append(_line("at", setup.at, "the gauge plane, from the carriage's joint"))
+        out.append("")
+    return out
 
 
 def _profile_line(profile: str | None, out: Path) -> str:
@@ -207,7 +296,9 @@ def render(found: dict[str, Any], args: argparse.Namespace,
     out += ["", "# One [[indicators]] table per gauge found. stroke_mm: EDIT to your gauge's",
             "# plunger travel; preload_mm: how far it is pushed in at mounting (default",
             "# stroke/2). The plan check refuses moves beyond the stroke."]
-    if not gauges:
+    if config is not None:
+        out += _config_gauges(found, config, str(args.config))
+    elif not gauges:
         out += ["# EDIT: no gauge answered on any port probed; set the ports (and protocols).",
                 "[[indicators]]", 'name = "A"', 'port = "/dev/ttyUSB0"',
                 'protocol = "mitutoyo"          # mitutoyo | sylvac | mahr | generic',
@@ -215,19 +306,16 @@ def render(found: dict[str, Any], args: argparse.Namespace,
                 "[[indicators]]", 'name = "B"', 'port = "/dev/ttyUSB1"',
                 'protocol = "mitutoyo"', _line("stroke_mm", stroke)]
         names = ["A", "B"]
-    for name, ind in zip(names, gauges, strict=False):
-        reading = "" if ind["reading_mm"] is None else f", reading {ind['reading_mm']:+.4f} mm"
-        out += ["", f"[[indicators]]                 # answered at {ind['line']}{reading}",
-                f"name = {v(name)}", f"port = {v(ind['port'])}",
-                f"protocol = {v(ind['protocol'])}", _line("stroke_mm", stroke)]
-    for ind in silent:
-        out.append(f"# {ind['port']}: no gauge ({ind['reason']})")
-    out += ["", "# Setups proposed for the gauges found: one [[setups]] per mounting; the",
-            "# operator is prompted before each to mount its gauges at the middle of the",
-            "# leg at Π0 and remove the others. EDIT which gauge sits on which leg, and",
-            '# the direction each measures along ("-y" if mounted reversed).']
-    for leg, inds in propose_setups(names):
-        out += ["[[setups]]", f"leg = {v(leg)}", f"indicators = {v(inds)}", ""]
+    if config is None:
+        for name, ind in zip(names, gauges, strict=False):
+            reading = "" if ind["reading_mm"] is None else \
+                f", reading {ind['reading_mm']:+.4f} mm"
+            out += ["", f"[[indicators]]                 # answered at {ind['line']}{reading}",
+                    f"name = {v(name)}", f"port = {v(ind['port'])}",
+                    f"protocol = {v(ind['protocol'])}", _line("stroke_mm", stroke)]
+        for ind in silent:
+            out.append(f"# {ind['port']}: no gauge ({ind['reason']})")
+    out += _setup_lines(config, names, getattr(args, "config", None))
     models = get_args(ProcedureConfig.model_fields["model"].annotation)
     methods = get_args(ProcedureConfig.model_fields["method"].annotation)
     out += [

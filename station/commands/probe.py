@@ -11,7 +11,8 @@ requests go out (drivers.probe).
 
 Exit status: 0 when everything asked for was probed (a silent port is a
 finding, not a failure); 1 when the controller could not be reached; 2 bad
-arguments.
+arguments, and a port that does not exist (a typo, an adapter unplugged: what
+``orthocal run`` refuses too), said in one line after the findings.
 """
 
 from __future__ import annotations
@@ -112,6 +113,11 @@ def main(args: argparse.Namespace) -> int:
         print(json.dumps(found, indent=1))
     else:
         print_human(found)
+    # After the findings: the ports that do answer are worth seeing all the same.
+    missing = [ind["port"] for ind in found["indicators"] if not ind.get("exists", True)]
+    if missing:
+        raise BadInput(f"probe: port {missing[0]} does not exist" if len(missing) == 1 else
+                       f"probe: ports {', '.join(missing)} do not exist")
     controller = found["controller"]
     return 1 if controller is not None and "error" in controller else 0
 

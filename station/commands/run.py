@@ -15,7 +15,7 @@ import json
 import sys
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from drivers.base import Moves
 from station import report
@@ -26,13 +26,13 @@ from station.console.operator import ConsoleOperator, Operator, VirtualOperator
 from station.engine.closed_loop import mountings_expected
 from station.engine.devices import build_controller, open_devices
 from station.engine.procedure import Run, execute
-from station.engine.recovery import check_reference, drop_redone, home_if_needed
+from station.engine.recovery import check_reference, home_if_needed
 from station.engine.results import AXES
-from station.engine.writeback import held_after
 from station.engine.writeback import rollback as do_rollback
 from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
 from station.plan.check import check_plan
 from station.plan.checker import MotionChecker
+from station.plan.ports import check_ports
 from station.plan.steps import build_plan
 from station.record.migrate import migrate
 from station.rundir.directory import (
@@ -43,8 +43,9 @@ from station.rundir.directory import (
     version,
     write_run_files,
 )
-from station.rundir.journal import JOURNAL_NAME, Journal, JournalState
+from station.rundir.journal import JOURNAL_NAME, Journal
 from station.rundir.lock import MachineLock, acquire, taken_over_message, update_run_dir
+from station.rundir.state import RunState
 
 
 def _operator(yes: bool, station: Any) -> Operator:
@@ -96,6 +97,7 @@ def run(options: RunOptions) -> int:
             if options.config is None:
                 raise BadInput("run: give --config FILE or --simulate")
             config = load_config(options.config)
+            check_ports(config)  # --plan too: a gauge that is not there is bad input
             if not options.plan:
                 ConsoleOperator.require_tty_or_yes(options.yes)
         if options.offsets_from is not None:
@@ -153,8 +155,8 @@ def run(options: RunOptions) -> int:
                         "argv": sys.argv[1:]})
         say(f"orthocal: run directory {run_dir}")
         say(f"orthocal: {report.mountings_line(_mountings(config, plan))}")
-        ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
-                  JournalState(), [], now_iso(), checker=checker)
+        ctx = Run(run_dir, config, plan, journal, devices, operator, sim, now_iso(),
+                  checker=checker)
         code, result = execute(ctx)
         record_history(config, result, run_dir.parent)
         return _report(options.json, code, result)
@@ -170,6 +172,8 @@ def print_result(as_json: bool, result: dict[str, Any]) -> None:
     """One JSON document, or the summary, on stdout."""
     if as_json:
         print(json.dumps(report.jsonable_value(result), allow_nan=False))
+    elif not result:  # a finished run whose result.json is lost: no record to sum up
+        print("orthocal run: UNKNOWN")
     else:
         print(report.summary_text(result))
 
@@ -183,7 +187,8 @@ def exit_status(result: dict[str, Any], code: int | None = None) -> int:
 
     if code is None:
         code = EXIT_OK if result.get("status") == "ok" else EXIT_FAILED
-    if code == EXIT_OK and report.not_converged(result):
+    # a result.json that is lost ({}) has no loop to judge: the flow's code stands
+    if code == EXIT_OK and result and report.not_converged(result):
         return EXIT_NOT_CONVERGED
     return code
 
@@ -213,25 +218,25 @@ def _report(as_json: bool, code: int, result: dict[str, Any]) -> int:
 
 
 def resume(options: ResumeOptions) -> int:
-    run_dir, records, state = reopen(options.run_dir)
+    run_dir, state = reopen(options.run_dir)
     if state.header is None:
         raise BadInput(f"{run_dir / JOURNAL_NAME}: no run header (not a run journal)")
     if state.finished is not None:
         result_path = run_dir / "result.json"
         result = migrate(json.loads(result_path.read_text())) if result_path.exists() else {}
-        say(f"orthocal: {run_dir} already finished ({state.finished.get('status')})")
+        say(f"orthocal: {run_dir} already finished ({state.finished.status})")
         print_result(options.json, result)
-        return exit_status(result, 0 if state.finished.get("status") == "ok" else 1)
-    config = _held_offsets(load_config(run_dir / "config.toml"), records)
-    sim = state.header.get("simulation")
-    records = drop_redone(records)
+        return exit_status(result, 0 if state.finished.status == "ok" else 1)
+    config = _held_offsets(load_config(run_dir / "config.toml"), state)
+    sim = state.header.simulation
     with ExitStack() as stack:
         station, config = _restart_station(stack, options, sim, run_dir, config)
         if station is None:
+            check_ports(config)  # before homing or the Π0 check moves anything
             ConsoleOperator.require_tty_or_yes(options.yes)
         _lock(stack, config, "resume", run_dir)
         plan = build_plan(config)
-        journal = Journal(run_dir / JOURNAL_NAME)
+        journal = Journal(run_dir / JOURNAL_NAME, state)  # goes on folding into it
         stack.callback(journal.close)
         # First thing after reopening: a kill may have torn the last line, and the
         # reader accepts a torn line only when a session record follows it; a driver
@@ -249,27 +254,27 @@ def resume(options: ResumeOptions) -> int:
         operator = _operator(options.yes, station)
         try:
             if home_if_needed(devices.controller, config, journal, operator, say):
-                records = check_reference(devices.controller, devices.indicators, config,
-                                          plan, journal, records, say)
+                check_reference(devices.controller, devices.indicators, config, plan,
+                                journal, say)
         except BaseException:
             _stop_quietly(devices.controller)
             raise
-        started = state.header.get("started") or now_iso()
-        ctx = Run(run_dir, config, plan, journal, devices, operator, sim,
-                  state, records, started, checker=checker)
+        started = state.header.started or now_iso()
+        ctx = Run(run_dir, config, plan, journal, devices, operator, sim, started,
+                  checker=checker)
         code, result = execute(ctx)
         record_history(config, result, run_dir.parent)
         return _report(options.json, code, result)
 
 
-def _held_offsets(config: Any, records: list[dict[str, Any]]) -> Any:
+def _held_offsets(config: Any, state: RunState) -> Any:
     """Where the station holds the offsets (a map without OFFSET registers), a resumed
     run or a rollback starts from what its journal says they are."""
     from drivers.map_files import load_map
 
     if load_map(config.controller.profile).has_role("OFFSET"):
         return config
-    held = held_after(records, config.controller.offsets)
+    held = state.held_offsets(config.controller.offsets)
     if held is None:
         return config
     return config.model_copy(update={
@@ -284,9 +289,10 @@ def offsets_from(config: Any, run_dir: Path) -> Any:
     if load_map(config.controller.profile).has_role("OFFSET"):
         raise BadInput(f"--offsets-from: the drive holds its own zero offsets (map "
                        f"{config.controller.profile!r} has OFFSET registers)")
-    done, records, state = reopen(Path(run_dir))
-    start = ((state.header or {}).get("config") or {}).get("controller", {}).get("offsets")
-    held = held_after(records, start)
+    done, state = reopen(Path(run_dir))
+    controller = (state.header.config if state.header else {}).get("controller")
+    start = controller.get("offsets") if isinstance(controller, dict) else None
+    held = state.held_offsets(cast("list[float] | None", start))
     if held is None:
         raise BadInput(f"--offsets-from: {done} wrote no offsets")
     say(f"orthocal: starting from the offsets {done} ended with: "
@@ -315,13 +321,13 @@ def _stop_quietly(controller: Moves) -> None:
 
 
 def rollback(options: ResumeOptions) -> int:
-    run_dir, records, state = reopen(options.run_dir)
-    config = _held_offsets(load_config(run_dir / "config.toml"), records)
-    sim = state.header.get("simulation") if state.header else None
+    run_dir, state = reopen(options.run_dir)
+    config = _held_offsets(load_config(run_dir / "config.toml"), state)
+    sim = state.header.simulation if state.header else None
     with ExitStack() as stack:
         station, config = _restart_station(stack, options, sim, run_dir, config)
         _lock(stack, config, "rollback", run_dir)
-        journal = Journal(run_dir / JOURNAL_NAME)
+        journal = Journal(run_dir / JOURNAL_NAME, state)
         stack.callback(journal.close)
         controller = build_controller(config, None)
         stack.callback(controller.close)

@@ -20,6 +20,11 @@ class Incomparable(ValueError):
 
 
 def check_comparable(a: Mapping[str, Any], b: Mapping[str, Any]) -> None:
+    if a.get("run_dir") == b.get("run_dir"):
+        # One run against itself: every change exactly zero, every one "not
+        # significant", which says nothing about the machine.
+        raise Incomparable(f"A and B are the same run ({a.get('run_dir')}): give two runs "
+                           "of one machine")
     for label, entry in (("A", a), ("B", b)):
         if not entry.get("machine_id"):
             raise Incomparable(f"run {label} ({entry.get('run_dir')}) names no machine: set "
@@ -83,27 +88,65 @@ def changes(joints: dict[str, Any], layout: dict[str, Any]) -> dict[str, Any]:
 
 
 def microns(value: float | None) -> str:
-    """A length in mm shown in µm, signed; — where not stated."""
+    """A length in mm shown in µm, signed, to 0.1 µm; — where not stated."""
     return "—" if value is None else f"{1000 * value:+.1f}"
+
+
+def length_text(value: float | None, signed: bool = True) -> str:
+    """A length in mm in the unit its size calls for, to 0.1 µm either way: µm below
+    a millimetre (a joint's drift, a gap), mm from one up (an offset the controller
+    holds); — where not stated."""
+    if value is None:
+        return "—"
+    sign = "+" if signed else ""
+    return f"{1000 * value:{sign}.1f} µm" if abs(value) < 1.0 else f"{value:{sign}.4f} mm"
+
+
+def tilt_text(value: float | None, signed: bool = True) -> str:
+    """A tilt in mrad (= mm/m) to three significant digits: a tilt is stated to a
+    few per cent of itself (its standard error), so more digits would be noise and
+    fewer would round a small one to zero; — where not stated."""
+    if value is None:
+        return "—"
+    size = abs(value)
+    decimals = 3 if size == 0 or not math.isfinite(size) else \
+        min(6, max(0, 2 - math.floor(math.log10(size))))
+    return f"{value:{'+' if signed else ''}.{decimals}f} mrad"
+
+
+#: What ``significant`` means, said once under a comparison's lines.
+CRITERION = ("significant: the change's 95 % interval (change ± the half-width shown) "
+             "excludes zero; for the joints k from Student's t on the smaller dof of the "
+             "two runs, for the tilts and gaps the normal's k. Joints as e = Δρ − o, each "
+             "joint's zero error without the controller's offsets (history's legend); "
+             "tilts in mrad (= mm/m).")
+
+
+def _significance(flag: bool | None) -> str:
+    if flag is None:
+        return "significance unknown (no standard error)"
+    return "significant" if flag else "not significant"
 
 
 def change_lines(doc: Mapping[str, Any]) -> list[str]:
     """One line per parameter of a comparison (``compare``'s ``joint_error_mm`` and
     ``layout``): before → after, the change ± its 95 % half-width, and whether it is
-    significant; the joints and gaps in µm, the tilts in mrad."""
-    lines = []
+    significant (CRITERION), each value in the unit its size calls for (length_text,
+    tilt_text)."""
+    # (name, before, after, change, ± half-width, significance) per parameter
+    rows: list[list[str]] = []
     for axis, c in (doc.get("joint_error_mm") or {}).items():
-        lines.append(f"joint {axis}  {microns(c['before'])} → {microns(c['after'])} µm: change "
-                     f"{microns(c['change'])} ± {microns(c['interval_95']).lstrip('+')} µm at 95 %"
-                     + (" (significant)" if c["significant"] else ""))
+        rows.append([f"joint {axis} e", *(length_text(c[k]) for k in ("before", "after",
+                                                                       "change")),
+                     length_text(c["interval_95"], signed=False),
+                     _significance(c["significant"])])
     for name, c in (doc.get("layout") or {}).items():
-        scale, unit = (1000.0, "µm") if name.startswith("gap") else (1.0, "mrad")
-        ci = c["interval_95"]
-        lines.append(f"{name:<8} {c['before'] * scale:+.3f} → {c['after'] * scale:+.3f} "
-                     f"{unit}: change {c['change'] * scale:+.3f}"
-                     + ("" if ci is None else f" ± {ci * scale:.3f}") + f" {unit}"
-                     + (" (significant)" if c["significant"] else ""))
-    return lines
+        text = length_text if name.startswith("gap") else tilt_text
+        rows.append([name, *(text(c[k]) for k in ("before", "after", "change")),
+                     text(c["interval_95"], signed=False), _significance(c["significant"])])
+    widths = [max((len(r[i]) for r in rows), default=0) for i in range(5)]
+    return [f"{r[0]:<{widths[0]}}  {r[1]:>{widths[1]}} → {r[2]:>{widths[2]}}  change "
+            f"{r[3]:>{widths[3]}} ± {r[4]:<{widths[4]}} at 95 %  {r[5]}" for r in rows]
 
 
 def since_last_run(config: Any, result: Mapping[str, Any], runs_dir: Path) -> dict[str, Any] | None:

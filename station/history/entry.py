@@ -30,8 +30,10 @@ def _mapping(value: Any) -> Mapping[str, Any]:
 
 
 def _frame(drho: Mapping[str, Any], se: Mapping[str, Any], offsets: Mapping[str, Any] | None,
-           dof: Any) -> dict[str, Any] | None:
-    """Per axis e = Δρ − o with Δρ's standard error; None when any is missing."""
+           dof: Any, certificate: Mapping[str, Any] | None = None) -> dict[str, Any] | None:
+    """Per axis e = Δρ − o with Δρ's standard error, and ``certificate``'s expanded
+    uncertainty of Δρ where it states one (o is exact: e's is Δρ's); None when any
+    value is missing."""
     if not isinstance(offsets, Mapping):
         return None
     out: dict[str, Any] = {}
@@ -40,18 +42,38 @@ def _frame(drho: Mapping[str, Any], se: Mapping[str, Any], offsets: Mapping[str,
         if d is None or o is None:
             return None
         out[a] = {"value_mm": d - o, "std_error_mm": s}
+        expanded = _num((certificate or {}).get(f"drho_{a}"))
+        if expanded is not None:
+            out[a]["expanded_95_mm"] = expanded
     return {"joint_error_mm": out, "dof": _num(dof)}
+
+
+def _certificate(result: Mapping[str, Any], statement: str) -> Mapping[str, Any]:
+    """The run's certificate figure per parameter: the uncertainty budget's expanded
+    uncertainty (Type A and B, docs/design.md "Uncertainty budget"), where the budget
+    states the same Δρ as ``statement`` (``remaining.total`` or ``identified``); else
+    none, and the history falls back to the statistical interval, saying so."""
+    budget = _mapping(result.get("uncertainty_budget"))
+    if budget.get("statement") != statement:
+        return {}
+    return _mapping(budget.get("expanded_95_mm"))
 
 
 def _layout(result: Mapping[str, Any]) -> dict[str, Any]:
     acc = _mapping(result.get("accuracy"))
     out: dict[str, Any] = {}
-    for values, errors in (("tilts", "tilt_std_errors"), ("gaps", "gap_std_errors")):
-        got = _mapping(acc.get(values))
-        ses = _mapping(acc.get(errors))
+    for kind in ("tilt", "gap"):
+        got = _mapping(acc.get(f"{kind}s"))
+        ses = _mapping(acc.get(f"{kind}_std_errors"))
+        intervals = _mapping(acc.get(f"{kind}_interval_95"))
         for name, value in got.items():
             if _num(value) is not None:
                 out[name] = {"value": float(value), "std_error": _num(ses.get(name))}
+                # the run's own 95 % interval (Student's t on its dof), as a half-width
+                pair = intervals.get(name)
+                if isinstance(pair, list) and len(pair) == 2 and \
+                        all(_num(x) is not None for x in pair):
+                    out[name]["interval_95"] = (float(pair[1]) - float(pair[0])) / 2.0
     return out
 
 
@@ -80,7 +102,9 @@ def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str,
     found_drho = rem.get("total") or result.get("identified") or {}
     found_se = rem.get("std_errors") if rem.get("total") else result.get("std_errors") or {}
     found_dof = rem.get("std_errors_dof") if rem.get("total") else result.get("std_errors_dof")
-    as_found = _frame(found_drho, found_se or {}, result.get("offsets_before"), found_dof)
+    statement = "remaining.total" if rem.get("total") else "identified"
+    as_found = _frame(found_drho, found_se or {}, result.get("offsets_before"), found_dof,
+                      _certificate(result, statement))
     as_left = None if not rem.get("estimate") else _frame(
         rem["estimate"], rem.get("std_errors") or {}, result.get("offsets_final"),
         rem.get("std_errors_dof"))

@@ -8,7 +8,8 @@ as-found values only: a run's as-left value of e = Δρ − o rests largely on t
 verification as its as-found (``remaining.total``), so fitting both would count one
 measurement twice. Where the values scatter more than their standard errors say
 (χ²/ν > 1: the machine does not drift in a straight line), the slope's standard
-error is scaled by √(χ²/ν) and its 95 % factor taken from Student's t on ν."""
+error is scaled by √(χ²/ν) and its 95 % factor taken from Student's t on ν. No
+drift is stated from runs spanning less than MIN_SPAN_DAYS."""
 
 from __future__ import annotations
 
@@ -23,6 +24,11 @@ from orthocal import AXES, coverage_factor
 #: A month of the drift: the mean Gregorian month, in days.
 MONTH_DAYS = 30.436875
 
+#: No drift is stated from runs that span less than this (days): a line through runs
+#: minutes apart turns their noise into microns per month (two runs 35 s apart gave
+#: 3.5e4 ± 1.4e5 µm/month), which says nothing of how the machine ages.
+MIN_SPAN_DAYS = 7.0
+
 
 @dataclass(frozen=True)
 class Point:
@@ -33,9 +39,17 @@ class Point:
     value: float
     std_error: float | None
     dof: float | None
+    #: a 95 % half-width the run itself states: its certificate's expanded
+    #: uncertainty (the uncertainty budget, Type A and B), or for tilts and gaps their
+    #: statistical interval; None: k × std_error here
+    interval_95: float | None = None
+    #: interval_95 is the certificate's expanded uncertainty (not only the scatter)
+    certified: bool = False
 
     @property
     def expanded_95(self) -> float | None:
+        if self.interval_95 is not None:
+            return self.interval_95
         return None if self.std_error is None else \
             coverage_factor(self.dof, 0.95) * self.std_error
 
@@ -74,21 +88,44 @@ def series(entries: Sequence[Mapping[str, Any]]) -> dict[str, list[Point]]:
         for state, key, at in (("as found", "as_found", when), ("as left", "as_left", left)):
             frame = entry.get(key) or {}
             for axis, v in (frame.get("joint_error_mm") or {}).items():
+                certificate = v.get("expanded_95_mm")  # entries since it was kept
                 out[f"drho_{axis}"].append(Point(at, state, float(v["value_mm"]),
-                                                 v.get("std_error_mm"), frame.get("dof")))
+                                                 v.get("std_error_mm"), frame.get("dof"),
+                                                 certificate, certificate is not None))
         for name, v in (entry.get("layout") or {}).items():
             out.setdefault(name, []).append(
-                Point(when, "measured", float(v["value"]), v.get("std_error"), None))
+                Point(when, "measured", float(v["value"]), v.get("std_error"), None,
+                      v.get("interval_95")))
     return {name: sorted(points, key=lambda p: p.when) for name, points in out.items()
             if points}
 
 
+def _fitted(points: Sequence[Point]) -> list[Point]:
+    """The points a drift is fitted to: as found (or measured), with a standard error.
+    Weighted by the scatter alone: the certificate's Type B part (the legs' form, the
+    gauges' error) is the same in every run of one machine, so it moves no slope."""
+    return [p for p in points if p.state != "as left" and p.std_error and p.std_error > 0]
+
+
+def why_no_drift(points: Sequence[Point]) -> str | None:
+    """Why no drift is stated for ``points`` (the words history and its figure
+    print), or None where :func:`drift` states one."""
+    fit = _fitted(points)
+    if len(fit) < 2:
+        return "fewer than two dated runs"
+    span = max(p.when for p in fit) - min(p.when for p in fit)
+    if span.total_seconds() < MIN_SPAN_DAYS * 86400.0:
+        return f"runs span less than {MIN_SPAN_DAYS:g} days"
+    return None
+
+
 def drift(points: Sequence[Point]) -> Drift | None:
     """The weighted slope per month of the points fitted (as found, or measured),
-    or None where fewer than two runs with standard errors and distinct dates."""
-    fit = [p for p in points if p.state != "as left" and p.std_error and p.std_error > 0]
-    if len(fit) < 2:
+    or None where :func:`why_no_drift` says why not (fewer than two runs with
+    standard errors, or runs spanning less than MIN_SPAN_DAYS)."""
+    if why_no_drift(points) is not None:
         return None
+    fit = _fitted(points)
     t0 = fit[0].when
     x = [(p.when - t0).total_seconds() / 86400.0 / MONTH_DAYS for p in fit]
     # mypy does not narrow std_error through fit's filter (every one is > 0)
@@ -98,7 +135,7 @@ def drift(points: Sequence[Point]) -> Drift | None:
     ym = sum(wi * p.value for wi, p in zip(w, fit, strict=True)) / sw
     sxx = sum(wi * (xi - xm) ** 2 for wi, xi in zip(w, x, strict=True))
     if sxx <= 0.0:
-        return None  # every run at one instant: no slope to state
+        return None  # cannot happen past why_no_drift; a zero divisor all the same
     slope = sum(wi * (xi - xm) * (p.value - ym)
                 for wi, xi, p in zip(w, x, fit, strict=True)) / sxx
     se = math.sqrt(1.0 / sxx)

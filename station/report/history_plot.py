@@ -3,19 +3,23 @@ figure for its maintenance file (docs/design.md, "Machine history"), PNG or SVG.
 
 A panel per joint error e = Δρ − o (µm, the machine's own, whatever offsets were
 written in between: station.history.entry), then one for the tilts (mrad) and one
-for the gaps (µm) where any run identified them. Each value with its 95 %
-expanded uncertainty, as found (open circle, at the run's start) and as left
-(filled square, at its end); each panel states every parameter's drift per month
-(station.history.trend)."""
+for the gaps (µm) where any run identified them. Each value as found (open circle,
+at the run's start) and as left (filled square, at its end) with its 95 % error
+bar: the run's certificate (its uncertainty budget's expanded uncertainty, Type A
+and B) where it states one, else the statistical interval, each labelled as what
+it is; each panel states every parameter's drift per month, or why none
+(station.history.trend). A footnote says what e is: on a calibrated machine it is
+minus the offset the controller holds, not an error left in the machine."""
 
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from station.history.trend import Drift, Point, drift, series
+from station.history.trend import Drift, Point, drift, series, why_no_drift
 from station.report.format import param_plain
 from station.report.plots import pyplot, release_fonts
 
@@ -25,19 +29,33 @@ FORMATS = {".png": "png", ".svg": "svg"}
 #: (name prefix, what the panel shows, unit, factor from the entry's unit). A panel
 #: per joint: their errors differ by hundreds of µm, and a shared scale would flatten
 #: the few µm a joint drifts.
-GROUPS = (("drho_x", "joint x error e = Δρ − o", "µm", 1000.0),
-          ("drho_y", "joint y error e = Δρ − o", "µm", 1000.0),
-          ("drho_z", "joint z error e = Δρ − o", "µm", 1000.0),
+GROUPS = (("drho_x", "joint x zero error e = Δρ − o", "µm", 1000.0),
+          ("drho_y", "joint y zero error e = Δρ − o", "µm", 1000.0),
+          ("drho_z", "joint z zero error e = Δρ − o", "µm", 1000.0),
           ("tilt_", "tilts of the axes", "mrad", 1.0),
           ("gap_", "gaps between the axes", "µm", 1000.0))
+
+#: Under the figure: what e is, since a calibrated machine shows minus the offsets
+#: its controller holds (e.g. −1818.6 µm), which alone would read as a machine far off.
+E_MEANS = ("e = Δρ − o: each joint's zero error without the controller's offsets o, the "
+           "machine's own; the offsets cancel it, so a calibrated machine shows e ≈ −o while "
+           "the joint as found, Δρ = e + o, is near 0 (orthocal history lists Δρ). Only e "
+           "compares across runs whatever offsets were written, so its drift is the "
+           "machine's.")
 
 _COLOURS = ("#1f5fa8", "#e08a00", "#2e8b3d")
 
 
-def _drift_text(name: str, d: Drift | None, unit: str, scale: float) -> str:
+def _label(name: str) -> str:
+    """A parameter's name in a legend: e for the joints (drho_x: the frame's e_x)."""
+    return f"e {name[-1]}" if name.startswith("drho_") else param_plain(name)
+
+
+def _drift_text(name: str, points: Sequence[Point], unit: str, scale: float) -> str:
+    d: Drift | None = drift(points)
     if d is None:
-        return f"{param_plain(name)}: no drift (fewer than two dated runs)"
-    return (f"{param_plain(name)}: {scale * d.per_month:+.3g} ± {scale * d.expanded_95:.2g} "
+        return f"{_label(name)}: drift not stated, {why_no_drift(points)}"
+    return (f"{_label(name)}: {scale * d.per_month:+.3g} ± {scale * d.expanded_95:.2g} "
             f"{unit}/month ({d.runs} runs)")
 
 
@@ -47,17 +65,23 @@ def _panel(ax: Any, names: Sequence[str], points: Mapping[str, list[Point]], tit
     for colour, name in zip(_COLOURS * 2, names, strict=False):
         for state, marker, face in (("as found", "o", "none"), ("as left", "s", colour),
                                     ("measured", "D", colour)):
-            chosen = [p for p in points[name] if p.state == state]
-            if not chosen:
-                continue
-            xs = [p.when for p in chosen]
-            ys = [scale * p.value for p in chosen]
-            err = [math.nan if p.expanded_95 is None else scale * p.expanded_95
-                   for p in chosen]
-            label = param_plain(name) + ("" if state == "measured" else f" {state}")
-            ax.errorbar(xs, ys, yerr=err, fmt=marker, color=colour, mfc=face, ms=6,
-                        capsize=3, lw=1, label=label)
-        texts.append(_drift_text(name, drift(points[name]), unit, scale))
+            # Bars of one kind per legend entry: a run whose certificate states its
+            # uncertainty and one (older) whose does not are labelled apart.
+            for certified, bars in ((True, "± U95 of its certificate"),
+                                    (False, "± 95 % statistical interval")):
+                chosen = [p for p in points[name]
+                          if p.state == state and p.certified == certified]
+                if not chosen:
+                    continue
+                xs = [p.when for p in chosen]
+                ys = [scale * p.value for p in chosen]
+                err = [math.nan if p.expanded_95 is None else scale * p.expanded_95
+                       for p in chosen]
+                label = _label(name) + ("" if state == "measured" else f" {state}") + \
+                    f", {bars}"
+                ax.errorbar(xs, ys, yerr=err, fmt=marker, color=colour, mfc=face, ms=6,
+                            capsize=3, lw=1, label=label)
+        texts.append(_drift_text(name, points[name], unit, scale))
     ax.set_title(title, fontsize=10, loc="left")
     ax.set_ylabel(unit)
     ax.grid(True, alpha=0.3)
@@ -83,13 +107,19 @@ def plot_history(entries: Sequence[Mapping[str, Any]], path: Path, machine_id: s
                                  figsize=(12.0, 0.8 + 2.4 * len(groups)))
         try:
             for ax, (_, what, unit, scale, names) in zip(axes[:, 0], groups, strict=True):
-                _panel(ax, names, points, f"machine {machine_id}: {what} ({unit}), "
-                       "error bars 95 % expanded uncertainty", unit, scale)
+                _panel(ax, names, points, f"machine {machine_id}: {what} ({unit})", unit,
+                       scale)
             axes[-1, 0].set_xlabel("run date (UTC)")
             fig.suptitle(f"Calibration history of machine {machine_id}: {len(entries)} runs",
                          fontsize=12)
             fig.autofmt_xdate()
-            fig.tight_layout()
+            if groups[0][0].startswith("drho_"):  # the footnote where e is drawn
+                # two lines of 8 pt under the panels: 0.45 in of the figure's height
+                fig.tight_layout(rect=(0.0, 0.45 / fig.get_figheight(), 1.0, 1.0))
+                fig.text(0.01, 0.005, textwrap.fill(E_MEANS, 180), fontsize=8,
+                         va="bottom", ha="left")
+            else:
+                fig.tight_layout()
             fmt = FORMATS[path.suffix.lower()]
             meta = ({"Title": f"orthocal history {machine_id}", "Date": None}
                     if fmt == "svg" else {"Title": f"orthocal history {machine_id}"})
