@@ -105,6 +105,22 @@ class Square:
         limit = self.limit if self.limit is not None else self.half
         return None if limit is None else abs(self.value) > limit
 
+    @property
+    def beyond_95(self) -> bool:
+        """The 95 % interval excludes zero: the motions are out of square, whatever
+        the decision on the axis' lean (the gaps and the offsets written shear the
+        motions too, and the lean is decided at a stricter k or by the model test)."""
+        return self.half is not None and abs(self.value) > self.half
+
+    @property
+    def verdict(self) -> str:
+        """The row's word, which never says "within" of an interval that excludes zero."""
+        if self.significant:
+            return "beyond its uncertainty"
+        if self.beyond_95:
+            return "beyond its 95 % interval; no lean of the axis told apart"
+        return "within its uncertainty" if self.significant is False else "—"
+
 
 def _half_width(interval: Interval | None) -> float | None:
     lo, hi = (None, None) if interval is None else (num(interval[0]), num(interval[1]))
@@ -170,6 +186,10 @@ def cause(acc: Accuracy) -> str | None:
     if after is None or state is None:
         return None
     if state is False:
+        if any(s.beyond_95 for s in squareness(acc)):
+            return ("no axis leans beyond what the data tell apart (nothing to shim); the "
+                    "motions' squareness beyond its interval is the gaps' and the offsets' "
+                    "shear")
         return "the axes are square within their uncertainty (nothing to shim)"
     legs = num(acc.objectives.joints.after.rms_mm)
     best = num(acc.objectives.tool.after.rms_mm)
@@ -269,7 +289,16 @@ def _squareness_line(acc: Accuracy) -> str:
         text += (": offsets cannot fix it; shim the rails or put the geometry into the "
                  "controller (orthocal export --kinematics, or orthocal compensate)")
     elif state is False:
-        text += ": square within its uncertainty"
+        sheared = [s.pair.upper() for s in rows if s.beyond_95]
+        kept_none = all(s.limit == math.inf for s in rows)
+        if sheared:
+            text += (f": the motions {', '.join(sheared)} are out of square beyond their "
+                     "95 % interval, yet no axis leans beyond what the data tell apart ("
+                     + ("the model test kept no tilt" if kept_none else
+                        "its decision limit") + "): the gaps and the offsets written shear "
+                     "the motions, not the rails (nothing to shim)")
+        else:
+            text += ": square within its uncertainty"
     return text
 
 
@@ -387,8 +416,7 @@ def _squareness_html(acc: Accuracy) -> str:
     table_rows = []
     for s in rows:
         t, t_se = at(acc.tilts, s.tilt), at(acc.tilt_std_errors, s.tilt)
-        verdict = {True: "beyond its uncertainty", False: "within its uncertainty",
-                   None: "—"}[s.significant]
+        verdict = s.verdict
         table_rows.append([
             s.pair.upper(), fmt(s.value, signed=True),
             fmt(s.half) if s.half is not None else "—",
