@@ -81,11 +81,6 @@ def from_counts(raw: int, scale: float) -> float:
     return raw / scale
 
 
-def mm_to_um(mm: float) -> int:
-    """Millimetres → integer micrometres (rounded, see :func:`to_counts`)."""
-    return to_counts(mm, 1000.0)
-
-
 def um_to_mm(um: int) -> float:
     return um / 1000.0
 

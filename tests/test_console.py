@@ -5,13 +5,11 @@ from __future__ import annotations
 
 import io
 import re
-import sys
 import threading
 
 import pytest
 
-from station.console import terminal as console
-from station.console.terminal import RunProgress, format_eta, print_error, prompt_yes_no
+from station.console.terminal import RunProgress, format_eta
 
 
 class FakeClock:
@@ -102,47 +100,3 @@ def test_update_outside_with_block_is_an_error() -> None:
 )
 def test_format_eta(seconds: float | None, text: str) -> None:
     assert format_eta(seconds) == text
-
-
-def test_prompt_assume_yes_prints_question_and_reads_nothing() -> None:
-    out = io.StringIO()
-    stdin = io.StringIO("n\n")
-    assert prompt_yes_no("Write offsets?", assume_yes=True, stream=out, input_stream=stdin)
-    assert out.getvalue() == "Write offsets? [y/n] yes (--yes)\n"
-    assert stdin.read() == "n\n"
-
-
-@pytest.mark.parametrize(("typed", "expected", "asks"), [
-    ("y\n", True, 1), ("YES\n", True, 1), ("n\n", False, 1), (" no \n", False, 1),
-    ("\nmaybe\ny\n", True, 3),  # empty and unclear answers ask again
-    ("", False, 1),  # end of input: nobody there to agree
-    ("\n", False, 2),
-])
-def test_prompt_answers(typed: str, expected: bool, asks: int) -> None:
-    out = io.StringIO()
-    assert prompt_yes_no("Go?", assume_yes=False, stream=out,
-                         input_stream=io.StringIO(typed)) is expected
-    assert out.getvalue().count("Go? [y/n]") == asks
-
-
-def test_prompt_reads_sys_stdin_by_default(monkeypatch: pytest.MonkeyPatch,
-                                           capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.setattr(sys, "stdin", io.StringIO("y\n"))
-    assert prompt_yes_no("Mount indicators on leg x, ready?", assume_yes=False)
-    captured = capsys.readouterr()
-    assert captured.out == ""
-    assert "Mount indicators on leg x, ready? [y/n]" in captured.err
-
-
-def test_print_error_is_plain_in_a_log_and_keeps_brackets() -> None:
-    out = io.StringIO()
-    print_error("bad key [controller] port in station.toml line 7", stream=out)
-    assert out.getvalue() == "error: bad key [controller] port in station.toml line 7\n"
-
-
-def test_print_error_colours_on_a_terminal() -> None:
-    out = TtyStringIO()
-    console.print_error("axis y alarm 17", stream=out)
-    value = out.getvalue()
-    assert "\x1b[" in value
-    assert re.sub(r"\x1b\[[0-9;]*m", "", value) == "error: axis y alarm 17\n"

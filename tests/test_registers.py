@@ -14,7 +14,6 @@ from drivers.registers import (
     decode_int,
     encode_i32,
     encode_int,
-    mm_to_um,
     to_counts,
     um_to_mm,
 )
@@ -159,7 +158,6 @@ def test_int_ranges_and_16_bit_types() -> None:
      (310.25, 310250), (-100.0004, -100000), (0.0015, 2), (-0.0015, -2)],
 )
 def test_um_rounding_never_truncates(mm: float, um: int) -> None:
-    assert mm_to_um(mm) == um
     assert to_counts(mm, 1000.0) == um
 
 
