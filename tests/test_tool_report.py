@@ -375,22 +375,15 @@ def test_an_axis_leans_by_the_results_decision_not_by_its_95_interval(
         rows = rows_of(part[:part.index("</table>")])
         text = report.summary_text(result)
         assert ("offsets cannot fix it" in text) is leans
-        # never "within" of an interval that excludes zero: a value beyond its 95 %
-        # half-width whose axis does not count as leaning says both, apart
-        beyond = {r[0] for r in rows if abs(float(r[1].replace("−", "-")))
-                  > float(r[2])}
-        assert beyond  # the sample's squareness lies beyond its 95 % interval
-        for r in rows:
-            if leans:
-                assert r[-1] == "beyond its uncertainty"
-            elif r[0] in beyond:
-                assert r[-1] == "beyond its 95 % interval; no lean of the axis told apart"
-            else:
-                assert r[-1] == "within its uncertainty"
-        assert "square within its uncertainty" not in text
-        if not leans:
-            assert "out of square beyond their 95 % interval" in text
-            assert "shear the motions, not the rails" in text
+        # never "within" of an interval that excludes zero (the lean is decided apart)
+        beyond = {r[0] for r in rows if abs(float(r[1].replace("−", "-"))) > float(r[2])}
+        apart = "beyond its 95 % interval; no lean of the axis told apart"
+        assert [r[-1] for r in rows] == ["beyond its uncertainty" if leans else apart
+                                         if r[0] in beyond else "within its uncertainty"
+                                         for r in rows]
+        assert "square within its uncertainty" not in text and beyond
+        assert ("out of square beyond their 95 % interval" in text) is not leans
+        assert ("shear the motions, not the rails" in text) is not leans
         if decision is not None:
             assert html.escape(decision["rule"]) in part
 
