@@ -138,3 +138,17 @@ def test_bad_options_exit_2(tmp_path, argv, message):
     assert proc.returncode == 2 and message in proc.stderr
     assert "Traceback" not in proc.stderr
     assert not Path(tmp_path / "c.toml").exists()
+
+
+def test_the_default_noise_is_the_documented_one() -> None:
+    # docs/design.md: "--noise MM: indicator noise σ (default 0.001 mm)", for run
+    # --simulate and orthocal sim alike; sim drew 0.002 mm, so a recheck of a good
+    # machine against it could not show convergence with the documented gauges
+    from station.commands.cli import build_parser
+    from station.commands.sim import _specs
+
+    design = (Path(__file__).resolve().parents[1] / "docs" / "design.md").read_text()
+    assert "indicator noise σ (default 0.001 mm)" in design
+    args = build_parser().parse_args(["sim", "--config-out", "unused.toml"])
+    _, _, gauges, _ = _specs(args, 1)
+    assert gauges.noise_mm == 0.001

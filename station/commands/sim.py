@@ -32,6 +32,7 @@ from station.commands.options import DriveOptions
 from station.commands.sim_config import SimulatedStation, gauges_for
 from station.commands.simulation import (
     DEFAULT_MOUNT_ERROR_MM,
+    DEFAULT_NOISE_MM,
     backlash_mm,
     drive_motion,
     drive_params,
@@ -93,7 +94,8 @@ def _specs(args: argparse.Namespace, seed: int
     rng = random.Random(seed)
     drho = list(args.true_drho) if args.true_drho is not None else \
         [round(rng.uniform(-2.0, 2.0), 4) for _ in range(3)]
-    noise = 0.002 if args.noise is None else args.noise
+    # the documented default (docs/design.md, --noise), the same as run --simulate's
+    noise = DEFAULT_NOISE_MM if args.noise is None else args.noise
     if noise < 0:
         raise BadInput(f"--noise: must be >= 0 mm, got {noise}")
     mount_error = DEFAULT_MOUNT_ERROR_MM if args.mount_error is None else args.mount_error
