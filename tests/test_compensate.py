@@ -5,21 +5,20 @@ path, at the points written and between them, through the real command line.
 The programmed paths are stated here on their own (lines, and arcs as rotations of
 the start about the plane's normal, Rodrigues' formula), not by station.gcode; the
 tool's path is orthocal's nominal_path of what a nominal controller interpolates
-between the points the output file holds, read back by the parser below."""
+between the points the output file holds, read back by tests/gcode_paths.py."""
 
 from __future__ import annotations
 
 import json
 import math
 import re
-from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
 import pytest
 from compensate_runs import SQUARE, TILTED, write_run
-from scipy.spatial import cKDTree
+from gcode_paths import INCH, X_AXIS, Y_AXIS, Z_AXIS, Arc, Line, distance_to, sent
 
 from orthocal import Geometry
 from orthocal.compensation import nominal_path
@@ -28,55 +27,6 @@ from station.commands.cli import main
 G = Geometry(310.25, -100.0, 60.0)
 TOL = 0.001
 CHORD_FRACTIONS = np.linspace(0.0, 1.0, 21)
-Z_AXIS, Y_AXIS, X_AXIS = np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]
-
-
-# --- the programmed paths, stated independently ----------------------------------------
-
-@dataclass(frozen=True)
-class Line:
-    a: tuple[float, float, float]
-    b: tuple[float, float, float]
-
-    def dense(self) -> np.ndarray:
-        return np.array([self.a, self.b], dtype=float)
-
-
-@dataclass(frozen=True)
-class Arc:
-    """The start turned by ``angle`` (rad, right-handed) about ``axis`` through
-    ``centre``, rising ``rise`` along the axis (a helix)."""
-
-    centre: tuple[float, float, float]
-    axis: np.ndarray
-    start: tuple[float, float, float]
-    angle: float
-    rise: float = 0.0
-
-    def dense(self) -> np.ndarray:
-        c, k, v = np.array(self.centre), self.axis, np.array(self.start) - self.centre
-        r = float(np.linalg.norm(v - (v @ k) * k))
-        step = 2.0 * math.sqrt(2.0 * 1e-7 / r)  # chords 0.1 nm off the arc
-        s = np.linspace(0.0, 1.0, int(abs(self.angle) / step) + 2)[:, None]
-        phi = self.angle * s
-        turned = (v * np.cos(phi) + np.cross(k, v) * np.sin(phi)
-                  + k * (k @ v) * (1 - np.cos(phi)))
-        return c + turned + self.rise * s * k
-
-
-def distance_to(path: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Each point's distance to the polyline ``path`` (dense enough to be the curve):
-    the segments beside its nearest vertex."""
-    _, i = cKDTree(path).query(points)
-    best = np.full(len(points), np.inf)
-    for lo in (i - 1, i):
-        ok = (lo >= 0) & (lo + 1 < len(path))
-        a, b = path[np.clip(lo, 0, len(path) - 2)], path[np.clip(lo + 1, 1, len(path) - 1)]
-        d = b - a
-        t = np.clip(((points - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-300), 0, 1)
-        dist = np.linalg.norm(points - (a + t[:, None] * d), axis=1)
-        best = np.where(ok, np.minimum(best, dist), best)
-    return best
 
 
 # --- the programs: (G-code, the path of its motion) per block, N numbered --------------
@@ -112,7 +62,6 @@ ARCS_G91 = ["G21 G90 G17 G94", "G0 X10 Y0 Z-10", "G91 G3 X-10 Y10 I-10 J0 F400",
             "G18 G2 X-10 Z10 I-10 K0", "G19 G3 Y10 Z10 J0 K10", "G17 G2 X10 Y10 R-10",
             "G90.1 G3 X-10 Y10 I0 J20", "X-10 Y-10 I0 J20", "G91.1 G1 X10 Y-20 Z-6"]
 
-INCH = 25.4
 INCHES = [
     ("G20 G90 G17 G94", None),
     ("G0 X0.5 Y0 Z-0.25", None),
@@ -152,28 +101,6 @@ def compensate(tmp_path: Path, capsys, text: str, *args: str, run: Path | None =
     rc = main(["compensate", str(program), "--run", str(run), *args])
     return rc, program.with_name(program.stem + ".compensated" + program.suffix), \
         capsys.readouterr().err
-
-
-def sent(text: str, offset=(0.0, 0.0, 0.0)) -> list[tuple[int | None, np.ndarray]]:
-    """Every point a controller is sent, in machine mm, with the N of its block."""
-    inches, absolute, block = False, True, None
-    pos = np.zeros(3)
-    out = []
-    for line in text.splitlines():
-        code = re.sub(r"\(.*?\)|;.*", "", line).upper()
-        if m := re.match(r"\s*N(\d+)", code):
-            block = int(m.group(1))
-        for g in re.findall(r"G(\d+(?:\.\d+)?)", code):
-            inches = {"20": True, "21": False}.get(g, inches)
-            absolute = {"90": True, "91": False}.get(g, absolute)
-        xyz = dict(re.findall(r"([XYZ])([-+]?\d*\.?\d+)", code))
-        if not re.search(r"\bG0?[01]\b", re.sub(r"G", " G", code)) or not xyz:
-            continue
-        assert set(xyz) == set("XYZ"), line  # every point written whole
-        v = np.array([float(xyz[a]) for a in "XYZ"]) * (INCH if inches else 1.0)
-        pos = v if absolute else pos + v
-        out.append((block, pos + offset))
-    return out
 
 
 def worst(text: str, paths: dict[int, object], theta: np.ndarray,

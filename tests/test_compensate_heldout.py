@@ -14,8 +14,6 @@ The held-out machine: axes 0.15 / −0.10 / 0.12 mm apart, leaning 0.2 / 0.1 / �
 from __future__ import annotations
 
 import math
-import re
-from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
 from typing import Any
@@ -23,7 +21,7 @@ from typing import Any
 import heldout
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
+from gcode_paths import X_AXIS, Y_AXIS, Z_AXIS, Arc, Line, distance_to, sent
 
 from orthocal import Geometry
 from orthocal.compensation import nominal_path
@@ -31,7 +29,6 @@ from station.commands.cli import main
 
 G = Geometry()
 CHORD_FRACTIONS = np.linspace(0.0, 1.0, 21)
-Z_AXIS, Y_AXIS, X_AXIS = np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]
 
 
 @pytest.fixture(scope="module")
@@ -44,39 +41,7 @@ def square(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     return heldout.square(tmp_path_factory.mktemp("square"))
 
 
-# --- the program and its path, stated independently of station.gcode -----------------
-
-@dataclass(frozen=True)
-class Line:
-    a: tuple[float, float, float]
-    b: tuple[float, float, float]
-
-    def dense(self, step_mm: float = 0.5) -> np.ndarray:
-        a, b = np.array(self.a, dtype=float), np.array(self.b, dtype=float)
-        n = max(2, int(np.linalg.norm(b - a) / step_mm) + 1)
-        return a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-
-
-@dataclass(frozen=True)
-class Arc:
-    """The start turned by ``angle`` (rad, right-handed) about ``axis`` through
-    ``centre`` (Rodrigues' formula)."""
-
-    centre: tuple[float, float, float]
-    axis: np.ndarray
-    start: tuple[float, float, float]
-    angle: float
-
-    def dense(self, step_mm: float | None = None) -> np.ndarray:
-        c, k = np.array(self.centre, dtype=float), self.axis
-        v = np.array(self.start, dtype=float) - c
-        r = float(np.linalg.norm(v))
-        # default: chords 0.1 nm off the arc, so that the polyline is the curve
-        step = step_mm / r if step_mm else 2.0 * math.sqrt(2.0 * 1e-7 / r)
-        phi = self.angle * np.linspace(0.0, 1.0, int(abs(self.angle) / step) + 2)[:, None]
-        return c + v * np.cos(phi) + np.cross(k, v) * np.sin(phi) + k * (k @ v) * (
-            1 - np.cos(phi))
-
+# --- the program and its path (tests/gcode_paths.py), independent of station.gcode ----
 
 # Near the faces where the held-out machine's offsets leave the most (40 to 70 µm),
 # within the soft limits: lines, a G17 full circle, G18 and G19 arcs, and a G91
@@ -106,28 +71,6 @@ def numbered(program: list[tuple[str, Any]]) -> str:
 
 # --- where the tool goes -----------------------------------------------------------------
 
-def sent(text: str) -> list[tuple[int | None, np.ndarray]]:
-    """Every point the output sends a controller (mm, no work offset), with the N of
-    its block."""
-    absolute, block = True, None
-    pos = np.zeros(3)
-    out = []
-    for line in text.splitlines():
-        code = re.sub(r"\(.*?\)|;.*", "", line).upper()
-        if m := re.match(r"\s*N(\d+)", code):
-            block = int(m.group(1))
-        for g in re.findall(r"G(\d+(?:\.\d+)?)", code):
-            absolute = {"90": True, "91": False}.get(g, absolute)
-        xyz = dict(re.findall(r"([XYZ])([-+]?\d*\.?\d+)", code))
-        if not re.search(r"\bG0?[01]\b", re.sub(r"G", " G", code)) or not xyz:
-            continue
-        assert set(xyz) == set("XYZ"), line  # every point written whole
-        v = np.array([float(xyz[a]) for a in "XYZ"])
-        pos = v if absolute else pos + v
-        out.append((block, pos))
-    return out
-
-
 def chords(text: str) -> dict[int, np.ndarray]:
     """What a nominal controller passes through: each chord between points written at
     CHORD_FRACTIONS ((m, 21, 3) per block)."""
@@ -135,21 +78,6 @@ def chords(text: str) -> dict[int, np.ndarray]:
     for (_, a), (block, b) in pairwise(sent(text)):
         out.setdefault(block, []).append(a + CHORD_FRACTIONS[:, None] * (b - a))
     return {k: np.array(v) for k, v in out.items()}
-
-
-def distance_to(path: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Each point's distance to the polyline ``path``: the segments beside its nearest
-    vertex."""
-    _, i = cKDTree(path).query(points)
-    best = np.full(len(points), np.inf)
-    for lo in (i - 1, i):
-        ok = (lo >= 0) & (lo + 1 < len(path))
-        a, b = path[np.clip(lo, 0, len(path) - 2)], path[np.clip(lo + 1, 1, len(path) - 1)]
-        d = b - a
-        t = np.clip(((points - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-300), 0, 1)
-        best = np.where(ok, np.minimum(best, np.linalg.norm(points - (a + t[:, None] * d),
-                                                            axis=1)), best)
-    return best
 
 
 def off_path(commanded: dict[int, np.ndarray], truth: np.ndarray) -> tuple[float, float]:

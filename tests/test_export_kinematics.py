@@ -8,7 +8,6 @@ directories (tests/compensate_runs.py) for the refusals. The example machine
 
 from __future__ import annotations
 
-import configparser
 import json
 import re
 import shutil
@@ -18,6 +17,7 @@ from pathlib import Path
 import heldout
 import pytest
 from compensate_runs import write_run
+from test_export import home_offsets  # as LinuxCNC reads HOME_OFFSET
 
 from station.commands import export as cmd_export
 from station.commands.cli import main
@@ -77,16 +77,6 @@ def values(text: str, section: str, key: str) -> list[str]:
     """Every value of ``key`` in ``[section]``, in order (LinuxCNC reads HALFILE so)."""
     return [line.split("=", 1)[1].strip() for line in lines_of(text, section)
             if re.match(rf"\s*{key}\s*=", line)]
-
-
-def home_offsets(text: str) -> dict[str, float]:
-    """As LinuxCNC reads them: comments stripped."""
-    ini = configparser.ConfigParser(strict=False, interpolation=None,
-                                    inline_comment_prefixes=("#", ";"))
-    ini.optionxform = str
-    ini.read_string(text)
-    return {s: float(ini.get(s, "HOME_OFFSET")) for s in ini.sections()
-            if ini.has_option(s, "HOME_OFFSET")}
 
 
 def setps(hal: str) -> dict[str, tuple[float, str]]:
