@@ -69,13 +69,13 @@ from bench.floor import (
     own_setup_events,
     physical_floor,
 )
-from drivers.sim.motion import DriveMotion
+from drivers.sim.drive_motion import DriveMotion
 from drivers.sim.specs import DriveSpec, GaugeSpec, MachineTruth
 from orthocal import AXES
-from station.commands import simulation
-from station.commands.sim_config import SimulatedStation, gauges_for
+from station.commands.simulate import launch as simulation
+from station.commands.simulate.station_setups import SimulatedStation, gauges_for
 from station.config.toml import toml_text
-from station.rundir.journal import read_journal
+from station.record.journal_file import read_journal
 
 
 @dataclass

@@ -16,9 +16,9 @@ import numpy as np
 
 from drivers.indicator_protocols import make_protocol
 from drivers.profiles import move_time
-from drivers.sim.motion import DriveMotion
+from drivers.sim.drive_motion import DriveMotion
 from orthocal import AXES
-from station.rundir.journal import read_journal
+from station.record.journal_file import read_journal
 
 
 @dataclass

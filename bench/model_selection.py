@@ -35,7 +35,7 @@ from orthocal import MODELS, Geometry, IdentificationError, design, deviations, 
 from orthocal.noise import noise_from_cycles, noise_from_readings
 from orthocal.postures import posture_name
 from orthocal.selection import LEVEL, select_model
-from station.commands.design import plan_keys
+from station.commands.design_command import plan_keys
 
 G = Geometry()
 LEGS = "xyz"
@@ -76,7 +76,7 @@ def simulate_run(truth: np.ndarray, rng: np.random.Generator, noise: float, cycl
                  ) -> tuple[dict, np.ndarray]:
     """Per-cycle deviations (key → list) and the std of the readings at each stop;
     ``stands``: each gauge's stand off L/2 (mm, GAUGES order), each gauge then
-    reading in its own plane (bench/stands.py)."""
+    reading in its own plane (bench/stands_vs_auto.py)."""
     planes = None if stands is None else stands[GAUGE_OF_KEY]
     exact = dict(zip(ALL_KEYS, deviations(ALL_KEYS, G, truth, planes), strict=True))
     n_stops = 3 * cycles + 1  # Z0, P+1, P-1, Z1, P+2, ...
@@ -175,7 +175,7 @@ def section_strokes(args: argparse.Namespace, rng: np.random.Generator) -> None:
     """What intermediate stops cost (run time, from the station's time model) and
     buy (standard errors: orthocal design's prediction and the scatter of
     simulated identifications), two against four stops per leg."""
-    from station.commands.design import run_time
+    from station.commands.design_command import run_time
     from station.config import parse_config
     from station.plan.steps import build_plan
 

@@ -46,11 +46,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drivers.errors import DeviceError
+from drivers.device_errors import DeviceError
 from station.commands import run as cmd_run
 from station.commands.options import ResumeOptions, RunOptions, SimOptions
 from station.errors import BadInput, RunFailed
-from station.rundir.journal import read_journal
+from station.record.journal_file import read_journal
 
 AXES = "xyz"
 

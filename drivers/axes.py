@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from drivers.base import HeldBy, Vec3
-from drivers.errors import (
+from drivers.device_errors import (
     AlarmError,
     ControllerError,
     EStopError,
@@ -28,10 +28,10 @@ from drivers.errors import (
     ReadbackMismatch,
     TargetRefused,
 )
-from drivers.limits import SoftLimits, read_soft_limits
 from drivers.modbus_link import ModbusLink, format_mm
 from drivers.profiles import move_time
 from drivers.registers import RegisterMap
+from drivers.soft_limits import SoftLimits, read_soft_limits
 
 _SLACK = 1e-9  # float noise when comparing mm values derived from integer counts
 
@@ -103,7 +103,7 @@ class ModbusAxisController(ModbusLink):
         """(lower, upper) joint limits in mm as the controller enforces them; where the
         controller cannot tell (exception 2, no such registers in the map, a range
         that is none), the limits given to the driver, else NaN with the reason
-        (:mod:`drivers.limits`): the station decides what to do without them."""
+        (:mod:`drivers.soft_limits`): the station decides what to do without them."""
         def read() -> np.ndarray:
             regs = self.map.axis_registers("SOFT_MIN") + self.map.axis_registers("SOFT_MAX")
             return self.read_mm(regs, "read soft limits")

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from drivers.base import AxisStatus, HeldBy, Vec3
-from drivers.limits import SoftLimits
+from drivers.soft_limits import SoftLimits
 
 if TYPE_CHECKING:
     from drivers.axes import ModbusAxisController

@@ -6,8 +6,8 @@
 A gauge's protocol is data, not a class per vendor, so a gauge nobody has met
 yet is a ``[[indicators]]`` entry with ``protocol = "generic"`` and a few
 overrides rather than new code. The serial driver (:mod:`drivers.indicators`),
-the simulated gauges (:mod:`drivers.sim.indicators`) and the bring-up probe
-(:mod:`drivers.probe`) all speak through these, so none of them needs a port
+the simulated gauges (:mod:`drivers.sim.pty_gauges`) and the bring-up probe
+(:mod:`drivers.bringup`) all speak through these, so none of them needs a port
 to know a protocol.
 """
 
@@ -19,7 +19,7 @@ from typing import Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, field_validator, model_validator
 
-from drivers.errors import IndicatorReplyError
+from drivers.device_errors import IndicatorReplyError
 
 UNIT_MM: dict[str, float] = {"mm": 1.0, "um": 0.001, "in": 25.4}
 
@@ -230,7 +230,7 @@ def make_protocol(name: str, overrides: Mapping[str, Any] | None = None) -> Indi
 class ReplyParser:
     """One protocol's reply grammar, compiled once: a run parses a reply at every
     reading of every gauge. :meth:`parse` turns a line (its terminator removed)
-    into mm, or raises :class:`~drivers.errors.IndicatorReplyError` naming
+    into mm, or raises :class:`~drivers.device_errors.IndicatorReplyError` naming
     ``device`` for a gauge's error reply or anything the grammar does not match.
     """
 

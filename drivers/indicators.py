@@ -11,7 +11,7 @@ can journal it); a port that fails at the OS level (unplugged USB adapter) is
 closed and opened again, by its path, until ``reopen_s`` has passed (a stable
 path such as ``/dev/serial/by-id/...`` comes back when the adapter is plugged
 in again; each attempt is reported), then the reading goes on; a port still
-gone after that raises :class:`~drivers.errors.IndicatorPortError`. Opening
+gone after that raises :class:`~drivers.device_errors.IndicatorPortError`. Opening
 the indicator waits for its port within the same budget.
 """
 
@@ -28,7 +28,7 @@ from typing import Any, Self
 import serial
 
 from drivers.base import Indicator
-from drivers.errors import (
+from drivers.device_errors import (
     IndicatorError,
     IndicatorPortError,
     IndicatorReplyError,
@@ -37,7 +37,7 @@ from drivers.errors import (
 from drivers.indicator_protocols import IndicatorProtocol, ReplyParser, make_protocol
 
 # What a serial port raises when the OS loses it (an unplugged adapter): the
-# driver reopens the port, the bring-up probe (drivers.probe) reports it.
+# driver reopens the port, the bring-up probe (drivers.bringup) reports it.
 try:  # termios.error is not an OSError, and pyserial lets it through from tcflush
     import termios
 

@@ -46,7 +46,7 @@ from pymodbus.exceptions import ConnectionException, ModbusIOException
 from pymodbus.pdu import ModbusPDU
 
 from drivers.base import AxisStatus
-from drivers.errors import (
+from drivers.device_errors import (
     ControllerBusy,
     ControllerConnectionError,
     ControllerError,

@@ -1,6 +1,6 @@
 """The rest-to-rest trapezoid, in one place: the motion profile the station's
 move deadlines assume (:meth:`drivers.axes.ModbusAxisController.move_timeout`),
-the one the simulated drive runs by default (:mod:`drivers.sim.motion`) and the
+the one the simulated drive runs by default (:mod:`drivers.sim.drive_motion`) and the
 one ``bench/cycle.py`` times its floor with. Kept apart from both so that the
 real driver never imports the simulator, and a deadline and the move it bounds
 cannot drift apart.

@@ -59,7 +59,7 @@ def predicted_after_correction(keys: Sequence[Key], geometry: Geometry,
 #: The loop's false-alarm rate per value: a machine the last round fixed is
 #: rewritten in one run of a thousand (three axes). The normal's 3σ (0.27 % per
 #: value) rewrote one run in 120 by design: at 20 runs, a 15 % chance that "every
-#: run takes one write-back" fails (bench/closed_loop.py saw it, 19/20).
+#: run takes one write-back" fails (bench/loop_vs_noise.py saw it, 19/20).
 FALSE_ALARM = 0.001 / 3
 
 

@@ -41,7 +41,7 @@ as random effects of prior SD tolerance/√3, and
   test weighs it against the stands' variance, a candidate must also not be
   improved on by the next one: the drop of that residual when the next
   candidate's parameters join (a likelihood-ratio F test on their number, 3
-  for the tilts). Measured by bench/stands.py: misplaced stands (±5 mm) on
+  for the tilts). Measured by bench/stands_vs_auto.py: misplaced stands (±5 mm) on
   square machines with ±1.5 mm offsets keep ``rho`` where the lack of fit
   alone picks a tilt model in about 3 runs of 4 without the option, and 0.2
   mrad of tilt is still found.

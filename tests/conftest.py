@@ -26,6 +26,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+# The shared helpers (builders, fakes, the wire, the real systems) live in tests/helpers/
+# and are imported by name from every folder of tests.
+sys.path.insert(0, str(Path(__file__).resolve().parent / "helpers"))
+
 from builders import NO_FIGURES, CliOutcome, Prepare, Rig
 
 from drivers.sim.station import TIME_SCALE_ENV
@@ -184,8 +189,8 @@ def orthocal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     station the command starts (run, then resume or rollback), whose config gives
     the devices :data:`CLI_TIMEOUT_S` and a report without figures (``figures=True``:
     with them), and the rig records every register write."""
-    from station.commands import simulation
     from station.commands.cli import main
+    from station.commands.simulate import launch as simulation
 
     def invoke(*argv: str, prepare: Prepare | None = None, out_dir: Path | None = None,
                rig: Rig | None = None, figures: bool = False) -> CliOutcome:

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from drivers.base import AxisStatus, HeldBy, Vec3
-from drivers.errors import AlarmError, MoveTimeout, ReadbackMismatch
+from drivers.device_errors import AlarmError, MoveTimeout, ReadbackMismatch
 from drivers.sim.drive import default_soft_limits
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.specs import MachineTruth

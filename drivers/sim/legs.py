@@ -8,8 +8,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 import orthocal
-from drivers.sim import form
-from drivers.sim.motion import SAMPLE_DT_S, SAMPLE_MIN, Segment
+from drivers.sim import bowed_legs as form
+from drivers.sim.drive_motion import SAMPLE_DT_S, SAMPLE_MIN, Segment
 from orthocal import Geometry
 
 
@@ -64,7 +64,7 @@ class GaugeView:
         ``mount`` (default: the nominal L/2) at joints ``rho`` ((..., 3), as
         :meth:`sample_segment` gives them): :func:`orthocal.leg_reading` with the
         true errors, plus the leg's bow where the plane touches it
-        (:mod:`drivers.sim.form`; nothing computed for a straight leg, so its
+        (:mod:`drivers.sim.bowed_legs`; nothing computed for a straight leg, so its
         readings stay those of the maths to the bit)."""
         reading = orthocal.leg_reading(rho, leg, direction, self.geometry, self.true_drho,
                                        self.true_dl, mount=mount, tilt=self.true_tilt,

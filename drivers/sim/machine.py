@@ -20,10 +20,10 @@ unrelated to the carriage (``count_shift``), and moves are refused with
 :data:`ALARM_NOT_HOMED` until :meth:`home` re-establishes it (``home_error_mm``:
 how far the new reference lies from the old one, 0 for a repeatable switch).
 
-Motion: the drive's (``motion``, a :class:`~drivers.sim.motion.DriveMotion`
-or its two names), run from :mod:`drivers.sim.motion`; everything the
+Motion: the drive's (``motion``, a :class:`~drivers.sim.drive_motion.DriveMotion`
+or its two names), run from :mod:`drivers.sim.drive_motion`; everything the
 carriages do is handed to ``segment_listeners`` as
-:class:`~drivers.sim.motion.Segment` pieces as it ends.
+:class:`~drivers.sim.drive_motion.Segment` pieces as it ends.
 
 Lost motion (``backlash``, mm per joint: ISO 230-2's reversal value B): the
 drive counts its motor; the carriage follows it through a dead band of width
@@ -34,7 +34,7 @@ The controller reports the count; the legs, the gauges and the end point see
 the carriage.
 
 Bowed legs (``leg_bow``, mm per leg: the sagitta h of each leg's surface at its
-middle, :mod:`drivers.sim.form`): a gauge's coordinate gets 4·h·t·(1 − t), t
+middle, :mod:`drivers.sim.bowed_legs`): a gauge's coordinate gets 4·h·t·(1 − t), t
 being where along the leg its plane touches it; the end point does not move
 (the bow is the leg's form, not its length).
 
@@ -57,8 +57,7 @@ import numpy as np
 
 import orthocal
 from drivers.base import Vec3
-from drivers.sim.legs import GaugeView
-from drivers.sim.motion import (
+from drivers.sim.drive_motion import (
     EPS,
     DriveMotion,
     Motion,
@@ -67,6 +66,7 @@ from drivers.sim.motion import (
     make_profile,
     start_offsets,
 )
+from drivers.sim.legs import GaugeView
 from orthocal import Geometry
 
 #: Alarm raised by a move commanded before homing (IAI drives do the same).

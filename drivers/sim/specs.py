@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drivers.registers import RegisterMap
+from drivers.sim.drive_motion import DriveMotion
 from drivers.sim.faults import Faults, IndicatorFaults
-from drivers.sim.motion import DriveMotion
 from orthocal import Geometry
 
 # Fast but physical: moves still take time, so in-position waits are real.
@@ -47,7 +47,7 @@ class MachineTruth:
     ``drho``: the joints' zero errors Δρ (mm); ``dl``: the legs' length errors ΔL
     (mm); ``tilt``: the actuator axes' tilts (mrad); ``gap``: how far the axes pass
     each other, gap_xy, gap_xz, gap_yz (mm); ``backlash``: each joint's lost motion
-    (mm); ``leg_bow``: each leg's sagitta at its middle (mm, :mod:`drivers.sim.form`);
+    (mm); ``leg_bow``: each leg's sagitta at its middle (mm, :mod:`drivers.sim.bowed_legs`);
     ``geometry``: the nominal machine they are errors of."""
 
     drho: Sequence[float] = ZERO3
@@ -66,7 +66,7 @@ class MachineTruth:
 @dataclass(frozen=True)
 class DriveSpec:
     """The virtual drive: how it moves (``motion``: a
-    :class:`~drivers.sim.motion.DriveMotion` or its name), the speed and
+    :class:`~drivers.sim.drive_motion.DriveMotion` or its name), the speed and
     acceleration it is set up with (``speed_mm_s``, ``accel_mm_s2``: what its
     integrator knows), the acceleration it really uses where that differs
     (``actual_accel_mm_s2``: what a drive does without telling anyone), the

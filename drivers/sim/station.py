@@ -32,16 +32,16 @@ zeroed: a virtual station restarted after an interruption finds the machine and
 the gauges as they were left.
 
 The drive (``DriveSpec.motion``): "coordinated", "independent" or a
-:class:`~drivers.sim.motion.DriveMotion` (profile shape, acceleration, start
+:class:`~drivers.sim.drive_motion.DriveMotion` (profile shape, acceleration, start
 delays, one axis after another), and ``DriveSpec.actual_accel_mm_s2`` an
 acceleration of its own: what a real drive does without telling anyone.
 :attr:`VirtualStation.accel_mm_s2` stays what it is set up with.
 
 Form and scale: ``MachineTruth.leg_bow`` bows each leg (the sagitta of its
-surface at its middle, mm, :mod:`drivers.sim.form`), so that a gauge's plunger,
+surface at its middle, mm, :mod:`drivers.sim.bowed_legs`), so that a gauge's plunger,
 touching the leg at another point of it at each posture, sees the curve;
 ``GaugeSpec.scale`` gives the gauges a relative scale error: each shows
-(1 + S) times its plunger's travel (:class:`~drivers.sim.indicators.SimIndicator`).
+(1 + S) times its plunger's travel (:class:`~drivers.sim.pty_gauges.SimIndicator`).
 
 Out of stroke (:attr:`VirtualStation.out_of_stroke`) is counted from the
 machine's trajectory, not only from the readings, and a stand can be knocked
@@ -76,8 +76,8 @@ from drivers.base import Vec3
 from drivers.files import write_atomic
 from drivers.indicator_protocols import make_protocol
 from drivers.sim.controller import SimController
-from drivers.sim.indicators import SimIndicator
 from drivers.sim.machine import VirtualOrthoglide
+from drivers.sim.pty_gauges import SimIndicator
 from drivers.sim.specs import DeviceFaults, DriveSpec, GaugeSpec, MachineTruth
 from drivers.sim.strokes import OutOfStroke, StrokeWatch
 from orthocal import plane_at

@@ -27,9 +27,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from drivers.sim.indicators import SimIndicator
+from drivers.sim.drive_motion import Segment
 from drivers.sim.machine import VirtualOrthoglide
-from drivers.sim.motion import Segment
+from drivers.sim.pty_gauges import SimIndicator
 from orthocal import Geometry
 
 # Closed segments wait for the next look at them (a mounting, out_of_stroke) up to
@@ -44,7 +44,7 @@ class OutOfStroke:
     stroke: ``past_mm`` beyond it (the farthest, over the segment), ``end`` "low"
     (−preload: the leg left the fully extended plunger) or "high" (stroke −
     preload: the plunger pushed to its stop). ``segment``/``kind``/``move``: the
-    :class:`~drivers.sim.motion.Segment` (its index, "move"/"home"/"brake", the
+    :class:`~drivers.sim.drive_motion.Segment` (its index, "move"/"home"/"brake", the
     move's number in ``moves_started``)."""
 
     gauge: str

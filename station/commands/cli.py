@@ -16,7 +16,7 @@ import sys
 from collections.abc import Sequence
 
 # orthocal.MODELS, spelled out: the command line is parsed before numpy is loaded
-# (tests/test_gaps.py checks that the two agree).
+# (tests/engine/test_gaps.py checks that the two agree).
 _BASE_MODELS = ("rho", "L", "full", "rho+tilt", "full+tilt", "rho+gap", "rho+tilt+gap",
                 "full+tilt+gap")
 # each also with the legs' bows fitted ("+form": needs a second gauge plane per leg)
@@ -34,7 +34,7 @@ _COMMANDS = {
     "identify": "station.commands.identify:main",
     "probe": "station.commands.probe:main",
     "init": "station.commands.init:main",
-    "design": "station.commands.design:main",
+    "design": "station.commands.design_command:main",
     "schema": "station.commands.schema:main",
     "history": "station.commands.history:history_main",
     "compare": "station.commands.history:compare_main",
@@ -95,7 +95,7 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         help="hidden actuator axis tilts tilt_yx, tilt_zx, tilt_zy of the virtual machine "
         "(mrad; zero if absent)",
     )
-    # A string, checked in station.commands.simulation.gaps_mm: a bad value is one
+    # A string, checked in station.commands.simulate.launch.gaps_mm: a bad value is one
     # line naming the option, exit 2 (argparse's own error would print the usage too).
     p.add_argument(
         "--true-gap",
@@ -150,7 +150,7 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
     )
     # The virtual drive's own behaviour, never written to the config it hands the
     # station: what a real drive does without saying (docs/design.md, "Register map").
-    # Strings here, checked in station.commands.simulation: a bad value is one line, exit 2.
+    # Strings here, checked in station.commands.simulate.launch: a bad value is one line, exit 2.
     p.add_argument(
         "--drive-profile", metavar="SHAPE[,SHAPE,SHAPE]", default=None,
         help="the virtual drive's profile shape: trapezoid (default), scurve "
@@ -394,7 +394,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _catch_ctrl_c()
     args = build_parser().parse_args(argv)  # bad arguments: argparse exits 2 with usage
     module_name, func_name = _COMMANDS[args.command].split(":")
-    from drivers.errors import DeviceError
+    from drivers.device_errors import DeviceError
     from station.errors import BadInput, RunFailed
 
     try:

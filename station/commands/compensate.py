@@ -76,8 +76,8 @@ def output_path(program: Path, out: str | None, mark: str) -> Path:
 
 def _job(args: argparse.Namespace) -> Job:
     """The run's identified machine and soft limits, the tolerance and work offset."""
-    from station.gcode.limits import LimitsError, run_limits
     from station.gcode.rewrite import Job
+    from station.gcode.soft_bounds import LimitsError, run_limits
     from station.gcode.subdivide import Machine
     from station.record.identified import NotACalibration, identified_machine
 

@@ -36,7 +36,7 @@ def kinematics_export(args: argparse.Namespace, result: dict[str, Any]) -> int:
     component's source, into the folder --out."""
     from importlib.resources import files
 
-    from station.history.export import ExportError
+    from station.history.controller_terms import ExportError
     from station.history.linuxcnc_kins import (
         COMPONENT_FILE,
         GEOMETRY_HAL,
@@ -94,7 +94,7 @@ def _joints(text: str) -> list[int]:
 
 
 def export_main(args: argparse.Namespace) -> int:
-    from station.history.export import ExportError, csv_lines, linuxcnc
+    from station.history.controller_terms import ExportError, csv_lines, linuxcnc
     from station.history.twincat import twincat
 
     _, result = read_result(args.run_dir)

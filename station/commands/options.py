@@ -20,7 +20,7 @@ StationHook = Callable[[Any], None]
 @dataclass(frozen=True)
 class DriveOptions:
     """How the virtual controller moves its axes (``--motion``, ``--drive-*``), as
-    given: text, checked by station.commands.simulation.drive_params."""
+    given: text, checked by station.commands.simulate.launch.drive_params."""
 
     motion: str | None = None
     profile: str | None = None

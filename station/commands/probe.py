@@ -7,7 +7,7 @@ usual line settings and reports which answers, with a live reading, or why
 none did. With ``--controller`` or ``--config`` it reads the controller's
 status, positions, offsets and soft limits and which registers of the profile
 answer. It never moves an axis and never writes a register: only reading
-requests go out (drivers.probe).
+requests go out (drivers.bringup).
 
 Exit status: 0 when everything asked for was probed (a silent port is a
 finding, not a failure); 1 when the controller could not be reached; 2 bad
@@ -80,8 +80,8 @@ def default_ports(config: Any) -> list[str]:
 
 def gather(args: argparse.Namespace) -> dict[str, Any]:
     """The probe's findings as docs/design.md's JSON: ``indicators`` and ``controller``."""
-    from drivers.errors import DeviceError
-    from drivers.probe import probe_controller, probe_port
+    from drivers.bringup import probe_controller, probe_port
+    from drivers.device_errors import DeviceError
     from station.config import load_config
 
     if getattr(args, "config", None) and args.controller:
@@ -94,7 +94,7 @@ def gather(args: argparse.Namespace) -> dict[str, Any]:
                                             for p in ports],
                              "controller": None}
     if args.controller or config is not None:
-        # Reads only (drivers.probe): a probe never moves an axis or writes a register.
+        # Reads only (drivers.bringup): a probe never moves an axis or writes a register.
         ctl = controller_from_args(args, config)
         try:
             ctl.connect()

@@ -1,7 +1,7 @@
 """``orthocal run``, ``orthocal resume`` and ``orthocal rollback``.
 
 The commands open what a run needs (config, virtual station, devices, run directory,
-journal) and hand it to station.engine.procedure, which runs the flow; station.rundir.directory says
+journal) and hand it to station.engine.procedure, which runs the flow; station.record.run_dir says
 what a run directory holds.
 
 Progress goes to stderr; stdout carries the summary or, with --json, one JSON
@@ -20,7 +20,7 @@ from typing import Any, cast
 from drivers.base import Moves
 from station import report
 from station.commands.options import ResumeOptions, RunOptions
-from station.commands.sim_file import run_options
+from station.commands.simulate.file_options import run_options
 from station.config import load_config, parse_config
 from station.console.operator import ConsoleOperator, Operator, VirtualOperator
 from station.engine.closed_loop import mountings_expected
@@ -34,8 +34,10 @@ from station.plan.check import check_plan
 from station.plan.checker import MotionChecker
 from station.plan.ports import check_ports
 from station.plan.steps import build_plan
+from station.record.journal_file import JOURNAL_NAME, Journal
+from station.record.lock import MachineLock, acquire, taken_over_message, update_run_dir
 from station.record.migrate import migrate
-from station.rundir.directory import (
+from station.record.run_dir import (
     NVRAM_NAME,
     new_run_dir,
     now_iso,
@@ -43,9 +45,7 @@ from station.rundir.directory import (
     version,
     write_run_files,
 )
-from station.rundir.journal import JOURNAL_NAME, Journal
-from station.rundir.lock import MachineLock, acquire, taken_over_message, update_run_dir
-from station.rundir.state import RunState
+from station.record.state import RunState
 
 
 def _operator(yes: bool, station: Any) -> Operator:
@@ -84,7 +84,7 @@ def run(options: RunOptions) -> int:
         if options.sim is not None:
             # The virtual station (a Modbus server, pseudo-terminals: ~0.3 s of imports)
             # only where one runs; a run against real devices never loads it.
-            from station.commands import simulation
+            from station.commands.simulate import launch as simulation
 
             sim = simulation.sim_params(options.sim)
             station = simulation.start_station(sim, None)
@@ -116,7 +116,7 @@ def run(options: RunOptions) -> int:
             check_plan(plan, config, controller.soft_limits(),
                        start=controller.read_positions())
             # The experiment's quality and time before anything moves (orthocal design).
-            from station.commands.design import design_summary, format_summary
+            from station.commands.design_command import design_summary, format_summary
 
             summary = design_summary(config, config.procedure.model,
                                      controller_limits=controller.soft_limits())
@@ -307,7 +307,7 @@ def _restart_station(stack: ExitStack, options: ResumeOptions, sim: dict[str, An
     unchanged for a run on real devices, which never loads the simulator)."""
     if sim is None:
         return None, config
-    from station.commands import simulation
+    from station.commands.simulate import launch as simulation
 
     return simulation.restart_station(stack, options.station_hook, sim, run_dir, config)
 

@@ -8,7 +8,7 @@ import sys
 
 
 def main(args: argparse.Namespace) -> int:
-    from station.record.schema import dumps
+    from station.record.schema_files import dumps
 
     sys.stdout.write(dumps(args.kind))
     return 0

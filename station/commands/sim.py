@@ -6,7 +6,7 @@ pseudo-terminal pair whose client end the config names), so
 ``orthocal run --config FILE`` can rehearse the real workflow from another
 terminal. A separate process cannot be told where the operator mounted the
 gauges, so six fixed indicators stand two per leg, all mounted at once.
-The drive moves as ``--motion`` and ``--drive-*`` say (station.commands.simulation), and
+The drive moves as ``--motion`` and ``--drive-*`` say (station.commands.simulate.launch), and
 the config it writes tells the station only what an integrator would: that the
 axes are coordinated, if they are, and the default acceleration. A map whose axes
 are separate drives (unit ids) gets a drive that does not interpolate, as with
@@ -29,8 +29,7 @@ from typing import Any
 
 from drivers.sim.specs import DriveSpec, GaugeSpec, MachineTruth
 from station.commands.options import DriveOptions
-from station.commands.sim_config import SimulatedStation, gauges_for
-from station.commands.simulation import (
+from station.commands.simulate.launch import (
     DEFAULT_MOUNT_ERROR_MM,
     DEFAULT_NOISE_MM,
     backlash_mm,
@@ -44,6 +43,7 @@ from station.commands.simulation import (
     served_map,
     station_config,
 )
+from station.commands.simulate.station_setups import SimulatedStation, gauges_for
 from station.config import parse_config
 from station.config.toml import dump_toml
 from station.errors import BadInput

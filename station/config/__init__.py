@@ -321,7 +321,7 @@ class WritebackConfig(_Strict):
 
 class UncertaintyConfig(_Strict):
     """Type B inputs of the uncertainty budget (docs/design.md "Uncertainty budget"); each
-    absent one is taken at the default the budget names (station.engine.budget),
+    absent one is taken at the default the budget names (station.analysis.run_budget),
     never silently as zero."""
 
     # The legs' straightness over the length the plunger slides along them: the

@@ -1,5 +1,5 @@
-"""The run's flow as one small state machine: measure → identify → write →
-verify → (write → verify)… → finish (docs/design.md, "Closed loop").
+"""The closed loop's decisions, a small pure state machine: measure → identify →
+write → verify → (write → verify)… → finish (docs/design.md, "Closed loop").
 
 :func:`next_step` is a pure function from what has happened so far
 (:class:`LoopState`) to what to do next. The executor (station.engine.procedure)
@@ -21,7 +21,7 @@ setup of a verification has already taken more cycles on its mounted gauges wher
 its own scatter said the verdict needed them ([procedure] max_cycles_in_mounting,
 station.engine.sequencer). After a write-back, a leftover under converge_mm that the
 rounds joined see at 95 % where it keeps "converged" out of reach is written (the
-joined Δρ̂, station.engine.verdict.judge): a write and its verification cost the
+joined Δρ̂, station.analysis.verdict.judge): a write and its verification cost the
 mountings a further pass would, and leave the machine closer. Where nothing is seen,
 the round is measured again, a further pass of the same verification pooled with it
 (phase "v+1", "v2+1"…), up to ``max_extra_passes``: what is left beyond the noise

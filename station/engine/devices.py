@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from drivers.base import AxisController, Gauges
+from station.analysis.documents import JsonObject
 from station.config import StationConfig
-from station.engine.documents import JsonObject
 from station.errors import BadInput
 
 if TYPE_CHECKING:

@@ -24,12 +24,15 @@ from orthocal.loop import (
 )
 from orthocal.lost_motion import Reversal, band_middle, edge_of
 from orthocal.numbers import finite
+from station.analysis import accuracy_statement as accuracy
+from station.analysis import compensated, reversal, verdict
+from station.analysis import run_budget as budget
+from station.analysis.documents import JsonObject
+from station.analysis.statistics import Measurement, pooled
 from station.config import StationConfig
 from station.console.operator import Operator
-from station.engine import accuracy, budget, compensated, reversal, verdict
 from station.engine.closed_loop import round_phase
 from station.engine.devices import Devices
-from station.engine.documents import JsonObject
 from station.engine.replay import RoundFit, Steps
 from station.engine.results import (
     ident_json,
@@ -39,16 +42,15 @@ from station.engine.results import (
     writeback_fields,
 )
 from station.engine.sequencer import Sequencer
-from station.engine.statistics import Measurement, pooled
 from station.engine.writeback import WritebackOutcome, write_back
 from station.errors import RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan
+from station.record.journal_file import Journal
 from station.record.model import MachineModel
+from station.record.run_dir import MODEL_NAME
+from station.record.state import RunState
 from station.report.io import jsonable_value
-from station.rundir.directory import MODEL_NAME
-from station.rundir.journal import Journal
-from station.rundir.state import RunState
 
 
 @dataclass
@@ -67,7 +69,7 @@ class Run:
 
     @property
     def state(self) -> RunState:
-        """The journal so far, every session's (station.rundir.state)."""
+        """The journal so far, every session's (station.record.state)."""
         return self.journal.state
 
     @cached_property
@@ -474,7 +476,7 @@ def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
 
 def _identify(ctx: Run, m: Measurement,
               model: str | None = None) -> tuple[Identification, JsonObject | None]:
-    from station.engine.identify import identify_measurement
+    from station.analysis.model_choice import identify_measurement
 
     return identify_measurement(ctx.config, m, model)
 

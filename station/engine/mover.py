@@ -17,9 +17,9 @@ from typing import Protocol
 import numpy as np
 
 from drivers.base import Arrivals, AxisReadout, GaugeReadings
+from station.analysis.documents import JsonObject
 from station.config import StationConfig
-from station.engine.documents import JsonObject
-from station.engine.guard import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
+from station.engine.guard_monitor import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.errors import BadInput, RunFailed
 from station.plan.checker import SIGNAL_PAD_MM, MotionChecker, PathRefused
 from station.plan.steps import Move, Plan, SetupPlan

@@ -1,6 +1,7 @@
-"""The run's flow, shared by ``orthocal run`` and ``orthocal resume``: measure, identify,
-write back, verify, and again while the verification finds a significant correction
-(the closed loop); replaying from the journal what a resumed run already did.
+"""A run from start to end, shared by ``orthocal run`` and ``orthocal resume``: it opens
+the devices, asks the closed loop for each next step (measure, identify, write back,
+verify, and again while the verification finds a significant correction), has the
+flow perform it, and writes the result when the run ends, however it ends.
 
 station.engine.closed_loop decides the next step from what happened so far (a pure state machine);
 :class:`Flow` performs each step or, on resume, replays it from the journal.
@@ -12,17 +13,17 @@ import threading
 import time
 from dataclasses import asdict
 
-from drivers.errors import DeviceError
+from drivers.device_errors import DeviceError
+from station.analysis.documents import JsonObject
 from station.console.progress import Progress
 from station.engine.closed_loop import LoopState, next_step
-from station.engine.documents import JsonObject
 from station.engine.flow import Flow, Run
 from station.engine.recovery import resume_hint
 from station.engine.results import base_result, offsets_fields
 from station.engine.sequencer import Sequencer
 from station.errors import BadInput, RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
-from station.rundir.directory import now_iso
+from station.record.run_dir import now_iso
 
 
 def _import_plotting(figures: bool) -> None:

@@ -13,7 +13,7 @@ with σ the pooled scatter of single readings within the setup's stops, n the
 readings averaged now and then, s_Π0 the standard deviation of the setup's Π0
 stop means across its cycles (drift, temperature). A larger difference means
 the new reference differs: the setup's cycles are dropped and it is redone (the
-journal's ``setup-redo`` record says so: the run state, station.rundir.state, voids
+journal's ``setup-redo`` record says so: the run state, station.record.state, voids
 that setup's cycles when it is journaled, so the setup is measured again from its
 first cycle).
 
@@ -39,7 +39,7 @@ from station.engine.mover import MoverAxes
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan, stop_id
-from station.rundir.journal import Journal
+from station.record.journal_file import Journal
 
 K_SIGMA = 4.0  # a false redo costs a setup; a kept bad setup costs the answer
 
@@ -157,7 +157,7 @@ def check_reference(controller: MoverAxes, indicators: GaugeReadings, config: St
 
 def resume_hint(exc: BaseException) -> str:
     """What the operator does before ``orthocal resume``, for the fault that ended a run."""
-    from drivers.errors import ControllerNotHomed
+    from drivers.device_errors import ControllerNotHomed
     from station.errors import StorageFull
 
     if isinstance(exc, ControllerNotHomed):

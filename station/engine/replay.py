@@ -3,7 +3,7 @@
 
 A run is small journaled steps; each step's record is fsynced before the next step
 starts. A step is known by its identity (the keys below), and the run state
-(station.rundir.state.RunState: the journal folded, every record saved folded in as
+(station.record.state.RunState: the journal folded, every record saved folded in as
 it is written) holds each done step's record under it. :meth:`Steps.take` is the
 one place that decides: a step whose record is there is not taken again, its record
 stands for it; any other is taken, and journals its record. Whether live or
@@ -31,10 +31,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, TypeVar
 
-from station.engine.documents import JsonObject
+from station.analysis.documents import JsonObject
 from station.record.journal import Cycle, Repeat, SetupDone, Writeback
-from station.rundir.journal import Journal
-from station.rundir.state import Fit, RunState
+from station.record.journal_file import Journal
+from station.record.state import Fit, RunState
 
 R = TypeVar("R")
 R_co = TypeVar("R_co", covariant=True)

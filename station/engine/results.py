@@ -14,12 +14,12 @@ from drivers.base import ZeroOffsets
 from orthocal import AXES, coverage_factor
 from orthocal.loop import WRITABLE, predicted_after_correction
 from orthocal.numbers import finite
+from station.analysis.statistics import Measurement, split_key
 from station.config import StationConfig
-from station.engine.statistics import Measurement, split_key
 from station.engine.writeback import WritebackOutcome
 from station.record.result import SCHEMA_VERSION
-from station.record.simulation import SimulationParams
-from station.rundir.state import RunState
+from station.record.simulated import SimulationParams
+from station.record.state import RunState
 
 
 def ident_json(ident: Any) -> dict[str, Any]:

@@ -34,14 +34,9 @@ import numpy as np
 from drivers.base import GaugeReadings, Moves, OffsetResolution
 from orthocal.lost_motion import reversal_gain
 from orthocal.postures import MIDDLE, plane_at
-from station.config import StationConfig
-from station.console.operator import Operator
-from station.engine.documents import JsonObject
-from station.engine.guard import PlungerGuard
-from station.engine.mover import Mover, MoverAxes
-from station.engine.replay import CycleStep, RepeatStep, SetupEnd, Steps
-from station.engine.sizing import VerificationSizing
-from station.engine.statistics import (
+from station.analysis.documents import JsonObject
+from station.analysis.sizing import VerificationSizing
+from station.analysis.statistics import (
     Measurement,
     NoiseScale,
     SetupOutcome,
@@ -49,6 +44,11 @@ from station.engine.statistics import (
     cycle_std_error,
     reject_outliers,
 )
+from station.config import StationConfig
+from station.console.operator import Operator
+from station.engine.guard_monitor import PlungerGuard
+from station.engine.mover import Mover, MoverAxes
+from station.engine.replay import CycleStep, RepeatStep, SetupEnd, Steps
 from station.errors import RunFailed, check_interrupted
 from station.plan.checker import MotionChecker
 from station.plan.steps import (
@@ -63,7 +63,7 @@ from station.plan.steps import (
     Step,
     stop_id,
 )
-from station.rundir.journal import Journal
+from station.record.journal_file import Journal
 
 # A cycle the guard stopped is taken again (at most MAX_RETAKES times) when its
 # closing Π0 shows a gauge's zero moved by more than ZERO_MOVED_MM (or the

@@ -29,15 +29,15 @@ from pathlib import Path
 import numpy as np
 
 from drivers.base import ZeroOffsets
-from drivers.errors import DeviceError
+from drivers.device_errors import DeviceError
 from drivers.files import write_atomic
 from orthocal import AXES
+from station.analysis.documents import JsonObject
 from station.console.operator import Operator
-from station.engine.documents import JsonObject
 from station.engine.replay import Steps, WritebackRound, WritebackStage
 from station.errors import RunFailed
 from station.record.journal import Writeback
-from station.rundir.journal import Journal
+from station.record.journal_file import Journal
 
 BACKUP_NAME = "offsets_backup.json"
 

@@ -1,4 +1,4 @@
-"""A program to measure compensate's cost by (bench/compensate.py): a seeded walk in
+"""A program to measure compensate's cost by (bench/compensate_cost.py): a seeded walk in
 the middle of the workspace, four in five lines a G1 of 5 mm in a random direction,
 the fifth a G2 or G3 quarter arc of radius 2 to 10 mm in the XY plane (I, J), now
 and then a comment or a feed."""

@@ -4,7 +4,7 @@ INI with the orthoglidekins component as its kinematics, a HAL file that sets th
 component's geometry pins from the run, and the component's source. Pure: from the
 run's record and the INI's text (and the text of the HAL files it lists) to text.
 
-- HOME_OFFSET as the plain export writes it (station.history.export.linuxcnc);
+- HOME_OFFSET as the plain export writes it (station.history.controller_terms.linuxcnc);
   where the drive itself holds the offsets the run wrote, left as it was and said
   in a comment: the joints then already count as the station commanded them, and
   the ``drho`` pins carry only what those offsets did not correct.
@@ -21,7 +21,7 @@ import re
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from station.history.export import ExportError, linuxcnc
+from station.history.controller_terms import ExportError, linuxcnc
 from station.record.identified import COMPONENT, IdentifiedMachine
 
 #: The HAL file the export writes beside the INI.

@@ -7,7 +7,7 @@ and parameter, comma-separated, its header saying which parameter each value is 
 and what sign it carries. Where homing sets the axis position at the reference cam
 to the encoder parameter "Reference position for homing" (MC_Home with Position :=
 DEFAULT_HOME_POSITION), that parameter behaves as LinuxCNC's HOME_OFFSET, and takes
-the same change (station.history.export.home_changes). An axis with an absolute
+the same change (station.history.controller_terms.home_changes). An axis with an absolute
 encoder, which is not homed, takes it in "Position Bias" instead (the axis position
 is the scaled encoder count plus the bias): one or the other, never both. The
 run does not know what the NC holds now, so the rows state the change to add to it."""
@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from orthocal import AXES
-from station.history.export import (
+from station.history.controller_terms import (
     ExportError,
     backlash_stands_out,
     home_changes,

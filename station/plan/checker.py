@@ -31,7 +31,7 @@ START_REUSE_MM = 0.05
 # Sub-move bounds a checker remembers before it starts afresh (a design search
 # bounds tens of thousands; each entry is a few hundred bytes).
 BOUND_CACHE_SIZE = 200_000
-# Added on both sides of a measured signal (station.engine.guard) when a move is routed
+# Added on both sides of a measured signal (station.engine.guard_monitor) when a move is routed
 # with it: a reading's noise, the error of carrying it to a stop not yet read.
 SIGNAL_PAD_MM = 0.05
 

@@ -26,15 +26,17 @@ signal is carried along the move's progress at the slope seen so far (median of
 the samples' slopes, once 15 % of the move is done); the axes are stopped when
 nominal bound + signal, or the measured travel itself, comes within the margin.
 
-A stop is a second line, not the end: the trip (:class:`station.engine.guard.PlungerGuardTrip`)
-carries what the sequencer needs to re-plan from where the machine stands
-(:meth:`~station.engine.guard.PlungerGuard.signal_envelope`): more waypoints, a lower speed, the
-cycle's readings taken again. Later cycles route their moves with the signal
-the first cycle measured at each stop (:meth:`~station.engine.guard.PlungerGuard.route_signal`).
+A stop is a second line, not the end: the trip
+(:class:`station.engine.guard_monitor.PlungerGuardTrip`) carries what the sequencer
+needs to re-plan from where the machine stands
+(:meth:`~station.engine.guard_monitor.PlungerGuard.signal_envelope`): more waypoints,
+a lower speed, the cycle's readings taken again. Later cycles route their moves with
+the signal the first cycle measured at each stop
+(:meth:`~station.engine.guard_monitor.PlungerGuard.route_signal`).
 
 Here the prediction, pure: what the guard tracks per gauge and per move, the
 signal's slope, the travel still ahead, what later cycles will do. The monitor
-that reads the gauges and stops the axes is the engine's (station.engine.guard).
+that reads the gauges and stops the axes is the engine's (station.engine.guard_monitor).
 """
 
 from __future__ import annotations

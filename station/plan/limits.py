@@ -17,7 +17,7 @@ def effective_limits(
     """The controller's soft limits, narrowed (never widened) by the config.
 
     Where the controller cannot tell its limits (``controller_limits.source`` is
-    "absent" or "nonsense", drivers.limits.SoftLimits) they come from
+    "absent" or "nonsense", drivers.soft_limits.SoftLimits) they come from
     ``[controller] soft_min`` / ``soft_max`` alone; with neither, BadInput names both
     ways to provide them, before anything moves (docs/design.md, "Register map").
     """

@@ -4,7 +4,7 @@ s) and is fsynced before the station moves on; a resumed run replays them.
 
 Every record is closed: its fields are declared. What is a document of its own is a
 JSON object here: the header's config, plan and simulation (station.config,
-station.plan, station.record.simulation read them) and an event's body (retries,
+station.plan, station.record.simulated read them) and an event's body (retries,
 the plunger guard's stops and recoveries, …: ``{"event": name, …}``)."""
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ class Header(_Record):
     config: JsonObject = Field(description="the station config (config.toml's model)")
     plan: JsonObject
     simulation: JsonObject | None = Field(
-        None, description="a simulated run's parameters (station.record.simulation)")
+        None, description="a simulated run's parameters (station.record.simulated)")
     started: str
     argv: list[str] | None = None
 

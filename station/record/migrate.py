@@ -6,7 +6,7 @@ which only added the field). Version 1 → 2 renames nothing: version 2 requires
 fields every run now writes, and a file of an older version lacks those that did
 not exist when it was written. They are filled with what that run had where that is
 known (a simulation without tilts, gaps, lost motion, bowed legs or gauge scale
-errors had none of them: 0, as station.record.simulation reads its journal; a loop
+errors had none of them: 0, as station.record.simulated reads its journal; a loop
 without extra passes had none) and with null where it is not (a verdict, a
 squareness rule, a figure not computed then). Nothing present is changed, and a
 document missing whole sections (a fragment, a run that stopped early) is migrated

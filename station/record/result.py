@@ -150,7 +150,7 @@ class Remaining(Closed):
 class Setup(Closed):
     """One setup of a measurement: how many cycles it used of how many it could, its
     repeats, and whether its spread was flagged (built by the engine as
-    station.engine.statistics.SetupOutcome, which adds what the record leaves out)."""
+    station.analysis.statistics.SetupOutcome, which adds what the record leaves out)."""
 
     leg: str
     indicators: dict[str, str] = Field(description="indicator name → its direction")

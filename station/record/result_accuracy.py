@@ -1,6 +1,6 @@
 """result.json's ``accuracy``: the run's statement at the tool (docs/design.md,
-"Accuracy at the tool"), built by station.engine.accuracy.statement,
-station.engine.compensated and station.engine.reversal.at_the_tool."""
+"Accuracy at the tool"), built by station.analysis.accuracy_statement.statement,
+station.analysis.compensated and station.analysis.reversal.at_the_tool."""
 
 from __future__ import annotations
 

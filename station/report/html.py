@@ -7,7 +7,9 @@ from pathlib import Path
 
 from drivers.files import write_atomic
 from station.record.result import RunResult
-from station.report import budget, reversal, rounds, since
+from station.report import budget_table as budget
+from station.report import reversal_table as reversal
+from station.report import rounds, since
 from station.report.boundary import ResultLike, as_result
 from station.report.field_plot import plot_field
 from station.report.format import (

@@ -13,7 +13,9 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from station.record.result import RunResult
-from station.report import budget, reversal, rounds, since, tool
+from station.report import budget_table as budget
+from station.report import reversal_table as reversal
+from station.report import rounds, since, tool
 from station.report.boundary import ResultLike, as_result
 from station.report.format import (
     AXES,

@@ -25,7 +25,7 @@ from station.record.result_accuracy import (
     ObjectiveFigures,
 )
 from station.record.result_base import Interval, NotStated
-from station.report import form, gaps, in_controller
+from station.report import gaps, in_controller, leg_form
 from station.report.format import (
     AXES,
     at,
@@ -271,7 +271,7 @@ def summary_lines(result: RunResult) -> list[str]:
             f"({OBJECTIVE_TEXT[acc.objective]}) {state}; objective {alt.objective} would "
             f"leave {um(alt.after.rms_mm)} µm RMS (max {um(alt.after.max_mm)} µm)")
     return [line, *in_controller.summary_lines(acc), _squareness_line(acc),
-            *gaps.summary_lines(acc), *form.summary_lines(result)]
+            *gaps.summary_lines(acc), *leg_form.summary_lines(result)]
 
 
 def _squareness_line(acc: Accuracy) -> str:
@@ -331,7 +331,7 @@ def html_section(result: RunResult, figure: str | None = None,
                 "method's means and does not say where the tool goes.</p></div>")
     parts = [head, _intro(acc), _before_after(result, acc), in_controller.html_section(acc),
              _objectives(result, acc), _squareness_html(acc), gaps.html_section(acc)]
-    if bows := form.html_section(result):
+    if bows := leg_form.html_section(result):
         parts.append(bows)
     if figure:
         label = f"Figure {number}. " if number is not None else ""

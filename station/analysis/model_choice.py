@@ -1,0 +1,126 @@
+"""Which model the station identifies: a named one, or ``auto`` resolved by
+:func:`orthocal.select_model` against the noise this very measurement shows
+(docs/design.md, "Models")."""
+
+from __future__ import annotations
+
+import math
+
+import orthocal
+from orthocal.covariance import with_measured_noise
+from orthocal.noise import noise_from_cycles, noise_from_readings
+from orthocal.postures import MIDDLE, split_plane
+from orthocal.selection import CANDIDATES, LEVEL, lack_of_fit
+from station.analysis.documents import JsonObject
+from station.analysis.statistics import Measurement
+from station.config import StationConfig
+from station.errors import RunFailed
+
+
+def measurement_noise(config: StationConfig, m: Measurement) -> tuple[float, float, str]:
+    """(σ of one per-cycle deviation, its degrees of freedom, where it comes from).
+
+    From two cycles on, the cycle-to-cycle scatter: it holds every noise the
+    deviations carry (the machine's repeatability between stops too), which the
+    scatter of readings at one stop misses. With one cycle, the within-stop
+    scatter. Floored at the gauges' quantisation (resolution/√12 per reading),
+    so quantised data that never scatter do not claim zero noise."""
+    proc = config.procedure
+    data = m.for_identify()
+    resolution = min(ind.resolution_mm for ind in config.indicators)
+    floor = resolution / math.sqrt(12.0) * math.sqrt(1.5 / proc.readings)
+    if any(len(v) >= 2 for v in data.values()):
+        sigma, dof = noise_from_cycles(data)
+        source = "cycle-to-cycle scatter"
+    elif m.within_std and proc.readings >= 2:
+        sigma, dof = noise_from_readings(m.within_std, proc.readings)
+        source = "scatter of the readings at each stop"
+    else:
+        raise RunFailed("model auto needs the noise of the measurement, and one cycle of one "
+                        "reading per stop shows none: set [procedure] cycles >= 2 (or "
+                        "readings >= 2), or name a model")
+    if sigma < floor:
+        sigma, source = floor, source + ", floored at the gauge resolution"
+    return sigma, dof, source
+
+
+def second_plane(keys) -> bool:
+    """Whether any deviation was read in a second gauge plane (SetupConfig.at)."""
+    return any(split_plane(k[0])[1] != MIDDLE for k in keys)
+
+
+def with_form(model: str, keys) -> str:
+    """``model`` with the legs' bows fitted beside it (orthocal.FORM) where the
+    gauges were read in a second plane: the bows are then measured, not assumed."""
+    if model.endswith(orthocal.FORM) or model == "auto" or not second_plane(keys):
+        return model
+    return model + orthocal.FORM
+
+
+def identify_measurement(config: StationConfig, m: Measurement,
+                         model: str | None = None
+                         ) -> tuple[orthocal.Identification, JsonObject | None]:
+    """The identification of ``m`` with ``model`` (default: the config's) and, for
+    auto, the selection's JSON (the run JSON's ``model_selection``).
+
+    Standard errors: from the noise this measurement shows, with the correlation
+    its shared Π0 stops give the deviations (orthocal.covariance.with_measured_noise:
+    honest where ordinary least squares is ~10-20 % off), inflated by √F when the
+    model leaves more than that noise (so a model the data reject does not look
+    precise). Without a noise estimate (one cycle of one reading), the fit's own."""
+    proc = config.procedure
+    data = m.for_identify()
+    model = with_form(model or proc.model, data)
+    geometry = config.machine.geometry()
+    try:
+        noise = measurement_noise(config, m)
+    except RunFailed:
+        if model == "auto":
+            raise
+        noise = None
+    selection = None
+    # Misplaced stands are modelled so that they are not taken for tilted axes
+    # (orthocal.stands); the linearised system (7) has no stand effect.
+    stands = orthocal.Stands(tolerance=proc.stand_tolerance_mm,
+                             mounts=m.mounts_for_identify() or None) \
+        if proc.stand_tolerance_mm > 0 and proc.method == "nonlinear" else None
+    try:
+        if model != "auto":
+            ident = orthocal.identify(data, geometry, model=model, method=proc.method,
+                                      sigma=noise[0] if noise and stands else None,
+                                      stands=stands if noise else None)
+            test = lack_of_fit(ident, geometry, noise[0], noise[1]) if noise else None
+        else:
+            assert noise is not None  # auto: measurement_noise's failure raised above
+            sigma, dof, source = noise
+            # The model test excuses what the stated leg form and gauge errors can
+            # make, within their bounds and with their shapes (orthocal.misfit): a
+            # bowed leg does not buy tilts, and a gap is not taken for a bow.
+            from station.analysis.run_budget import allowance
+
+            allowed = allowance(config)
+            candidates = [with_form(c, data) for c in CANDIDATES]
+            sel = orthocal.select_model(data, geometry, sigma, dof, candidates=candidates,
+                                        method=proc.method, stands=stands,
+                                        noise_source=source, allowance=allowed)
+            ident, selection = sel.identification, sel.to_dict()
+            selection["allowance"] = {
+                **allowed.to_dict(),
+                "note": ("a misfit is excused only by what the stated leg form (a bow per "
+                         "gauge plane within the straightness), gauge errors (a scale "
+                         "within the MPE) and temperature can make, with the shape each "
+                         "makes; the test keeps the measured noise's degrees of freedom")}
+    except orthocal.IdentificationError as exc:
+        raise RunFailed(f"identification failed: {exc}") from None
+    if noise is not None and selection is not None:
+        # the statement's inflation: the misfit beyond the noise alone
+        test = lack_of_fit(ident, geometry, noise[0], noise[1])
+    if noise is not None:
+        inflate = 1.0
+        if (test is not None and test.F is not None and test.p_value is not None
+                and test.p_value < LEVEL and test.F > 1.0):  # rejected
+            inflate = math.sqrt(test.F)
+        ident = with_measured_noise(ident, geometry, noise[0], inflate=inflate,
+                                    noise_dof=noise[1])
+    return ident, selection
+

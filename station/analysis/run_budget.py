@@ -1,0 +1,199 @@
+"""The run's uncertainty budget (docs/design.md, "Uncertainty budget"): the
+config's Type B inputs, each absent one at a default named here, propagated by
+orthocal.budget through the last round's identification to the run's statement,
+combined with its Type A part (the scatter), and the noise the model test is to
+allow for them."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+import orthocal
+from orthocal import budget as gum
+from station.analysis.documents import JsonObject
+from station.config import StationConfig
+
+# Defaults where the config says nothing, each named in the budget as assumed.
+# A ground steel leg straight to 10 µm over its length: good practice, not a given.
+DEFAULT_LEG_STRAIGHTNESS_MM = 0.010
+# Typical MPE of a 12.5 mm digital indicator with 1 µm steps (Mitutoyo ID-C, Sylvac
+# S_Dial, Mahr MarCator data sheets: 3 µm); a gauge of unknown make: 5 µm.
+DEFAULT_MPE_MM = {"mitutoyo": 0.003, "sylvac": 0.003, "mahr": 0.003, "generic": 0.005}
+# A temperature change during a run of some minutes in a workshop, and a plunger set
+# by eye against the leg's normal.
+DEFAULT_TEMPERATURE_CHANGE_C = 0.5
+DEFAULT_PLUNGER_ANGLE_DEG = 2.0
+
+
+def inputs(config: StationConfig) -> JsonObject:
+    """Every Type B input with its value and whether the config gave it (else the
+    default above): what the budget assumed, in its own words."""
+    u = config.uncertainty
+    gauges = {ind.name: ind for ind in config.indicators}
+
+    def entry(value: object, default: object, why: str) -> JsonObject:
+        given = value is not None
+        return {"value": value if given else default, "given": given,
+                **({} if given else {"assumed": why})}
+
+    return {
+        "leg_straightness_mm": entry(
+            u.leg_straightness_mm, DEFAULT_LEG_STRAIGHTNESS_MM,
+            "good practice for a ground leg over its length, not measured "
+            "([uncertainty] leg_straightness_mm)"),
+        "temperature_change_c": entry(
+            u.temperature_change_c, DEFAULT_TEMPERATURE_CHANGE_C,
+            "a workshop over a run of minutes ([uncertainty] temperature_change_c)"),
+        "plunger_angle_deg": entry(
+            u.plunger_angle_deg, DEFAULT_PLUNGER_ANGLE_DEG,
+            "plungers set by eye ([uncertainty] plunger_angle_deg)"),
+        "mpe_mm": {name: entry(g.mpe_mm, DEFAULT_MPE_MM[g.protocol],
+                               f"typical of a {g.protocol} digital indicator "
+                               "([[indicators]] mpe_mm)")
+                   for name, g in gauges.items()},
+        "resolution_mm": {name: {"value": g.resolution_mm, "given": True}
+                          for name, g in gauges.items()},
+    }
+
+
+def _gauge_names(config: StationConfig) -> dict[tuple[str, str], str]:
+    """(leg, direction) → the indicator mounted there (its setup's)."""
+    return {(sp.leg, d.lstrip("-")): name for sp in config.setups
+            for name, d in sp.indicators.items()}
+
+
+def _at_its_parameters(ident: orthocal.Identification, geometry: orthocal.Geometry
+                       ) -> orthocal.Identification:
+    """``ident`` with its residuals those of its own parameters: a fit moved to the
+    middle of the joints' lost-motion bands (orthocal.lost_motion.band_middle) keeps
+    the residuals of the band's edge, µm away, where its sensitivity is the same."""
+    if ident.method != "nonlinear":
+        return ident
+    model = orthocal.deviations(list(ident.keys), geometry, ident.fit_vector, ident.mount_offsets)
+    return replace(ident, residuals=np.asarray(ident.values) - model)
+
+
+def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.Source]:
+    """The Type B sources of ``ident`` (a round's identification), named by the
+    indicators (not by their gauge planes) where they are a gauge's."""
+    ident = _at_its_parameters(ident, config.machine.geometry())
+    given = inputs(config)
+    names = _gauge_names(config)
+    planes = {plane: name for plane, name in names.items()
+              if any((k[1], k[2]) == plane for k in ident.keys)}
+
+    def per_plane(key: str) -> dict[tuple[str, str], float]:
+        return {plane: float(given[key][name]["value"]) for plane, name in planes.items()}
+
+    out = gum.budget_sources(
+        ident, config.machine.geometry(),
+        straightness=given["leg_straightness_mm"]["value"],
+        mpe=per_plane("mpe_mm"), resolution=per_plane("resolution_mm"),
+        plunger_angle_deg=float(given["plunger_angle_deg"]["value"]),
+        temperature_change=float(given["temperature_change_c"]["value"]))
+    renamed = []
+    for s in out:
+        plane = s.name[-2:]
+        if s.name.startswith("gauge ") and (plane[0], plane[1]) in planes:
+            name = planes[(plane[0], plane[1])]
+            s = replace(s, name=f"{s.name[:-3]} {name} (leg {plane[0]}, along {plane[1]})")
+        renamed.append(s)
+    return renamed
+
+
+def fields(config: StationConfig, ident: orthocal.Identification,
+           type_a_se: dict[str, float], type_a_dof: float | None, statement: str
+           ) -> JsonObject | None:
+    """The run JSON's ``uncertainty_budget`` for the Δρ of ``statement`` (where the
+    run states them: "remaining.total" or "identified"), from the identification
+    of the round that measured them; None where the model has no Δρ."""
+    names = [n for n in type_a_se if n.startswith("drho_") and type_a_se[n] is not None]
+    if not names:
+        return None
+    try:
+        srcs = sources(config, ident)
+    except ValueError as exc:
+        return {"error": f"not stated: {exc}"}
+    # the budget states the Δρ; the tilts and ΔL of the model are propagated too
+    trimmed = [replace(s, contributions={n: s.contributions[n] for n in names})
+               for s in srcs]
+    doc = gum.combine({n: float(type_a_se[n]) for n in names}, type_a_dof, trimmed)
+    # largest first; ties (to a nanometre: within another CPU's last bits) by name
+    doc["sources"] = [doc["sources"][0], *sorted(doc["sources"][1:], key=lambda s: (
+        -round(1e6 * max(v or 0.0 for v in s["contributions_mm"].values())), s["source"]))]
+    given = inputs(config)
+    assumed = [f"{k}: {v['value']} ({v['assumed']})" for k, v in given.items()
+               if isinstance(v, dict) and "given" in v and not v["given"]]
+    assumed += [f"mpe_mm of {n}: {v['value']} ({v['assumed']})"
+                for n, v in given["mpe_mm"].items() if not v["given"]]
+    # named by what identifies an instrument (its serial), not by its port
+    instruments = [{"name": g.name, "protocol": g.protocol, "serial": g.serial,
+                    "resolution_mm": g.resolution_mm,
+                    "mpe_mm": given["mpe_mm"][g.name]["value"]} for g in config.indicators]
+    return {"statement": statement, **doc, "inputs": given, "assumed": assumed,
+            "instruments": instruments,
+            "method": ("GUM (JCGM 100:2008): each input through the sensitivity of the "
+                       "round's identification (stands and model included), combined in "
+                       "quadrature with the scatter, Welch-Satterthwaite dof, Student's "
+                       "k for 95 %; the legs' form as independent bows of each gauge "
+                       "plane (rectangular, ±straightness), the gauge MPE over the travel "
+                       "a deviation spans (0.2 mm, in proportion below)")}
+
+
+def form_of_layout(config: StationConfig, ident: orthocal.Identification, names: Sequence[str]
+                   ) -> tuple[np.ndarray, str] | None:
+    """What the legs' form ([uncertainty] leg_straightness_mm, stated or assumed) may
+    leave in the layout ``names`` as ``ident`` (the fit that gave them) identifies
+    them, as a covariance over ``names`` and the words the accuracy block says it
+    with; None where the fit took the bows itself (a second gauge plane) or holds
+    none of ``names``."""
+    held = [n for n in names if n in ident.names]
+    if not held or any(n in ident.names for n in orthocal.BOW_NAMES):
+        return None
+    geometry = config.machine.geometry()
+    given = inputs(config)["leg_straightness_mm"]
+    prop = gum.propagation(_at_its_parameters(ident, geometry), geometry)
+    cov = gum.form_covariance(prop, given["value"])
+    idx = [list(ident.names).index(n) for n in held]
+    said = "stated" if given.get("given") else "assumed, not stated in [uncertainty]"
+    return cov[np.ix_(idx, idx)], (
+        f"the 95 % intervals of the after-figures carry the legs' form (straightness "
+        f"{given['value']} mm, {said}) as errors of the tilts and gaps: with one gauge "
+        "plane per leg a uniform bow of the legs reads exactly as tilts")
+
+
+def allowance(config: StationConfig) -> orthocal.Allowance:
+    """What the model test may excuse a misfit by (orthocal.misfit): the stated (or
+    assumed) straightness as each gauge plane's bow, each gauge's MPE as a scale
+    error over its travel, the plunger angle and the temperature change; the same
+    inputs as the budget's, so the model test and the statement agree on them."""
+    given = inputs(config)
+    value = given["leg_straightness_mm"]["value"]
+    per_leg = dict(zip(orthocal.AXES, value if isinstance(value, list) and len(value) == 3
+                       else [value[0] if isinstance(value, list) else value] * 3,
+                       strict=True))
+    planes = _gauge_names(config)
+    return orthocal.Allowance(
+        straightness={plane: float(per_leg[plane[0]]) for plane in planes},
+        mpe={plane: float(given["mpe_mm"][name]["value"]) for plane, name in planes.items()},
+        plunger_angle_deg=float(given["plunger_angle_deg"]["value"]),
+        temperature_change=float(given["temperature_change_c"]["value"]))
+
+
+def of_run(config: StationConfig, idents: list[orthocal.Identification], result: JsonObject
+           ) -> JsonObject | None:
+    """``uncertainty_budget`` of the run's statement: the last verification's
+    (``remaining.total``: its Type A part the remaining's standard errors) when the
+    loop measured after its last write-back, else the last identification's."""
+    if not idents:
+        return None
+    remaining = result.get("remaining")
+    if remaining:
+        return fields(config, idents[-1], remaining["std_errors"],
+                      remaining.get("std_errors_dof"), "remaining.total")
+    return fields(config, idents[-1], dict(idents[-1].std_errors),
+                  idents[-1].std_error_dof, "identified")
+

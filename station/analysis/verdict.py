@@ -1,0 +1,154 @@
+"""What a verification round says of the machine: a correction worth writing, the
+machine shown converged, or neither (station.engine.closed_loop's verdicts), and in
+words why a run that stopped undecided is not converged (docs/design.md, "Closed loop")."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from orthocal import Identification
+from orthocal.geometry import AXES, Geometry
+from orthocal.loop import (
+    FALSE_ALARM,
+    WRITABLE,
+    joined_with_previous,
+    shown_within,
+    significant_corrections,
+)
+from orthocal.noise import coverage_factor
+from orthocal.numbers import finite
+from station.analysis.documents import JsonObject
+
+Joined = tuple[dict[str, float], dict[str, float | None]]  # Δρ̂ and standard errors
+
+
+@dataclass(frozen=True)
+class Verdict:
+    verdict: str  # closed_loop.Verdict
+    significant: list[str]  # the writable parameters beyond the noise of both rounds
+    shown_mm: dict[str, float]  # per axis, how far the machine may be off at 95 %
+
+    def fields(self) -> JsonObject:
+        """The round's entry in the result's ``iterations``."""
+        return {"shown_within_95_mm": {k: finite(v) for k, v in self.shown_mm.items()},
+                "verdict": self.verdict}
+
+
+def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
+    """converge_mm plus half a count of the drive's offsets: "converged" claims each
+    joint zero within this at 95 % (a correction is rounded to the count)."""
+    return converge_mm + 0.5 * offset_count_mm
+
+
+def judge(ident: Identification, previous: Identification | None, converge_mm: float, limit: float,
+          target: dict[str, float] | None, passes_left: bool = False,
+          joined: Joined | None = None) -> Verdict:
+    """The verdict on round ``ident`` (``previous``: the identification whose
+    correction it verifies; None for the first measurement, judged against its
+    own noise alone). Significant: beyond k standard errors of both rounds (of
+    the first alone) and beyond converge_mm (orthocal.loop.significant_corrections);
+    after a write-back, where the round cannot show the machine within ``limit``: on
+    those axes, a leftover seen at 95 % (the rounds joined), and with no further pass
+    of the round left (``passes_left`` False), any correction beyond the noise alone.
+    Converged: every axis shown within ``limit`` at 95 % (orthocal.loop.shown_within):
+    for a first measurement, a machine within tolerance that nothing is written
+    to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
+    unproven. ``joined``: the round's Δρ̂ and standard errors joined with the rounds
+    before it (orthocal.loop.joined_with_previous): what the machine is shown
+    within and seen off by; the corrections stand out of this round's own noise."""
+    aim = target if previous else None
+    beyond_noise = significant_corrections(
+        ident.parameters, ident.std_errors, 0.0,
+        previous_std_errors=previous.std_errors if previous else None,
+        dof=ident.std_error_dof, previous_dof=previous.std_error_dof if previous else None,
+        target=aim)
+    sig = [n for n in beyond_noise
+           if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
+    values, ses = joined or (ident.parameters, ident.std_errors)
+    shown = shown_within(values, ses, ident.std_error_dof, target=target)
+    out = [n for n, v in shown.items() if v > limit]
+    seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
+    if not sig and previous is not None and out:
+        # converge_mm spares a correction too small to matter, where the machine can
+        # be shown within it. Where it cannot, the next step mounts every setup either
+        # way: a further pass of the same machine, or a write and its verification.
+        # Where the leftover is seen at 95 %, the write is taken: it writes the rounds'
+        # joined Δρ̂ (Flow.write), which leaves the least error that is known, and the
+        # next verification joins on from there as a further pass would. With no pass
+        # left, a correction beyond the noise of both rounds is written too.
+        sig = [n for n in WRITABLE if (n in out and seen.get(n, 0.0) > 0.0)
+               or (not passes_left and n in beyond_noise)]
+    verdict = "significant" if sig else "converged"
+    if not sig and out:
+        verdict = "suspected" if any(v > 0 for v in seen.values()) else "unproven"
+    return Verdict(verdict, sig, shown)
+
+
+def joined_round(ident: Identification, before: Joined | None,
+                 offsets_before: dict[str, float] | None,
+                 offsets_written: dict[str, float] | None) -> Joined:
+    """A round's Δρ̂ joined with ``before`` (the rounds before it, joined alike; None:
+    the first round), moved by the offsets its write-back changed from
+    ``offsets_before`` to ``offsets_written`` (read back; None: nothing written), by
+    orthocal.loop.joined_with_previous at the loop's false-alarm k."""
+    own: Joined = (dict(ident.parameters), dict(ident.std_errors))
+    if before is None:
+        return own
+    moved = {} if offsets_before is None or offsets_written is None else \
+        {f"drho_{a}": offsets_written[a] - offsets_before[a] for a in AXES}
+    return joined_with_previous(*own, *before, moved, coverage_factor(None, 1.0 - FALSE_ALARM))
+
+
+def stands_part(ident: Identification, geometry: Geometry) -> JsonObject:
+    """A round's entry ``stands_part_mm``: how much of each Δρ standard error the stands
+    set by eye make (orthocal.design.drho_error_parts at the round's fit), where they
+    were modelled; read by :func:`not_converged`."""
+    stands, sigma = ident.stand_model, ident.stand_sigma or 0.0
+    if stands is None or not sigma > 0.0:
+        return {}
+    from orthocal import design
+
+    _, part = design.drho_error_parts(ident.keys, geometry, ident.model, ident.fit_vector,
+                                      sigma, stands.prior_sd, stands)
+    return {"stands_part_mm": {f"drho_{a}": float(v) for a, v in zip(AXES, part, strict=True)}}
+
+
+def not_converged(entry: JsonObject, converge_mm: float, offset_count_mm: float) -> str:
+    """Why the last verification (its ``iterations`` entry) could not show the machine
+    converged, in words: how far the worst axis may still be off, and what to change."""
+    shown = entry.get("shown_within_95_mm") or {}
+    passes = len(entry.get("passes", [entry["phase"]]))
+    worst = max(shown, key=lambda k: math.inf if shown[k] is None else shown[k])
+    bound = shown[worst]
+    how = "by an unknown amount (no standard error)" if bound is None else \
+        f"by up to {1000 * bound:.1f} µm"
+    ses = [v for k, v in entry["std_errors"].items() if k in WRITABLE and v is not None]
+    noise = f" (standard error {1000 * max(ses):.1f} µm)" if ses else ""
+    seen = "a correction is seen at 95 % but does not stand out of both rounds' noise" \
+        if entry.get("verdict") == "suspected" else "no correction stands out of the noise"
+    said = (f"after {passes} pass(es) of its last verification, Δρ_{worst[-1]} may still "
+            f"be off {how} at 95 %, more than converge_mm = {1000 * converge_mm:g} µm + "
+            f"half the drive's count ({500 * offset_count_mm:g} µm), and {seen}{noise}")
+    if entry.get("fit_ok") is False:
+        # the noise is not the cause: more of the same measurement cannot help
+        return (f"{said}; the cause is the model, not the noise: model {entry.get('model')} "
+                f"leaves {1000 * (entry.get('residual_rms_mm') or 0.0):.1f} µm RMS of "
+                "residual against the scatter's "
+                f"{1000 * (entry.get('noise_floor_mm') or 0.0):.1f} µm, so more cycles or "
+                "quieter gauges will not help; look for what the model lacks (a loose "
+                "gauge or stand, lost motion, legs bowed beyond [uncertainty] "
+                "leg_straightness_mm) or name a larger model")
+    part = (entry.get("stands_part_mm") or {}).get(worst)
+    se = (entry.get("std_errors") or {}).get(worst)
+    if part is not None and se and part > 0.5 * se:
+        # the stands, not the gauges, hold the error: more cycles cannot take it
+        return (f"{said}; of Δρ_{worst[-1]}'s standard error {1000 * se:.1f} µm, the "
+                f"stands set by eye make {1000 * part:.1f} µm (each gauge's plane moves "
+                "the reading by its offset times the leg's slope, and these axes' tilts "
+                "and gaps slope the legs): more cycles cannot shrink that part; more "
+                "passes of the verification ([procedure] max_extra_passes) average it, "
+                "and so do stands set against a mark at the legs' middles with "
+                "[procedure] stand_tolerance_mm stated")
+    return (f"{said}; measure with more cycles or readings, quieter gauges, or a larger "
+            "converge_mm")

@@ -1,0 +1,107 @@
+"""The virtual station (drivers.sim) as the station uses it: the calibration's
+setups for its gauges and its description in station.toml's shape.
+
+drivers.sim knows hardware only — a machine, a drive, gauges that wait to be
+mounted. Which gauges a calibration moves where is the station's: two styles,
+``TWO_SETUPS`` (A and B moved from leg to leg; the operator re-mounts them before
+each setup) and ``SIX_SETUPS`` (A..F, two per leg; D mounted reversed to exercise
+the sign convention). :func:`gauges_for` names a station's gauges after one of
+them, and :class:`SimulatedStation` describes itself as the config a simulated run
+uses (:meth:`SimulatedStation.config`): what an integrator would write of it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from drivers.sim.specs import GaugeSpec, Mounting
+from drivers.sim.station import VirtualStation
+
+TWO_SETUPS: list[dict[str, Any]] = [
+    {"leg": "x", "indicators": {"A": "y", "B": "z"}},
+    {"leg": "y", "indicators": {"A": "x", "B": "z"}},
+    {"leg": "z", "indicators": {"A": "x", "B": "y"}},
+]
+SIX_SETUPS: list[dict[str, Any]] = [
+    {"leg": "x", "indicators": {"A": "y", "B": "z"}},
+    {"leg": "y", "indicators": {"C": "x", "D": "-z"}},
+    {"leg": "z", "indicators": {"E": "x", "F": "y"}},
+]
+# The controller's reply timeout the description gives: a virtual drive on the
+# loopback answers in milliseconds, and a lost reply is found out in a second.
+CONTROLLER_TIMEOUT_S = 1.0
+
+
+def setups_of(count: int) -> list[dict[str, Any]]:
+    """The setups of the ``count``-gauge style: 2 (moved leg to leg) or 6 (two per leg)."""
+    if count not in (2, 6):
+        raise ValueError("indicator count must be 2 (moved leg to leg) or 6 (two per leg)")
+    return TWO_SETUPS if count == 2 else SIX_SETUPS
+
+
+def _names(setups: list[dict[str, Any]]) -> tuple[str, ...]:
+    return tuple(sorted({n for s in setups for n in s["indicators"]}))
+
+
+def gauges_for(count: int, spec: GaugeSpec | None = None, *,
+               mounted: bool = False) -> GaugeSpec:
+    """``spec`` (None: the defaults) with the gauges of the ``count``-gauge setups,
+    in name order; ``mounted``: each already where its setup puts it (a station in
+    another process cannot be told where the operator mounted them)."""
+    setups = setups_of(count)
+    mountings: tuple[Mounting, ...] = tuple(
+        (name, s["leg"], direction) for s in setups
+        for name, direction in s["indicators"].items()) if mounted else ()
+    return dataclasses.replace(spec or GaugeSpec(), names=_names(setups), mounted=mountings)
+
+
+class SimulatedStation(VirtualStation):
+    """A virtual station whose gauges are those of a calibration's setups
+    (:func:`gauges_for`), which describes itself to the station (:meth:`config`).
+    A test may replace ``config`` on an instance: its description stands for what a
+    user writes in the file."""
+
+    @property
+    def setups(self) -> list[dict[str, Any]]:
+        """The setups of its gauges (A and B: moved leg to leg; A..F: two per leg)."""
+        names = self.gauge_spec.names
+        for setups in (TWO_SETUPS, SIX_SETUPS):
+            if names == _names(setups):
+                return setups
+        raise ValueError(f"gauges {', '.join(names)} are those of no setups "
+                         f"(A, B or A..F)")
+
+    def config(self) -> dict[str, Any]:
+        """What this station's hardware is, in station.toml's shape: the machine's
+        geometry, the controller's link and limits, the gauges' ports, protocol and
+        strokes, and where they are mounted (its setups). The procedure and the
+        write-back are the station's to choose (station.commands.simulate.launch).
+
+        The drive's map is named ``profile`` (or the map's name), with the map's
+        default unit id and, for a map without soft-limit registers, the limits the
+        drive enforces as ``soft_min``/``soft_max``."""
+        g = self.geometry
+        ctl = self.controller
+        # A map without soft-limit registers: the config tells the station the limits
+        # the drive enforces, so that it can plan.
+        limits = {} if ctl.map.has_role("SOFT_MIN") else {
+            "soft_min": [float(v) for v in ctl.soft_min],
+            "soft_max": [float(v) for v in ctl.soft_max]}
+        return {
+            "machine": {"leg_length": g.leg_length, "rho_min": g.rho_min, "rho_max": g.rho_max},
+            # TCP: host and port; RTU: the pty the client opens and its baud rate.
+            "controller": {**ctl.client_kwargs(), "profile": self.profile or ctl.map.name,
+                           "device_id": ctl.device_id, **limits,
+                           "timeout_s": CONTROLLER_TIMEOUT_S,
+                           "speed_mm_s": self.speed_mm_s, "accel_mm_s2": self.accel_mm_s2,
+                           # What an integrator would write: that the drive interpolates,
+                           # if it does; else nothing (the profile's default: any timing).
+                           # Never the drive's shape, delays or own acceleration.
+                           **({"motion": "coordinated"} if self.machine.drive.coordinated
+                              else {})},
+            "indicators": [{"name": n, "port": s.port, "protocol": self.protocol,
+                            "stroke_mm": self.strokes[n][0], "preload_mm": self.strokes[n][1]}
+                           for n, s in self.indicators.items()],
+            "setups": [dict(s) for s in self.setups],
+        }

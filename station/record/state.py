@@ -1,0 +1,197 @@
+"""What a run's journal says, folded once: :class:`RunState`.
+
+Every reader of the journal reads this: a resumed run (the steps it does not take
+again, station.engine.replay; the setup a power cut interrupted, with its readings,
+station.engine.recovery), the offsets a station holds (resume, rollback,
+``--offsets-from``) and the result's counts (station.engine.procedure). The state is
+built by one function, :meth:`RunState.apply`, applied to the typed records
+(station.record.journal) in journal order, with no I/O: reopening a run folds what is
+on disk, and a :class:`~station.record.journal_file.Journal` folds each record it saves
+into the same state, so nothing reads the file a second time.
+
+A ``setup-redo`` record voids the earlier cycle, setup_done and repeat records of its
+(phase, setup): that setup is measured again from its first cycle
+(station.engine.recovery).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from orthocal import AXES
+from station.record.journal import (
+    Cycle,
+    Event,
+    Finished,
+    Header,
+    Identification,
+    JournalRecord,
+    Reading,
+    Repeat,
+    Resumed,
+    Rollback,
+    Setup,
+    SetupDone,
+    SetupRedo,
+    Verification,
+    Writeback,
+)
+
+Fit = Identification | Verification
+#: The write-back stages after which the station holds the offsets the stage names.
+_HOLDS = {"done": "written", "interrupted-restored": "before", "failed-restored": "before"}
+
+
+@dataclass
+class LiveSetup:
+    """The setup mounted last and not ended: its gauges are still on the machine, so it
+    is the one a reference check after homing can check."""
+
+    phase: str
+    setup: int
+    indicators: dict[str, str]  # name → direction, as last mounted
+    # Every reading at its stops, from each of its mountings (a resume remounts it),
+    # (stop, indicator) → values: the Π0 readings and their scatter the check needs.
+    readings: dict[tuple[str, str], list[float]] = field(default_factory=dict)
+
+    @property
+    def prefix(self) -> str:
+        return f"{self.phase}:{self.setup}:"  # of its stop ids (station.plan.steps.stop_id)
+
+
+@dataclass
+class GuardTally:
+    """What the plunger guard did in every session (the result's ``plunger_guard``)."""
+
+    stops: int = 0  # times it stopped the axes
+    recovered: list[dict[str, Any]] = field(default_factory=list)  # each way back
+    retakes: int = 0  # cycles taken again after a knocked stand
+    refused: int = 0  # moves refused before they started
+
+
+@dataclass
+class RunState:
+    """The journal's records folded in order (module docstring)."""
+
+    header: Header | None = None
+    finished: Finished | None = None
+    resumes: int = 0  # ``resumed`` records: the sessions after the first
+    # The steps done, by their identity (station.engine.replay reads them).
+    cycles: dict[tuple[str, int, int], Cycle] = field(default_factory=dict)
+    setups_done: dict[tuple[str, int], SetupDone] = field(default_factory=dict)
+    repeats: dict[tuple[str, int, int], Repeat] = field(default_factory=dict)
+    fits: dict[int, Fit] = field(default_factory=dict)  # round (0: the measurement's)
+    writebacks: dict[int, dict[str, Writeback]] = field(default_factory=dict)  # round, stage
+    live: LiveSetup | None = None
+    # What the journal's own write-backs and rollbacks leave the offsets at (x, y, z),
+    # None while it has none.
+    offsets_held: list[float] | None = None
+    guard: GuardTally = field(default_factory=GuardTally)
+    retries: int = 0  # driver retries
+    mountings: int = 0  # ``setup`` records: what the operator mounted, and for how long
+    operator_s: float = 0.0
+
+    @classmethod
+    def of(cls, records: Iterable[JournalRecord]) -> RunState:
+        state = cls()
+        for record in records:
+            state.apply(record)
+        return state
+
+    @property
+    def started(self) -> float | None:
+        """When the run's header was written (Unix time, s)."""
+        return None if self.header is None else self.header.t
+
+    def held_offsets(self, start: Sequence[float] | None) -> list[float] | None:
+        """The offsets a station holding them holds now: the journal's own, else
+        ``start`` (what the run began with; None: zeros, none of its own)."""
+        if self.offsets_held is not None:
+            return list(self.offsets_held)
+        return None if start is None else [float(v) for v in start]
+
+    def apply(self, rec: JournalRecord) -> None:
+        """Fold one more record in (outliers, homing, reference checks and the
+        records of a fault are read by nothing that resumes or sums a run)."""
+        match rec:
+            case Header():
+                self.header = rec
+            case Finished():
+                self.finished = rec
+            case Resumed():
+                self.resumes += 1
+            case Setup():
+                self._mounted(rec)
+            case Reading():
+                if self.live is not None and rec.stop.startswith(self.live.prefix):
+                    self.live.readings[(rec.stop, rec.indicator)] = list(rec.values)
+            case Cycle():
+                self.cycles[(rec.phase, rec.setup, rec.cycle)] = rec
+            case SetupDone():
+                self._ended(rec)
+            case Repeat() if rec.repeat is not None:
+                self.repeats[(rec.phase, rec.setup, rec.repeat)] = rec
+            case Identification() | Verification():
+                self._fit(rec)
+            case Writeback():
+                self._writeback(rec)
+            case Rollback(stage="done") if rec.restored is not None:
+                self.offsets_held = [float(rec.restored[a]) for a in AXES]
+            case Event():
+                self._event(rec.event)
+            case SetupRedo():
+                self._void(rec.phase, rec.setup)
+
+    def _mounted(self, rec: Setup) -> None:
+        self.mountings += 1
+        self.operator_s += float(rec.operator_s or 0.0)
+        if self.live is not None and (self.live.phase, self.live.setup) == (rec.phase,
+                                                                            rec.setup):
+            self.live.indicators = dict(rec.indicators)  # remounted: its readings stand
+        else:
+            self.live = LiveSetup(rec.phase, rec.setup, dict(rec.indicators))
+
+    def _ended(self, rec: SetupDone) -> None:
+        self.setups_done[(rec.phase, rec.setup)] = rec
+        if self.live is not None and (self.live.phase, self.live.setup) == (rec.phase,
+                                                                            rec.setup):
+            self.live = None
+
+    def _fit(self, rec: Fit) -> None:
+        # a verification's round n; the measurement's identification is round 0
+        n = rec.round if isinstance(rec, Verification) else 0
+        self.fits[1 if n is None else n] = rec
+
+    def _writeback(self, rec: Writeback) -> None:
+        # records from before the closed loop carry no round: round 1
+        self.writebacks.setdefault(1 if rec.round is None else rec.round, {})[rec.stage] = rec
+        held = getattr(rec, _HOLDS[rec.stage]) if rec.stage in _HOLDS else None
+        if held is not None:
+            self.offsets_held = [float(held[a]) for a in AXES]
+
+    def _event(self, event: dict[str, Any]) -> None:
+        name = event.get("event")
+        if name == "retry":
+            self.retries += 1
+        elif name == "plunger-guard":
+            self.guard.stops += 1
+        elif name == "retake":
+            self.guard.retakes += 1
+        elif name == "plunger-guard-refused":
+            self.guard.refused += 1
+        elif name == "plunger-guard-recovery" and event.get("result") == "recovered":
+            # zero_shift_mm: only where the way back found a gauge's zero moved (a step)
+            self.guard.recovered.append({
+                **{k: event.get(k) for k in ("where", "move", "indicator", "waypoints",
+                                             "speed_mm_s")},
+                **({"zero_shift_mm": event["zero_shift_mm"]} if "zero_shift_mm" in event
+                   else {})})
+
+    def _void(self, phase: str, setup: int) -> None:
+        """A setup-redo: the setup's steps so far are void (its readings are kept, as
+        the stops measured again replace theirs)."""
+        self.setups_done.pop((phase, setup), None)
+        self.cycles = {k: v for k, v in self.cycles.items() if k[:2] != (phase, setup)}
+        self.repeats = {k: v for k, v in self.repeats.items() if k[:2] != (phase, setup)}

@@ -1,0 +1,157 @@
+"""`orthocal run|resume|rollback` through the real command line: exit codes
+0 (ok), 1 (refused or failed, one line naming the device, no traceback) and
+2 (bad input naming the field), --plan, --json and rollback."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import pytest
+from builders import no_figures_file
+from truth import assert_truth, drho
+
+from station.commands.cli import main
+from station.commands.simulate.launch import station_config
+from station.commands.simulate.station_setups import SimulatedStation, gauges_for
+from station.config.toml import toml_text
+
+
+def test_simulated_run_then_rollback(tmp_path: Path, capsys) -> None:
+    code = main(["run", "--simulate", no_figures_file(tmp_path), "--seed", "3",
+                 "--true-drho", "0.4,-0.7,1.2", "--out", str(tmp_path), "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    result = json.loads(out)  # exactly one JSON document on stdout
+    assert result["status"] == "ok"
+    assert result["simulation"]["true_drho"] == {"x": 0.4, "y": -0.7, "z": 1.2}
+    assert "Traceback" not in err
+    run_dir = Path(result["run_dir"])
+    nvram = json.loads((run_dir / "controller_nvram.json").read_text())["offsets_mm"]
+    assert nvram == pytest.approx([result["offsets_written"][a] for a in "xyz"])
+
+    code = main(["rollback", str(run_dir), "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    nvram = json.loads((run_dir / "controller_nvram.json").read_text())["offsets_mm"]
+    assert nvram == pytest.approx([result["offsets_before"][a] for a in "xyz"])
+    assert json.loads(out)["restored"] == result["offsets_before"]
+
+
+def test_writeback_beyond_the_limit_is_refused_exit_1(tmp_path: Path, capsys) -> None:
+    code = main(["run", "--simulate", no_figures_file(tmp_path), "--seed", "4",
+                 "--true-drho", "3.6,0.2,-0.3", "--out", str(tmp_path), "--json"])
+    out, _err = capsys.readouterr()
+    assert code == 1
+    result = json.loads(out)
+    assert result["status"] == "refused" and result["offsets_written"] is None
+    assert result["verification"] is None
+    assert abs(result["identified"]["drho_x"] - 3.6) < 0.01
+    stored = json.loads((Path(result["run_dir"]) / "result.json").read_text())
+    assert stored["writeback"]["status"] == "refused"
+
+
+def test_bad_config_exit_2_names_the_field(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "station.toml"
+    bad.write_text('[[indicators]]\nname = "A"\nport = "/dev/x"\nstroke_mm = -1\n'
+                   '[[setups]]\nleg = "x"\nindicators = { A = "y" }\n')
+    assert main(["run", "--config", str(bad), "--yes", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "indicators[0].stroke_mm: must be > 0" in err and "Traceback" not in err
+    assert not list(tmp_path.glob("run-*"))
+
+
+@pytest.fixture
+def station_toml(tmp_path: Path):
+    with SimulatedStation(gauges=gauges_for(6, mounted=True), seed=2) as station:
+        config = station_config(station, {})
+        path = tmp_path / "station.toml"
+
+        def write(**indicator_changes) -> Path:
+            for ind in config["indicators"]:
+                ind.update(indicator_changes.get(ind["name"], {}))
+            path.write_text(toml_text(config, "test"))
+            return path
+
+        yield write
+
+
+def test_plan_lists_and_exits_0_without_moving(station_toml, tmp_path: Path, capsys) -> None:
+    path = station_toml()
+    assert main(["run", "--config", str(path), "--plan", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "Π_x^+" in out and "plan checked" in out
+    assert not list(tmp_path.glob("run-*"))
+
+
+def test_plan_refused_by_stroke_exit_2(station_toml, tmp_path: Path, capsys) -> None:
+    # D stands on leg y, reversed: leg y's swing pushes it in, and it is at its stop
+    # already (no waypoint helps)
+    path = station_toml(D={"stroke_mm": 6.0, "preload_mm": 6.0})
+    assert main(["run", "--config", str(path), "--yes", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "indicator D" in err and "Π_y^" in err and "nothing has moved" in err
+
+
+def test_real_devices_need_a_tty_or_yes(station_toml, tmp_path: Path, capsys,
+                                        monkeypatch) -> None:
+    monkeypatch.setattr("sys.stdin.isatty", lambda: False, raising=False)
+    path = station_toml()
+    assert main(["run", "--config", str(path), "--out", str(tmp_path)]) == 2
+    assert "--yes" in capsys.readouterr().err
+
+
+def test_unreachable_controller_exit_1_names_it(tmp_path: Path, capsys) -> None:
+    with socket.socket() as s:  # a port that was free a moment ago: nothing listens
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    path = tmp_path / "station.toml"
+    path.write_text(f'[controller]\nport = {port}\ntimeout_s = 0.2\n'
+                    '[[indicators]]\nname = "A"\nport = "/dev/null"\n'
+                    '[[setups]]\nleg = "x"\nindicators = { A = "y" }\n')
+    assert main(["run", "--config", str(path), "--yes", "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert f"127.0.0.1:{port}" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_resume_of_a_missing_run_dir_exit_2(tmp_path: Path, capsys) -> None:
+    assert main(["resume", str(tmp_path / "nope")]) == 2
+    assert "no such run directory" in capsys.readouterr().err
+
+
+def test_kill_9_mid_run_then_resume_finishes(tmp_path: Path, capsys) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "runs"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station", "run", "--simulate", no_figures_file(tmp_path),
+         "--seed", "11",
+         "--true-drho", "1.1,-0.4,0.6", "--out", str(out), "--json"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        journal = None
+        while time.monotonic() < deadline:  # kill once the second setup is under way
+            found = list(out.glob("run-*/journal.jsonl"))
+            if found and found[0].read_text().count('"type":"setup"') >= 2:
+                journal = found[0]
+                break
+            time.sleep(0.05)
+        assert journal is not None, "the run did not get to its second setup"
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait(10)
+    before = journal.read_bytes()
+    run_dir = journal.parent
+    assert main(["resume", str(run_dir), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["status"] == "ok"
+    assert journal.read_bytes().startswith(before)
+    assert_truth(result, drho((1.1, -0.4, 0.6)))
+    assert result["verification"]["deviations_rms_mm"] < 0.005

@@ -1,0 +1,188 @@
+"""``orthocal export``: a run's final offsets in a controller's own terms, the new value
+beside the old and the sign taken from the conventions, not left to guess."""
+
+from __future__ import annotations
+
+import configparser
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from builders import FAST, Completed, cli, simulated
+
+from station.commands import run as cmd_run
+from station.history.controller_terms import ExportError, csv_lines, linuxcnc
+from station.history.twincat import twincat
+
+GATEWAY_NO_OFFSETS = Path(__file__).resolve().parents[2] / "examples" / "maps" / \
+    "gateway-3x1-no-offsets.toml"
+
+INI = """[EMC]
+MACHINE = og
+[JOINT_0]
+TYPE = LINEAR
+HOME_OFFSET = 10.0
+[JOINT_1]
+HOME_OFFSET = -2.5 ; the y joint
+[JOINT_2]
+HOME_OFFSET = 0
+"""
+
+
+def result(**extra: Any) -> dict[str, Any]:
+    return {"run_dir": "/runs/run-1", "machine": {"id": "OG-1"}, "offsets_held_by": "station",
+            "offsets_before": {"x": 0.1, "y": 0.0, "z": -0.2},
+            "offsets_final": {"x": 0.6, "y": -0.3, "z": -0.2},
+            "reversal": {"value_mm": {"x": 0.02, "y": 0.0003, "z": 0.0},
+                         "std_errors_mm": {"x": 0.001, "y": 0.001, "z": 0.001}}, **extra}
+
+
+def home_offsets(text: str) -> dict[str, float]:
+    """As LinuxCNC would read them: configparser, comments stripped."""
+    ini = configparser.ConfigParser(strict=False, interpolation=None,
+                                    inline_comment_prefixes=("#", ";"))
+    ini.optionxform = str
+    ini.read_string(text)
+    return {s: float(ini.get(s, "HOME_OFFSET")) for s in ini.sections()
+            if ini.has_option(s, "HOME_OFFSET")}
+
+
+def test_the_carriage_stays_where_the_station_put_it() -> None:
+    """Station: a commanded ρ puts the carriage at ρ + o + c. LinuxCNC: at switch + ρ −
+    HOME_OFFSET. Matched before the run, the exported HOME_OFFSET must put every
+    commanded ρ where the offsets the run left put it."""
+    r = result()
+    switch, c = {"x": 25.0, "y": 25.0, "z": 25.0}, {"x": 3.0, "y": -1.0, "z": 0.5}
+    old = {a: switch[a] - r["offsets_before"][a] - c[a] for a in "xyz"}
+    ini = "".join(f"[JOINT_{j}]\nHOME_OFFSET = {old[a]!r}\n" for j, a in enumerate("xyz"))
+    new = home_offsets(linuxcnc(r, ini))
+    for j, a in enumerate("xyz"):
+        for rho in (-100.0, 0.0, 60.0):
+            assert switch[a] + rho - new[f"JOINT_{j}"] == pytest.approx(
+                rho + r["offsets_final"][a] + c[a], abs=1e-9)
+
+
+def test_linuxcnc_keeps_the_ini_writes_old_beside_new_and_backlash_when_asked() -> None:
+    text = linuxcnc(result(), INI, source="og.ini")
+    assert home_offsets(text) == pytest.approx({"JOINT_0": 9.5, "JOINT_1": -2.2,
+                                                "JOINT_2": 0.0})
+    assert "HOME_OFFSET was 10.000000" in text and "machine OG-1" in text
+    assert "MACHINE = og" in text and "TYPE = LINEAR" in text  # the rest as it was
+    assert "BACKLASH" not in text  # not asked for
+    asked = linuxcnc(result(), INI, source="og.ini", backlash=True)
+    assert "BACKLASH = 0.020000" in asked  # 20 standard errors out
+    assert asked.count("BACKLASH = ") == 1 and "BACKLASH not written" in asked
+    # a drive that holds the offsets itself: LinuxCNC must not correct them again
+    with pytest.raises(ExportError, match="correct the machine twice"):
+        linuxcnc(result(offsets_held_by="controller"), INI)
+    # joints mapped otherwise: x drives joint 2
+    swapped = home_offsets(linuxcnc(result(), INI, joints=(2, 1, 0)))
+    assert swapped["JOINT_2"] == pytest.approx(-0.5)
+
+
+def test_what_cannot_be_exported_is_said_naming_the_field() -> None:
+    with pytest.raises(ExportError, match=r"og.ini: \[JOINT_2\] has no HOME_OFFSET"):
+        linuxcnc(result(), "[JOINT_0]\nHOME_OFFSET = 1\n[JOINT_1]\nHOME_OFFSET = 1\n",
+                 source="og.ini")
+    with pytest.raises(ExportError, match=r"HOME_OFFSET = 'ten' is not a number"):
+        linuxcnc(result(), INI.replace("10.0", "ten"))
+    with pytest.raises(ExportError, match="offsets_before"):
+        csv_lines(result(offsets_final=None))
+
+
+def test_the_command(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run-1"
+    run_dir.mkdir()
+    (run_dir / "result.json").write_text(json.dumps(result()))
+    (tmp_path / "og.ini").write_text(INI)
+
+    def orthocal(*argv: str) -> Completed:
+        return cli("export", str(run_dir), *argv, cwd=tmp_path)
+
+    ok = orthocal("--to", "linuxcnc", "--ini", str(tmp_path / "og.ini"))
+    assert ok.returncode == 0 and home_offsets(ok.stdout)["JOINT_0"] == pytest.approx(9.5)
+    rows = orthocal("--to", "csv").stdout.splitlines()
+    assert rows[1].startswith("x,0.100000,0.600000,+0.500000,0.020000,OG-1,")
+    tc = orthocal("--to", "twincat", "--axes", "X1,Y1,Z1")
+    assert tc.returncode == 0 and tc.stdout.count("\nX1,x,") == 1
+    for argv, words in ((["--to", "linuxcnc"], "--ini"),
+                        (["--to", "linuxcnc", "--ini", "missing.ini"], "cannot read"),
+                        (["--to", "linuxcnc", "--ini", "og.ini", "--joints", "0,1"], "--joints"),
+                        (["--to", "twincat", "--axes", "X1,Y1"], "--axes"),
+                        (["--to", "twincat", "--out", "no/such/dir/f.csv"], "cannot write")):
+        bad = orthocal(*argv)
+        assert bad.returncode == 2 and words in bad.stderr
+        assert len(bad.stderr.strip().splitlines()) == 1 and "Traceback" not in bad.stderr
+    # offsets the drive itself holds: neither controller may be told them again
+    (run_dir / "result.json").write_text(json.dumps(result(offsets_held_by="controller")))
+    for target in (["--to", "twincat"], ["--to", "linuxcnc", "--ini", "og.ini"]):
+        refused = orthocal(*target)
+        assert refused.returncode == 2 and "correct the machine twice" in refused.stderr
+        assert len(refused.stderr.strip().splitlines()) == 1
+    (run_dir / "result.json").write_text(json.dumps(result(offsets_before={"x": "?"})))
+    broken = orthocal("--to", "twincat")
+    assert broken.returncode == 2 and "offsets_before/offsets_final" in broken.stderr
+
+
+def twincat_rows(text: str) -> list[dict[str, str]]:
+    """The parameter rows, as a person or a PLC would read them: comments skipped."""
+    lines = [line for line in text.splitlines() if line and not line.startswith("#")]
+    return list(csv.DictReader(lines))
+
+
+def test_twincat_reference_positions_carry_the_station_s_change() -> None:
+    """TwinCAT sets the axis position at the reference cam to R: a carriage commanded
+    to ρ sits at cam + ρ − R. With R matched to the offsets before the run, R + change
+    must put every commanded ρ where the offsets the run left put it."""
+    r = result()
+    text = twincat(r)
+    rows = twincat_rows(text)
+    assert [row["nc_axis"] for row in rows] == ["Axis 1", "Axis 2", "Axis 3"]
+    assert all("Reference position for homing" in row["parameter"] for row in rows)
+    cam, c = 25.0, {"x": 3.0, "y": -1.0, "z": 0.5}
+    for row in rows:
+        a = row["joint"]
+        change = float(row["change_mm"])
+        assert change == pytest.approx(-(r["offsets_final"][a] - r["offsets_before"][a]))
+        old = cam - r["offsets_before"][a] - c[a]
+        for rho in (-100.0, 0.0, 60.0):
+            assert cam + rho - (old + change) == pytest.approx(
+                rho + r["offsets_final"][a] + c[a], abs=1e-9)
+        assert row["machine_id"] == "OG-1"
+    assert "machine OG-1" in text and "Position Bias" in text and "never both" in text
+    assert "MC_BacklashCompensation" not in text  # not asked for
+    asked = twincat(r, axes=("X1", "Y1", "Z1"), backlash=True)
+    backlash = [row for row in twincat_rows(asked) if "Backlash" in row["parameter"]]
+    assert [(row["nc_axis"], row["value_mm"]) for row in backlash] == [("X1", "0.020000")]
+    assert asked.count("backlash not written") == 2  # y and z: within their noise
+    with pytest.raises(ExportError, match="TwinCAT as well would correct the machine twice"):
+        twincat(result(offsets_held_by="controller"))
+    with pytest.raises(ExportError, match="--axes"):
+        twincat(r, axes=("X1", "Y1"))
+
+
+def test_twincat_from_a_run_whose_station_held_the_offsets(tmp_path: Path, capsys) -> None:
+    true = (0.3, -0.2, 0.1)
+    cmd_run.run(simulated(tmp_path / "runs", seed=3, noise=0.001, true_drho=true,
+                          procedure={**FAST, "model": "rho", "approach_overrun_mm": 0.1},
+                          profile=str(GATEWAY_NO_OFFSETS), backlash="0.03,0,0"))
+    done = json.loads(capsys.readouterr().out)
+    assert done["offsets_held_by"] == "station"
+    out = tmp_path / "og.csv"
+    made = cli("export", done["run_dir"], "--to", "twincat", "--backlash", "--out", str(out),
+               cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    rows = twincat_rows(out.read_text())
+    for row in rows:
+        a = row["joint"]
+        if "Reference" not in row["parameter"]:
+            continue
+        # from zero offsets the change is −offsets_final, about +Δρ (o = −Δρ)
+        assert float(row["change_mm"]) == pytest.approx(
+            -(done["offsets_final"][a] - done["offsets_before"][a]), abs=1e-6)
+        assert abs(float(row["change_mm"]) - true["xyz".index(a)]) < 0.005
+    backlash = {row["joint"]: float(row["value_mm"]) for row in rows
+                if "Backlash" in row["parameter"]}
+    assert set(backlash) == {"x"} and abs(backlash["x"] - 0.03) < 0.01

@@ -1,0 +1,133 @@
+"""The run's record has a schema (station.record): the one we ship is the one the
+models make, and real runs' result.json and journal lines validate against it with
+an independent validator (jsonschema), as another tool reading them would."""
+
+from __future__ import annotations
+
+import json
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import pytest
+from builders import simulated
+from jsonschema import Draft202012Validator
+
+from station.commands import run as cmd_run
+from station.commands.cli import main
+from station.commands.history import read_result
+from station.record import schema_files as schema
+from station.record.migrate import migrate
+from station.record.result import SCHEMA_VERSION, RunResult
+
+DATA = Path(__file__).parents[1] / "data"
+GOLDEN = DATA / "golden_run"
+
+
+@cache
+def validator(kind: str) -> Draft202012Validator:
+    """One validator per kind (checking the schema and building its validator for
+    each of a run's hundreds of journal lines cost seconds)."""
+    doc = json.loads(schema.shipped(kind))
+    Draft202012Validator.check_schema(doc)
+    return Draft202012Validator(doc)
+
+
+def errors(kind: str, doc: dict[str, Any]) -> list[str]:
+    return [f"{'/'.join(map(str, e.absolute_path))}: {e.message}"
+            for e in validator(kind).iter_errors(doc)]
+
+
+@pytest.mark.parametrize("kind", schema.KINDS)
+def test_the_shipped_schema_is_the_models(kind: str, capsys) -> None:
+    # after changing a model: python -m station schema KIND > station/record/schemas/...
+    assert schema.shipped(kind) == schema.dumps(kind)
+    assert main(["schema", kind]) == 0
+    assert capsys.readouterr().out == schema.shipped(kind)
+    assert json.loads(schema.shipped(kind))["schema_version"] == SCHEMA_VERSION == 2
+
+
+def _check_run_dir(run_dir: Path) -> dict[str, Any]:
+    result = json.loads((run_dir / "result.json").read_text())
+    assert errors("result", result) == []
+    if (run_dir / "model.json").exists():
+        assert errors("model", json.loads((run_dir / "model.json").read_text())) == []
+    for n, line in enumerate((run_dir / "journal.jsonl").read_text().splitlines()):
+        assert errors("journal", json.loads(line)) == [], n
+    return result
+
+
+def test_a_run_and_a_refused_write_back_validate(tmp_path: Path, capsys) -> None:
+    cmd_run.run(simulated(tmp_path / "ok", seed=3, true_drho=(0.3, -0.2, 0.1)))
+    capsys.readouterr()
+    (ok,) = (tmp_path / "ok").glob("run-*")
+    assert _check_run_dir(ok)["schema_version"] == SCHEMA_VERSION
+    machine = json.loads((ok / "model.json").read_text())
+    assert machine["format"] == "orthocal machine model 1"
+    # a field the record does not declare, or a unit it does not know, is caught
+    assert any("unexpected" in e for e in errors("model", {**machine, "bows": {}}))
+    assert errors("model", {**machine, "units": {**machine["units"], "tilt": "rad"}})
+    # a correction beyond max_abs_offset_mm is refused: another status, other records
+    cmd_run.run(simulated(tmp_path / "refused", seed=3, true_drho=(0.3, -0.2, 0.1),
+                          writeback={"max_abs_offset_mm": 0.05}))
+    capsys.readouterr()
+    (refused,) = (tmp_path / "refused").glob("run-*")
+    assert _check_run_dir(refused)["writeback"]["status"] == "refused"
+
+
+def test_the_golden_run_validates_and_drift_does_not() -> None:
+    result = json.loads((GOLDEN / "result.json").read_text())
+    result.update(run_dir="RUN_DIR", started="WHEN", finished="WHEN", duration_s=1.0)
+    result["timing"].update(wall_s=1.0, operator_s=0.0)
+    assert errors("result", result) == []
+    # a field the models do not declare, or a status they do not know, is caught
+    assert any("unexpected" in e for e in errors("result", {**result, "offsets_new": 1}))
+    assert errors("result", {**result, "status": "fine"})
+    # a journal line of an unknown type, or a reading without values
+    assert errors("journal", {"type": "mystery", "t": 0.0})
+    assert errors("journal", {"type": "reading", "t": 0.0, "stop": "m:0:0:0", "indicator": "A"})
+
+
+#: Results written by older versions: the golden run as version 1 wrote it (times and
+#: the run directory taken out, as tests/e2e/test_unchanged.py does), and two runs from
+#: before the schema (no schema_version).
+OLDER = {"result_v1.json": 1, "result_tilted_joints.json": None,
+         "result_tilted_tool.json": None}
+
+
+@pytest.mark.parametrize("name", sorted(OLDER))
+def test_an_older_result_is_read_as_the_current_version(name: str, tmp_path: Path) -> None:
+    old = json.loads((DATA / name).read_text())
+    assert old.get("schema_version") == OLDER[name]
+    snapshot = json.dumps(old)
+    doc = migrate(old)
+    assert json.dumps(old) == snapshot  # the caller's document is left as it was
+    assert doc["schema_version"] == SCHEMA_VERSION and migrate(doc) == doc
+    for key, value in (("run_dir", "RUN_DIR"), ("started", "WHEN"), ("finished", "WHEN"),
+                       ("duration_s", 1.0)):
+        doc.setdefault(key, value)
+    doc["timing"].setdefault("wall_s", 1.0)
+    assert errors("result", doc) == []
+    RunResult.model_validate_json(json.dumps(doc), strict=True)
+    # every reader of a run directory reads it so (orthocal report, compare, export)
+    (tmp_path / "result.json").write_text(json.dumps(old))
+    assert read_result(str(tmp_path))[1]["schema_version"] == SCHEMA_VERSION
+
+
+def test_an_old_journals_simulation_is_read_with_what_that_run_had() -> None:
+    """Headers from before a simulated error existed lack it, or hold null: the run
+    had none of it, said once (station.record.simulated)."""
+    from station.record.simulated import SimulationParams
+
+    old = {"seed": 4, "true_drho": [0.1, 0.2, 0.3], "true_dl": [0, 0, 0], "noise_mm": 0.002,
+           "true_tilt": None, "backlash_mm": None, "indicators": 6}
+    sim = SimulationParams.from_header(old)
+    assert sim.true_tilt == sim.true_gap == sim.backlash_mm == sim.leg_bow_mm == (0, 0, 0)
+    assert sim.mount_error_mm == 0.0 and sim.gauge_scales(6) == [0.0] * 6
+    assert sim.true_drho == (0.1, 0.2, 0.3) and sim.indicators == 6
+    # what a run draws now is kept as it is, one scale error per gauge included
+    new = SimulationParams.from_header({**old, "gauge_scale": [0.001, -0.002],
+                                        "mount_error_mm": 5.0})
+    assert new.gauge_scales(2) == [0.001, -0.002] and new.mount_error_mm == 5.0
+    with pytest.raises(ValueError):
+        SimulationParams.from_header({**old, "true_drho": [0.1, 0.2]})

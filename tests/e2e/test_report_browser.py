@@ -1,0 +1,105 @@
+"""report.html in a real browser (Debian's Chromium, headless): drawn again from the
+golden run's result.json by ``orthocal report``, it lays out with every figure drawn
+at a real size, nothing wider than the page, and prints to PDF, as a shop prints it.
+
+The layout facts come from the browser itself: a copy of the page carries a script
+that measures it after load and writes what it found into the DOM, which Chromium's
+``--dump-dom`` prints. Chromium is started with a fresh profile and without the
+background networking a closed network refuses, and is stopped with its whole
+process group, so nothing is left behind."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+from pathlib import Path
+
+import pytest
+from builders import cli
+from result_builders import golden_result
+from system import require
+
+GOLDEN = Path(__file__).parents[1] / "data" / "golden_run"
+FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--disable-dev-shm-usage", "--window-size=1000,1400"]
+TIMEOUT_S = 90.0
+#: What the page says of itself once laid out: every figure's box, how wide the
+#: document scrolls against the window, the headings in order.
+PROBE = """<script>
+window.addEventListener("load", () => {
+  const figures = [...document.querySelectorAll("svg")].map(s => {
+    const r = s.getBoundingClientRect(); return [r.width, r.height]; });
+  const page = document.documentElement.clientWidth;
+  const widest = document.documentElement.scrollWidth;
+  const headings = [...document.querySelectorAll("h1, h2")].map(h => h.textContent);
+  const out = document.createElement("pre"); out.id = "orthocal-probe";
+  out.textContent = JSON.stringify({figures, page, widest, headings});
+  document.body.appendChild(out);
+});
+</script>"""
+
+
+def chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def browse(tmp: Path, *args: str) -> str:
+    """Run headless Chromium to completion; its stdout. The whole process group is
+    killed on a timeout (Chromium's zygote and renderers are its children)."""
+    exe = chromium()
+    assert exe is not None
+    proc = subprocess.Popen([exe, *FLAGS, f"--user-data-dir={tmp / 'profile'}", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                            start_new_session=True, env={**os.environ, "HOME": str(tmp)})
+    try:
+        out, _ = proc.communicate(timeout=TIMEOUT_S)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+    assert proc.returncode == 0, f"chromium exited {proc.returncode}"
+    return out
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The golden run's report.html, drawn by this code, figures included."""
+    require(chromium() is not None, "Chromium (Debian's chromium package)")
+    run = tmp_path_factory.mktemp("run") / "golden"
+    shutil.copytree(GOLDEN, run)
+    (run / "report.html").unlink()
+    # the golden result.json lacks what cannot repeat (times, the run directory)
+    (run / "result.json").write_text(json.dumps(golden_result()), encoding="utf-8")
+    done = cli("report", str(run), cwd=run)
+    assert done.returncode == 0, done.stderr
+    return run / "report.html"
+
+
+def test_every_figure_is_drawn_and_nothing_is_wider_than_the_page(report, tmp_path) -> None:
+    page = tmp_path / "probed.html"
+    page.write_text(report.read_text(encoding="utf-8").replace("</body>", PROBE + "</body>"),
+                    encoding="utf-8")
+    dom = browse(tmp_path, "--dump-dom", page.as_uri())
+    m = re.search(r'<pre id="orthocal-probe">(.*?)</pre>', dom, re.S)
+    assert m, "the page's script did not run"
+    facts = json.loads(m.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+    assert len(facts["figures"]) == report.read_text(encoding="utf-8").count("<svg")
+    assert facts["figures"] and all(w > 200 and h > 100 for w, h in facts["figures"])
+    assert facts["widest"] <= facts["page"] + 1  # no sideways scrolling on a screen
+    assert facts["headings"][0].startswith("Calibration report")
+    assert "Accuracy at the tool" in facts["headings"]
+
+
+def test_it_prints_to_pdf(report, tmp_path) -> None:
+    pdf = tmp_path / "report.pdf"
+    browse(tmp_path, "--no-pdf-header-footer", f"--print-to-pdf={pdf}", report.as_uri())
+    data = pdf.read_bytes()
+    assert data.startswith(b"%PDF-")
+    pages = len(re.findall(rb"/Type\s*/Page\b", data))
+    assert pages >= 2  # the whole report, not a blank first sheet
+    assert len(data) > 50_000  # the figures are in it, as vectors
