@@ -15,7 +15,7 @@ import json
 import sys
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 from drivers.base import Moves
 from station import report
@@ -228,7 +228,7 @@ def resume(options: ResumeOptions) -> int:
         print_result(options.json, result)
         return exit_status(result, 0 if state.finished.status == "ok" else 1)
     config = _held_offsets(load_config(run_dir / "config.toml"), state)
-    sim = state.header.simulation
+    sim = _simulation(state)
     with ExitStack() as stack:
         station, config = _restart_station(stack, options, sim, run_dir, config)
         if station is None:
@@ -290,15 +290,20 @@ def offsets_from(config: Any, run_dir: Path) -> Any:
         raise BadInput(f"--offsets-from: the drive holds its own zero offsets (map "
                        f"{config.controller.profile!r} has OFFSET registers)")
     done, state = reopen(Path(run_dir))
-    controller = (state.header.config if state.header else {}).get("controller")
-    start = controller.get("offsets") if isinstance(controller, dict) else None
-    held = state.held_offsets(cast("list[float] | None", start))
+    start = state.header.config.controller.offsets if state.header else None
+    held = state.held_offsets(start)
     if held is None:
         raise BadInput(f"--offsets-from: {done} wrote no offsets")
     say(f"orthocal: starting from the offsets {done} ended with: "
         + ", ".join(f"{a} {v:+.4f}" for a, v in zip(AXES, held, strict=True)) + " mm")
     return config.model_copy(update={
         "controller": config.controller.model_copy(update={"offsets": held})})
+
+
+def _simulation(state: RunState) -> dict[str, Any] | None:
+    """A simulated run's parameters as its header holds them (None: real devices)."""
+    sim = None if state.header is None else state.header.simulation
+    return None if sim is None else sim.as_json()
 
 
 def _restart_station(stack: ExitStack, options: ResumeOptions, sim: dict[str, Any] | None,
@@ -323,7 +328,7 @@ def _stop_quietly(controller: Moves) -> None:
 def rollback(options: ResumeOptions) -> int:
     run_dir, state = reopen(options.run_dir)
     config = _held_offsets(load_config(run_dir / "config.toml"), state)
-    sim = state.header.simulation if state.header else None
+    sim = _simulation(state)
     with ExitStack() as stack:
         station, config = _restart_station(stack, options, sim, run_dir, config)
         _lock(stack, config, "rollback", run_dir)

@@ -36,7 +36,15 @@ from station.analysis.documents import JsonObject
 from station.console.operator import Operator
 from station.engine.replay import Steps, WritebackRound, WritebackStage
 from station.errors import RunFailed
-from station.record.journal import Writeback
+from station.record.journal import (
+    Writeback,
+    WritebackBackup,
+    WritebackDone,
+    WritebackFailed,
+    WritebackIntent,
+    WritebackSkipped,
+    WritebackUnchanged,
+)
 from station.record.journal_file import Journal
 
 BACKUP_NAME = "offsets_backup.json"
@@ -88,12 +96,14 @@ class _Stages:
 
 def _outcome(final: Writeback) -> WritebackOutcome:
     """What a round's final stage says of it, taken now or journaled before."""
-    return WritebackOutcome("written" if final.stage == "done" else final.stage,
-                            final.reason, _copy(final.before), _copy(final.written))
-
-
-def _copy(offsets: dict[str, float] | None) -> dict[str, float] | None:
-    return None if offsets is None else dict(offsets)
+    match final:
+        case WritebackDone():
+            return WritebackOutcome("written", None, dict(final.before), dict(final.written))
+        case WritebackUnchanged() | WritebackFailed():
+            return WritebackOutcome(final.stage, final.reason, dict(final.before), None)
+        case WritebackSkipped():
+            return WritebackOutcome(final.stage, final.reason, None, None)
+    raise AssertionError(f"write-back stage {final.stage!r} ends no round")
 
 
 def write_back(
@@ -154,7 +164,7 @@ def _backup(stages: _Stages, controller: ZeroOffsets, run_dir: Path) -> dict[str
             stages.log({"stage": "backup", "before": before})
 
     record = stages.take("backup", backup)
-    assert record is not None and record.before is not None
+    assert isinstance(record, WritebackBackup)
     return {a: float(v) for a, v in record.before.items()}
 
 
@@ -184,7 +194,7 @@ def _intent(stages: _Stages, controller: ZeroOffsets, operator: Operator,
                                                 note))
     if record is None:
         return None
-    assert record.written is not None
+    assert isinstance(record, WritebackIntent)
     return {a: float(v) for a, v in record.written.items()}
 
 

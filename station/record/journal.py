@@ -2,10 +2,18 @@
 ``type`` (docs/design.md, "The run record"). Every record carries ``t`` (Unix time,
 s) and is fsynced before the station moves on; a resumed run replays them.
 
-Every record is closed: its fields are declared. What is a document of its own is a
-JSON object here: the header's config, plan and simulation (station.config,
-station.plan, station.record.simulated read them) and an event's body (retries,
-the plunger guard's stops and recoveries, …: ``{"event": name, …}``)."""
+Every record is closed, and so is every object in it: its fields are declared, down
+to the header's config (station.config's StationConfig), plan
+(station.record.journal_plan) and simulation (station.record.simulated), an event's
+body (station.record.journal_events, tagged by ``event``) and each stage of a
+write-back or a rollback (tagged by ``stage``). The only open-ended objects are maps
+keyed by data (a gauge, an axis, a parameter) with typed values.
+
+The journal's shape has only grown: a field a later version added is optional where
+it is declared, so a journal an older version wrote reads as it is (tests/e2e/test_record.py
+reads one from the first version that ran). A change that is not a field added would
+migrate the older lines in one place, read_records (station.record.journal_file), before
+they are parsed."""
 
 from __future__ import annotations
 
@@ -13,7 +21,12 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
-from station.record.result_base import JsonObject
+from station.config import StationConfig
+from station.record.journal_events import EventBody
+from station.record.journal_plan import PlanRecord
+from station.record.simulated import SimulationParams
+
+Offsets = dict[str, float]  # axis (x, y, z) → zero offset, mm
 
 
 class _Record(BaseModel):
@@ -25,9 +38,9 @@ class _Record(BaseModel):
 class Header(_Record):
     type: Literal["header"]
     version: str = Field(description="orthocal's version")
-    config: JsonObject = Field(description="the station config (config.toml's model)")
-    plan: JsonObject
-    simulation: JsonObject | None = Field(
+    config: StationConfig = Field(description="the station config (config.toml's model)")
+    plan: PlanRecord
+    simulation: SimulationParams | None = Field(
         None, description="a simulated run's parameters (station.record.simulated)")
     started: str
     argv: list[str] | None = None
@@ -121,20 +134,79 @@ class Verification(_Fit):
 
 
 class Writeback(_Record):
-    """One stage of a write-back round (backup, intent, done, …)."""
+    """One stage of a write-back round (its kinds below, each tagged by ``stage``);
+    ``round``: k of the closed loop (absent before the closed loop: round 1)."""
 
     type: Literal["writeback"]
     stage: str
     round: int | None = None
-    reason: str | None = None
-    before: dict[str, float] | None = None
-    written: dict[str, float] | None = None
+
+
+class WritebackBackup(Writeback):
+    """The offsets the round starts from (round 1 also saves them to ``file``)."""
+
+    stage: Literal["backup"]
+    before: Offsets
     file: str | None = Field(None, description="the backup file")
+
+
+class WritebackIntent(Writeback):
+    """The offsets the operator confirmed, journaled before any is written."""
+
+    stage: Literal["intent"]
+    before: Offsets
+    written: Offsets
+
+
+class WritebackDone(Writeback):
+    """Written, and ``written`` as read back."""
+
+    stage: Literal["done"]
+    before: Offsets
+    written: Offsets
+
+
+class WritebackSkipped(Writeback):
+    """Nothing to write (the model identifies no joint offsets)."""
+
+    stage: Literal["skipped"]
+    reason: str
+
+
+class WritebackUnchanged(Writeback):
+    """Nothing written: the correction refused (beyond max_abs_offset_mm) or declined."""
+
+    stage: Literal["refused", "declined"]
+    reason: str
+    before: Offsets
+
+
+class WritebackFailed(Writeback):
+    """The write failed: ``failed-restored``, the backup written back; ``failed``, that
+    failed too (the offsets are uncertain)."""
+
+    stage: Literal["failed", "failed-restored"]
+    reason: str
+    before: Offsets
+
+
+class WritebackInterrupted(Writeback):
+    """Ctrl-C during the write: the backup written back, the intent kept for resume."""
+
+    stage: Literal["interrupted-restored"]
+    before: Offsets
+
+
+AnyWriteback = Annotated[
+    WritebackBackup | WritebackIntent | WritebackDone | WritebackSkipped
+    | WritebackUnchanged | WritebackFailed | WritebackInterrupted,
+    Field(discriminator="stage"),
+]
 
 
 class Event(_Record):
     type: Literal["event"]
-    event: JsonObject = Field(description='{"event": its name, and its own fields}')
+    event: EventBody = Field(description='{"event": its kind, and its own fields}')
 
 
 class Finished(_Record):
@@ -192,19 +264,30 @@ class SetupRedo(_Record):
 
 
 class Rollback(_Record):
-    """The operator's rollback to the backed-up offsets."""
+    """A stage of the operator's rollback to the backed-up offsets."""
 
     type: Literal["rollback"]
-    stage: Literal["intent", "done"]
-    current: dict[str, float] | None = None
-    restore: dict[str, float] | None = None
-    restored: dict[str, float] | None = None
+    stage: str
+
+
+class RollbackIntent(Rollback):
+    stage: Literal["intent"]
+    current: Offsets = Field(description="the offsets before the rollback")
+    restore: Offsets = Field(description="the backed-up offsets it writes")
+
+
+class RollbackDone(Rollback):
+    stage: Literal["done"]
+    restored: Offsets = Field(description="the offsets as read back")
+
+
+AnyRollback = Annotated[RollbackIntent | RollbackDone, Field(discriminator="stage")]
 
 
 JournalRecord = Annotated[
     Header | Setup | Reading | Outlier | Cycle | SetupDone | Repeat | Identification
-    | Verification | Writeback | Event | Finished | Stopped | Resumed | Homed
-    | ReferenceCheck | SetupRedo | Rollback,
+    | Verification | AnyWriteback | Event | Finished | Stopped | Resumed | Homed
+    | ReferenceCheck | SetupRedo | AnyRollback,
     Field(discriminator="type"),
 ]
 

@@ -143,7 +143,8 @@ def read_journal(path: str | Path) -> list[dict[str, Any]]:
 
 def read_records(path: str | Path) -> list[JournalRecord]:
     """All intact records (as :func:`read_journal`), each parsed into its record type
-    (station.record.journal): BadInput names a line that is not one."""
+    (station.record.journal; an older version's lines read as they are): BadInput
+    names a line that is not one."""
     path = Path(path)
     records: list[JournalRecord] = []
     for number, record in _lines(path):

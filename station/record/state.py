@@ -31,17 +31,26 @@ from station.record.journal import (
     Reading,
     Repeat,
     Resumed,
-    Rollback,
+    RollbackDone,
     Setup,
     SetupDone,
     SetupRedo,
     Verification,
     Writeback,
+    WritebackDone,
+    WritebackFailed,
+    WritebackInterrupted,
+)
+from station.record.journal_events import (
+    EventBody,
+    GuardRecovery,
+    GuardRefused,
+    GuardStop,
+    Retake,
+    Retry,
 )
 
 Fit = Identification | Verification
-#: The write-back stages after which the station holds the offsets the stage names.
-_HOLDS = {"done": "written", "interrupted-restored": "before", "failed-restored": "before"}
 
 
 @dataclass
@@ -137,7 +146,7 @@ class RunState:
                 self._fit(rec)
             case Writeback():
                 self._writeback(rec)
-            case Rollback(stage="done") if rec.restored is not None:
+            case RollbackDone():
                 self.offsets_held = [float(rec.restored[a]) for a in AXES]
             case Event():
                 self._event(rec.event)
@@ -167,27 +176,31 @@ class RunState:
     def _writeback(self, rec: Writeback) -> None:
         # records from before the closed loop carry no round: round 1
         self.writebacks.setdefault(1 if rec.round is None else rec.round, {})[rec.stage] = rec
-        held = getattr(rec, _HOLDS[rec.stage]) if rec.stage in _HOLDS else None
-        if held is not None:
-            self.offsets_held = [float(held[a]) for a in AXES]
+        # the stages after which the station holds the offsets: those written, or the
+        # backup written back
+        match rec:
+            case WritebackDone():
+                self.offsets_held = [float(rec.written[a]) for a in AXES]
+            case WritebackInterrupted() | WritebackFailed(stage="failed-restored"):
+                self.offsets_held = [float(rec.before[a]) for a in AXES]
 
-    def _event(self, event: dict[str, Any]) -> None:
-        name = event.get("event")
-        if name == "retry":
-            self.retries += 1
-        elif name == "plunger-guard":
-            self.guard.stops += 1
-        elif name == "retake":
-            self.guard.retakes += 1
-        elif name == "plunger-guard-refused":
-            self.guard.refused += 1
-        elif name == "plunger-guard-recovery" and event.get("result") == "recovered":
-            # zero_shift_mm: only where the way back found a gauge's zero moved (a step)
-            self.guard.recovered.append({
-                **{k: event.get(k) for k in ("where", "move", "indicator", "waypoints",
-                                             "speed_mm_s")},
-                **({"zero_shift_mm": event["zero_shift_mm"]} if "zero_shift_mm" in event
-                   else {})})
+    def _event(self, event: EventBody) -> None:
+        match event:
+            case Retry():
+                self.retries += 1
+            case GuardStop():
+                self.guard.stops += 1
+            case Retake():
+                self.guard.retakes += 1
+            case GuardRefused():
+                self.guard.refused += 1
+            case GuardRecovery(result="recovered"):
+                # zero_shift_mm: only where the way back found a gauge's zero moved (a step)
+                self.guard.recovered.append({
+                    "where": event.where, "move": event.move, "indicator": event.indicator,
+                    "waypoints": event.waypoints, "speed_mm_s": event.speed_mm_s,
+                    **({"zero_shift_mm": dict(event.zero_shift_mm)}
+                       if event.zero_shift_mm is not None else {})})
 
     def _void(self, phase: str, setup: int) -> None:
         """A setup-redo: the setup's steps so far are void (its readings are kept, as

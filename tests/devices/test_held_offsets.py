@@ -103,9 +103,10 @@ def test_the_journal_says_what_the_station_holds() -> None:
     second = {"x": 0.12, "y": 0.18, "z": 0.32}
     assert held_after([], None) is None
     assert held_after([], [0.1, 0.2, 0.3]) == [0.1, 0.2, 0.3]
-    records = [_wb("intent", before=before, written=first), _wb("done", written=first)]
+    records = [_wb("intent", before=before, written=first),
+               _wb("done", before=before, written=first)]
     assert held_after(records, [0.1, 0.2, 0.3]) == [0.11, 0.19, 0.31]
-    records += [_wb("done", written=second)]
+    records += [_wb("done", before=first, written=second)]
     assert held_after(records, None) == [0.12, 0.18, 0.32]
     # a write-back cut and restored, or a rollback, leaves the backed-up offsets
     assert held_after([*records, _wb("interrupted-restored", before=first)], None) == \

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 
 import pytest
+from builders import journal_header
 
 import station.record.journal_file as journal_mod
 from station.errors import BadInput
@@ -16,8 +17,7 @@ from station.record.journal import Header, Reading, Setup
 from station.record.journal_file import Journal, read_journal, read_records
 from station.record.state import RunState
 
-HEADER = {"type": "header", "version": "test", "config": {"a": 1}, "plan": {},
-          "started": "2026-01-01T00:00:00+00:00"}
+HEADER = journal_header()
 
 
 def test_each_append_is_flushed_and_fsynced(tmp_path: Path, monkeypatch) -> None:
@@ -47,14 +47,17 @@ def test_the_state_saved_is_the_state_read_back(tmp_path: Path) -> None:
         j.append({"type": "setup", "phase": "m", "setup": 0, "leg": "x",
                   "indicators": {"A": "y"}, "operator_s": 1.5})
         j.append({"type": "reading", "stop": "m:0:0:0", "indicator": "A", "values": [0.1, 0.2]})
-        j.append({"type": "event", "event": {"event": "retry", "device": "indicator A"}})
-        j.append({"type": "writeback", "stage": "backup", "before": {"x": 0.0}})
+        j.append({"type": "event", "event": {"event": "retry", "device": "indicator A",
+                                             "indicator": "A", "port": "/dev/a",
+                                             "attempt": 1, "error": "no reply"}})
+        j.append({"type": "writeback", "stage": "backup",
+                  "before": {"x": 0.0, "y": 0.0, "z": 0.0}})
         saved = j.state
     records = read_records(path)
     assert [type(r) for r in records[:3]] == [Header, Setup, Reading]  # each its type
     state = RunState.of(records)
     assert state == saved  # folded as saved, and folded again from the file: the same
-    assert state.header is not None and state.header.config == {"a": 1}
+    assert state.header is not None and state.header.config.indicators[1].name == "B"
     assert state.live is not None and (state.live.phase, state.live.setup) == ("m", 0)
     assert state.live.readings[("m:0:0:0", "A")] == [0.1, 0.2]
     assert (state.mountings, state.operator_s, state.retries) == (1, 1.5, 1)

@@ -20,7 +20,7 @@ from typing import Any
 
 import forked
 import pytest
-from builders import FAST, Rig, no_figures_file, on_setup
+from builders import FAST, Rig, journal_header, no_figures_file, on_setup
 from close import assert_same
 
 from drivers.sim.specs import GaugeSpec, MachineTruth
@@ -270,8 +270,7 @@ def test_a_second_station_on_the_same_machine_is_refused_at_once(
         run_dir.mkdir(parents=True)
         (run_dir / "config.toml").write_text(dump_toml(config))
         with Journal(run_dir / "journal.jsonl") as j:
-            j.append({"type": "header", "version": "test", "config": config.model_dump(),
-                      "plan": {}, "simulation": None, "started": "2026-01-01T00:00:00+00:00"})
+            j.append(journal_header(config=config.model_dump()))
         holder = subprocess.Popen(
             [sys.executable, "-c", HOLDER, str(station.controller.port), "/runs/other-run"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)

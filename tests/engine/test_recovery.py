@@ -6,10 +6,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from builders import journal_header
+
 from station.record.journal import RECORD, JournalRecord
 from station.record.state import RunState
 
-HEADER = {"type": "header", "version": "test", "config": {}, "plan": {}, "started": "now"}
+HEADER = journal_header(started="now")
 
 
 def _typed(records: list[dict[str, Any]]) -> list[JournalRecord]:

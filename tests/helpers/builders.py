@@ -72,6 +72,17 @@ def station_config(**sections: Any) -> StationConfig:
     return parse_config(station_data(**sections))
 
 
+def journal_header(**fields: Any) -> dict[str, Any]:
+    """A journal's ``header`` record (without ``t``) for the tests' station (BASE),
+    its config and plan as a run journals them, with ``fields`` put in."""
+    from station.plan.steps import build_plan
+
+    config = station_config()
+    return {"type": "header", "version": "test", "config": config.model_dump(),
+            "plan": build_plan(config).to_json(), "simulation": None,
+            "started": "2026-01-01T00:00:00+00:00", **fields}
+
+
 def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
               procedure: dict[str, Any] | None = FAST, hook: Any = None, yes: bool = False,
               json: bool = True, plan: bool = False, true_drho: Any = None,

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from builders import station_config, station_data
+from builders import journal_header, station_config, station_data
 
 import orthocal
 from drivers.sim.controller import SimController
 from station.commands.cli import main
-from station.config import StationConfig, parse_config
+from station.config import StationConfig, load_config, parse_config
 from station.errors import BadInput
 from station.plan.check import check_plan
 from station.plan.steps import Move, Prompt, Read, build_plan
@@ -235,8 +235,7 @@ def test_resume_refuses_a_gauge_port_that_does_not_exist(tmp_path: Path, capsys)
         run_dir.mkdir()
         (run_dir / "config.toml").write_text(path.read_text())
         (run_dir / "journal.jsonl").write_text(json.dumps(
-            {"type": "header", "t": 0.0, "version": "test", "config": {}, "plan": {},
-             "simulation": None, "started": "2026-01-01T00:00:00+00:00"}) + "\n")
+            {"t": 0.0, **journal_header(config=load_config(path).model_dump())}) + "\n")
         assert main(["resume", str(run_dir), "--yes"]) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"orthocal: error: indicator D: port {missing} does not exist")

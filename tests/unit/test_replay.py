@@ -20,6 +20,8 @@ from station.engine.replay import (
 from station.record.journal_file import Journal
 from station.record.state import RunState
 
+ZERO = {"x": 0.0, "y": 0.0, "z": 0.0}
+
 
 def _cycle(phase: str, setup: int, cycle: int) -> dict[str, Any]:
     return {"type": "cycle", "phase": phase, "setup": setup, "cycle": cycle,
@@ -40,9 +42,10 @@ def _journal(tmp_path: Path, records: list[dict[str, Any]]) -> Journal:
 def test_each_step_is_found_by_its_identity(tmp_path: Path) -> None:
     with _journal(tmp_path, [
         _cycle("m", 0, 1), _cycle("m", 0, 2), _done(0), _cycle("m", 1, 1),
-        {"type": "writeback", "stage": "backup", "before": {}},  # before rounds: round 1
-        {"type": "writeback", "round": 2, "stage": "intent", "written": {}},
-        {"type": "writeback", "round": 2, "stage": "declined", "before": {}},
+        {"type": "writeback", "stage": "backup", "before": ZERO},  # before rounds: round 1
+        {"type": "writeback", "round": 2, "stage": "intent", "before": ZERO, "written": ZERO},
+        {"type": "writeback", "round": 2, "stage": "declined", "reason": "declined",
+         "before": ZERO},
         {"type": "identification", "model": "rho", "parameters": {}, "std_errors": {}},
     ]) as journal:
         state = journal.state

@@ -8,6 +8,9 @@ import argparse
 import dataclasses
 import re
 from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel
 
 from drivers.map_files import is_map_file
 from station.commands.options import DriveOptions, RunOptions, SimOptions
@@ -42,7 +45,8 @@ def load_simulation(path: str | Path) -> SimOptions:
         gauge_scale=as_text(s.gauge_scale), profile=profile,
         drive=DriveOptions(motion=d.motion, profile=as_text(d.profile), accel=as_text(d.accel),
                            delays=as_text(d.delays), sequence=d.sequence),
-        procedure=doc.procedure, writeback=doc.writeback, report=doc.report)
+        procedure=_given(doc.procedure), writeback=_given(doc.writeback),
+        report=_given(doc.report))
     try:  # the options' own checks, said in the file's words
         sim_params(options)
     except BadInput as exc:
@@ -51,6 +55,11 @@ def load_simulation(path: str | Path) -> SimOptions:
         said = re.sub(r"--[a-z][\w-]*", lambda m: _key_of(m.group(0)), str(exc))
         raise BadInput(f"{source}: {said}") from None
     return options
+
+
+def _given(table: BaseModel | None) -> dict[str, Any] | None:
+    """A table of overrides as the keys the file gives (None: no table)."""
+    return None if table is None else table.model_dump(exclude_unset=True)
 
 
 def with_command_line(from_file: SimOptions, given: SimOptions) -> SimOptions:

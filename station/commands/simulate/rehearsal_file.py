@@ -22,6 +22,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from station.config import format_validation_error
+from station.config.overrides import ProcedureOverrides, ReportOverrides, WritebackOverrides
 from station.errors import BadInput, read_input
 
 Triple = tuple[float, float, float]
@@ -62,12 +63,13 @@ class SimulationTable(_Strict):
 
 class SimulationFile(_Strict):
     """The whole file: the virtual machine, and the station's procedure, write-back
-    and report overrides for the run (checked as the station config checks them)."""
+    and report overrides for the run (each key of its table's type; the station config
+    then checks them together)."""
 
     simulation: SimulationTable = SimulationTable()
-    procedure: dict[str, Any] | None = None
-    writeback: dict[str, Any] | None = None
-    report: dict[str, Any] | None = None
+    procedure: ProcedureOverrides | None = None
+    writeback: WritebackOverrides | None = None
+    report: ReportOverrides | None = None
 
 
 def read_simulation(path: Path) -> SimulationFile:

@@ -1,0 +1,92 @@
+"""The journal header's ``plan``: the checked plan as station.plan.steps.Plan.to_json
+writes it, every field declared (docs/design.md, "The run record"). Its steps are the
+measurement phase's, tagged by ``kind``.
+
+A field that a later version added is optional: journals written before it lack it
+(soft limits' ``source``, the controller's path model ``motion``, a move's
+``approach`` and ``via``, a prompt's ``at``, ``test_postures``)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Joints = tuple[float, float, float]  # x, y, z, mm
+
+
+class _Closed(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class SoftLimits(_Closed):
+    lower: list[float]
+    upper: list[float]
+    source: str | None = Field(None, description="whose limits: the controller's, the config's")
+
+
+class SetupPostures(_Closed):
+    index: int
+    leg: str
+    indicators: dict[str, str] = Field(description="gauge → its direction (y, -z, …)")
+    postures: dict[str, Joints] = Field(description='posture ("0", "+", "-", "+30") → joints')
+
+
+class PromptStep(_Closed):
+    """The operator mounts the setup's gauges."""
+
+    kind: Literal["prompt"]
+    setup: int
+    leg: str
+    indicators: list[tuple[str, str]] = Field(description="(gauge, direction) as mounted")
+    at: float | None = Field(None, description="the gauges' place along the leg")
+
+
+class MoveStep(_Closed):
+    kind: Literal["move"]
+    targets: Joints
+    label: str
+    approach: Joints | None = Field(None, description="where the last short leg starts")
+    via: list[Joints] | None = Field(None, description="the waypoints the check put on it")
+
+
+class SettleStep(_Closed):
+    kind: Literal["settle"]
+    seconds: float
+
+
+class ReadStep(_Closed):
+    kind: Literal["read"]
+    stop: str
+    setup: int
+    cycle: int
+    sign: str
+    indicators: list[str]
+    n: int
+
+
+class CheckpointStep(_Closed):
+    kind: Literal["checkpoint"]
+    setup: int
+    cycle: int
+    label: str
+
+
+PlanStep = Annotated[PromptStep | MoveStep | SettleStep | ReadStep | CheckpointStep,
+                     Field(discriminator="kind")]
+
+
+class PlanRecord(_Closed):
+    """The plan every move of the run was checked against."""
+
+    cycles: int
+    readings: int
+    settle_s: float
+    soft_limits: SoftLimits | None
+    setups: list[SetupPostures]
+    travel_mm: dict[str, tuple[float, float]] = Field(
+        default_factory=dict, description="per gauge and setup: (min, max) plunger travel")
+    motion: str | None = Field(None, description="the controller's path model")
+    steps: list[PlanStep]
+    test_postures: list[str] | None = Field(
+        None, description="a cycle's postures, where [procedure] strokes names them")
