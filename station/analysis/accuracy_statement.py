@@ -37,8 +37,8 @@ from orthocal.accuracy import (
 from orthocal.loop import FALSE_ALARM
 from orthocal.numbers import finite
 from orthocal.tool_interval import after_interval, assumes
-from station.analysis.documents import JsonObject
 from station.config import StationConfig
+from station.record.result_accuracy import SquarenessDecision
 
 #: Grid nodes per axis of the workspace box (docs/model.md's check values use 7³).
 GRID_POINTS = 7
@@ -260,7 +260,7 @@ def statement(config: StationConfig, limits: Limits | None, *,
               drho_now_cov: np.ndarray | None, dof: float | None, layout: Layout | None,
               model: str, in_model: Sequence[str], offsets_before: Mapping[str, float] | None,
               target_tool: Mapping[str, float], form: tuple[np.ndarray, str] | None = None
-              ) -> JsonObject:
+              ) -> dict[str, object]:
     """The run JSON's ``accuracy`` (docs/design.md): before and after over the workspace
     with 95 % intervals for the after-figures, both objectives' predicted after-
     figures side by side, squareness and the gaps with what to do, what it all
@@ -323,7 +323,7 @@ def statement(config: StationConfig, limits: Limits | None, *,
         "best_offsets_can_do": _stats(best),
         "squareness_mm_per_m": sq_values,
         "squareness_std_errors": sq_se,
-        "squareness_decision": decision,
+        "squareness_decision": None if decision is None else decision.model_dump(),
         "squareness_advice": squareness_advice(layout, rail, decision),
         "tilts": None if layout is None else layout.as_dict(),
         "tilt_std_errors": None if layout is None else layout.std_errors(),
@@ -342,7 +342,8 @@ def statement(config: StationConfig, limits: Limits | None, *,
 _LEANS = {"tilt_yx": ("y", "x"), "tilt_zx": ("z", "x"), "tilt_zy": ("z", "y")}
 
 
-def squareness_decision(tilts: Layout | None, tilts_in_model: bool) -> JsonObject | None:
+def squareness_decision(tilts: Layout | None, tilts_in_model: bool
+                        ) -> SquarenessDecision | None:
     """When an axis counts as leaning (what the advice and the report judge by):
     beyond k standard errors, k from Student's t on the tilts' dof for one false
     alarm in a thousand square machines over the three axes (the closed loop's
@@ -351,17 +352,16 @@ def squareness_decision(tilts: Layout | None, tilts_in_model: bool) -> JsonObjec
     if tilts is None:
         return None
     if not tilts_in_model:
-        return {"k": None, "rule": "the model test kept no tilt (none beyond the noise): "
-                                   "no axis counts as leaning"}
+        return SquarenessDecision(k=None, rule="the model test kept no tilt (none beyond "
+                                               "the noise): no axis counts as leaning")
     k = orthocal.coverage_factor(tilts.dof, 1.0 - FALSE_ALARM)
-    return {"k": k, "rule": f"an axis counts as leaning beyond {k:.2f} standard errors "
-                            f"(Student's t on "
-                            f"{tilts.dof:g} dof: one false alarm in a thousand square "
-                            "machines)"}
+    return SquarenessDecision(k=k, rule=f"an axis counts as leaning beyond {k:.2f} standard "
+                                        f"errors (Student's t on {tilts.dof:g} dof: one false "
+                                        "alarm in a thousand square machines)")
 
 
 def squareness_advice(tilts: Layout | None, rail_mm: float,
-                      decision: JsonObject | None) -> list[str]:
+                      decision: SquarenessDecision | None) -> list[str]:
     """What to do about each axis that leans (``decision``: squareness_decision's; the tilts, the
     axes' own: the squareness of the tool's motions also holds what the offsets
     written shear them by): shim the rail (tilt × its travel) or compensate in the
@@ -369,7 +369,7 @@ def squareness_advice(tilts: Layout | None, rail_mm: float,
     if tilts is None:
         return ["the tilts were not identified: squareness not stated"]
     k = orthocal.coverage_factor(tilts.dof)
-    k_decide = None if decision is None else decision["k"]
+    k_decide = None if decision is None else decision.k
     out = []
     for (name, value), se in zip(tilts.as_dict().items(), tilts.std_errors().values(),
                                  strict=True):
@@ -392,7 +392,7 @@ def squareness_advice(tilts: Layout | None, rail_mm: float,
 _PASSES = {"gap_xy": ("x", "y", "z"), "gap_xz": ("x", "z", "y"), "gap_yz": ("y", "z", "x")}
 
 
-def gap_advice(layout: Layout | None, decision: JsonObject | None) -> list[str]:
+def gap_advice(layout: Layout | None, decision: SquarenessDecision | None) -> list[str]:
     """What to do about each pair of axes that pass each other (the gaps' rule is the
     tilts', ``decision``): offsets cannot fix a gap; the controller's kinematics can
     (model.json holds the machine), and so can moving a rail across by the gap."""
@@ -401,7 +401,7 @@ def gap_advice(layout: Layout | None, decision: JsonObject | None) -> list[str]:
         return ["the gaps between the axes were not identified: not stated"]
     se = layout.gap_std_errors() or {}
     k = orthocal.coverage_factor(layout.dof)
-    k_decide = None if decision is None else decision["k"]
+    k_decide = None if decision is None else decision.k
     out = []
     for name, value in gaps.items():
         a, b, along = _PASSES[name]
@@ -423,7 +423,7 @@ def model_export(config: StationConfig, *, drho_start: Mapping[str, float],
                  drho_start_cov: np.ndarray | None, drho_now: Mapping[str, float],
                  tilts: Layout | None, model: str, offsets_before: Mapping[str, float] | None,
                  offsets_written: Mapping[str, float] | None, dof: float | None
-                 ) -> JsonObject:
+                 ) -> dict[str, object]:
     """model.json: the identified machine, for a controller or a tool that
     compensates kinematics (parameters, standard errors, covariance, conventions
     and units)."""

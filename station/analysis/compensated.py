@@ -28,9 +28,9 @@ from station.analysis.accuracy_statement import (
     grid,
     params,
 )
-from station.analysis.documents import JsonObject
 from station.config import StationConfig
 from station.record.result import Compensated
+from station.record.result_accuracy import Accuracy, AfterInterval
 
 #: How the identified machine reaches the controller, as the advice names them.
 ROUTES = [
@@ -74,7 +74,7 @@ def grouped(nominal: Mapping[str, str]) -> dict[str, list[str]]:
 def statement(points: np.ndarray, frame: str, *, drho_now: Mapping[str, float],
               cov: np.ndarray, wide: np.ndarray, dof: float | None,
               layout: Layout | None, in_model: Sequence[str], model: str,
-              offsets_only: Mapping[str, float], form_words: str | None) -> Compensated:
+              offsets_only: AfterInterval, form_words: str | None) -> Compensated:
     """``accuracy.compensated``: the tool error over ``points`` (the statement's
     grid, ``frame``) with the controller told ``told_names``. ``cov``: the 12×12
     statistical covariance of Δρ now and the pooled layout (station.analysis.accuracy_statement's);
@@ -107,22 +107,22 @@ def statement(points: np.ndarray, frame: str, *, drho_now: Mapping[str, float],
     return Compensated(
         rms_mm=iv.rms_mm, max_mm=iv.max_mm, rms_interval_95_mm=iv.rms_interval_mm,
         max_interval_95_mm=iv.max_interval_mm,
-        offsets_only_rms_mm=float(offsets_only["rms_mm"]),
-        offsets_only_max_mm=float(offsets_only["max_mm"]), told=told, nominal=nominal,
+        offsets_only_rms_mm=offsets_only.rms_mm,
+        offsets_only_max_mm=offsets_only.max_mm, told=told, nominal=nominal,
         routes=list(ROUTES), method=iv.method, assumes=assumes,
         field_rms_mm=[round(float(v), 7) for v in iv.point_rms_mm])
 
 
 
-def of_run(config: StationConfig, limits: Limits | None, acc: JsonObject, *,
+def of_run(config: StationConfig, limits: Limits | None, acc: Accuracy, *,
            drho_now: Mapping[str, float], drho_now_cov: np.ndarray | None, dof: float | None,
            layout: Layout | None, in_model: Sequence[str], model: str,
-           form: tuple[np.ndarray, str] | None) -> JsonObject:
+           form: tuple[np.ndarray, str] | None) -> Compensated:
     """:func:`statement` for a run, on the grid and frame of its statement ``acc``
     (station.analysis.accuracy_statement.statement's), as result.json holds it."""
     cov = covariance(drho_now_cov, layout)
     wide = cov if form is None else covariance(drho_now_cov, layout, form[0])
-    return statement(grid(config, limits).points, str(acc["frame"]), drho_now=drho_now,
+    return statement(grid(config, limits).points, acc.frame, drho_now=drho_now,
                      cov=cov, wide=wide, dof=dof, layout=layout, in_model=in_model,
-                     model=model, offsets_only=acc["after"],
-                     form_words=None if form is None else form[1]).model_dump(mode="json")
+                     model=model, offsets_only=acc.after,
+                     form_words=None if form is None else form[1])

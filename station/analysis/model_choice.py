@@ -11,10 +11,10 @@ from orthocal.covariance import with_measured_noise
 from orthocal.noise import noise_from_cycles, noise_from_readings
 from orthocal.postures import MIDDLE, split_plane
 from orthocal.selection import CANDIDATES, LEVEL, lack_of_fit
-from station.analysis.documents import JsonObject
 from station.analysis.statistics import Measurement
 from station.config import StationConfig
 from station.errors import RunFailed
+from station.record.result_base import JsonObject
 
 
 def measurement_noise(config: StationConfig, m: Measurement) -> tuple[float, float, str]:

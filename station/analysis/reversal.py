@@ -12,10 +12,11 @@ import numpy as np
 import orthocal
 from orthocal.lost_motion import Reversal, estimate_reversal, reversal_gain, tool_reversal_mm
 from orthocal.numbers import finite
-from station.analysis.documents import JsonObject
 from station.analysis.statistics import Measurement
 from station.config import StationConfig
 from station.errors import RunFailed
+from station.record import result_sections
+from station.record.result_accuracy import ToolReversal
 
 #: Beyond this reversal (mm) a joint's lost motion is worth repairing (a worn screw,
 #: nut or belt), not only compensating: ISO 230-2 reports the value, the advice is
@@ -72,18 +73,18 @@ def check_overrun(config: StationConfig, rev: Reversal) -> None:
             "(nothing was written)")
 
 
-def fields(config: StationConfig, rev: Reversal) -> JsonObject:
+def fields(config: StationConfig, rev: Reversal) -> result_sections.Reversal:
     """The run JSON's ``reversal`` (docs/design.md)."""
     proc = config.procedure
     side = {"below": "from below", "above": "from above"}.get(proc.approach)
-    return {
-        "value_mm": {a: finite(v) for a, v in rev.value.items()},
-        "std_errors_mm": {a: finite(v) for a, v in rev.std_errors.items()},
-        "std_errors_dof": finite(rev.dof), "n": dict(rev.n),
-        "approach": proc.approach, "approach_overrun_mm": proc.approach_overrun_mm,
-        "method": METHOD.format(gain=gain(config)),
-        "stated": _stated(proc.approach, side, rev),
-    }
+    return result_sections.Reversal(
+        value_mm={a: finite(v) for a, v in rev.value.items()},
+        std_errors_mm={a: finite(v) for a, v in rev.std_errors.items()},
+        std_errors_dof=finite(rev.dof), n=dict(rev.n),
+        approach=proc.approach, approach_overrun_mm=proc.approach_overrun_mm,
+        method=METHOD.format(gain=gain(config)),
+        stated=_stated(proc.approach, side, rev),
+    )
 
 
 def _stated(approach: str, side: str | None, rev: Reversal) -> str:
@@ -100,7 +101,7 @@ def _stated(approach: str, side: str | None, rev: Reversal) -> str:
             "edge, shifted by half the reversal")
 
 
-def at_the_tool(config: StationConfig, rev: Reversal, points: np.ndarray) -> JsonObject:
+def at_the_tool(config: StationConfig, rev: Reversal, points: np.ndarray) -> ToolReversal:
     """What the reversal leaves where the side a point is reached from is not known:
     each joint off by up to ±B/2, through the machine's Jacobian, worst over the
     workspace grid; and what to do (the run JSON's ``accuracy.reversal``)."""
@@ -128,10 +129,10 @@ def at_the_tool(config: StationConfig, rev: Reversal, points: np.ndarray) -> Jso
     else:
         advice = ("compensate it in the controller's backlash (reversal) parameter: "
                   + ", ".join(f"joint {a} {1000 * v:.1f} µm" for a, v in measured.items()))
-    return {"value_mm": {a: finite(v) for a, v in rev.value.items()},
-            "tool_max_mm": finite(tool), "repair_above_mm": REPAIR_ABOVE_MM,
-            "advice": advice,
-            "assumes": ("a point reached from an unknown side: each joint off by up to "
-                        "half its reversal beyond the field, through the nominal "
-                        "kinematics, worst over the workspace grid and the sides")}
+    return ToolReversal(
+        value_mm={a: finite(v) for a, v in rev.value.items()},
+        tool_max_mm=finite(tool), repair_above_mm=REPAIR_ABOVE_MM, advice=advice,
+        assumes=("a point reached from an unknown side: each joint off by up to half its "
+                 "reversal beyond the field, through the nominal kinematics, worst over "
+                 "the workspace grid and the sides"))
 

@@ -6,15 +6,18 @@ allow for them."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
 
 import orthocal
 from orthocal import budget as gum
-from station.analysis.documents import JsonObject
 from station.config import StationConfig
+from station.record.io import section
+from station.record.result import Remaining
+from station.record.result_base import NotStated
+from station.record.result_sections import BudgetInputs, StatedInput, UncertaintyBudget
 
 # Defaults where the config says nothing, each named in the budget as assumed.
 # A ground steel leg straight to 10 µm over its length: good practice, not a given.
@@ -28,35 +31,42 @@ DEFAULT_TEMPERATURE_CHANGE_C = 0.5
 DEFAULT_PLUNGER_ANGLE_DEG = 2.0
 
 
-def inputs(config: StationConfig) -> JsonObject:
+def inputs(config: StationConfig) -> BudgetInputs:
     """Every Type B input with its value and whether the config gave it (else the
     default above): what the budget assumed, in its own words."""
     u = config.uncertainty
     gauges = {ind.name: ind for ind in config.indicators}
 
-    def entry(value: object, default: object, why: str) -> JsonObject:
-        given = value is not None
-        return {"value": value if given else default, "given": given,
-                **({} if given else {"assumed": why})}
+    def entry(value: float | list[float] | None, default: float, why: str) -> StatedInput:
+        if value is not None:
+            return StatedInput(value=value, given=True)
+        return StatedInput(value=default, given=False, assumed=why)
 
-    return {
-        "leg_straightness_mm": entry(
+    return BudgetInputs(
+        leg_straightness_mm=entry(
             u.leg_straightness_mm, DEFAULT_LEG_STRAIGHTNESS_MM,
             "good practice for a ground leg over its length, not measured "
             "([uncertainty] leg_straightness_mm)"),
-        "temperature_change_c": entry(
+        temperature_change_c=entry(
             u.temperature_change_c, DEFAULT_TEMPERATURE_CHANGE_C,
             "a workshop over a run of minutes ([uncertainty] temperature_change_c)"),
-        "plunger_angle_deg": entry(
+        plunger_angle_deg=entry(
             u.plunger_angle_deg, DEFAULT_PLUNGER_ANGLE_DEG,
             "plungers set by eye ([uncertainty] plunger_angle_deg)"),
-        "mpe_mm": {name: entry(g.mpe_mm, DEFAULT_MPE_MM[g.protocol],
-                               f"typical of a {g.protocol} digital indicator "
-                               "([[indicators]] mpe_mm)")
-                   for name, g in gauges.items()},
-        "resolution_mm": {name: {"value": g.resolution_mm, "given": True}
-                          for name, g in gauges.items()},
-    }
+        mpe_mm={name: entry(g.mpe_mm, DEFAULT_MPE_MM[g.protocol],
+                            f"typical of a {g.protocol} digital indicator "
+                            "([[indicators]] mpe_mm)")
+                for name, g in gauges.items()},
+        resolution_mm={name: StatedInput(value=g.resolution_mm, given=True)
+                       for name, g in gauges.items()},
+    )
+
+
+def _number(stated: StatedInput) -> float:
+    """An input stated as one number (all but the legs' straightness, which may be one
+    per leg)."""
+    assert not isinstance(stated.value, list), stated
+    return float(stated.value)
 
 
 def _gauge_names(config: StationConfig) -> dict[tuple[str, str], str]:
@@ -85,15 +95,15 @@ def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.S
     planes = {plane: name for plane, name in names.items()
               if any((k[1], k[2]) == plane for k in ident.keys)}
 
-    def per_plane(key: str) -> dict[tuple[str, str], float]:
-        return {plane: float(given[key][name]["value"]) for plane, name in planes.items()}
+    def per_plane(table: dict[str, StatedInput]) -> dict[tuple[str, str], float]:
+        return {plane: _number(table[name]) for plane, name in planes.items()}
 
     out = gum.budget_sources(
         ident, config.machine.geometry(),
-        straightness=given["leg_straightness_mm"]["value"],
-        mpe=per_plane("mpe_mm"), resolution=per_plane("resolution_mm"),
-        plunger_angle_deg=float(given["plunger_angle_deg"]["value"]),
-        temperature_change=float(given["temperature_change_c"]["value"]))
+        straightness=given.leg_straightness_mm.value,
+        mpe=per_plane(given.mpe_mm), resolution=per_plane(given.resolution_mm),
+        plunger_angle_deg=_number(given.plunger_angle_deg),
+        temperature_change=_number(given.temperature_change_c))
     renamed = []
     for s in out:
         plane = s.name[-2:]
@@ -105,12 +115,13 @@ def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.S
 
 
 def fields(config: StationConfig, ident: orthocal.Identification,
-           type_a_se: dict[str, float], type_a_dof: float | None, statement: str
-           ) -> JsonObject | None:
+           type_a_se: Mapping[str, float | None], type_a_dof: float | None, statement: str
+           ) -> dict[str, object] | None:
     """The run JSON's ``uncertainty_budget`` for the Δρ of ``statement`` (where the
     run states them: "remaining.total" or "identified"), from the identification
     of the round that measured them; None where the model has no Δρ."""
-    names = [n for n in type_a_se if n.startswith("drho_") and type_a_se[n] is not None]
+    se = {n: v for n, v in type_a_se.items() if n.startswith("drho_") and v is not None}
+    names = list(se)
     if not names:
         return None
     try:
@@ -120,20 +131,23 @@ def fields(config: StationConfig, ident: orthocal.Identification,
     # the budget states the Δρ; the tilts and ΔL of the model are propagated too
     trimmed = [replace(s, contributions={n: s.contributions[n] for n in names})
                for s in srcs]
-    doc = gum.combine({n: float(type_a_se[n]) for n in names}, type_a_dof, trimmed)
+    doc = gum.combine({n: float(v) for n, v in se.items()}, type_a_dof, trimmed)
     # largest first; ties (to a nanometre: within another CPU's last bits) by name
     doc["sources"] = [doc["sources"][0], *sorted(doc["sources"][1:], key=lambda s: (
         -round(1e6 * max(v or 0.0 for v in s["contributions_mm"].values())), s["source"]))]
     given = inputs(config)
-    assumed = [f"{k}: {v['value']} ({v['assumed']})" for k, v in given.items()
-               if isinstance(v, dict) and "given" in v and not v["given"]]
-    assumed += [f"mpe_mm of {n}: {v['value']} ({v['assumed']})"
-                for n, v in given["mpe_mm"].items() if not v["given"]]
+    alone = {"leg_straightness_mm": given.leg_straightness_mm,
+             "temperature_change_c": given.temperature_change_c,
+             "plunger_angle_deg": given.plunger_angle_deg}
+    assumed = [f"{k}: {v.value} ({v.assumed})" for k, v in alone.items() if not v.given]
+    assumed += [f"mpe_mm of {n}: {v.value} ({v.assumed})"
+                for n, v in given.mpe_mm.items() if not v.given]
     # named by what identifies an instrument (its serial), not by its port
     instruments = [{"name": g.name, "protocol": g.protocol, "serial": g.serial,
                     "resolution_mm": g.resolution_mm,
-                    "mpe_mm": given["mpe_mm"][g.name]["value"]} for g in config.indicators]
-    return {"statement": statement, **doc, "inputs": given, "assumed": assumed,
+                    "mpe_mm": given.mpe_mm[g.name].value} for g in config.indicators]
+    return {"statement": statement, **doc, "inputs": given.model_dump(exclude_unset=True),
+            "assumed": assumed,
             "instruments": instruments,
             "method": ("GUM (JCGM 100:2008): each input through the sensitivity of the "
                        "round's identification (stands and model included), combined in "
@@ -154,14 +168,14 @@ def form_of_layout(config: StationConfig, ident: orthocal.Identification, names:
     if not held or any(n in ident.names for n in orthocal.BOW_NAMES):
         return None
     geometry = config.machine.geometry()
-    given = inputs(config)["leg_straightness_mm"]
+    given = inputs(config).leg_straightness_mm
     prop = gum.propagation(_at_its_parameters(ident, geometry), geometry)
-    cov = gum.form_covariance(prop, given["value"])
+    cov = gum.form_covariance(prop, given.value)
     idx = [list(ident.names).index(n) for n in held]
-    said = "stated" if given.get("given") else "assumed, not stated in [uncertainty]"
+    said = "stated" if given.given else "assumed, not stated in [uncertainty]"
     return cov[np.ix_(idx, idx)], (
         f"the 95 % intervals of the after-figures carry the legs' form (straightness "
-        f"{given['value']} mm, {said}) as errors of the tilts and gaps: with one gauge "
+        f"{given.value} mm, {said}) as errors of the tilts and gaps: with one gauge "
         "plane per leg a uniform bow of the legs reads exactly as tilts")
 
 
@@ -171,29 +185,33 @@ def allowance(config: StationConfig) -> orthocal.Allowance:
     error over its travel, the plunger angle and the temperature change; the same
     inputs as the budget's, so the model test and the statement agree on them."""
     given = inputs(config)
-    value = given["leg_straightness_mm"]["value"]
+    value = given.leg_straightness_mm.value
     per_leg = dict(zip(orthocal.AXES, value if isinstance(value, list) and len(value) == 3
                        else [value[0] if isinstance(value, list) else value] * 3,
                        strict=True))
     planes = _gauge_names(config)
     return orthocal.Allowance(
         straightness={plane: float(per_leg[plane[0]]) for plane in planes},
-        mpe={plane: float(given["mpe_mm"][name]["value"]) for plane, name in planes.items()},
-        plunger_angle_deg=float(given["plunger_angle_deg"]["value"]),
-        temperature_change=float(given["temperature_change_c"]["value"]))
+        mpe={plane: _number(given.mpe_mm[name]) for plane, name in planes.items()},
+        plunger_angle_deg=_number(given.plunger_angle_deg),
+        temperature_change=_number(given.temperature_change_c))
 
 
-def of_run(config: StationConfig, idents: list[orthocal.Identification], result: JsonObject
-           ) -> JsonObject | None:
+def of_run(config: StationConfig, idents: list[orthocal.Identification],
+           remaining: Remaining | None) -> UncertaintyBudget | NotStated | None:
     """``uncertainty_budget`` of the run's statement: the last verification's
-    (``remaining.total``: its Type A part the remaining's standard errors) when the
-    loop measured after its last write-back, else the last identification's."""
+    (``remaining.total``: its Type A part the remaining's standard errors, from the
+    run's ``remaining``) when the loop measured after its last write-back, else the
+    last identification's."""
     if not idents:
         return None
-    remaining = result.get("remaining")
-    if remaining:
-        return fields(config, idents[-1], remaining["std_errors"],
-                      remaining.get("std_errors_dof"), "remaining.total")
-    return fields(config, idents[-1], dict(idents[-1].std_errors),
-                  idents[-1].std_error_dof, "identified")
+    if remaining is not None:
+        doc = fields(config, idents[-1], remaining.std_errors, remaining.std_errors_dof,
+                     "remaining.total")
+    else:
+        doc = fields(config, idents[-1], dict(idents[-1].std_errors),
+                     idents[-1].std_error_dof, "identified")
+    if doc is None:
+        return None
+    return section(NotStated, doc) if "error" in doc else section(UncertaintyBudget, doc)
 

@@ -42,7 +42,7 @@ class VerificationSizing:
         third of the converge limit on every axis, or once the gauges' noise is no
         longer its larger part on any axis still short of it: the stands set by eye
         are the rest, and only another mounting averages them
-        (orthocal.design.drho_error_parts). Any other phase: always."""
+        (orthocal.design.drho_error_parts). Every other phase: always."""
         if not phase.startswith("v"):
             return True
         se = cycle_std_error(cycles)

@@ -18,7 +18,8 @@ from orthocal.loop import (
 )
 from orthocal.noise import coverage_factor
 from orthocal.numbers import finite
-from station.analysis.documents import JsonObject
+from station.record.result import Iteration
+from station.record.result_base import Params
 
 Joined = tuple[dict[str, float], dict[str, float | None]]  # Δρ̂ and standard errors
 
@@ -29,10 +30,9 @@ class Verdict:
     significant: list[str]  # the writable parameters beyond the noise of both rounds
     shown_mm: dict[str, float]  # per axis, how far the machine may be off at 95 %
 
-    def fields(self) -> JsonObject:
-        """The round's entry in the result's ``iterations``."""
-        return {"shown_within_95_mm": {k: finite(v) for k, v in self.shown_mm.items()},
-                "verdict": self.verdict}
+    def shown(self) -> Params:
+        """The round's ``shown_within_95_mm`` in the result's ``iterations``."""
+        return {k: finite(v) for k, v in self.shown_mm.items()}
 
 
 def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
@@ -100,47 +100,51 @@ def joined_round(ident: Identification, before: Joined | None,
     return joined_with_previous(*own, *before, moved, coverage_factor(None, 1.0 - FALSE_ALARM))
 
 
-def stands_part(ident: Identification, geometry: Geometry) -> JsonObject:
+def stands_part(ident: Identification, geometry: Geometry) -> Params | None:
     """A round's entry ``stands_part_mm``: how much of each Δρ standard error the stands
     set by eye make (orthocal.design.drho_error_parts at the round's fit), where they
-    were modelled; read by :func:`not_converged`."""
+    were modelled (None: not modelled); read by :func:`not_converged`."""
     stands, sigma = ident.stand_model, ident.stand_sigma or 0.0
     if stands is None or not sigma > 0.0:
-        return {}
+        return None
     from orthocal import design
 
     _, part = design.drho_error_parts(ident.keys, geometry, ident.model, ident.fit_vector,
                                       sigma, stands.prior_sd, stands)
-    return {"stands_part_mm": {f"drho_{a}": float(v) for a, v in zip(AXES, part, strict=True)}}
+    return {f"drho_{a}": float(v) for a, v in zip(AXES, part, strict=True)}
 
 
-def not_converged(entry: JsonObject, converge_mm: float, offset_count_mm: float) -> str:
+def _or_inf(bound: float | None) -> float:
+    return math.inf if bound is None else bound
+
+
+def not_converged(entry: Iteration, converge_mm: float, offset_count_mm: float) -> str:
     """Why the last verification (its ``iterations`` entry) could not show the machine
     converged, in words: how far the worst axis may still be off, and what to change."""
-    shown = entry.get("shown_within_95_mm") or {}
-    passes = len(entry.get("passes", [entry["phase"]]))
-    worst = max(shown, key=lambda k: math.inf if shown[k] is None else shown[k])
+    shown = entry.shown_within_95_mm or {}
+    passes = len(entry.passes or [entry.phase])
+    worst = max(shown, key=lambda k: _or_inf(shown[k]))
     bound = shown[worst]
     how = "by an unknown amount (no standard error)" if bound is None else \
         f"by up to {1000 * bound:.1f} µm"
-    ses = [v for k, v in entry["std_errors"].items() if k in WRITABLE and v is not None]
+    ses = [v for k, v in entry.std_errors.items() if k in WRITABLE and v is not None]
     noise = f" (standard error {1000 * max(ses):.1f} µm)" if ses else ""
     seen = "a correction is seen at 95 % but does not stand out of both rounds' noise" \
-        if entry.get("verdict") == "suspected" else "no correction stands out of the noise"
+        if entry.verdict == "suspected" else "no correction stands out of the noise"
     said = (f"after {passes} pass(es) of its last verification, Δρ_{worst[-1]} may still "
             f"be off {how} at 95 %, more than converge_mm = {1000 * converge_mm:g} µm + "
             f"half the drive's count ({500 * offset_count_mm:g} µm), and {seen}{noise}")
-    if entry.get("fit_ok") is False:
+    if entry.fit_ok is False:
         # the noise is not the cause: more of the same measurement cannot help
-        return (f"{said}; the cause is the model, not the noise: model {entry.get('model')} "
-                f"leaves {1000 * (entry.get('residual_rms_mm') or 0.0):.1f} µm RMS of "
+        return (f"{said}; the cause is the model, not the noise: model {entry.model} "
+                f"leaves {1000 * (entry.residual_rms_mm or 0.0):.1f} µm RMS of "
                 "residual against the scatter's "
-                f"{1000 * (entry.get('noise_floor_mm') or 0.0):.1f} µm, so more cycles or "
+                f"{1000 * (entry.noise_floor_mm or 0.0):.1f} µm, so more cycles or "
                 "quieter gauges will not help; look for what the model lacks (a loose "
                 "gauge or stand, lost motion, legs bowed beyond [uncertainty] "
                 "leg_straightness_mm) or name a larger model")
-    part = (entry.get("stands_part_mm") or {}).get(worst)
-    se = (entry.get("std_errors") or {}).get(worst)
+    part = (entry.stands_part_mm or {}).get(worst)
+    se = entry.std_errors.get(worst)
     if part is not None and se and part > 0.5 * se:
         # the stands, not the gauges, hold the error: more cycles cannot take it
         return (f"{said}; of Δρ_{worst[-1]}'s standard error {1000 * se:.1f} µm, the "

@@ -34,9 +34,12 @@ from station.plan.check import check_plan
 from station.plan.checker import MotionChecker
 from station.plan.ports import check_ports
 from station.plan.steps import build_plan
+from station.record import io
 from station.record.journal_file import JOURNAL_NAME, Journal
 from station.record.lock import MachineLock, acquire, taken_over_message, update_run_dir
 from station.record.migrate import migrate
+from station.record.result import RunResult
+from station.record.result_base import JsonObject
 from station.record.run_dir import (
     NVRAM_NAME,
     new_run_dir,
@@ -168,17 +171,19 @@ def _mountings(config: Any, plan: Any) -> dict[str, int]:
                               proc.verify)
 
 
-def print_result(as_json: bool, result: dict[str, Any]) -> None:
-    """One JSON document, or the summary, on stdout."""
+def print_result(as_json: bool, result: RunResult | JsonObject) -> None:
+    """One JSON document, or the summary, on stdout: the record as result.json holds
+    it, or a result.json read back (``{}``: lost)."""
     if as_json:
-        print(json.dumps(report.jsonable_value(result), allow_nan=False))
+        doc = io.jsonable(result) if isinstance(result, RunResult) else result
+        print(json.dumps(report.jsonable_value(doc), allow_nan=False))
     elif not result:  # a finished run whose result.json is lost: no record to sum up
         print("orthocal run: UNKNOWN")
     else:
         print(report.summary_text(result))
 
 
-def exit_status(result: dict[str, Any], code: int | None = None) -> int:
+def exit_status(result: RunResult | JsonObject, code: int | None = None) -> int:
     """The exit status of a finished run (station.commands.cli): 0 completed, its
     closed loop converged or off; 3 completed but the loop did not converge
     (``loop.stopped`` "not-converged" or "max_iterations"); 1 anything else. ``code``:
@@ -186,14 +191,15 @@ def exit_status(result: dict[str, Any], code: int | None = None) -> int:
     from station.commands.cli import EXIT_FAILED, EXIT_NOT_CONVERGED, EXIT_OK
 
     if code is None:
-        code = EXIT_OK if result.get("status") == "ok" else EXIT_FAILED
+        status = result.status if isinstance(result, RunResult) else result.get("status")
+        code = EXIT_OK if status == "ok" else EXIT_FAILED
     # a result.json that is lost ({}) has no loop to judge: the flow's code stands
     if code == EXIT_OK and result and report.not_converged(result):
         return EXIT_NOT_CONVERGED
     return code
 
 
-def record_history(config: Any, result: dict[str, Any], runs_dir: Path) -> None:
+def record_history(config: Any, result: RunResult, runs_dir: Path) -> None:
     """The run into the machine's history (station.history): one line, never a failed
     run, when the store cannot take it (the run directory is the record). What changed
     since the machine's last run was read before, into the result (the run's finish)."""
@@ -205,13 +211,13 @@ def record_history(config: Any, result: dict[str, Any], runs_dir: Path) -> None:
     url = config.history.url or default_url(runs_dir)
     try:
         with HistoryStore(url) as store:
-            store.record(entry_of(report.jsonable(result), config.controller.profile))
+            store.record(entry_of(io.jsonable(result), config.controller.profile))
     except Exception as exc:  # any database error: said, and the run stands
         say(f"orthocal: not recorded in the history at {url} ({type(exc).__name__}: {exc});"
             f" orthocal history --rebuild {runs_dir} makes it again from the run directories")
 
 
-def _report(as_json: bool, code: int, result: dict[str, Any]) -> int:
+def _report(as_json: bool, code: int, result: RunResult) -> int:
     """The summary (or the JSON document) on stdout, and the exit status."""
     print_result(as_json, result)
     return exit_status(result, code)
@@ -223,10 +229,10 @@ def resume(options: ResumeOptions) -> int:
         raise BadInput(f"{run_dir / JOURNAL_NAME}: no run header (not a run journal)")
     if state.finished is not None:
         result_path = run_dir / "result.json"
-        result = migrate(json.loads(result_path.read_text())) if result_path.exists() else {}
+        found = migrate(json.loads(result_path.read_text())) if result_path.exists() else {}
         say(f"orthocal: {run_dir} already finished ({state.finished.status})")
-        print_result(options.json, result)
-        return exit_status(result, 0 if state.finished.status == "ok" else 1)
+        print_result(options.json, found)
+        return exit_status(found, 0 if state.finished.status == "ok" else 1)
     config = _held_offsets(load_config(run_dir / "config.toml"), state)
     sim = _simulation(state)
     with ExitStack() as stack:

@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from drivers.base import AxisController, Gauges
-from station.analysis.documents import JsonObject
 from station.config import StationConfig
 from station.errors import BadInput
 
@@ -39,7 +38,7 @@ class Devices:
         self.stack.close()
 
 
-def build_controller(config: StationConfig, on_event: Callable[[JsonObject], None] | None
+def build_controller(config: StationConfig, on_event: Callable[[dict[str, object]], None] | None
                      ) -> AxisController:
     from drivers.axes import ModbusAxisController
 
@@ -66,7 +65,7 @@ def build_controller(config: StationConfig, on_event: Callable[[JsonObject], Non
 
 
 def build_indicators(config: StationConfig, names: list[str] | None,
-                     on_event: Callable[[JsonObject], None] | None) -> IndicatorGroup:
+                     on_event: Callable[[dict[str, object]], None] | None) -> IndicatorGroup:
     from drivers.indicator_protocols import make_protocol
     from drivers.indicators import IndicatorGroup, SerialIndicator
 
@@ -99,7 +98,7 @@ def build_indicators(config: StationConfig, names: list[str] | None,
         raise
 
 
-def open_devices(config: StationConfig, on_event: Callable[[JsonObject], None] | None,
+def open_devices(config: StationConfig, on_event: Callable[[dict[str, object]], None] | None,
                  station: VirtualStation | None = None) -> Devices:
     stack = ExitStack()
     try:

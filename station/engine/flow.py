@@ -27,30 +27,27 @@ from orthocal.numbers import finite
 from station.analysis import accuracy_statement as accuracy
 from station.analysis import compensated, reversal, verdict
 from station.analysis import run_budget as budget
-from station.analysis.documents import JsonObject
 from station.analysis.statistics import Measurement, pooled
 from station.config import StationConfig
 from station.console.operator import Operator
+from station.engine import results
 from station.engine.closed_loop import round_phase
 from station.engine.devices import Devices
 from station.engine.replay import RoundFit, Steps
-from station.engine.results import (
-    ident_json,
-    measurement_fields,
-    remaining_fields,
-    verification_fields,
-    writeback_fields,
-)
 from station.engine.sequencer import Sequencer
 from station.engine.writeback import WritebackOutcome, write_back
 from station.errors import RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan
+from station.record.io import jsonable_value, section
 from station.record.journal_file import Journal
 from station.record.model import MachineModel
+from station.record.result import Iteration, Joined, Loop, RunResult, Status
+from station.record.result_accuracy import Accuracy
+from station.record.result_base import JsonObject, NotStated
+from station.record.result_sections import ModelSelection
 from station.record.run_dir import MODEL_NAME
 from station.record.state import RunState
-from station.report.io import jsonable_value
 
 
 @dataclass
@@ -65,7 +62,7 @@ class Run:
     started_iso: str
     checker: MotionChecker | None = None
     t0: float = field(default_factory=time.monotonic)
-    result: JsonObject = field(default_factory=dict)
+    result: RunResult | None = None  # the record, once the flow starts it
 
     @property
     def state(self) -> RunState:
@@ -82,7 +79,7 @@ class Flow:
     """The steps of station.engine.closed_loop against the devices, each one replayed from the
     journal when a resumed run already did it; fills the result as it goes."""
 
-    def __init__(self, ctx: Run, seq: Sequencer, result: JsonObject) -> None:
+    def __init__(self, ctx: Run, seq: Sequencer, result: RunResult) -> None:
         self.ctx, self.seq, self.result = ctx, seq, result
         self.idents: list[Identification] = []  # identification of each round, in order
         self.measurements: list[Measurement] = []  # each round's, its passes pooled
@@ -100,9 +97,10 @@ class Flow:
         # the joint errors that leave the least tool error (engine.accuracy)
         self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
         self._grid: np.ndarray | None = None
-        self.model: JsonObject | None = None  # model.json, once the run stops
+        self.model: MachineModel | None = None  # model.json, once the run stops
         self.outcomes: list[WritebackOutcome] = []
-        self.iterations: list[JsonObject] = result.setdefault("iterations", [])
+        self.iterations: list[Iteration] = []
+        result.iterations = self.iterations  # filled round by round
         # each round's Δρ̂ and standard errors joined with the rounds before (_joined)
         self.joined: list[verdict.Joined] = []
 
@@ -123,8 +121,8 @@ class Flow:
         self._expect(written=False)
         m = pooled(self.measurements[-1], self.seq.measure(phase))
         self.measurements[-1] = m
-        return self._identify_round(m, [*self.iterations[-1].get("passes", [
-            self.iterations[-1]["phase"]]), phase])
+        last = self.iterations[-1]
+        return self._identify_round(m, [*(last.passes or [last.phase]), phase])
 
     def _expect(self, written: bool) -> None:
         """Tell the sequencer the machine the next pass should find (it sizes a
@@ -159,12 +157,12 @@ class Flow:
         # the offsets, so a later round's choice sees the machine as it is.
         ident, selection = _identify(ctx, m)
         if n == 0 and selection is not None:
-            self.result["model_selection"] = selection
+            self.result.model_selection = section(ModelSelection, selection)
         # Lost motion: the joints' reversal from every round so far; every stop was
         # approached from one side, so the fit found Δρ at that edge of each band:
         # what is stated and written is its middle.
         rev = reversal.estimate(ctx.config, self.measurements)
-        self.result["reversal"] = reversal.fields(ctx.config, rev)
+        self.result.reversal = reversal.fields(ctx.config, rev)
         reversal.check_overrun(ctx.config, rev)
         self.reversal = rev
         self._layout_of(phase, m, ident)
@@ -175,7 +173,7 @@ class Flow:
             self.idents[-1] = ident
         else:
             self.idents.append(ident)
-        fields = measurement_fields(ctx.config, m, ident)
+        fields = results.measurement_fields(ctx.config, m, ident)
         prev = self.idents[n - 1] if n else None
         proc = ctx.config.procedure
         count = ctx.devices.controller.offset_resolution_mm()
@@ -185,35 +183,31 @@ class Flow:
                                passes_left=len(passes) - 1 < proc.max_extra_passes,
                                joined=joined if n else None)
         sig = judged.significant
-        entry: JsonObject = {
-            "phase": phase, "model": ident.model, "identified": fields["identified"],
-            "std_errors": fields["std_errors"], "std_errors_dof": fields["std_errors_dof"],
-            "offsets_written": None, "writeback": None,
-            "deviations_rms_mm": fields["deviations_rms_mm"],
-            "residual_rms_mm": fields["residual_rms_mm"],
-            "noise_floor_mm": fields["noise_floor_mm"], "fit_ok": fields["fit_ok"],
-            "significant": sig, **judged.fields(),
-            **verdict.stands_part(ident, ctx.config.machine.geometry()),
-            **({"joined": {"drho_mm": joined[0], "std_errors_mm": joined[1]}} if n else {})}
+        entry = fields.iteration(phase, judged)
+        part = verdict.stands_part(ident, ctx.config.machine.geometry())
+        if part is not None:
+            entry.stands_part_mm = part
+        if n:
+            entry.joined = Joined(drho_mm=joined[0], std_errors_mm=joined[1])
         if again:
-            entry["passes"] = passes
+            entry.passes = passes
             self.iterations[-1] = entry
         else:
             self.iterations.append(entry)
         if n == 0:
-            self.result.update(fields)
+            fields.onto(self.result)
             ctx.steps.once(RoundFit(0, len(passes)),
-                           {"type": "identification", **ident_json(ident),
-                            **({"passes": passes} if again else {})})
+                           {"type": "identification", **results.ident_json(ident),
+                            **({"passes": [*passes]} if again else {})})
             return judged.verdict
-        self.result["verification"] = verification_fields(
+        self.result.verification = results.verification_fields(
             ctx.config, fields, self.idents[n - 1], self.target,
             edge=edge_of(rev, ctx.config.procedure.approach))
         ctx.steps.once(RoundFit(n, len(passes)),
                        {"type": "verification", "round": n, "phase": phase,
-                        **({"passes": passes} if again else {}), **ident_json(ident),
-                        "deviations_rms_mm": fields["deviations_rms_mm"],
-                        "significant": sig, "verdict": judged.verdict})
+                        **({"passes": [*passes]} if again else {}), **results.ident_json(ident),
+                        "deviations_rms_mm": fields.deviations_rms_mm,
+                        "significant": [*sig], "verdict": judged.verdict})
         return judged.verdict
 
     def write(self, round: int) -> str:
@@ -224,7 +218,7 @@ class Flow:
         self.target = self._aim()
         note = self._objective_note(ident)
         # What is written is the round's Δρ̂ joined with the rounds before it (the
-        # first round's own): the least error known, where the rounds agree
+        # first round's own): the least error results.known, where the rounds agree
         # (orthocal.loop.joined_with_previous keeps a round's own where they do not).
         values = {**ident.parameters, **self.joined[round - 1][0]}
         outcome = write_back(
@@ -234,30 +228,31 @@ class Flow:
             journal=ctx.journal, operator=ctx.operator, round=round,
             offsets_at_start=first.before if first is not None else None)
         self.outcomes.append(outcome)
-        self.iterations[round - 1]["offsets_written"] = outcome.written
-        self.iterations[round - 1]["writeback"] = outcome.status
+        entry = self.iterations[round - 1]
+        entry.offsets_written = None if outcome.written is None else dict(outcome.written)
+        entry.writeback = outcome.status
         if ctx.config.writeback.objective != "joints":
-            self.iterations[round - 1]["target_drho"] = dict(self.target)
+            entry.target_drho = dict(self.target)
         if round == 1:
-            writeback_fields(self.result, outcome, ctx.devices.controller)
+            results.writeback_fields(self.result, outcome, ctx.devices.controller)
         elif outcome.written is not None:
-            self.result["offsets_written"] = outcome.written
-        self.result["writeback"] = {**outcome.to_json(), "round": round}
+            self.result.offsets_written = dict(outcome.written)
+        self.result.writeback = results.writeback_record(outcome, round)
         self._totals()
         return outcome.status
 
     def _totals(self) -> None:
         """Top-level ``identified``: the total Δρ written since the run started (the
         other parameters as the first identification found them)."""
-        total = dict(self.iterations[0]["identified"])
-        written = [it for it in self.iterations if it["offsets_written"] is not None]
+        total = dict(self.iterations[0].identified)
+        written = [it for it in self.iterations if it.offsets_written is not None]
         if written:
             for name in WRITABLE:
                 if name in total:
-                    total[name] = sum(it["identified"].get(name, 0.0)
-                                      - it.get("target_drho", {}).get(name, 0.0)
+                    total[name] = sum(results.known(it.identified).get(name, 0.0)
+                                      - results.known(it.target_drho or {}).get(name, 0.0)
                                       for it in written)
-        self.result["identified"] = total
+        self.result.identified = total
 
     def stopped(self, reason: str) -> None:
         """Status, message and the loop's verdict once station.engine.closed_loop says finish."""
@@ -285,29 +280,28 @@ class Flow:
             message = f"closed loop did not converge: {detail}"
         if last is None:
             # nothing written: the offsets as found are the run's before and after
-            self.result["offsets_before"] = {a: float(v) for a, v in zip(
+            self.result.offsets_before = {a: float(v) for a, v in zip(
                 "xyz", self.ctx.devices.controller.read_offsets(), strict=True)}
-            self.result["offsets_written"] = None
+            self.result.offsets_written = None
         if converged and last is None:
             limit = verdict.converge_limit(proc.converge_mm, count)
             message = (f"within tolerance, nothing written: every joint offset is shown within "
                        f"{1000 * limit:.1f} µm at 95 % and no correction stands out of the "
                        "noise")
-        self.result["converged"] = converged
-        self.result["loop"] = {
-            "stopped": reason, "detail": detail,
-            "write_backs": sum(1 for o in self.outcomes if o.status == "written"),
-            "max_iterations": proc.max_iterations, "converge_mm": proc.converge_mm,
-            "converged_within_mm": verdict.converge_limit(proc.converge_mm, count),
-            "extra_passes": sum(len(it.get("passes", ())) - 1 for it in self.iterations
-                                if it.get("passes")),
-            "max_extra_passes": proc.max_extra_passes,
-        }
-        self.result["remaining"] = remaining_fields(self.iterations, self.result)
-        self.result["uncertainty_budget"] = budget.of_run(self.ctx.config, self.idents,
-                                                          self.result)
+        self.result.converged = converged
+        self.result.loop = Loop(
+            stopped=reason, detail=detail,
+            write_backs=sum(1 for o in self.outcomes if o.status == "written"),
+            max_iterations=proc.max_iterations, converge_mm=proc.converge_mm,
+            converged_within_mm=verdict.converge_limit(proc.converge_mm, count),
+            extra_passes=sum(len(it.passes) - 1 for it in self.iterations if it.passes),
+            max_extra_passes=proc.max_extra_passes,
+        )
+        self.result.remaining = results.remaining_fields(self.iterations, self.result)
+        self.result.uncertainty_budget = budget.of_run(self.ctx.config, self.idents,
+                                                       self.result.remaining)
         self._accuracy()
-        self.result["status"], self.result["message"] = status, message
+        self.result.status, self.result.message = status, message
 
     # --- accuracy at the tool ------------------------------------------------------
 
@@ -413,58 +407,74 @@ class Flow:
         """The run's statement at the tool (result ``accuracy``) and model.json."""
         if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
             return
-        cfg = self.ctx.config
         layout = accuracy.pool_layout(self.layout_rounds)
-        last = self.idents[-1]
+        remaining = self.result.remaining
+        start = results.known((remaining.total if remaining is not None else None) or {
+            n: self.result.identified.get(n, 0.0) for n in WRITABLE})
+        # without a verification after the last correction written: its aim, as predicted
+        now = results.known(remaining.estimate) if remaining is not None else dict(self.target)
+        acc = self.result.accuracy = self._statement(layout, start, now)
+        if isinstance(acc, NotStated):
+            return
+        if self.reversal is not None:
+            acc.reversal = reversal.at_the_tool(self.ctx.config, self.reversal, self._points())
+        self._write_model(layout, start, now)
+
+    def _statement(self, layout: accuracy.Layout | None, start: dict[str, float],
+                   now: dict[str, float]) -> Accuracy | NotStated:
+        """``accuracy`` for Δρ ``start`` at the start and ``now`` (analysis.accuracy_statement,
+        its ``compensated`` analysis.compensated's), or why it is not stated."""
+        cfg, last = self.ctx.config, self.idents[-1]
         names = list(last.names)
         idx = [names.index(n) for n in WRITABLE if n in names]
-        remaining = self.result.get("remaining")
-        start = (remaining or {}).get("total") or {
-            n: self.result["identified"].get(n, 0.0) for n in WRITABLE}
-        if remaining:
-            now = remaining["estimate"]
-        else:  # the last correction written and not verified: its aim, as predicted
-            now = dict(self.target)
         now_cov = np.asarray(last.covariance)[np.ix_(idx, idx)] if len(idx) == 3 else None
-        before = self.result.get("offsets_before")
+        before = self.result.offsets_before
         limits, form = (self.seq.checker.lo, self.seq.checker.hi), self._layout_form(layout)
         try:
-            acc = self.result["accuracy"] = accuracy.statement(
+            doc = accuracy.statement(
                 cfg, limits, drho_start=start, drho_now=now, drho_now_cov=now_cov,
                 dof=finite(last.std_error_dof), layout=layout, model=last.model,
-                in_model=names, offsets_before=before, target_tool=self._tool_target(),
-                form=form)
-            acc["compensated"] = compensated.of_run(
+                in_model=names, offsets_before=None if before is None else results.known(before),
+                target_tool=self._tool_target(), form=form)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            return NotStated(error=f"not stated: {exc}")
+        # validated outside the try: a section that does not fit the record is a bug
+        acc = section(Accuracy, {**doc, "compensated": None})
+        try:
+            acc.compensated = compensated.of_run(
                 cfg, limits, acc, drho_now=now, drho_now_cov=now_cov,
                 dof=finite(last.std_error_dof), layout=layout, in_model=names,
                 model=last.model, form=form)
         except (ValueError, np.linalg.LinAlgError) as exc:
-            self.result["accuracy"] = {"error": f"not stated: {exc}"}
-            return
-        if self.reversal is not None:
-            self.result["accuracy"]["reversal"] = reversal.at_the_tool(
-                cfg, self.reversal, self._points())
+            return NotStated(error=f"not stated: {exc}")
+        return acc
+
+    def _write_model(self, layout: accuracy.Layout | None, start: dict[str, float],
+                     now: dict[str, float]) -> None:
+        """model.json: the machine identified, built through its record
+        (station.record.model): what another tool validates model.json against is what
+        the engine writes."""
         first = self.idents[0]
         f_names = list(first.names)
         f_idx = [f_names.index(n) for n in WRITABLE if n in f_names]
-        # built through its record (station.record.model): what another tool validates
-        # model.json against is what the engine writes
+        before, written = self.result.offsets_before, self.result.offsets_written
         self.model = MachineModel.model_validate(accuracy.model_export(
-            cfg, drho_start=start,
+            self.ctx.config, drho_start=start,
             drho_start_cov=np.asarray(first.covariance)[np.ix_(f_idx, f_idx)]
             if len(f_idx) == 3 else None,
-            drho_now=now, tilts=layout, model=last.model, offsets_before=before,
-            offsets_written=self.result.get("offsets_written"),
-            dof=finite(first.std_error_dof))).model_dump(mode="json")
+            drho_now=now, tilts=layout, model=self.idents[-1].model,
+            offsets_before=None if before is None else results.known(before),
+            offsets_written=None if written is None else results.known(written),
+            dof=finite(first.std_error_dof)))
         try:
             write_atomic(self.ctx.run_dir / MODEL_NAME,
-                         json.dumps(jsonable_value(self.model), indent=1,
-                                    allow_nan=False) + "\n")
+                         json.dumps(jsonable_value(self.model.model_dump(mode="json")),
+                                    indent=1, allow_nan=False) + "\n")
         except OSError as exc:  # a full disk: result.json says so too, if it can
             say(f"orthocal: {MODEL_NAME} not written ({storage_message(self.ctx.run_dir, exc)})")
 
 
-def _status_of(outcome: WritebackOutcome) -> tuple[str, str | None]:
+def _status_of(outcome: WritebackOutcome) -> tuple[Status, str | None]:
     if outcome.status in ("written", "skipped"):
         return "ok", None
     if outcome.status == "refused":

@@ -8,7 +8,6 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from drivers.base import Vec3
-from station.analysis.documents import JsonObject
 from station.config import StationConfig
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker, PathRefused
@@ -55,7 +54,7 @@ class PlungerGuard:
     def __init__(self, config: StationConfig, checker: MotionChecker,
                  positions: Callable[[], np.ndarray],
                  read: Callable[[list[str]], dict[str, list[float]]],
-                 stop: Callable[[], None], journal: Callable[[JsonObject], None]
+                 stop: Callable[[], None], journal: Callable[[dict[str, object]], None]
                  ) -> None:
         self.config = config
         self.enabled = config.procedure.plunger_guard
@@ -457,7 +456,7 @@ class PlungerGuard:
                     f"({exc.detail})"), {})
 
     def _refuse(self, cycle: int, label: str, g: Gauge, pushed: bool, what: str,
-                extra: JsonObject) -> None:
+                extra: dict[str, object]) -> None:
         self._journal({"type": "event", "event": {
             "event": "plunger-guard-refused", "indicator": g.name, "where": self._where,
             "move": label, "cycle": cycle, "margin_mm": self.margin, **extra}})

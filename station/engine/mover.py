@@ -17,7 +17,6 @@ from typing import Protocol
 import numpy as np
 
 from drivers.base import Arrivals, AxisReadout, GaugeReadings
-from station.analysis.documents import JsonObject
 from station.config import StationConfig
 from station.engine.guard_monitor import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
 from station.errors import BadInput, RunFailed
@@ -51,8 +50,8 @@ class Mover:
 
     def __init__(self, *, config: StationConfig, plan: Plan, controller: MoverAxes,
                  indicators: GaugeReadings, checker: MotionChecker, guard: PlungerGuard,
-                 journal: Callable[[JsonObject], None],
-                 journal_safe: Callable[[JsonObject], None],
+                 journal: Callable[[dict[str, object]], None],
+                 journal_safe: Callable[[dict[str, object]], None],
                  progress: Callable[..., None]) -> None:
         self.config, self.plan = config, plan
         self.controller, self.indicators = controller, indicators
@@ -69,7 +68,7 @@ class Mover:
         self.touched = False
         self.moves = 0
         self.guard_recoveries = 0
-        self.recovered: list[JsonObject] = []
+        self.recovered: list[dict[str, object]] = []
         self._leg_start: np.ndarray | None = None  # where the sub-move in progress began
         self._speed_factor = 1.0
         self._recoveries = 0
@@ -182,7 +181,7 @@ class Mover:
         trip (the run stops) when no safe path is left; returns the sub-moves on."""
         self._recoveries += 1
         here, means = self._at_rest_after_stop()
-        record: JsonObject = {
+        record: dict[str, object] = {
             "event": "plunger-guard-recovery", "indicator": trip.indicator,
             "where": self.guard.where, "move": trip.label, "from": [float(v) for v in here],
             "readings_mm": means}

@@ -1,7 +1,6 @@
-"""A run from start to end, shared by ``orthocal run`` and ``orthocal resume``: it opens
-the devices, asks the closed loop for each next step (measure, identify, write back,
-verify, and again while the verification finds a significant correction), has the
-flow perform it, and writes the result when the run ends, however it ends.
+"""The run's flow, shared by ``orthocal run`` and ``orthocal resume``: measure, identify,
+write back, verify, and again while the verification finds a significant correction
+(the closed loop); replaying from the journal what a resumed run already did.
 
 station.engine.closed_loop decides the next step from what happened so far (a pure state machine);
 :class:`Flow` performs each step or, on resume, replays it from the journal.
@@ -14,15 +13,16 @@ import time
 from dataclasses import asdict
 
 from drivers.device_errors import DeviceError
-from station.analysis.documents import JsonObject
 from station.console.progress import Progress
 from station.engine.closed_loop import LoopState, next_step
 from station.engine.flow import Flow, Run
 from station.engine.recovery import resume_hint
-from station.engine.results import base_result, offsets_fields
+from station.engine.results import base_result, fill_offsets
 from station.engine.sequencer import Sequencer
 from station.errors import BadInput, RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
+from station.record import io
+from station.record.result import PlungerGuard, RunResult, Status, Timing
 from station.record.run_dir import now_iso
 
 
@@ -45,9 +45,9 @@ def _import_plotting(figures: bool) -> None:
         pass  # the report says so itself when it cannot plot
 
 
-def execute(ctx: Run) -> tuple[int, JsonObject]:
+def execute(ctx: Run) -> tuple[int, RunResult]:
     """The whole flow of a run (or the rest of a resumed one): its exit status and
-    result document."""
+    record, as result.json holds it."""
     # The report's plots need matplotlib (~0.4 s of imports) and identification
     # scipy.optimize (~0.3 s), which would otherwise load after the last reading,
     # with the operator waiting; loaded now, they overlap the first moves, where
@@ -64,7 +64,7 @@ def execute(ctx: Run) -> tuple[int, JsonObject]:
     return code, result
 
 
-def _execute_with(ctx: Run, progress: Progress) -> tuple[int, JsonObject]:
+def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
     # The plan check's checker, where the command made one: its routes and bounds
     # are the first cycle's (each sub-move decided again from where the axes stand).
     checker = ctx.checker or MotionChecker(ctx.config, ctx.devices.controller.soft_limits())
@@ -102,8 +102,9 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, JsonObject]:
     except BadInput:
         _finish(ctx, seq, result, "failed", "refused by a runtime check", final=False)
         raise
-    _finish(ctx, seq, result, result["status"], result["message"], final=True)
-    return (0 if result["status"] == "ok" else 1), result
+    _finish(ctx, seq, result, result.status, result.message, final=True)
+    # the record as written (validated, in result.json's order), for the caller
+    return (0 if result.status == "ok" else 1), io.validated(result)
 
 
 def _stopped(seq: Sequencer) -> str:
@@ -114,36 +115,35 @@ def _stopped(seq: Sequencer) -> str:
             "stopped")
 
 
-def _since_last(ctx: Run, result: JsonObject) -> None:
+def _since_last(ctx: Run, result: RunResult) -> None:
     """What changed since the machine's last calibration (station.history), into the
     result before result.json and report.html are written: written once, not again."""
-    from station import report
     from station.history.compare import since_last_run
 
-    since = since_last_run(ctx.config, report.jsonable(result), ctx.run_dir.parent)
+    since = since_last_run(ctx.config, result, ctx.run_dir.parent)
     if since is not None:
-        result["since_last"] = since
+        result.since_last = since
 
 
-def _finish(ctx: Run, seq: Sequencer, result: JsonObject, status: str,
+def _finish(ctx: Run, seq: Sequencer, result: RunResult, status: Status,
             message: str | None, final: bool) -> None:
-    result["status"], result["message"] = status, message
-    result["finished"] = now_iso()
+    result.status, result.message = status, message
+    result.finished = now_iso()
     wall = time.monotonic() - ctx.t0
     # The journal as saved so far, every session's (its state, not the file again).
     state = ctx.state
     # A resumed run lasts from its header, its sessions and the pauses between; a run
     # never resumed, this session's wall time.
     started = state.started if state.resumes else None
-    result["duration_s"] = round(time.time() - started, 3) if started else round(wall, 3)
-    result["timing"] = {"wall_s": round(wall, 3), "moves": seq.counters.moves,
-                        "readings": seq.counters.readings, "retries": state.retries,
-                        "outliers_rejected": seq.counters.rejected,
-                        # what the operator paid: each mounting and the time it took
-                        "mountings": state.mountings,
-                        "operator_s": round(state.operator_s, 3)}
-    result["plunger_guard"] = asdict(state.guard)
-    result.update(offsets_fields(ctx.devices.controller, result, state))
+    result.duration_s = round(time.time() - started, 3) if started else round(wall, 3)
+    result.timing = Timing(wall_s=round(wall, 3), moves=seq.counters.moves,
+                           readings=seq.counters.readings, retries=state.retries,
+                           outliers_rejected=seq.counters.rejected,
+                           # what the operator paid: each mounting and the time it took
+                           mountings=state.mountings,
+                           operator_s=round(state.operator_s, 3))
+    result.plunger_guard = PlungerGuard.model_validate(asdict(state.guard))
+    fill_offsets(result, ctx.devices.controller, state)
     if final:
         ctx.journal.append({"type": "finished", "status": status, "message": message})
         _since_last(ctx, result)
@@ -152,14 +152,15 @@ def _finish(ctx: Run, seq: Sequencer, result: JsonObject, status: str,
             ctx.journal.flush()
         except Exception:
             pass
-    from station import report
-
     try:
-        report.write_result(result, ctx.run_dir)
+        io.write_result(result, ctx.run_dir)
     except OSError as exc:  # a full disk: the journal holds the run; say so and go on
         say(f"orthocal: result.json not written ({storage_message(ctx.run_dir, exc)})")
         return
+    from station import report
+
     try:
-        report.write_html(result, ctx.run_dir, figures=ctx.config.report.figures)
+        report.write_html(io.validated(result), ctx.run_dir,
+                          figures=ctx.config.report.figures)
     except Exception as exc:  # the report is a view; result.json and the journal are the record
         say(f"orthocal: report.html not written ({type(exc).__name__}: {exc})")

@@ -31,7 +31,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, TypeVar
 
-from station.analysis.documents import JsonObject
 from station.record.journal import Cycle, Repeat, SetupDone, Writeback
 from station.record.journal_file import Journal
 from station.record.state import Fit, RunState
@@ -132,6 +131,6 @@ class Steps:
         act()
         return step.find(self.journal.state)
 
-    def once(self, step: StepKey[object], record: JsonObject) -> None:
+    def once(self, step: StepKey[object], record: dict[str, object]) -> None:
         """Journal ``record`` as ``step``'s, unless the journal holds the step's already."""
         self.take(step, lambda: self.journal.append(record))

@@ -1,28 +1,46 @@
-"""The run's result document (result.json and ``--json``): its fields from a
-measurement, an identification and a write-back, and its printing."""
+"""The run's result document (result.json and ``--json``) as the record's models
+(station.record.result.RunResult): its fields from a measurement, an identification
+and a write-back."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Literal
 
 import numpy as np
 
 import orthocal
 from drivers.base import ZeroOffsets
-from orthocal import AXES, coverage_factor
+from orthocal import AXES, Identification, coverage_factor
 from orthocal.loop import WRITABLE, predicted_after_correction
 from orthocal.numbers import finite
 from station.analysis.statistics import Measurement, split_key
+from station.analysis.verdict import Verdict
 from station.config import StationConfig
 from station.engine.writeback import WritebackOutcome
-from station.record.result import SCHEMA_VERSION
+from station.record.result import (
+    SCHEMA_VERSION,
+    Correlation,
+    Deviation,
+    Iteration,
+    Machine,
+    Remaining,
+    RunResult,
+    Setup,
+    Simulation,
+    Verification,
+    VerifiedDeviation,
+    Writeback,
+)
+from station.record.result_base import Closed, JsonObject, Params
+from station.record.result_sections import StandEstimate
 from station.record.simulated import SimulationParams
 from station.record.state import RunState
 
 
-def ident_json(ident: Any) -> dict[str, Any]:
+def ident_json(ident: Identification) -> JsonObject:
+    """A round's identification as its journal record states it."""
     return {"model": ident.model, "method": ident.method,
             "parameters": {k: float(v) for k, v in ident.parameters.items()},
             "std_errors": {k: num(v) for k, v in ident.std_errors.items()},
@@ -33,12 +51,54 @@ def ident_json(ident: Any) -> dict[str, Any]:
 num = finite  # the result document's numbers: finite, or null
 
 
-def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dict[str, Any]:
+class Measured(Closed):
+    """A round's measurement and its identification as result.json states them: the
+    first round's at the top level (RunResult's fields of the same names, :meth:`onto`),
+    and what a round's ``iterations`` entry and a ``verification`` take of them."""
+
+    model: str
+    method: Literal["linear", "nonlinear"]
+    identified: Params
+    std_errors: Params
+    std_errors_dof: float | None
+    correlation: Correlation
+    residual_rms_mm: float | None
+    sigma_mm: float | None
+    condition_number: float | None
+    noise_mm: float | None
+    noise_floor_mm: float | None
+    fit_ok: bool
+    fit_note: str
+    deviations: dict[str, Deviation]
+    not_identifiable: list[str]
+    deviations_rms_mm: float | None
+    stands: dict[str, StandEstimate] | None
+    setups: list[Setup]
+
+    def onto(self, result: RunResult) -> None:
+        """The first round's fields at the top level of ``result`` (``model`` too: with
+        model auto, the one the model test chose)."""
+        for name in type(self).model_fields:
+            setattr(result, name, getattr(self, name))
+
+    def iteration(self, phase: str, judged: Verdict) -> Iteration:
+        """The round's entry in ``iterations`` and its verdict, nothing written after
+        it yet."""
+        return Iteration(
+            phase=phase, model=self.model, identified=self.identified,
+            std_errors=self.std_errors, std_errors_dof=self.std_errors_dof,
+            offsets_written=None, writeback=None, deviations_rms_mm=self.deviations_rms_mm,
+            residual_rms_mm=self.residual_rms_mm, noise_floor_mm=self.noise_floor_mm,
+            fit_ok=self.fit_ok, significant=judged.significant,
+            shown_within_95_mm=judged.shown(), verdict=judged.verdict)
+
+
+def measurement_fields(config: StationConfig, m: Measurement, ident: Identification
+                       ) -> Measured:
     stats = m.stats()
-    deviations = {}
-    for key, st in stats.items():
-        model = ident.predicted.get(split_key(key))
-        deviations[key] = {**st, "model": num(model)}
+    deviations = {key: Deviation(mean=st["mean"], std=st["std"], n=st["n"],
+                                 model=num(ident.predicted.get(split_key(key))))
+                  for key, st in stats.items()}
     means = np.array([st["mean"] for st in stats.values()])
     noise = m.noise_mm
     # What the residual should be if the model explains the data: the standard
@@ -56,61 +116,67 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Any) -> dic
                    "larger than the noise explains: errors outside the model (leg lengths, "
                    "play, a loose indicator?)"))
     corr = ident.correlation
-    return {
-        "model": ident.model, "method": ident.method,
-        "identified": {k: float(v) for k, v in ident.parameters.items()},
-        "std_errors": {k: num(v) for k, v in ident.std_errors.items()},
+    return Measured(
+        model=ident.model, method=ident.method,
+        identified={k: float(v) for k, v in ident.parameters.items()},
+        std_errors={k: num(v) for k, v in ident.std_errors.items()},
         # with few cycles the noise behind the standard errors is itself uncertain:
         # an interval of k standard errors takes k from Student's t with these dof
-        "std_errors_dof": num(ident.std_error_dof),
-        "correlation": {"names": list(ident.names),
-                        "matrix": [[num(x) for x in row] for row in np.asarray(corr)]},
-        "residual_rms_mm": num(resid), "sigma_mm": num(ident.sigma),
-        "condition_number": num(ident.condition_number),
-        "noise_mm": num(noise), "noise_floor_mm": num(expected), "fit_ok": bool(fit_ok),
-        "fit_note": fit_note,
-        "deviations": deviations,
+        std_errors_dof=num(ident.std_error_dof),
+        correlation=Correlation(names=list(ident.names),
+                                matrix=[[num(x) for x in row] for row in np.asarray(corr)]),
+        residual_rms_mm=num(resid), sigma_mm=num(ident.sigma),
+        condition_number=num(ident.condition_number),
+        noise_mm=num(noise), noise_floor_mm=num(expected), fit_ok=bool(fit_ok),
+        fit_note=fit_note,
+        deviations=deviations,
         # said in every report, never silently fixed
-        "not_identifiable": orthocal.cannot_identify(
+        not_identifiable=orthocal.cannot_identify(
             ident.keys, config.machine.geometry(), "full+tilt+gap"),
-        "deviations_rms_mm": float(np.sqrt(np.mean(means**2))) if means.size else None,
+        deviations_rms_mm=float(np.sqrt(np.mean(means**2))) if means.size else None,
         # Where each indicator stand was, mm off the leg's middle (L/2), when the
         # stands were modelled (orthocal.stands): the operator learns where each stood.
-        "stands": {name: est.to_dict() for name, est in ident.stands.items()} or None,
-        "setups": [o.model_dump(mode="json") for o in m.setups],
-    }
+        stands={name: StandEstimate.model_validate(est.to_dict())
+                for name, est in ident.stands.items()} or None,
+        setups=[Setup.model_validate(o.model_dump()) for o in m.setups],
+    )
 
 
-def verification_fields(config: StationConfig, fields: dict[str, Any], before: Any,
+def verification_fields(config: StationConfig, fields: Measured, before: Identification,
                         target: dict[str, float],
-                        edge: dict[str, float] | None = None) -> dict[str, Any]:
+                        edge: dict[str, float] | None = None) -> Verification:
     """The verification block of a round's ``fields`` (measurement_fields), judged
     against what the model predicts once the Δρ of ``before`` (the identification
     whose correction it verifies) are written toward ``target``: ΔL and tilts cannot
     be, and still show; nor the lost motion (``edge``: where every stop's one
     approach puts each joint against the middle of its band, ±B/2)."""
     geometry = config.machine.geometry()
-    keys = [split_key(k) for k in fields["deviations"]]  # "+xy", "+30xy"
+    keys = [split_key(k) for k in fields.deviations]  # "+xy", "+30xy"
     aim = {n: target.get(n, 0.0) + (edge or {}).get(n, 0.0) for n in WRITABLE}
     predicted = predicted_after_correction(keys, geometry, before.parameters, aim)
-    deviations = {k: {**v, "expected": float(p)} for (k, v), p
-                  in zip(fields["deviations"].items(), predicted, strict=True)}
-    gaps = [v["mean"] - v["expected"] for v in deviations.values()]
-    return {
-        "identified": fields["identified"], "std_errors": fields["std_errors"],
-        "std_errors_dof": fields["std_errors_dof"],
-        "residual_rms_mm": fields["residual_rms_mm"],
-        "deviations_rms_mm": fields["deviations_rms_mm"],
-        "expected_rms_mm": float(np.sqrt(np.mean(np.square(predicted))))
+    deviations = {k: VerifiedDeviation(mean=v.mean, std=v.std, n=v.n, model=v.model,
+                                       expected=float(p))
+                  for (k, v), p in zip(fields.deviations.items(), predicted, strict=True)}
+    gaps = [v.mean - v.expected for v in deviations.values()]
+    return Verification(
+        identified=fields.identified, std_errors=fields.std_errors,
+        std_errors_dof=fields.std_errors_dof,
+        residual_rms_mm=fields.residual_rms_mm,
+        deviations_rms_mm=fields.deviations_rms_mm,
+        expected_rms_mm=float(np.sqrt(np.mean(np.square(predicted))))
         if len(keys) else None,
-        "vs_expected_rms_mm": float(np.sqrt(np.mean(np.square(gaps)))) if gaps else None,
-        "noise_floor_mm": fields["noise_floor_mm"],
-        "deviations": deviations, "setups": fields["setups"],
-    }
+        vs_expected_rms_mm=float(np.sqrt(np.mean(np.square(gaps)))) if gaps else None,
+        noise_floor_mm=fields.noise_floor_mm,
+        deviations=deviations, setups=fields.setups,
+    )
 
 
-def remaining_fields(iterations: list[dict[str, Any]],
-                     result: dict[str, Any]) -> dict[str, Any] | None:
+def known(values: Params) -> dict[str, float]:
+    """The numbers of a map the engine filled from a fit (the record allows null)."""
+    return {k: v for k, v in values.items() if v is not None}
+
+
+def remaining_fields(iterations: list[Iteration], result: RunResult) -> Remaining | None:
     """What the last measurement says is left of Δρ on the machine as it now stands,
     not written (below k standard errors or converge_mm, the loop's limit, or a
     write-back refused). The loop stops on a correction too small to be worth a
@@ -119,90 +185,103 @@ def remaining_fields(iterations: list[dict[str, Any]],
     (offsets read back, rounded to its count) plus what is left; the truth lies
     within k95 of its standard errors. None when the last correction was written
     and nothing measured after it (verify off)."""
-    if not iterations or iterations[-1]["offsets_written"] is not None:
+    if not iterations or iterations[-1].offsets_written is not None:
         return None
     last = iterations[-1]
-    names = [n for n in WRITABLE if n in last["identified"]]
-    before, now = result.get("offsets_before"), result.get("offsets_written")
+    found = known(last.identified)
+    names = [n for n in WRITABLE if n in found]
+    before, now = known(result.offsets_before or {}), known(result.offsets_written or {})
     applied = {f"drho_{a}": before[a] - now[a] for a in before} \
-        if isinstance(before, dict) and isinstance(now, dict) else {}
-    dof = last.get("std_errors_dof")
-    return {
-        "phase": last["phase"], "round": len(iterations),
-        "estimate": {n: last["identified"][n] for n in names},
-        "total": {n: applied.get(n, 0.0) + last["identified"][n] for n in names},
-        "std_errors": {n: last["std_errors"].get(n) for n in names},
-        "std_errors_dof": dof,
-        "coverage_factor_95": num(coverage_factor(dof)) if dof else None,
-    }
+        if result.offsets_before is not None and result.offsets_written is not None else {}
+    dof = last.std_errors_dof
+    return Remaining(
+        phase=last.phase, round=len(iterations),
+        estimate={n: found[n] for n in names},
+        total={n: applied.get(n, 0.0) + found[n] for n in names},
+        std_errors={n: last.std_errors.get(n) for n in names},
+        std_errors_dof=dof,
+        coverage_factor_95=num(coverage_factor(dof)) if dof else None,
+    )
 
 
-def offsets_fields(controller: ZeroOffsets, result: dict[str, Any],
-                   state: RunState) -> dict[str, Any]:
+def fill_offsets(result: RunResult, controller: ZeroOffsets, state: RunState) -> None:
     """Where the offsets live and what they are when the run stops (docs/design.md,
     "Offsets held by the station"): ``offsets_held_by`` "controller" | "station",
     ``offsets_final`` (the journal's last write-back or rollback, else the offsets
     before), and for a station that holds them what to do with them."""
     held_by = controller.held_by
-    before = result.get("offsets_before")
-    start = [before[a] for a in AXES] if isinstance(before, dict) else None
+    before = None if result.offsets_before is None else known(result.offsets_before)
+    start = [before[a] for a in AXES] if before is not None else None
     final = state.held_offsets(start)
-    out: dict[str, Any] = {"offsets_held_by": held_by,
-                           "offsets_final": None if final is None else
-                           {a: float(v) for a, v in zip(AXES, final, strict=True)}}
+    result.offsets_held_by = held_by
+    result.offsets_final = None if final is None else \
+        {a: float(v) for a, v in zip(AXES, final, strict=True)}
     if held_by == "station":
         reg_map = getattr(controller, "map", None)
         why = (getattr(reg_map, "unsupported", {}) or {}).get("offsets", "")
         line = "" if final is None else ", ".join(f"{v:.4f}" for v in final)
-        out["offsets_note"] = (
+        result.offsets_note = (
             "the drive holds no zero offset it can be told over Modbus, so these offsets "
             "live in this station run only: "
             + (f"{why.rstrip().rstrip('.')}; " if why else "enter them in the drive's own "
                "home-offset parameter; ")
             + f"a later run starts from them with [controller] offsets = [{line}] or "
-            f"--offsets-from {result.get('run_dir')}")
-    return out
+            f"--offsets-from {result.run_dir}")
 
 
-def writeback_fields(result: dict[str, Any], outcome: WritebackOutcome, controller: Any) -> None:
-    result["writeback"] = outcome.to_json()
-    result["offsets_before"] = outcome.before if outcome.before is not None else \
+def writeback_record(outcome: WritebackOutcome, round: int | None = None) -> Writeback:
+    """result.json's ``writeback`` of a write-back's ``outcome`` (``round``: from 1)."""
+    record = Writeback(status=outcome.status, reason=outcome.reason)
+    if round is not None:
+        record.round = round
+    return record
+
+
+def writeback_fields(result: RunResult, outcome: WritebackOutcome,
+                     controller: ZeroOffsets) -> None:
+    """The first write-back's: its outcome, the offsets before it and those written."""
+    result.writeback = writeback_record(outcome)
+    result.offsets_before = dict(outcome.before) if outcome.before is not None else \
         {a: float(v) for a, v in zip(AXES, controller.read_offsets(), strict=True)}
-    result["offsets_written"] = outcome.written
+    result.offsets_written = None if outcome.written is None else dict(outcome.written)
 
 
-def _simulation(sim: SimulationParams, gauges: list[str]) -> dict[str, Any]:
+def _simulation(sim: SimulationParams, gauges: list[str]) -> Simulation:
     """result.json's ``simulation``: the hidden machine, named for the report."""
-    return {
-        "seed": sim.seed, "true_drho": dict(zip(AXES, sim.true_drho, strict=True)),
-        "true_dl": dict(zip(AXES, sim.true_dl, strict=True)),
-        "true_tilt": dict(zip(("tilt_yx", "tilt_zx", "tilt_zy"), sim.true_tilt, strict=True)),
+    return Simulation(
+        seed=sim.seed, true_drho=dict(zip(AXES, sim.true_drho, strict=True)),
+        true_dl=dict(zip(AXES, sim.true_dl, strict=True)),
+        true_tilt=dict(zip(("tilt_yx", "tilt_zx", "tilt_zy"), sim.true_tilt, strict=True)),
         # how far the axes pass each other (mm)
-        "true_gap": dict(zip(("gap_xy", "gap_xz", "gap_yz"), sim.true_gap, strict=True)),
-        "noise_mm": sim.noise_mm,
+        true_gap=dict(zip(("gap_xy", "gap_xz", "gap_yz"), sim.true_gap, strict=True)),
+        noise_mm=sim.noise_mm,
         # stands placed by eye: each mounting off the leg's middle by up to this
-        "mount_error_mm": sim.mount_error_mm,
+        mount_error_mm=sim.mount_error_mm,
         # each joint's lost motion (ISO 230-2's reversal value), mm
-        "backlash_mm": dict(zip(AXES, sim.backlash_mm, strict=True)),
+        backlash_mm=dict(zip(AXES, sim.backlash_mm, strict=True)),
         # each leg's bow (sagitta at its middle, mm) and each gauge's scale error
-        "leg_bow_mm": dict(zip(AXES, sim.leg_bow_mm, strict=True)),
-        "gauge_scale": dict(zip(gauges, sim.gauge_scales(len(gauges)), strict=True))}
+        leg_bow_mm=dict(zip(AXES, sim.leg_bow_mm, strict=True)),
+        gauge_scale=dict(zip(gauges, sim.gauge_scales(len(gauges)), strict=True)))
 
 
-def base_result(run_dir: Path, config: StationConfig, sim: dict[str, Any] | None,
-                started_iso: str) -> dict[str, Any]:
+def base_result(run_dir: Path, config: StationConfig, sim: JsonObject | None,
+                started_iso: str) -> RunResult:
+    """The record as a run starts it: failed until it says otherwise. Built without
+    validation: the fields every run writes at its end (timing, the plunger guard,
+    the offsets) are set there, and result.json is validated as it is written
+    (station.record.io)."""
     m = config.machine
-    return {
+    return RunResult.model_construct(  # type: ignore[call-arg]  # the rest at the end
         # the record's schema (station.record.result; orthocal schema result)
-        "schema_version": SCHEMA_VERSION,
-        "run_dir": str(run_dir), "status": "failed", "message": None,
-        "started": started_iso, "finished": None, "duration_s": None,
-        "simulated": sim is not None,
-        "simulation": None if sim is None else _simulation(
+        schema_version=SCHEMA_VERSION,
+        run_dir=str(run_dir), status="failed", message=None,
+        started=started_iso, finished=None, duration_s=None,
+        simulated=sim is not None,
+        simulation=None if sim is None else _simulation(
             SimulationParams.from_header(sim), [i.name for i in config.indicators]),
-        "machine": {"id": m.id, "leg_length": m.leg_length, "rho_min": m.rho_min,
-                    "rho_max": m.rho_max},
-        "model": config.procedure.model, "method": config.procedure.method,
-        "identified": {}, "std_errors": {}, "offsets_before": None, "offsets_written": None,
-        "writeback": None, "verification": None,
-    }
+        machine=Machine(id=m.id, leg_length=m.leg_length, rho_min=m.rho_min,
+                        rho_max=m.rho_max),
+        model=config.procedure.model, method=config.procedure.method,
+        identified={}, std_errors={}, offsets_before=None, offsets_written=None,
+        writeback=None, verification=None,
+    )

@@ -34,7 +34,6 @@ import numpy as np
 from drivers.base import GaugeReadings, Moves, OffsetResolution
 from orthocal.lost_motion import reversal_gain
 from orthocal.postures import MIDDLE, plane_at
-from station.analysis.documents import JsonObject
 from station.analysis.sizing import VerificationSizing
 from station.analysis.statistics import (
     Measurement,
@@ -171,7 +170,7 @@ class Sequencer:
         except Exception:
             pass  # nothing more can be saved; the original fault is re-raised
 
-    def _journal_safe(self, record: JsonObject) -> None:
+    def _journal_safe(self, record: dict[str, object]) -> None:
         try:
             self.journal.append(record)
         except Exception:

@@ -32,7 +32,6 @@ from drivers.base import ZeroOffsets
 from drivers.device_errors import DeviceError
 from drivers.files import write_atomic
 from orthocal import AXES
-from station.analysis.documents import JsonObject
 from station.console.operator import Operator
 from station.engine.replay import Steps, WritebackRound, WritebackStage
 from station.errors import RunFailed
@@ -56,9 +55,6 @@ class WritebackOutcome:
     reason: str | None
     before: dict[str, float] | None
     written: dict[str, float] | None
-
-    def to_json(self) -> JsonObject:
-        return {"status": self.status, "reason": self.reason}
 
 
 def _axes(values: Iterable[float]) -> dict[str, float]:
@@ -86,7 +82,7 @@ class _Stages:
     steps: Steps
     round: int
 
-    def log(self, record: JsonObject) -> None:
+    def log(self, record: dict[str, object]) -> None:
         self.steps.journal.append({"type": "writeback", "round": self.round, **record})
 
     def take(self, stage: str, act: Callable[[], object]) -> Writeback | None:

@@ -13,6 +13,9 @@ from typing import Any
 from orthocal import coverage_factor
 from station.errors import say
 from station.history.trend import started_at
+from station.record.io import jsonable, section
+from station.record.result import RunResult
+from station.record.result_sections import NotCompared, SinceLast
 
 
 class Incomparable(ValueError):
@@ -149,29 +152,35 @@ def change_lines(doc: Mapping[str, Any]) -> list[str]:
             f"{r[3]:>{widths[3]}} ± {r[4]:<{widths[4]}} at 95 %  {r[5]}" for r in rows]
 
 
-def since_last_run(config: Any, result: Mapping[str, Any], runs_dir: Path) -> dict[str, Any] | None:
-    """:func:`since_last` of a finishing run (its ``result``, JSON values) against the
-    machine's history as it stands before the run is recorded there ([history], or
-    ``<runs_dir>``'s store). None without history, machine id or earlier run; a store
-    that cannot be read, or an entry this code cannot read, is said in one line and
-    compares nothing: the run stands."""
+def since_last_run(config: Any, result: RunResult, runs_dir: Path
+                   ) -> SinceLast | NotCompared | None:
+    """:func:`since_last` of a finishing run (its record) against the machine's
+    history as it stands before the run is recorded there ([history], or
+    ``<runs_dir>``'s store), as the record's ``since_last``. None without history,
+    machine id or earlier run; a store that cannot be read, or an entry this code
+    cannot read, is said in one line and compares nothing: the run stands."""
     if not config.history.enabled:
         return None
     from station.history.entry import entry_of
     from station.history.store import HistoryStore, default_url
 
-    entry = entry_of(result, config.controller.profile)
+    # the entry of the run as result.json will hold it, as the history files it
+    entry = entry_of(jsonable(result), config.controller.profile)
     if not entry.get("machine_id"):
         return None
     url = config.history.url or default_url(runs_dir)
     try:
         with HistoryStore(url) as store:
             earlier = store.entries(entry["machine_id"])
-        return since_last(earlier, entry)
+        doc = since_last(earlier, entry)
     except Exception as exc:  # a database or an old entry's error: said, not raised
         say(f"orthocal: not compared with the machine's last run ({type(exc).__name__}: "
             f"{exc})")
         return None
+    # validated outside the try: a comparison the record does not declare is a bug
+    if doc is None:
+        return None
+    return section(NotCompared, doc) if "not_compared" in doc else section(SinceLast, doc)
 
 
 def since_last(earlier: Sequence[Mapping[str, Any]],

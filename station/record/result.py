@@ -2,7 +2,7 @@
 
 Every field of every section is declared and every section is closed: a field the
 engine adds and these models do not know fails as result.json is written
-(station.report.io.write_result validates it). Floats that were NaN or infinite are
+(station.record.io.write_result validates it). Floats that were NaN or infinite are
 written as null. The larger sections live beside this file: ``accuracy`` in
 result_accuracy.py; ``model_selection``, ``stands``, ``uncertainty_budget``,
 ``reversal``, ``plunger_guard`` and ``since_last`` in result_sections.py. Files
@@ -35,13 +35,14 @@ from station.record.result_sections import (
     UncertaintyBudget,
 )
 
-__all__ = ["SCHEMA_VERSION", "Compensated", "RunResult", "Setup"]
+__all__ = ["SCHEMA_VERSION", "Compensated", "RunResult", "Setup", "Status"]
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION: Literal[2] = 2
 
 Stopped = Literal["converged", "max_iterations", "not-converged", "refused", "declined",
                   "failed", "skipped", "not-verified"]
 Verdict = Literal["significant", "converged", "suspected", "unproven"]
+Status = Literal["ok", "failed", "refused", "aborted"]
 
 
 class Machine(Closed):
@@ -202,7 +203,7 @@ class RunResult(Closed):
 
     schema_version: Literal[2]
     run_dir: str
-    status: Literal["ok", "failed", "refused", "aborted"]
+    status: Status
     message: str | None
     started: str
     finished: str | None

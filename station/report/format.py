@@ -8,13 +8,12 @@ run that failed halfway).
 from __future__ import annotations
 
 import html
-import math
-import re
 from collections.abc import Iterable, Mapping, Sequence
 from datetime import datetime
 
 from orthocal import AXES, PARAM_NAMES
 from orthocal.numbers import finite
+from station.record.keys import dev_parts
 from station.record.result import Deviation, RunResult, Simulation
 from station.record.result_accuracy import Accuracy
 from station.record.result_base import Interval
@@ -117,14 +116,6 @@ def param_html(name: str) -> str:
 def param_tex(name: str) -> str:
     kind, axis = name.split("_", 1)
     return "$" + _SYMBOL.get(kind, ("", kind))[1] + "_{" + axis + "}$"
-
-
-def dev_parts(key: str) -> tuple[str, str, str] | None:
-    """(posture, leg, direction) of "+xy", of a stroke key such as "+30xy", or of one
-    read in a second gauge plane, "+@0.75xy"."""
-    if re.fullmatch(r"[+-](\d+(\.\d*)?|\.\d+)?(@0?\.\d+)?[xyz][xyz]", key):
-        return key[:-2], key[-2], key[-1]
-    return None
 
 
 def posture_html(posture: str, leg: str) -> str:
@@ -253,27 +244,6 @@ def params_of(result: RunResult) -> list[str]:
     ident = result.identified
     names = [n for n in PARAM_NAMES if n in ident]
     return names + sorted(n for n in ident if n not in PARAM_NAMES)
-
-
-def dev_keys(*tables: Iterable[str]) -> list[str]:
-    """The deviation keys of ``tables`` (maps keyed by them), in :func:`dev_order`."""
-    present: set[str] = set()
-    for t in tables:
-        present.update(t)
-    return sorted(present, key=dev_order)
-
-
-def dev_order(key: str) -> tuple[object, ...]:
-    """Leg, then its gauge plane (the middle first), then posture from ρmax down to
-    ρmin ('+', '+30', '-50', '-'), then direction: DEVIATION_KEYS' order, with
-    intermediate strokes and second planes in their place."""
-    parts = dev_parts(key)
-    if parts is None:
-        return (1, key)
-    posture, leg, d = parts
-    posture, _, plane = posture.partition("@")
-    s = {"+": math.inf, "-": -math.inf}.get(posture)
-    return (0, leg, float(plane) if plane else 0.5, -(float(posture) if s is None else s), d)
 
 
 def format_when(iso: str | None) -> str:

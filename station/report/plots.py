@@ -9,12 +9,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from station.record.keys import dev_keys, dev_parts
 from station.record.result import Deviation, RunResult, Simulation
 from station.report.format import (
     AXES,
     at,
-    dev_keys,
-    dev_parts,
     dev_tex,
     fmt,
     hidden,

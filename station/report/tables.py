@@ -5,12 +5,12 @@ candidates, the correlation of the estimates, the deviations and the setups."""
 from __future__ import annotations
 
 from orthocal import coverage_factor
+from station.record.keys import dev_keys
 from station.record.result import Deviation, RunResult
 from station.report.format import (
     PARAM_NAMES,
     at,
     dev_html,
-    dev_keys,
     esc,
     fmt,
     hidden,

@@ -131,3 +131,57 @@ def test_an_old_journals_simulation_is_read_with_what_that_run_had() -> None:
     assert new.gauge_scales(2) == [0.001, -0.002] and new.mount_error_mm == 5.0
     with pytest.raises(ValueError):
         SimulationParams.from_header({**old, "true_drho": [0.1, 0.2]})
+
+
+#: What makes a JSON Schema say something of a value: without any of these a value of
+#: any type would pass (an open section).
+_SAYS = ("type", "$ref", "anyOf", "oneOf", "allOf", "const", "enum")
+
+
+def open_sections(node: object, where: str = "#") -> list[str]:
+    """Where the schema ``node`` lets through what it does not declare: an object with
+    properties that admits others, a map whose values are untyped, or a value of any
+    type at all."""
+    found: list[str] = []
+    if isinstance(node, list):
+        for i, item in enumerate(node):
+            found += open_sections(item, f"{where}/{i}")
+        return found
+    if not isinstance(node, dict):
+        return found
+    extra = node.get("additionalProperties")
+    if "properties" in node and extra is not False:
+        found.append(f"{where}: properties, and others admitted ({extra!r})")
+    if node.get("type") == "object" and "properties" not in node and \
+            (not isinstance(extra, dict) or not any(k in extra for k in _SAYS)):
+        found.append(f"{where}: an object of untyped values")
+    for name, sub in node.get("properties", {}).items():
+        if not any(k in sub for k in _SAYS):
+            found.append(f"{where}/properties/{name}: any type")
+    for key, sub in node.items():
+        if key not in ("const", "enum", "default", "examples"):
+            found += open_sections(sub, f"{where}/{key}")
+    return found
+
+
+def test_a_simulated_runs_result_fits_a_schema_with_no_open_section(tmp_path: Path,
+                                                                    capsys) -> None:
+    """result.json is typed through: the schema shipped for it closes every section
+    and types every value, and a simulated run's file (as the engine writes it, the
+    joints' lost motion measured) validates against it."""
+    doc = json.loads(schema.shipped("result"))
+    assert open_sections(doc) == []
+    # the check sees an open section where there is one
+    assert open_sections({"properties": {"a": {"type": "object"}, "b": {}}}) == [
+        "#: properties, and others admitted (None)", "#/properties/b: any type",
+        "#/properties/a: an object of untyped values"]
+    code = cmd_run.run(simulated(tmp_path, seed=5, true_drho=(0.4, -0.3, 0.2),
+                                 backlash="0.004,0.002,0.003"))
+    printed = json.loads(capsys.readouterr().out)
+    (run_dir,) = tmp_path.glob("run-*")
+    result = json.loads((run_dir / "result.json").read_text())
+    assert code in (0, 3), result["message"]
+    assert errors("result", result) == []
+    assert result["reversal"] is not None and result["iterations"]
+    # --json prints the document the file holds
+    assert printed == result

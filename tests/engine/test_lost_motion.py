@@ -244,9 +244,9 @@ def test_without_the_reversal_stop_the_run_says_its_offsets_are_the_bands_edge()
     measured = estimate_reversal({"x": [0.012, 0.011], "y": [0.008], "z": [0.015]})
     unmeasured = estimate_reversal({"x": [], "y": [], "z": []})
     below = station_config(procedure={"approach": "below"})
-    assert "middle of each joint's band" in reversal.fields(below, measured)["stated"]
+    assert "middle of each joint's band" in reversal.fields(below, measured).stated
     said = reversal.fields(station_config(procedure={"approach": "below",
                                                      "measure_reversal": False}),
-                           unmeasured)["stated"]
+                           unmeasured).stated
     assert "band's lower edge" in said and "did not measure" in said
     assert "middle of each joint's band" not in said

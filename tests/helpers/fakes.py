@@ -26,6 +26,7 @@ from station.engine.procedure import Run, execute
 from station.plan.check import check_plan
 from station.plan.checker import MotionChecker
 from station.plan.steps import build_plan
+from station.record import io
 from station.record.journal_file import JOURNAL_NAME, Journal
 from station.record.run_dir import new_run_dir, now_iso, reopen, write_run_files
 from station.record.state import RunState
@@ -132,6 +133,7 @@ def _execute(rig: FakeRig, config: StationConfig, plan: Any, checker: MotionChec
             ctx = Run(run_dir, config, plan, journal, devices, rig.operator(),
                       rig.simulation(), started, checker=checker)
             code, result = execute(ctx)
-            return exit_status(result, code), result
+            # the record as result.json holds it, JSON values the tests read by key
+            return exit_status(result, code), io.jsonable(result)
     finally:
         devices.close()

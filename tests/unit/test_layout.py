@@ -118,10 +118,10 @@ def test_every_document_the_code_cites_is_in_the_repo() -> None:
 
 def test_no_text_speaks_of_a_tracker_or_of_the_house() -> None:
     # A user's clone has no issue tracker and knows no "house" nor a working "turn":
-    # "the issue's 3 µm" or "the house's style" says nothing to its reader, where "the requirement: the
-    # offsets within 3 µm" or "the project's style" does. BENCHMARKS.md, the history
-    # of the figures, and the golden run's files are not read; nor is this file, which
-    # has to name the words.
+    # "the issue's 3 µm" or "the house's style" says nothing to its reader, where "the
+    # requirement: the offsets within 3 µm" or "the project's style" does.
+    # BENCHMARKS.md, the history of the figures, and the golden run's files are not
+    # read; nor is this file, which has to name the words.
     words = re.compile(r"\b(issues?|house)\b|\b(this|last|next|previous) turn\b|\bturn \d",
                        re.IGNORECASE)
     texts = [p for p in python_files() if p != Path(__file__).resolve()]
