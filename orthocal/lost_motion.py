@@ -30,6 +30,7 @@ import numpy as np
 from orthocal.geometry import AXES, Geometry
 from orthocal.identification import Identification
 from orthocal.measurement import leg_reading
+from orthocal.noise import coverage_factor
 from orthocal.postures import posture
 
 APPROACHES = ("below", "above", "as-planned")
@@ -167,3 +168,18 @@ def tool_reversal_mm(jacobians: np.ndarray, reversal: Mapping[str, float | None]
     shifts = signs * half  # (8, 3)
     moved = np.einsum("nij,sj->nsi", np.asarray(jacobians, dtype=float), shifts)
     return float(np.max(np.linalg.norm(moved, axis=-1))) if moved.size else 0.0
+
+
+def standing_out(value: Mapping[str, float | None], std_errors: Mapping[str, float | None],
+                 dof: float | None) -> dict[str, float]:
+    """The joints whose reversal stands out of its noise: the lower end of its 95 %
+    interval (k from Student's t on ``dof``) above zero. A reversal is a play and
+    never negative: a value at or below zero, one whose interval holds zero, or one
+    without a standard error is nothing to compensate."""
+    k = coverage_factor(dof)
+    out = {}
+    for axis, v in value.items():
+        se = std_errors.get(axis)
+        if v is not None and se is not None and v - k * se > 0.0:
+            out[axis] = v
+    return out

@@ -10,7 +10,13 @@ from collections.abc import Sequence
 import numpy as np
 
 import orthocal
-from orthocal.lost_motion import Reversal, estimate_reversal, reversal_gain, tool_reversal_mm
+from orthocal.lost_motion import (
+    Reversal,
+    estimate_reversal,
+    reversal_gain,
+    standing_out,
+    tool_reversal_mm,
+)
 from orthocal.numbers import finite
 from station.analysis.statistics import Measurement
 from station.config import StationConfig
@@ -116,23 +122,37 @@ def at_the_tool(config: StationConfig, rev: Reversal, points: np.ndarray) -> Too
                      - orthocal.forward(rho - step, geometry)) / (2 * h))
     jac = np.stack(cols, axis=-1)  # (n, 3 xyz, 3 joints)
     tool = tool_reversal_mm(jac, rev.value)
-    measured = {a: v for a, v in rev.value.items() if v is not None}
-    worst = max(measured.values(), default=0.0)
-    if not measured:
-        advice = "not measured"
-    elif worst > REPAIR_ABOVE_MM:
-        advice = ("repair the mechanics of joint(s) "
-                  + ", ".join(a for a, v in measured.items() if v > REPAIR_ABOVE_MM)
-                  + f" (reversal above {1000 * REPAIR_ABOVE_MM:g} µm: a worn screw, nut or "
-                  "belt), and meanwhile compensate it in the controller's backlash "
-                  "parameter")
-    else:
-        advice = ("compensate it in the controller's backlash (reversal) parameter: "
-                  + ", ".join(f"joint {a} {1000 * v:.1f} µm" for a, v in measured.items()))
     return ToolReversal(
         value_mm={a: finite(v) for a, v in rev.value.items()},
-        tool_max_mm=finite(tool), repair_above_mm=REPAIR_ABOVE_MM, advice=advice,
+        tool_max_mm=finite(tool), repair_above_mm=REPAIR_ABOVE_MM, advice=advice(rev),
         assumes=("a point reached from an unknown side: each joint off by up to half its "
                  "reversal beyond the field, through the nominal kinematics, worst over "
                  "the workspace grid and the sides"))
+
+
+def advice(rev: Reversal) -> str:
+    """What to do about the joints' lost motion: only for a joint whose reversal
+    stands out of its noise (orthocal.lost_motion.standing_out); repair beyond REPAIR_ABOVE_MM."""
+    measured = {a: v for a, v in rev.value.items() if v is not None}
+    if not measured:
+        return "not measured"
+    k = orthocal.coverage_factor(rev.dof)
+    big = standing_out(rev.value, rev.std_errors, rev.dof)
+    if not big:
+        said = ", ".join(f"joint {a} {1000 * v:+.1f}".replace("-", "−")
+                         + (f" ± {1000 * k * se:.1f}" if (se := rev.std_errors.get(a))
+                            is not None else "") for a, v in measured.items())
+        return (f"nothing to compensate: no joint's reversal stands out of its noise "
+                f"({said} µm, 95 %)")
+    if max(big.values()) > REPAIR_ABOVE_MM:
+        return ("repair the mechanics of joint(s) "
+                + ", ".join(a for a, v in big.items() if v > REPAIR_ABOVE_MM)
+                + f" (reversal above {1000 * REPAIR_ABOVE_MM:g} µm: a worn screw, nut or "
+                "belt), and meanwhile compensate it in the controller's backlash "
+                "parameter")
+    rest = [a for a in measured if a not in big]
+    return ("compensate it in the controller's backlash (reversal) parameter: "
+            + ", ".join(f"joint {a} {1000 * v:.1f} µm" for a, v in big.items())
+            + (f" (joint(s) {', '.join(rest)}: not beyond the noise, leave at zero)"
+               if rest else ""))
 

@@ -4,7 +4,9 @@ Exit status: 0 success (a run's closed loop converged, or the loop is off);
 1 the run failed or was aborted, with everything recorded so far kept; 2 bad
 input (config, CSV, arguments), with a message that names the offending field
 or line; 3 the run completed but its closed loop did not converge (the
-summary's first line says why). No traceback reaches the operator unless
+summary's first line says why); 4 the run completed and converged but the tool
+is not shown within the config's [acceptance] limit at 95 % (FAIL, or not
+decided). No traceback reaches the operator unless
 ``--debug`` is given.
 """
 
@@ -23,6 +25,7 @@ _BASE_MODELS = ("rho", "L", "full", "rho+tilt", "full+tilt", "rho+gap", "rho+til
 MODEL_NAMES = (*_BASE_MODELS, *(m + "+form" for m in _BASE_MODELS))
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_NOT_CONVERGED = 0, 1, 2, 3
+EXIT_OUT_OF_TOLERANCE = 4  # completed, the tool not shown within [acceptance] at 95 %
 
 # Each command lives in its own module, imported only when used, so that
 # `orthocal identify` does not pay for pymodbus and `orthocal --help` is instant.
@@ -65,6 +68,11 @@ def _json_table(text: str) -> dict:
     if not isinstance(value, dict):
         raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
     return value
+
+
+def _verbose(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--verbose", action="store_true",
+                   help="print the whole summary, not its first screen only")
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -215,10 +223,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help=argparse.SUPPRESS)
     run.add_argument("--sim-speed", type=float, default=None, help=argparse.SUPPRESS)
     _common(run)
+    _verbose(run)
 
     resume = sub.add_parser("resume", help="continue an interrupted run from its journal")
     resume.add_argument("run_dir", metavar="RUN_DIR")
     _common(resume)
+    _verbose(resume)
 
     rollback = sub.add_parser("rollback", help="restore the offsets saved before write-back")
     rollback.add_argument("run_dir", metavar="RUN_DIR")

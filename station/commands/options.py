@@ -88,13 +88,14 @@ class RunOptions:
     out: Path = Path("runs")
     yes: bool = False
     json: bool = False
+    verbose: bool = False  # the whole summary, not its first screen only
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> RunOptions:
         return cls(config=None if args.config is None else Path(args.config),
                    sim=SimOptions.from_args(args) if args.simulate else None,
                    plan=bool(args.plan), out=Path(args.out), yes=bool(args.yes),
-                   json=bool(args.json),
+                   json=bool(args.json), verbose=bool(getattr(args, "verbose", False)),
                    offsets_from=None if getattr(args, "offsets_from", None) is None
                    else Path(args.offsets_from))
 
@@ -108,8 +109,10 @@ class ResumeOptions:
     yes: bool = False
     json: bool = False
     station_hook: StationHook | None = None
+    verbose: bool = False  # the whole summary, not its first screen only
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> ResumeOptions:
-        return cls(run_dir=Path(args.run_dir), yes=bool(args.yes), json=bool(args.json))
+        return cls(run_dir=Path(args.run_dir), yes=bool(args.yes), json=bool(args.json),
+                   verbose=bool(getattr(args, "verbose", False)))
 

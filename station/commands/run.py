@@ -162,7 +162,7 @@ def run(options: RunOptions) -> int:
                   checker=checker)
         code, result = execute(ctx)
         record_history(config, result, run_dir.parent)
-        return _report(options.json, code, result)
+        return _report(options.json, code, result, options.verbose)
 
 
 def _mountings(config: Any, plan: Any) -> dict[str, int]:
@@ -171,24 +171,32 @@ def _mountings(config: Any, plan: Any) -> dict[str, int]:
                               proc.verify)
 
 
-def print_result(as_json: bool, result: RunResult | JsonObject) -> None:
+def print_result(as_json: bool, result: RunResult | JsonObject, verbose: bool = False) -> None:
     """One JSON document, or the summary, on stdout: the record as result.json holds
-    it, or a result.json read back (``{}``: lost)."""
+    it, or a result.json read back (``{}``: lost); the summary's first screen, all of
+    it with ``verbose`` (--verbose)."""
     if as_json:
         doc = io.jsonable(result) if isinstance(result, RunResult) else result
         print(json.dumps(report.jsonable_value(doc), allow_nan=False))
     elif not result:  # a finished run whose result.json is lost: no record to sum up
         print("orthocal run: UNKNOWN")
     else:
-        print(report.summary_text(result))
+        print(report.summary_text(result, verbose=verbose))
 
 
 def exit_status(result: RunResult | JsonObject, code: int | None = None) -> int:
     """The exit status of a finished run (station.commands.cli): 0 completed, its
     closed loop converged or off; 3 completed but the loop did not converge
-    (``loop.stopped`` "not-converged" or "max_iterations"); 1 anything else. ``code``:
+    (``loop.stopped`` "not-converged" or "max_iterations"); 4 completed, converged,
+    and the tool not shown within [acceptance] at 95 % (``acceptance.outcome`` fail or
+    undecided); 1 anything else. ``code``:
     the flow's own (0 completed, 1 not), else taken from the result's status."""
-    from station.commands.cli import EXIT_FAILED, EXIT_NOT_CONVERGED, EXIT_OK
+    from station.commands.cli import (
+        EXIT_FAILED,
+        EXIT_NOT_CONVERGED,
+        EXIT_OK,
+        EXIT_OUT_OF_TOLERANCE,
+    )
 
     if code is None:
         status = result.status if isinstance(result, RunResult) else result.get("status")
@@ -196,6 +204,8 @@ def exit_status(result: RunResult | JsonObject, code: int | None = None) -> int:
     # a result.json that is lost ({}) has no loop to judge: the flow's code stands
     if code == EXIT_OK and result and report.not_converged(result):
         return EXIT_NOT_CONVERGED
+    if code == EXIT_OK and result and report.not_accepted(result):
+        return EXIT_OUT_OF_TOLERANCE
     return code
 
 
@@ -217,9 +227,9 @@ def record_history(config: Any, result: RunResult, runs_dir: Path) -> None:
             f" orthocal history --rebuild {runs_dir} makes it again from the run directories")
 
 
-def _report(as_json: bool, code: int, result: RunResult) -> int:
+def _report(as_json: bool, code: int, result: RunResult, verbose: bool = False) -> int:
     """The summary (or the JSON document) on stdout, and the exit status."""
-    print_result(as_json, result)
+    print_result(as_json, result, verbose)
     return exit_status(result, code)
 
 
@@ -231,7 +241,7 @@ def resume(options: ResumeOptions) -> int:
         result_path = run_dir / "result.json"
         found = migrate(json.loads(result_path.read_text())) if result_path.exists() else {}
         say(f"orthocal: {run_dir} already finished ({state.finished.status})")
-        print_result(options.json, found)
+        print_result(options.json, found, options.verbose)
         return exit_status(found, 0 if state.finished.status == "ok" else 1)
     config = _held_offsets(load_config(run_dir / "config.toml"), state)
     sim = _simulation(state)
@@ -270,7 +280,7 @@ def resume(options: ResumeOptions) -> int:
                   checker=checker)
         code, result = execute(ctx)
         record_history(config, result, run_dir.parent)
-        return _report(options.json, code, result)
+        return _report(options.json, code, result, options.verbose)
 
 
 def _held_offsets(config: Any, state: RunState) -> Any:

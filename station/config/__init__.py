@@ -359,6 +359,16 @@ class ReportConfig(_Strict):
     figures: bool = True
 
 
+class AcceptanceConfig(_Strict):
+    """A shop's acceptance limit on the tool's error after calibration, µm (docs/
+    design.md, "Acceptance"): the run says PASS only where the whole 95 % interval
+    of the figure lies within its limit (station.analysis.acceptance). Absent: no
+    acceptance is judged."""
+
+    tool_rms_um: float | None = Field(None, gt=0, allow_inf_nan=False)
+    tool_max_um: float | None = Field(None, gt=0, allow_inf_nan=False)
+
+
 class StationConfig(_Strict):
     machine: MachineConfig = Field(default_factory=MachineConfig)
     controller: ControllerConfig = Field(default_factory=ControllerConfig)
@@ -369,6 +379,7 @@ class StationConfig(_Strict):
     uncertainty: UncertaintyConfig = Field(default_factory=UncertaintyConfig)
     history: HistoryConfig = Field(default_factory=HistoryConfig)
     report: ReportConfig = Field(default_factory=ReportConfig)
+    acceptance: AcceptanceConfig = Field(default_factory=AcceptanceConfig)
 
     @model_validator(mode="after")
     def _references(self) -> StationConfig:

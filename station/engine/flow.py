@@ -24,8 +24,8 @@ from orthocal.loop import (
 )
 from orthocal.lost_motion import Reversal, band_middle, edge_of
 from orthocal.numbers import finite
+from station.analysis import acceptance, compensated, reversal, verdict
 from station.analysis import accuracy_statement as accuracy
-from station.analysis import compensated, reversal, verdict
 from station.analysis import run_budget as budget
 from station.analysis.statistics import Measurement, pooled
 from station.config import StationConfig
@@ -301,6 +301,8 @@ class Flow:
         self.result.uncertainty_budget = budget.of_run(self.ctx.config, self.idents,
                                                        self.result.remaining)
         self._accuracy()
+        if (judged := acceptance.judge(self.ctx.config.acceptance, self.result)) is not None:
+            self.result.acceptance = judged
         self.result.status, self.result.message = status, message
 
     # --- accuracy at the tool ------------------------------------------------------

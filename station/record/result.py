@@ -23,6 +23,7 @@ from typing import Literal
 
 from pydantic import Field
 
+from station.record.result_acceptance import Acceptance
 from station.record.result_accuracy import Accuracy, Compensated
 from station.record.result_base import Axis3, Closed, NotStated, Params
 from station.record.result_sections import (
@@ -248,5 +249,7 @@ class RunResult(Closed):
     reversal: Reversal | None = None
     plunger_guard: PlungerGuard
     timing: Timing
+    acceptance: Acceptance | None = Field(
+        None, description="the tool against [acceptance] at 95 %; absent without it")
     since_last: SinceLast | NotCompared | None = Field(
         None, description="absent without [machine] id or an earlier run in the history")

@@ -11,11 +11,12 @@ is the one report the operator needed most.
 
 Split by job: boundary.py (the record from what the caller hands in; result.json
 is written by the record, station.record.io), format.py (names and formatting),
-text.py (the text summary), tool.py (accuracy at the tool: the headline's clause,
-the summary's lines, the page's section, where the stands were), rounds.py (the
-closed loop's rounds), since.py (what changed since the machine's last run),
-plots.py (figures), tables.py (the measurement's tables), html.py (the page). The
-report reads the record only, never the engine.
+first_screen.py (the summary's and the page's first screen: verdict, joints, tool,
+what to do), text.py (the text summary), tool.py (accuracy at the tool: the
+headline's clause, the summary's lines, the page's section, where the stands were),
+rounds.py (the closed loop's rounds), since.py (what changed since the machine's last
+run), plots.py (figures), tables.py (the measurement's tables), html.py (the page).
+The report reads the record only, never the engine.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from station.report.format import (
     PARAM_NAMES,
     STATUS_TEXT,
     fmt,
+    not_accepted,
     not_converged,
     param_plain,
 )
@@ -45,6 +47,7 @@ __all__ = [
     "jsonable",
     "jsonable_value",
     "mountings_line",
+    "not_accepted",
     "not_converged",
     "param_plain",
     "render_html",

@@ -31,7 +31,7 @@ def _largest(source: BudgetSource) -> tuple[float, str]:
     return -round(1e6 * _top(source)), source.source
 
 
-def _statement(result: RunResult, b: UncertaintyBudget) -> dict[str, float | None]:
+def statement_values(result: RunResult, b: UncertaintyBudget) -> dict[str, float | None]:
     """The figures the budget is of: remaining.total, or the identified Δρ."""
     if b.statement == "remaining.total":
         return dict(result.remaining.total) if result.remaining is not None else {}
@@ -44,13 +44,13 @@ def summary_lines(result: RunResult) -> list[str]:
         return [f"  uncertainty   {b.error}"] if b.error else []
     if b is None:
         return []
-    values = _statement(result, b)
-    line = "  statement     " + "   ".join(
-        f"Δρ{n[-1]} = {fmt(at(values, n), signed=True)} ± {_um(at(b.expanded_95_mm, n))} µm"
-        for n in NAMES if n in b.expanded_95_mm)
-    kk = [x for x in map(num, b.coverage_factor.values()) if x is not None]
-    line += (f" (95 %, k = {min(kk):.2f}–{max(kk):.2f}: the scatter and the uncertainty "
-             "budget, GUM)" if kk else "")
+    # the values are the first screen's "as found" (station.report.first_screen):
+    # said once; here what their ± is
+    kk = sorted({round(x, 2) for x in map(num, b.coverage_factor.values()) if x is not None})
+    k = "" if not kk else f", k = {kk[0]:.2f}" if len(kk) == 1 else \
+        f", k = {kk[0]:.2f}–{kk[-1]:.2f}"
+    line = (f"  statement     Δρ as found (above): 95 %{k}, the scatter and the uncertainty "
+            "budget (GUM)")
     top = sorted(b.sources, key=_largest)[:3]
     lines = [line, "  budget        largest: " + ", ".join(
         f"{s.source} {_um(_top(s))} µm" for s in top)]
@@ -102,7 +102,7 @@ def _cells(values: dict[str, float | None], names: list[str],
 
 def _certificate(result: RunResult, b: UncertaintyBudget, names: list[str]) -> str:
     m = result.machine
-    values = _statement(result, b)
+    values = statement_values(result, b)
     inst = "".join(
         f"<li>{html.escape(i.name)}: {html.escape(i.protocol)} dial "
         f"indicator, serial "

@@ -174,6 +174,14 @@ def not_converged(result: ResultLike) -> bool:
     return stalled(as_result(result))
 
 
+def not_accepted(result: ResultLike) -> bool:
+    """A run that completed whose tool the config's [acceptance] does not accept at
+    95 % (FAIL, or not decided): exit status 4 (station.analysis.acceptance)."""
+    record = as_result(result)
+    return (record.status == "ok" and record.acceptance is not None
+            and record.acceptance.outcome != "pass")
+
+
 def stalled(result: RunResult) -> bool:
     """:func:`not_converged` of the record."""
     return (result.status == "ok" and result.loop is not None
@@ -282,12 +290,18 @@ def max_abs(devs: Mapping[str, Deviation]) -> float | None:
 
 
 def param_line(result: RunResult, names: Iterable[str]) -> str:
+    """The parameters, each ± its 95 % half-width (k from Student's t on the
+    identification's dof), labelled: one value and one uncertainty per quantity."""
+    from orthocal import coverage_factor
+
     ident = machine_parameters(result)
-    return "   ".join(
-        f"{param_plain(n)} = {fmt(at(ident, n), signed=True)} ± {fmt(at(result.std_errors, n))}"
-        f" {unit(n)}"
-        for n in names
-    )
+    k = coverage_factor(num(result.std_errors_dof))
+    parts = []
+    for n in names:
+        se = at(result.std_errors, n)
+        pm = "" if se is None else f" ± {fmt(k * se)}"
+        parts.append(f"{param_plain(n)} = {fmt(at(ident, n), signed=True)}{pm} {unit(n)}")
+    return "   ".join(parts) + (f" (95 %, k = {k:.2f})" if parts else "")
 
 
 # ------------------------------------------------------------ accuracy at the tool

@@ -45,10 +45,10 @@ def summary_lines(acc: Accuracy) -> list[str]:
                      for n, v, iv, _ in rows)
     advice = acc.gap_advice or []
     acting = [a for a in advice if "offsets cannot fix it" in a]
-    tail = (": offsets cannot fix them; put the geometry into the controller (orthocal "
-            "export --kinematics, or orthocal compensate) or move a rail across by the gap") \
-        if acting else \
-        ": none beyond its uncertainty"
+    # what to do is the first screen's "to do" (station.report.first_screen), which
+    # weighs the routes against the tool's figures
+    tail = ": beyond their noise, and offsets cannot fix them (what to do: above)" \
+        if acting else ": none beyond its uncertainty"
     return [f"  axes' gaps    {text} µm (95 %; how far each pair of axes passes the other)"
             + tail]
 

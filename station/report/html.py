@@ -8,8 +8,8 @@ from pathlib import Path
 from drivers.files import write_atomic
 from station.record.result import RunResult
 from station.report import budget_table as budget
+from station.report import first_screen, rounds, since
 from station.report import reversal_table as reversal
-from station.report import rounds, since
 from station.report.boundary import ResultLike, as_result
 from station.report.field_plot import plot_field
 from station.report.format import (
@@ -282,6 +282,7 @@ def render_html(result: ResultLike, figures: bool = True) -> str:
     held = held_by_station(record)
     body = f"""
 {_title(record, figures)}
+{first_screen.html_block(record)}
 {header_boxes(record)}{_info_list(record)}
 <h2>What was done</h2>
 {what_was_done(record)}

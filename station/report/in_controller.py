@@ -63,17 +63,12 @@ def compensation_advice(acc: Accuracy, comp: Compensated) -> str:
 
 
 def summary_lines(acc: Accuracy) -> list[str]:
-    """The summary's line on the geometry in the controller (accuracy.compensated)."""
+    """The summary's line on the geometry in the controller (accuracy.compensated):
+    the advice; its figure with its interval is the first screen's."""
     comp = stated(acc)
     if comp is None:
         return []
-    ivs = [f"{iv} µm {what}" for iv, what in (
-        (um_interval(comp.rms_interval_95_mm), "RMS"),
-        (um_interval(comp.max_interval_95_mm), "max")) if iv]
-    figures = (f"{um(comp.rms_mm)} µm RMS (max {um(comp.max_mm)} µm"
-               + (f"; 95 %: {', '.join(ivs)}" if ivs else "") + ")")
-    return [f"  in the controller  the identified geometry would leave {figures}; "
-            f"{compensation_advice(acc, comp)}"]
+    return [f"  in the controller  {compensation_advice(acc, comp)}"]
 
 
 def html_section(acc: Accuracy) -> str:

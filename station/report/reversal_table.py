@@ -8,6 +8,7 @@ from __future__ import annotations
 import html
 
 from orthocal import coverage_factor
+from orthocal.lost_motion import standing_out
 from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy, ToolReversal
 from station.record.result_sections import Reversal
@@ -17,6 +18,23 @@ from station.report.format import AXES, at, num
 def _um(value: float | None, digits: int = 1) -> str:
     v = num(value)
     return "—" if v is None else f"{1000 * v:.{digits}f} µm"
+
+
+def _pm(value: float | None, se: float | None, k: float, axis: str) -> str:
+    """"x 4.2 ± 0.5 µm": the reversal with its 95 % half-width."""
+    v = num(value)
+    if v is None:
+        return f"{axis} —"
+    pm = "" if se is None else f" ± {1000 * k * se:.1f}"
+    return f"{axis} {1000 * v:.1f}{pm} µm".replace("-", "−")
+
+
+def _advice(rev: Reversal, tool: ToolReversal) -> str:
+    """The record's advice, where some joint's reversal stands out of its noise (a
+    result written before the advice was gated may advise on noise: not repeated)."""
+    if standing_out(rev.value_mm, rev.std_errors_mm, num(rev.std_errors_dof)):
+        return tool.advice
+    return "nothing to compensate: no joint's reversal stands out of its noise at 95 %"
 
 
 def _measured(result: RunResult) -> Reversal | None:
@@ -39,14 +57,13 @@ def summary_lines(result: RunResult) -> list[str]:
     if rev is None:
         return []
     k = coverage_factor(num(rev.std_errors_dof))
-    parts = [f"{a} {_um(at(rev.value_mm, a))}" + (f" ± {1000 * k * se:.1f}" if (se := at(
-        rev.std_errors_mm, a)) is not None else "") for a in AXES]
+    parts = [_pm(at(rev.value_mm, a), at(rev.std_errors_mm, a), k, a) for a in AXES]
     lines = [f"  lost motion   reversal (ISO 230-2) {', '.join(parts)} (95 %); {rev.stated}"]
     tool = _at_tool(result)
     if tool is not None:
         lines.append(f"    at the tool: a point reached from an unknown side is off by up to "
                      f"{_um(tool.tool_max_mm)} more (half each joint's reversal); "
-                     f"{tool.advice}")
+                     f"{_advice(rev, tool)}")
     return lines
 
 
@@ -69,7 +86,7 @@ def section_html(result: RunResult) -> str:
         f"off by up to half its reversal beyond the error field above, up to "
         f"<b>{_um(tool.tool_max_mm)}</b> at the tool over the workspace "
         f"({html.escape(tool.assumes)}). What to do: "
-        f"{html.escape(tool.advice)}.</p>")
+        f"{html.escape(_advice(rev, tool))}.</p>")
     return (
         "<h2>Lost motion (reversal)</h2>"
         f"<p>{html.escape(rev.stated)}. Measured: "

@@ -130,17 +130,11 @@ def remaining_text(result: RunResult) -> str | None:
 
 
 def summary_lines(result: RunResult) -> list[str]:
-    """The rounds for the text summary: one line per measurement, then the verdict
-    and what is left."""
+    """The rounds for the text summary: the verdict, then one line per measurement."""
     judged = judged_line(result)
     lines = [f"  {judged}"] if judged else []
-    lines += _round_lines(result)
-    left = remaining_text(result)
-    if left:
-        aim = " + the aim" if "from the aim" in left else ""
-        lines.append(f"  left over     {left}: measured by the last verification, not "
-                     f"written (the machine's Δρ is the correction applied{aim} + this)")
-    return lines
+    # what is left of Δρ is the first screen's "as left" (station.report.first_screen)
+    return lines + _round_lines(result)
 
 
 def _looped(result: RunResult) -> bool:

@@ -3,6 +3,7 @@ report.html (station.report.html lays out the rest)."""
 
 from __future__ import annotations
 
+from orthocal import coverage_factor
 from station.record.result import RunResult
 from station.report.format import (
     MODEL_TEXT,
@@ -62,9 +63,9 @@ def what_was_done(result: RunResult) -> str:
         "ΔL<sub>i</sub> (leg-length error): how much leg i is longer than nominal. "
         "tilt<sub>yx</sub>, tilt<sub>zx</sub>, tilt<sub>zy</sub> (mrad): how far actuator "
         "axis y leans toward x, and axis z toward x and toward y, off square. "
-        "± values are one standard error σ, from the noise measured in this run; the "
-        "95 % interval is ±kσ, k from Student's t on that noise's degrees of freedom "
-        "(GUM), so that few cycles do not claim more than they show.</p>"
+        "± values are 95 % expanded uncertainties, ±kσ: σ the standard error from the "
+        "noise measured in this run, k from Student's t on that noise's degrees of "
+        "freedom (GUM), so that few cycles do not claim more than they show.</p>"
     )
 
 
@@ -87,12 +88,14 @@ def _found(result: RunResult) -> list[str]:
                      "the controller's offsets were only changed if stated below.")
     if not names:
         return parts
+    k = coverage_factor(num(result.std_errors_dof))
     vals = "; ".join(
-        f"{param_html(n)} = {fmt(at(ident, n), signed=True)} ± "
-        f"{fmt(at(result.std_errors, n))} {unit(n)}" for n in names
+        f"{param_html(n)} = {fmt(at(ident, n), signed=True)}"
+        + ("" if (se := at(result.std_errors, n)) is None else f" ± {fmt(k * se)}")
+        + f" {unit(n)}" for n in names
     )
     what = "joint offsets" if all(n.startswith("drho") for n in names) else "parameters"
-    parts.append(f"The {what} were identified as {vals}.")
+    parts.append(f"The {what} were identified as {vals} (95 %, k = {k:.2f}).")
     resid, noise = num(result.residual_rms_mm), num(result.noise_mm)
     if resid is not None:
         s = f"The fitted model reproduces the measured deviations to {fmt(resid)} mm RMS"

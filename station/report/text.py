@@ -1,7 +1,8 @@
-"""The short text summary of a run (``summary_text``): what was identified and
-written, the verification (the legs' parallelism), the accuracy at the tool and
-the squareness (station.report.tool), the closed loop's rounds, what the plunger
-guard did.
+"""The text summary of a run (``summary_text``): its first screen (station.report.
+first_screen), then the details that only ``--verbose`` prints: the model and its
+test, the verification (the legs' parallelism), the objective, squareness and gaps
+(station.report.tool), the lost motion, the budget, the closed loop's rounds, what
+the plunger guard did.
 
 The record's sections may be absent (a run that failed halfway): a line whose
 section is absent is left out, a figure that is not stated shows "—".
@@ -10,27 +11,19 @@ section is absent is left out, a figure that is not stated shows "—".
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 
 from station.record.result import RunResult
 from station.report import budget_table as budget
+from station.report import first_screen, rounds, since, tool
 from station.report import reversal_table as reversal
-from station.report import rounds, since, tool
 from station.report.boundary import ResultLike, as_result
 from station.report.format import (
-    AXES,
     NOT_WRITTEN_TEXT,
-    STATE_TEXT,
-    at,
     fmt,
-    held_by_station,
-    held_offsets_text,
-    not_converged_why,
     num,
     param_line,
     param_plain,
     params_of,
-    run_state,
     unit,
 )
 
@@ -63,25 +56,6 @@ def guard_lines(result: RunResult) -> list[str]:
     return lines
 
 
-def headline(result: RunResult) -> str:
-    """The summary's first line: what happened, before anything else. A completed
-    run whose closed loop did not converge says NOT CONVERGED and why (exit status
-    3); offsets the station holds say so, with their values, to be entered in the
-    drive (the "offsets held" line below says where)."""
-    state = run_state(result)
-    head = f"orthocal run: {STATE_TEXT[state].upper()}"
-    if state == "not-converged":
-        head += f" — {not_converged_why(result)}"
-    elif result.message:
-        head += f" — {result.message}"
-    if held_by_station(result):
-        values = held_offsets_text(result)
-        head += (" — offsets HELD BY THE STATION, not by the drive"
-                 + (f": {values}" if values else "")
-                 + "; enter them in the drive (see \"offsets held\" below)")
-    return head
-
-
 def mountings_line(expected: Mapping[str, int]) -> str:
     """What the operator will be asked for (station.engine.closed_loop.mountings_expected)."""
     return (f"mountings: expect {expected['usual']} (one write-back, verified at once); "
@@ -89,25 +63,25 @@ def mountings_line(expected: Mapping[str, int]) -> str:
             f"{expected['most']} if every round takes all its passes")
 
 
-def timing_line(result: RunResult) -> str | None:
-    """The mountings the run took and the operator's time at them, or None (an older
-    result without them)."""
-    timing = result.timing
-    if timing.mountings is None:
-        return None
-    operator = num(timing.operator_s)
-    took = f", {operator:.0f} s at the machine" if operator is not None else ""
-    wall = num(timing.wall_s)
-    total = f"; the whole run {wall:.0f} s" if wall is not None else ""
-    return f"  mountings     {timing.mountings}{took}{total}"
-
-
-def summary_text(result: ResultLike) -> str:
-    """A few lines for the end of a run: status, identified values, residual,
-    offsets written, verification before → after, where the report is. ``result``:
-    the record, or a document that becomes it (station.report.boundary)."""
+def summary_text(result: ResultLike, verbose: bool = True) -> str:
+    """The run's summary: its first screen (station.report.first_screen: the verdict,
+    each joint as found → as left, the offsets, the tool before → after, what to do,
+    the mountings and the time, where the report is), then, ``verbose``, the details
+    (the model and its test, the verification, squareness, gaps, lost motion, the
+    budget, the rounds …). ``result``: the record, or a document that becomes it
+    (station.report.boundary)."""
     record = as_result(result)
-    lines = [headline(record), *_fit_lines(record), *_offsets_lines(record)]
+    lines = first_screen.lines(record)
+    if not verbose:
+        return "\n".join([*lines, "  details       in the report, or run with --verbose"])
+    details = detail_lines(record)
+    return "\n".join([*lines, *(["details:", *details] if details else [])])
+
+
+def detail_lines(record: RunResult) -> list[str]:
+    """Everything below the first screen, each value said once (the first screen's
+    are not repeated)."""
+    lines = [*_fit_lines(record)]
     lines += _verification_lines(record)
     lines += tool.summary_lines(record)
     lines += reversal.summary_lines(record)
@@ -123,12 +97,8 @@ def summary_text(result: ResultLike) -> str:
                      "its kinematics can take the rest: orthocal export --kinematics, or "
                      "orthocal compensate for a program)")
     lines += guard_lines(record)
-    if (line := timing_line(record)) is not None:
-        lines.append(line)
     lines += rounds.summary_lines(record)
-    if record.run_dir:
-        lines.append(f"  report        {Path(record.run_dir) / 'report.html'}")
-    return "\n".join(lines)
+    return lines
 
 
 def _fit_lines(result: RunResult) -> list[str]:
@@ -147,27 +117,10 @@ def _fit_lines(result: RunResult) -> list[str]:
         resid += f" (indicator noise {fmt(noise)} mm)"
     if result.fit_note:
         resid += f": {result.fit_note}"
-    return [f"  model         {result.model}{why}",
-            f"  identified    {param_line(result, names)}", resid]
-
-
-def _offsets_lines(result: RunResult) -> list[str]:
-    """The offsets before → written (or why not written), and who holds them."""
-    lines = []
-    written, wb = result.offsets_written, result.writeback
-    if written:
-        pairs = ", ".join(f"{a} {fmt(at(result.offsets_before, a))} → {fmt(written[a])}"
-                          for a in AXES if a in written)
-        status: str = wb.status if wb is not None else "written"
-        if held_by_station(result) and status == "written":
-            status = "held by the station"
-        lines.append(f"  offsets       {pairs} mm ({status})")
-    elif wb is not None:
-        reason = f": {wb.reason}" if wb.reason else ""
-        lines.append(f"  offsets       not written ({wb.status}{reason})")
-    if held_by_station(result):
-        lines.append(f"  offsets held  by the station: {result.offsets_note or ''}")
-    return lines
+    # Δρ is the first screen's "as found"; the other parameters here, at 95 %
+    others = [n for n in names if not n.startswith("drho_")]
+    ident = [f"  identified    {param_line(result, others)}"] if others else []
+    return [f"  model         {result.model}{why}", *ident, resid]
 
 
 def _verification_lines(result: RunResult) -> list[str]:

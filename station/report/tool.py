@@ -246,30 +246,19 @@ def tool_clause(result: RunResult) -> str | None:
 
 
 def summary_lines(result: RunResult) -> list[str]:
-    """The summary's "at the tool" line (before → after, the interval, the
-    objective and what the other would leave) and its "squareness" line."""
+    """The summary's details on the tool (its figures are the first screen's): the
+    objective and what the other would leave, the geometry in the controller, the
+    squareness, the gaps and the legs' form."""
     acc, why_not = statement(result)
     if acc is None:
         return [f"  at the tool   not stated: {why_not}"] if why_not else []
-    before, after = acc.before, acc.after
-    rms_iv = um_interval(after.rms_interval_95_mm)
-    max_iv = um_interval(after.max_interval_95_mm)
-    rms_after = f"{um(after.rms_mm)} µm RMS" + (f" (95 %: {rms_iv})" if rms_iv else "")
-    max_after = f"{um(after.max_mm)} µm" + (f" (95 %: {max_iv})" if max_iv else "")
-    if written(result):
-        state = "written"
-        figures = (f"{um(before.rms_mm)} → {rms_after}, max "
-                   f"{um(before.max_mm)} → {max_after}")
-    else:  # no arrow: nothing changed on the machine
-        state = "NOT written"
-        figures = (f"{um(before.rms_mm)} µm RMS (max {um(before.max_mm)} µm) as "
-                   f"the machine stands; written, the offsets would leave {rms_after}, max "
-                   f"{max_after}")
+    # the figures before → after are the first screen's (station.report.first_screen)
+    state = "written" if written(result) else "NOT written"
     alt = acc.alternative
-    line = (f"  at the tool   {figures}, over {box_text(acc.workspace_mm)}, frame "
-            f"{acc.frame} (identified model); objective {acc.objective} "
-            f"({OBJECTIVE_TEXT[acc.objective]}) {state}; objective {alt.objective} would "
-            f"leave {um(alt.after.rms_mm)} µm RMS (max {um(alt.after.max_mm)} µm)")
+    line = (f"  objective     {acc.objective} ({OBJECTIVE_TEXT[acc.objective]}) {state}, the "
+            f"tool's error in frame {acc.frame} (identified model); objective "
+            f"{alt.objective} would leave {um(alt.after.rms_mm)} µm RMS (max "
+            f"{um(alt.after.max_mm)} µm)")
     return [line, *in_controller.summary_lines(acc), _squareness_line(acc),
             *gaps.summary_lines(acc), *leg_form.summary_lines(result)]
 

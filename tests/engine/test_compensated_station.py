@@ -72,7 +72,7 @@ def test_the_prediction_says_what_the_hidden_machine_does(held_out) -> None:
 
 def test_the_advice_names_the_route(held_out) -> None:
     text = report.summary_text(held_out)
-    line = next(ln for ln in text.splitlines() if "in the controller" in ln)
+    line = next(ln for ln in text.splitlines() if ln.startswith("  in the controller"))
     assert "orthocal export --kinematics" in line and "orthocal compensate" in line
     assert "take it from" in line
 

@@ -23,6 +23,7 @@ from result_builders import (
     make_result,
 )
 
+from orthocal import coverage_factor
 from station import report
 from station.record.result import SCHEMA_VERSION
 
@@ -245,14 +246,20 @@ def test_summary_names_status_values_and_report() -> None:
     text = report.summary_text(result)
     assert text.splitlines()[0].startswith("orthocal run: COMPLETED")
     for name, value in result["identified"].items():
-        assert f"{report.param_plain(name)} = {report.fmt(value, signed=True)}" in text
+        # each joint's Δρ as found, with its 95 % half-width (k from Student's t)
+        line = next(ln for ln in text.splitlines() if ln.startswith(f"  joint {name[-1]} "))
+        found = re.search(r"as found ([+−]\d+\.\d{3}) mm ± (\d+\.\d) µm", line)
+        assert found is not None, line
+        assert float(found[1].replace("−", "-")) == pytest.approx(value, abs=0.0005)
+        half = coverage_factor(result.get("std_errors_dof")) * result["std_errors"][name]
+        assert float(found[2]) == pytest.approx(1000 * half, abs=0.05)
     assert report.fmt(result["residual_rms_mm"]) in text
     for axis in AXES:
         assert report.fmt(result["offsets_written"][axis]) in text
     before, after = result["deviations_rms_mm"], result["verification"]["deviations_rms_mm"]
     assert f"{report.fmt(before)} → {report.fmt(after)}" in text
     assert str(Path(result["run_dir"]) / "report.html") in text
-    assert len(text.splitlines()) <= 8
+    assert len(report.summary_text(result, verbose=False).splitlines()) <= 12
 
 
 def test_summary_of_failed_and_refused_runs() -> None:

@@ -246,20 +246,20 @@ def test_summary_has_the_tool_line_and_labels_the_legs_parallelism(
     lines = report.summary_text(sample).splitlines()
     ver = next(ln for ln in lines if ln.startswith("  verification  "))
     assert "legs' parallelism (the method's means, not the tool's accuracy)" in ver
-    at = next(ln for ln in lines if ln.startswith("  at the tool   "))
-    before, after = acc["before"], acc["after"]
+    at, before, after = next(ln for ln in lines if "  at the tool " in ln), acc["before"], \
+        acc["after"]
     iv = "–".join(um(v) for v in after["rms_interval_95_mm"])
-    assert f"{um(before['rms_mm'])} → {um(after['rms_mm'])} µm RMS (95 %: {iv})" in at
+    assert f"{um(before['rms_mm'])} → {um(after['rms_mm'])} µm RMS (95 %: {iv} µm)" in at
     assert f"max {um(before['max_mm'])} → {um(after['max_mm'])} µm" in at
-    alt = acc["alternative"]
-    assert f"objective {acc['objective']} (" in at and ") written" in at
-    assert f"objective {alt['objective']} would leave {um(alt['after']['rms_mm'])} µm RMS" in at
+    aim, alt = next(ln for ln in lines if ln.startswith("  objective  ")), acc["alternative"]
+    assert f"objective     {acc['objective']} (" in aim and ") written" in aim
+    assert f"objective {alt['objective']} would leave {um(alt['after']['rms_mm'])} µm" in aim
     sq = next(ln for ln in lines if ln.startswith("  squareness    "))
     for pair in ("xy", "xz", "yz"):
         assert (f"{pair.upper()} {report.fmt(acc['squareness_mm_per_m'][pair], signed=True)}"
                 f" ± {report.fmt(K * acc['squareness_std_errors'][pair])}") in sq
     assert "offsets cannot fix it" in sq
-    assert lines.index(ver) < lines.index(at) < lines.index(sq)
+    assert lines.index(at) < lines.index(ver) < lines.index(aim) < lines.index(sq)
 
 
 def test_where_the_stands_were(sample: dict[str, Any]) -> None:
@@ -277,11 +277,9 @@ def test_where_the_stands_were(sample: dict[str, Any]) -> None:
 
 
 def test_the_tool_objectives_left_over_is_measured_from_its_aim() -> None:
-    result = _sample("tool")
-    text = report.summary_text(result)
-    left = next(ln for ln in text.splitlines() if ln.startswith("  left over"))
-    assert "from the aim of objective tool" in left
-    assert "+43.50" not in left  # the aimed Δρ is not a correction left undone
+    text = report.summary_text(_sample("tool"))
+    left = next(ln for ln in text.splitlines() if ln.startswith("  joint x "))  # its aim:
+    assert "as left +43.5 ± " in left and "(aimed at +43.6 µm, objective tool)" in left
     assert "correction max 43.50 µm" not in text
 
 
@@ -294,9 +292,10 @@ def test_a_result_without_accuracy_renders_and_claims_nothing(
     assert "accuracy at the tool is not stated by this result" in headline(page)
     assert "not stated" in section(page)
     assert "Figure 1. The 12 leg deviations" in page
-    text = report.summary_text(result)
-    assert "at the tool" not in text and "legs' parallelism" in text
-    assert um(sample["accuracy"]["after"]["rms_mm"]) + " µm" not in page
+    assert "at the tool" not in (text := report.summary_text(result))
+    first = page[page.index('id="first-screen"'):page.index("</section>")]
+    assert "legs' parallelism" in text and "at the tool" not in first
+    assert um(sample["accuracy"]["after"]["rms_mm"]) + " µm" not in page.replace(first, "")
 
 
 def test_a_result_whose_accuracy_failed_says_so(sample: dict[str, Any]) -> None:
@@ -335,9 +334,10 @@ def test_synthetic_section_numbers_field_and_marks() -> None:
 def test_synthetic_summary_lines() -> None:
     text = report.summary_text(synthetic(objective="tool"))
     at = next(ln for ln in text.splitlines() if ln.startswith("  at the tool"))
-    assert "200.4 → 12.3 µm RMS (95 %: 11.1–13.5), max 410.1 → 30.7 µm (95 %: 27.0–34.2)" in at
-    assert "objective tool (the least predicted tool error) written" in at
-    assert "objective joints would leave 12.1 µm RMS (max 30.2 µm)" in at
+    assert "200.4 → 12.3 µm RMS (95 %: 11.1–13.5 µm), max 410.1 → 30.7 µm (95 %: 27.0" in at
+    aim = next(ln for ln in text.splitlines() if ln.startswith("  objective"))
+    assert "objective     tool (the least predicted tool error) written" in aim and \
+        "objective joints would leave 12.1 µm RMS (max 30.2 µm)" in aim
     assert "XY +0.200 ± 0.020, XZ +0.100 ± 0.020, YZ −0.150 ± 0.020 mm/m (95 %, k = 1.96)" \
         in text
 
@@ -396,11 +396,11 @@ def test_offsets_not_written_say_the_after_figures_are_what_writing_would_give()
     sec = section(page)
     assert "after, had the offsets been written" in sec and "chosen</b> (not written)" in sec
     assert "as the machine stands, the offsets not written" in text_of(headline(page))
-    at = next(ln for ln in report.summary_text(result).splitlines()
-              if ln.startswith("  at the tool"))
-    assert "200.4 µm RMS (max 410.1 µm) as the machine stands; written, the offsets would " \
-        "leave 12.3 µm RMS (95 %: 11.1–13.5)" in at and "→" not in at
-    assert "objective joints (the paper's Δρ: legs parallel) NOT written" in at
+    at = next(ln for ln in report.summary_text(result).splitlines() if "  at the tool" in ln)
+    assert "200.4 µm RMS (max 410.1 µm) as the machine stands, over [−100, 60]³ mm; written, " \
+        "the offsets would leave 12.3 µm RMS (95 %: 11.1–13.5 µm)" in at and "→" not in at
+    aim = next(ln for ln in report.summary_text(result).splitlines() if "  objective " in ln)
+    assert "objective     joints (the paper's Δρ: legs parallel) NOT written" in aim
 
 
 @pytest.mark.parametrize("damage", ["bad-field", "no-tilts", "nan"])

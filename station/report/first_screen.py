@@ -1,0 +1,346 @@
+"""The first screen of a run's summary and of report.html: what the operator needs,
+each value once, at 95 % and labelled, in µm where it is small (docs/design.md,
+"The first screen"):
+
+- the verdict (the headline) and the shop's acceptance, where it sets one;
+- each joint's Δρ as found → as left;
+- the offsets before → written;
+- the tool's error before → after, and with the geometry in the controller;
+- what to do: only actions whose figure stands out of its noise;
+- the mountings and the time; where the report is.
+
+Everything else (the model test, the budget, the rounds …) comes below it: in the
+text summary only with ``--verbose``, in report.html further down the page.
+:func:`items` is the one source of both, so that the two never say different things.
+"""
+
+from __future__ import annotations
+
+import html
+from dataclasses import dataclass
+from pathlib import Path
+
+from orthocal import coverage_factor
+from orthocal.lost_motion import standing_out
+from station.record.result import RunResult
+from station.record.result_accuracy import Accuracy
+from station.record.result_sections import UncertaintyBudget
+from station.report import budget_table as budget
+from station.report import in_controller, rounds, tool
+from station.report.format import (
+    AXES,
+    STATE_TEXT,
+    at,
+    box_text,
+    fmt,
+    held_by_station,
+    held_offsets_text,
+    not_converged_why,
+    num,
+    run_state,
+    um,
+    um_interval,
+)
+
+WRITABLE = tuple(f"drho_{a}" for a in AXES)
+#: Below this |Δρ| (mm) a joint's value is written in µm, above in mm (an offset of a
+#: millimetre reads as the controller's register does).
+UM_BELOW_MM = 0.1
+#: The repair threshold of a reversal when the record does not state one (mm).
+REPAIR_ABOVE_MM = 0.02
+#: The routes that put the identified geometry into the controller.
+ROUTES = "orthocal export --kinematics, or orthocal compensate"
+
+
+@dataclass(frozen=True)
+class Item:
+    """One line of the first screen: its label and its text."""
+
+    label: str
+    text: str
+
+
+# ----------------------------------------------------------------- the verdict
+
+
+def headline(result: RunResult) -> str:
+    """The summary's first line: what happened, before anything else. A completed
+    run whose closed loop did not converge says NOT CONVERGED and why (exit status
+    3); offsets the station holds say so, with their values, to be entered in the
+    drive (the "offsets held" line below says where)."""
+    state = run_state(result)
+    head = f"orthocal run: {STATE_TEXT[state].upper()}"
+    if state == "not-converged":
+        head += f" — {not_converged_why(result)}"
+    elif result.message:
+        head += f" — {result.message}"
+    if held_by_station(result):
+        values = held_offsets_text(result)
+        head += (" — offsets HELD BY THE STATION, not by the drive"
+                 + (f": {values}" if values else "")
+                 + "; enter them in the drive (see \"offsets held\" below)")
+    return head
+
+
+def acceptance_text(result: RunResult) -> str | None:
+    """The shop's acceptance at 95 %, PASS, FAIL or NOT DECIDED, with each limit's
+    finding (the figures themselves are the "at the tool" line's); None without
+    ``[acceptance]``."""
+    acc = result.acceptance
+    if acc is None:
+        return None
+    parts = []
+    for c in acc.checks:
+        limit = f"{c.figure.upper() if c.figure == 'rms' else c.figure} {c.limit_um:g} µm"
+        if c.outcome == "pass":
+            parts.append(f"{limit}: its whole 95 % interval within")
+        elif c.outcome == "fail":
+            parts.append(f"{limit}: exceeded by its whole 95 % interval")
+        elif c.interval_95_um is None:
+            parts.append(f"{limit}: the figure is not stated")
+        else:
+            parts.append(f"{limit}: inside its 95 % interval, not decided")
+    word = {"pass": "PASS", "fail": "FAIL", "undecided": "NOT DECIDED"}[acc.outcome]
+    note = f" ({acc.note})" if acc.note else ""
+    return (f"{word} at 95 %, the tool's error after calibration against [acceptance]: "
+            + "; ".join(parts) + note)
+
+
+# ---------------------------------------------------------------- the joints
+
+
+def value_pm(value_mm: float | None, half_mm: float | None) -> str:
+    """A value with its 95 % half-width: "+1.1 ± 1.6 µm" when small, "+0.697 mm ±
+    19.5 µm" when not (the half-width always in µm)."""
+    v = num(value_mm)
+    if v is None:
+        return "—"
+    pm = "" if (h := num(half_mm)) is None else f" ± {um(h)} µm"
+    if abs(v) < UM_BELOW_MM:
+        return f"{fmt(1000 * v, 1, signed=True)}" + (pm or " µm")
+    return f"{fmt(v, 3, signed=True)} mm{pm}"
+
+
+def as_found(result: RunResult) -> dict[str, tuple[float | None, float | None]]:
+    """Each joint's Δρ at the start of the run with its 95 % half-width: the
+    statement with its expanded uncertainty (the scatter and the budget, GUM) where
+    the run states one, else the identification's ±k σ (k from Student's t)."""
+    b = result.uncertainty_budget
+    if isinstance(b, UncertaintyBudget):
+        values = budget.statement_values(result, b)
+        return {n: (at(values, n), at(b.expanded_95_mm, n)) for n in WRITABLE
+                if n in b.expanded_95_mm}
+    k = coverage_factor(num(result.std_errors_dof))
+    out: dict[str, tuple[float | None, float | None]] = {}
+    for n in WRITABLE:
+        if n in result.identified:
+            se = at(result.std_errors, n)
+            out[n] = (at(result.identified, n), None if se is None else k * se)
+    return out
+
+
+def _nothing_written(result: RunResult) -> bool:
+    return not result.offsets_written and not any(
+        e.offsets_written for e in result.iterations or [])
+
+
+def as_left(result: RunResult, name: str) -> str:
+    """Joint ``name``'s Δρ as the run leaves it: what the last verification found
+    left (± its 95 % half-width), or why there is no such figure."""
+    if _nothing_written(result):
+        return "unchanged (nothing written)"
+    rem = result.remaining
+    if rem is None or at(rem.estimate, name) is None:
+        return "not verified (the correction written, not measured after)"
+    k = num(rem.coverage_factor_95) or coverage_factor(num(rem.std_errors_dof))
+    se = at(rem.std_errors, name)
+    text = value_pm(at(rem.estimate, name), None if se is None else k * se)
+    aim = rounds.aim_of(result, len(result.iterations or []) - 1).get(name)
+    if aim:
+        text += f" (aimed at {value_pm(aim, None)}, objective tool)"
+    return text
+
+
+def joint_items(result: RunResult) -> list[Item]:
+    """One line per joint: Δρ as found → as left, at 95 %."""
+    return [Item(f"joint {n[-1]}", f"Δρ as found {value_pm(value, half)} → as left "
+                                   f"{as_left(result, n)} (95 %)")
+            for n, (value, half) in as_found(result).items()]
+
+
+def offsets_item(result: RunResult) -> Item | None:
+    """The offsets before → written (or why not written)."""
+    written, wb = result.offsets_written, result.writeback
+    if written:
+        pairs = ", ".join(f"{a} {fmt(at(result.offsets_before, a))} → {fmt(written[a])}"
+                          for a in AXES if a in written)
+        status: str = wb.status if wb is not None else "written"
+        if held_by_station(result) and status == "written":
+            status = "held by the station"
+        return Item("offsets", f"{pairs} mm ({status})")
+    if wb is not None:
+        reason = f": {wb.reason}" if wb.reason else ""
+        return Item("offsets", f"not written ({wb.status}{reason})")
+    return None
+
+
+# ------------------------------------------------------------------- the tool
+
+
+def _figure(before: float | None, after: float | None, interval: str | None,
+            what: str = "") -> str:
+    """"333.4 → 36.7 µm RMS (95 %: 9.3–57.5 µm)": the interval is the after-figure's."""
+    return (f"{um(before)} → {um(after)} µm{what}"
+            + (f" (95 %: {interval} µm)" if interval else ""))
+
+
+def tool_item(result: RunResult) -> Item | None:
+    """The tool's error over the workspace before → after (the after-figure with its
+    95 % interval), and with the geometry in the controller where the run states it."""
+    acc, why = tool.statement(result)
+    if acc is None:
+        return Item("at the tool", f"not stated: {why}") if why else None
+    a, b = acc.after, acc.before
+    rms_iv, max_iv = um_interval(a.rms_interval_95_mm), um_interval(a.max_interval_95_mm)
+    if tool.written(result):
+        text = (f"{_figure(b.rms_mm, a.rms_mm, rms_iv, ' RMS')}, max "
+                f"{_figure(b.max_mm, a.max_mm, max_iv)}, over {box_text(acc.workspace_mm)}, "
+                "with the offsets written")
+    else:  # no arrow: nothing changed on the machine
+        text = (f"{um(b.rms_mm)} µm RMS (max {um(b.max_mm)} µm) as the machine stands, "
+                f"over {box_text(acc.workspace_mm)}; written, the offsets would leave "
+                f"{um(a.rms_mm)} µm RMS" + (f" (95 %: {rms_iv} µm)" if rms_iv else "")
+                + f", max {um(a.max_mm)} µm" + (f" (95 %: {max_iv} µm)" if max_iv else ""))
+    comp = in_controller.stated(acc)
+    if comp is not None:
+        iv = um_interval(comp.rms_interval_95_mm)
+        text += (f"; with the geometry in the controller {um(comp.rms_mm)} µm RMS"
+                 + (f" (95 %: {iv} µm)" if iv else ""))
+    return Item("at the tool", text)
+
+
+# ------------------------------------------------------------------ what to do
+
+
+def _reversal_action(result: RunResult, acc: Accuracy | None) -> str | None:
+    """The joints' play, only where it stands out of its noise (and is a play:
+    positive)."""
+    rev = result.reversal
+    if rev is None:
+        return None
+    big = standing_out(rev.value_mm, rev.std_errors_mm, num(rev.std_errors_dof))
+    if not big:
+        return None
+    repair = acc.reversal.repair_above_mm if acc is not None and acc.reversal else \
+        REPAIR_ABOVE_MM
+    worn = [a for a, v in big.items() if v > repair]
+    if worn:
+        return (f"repair joint(s) {', '.join(worn)}: reversal above {1000 * repair:g} µm "
+                "(a worn screw, nut or belt); meanwhile set the controller's backlash")
+    return ("set the controller's backlash (reversal) parameter: "
+            + ", ".join(f"joint {a} {1000 * v:.1f} µm" for a, v in big.items()))
+
+
+def _leaning(acc: Accuracy) -> list[str]:
+    """The axes that lean by the result's decision rule (tool.squareness), each with
+    the record's advice on it (shim the rail by how much, or the controller)."""
+    out = []
+    for sq in tool.squareness(acc):
+        if not sq.significant:
+            continue
+        said = [a for a in acc.squareness_advice
+                if f"({sq.tilt})" in a and "offsets cannot fix it" in a]
+        out += said or [f"the motions {sq.pair.upper()} are out of square beyond the decision "
+                        f"rule, an axis leans: offsets cannot fix it; shim its rail or put "
+                        f"the geometry into the controller ({ROUTES})"]
+    return out
+
+
+def _geometry_actions(acc: Accuracy) -> list[str]:
+    """Leaning axes and passing rails beyond the result's decision rule, and the
+    geometry in the controller where it clearly lowers the tool's error."""
+    out = _leaning(acc)
+    gains = in_controller.gains(acc)
+    gaps = [a.split(" (gap_")[1][:2].upper() for a in acc.gap_advice or []
+            if "offsets cannot fix it" in a and " (gap_" in a]
+    if gaps:
+        route = (f"put the geometry into the controller ({ROUTES}) or move a rail across "
+                 "by the gap" if gains is not False else
+                 "move a rail across by the gap (the geometry in the controller does not "
+                 "clearly lower the tool's error at 95 %)")
+        out.append(f"the axes' gaps {', '.join(gaps)} stand out of their noise and offsets "
+                   f"cannot fix them: {route}")
+    elif gains:
+        out.append(f"put the identified geometry into the controller ({ROUTES}): it "
+                   "clearly lowers the tool's error")
+    return out
+
+
+def actions(result: RunResult) -> list[str]:
+    """What to do, only what stands out of the noise; [] for a run that did not
+    complete (the headline says what stopped it)."""
+    if result.status != "ok":
+        return []
+    acc, _ = tool.statement(result)
+    out = _geometry_actions(acc) if acc is not None else []
+    if (play := _reversal_action(result, acc)) is not None:
+        out.append(play)
+    return out
+
+
+def todo_items(result: RunResult) -> list[Item]:
+    todo = actions(result)
+    if not todo:
+        return [Item("to do", "nothing further: nothing else stands out of the noise")] \
+            if result.status == "ok" and run_state(result) != "not-converged" else []
+    return [Item("to do" if i == 0 else "", a) for i, a in enumerate(todo)]
+
+
+# -------------------------------------------------------------------- the rest
+
+
+def timing_text(result: RunResult) -> str | None:
+    """The mountings the run took and the operator's time at them, or None (an older
+    result without them)."""
+    timing = result.timing
+    if timing.mountings is None:
+        return None
+    operator = num(timing.operator_s)
+    took = f", {operator:.0f} s at the machine" if operator is not None else ""
+    wall = num(timing.wall_s)
+    total = f"; the whole run {wall:.0f} s" if wall is not None else ""
+    return f"{timing.mountings}{took}{total}"
+
+
+def items(result: RunResult) -> list[Item]:
+    """The first screen below the headline, in order."""
+    out = []
+    if (accepted := acceptance_text(result)) is not None:
+        out.append(Item("acceptance", accepted))
+    out += joint_items(result)
+    out += [i for i in (offsets_item(result), tool_item(result)) if i is not None]
+    if held_by_station(result):  # the headline's "enter them in the drive": how
+        out.append(Item("offsets held", f"by the station: {result.offsets_note or ''}"))
+    out += todo_items(result)
+    if (timing := timing_text(result)) is not None:
+        out.append(Item("mountings", timing))
+    if result.run_dir:
+        out.append(Item("report", str(Path(result.run_dir) / "report.html")))
+    return out
+
+
+def lines(result: RunResult) -> list[str]:
+    """The summary's first lines: the headline, then :func:`items`."""
+    return [headline(result), *(f"  {i.label:<13} {i.text}" for i in items(result))]
+
+
+def html_block(result: RunResult) -> str:
+    """report.html's first screen: the same as :func:`lines`, as one block at the
+    top of the page (the report's path left out: the reader has it open)."""
+    verdict = headline(result).removeprefix("orthocal run: ")
+    rows = [Item("verdict", verdict), *(i for i in items(result) if i.label != "report")]
+    dl = [f"<dt>{html.escape(i.label)}</dt><dd>{html.escape(i.text)}</dd>" for i in rows]
+    return ('<section id="first-screen" class="box"><h2 style="margin-top:0">The result '
+            'at a glance</h2><dl class="kv">' + "".join(dl) + "</dl>"
+            '<p class="small">At 95 %: each ± and each interval is the 95 % expanded '
+            "uncertainty. The details follow below.</p></section>")

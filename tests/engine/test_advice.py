@@ -1,0 +1,74 @@
+"""Advice only where a value stands out of its noise and makes physical sense: the
+joints' lost motion is advised for compensation only where its 95 % interval lies
+above zero (a reversal is a play, never negative), in the engine's advice, the
+summary and the first screen's "to do"."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from builders import FAST
+from fakes import FakeRig, fake_config, run_on
+
+from orthocal.lost_motion import Reversal, standing_out
+from station import report
+from station.analysis.reversal import advice
+
+NOISE_ONLY = Reversal(value={"x": 0.0004, "y": -0.0001, "z": -0.0002},
+                      std_errors={"x": 0.00035, "y": 0.00035, "z": 0.00035}, dof=40.0,
+                      n={"x": 9, "y": 9, "z": 9})
+
+
+def test_noise_and_negative_reversals_are_not_advised() -> None:
+    # the values the report once advised: each ±0.7 µm at 95 %, two of them negative
+    said = advice(NOISE_ONLY)
+    assert "compensate it in" not in said and "backlash" not in said
+    assert said.startswith("nothing to compensate")
+    assert standing_out(NOISE_ONLY.value, NOISE_ONLY.std_errors, NOISE_ONLY.dof) == {}
+
+
+def test_a_negative_reversal_beyond_its_noise_is_no_play() -> None:
+    rev = Reversal(value={"x": -0.005, "y": 0.004, "z": None},
+                   std_errors={"x": 0.0002, "y": 0.0002, "z": None}, dof=40.0,
+                   n={"x": 9, "y": 9, "z": 0})
+    said = advice(rev)
+    assert "joint y 4.0 µm" in said and "joint x −" not in said and "joint x -" not in said
+    assert standing_out(rev.value, rev.std_errors, rev.dof) == {"y": 0.004}
+
+
+@pytest.mark.parametrize(("value_um", "se_um", "advised"), [
+    (1.0, 0.45, True),    # 1.0 − 2.02 × 0.45 = +0.09 µm: the interval lies above zero
+    (1.0, 0.55, False),   # 1.0 − 2.02 × 0.55 = −0.11 µm: it holds zero
+])
+def test_the_gate_is_the_95_interval_both_sides(value_um: float, se_um: float,
+                                                advised: bool) -> None:
+    rev = Reversal(value={"x": value_um / 1000}, std_errors={"x": se_um / 1000},
+                   dof=40.0, n={"x": 9})
+    assert ("joint x 1.0 µm" in advice(rev)) is advised
+    assert bool(standing_out(rev.value, rev.std_errors, rev.dof)) is advised
+
+
+def _run(tmp_path: Path, backlash: tuple[float, float, float]) -> dict:
+    rig = FakeRig(true_drho=(0.4, -0.3, 0.2), noise_mm=0.001, backlash=backlash, seed=3)
+    code, result = run_on(rig, tmp_path / "runs",
+                          fake_config(**{**FAST, "cycles": 3, "max_extra_passes": 1}))
+    assert code in (0, 3), result.get("message")
+    return result
+
+
+def test_joints_without_play_get_no_backlash_advice(tmp_path: Path) -> None:
+    result = _run(tmp_path, (0.0, 0.0, 0.0))
+    tool = result["accuracy"]["reversal"]
+    assert "compensate it in" not in tool["advice"] and "repair" not in tool["advice"]
+    text = report.summary_text(result)
+    todo = [ln for ln in text.splitlines() if "backlash" in ln]
+    assert todo == [], todo
+
+
+def test_joints_with_play_get_it(tmp_path: Path) -> None:
+    result = _run(tmp_path, (0.006, 0.006, 0.006))
+    assert "compensate it in the controller's backlash" in result["accuracy"]["reversal"][
+        "advice"]
+    first = report.summary_text(result, verbose=False)
+    assert "set the controller's backlash (reversal) parameter" in first
