@@ -128,6 +128,8 @@ class _SimConnections:
     def callback_new_connection(self) -> _Handler:
         handler = _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
         handler.sim = self.sim
+        with self.sim._lock:
+            self.sim.stats.connections += 1
         return handler
 
 
@@ -298,6 +300,7 @@ class SimController(DriveRegisters):
             if self._tasks:
                 await asyncio.gather(*self._tasks, return_exceptions=True)
             if self._server is not None:
+                await _set_up_accepted()
                 await self._server.shutdown()
             # Let the loop run the transports' connection_lost callbacks (socket close).
             for _ in range(3):
@@ -435,6 +438,23 @@ class SimController(DriveRegisters):
             if f.delay_s > 0:
                 self.stats.delayed += 1
             return fate, max(0.0, f.delay_s)
+
+
+async def _set_up_accepted() -> None:
+    """Let every connection the loop has accepted be set up before the server shuts
+    down. A client that connected and left while this thread waited for the CPU (a
+    loaded machine) is accepted in the same pass of the loop that sets the stop; its
+    transport, made by a task of the loop, refuses a listener already closed
+    (asyncio's Server._attach) and leaves its socket to the garbage collector: a
+    socket behind after close(). Set up, it is one of the connections shutdown()
+    closes. No check and shutdown() have a pass of the loop between them, so no
+    connection is accepted in between."""
+    current = asyncio.current_task()
+    for _ in range(10):
+        pending = [t for t in asyncio.all_tasks() if t is not current and not t.done()]
+        if not pending:
+            return
+        await asyncio.wait(pending, timeout=1.0)
 
 
 def _reset(conn: Any) -> None:

@@ -118,6 +118,8 @@ class DriveRegisters:
                         if m.has_role("SOFT_MIN") and soft_limit_registers is not False else [])
         self._status_regs = [m[n] for n in dict.fromkeys(
             n for spec in m.status.values() for n in spec.registers)]
+        self._status_names = {reg.name for reg in self._status_regs}
+        self._moving_shown = False  # the MOVING flag the status registers hold
         self._alarm_regs = [m[n] for n in m.alarm_code]
         self._actuals = m.axis_registers("ACTUAL")
         # Each register's part of each command: (command, the values it is written).
@@ -208,6 +210,9 @@ class DriveRegisters:
             if function_code in _READ_CODES:
                 for reg in self._code_regs.get(device_id, ()):  # taken: reads 0
                     self._store.put_counts(reg, 0)
+            if not self._moving_shown and not self._status_names.isdisjoint(
+                    self.layout.touched(device_id, table, address, count)):
+                self.machine.rest_reported = True  # the station is told the axes rest
         else:
             self._at = (device_id, table)
             result = self._write(start, address, [int(v) for v in set_values], registers)
@@ -236,6 +241,7 @@ class DriveRegisters:
         """Mirror the machine into the registers that show it."""
         m = self.machine
         st = m.status()
+        self._moving_shown = st.moving
         flags = {"homed": st.homed, "moving": st.moving, "in_position": st.in_position,
                  "alarm": st.alarm, "estop": st.estop}
         bits = {reg.name: 0 for reg in self._status_regs}

@@ -70,6 +70,8 @@ class FakeAxes:
     # --- Motion ---------------------------------------------------------------------
     def read_status(self) -> AxisStatus:
         s = self.machine.status()
+        if not s.moving:
+            self.machine.rest_reported = True  # the station is told the axes rest
         return AxisStatus(homed=s.homed, moving=s.moving, in_position=s.in_position,
                           alarm=s.alarm, estop=s.estop, alarm_code=s.alarm_code)
 

@@ -48,6 +48,8 @@ class SimStats:
 
     requests: int = 0
     replies: int = 0
+    #: connections the server set up (each TCP client's; the RTU line's, once open)
+    connections: int = 0
     #: write requests received (function 5, 6, 15, 16, 22, 23), answered or not
     writes: int = 0
     dropped: int = 0

@@ -186,6 +186,11 @@ class VirtualOrthoglide(GaugeView):
         self._estop = False
         self._pending_alarm: tuple[float, int] | None = None
         self.moves_started = 0
+        #: False from a motion's start until the controller has shown the station a
+        #: status with it over (drivers.sim.drive): what the station reads meanwhile
+        #: it reads with the axes moving as far as it knows, as often as its polls fit
+        #: into the motion (SimIndicator.at_rest).
+        self.rest_reported = True
         self.segment_listeners: list[Callable[[Segment], None]] = []
         self.move_listeners: list[Callable[[int, float, float], None]] = []
         # the segment in progress: (index, kind, start of this piece, move number)
@@ -310,6 +315,7 @@ class VirtualOrthoglide(GaugeView):
             offsets = start_offsets(drive, profiles)
         self._motion = Motion(now, start, scale, profiles, target_m.copy(), homing, offsets,
                               carriage0=carriage)
+        self.rest_reported = False
         self._open_segment("home" if homing else "move", now, move)
         return self._motion.duration
 

@@ -140,6 +140,13 @@ class SimIndicator:
         self.time_scale = float(time_scale)
         self._char_s = self.protocol.bits_per_char / baud / self.time_scale if baud else 0.0
         self._rng = random.Random(seed)
+        #: Whether the axes are known at rest (the virtual station's machine says). A
+        #: reading taken otherwise, one of the plunger guard's polls of a move, draws
+        #: its noise from a stream of its own: the polls number what fits into the
+        #: move's time, and drawn from one stream they would shift the noise of every
+        #: later reading at a stop, so that a seeded run would not repeat.
+        self.at_rest: Callable[[], bool] = lambda: True
+        self._moving_rng = random.Random(None if seed is None else f"{seed}:moving")
         self._lock = threading.Lock()  # source/zero against the simulator thread
         self._source: Source | None = source
         self._zero = float(source()) if zero_mm is None else float(zero_mm)
@@ -243,7 +250,8 @@ class SimIndicator:
         if source is not None:
             raw *= 1.0 + self.scale_error  # the scale is the display's: after the stop
         if self.noise_mm > 0:
-            raw += self._rng.gauss(0.0, self.noise_mm)
+            rng = self._rng if self.at_rest() else self._moving_rng
+            raw += rng.gauss(0.0, self.noise_mm)
         # + 0.0 turns -0.0 into 0.0: a gauge shows +0.000, not -0.000.
         return round(raw / self.resolution_mm) * self.resolution_mm + 0.0
 

@@ -242,6 +242,7 @@ class VirtualStation:
                                link=self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00",
                                time_scale=self.time_scale, scale_error=self.gauge_scale[name])
             sim.unmount()
+            sim.at_rest = lambda: self.machine.rest_reported
             self.indicators[name] = sim
             sim.start()
         if nvram_path is not None:

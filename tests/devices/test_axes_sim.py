@@ -8,6 +8,8 @@ a manual clock, so nothing depends on how fast the test host is.
 from __future__ import annotations
 
 import contextlib
+import gc
+import os
 import socket
 import struct
 import time
@@ -421,3 +423,27 @@ def test_machine_offsets_shift_the_count_not_the_carriage() -> None:
     np.testing.assert_allclose(m.actual(), PI0 + np.array([0.4, -0.3, 0.2]), atol=1e-12)
     with pytest.raises(ValueError):
         VirtualOrthoglide(GEOMETRY, true_params=[1, 2, 3], true_drho=[0, 0, 0])
+
+
+def test_a_client_that_came_and_went_just_before_close_leaves_no_socket() -> None:
+    # The server accepts it in the same pass of its loop as the stop: its connection,
+    # set up after the listener closed, was left for the garbage collector to close
+    # (collector held off here, as it may be for a while), a socket behind close().
+    def sockets() -> set[str]:
+        found = set()
+        for fd in os.listdir("/proc/self/fd"):
+            with contextlib.suppress(OSError):
+                found.add(os.readlink(f"/proc/self/fd/{fd}"))
+        return {f for f in found if f.startswith("socket:")}
+
+    machine = fast_machine()
+    gc.disable()
+    try:
+        for _ in range(20):
+            before = sockets()
+            sim = SimController(machine).start()
+            socket.create_connection(("127.0.0.1", sim.port)).close()
+            sim.close()
+            assert sockets() <= before
+    finally:
+        gc.enable()

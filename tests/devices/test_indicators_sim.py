@@ -88,6 +88,22 @@ def test_same_seed_same_readings() -> None:
     assert run(5) != run(6)
 
 
+def test_readings_taken_while_the_axes_move_leave_those_at_rest_unchanged() -> None:
+    # The plunger guard reads as often as its polls fit into a move: those readings
+    # draw their noise apart, so that a seeded run's readings at its stops repeat.
+    def at_rest_readings(polls: int) -> list[float]:
+        moving = [False]
+        with rig("mitutoyo", Leg(1.0), zero_mm=0.0, noise_mm=0.01, seed=5) as (sim, ind, _e):
+            sim.at_rest = lambda: not moving[0]
+            first = ind.read_n(3)
+            moving[0] = True
+            ind.read_n(polls)
+            moving[0] = False
+            return first + ind.read_n(3)
+
+    assert at_rest_readings(0) == at_rest_readings(4) == at_rest_readings(9)
+
+
 def test_coarser_resolution_reversed_gauge_and_zero_button() -> None:
     leg = Leg(5.0)
     with rig("mitutoyo", leg, resolution_mm=0.01, sign=-1) as (sim, ind, _):

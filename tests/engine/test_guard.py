@@ -68,7 +68,10 @@ def test_guard_stops_the_axes_before_a_short_preload_lifts_off(tmp_path: Path) -
     records = read_journal(run_dir / "journal.jsonl")
     trips = [r["event"] for r in records if r["type"] == "event"
              and r["event"]["event"] == "plunger-guard"]
-    assert len(trips) == 1 and trips[0]["indicator"] == "A"
+    # The first stop may be followed by one re-plan from where the machine stands
+    # (more waypoints, slower), which the same lift-off stops again: which of the two
+    # depends on how many polls fit into a sub-move at real time. Never a third.
+    assert 1 <= len(trips) <= 2 and {t["indicator"] for t in trips} == {"A"}, trips
     assert records[-1]["type"] == "fault" and "plunger guard" in records[-1]["error"]
     # stopped before the end: the plunger is still on the leg, and never read at its end
     ((station, sim),) = stations
