@@ -211,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     src.add_argument("--config", metavar="FILE", help="station config (TOML)")
     run.add_argument("--plan", action="store_true", help="print the checked plan and exit")
+    run.add_argument("--operator", metavar="NAME", default=None,
+                     help="who calibrates, recorded in the run and its report (over the "
+                          "config's [station] operator)")
     run.add_argument("--offsets-from", metavar="RUN_DIR", default=None,
                      help="a drive whose offsets the station holds: start from the offsets "
                           "that run ended with")
@@ -327,7 +330,13 @@ def build_parser() -> argparse.ArgumentParser:
     report = sub.add_parser("report", help="draw a run's report.html again from its "
                             "result.json, figures included")
     report.add_argument("run_dir", metavar="RUN_DIR")
-    report.add_argument("--no-figures", action="store_true", help="without its figures")
+    report.add_argument("--no-figures", action="store_true", help="without its figures "
+                        "(refused over a report with figures unless --force)")
+    report.add_argument("--out", metavar="FILE", default=None,
+                        help="write the report here instead of RUN_DIR/report.html (an "
+                             "existing FILE is refused unless --force)")
+    report.add_argument("--force", action="store_true",
+                        help="replace what --out or --no-figures would otherwise refuse")
 
     export = sub.add_parser("export", help="a run's final offsets in a controller's terms")
     export.add_argument("run_dir", metavar="RUN_DIR")

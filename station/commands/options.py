@@ -89,6 +89,7 @@ class RunOptions:
     yes: bool = False
     json: bool = False
     verbose: bool = False  # the whole summary, not its first screen only
+    operator: str | None = None  # --operator NAME: over the config's [station] operator
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> RunOptions:
@@ -96,6 +97,7 @@ class RunOptions:
                    sim=SimOptions.from_args(args) if args.simulate else None,
                    plan=bool(args.plan), out=Path(args.out), yes=bool(args.yes),
                    json=bool(args.json), verbose=bool(getattr(args, "verbose", False)),
+                   operator=getattr(args, "operator", None),
                    offsets_from=None if getattr(args, "offsets_from", None) is None
                    else Path(args.offsets_from))
 

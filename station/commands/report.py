@@ -1,13 +1,21 @@
 """``orthocal report RUN_DIR``: draw a run's report.html again from its result.json,
 with its figures (docs/design.md, "Command line"): after a run whose config said
-``[report] figures = false``, or after an upgrade of orthocal."""
+``[report] figures = false``, or after an upgrade of orthocal.
+
+It never replaces a file without saying so: ``--out FILE`` refuses a FILE that
+exists (one line, exit 2) unless ``--force``; the run's own report.html, which is
+what the command redraws, is replaced with "replaced FILE" on stdout, except that
+``--no-figures`` refuses to replace a report that has its figures (they would be
+lost) unless ``--force``."""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from pydantic import ValidationError
 
+from drivers.files import write_atomic
 from station.commands.history import read_result
 from station.errors import BadInput, RunFailed
 
@@ -20,12 +28,44 @@ def main(args: argparse.Namespace) -> int:
         result = report.as_result(doc)
     except ValidationError as exc:  # edited by hand, or another version's
         raise BadInput(f"{path}: not a result document ({_first(exc)})") from None
+    figures = not args.no_figures
+    target = _target(args, path.parent, figures)
+    existed = target.exists()
     try:
-        written = report.write_html(result, path.parent, figures=not args.no_figures)
+        write_atomic(target, report.render_html(result, figures))
     except OSError as exc:
-        raise RunFailed(f"{path.parent / 'report.html'}: not written ({exc.strerror})") from None
-    print(written)
+        raise RunFailed(f"{target}: not written ({exc.strerror})") from None
+    print(f"replaced {target}" if existed else target)
     return 0
+
+
+def _target(args: argparse.Namespace, run_dir: Path, figures: bool) -> Path:
+    """Where the report goes, or BadInput (one line) where writing there would
+    replace a file unasked: ``--out`` over any file, ``--no-figures`` over the run's
+    report with figures."""
+    force = bool(getattr(args, "force", False))
+    out = getattr(args, "out", None)
+    if out is not None:
+        target = Path(out)
+        if target.is_dir():
+            raise BadInput(f"--out {target}: a folder; give the report's file name")
+        if not target.parent.is_dir():
+            raise BadInput(f"--out {target}: no folder {target.parent}")
+        if target.exists() and not force:
+            raise BadInput(f"--out {target}: the file exists; give --force to replace it")
+        return target
+    target = run_dir / "report.html"
+    if not figures and not force and _has_figures(target):
+        raise BadInput(f"{target} has its figures and --no-figures would drop them: give "
+                       "--out FILE for a copy without them, or --force to replace it")
+    return target
+
+
+def _has_figures(page: Path) -> bool:
+    try:
+        return "<svg" in page.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return False  # none to lose
 
 
 def _first(exc: ValidationError) -> str:

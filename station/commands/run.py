@@ -105,6 +105,7 @@ def run(options: RunOptions) -> int:
                 ConsoleOperator.require_tty_or_yes(options.yes)
         if options.offsets_from is not None:
             config = offsets_from(config, options.offsets_from)
+        config = with_operator(config, options.operator)
         plan = build_plan(config)
         journal_box: list[Journal] = []
 
@@ -295,6 +296,17 @@ def _held_offsets(config: Any, state: RunState) -> Any:
         return config
     return config.model_copy(update={
         "controller": config.controller.model_copy(update={"offsets": held})})
+
+
+def with_operator(config: Any, name: str | None) -> Any:
+    """``--operator NAME`` over the config's ``[station] operator``: one line, exit 2,
+    for a name the config would refuse (empty, longer than 100 characters)."""
+    if name is None:
+        return config
+    if not 0 < len(name.strip()) <= 100:
+        raise BadInput("--operator: give a name of 1 to 100 characters")
+    return config.model_copy(update={"station": config.station.model_copy(
+        update={"operator": name.strip()})})
 
 
 def offsets_from(config: Any, run_dir: Path) -> Any:

@@ -369,7 +369,14 @@ class AcceptanceConfig(_Strict):
     tool_max_um: float | None = Field(None, gt=0, allow_inf_nan=False)
 
 
+class StationTable(_Strict):
+    # Who calibrates: recorded in the run's result and journal and printed in the
+    # report's header and certificate (`orthocal run --operator NAME` overrides it).
+    operator: str | None = Field(None, min_length=1, max_length=100)
+
+
 class StationConfig(_Strict):
+    station: StationTable = Field(default_factory=StationTable)
     machine: MachineConfig = Field(default_factory=MachineConfig)
     controller: ControllerConfig = Field(default_factory=ControllerConfig)
     indicators: list[IndicatorConfig] = Field(min_length=1)

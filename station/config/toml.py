@@ -51,6 +51,8 @@ def toml_text(data: dict[str, Any], header: str = "") -> str:
             lines.extend(f"{_key(a)} = {toml_value(b)}" for a, b in v.items())
         lines.append("")
 
+    if data.get("station"):  # an empty [station] (no operator named) is left out
+        table("[station]", data["station"])
     for section in ("machine", "controller"):
         if data.get(section) is not None:
             table(f"[{section}]", data[section])

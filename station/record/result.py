@@ -36,7 +36,7 @@ from station.record.result_sections import (
     UncertaintyBudget,
 )
 
-__all__ = ["SCHEMA_VERSION", "Compensated", "RunResult", "Setup", "Status"]
+__all__ = ["SCHEMA_VERSION", "Compensated", "Gauge", "RunResult", "Setup", "Status"]
 
 SCHEMA_VERSION: Literal[2] = 2
 
@@ -51,6 +51,15 @@ class Machine(Closed):
     leg_length: float
     rho_min: float
     rho_max: float
+
+
+class Gauge(Closed):
+    """gauges[]: a dial indicator of the run, named by what identifies it (its
+    serial, [[indicators]] serial), not by the port it was on."""
+
+    name: str
+    protocol: str
+    serial: str | None = Field(description="[[indicators]] serial (null: not given)")
 
 
 class Simulation(Closed):
@@ -212,6 +221,9 @@ class RunResult(Closed):
     simulated: bool
     simulation: Simulation | None
     machine: Machine
+    operator: str | None = Field(None, description="[station] operator or run --operator "
+                                                   "(null: not given)")
+    gauges: list[Gauge] | None = Field(None, description="the run's indicators")
     model: str
     method: Literal["linear", "nonlinear"]
     model_selection: ModelSelection | None = Field(None, description="model auto")

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from station.record.result import RunResult
 from station.record.result_base import NotStated
 from station.record.result_sections import BudgetSource, UncertaintyBudget
-from station.report.format import at, fmt, num
+from station.report.format import MANY_DOF, at, dof_text, fmt, k_text, num
 
 NAMES = ("drho_x", "drho_y", "drho_z")
 
@@ -46,9 +46,8 @@ def summary_lines(result: RunResult) -> list[str]:
         return []
     # the values are the first screen's "as found" (station.report.first_screen):
     # said once; here what their ± is
-    kk = sorted({round(x, 2) for x in map(num, b.coverage_factor.values()) if x is not None})
-    k = "" if not kk else f", k = {kk[0]:.2f}" if len(kk) == 1 else \
-        f", k = {kk[0]:.2f}–{kk[-1]:.2f}"
+    kk = [x for x in map(num, b.coverage_factor.values()) if x is not None]
+    k = f", k = {k_text(kk)}" if kk else ""
     line = (f"  statement     Δρ as found (above): 95 %{k}, the scatter and the uncertainty "
             "budget (GUM)")
     top = sorted(b.sources, key=_largest)[:3]
@@ -68,17 +67,17 @@ def section_html(result: RunResult) -> str:
     if isinstance(b, NotStated):
         return f"<h2>Uncertainty budget</h2><p>{html.escape(b.error)}</p>"
     names = [n for n in NAMES if n in b.expanded_95_mm]
-    head = "".join(f"<th>u(Δρ<sub>{n[-1]}</sub>) µm</th>" for n in names)
+    head = "".join(f"<th>u(Δρ<sub>{n[-1]}</sub>)</th>" for n in names)
     rows = []
     for s in sorted(b.sources, key=_largest):
-        value = "—" if s.value_mm is None else f"{_um(s.value_mm)} µm"
+        value = _um(s.value_mm)
         rows.append(f"<tr><td>{html.escape(s.source)}</td><td>{s.type}</td>"
                     f"<td>{html.escape(s.distribution)}</td><td>{value}</td>"
                     + "".join(f"<td class='num'>{_um(at(s.contributions_mm, n))}</td>"
                               for n in names) + "</tr>")
-    dof = "".join(f"<td class='num'>{'∞' if v is None else fmt(v, 1)}</td>"
-                  for v in (at(b.effective_dof, n) for n in names))
-    table = (f"<table><tr><th>source</th><th>type</th><th>distribution</th><th>value</th>"
+    dof = "".join(f"<td class='num'>{dof_text(at(b.effective_dof, n))}</td>" for n in names)
+    table = (f"<table><tr><th>source (µm)</th><th>type</th><th>distribution</th>"
+             f"<th>value</th>"
              f"{head}</tr>{''.join(rows)}"
              f"<tr><th colspan='4'>combined standard uncertainty u<sub>c</sub></th>"
              f"{_cells(b.combined_mm, names, _um)}</tr>"
@@ -86,7 +85,10 @@ def section_html(result: RunResult) -> str:
              f"<tr><th colspan='4'>coverage factor k (95 %)</th>"
              f"{_cells(b.coverage_factor, names, lambda v: fmt(v, 2))}</tr>"
              f"<tr><th colspan='4'>expanded uncertainty U = k·u<sub>c</sub></th>"
-             f"{_cells(b.expanded_95_mm, names, _um)}</tr></table>")
+             f"{_cells(b.expanded_95_mm, names, _um)}</tr></table>"
+             f"<p class='small'>Every figure in µm. Effective degrees of freedom above "
+             f"{MANY_DOF:.0f} are given as ∞: Student's k is then the normal's to the "
+             "digits shown.</p>")
     assumed = "".join(f"<li>{html.escape(a)}</li>" for a in b.assumed)
     return (f"<h2>Uncertainty budget</h2><p>{html.escape(b.method)}. It "
             f"states {html.escape(b.statement)}.</p>{table}"
@@ -122,7 +124,7 @@ def _certificate(result: RunResult, b: UncertaintyBudget, names: list[str]) -> s
         f"<tr><th>environment</th><td>temperature change during the run ≤ "
         f"{fmt(env.value)} K ({'stated' if env.given else 'assumed'})</td></tr>"
         f"<tr><th>date</th><td>{html.escape(result.started or '—')}</td></tr>"
-        "<tr><th>operator</th><td>not recorded by the station</td></tr>"
+        f"<tr><th>operator</th><td>{html.escape(result.operator or 'not given')}</td></tr>"
         "<tr><th>method</th><td>joint offsets from the legs' parallelism at the test "
         "postures Π0, Π<sub>i</sub><sup>±</sup> (Orthoglide calibration, dial indicators), "
         "closed loop; uncertainty after GUM (JCGM 100:2008)</td></tr>"

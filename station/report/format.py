@@ -8,6 +8,7 @@ run that failed halfway).
 from __future__ import annotations
 
 import html
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from datetime import datetime
 
@@ -93,6 +94,28 @@ def fmt(value: object, digits: int = 3, signed: bool = False) -> str:
     if float(text) == 0.0:
         text = f"{0.0:.{digits}f}"
     return text.replace("-", "−")
+
+
+#: An ASCII hyphen-minus that starts a number: not after a letter, digit, dot, hyphen
+#: or slash, so that dates (2024-05-02), ranges of standards (ISO 230-2), file names
+#: and options (--seed) keep theirs.
+_HYPHEN_MINUS = re.compile(r"(?<![\w.\-/])-(?=\.?\d)")
+#: What report.html does not typeset: figures, code, the stylesheet, and the tags.
+_NOT_TEXT = re.compile(r"(<svg\b.*?</svg>|<code\b.*?</code>|<style\b.*?</style>"
+                       r"|<script\b.*?</script>|<[^>]*>)", re.S)
+
+
+def minus_signs(text: str) -> str:
+    """``text`` with every number's ASCII hyphen-minus made the minus sign U+2212, as
+    fmt writes it: the report has one minus sign, whichever code formatted the number."""
+    return _HYPHEN_MINUS.sub("−", text)
+
+
+def minus_signs_html(page: str) -> str:
+    """:func:`minus_signs` on the text of an HTML page, leaving its tags, figures,
+    code and stylesheet as they are."""
+    return "".join(part if i % 2 else minus_signs(part)
+                   for i, part in enumerate(_NOT_TEXT.split(page)))
 
 
 _SYMBOL = {"drho": ("Δρ", r"\Delta\rho"), "dL": ("ΔL", r"\Delta L"), "tilt": ("tilt ", "t")}
@@ -312,6 +335,33 @@ def um(value_mm: float | None, digits: int = 1) -> str:
     "0.014 mm" hides the one digit the reader compares before and after."""
     v = num(value_mm)
     return "—" if v is None else fmt(1000.0 * v, digits)
+
+
+def um_signed(value_mm: float | None, digits: int = 1) -> str:
+    """:func:`um` with its sign: a deviation or an error that may be either."""
+    v = num(value_mm)
+    return "—" if v is None else fmt(1000.0 * v, digits, signed=True)
+
+
+#: Degrees of freedom above which Student's k is the normal's to the digits stated
+#: (t at 1000 dof is 1.962 for 95 %, the normal's 1.960): said "∞", not "321746.7".
+MANY_DOF = 1000.0
+
+
+def dof_text(dof: float | None) -> str:
+    """Degrees of freedom as the report says them: "∞" for none stated (infinite) or
+    above :data:`MANY_DOF`, else to one decimal ("14.0")."""
+    v = num(dof)
+    return "∞" if v is None or v > MANY_DOF else f"{v:.1f}"
+
+
+def k_text(factors: Iterable[float | None]) -> str:
+    """Coverage factors said once: "1.96" when all equal to the digits shown, else
+    "2.03–2.14"; "—" for none."""
+    shown = sorted({round(v, 2) for v in map(num, factors) if v is not None})
+    if not shown:
+        return "—"
+    return fmt(shown[0], 2) if len(shown) == 1 else f"{fmt(shown[0], 2)}–{fmt(shown[-1], 2)}"
 
 
 def um_interval(pair: Interval | None, digits: int = 1) -> str | None:

@@ -4,7 +4,8 @@ enter them), so that nothing below can be read against it."""
 
 from __future__ import annotations
 
-from station.record.result import RunResult
+from station.record.result import Gauge, RunResult
+from station.record.result_sections import UncertaintyBudget
 from station.report.format import (
     esc,
     held_by_station,
@@ -22,6 +23,28 @@ def held_box(result: RunResult) -> str:
             "enter them in the drive's own home-offset parameter").rstrip(".")
     return ('<div class="box warn"><b>Offsets held by the station, not by the drive</b>'
             + (f": {esc(values)}" if values else "") + f" — {esc(note)}.</div>")
+
+
+def gauges_text(result: RunResult) -> str:
+    """The run's indicators by what identifies them ("A: mitutoyo, serial 12345"), in
+    the config's order; the result's ``gauges``, else the budget's instruments (a
+    result written before runs recorded their gauges), else "not recorded"."""
+    gauges = result.gauges
+    if gauges is None and isinstance(result.uncertainty_budget, UncertaintyBudget):
+        gauges = [Gauge(name=i.name, protocol=i.protocol, serial=i.serial)
+                  for i in result.uncertainty_budget.instruments]
+    if not gauges:
+        return "not recorded"
+    return "; ".join(f"{g.name}: {g.protocol}, serial {g.serial or 'not given'}"
+                     for g in gauges)
+
+
+def run_facts(result: RunResult) -> list[tuple[str, str]]:
+    """Who calibrated with what, for the header's list (HTML, escaped): the operator
+    ([station] operator, run --operator; "not given" where neither said) and the
+    gauges by serial."""
+    return [("operator", esc(result.operator or "not given")),
+            ("gauges", esc(gauges_text(result)))]
 
 
 def header_boxes(result: RunResult) -> str:

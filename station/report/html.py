@@ -22,12 +22,15 @@ from station.report.format import (
     format_duration,
     format_when,
     held_by_station,
+    minus_signs_html,
     run_state,
+    um,
     writeback_text,
 )
-from station.report.header import header_boxes, held_box
+from station.report.header import header_boxes, run_facts
 from station.report.plots import plot_deviations, plot_parameters, release_fonts
 from station.report.story import result_paragraph, what_was_done
+from station.report.style import CSS
 from station.report.tables import (
     correlation_table,
     deviations_table,
@@ -39,49 +42,17 @@ from station.report.tables import (
 from station.report.tool import html_section as tool_section
 from station.report.tool import stands_html, statement
 
-_CSS = """
-body{font-family:-apple-system,"Segoe UI",Roboto,"Helvetica Neue",Arial,sans-serif;
- color:#1d2330;max-width:60rem;margin:2rem auto;padding:0 1.2rem;line-height:1.5;font-size:15px}
-h1{font-size:1.6rem;margin:0 0 .3rem}
-h2{font-size:1.2rem;margin:2rem 0 .6rem;border-bottom:1px solid #d0d5dd;padding-bottom:.2rem}
-h3{font-size:1rem;margin:1.2rem 0 .4rem}
-.meta{color:#555;margin:0 0 1rem}
-.status{display:inline-block;padding:.15rem .7rem;border-radius:1rem;font-weight:600;
- font-size:.95rem;vertical-align:middle;margin-left:.6rem;border:1px solid}
-.st-ok{background:#e6f4ea;color:#1e6b30;border-color:#9fd3ab}
-.st-failed,.st-aborted{background:#fdecea;color:#a52a1a;border-color:#f0a99f}
-.st-refused{background:#fff4e0;color:#8a5300;border-color:#f0c97a}
-.box{background:#f6f8fa;border:1px solid #d0d5dd;border-radius:6px;padding:.7rem 1rem;
- margin:.8rem 0}
-.warn{background:#fff8e6;border-color:#f0c97a}
-.bad{background:#fdecea;border-color:#f0a99f}
-table{border-collapse:collapse;margin:.4rem 0 1rem;font-size:.9rem}
-th,td{border:1px solid #d0d5dd;padding:.25rem .6rem;text-align:right;vertical-align:top}
-th{background:#f0f2f5;font-weight:600}
-td.l,th.l{text-align:left}
-td.num{font-variant-numeric:tabular-nums;white-space:nowrap}
-figure{margin:1rem 0;page-break-inside:avoid;break-inside:avoid}
-figure svg{width:100%;height:auto;display:block}
-figcaption{font-size:.88rem;color:#444;margin-top:.3rem}
-dl.kv{display:grid;grid-template-columns:max-content auto;gap:.15rem 1rem;margin:.4rem 0}
-dl.kv dt{color:#555}dl.kv dd{margin:0}
-.small{font-size:.85rem;color:#555}
-code{font-family:ui-monospace,Menlo,Consolas,monospace;font-size:.88em;word-break:break-all}
-@media print{body{margin:0;max-width:none;font-size:11pt}h2{page-break-after:avoid}
- table,.box{page-break-inside:avoid}}
-"""
-
 
 def _fit_box(result: RunResult) -> str:
     if result.residual_rms_mm is None and not result.fit_note:
         return ""
     rows = [
-        ("residual RMS (measured − model)", f"{fmt(result.residual_rms_mm)} mm"),
-        ("σ = √(RSS / (n − p))", f"{fmt(result.sigma_mm)} mm"),
-        ("indicator noise (spread of readings at a stop)", f"{fmt(result.noise_mm)} mm"),
+        ("residual RMS (measured − model)", f"{um(result.residual_rms_mm, 2)} µm"),
+        ("σ = √(RSS / (n − p))", f"{um(result.sigma_mm, 2)} µm"),
+        ("indicator noise (spread of readings at a stop)", f"{um(result.noise_mm, 2)} µm"),
         ("condition number (sensitivity of the fit to noise)",
          fmt(result.condition_number, 2)),
-        ("deviations RMS before calibration", f"{fmt(result.deviations_rms_mm)} mm"),
+        ("deviations RMS before calibration", f"{um(result.deviations_rms_mm)} µm"),
     ]
     dl = "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in rows)
     ok = result.fit_ok
@@ -108,29 +79,33 @@ def _writeback_box(result: RunResult) -> str:
 
 
 def _offsets_section(result: RunResult) -> str:
+    """The operator's result, first on the page: each joint's zero offset as found
+    (read before the run) and as left (the last write-back or rollback, else as
+    found), in mm, with what became of the correction above it."""
     before, written = result.offsets_before or {}, result.offsets_written or {}
+    left = result.offsets_final or written or before
     held = held_by_station(result)
     out = [_writeback_box(result)]
-    if before or written:
+    if before or left:
         rows = []
         for a in AXES:
-            if a not in before and a not in written:
+            if a not in before and a not in left:
                 continue
-            b, w = at(before, a), at(written, a)
-            change = fmt(w - b, signed=True) if b is not None and w is not None else "—"
-            rows.append([f"axis {a}", fmt(b, signed=True),
-                         fmt(w, signed=True) if written else "not written", change])
+            b, w = at(before, a), at(left, a)
+            change = fmt(w - b, 4, signed=True) if b is not None and w is not None else "—"
+            rows.append([f"joint {a}", fmt(b, 4, signed=True), fmt(w, 4, signed=True),
+                         change])
         whose = ("The joint zero offset o<sub>i</sub> the station holds (the drive takes "
                  "none over Modbus)" if held else
                  "The controller's joint zero offset o<sub>i</sub>")
-        out.append(table(["axis", "offset before (mm)",
-                          "offset held (mm)" if held else "offset written (mm)",
-                          "change (mm)"], rows, caption=(
-            f"{whose}; the correction is "
-            "o<sub>i</sub> ← o<sub>i</sub> − Δρ<sub>i</sub>. The old values are saved in "
+        out.append(table(["joint (offsets in mm)", "as found", "as left", "change"],
+                         rows, caption=(
+            f"{whose}: as found, read before the run; as left, "
+            f"{'held' if held else 'written and read back'} at its end "
+            "(o<sub>i</sub> ← o<sub>i</sub> − Δρ<sub>i</sub>). The old values are saved in "
             "the run directory, so <code>orthocal rollback</code> can restore them.")))
-    if held:
-        out.append(held_box(result))
+    # where the station holds them, the box at the top (header_boxes) says where to
+    # enter them, just above
     return "".join(out) or "<p>The controller's offsets were not read.</p>"
 
 
@@ -148,7 +123,7 @@ def _where_text(result: RunResult) -> tuple[str, str]:
     desc = "virtual machine (no hardware)"
     if (sim := result.simulation) is not None:
         desc += (f"; seed {sim.seed if sim.seed is not None else 'random'}"
-                 f", indicator noise σ = {fmt(sim.noise_mm, 4)} mm")
+                 f", indicator noise σ = {um(sim.noise_mm, 2)} µm")
     return "simulation", esc(desc)
 
 
@@ -162,6 +137,7 @@ def _timing_text(result: RunResult) -> str:
 
 def _info_list(result: RunResult) -> str:
     rows = [
+        *run_facts(result),
         ("run directory", f"<code>{esc(result.run_dir)}</code>"),
         ("started", esc(format_when(result.started))),
         ("finished", esc(format_when(result.finished))),
@@ -268,6 +244,8 @@ def _title(result: RunResult, figures: bool) -> str:
 
 
 _TITLE = "Calibration report"
+_AS_LEFT = "Controller offsets: as found → as left"
+_AS_LEFT_HELD = "Offsets held by the station: as found → as left"
 
 
 def render_html(result: ResultLike, figures: bool = True) -> str:
@@ -280,10 +258,12 @@ def render_html(result: ResultLike, figures: bool = True) -> str:
     # run states it, comes first.
     accuracy = tool_section(record, plot_tool, 1 if plot_tool else None)
     held = held_by_station(record)
-    body = f"""
+    body = minus_signs_html(f"""
 {_title(record, figures)}
 {first_screen.html_block(record)}
-{header_boxes(record)}{_info_list(record)}
+{header_boxes(record)}<h2 id="as-left">{_AS_LEFT_HELD if held else _AS_LEFT}</h2>
+{_offsets_section(record)}
+{_info_list(record)}
 <h2>What was done</h2>
 {what_was_done(record)}
 <h2>Result</h2>
@@ -304,14 +284,13 @@ def render_html(result: ResultLike, figures: bool = True) -> str:
 {deviations_table(record)}
 <h2>Setups</h2>
 {setups_table(record)}
-<h2>{"Offsets (held by the station)" if held else "Controller offsets"}</h2>
-{_offsets_section(record)}
-<p class="small">Generated by orthocal. All lengths in millimetres.</p>
-"""
+<p class="small">Generated by orthocal. Each table states its unit in its header: µm for
+the small errors, mm for lengths, positions and offsets, mm/m for squareness.</p>
+""")
     when = format_when(record.started)
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">'
-            f"<title>{esc(_TITLE)} — {esc(when)}</title><style>{_CSS}</style></head>"
+            f"<title>{esc(_TITLE)} — {esc(when)}</title><style>{CSS}</style></head>"
             f"<body>{body}</body></html>\n")
 
 

@@ -12,7 +12,7 @@ from orthocal.lost_motion import standing_out
 from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy, ToolReversal
 from station.record.result_sections import Reversal
-from station.report.format import AXES, at, num
+from station.report.format import AXES, at, fmt, num, um
 
 
 def _um(value: float | None, digits: int = 1) -> str:
@@ -76,9 +76,9 @@ def section_html(result: RunResult) -> str:
     rows = []
     for a in AXES:
         value, se = at(rev.value_mm, a), at(rev.std_errors_mm, a)
-        rows.append(f"<tr><td>{a}</td><td>{_um(value)}</td>"
-                    f"<td>{'—' if se is None else f'± {1000 * k * se:.1f} µm'}</td>"
-                    f"<td>{_um((value or 0.0) / 2)}</td><td>{rev.n.get(a, 0)}</td>"
+        rows.append(f"<tr><td>{a}</td><td>{um(value)}</td>"
+                    f"<td>{'—' if se is None else f'± {um(k * se)}'}</td>"
+                    f"<td>{um((value or 0.0) / 2)}</td><td>{rev.n.get(a, 0)}</td>"
                     "</tr>")
     tool = _at_tool(result)
     at_tool = "" if tool is None else (
@@ -91,6 +91,6 @@ def section_html(result: RunResult) -> str:
         "<h2>Lost motion (reversal)</h2>"
         f"<p>{html.escape(rev.stated)}. Measured: "
         f"{html.escape(rev.method)}.</p>"
-        "<table><thead><tr><th>joint</th><th>reversal B</th><th>95 % (k = "
-        f"{k:.2f})</th><th>B/2 either side of the stated Δρ</th><th>measurements</th></tr>"
+        "<table><thead><tr><th>joint (µm)</th><th>reversal B</th><th>95 % (k = "
+        f"{fmt(k, 2)})</th><th>B/2 either side of the stated Δρ</th><th>measurements</th></tr>"
         f"</thead><tbody>{''.join(rows)}</tbody></table>{at_tool}")

@@ -15,7 +15,7 @@ from typing import Any
 from orthocal.loop import WRITABLE
 from station.record.result import Iteration, RunResult
 from station.record.result_accuracy import Accuracy
-from station.report.format import at, num
+from station.report.format import at, num, um, um_signed
 from station.report.tool import objective
 
 #: What each of the closed loop's stop reasons (the run JSON's ``loop.stopped``)
@@ -261,24 +261,36 @@ def html_section(result: RunResult, plot: str | None) -> str:
 
 
 def _rounds_table(result: RunResult) -> str:
+    """One row per measurement, every figure in µm: the offsets a round wrote are
+    said as the change it made (the as found / as left table at the top holds the
+    offsets themselves, in mm)."""
     e = html.escape
     # where the station holds the offsets, none of them reached the drive
     held = "held" if result.offsets_held_by == "station" else "written"
+    prev = dict(result.offsets_before or {})
     rows = []
     for n, it in enumerate(result.iterations or []):
         written = it.offsets_written
         rows.append(
             "<tr>" + "".join(f"<td>{c}</td>" for c in (
-                e(_label(n, it)), _um(it.deviations_rms_mm),
-                _um(it.residual_rms_mm), _um(it.noise_floor_mm),
-                _um(correction_mm(it, aim_of(result, n))),
+                e(_label(n, it)), um(it.deviations_rms_mm, 2),
+                um(it.residual_rms_mm, 2), um(it.noise_floor_mm, 2),
+                um(correction_mm(it, aim_of(result, n)), 2),
                 e(", ".join(it.significant) or "—"),
-                e(", ".join(f"{a} {'—' if v is None else f'{v:+.4f}'}"
-                            for a, v in written.items()) if written
-                  else str(it.writeback or "—")),
+                e(_changes(prev, written)) if written else e(str(it.writeback or "—")),
             )) + "</tr>")
-    return ("<table><thead><tr><th>measurement</th><th>deviations RMS</th>"
+        prev.update({a: v for a, v in (written or {}).items() if v is not None})
+    return ("<table><thead><tr><th>measurement (µm)</th><th>deviations RMS</th>"
             "<th>residual RMS</th><th>noise floor</th>"
             "<th>correction max (a verification's: joined with the rounds before)</th>"
-            f"<th>significant</th><th>offsets {held} (mm)</th></tr></thead><tbody>"
+            f"<th>significant</th><th>change of the offsets {held}</th></tr></thead><tbody>"
             + "".join(rows) + "</tbody></table>")
+
+
+def _changes(before: Mapping[str, float | None], written: Mapping[str, float | None]) -> str:
+    """"x −1101.0, y +698.0, z −401.0": what a round's write-back changed, in µm (the
+    offset written where the one before is not known)."""
+    def change(a: str, v: float | None) -> str:
+        b = at(before, a)
+        return "—" if v is None else um_signed(v - b if b is not None else v)
+    return ", ".join(f"{a} {change(a, v)}" for a, v in written.items())

@@ -17,6 +17,7 @@ from station.report.format import (
     param_html,
     params_of,
     true_value,
+    um,
     unit,
     writeback_text,
 )
@@ -98,9 +99,9 @@ def _found(result: RunResult) -> list[str]:
     parts.append(f"The {what} were identified as {vals} (95 %, k = {k:.2f}).")
     resid, noise = num(result.residual_rms_mm), num(result.noise_mm)
     if resid is not None:
-        s = f"The fitted model reproduces the measured deviations to {fmt(resid)} mm RMS"
+        s = f"The fitted model reproduces the measured deviations to {um(resid, 2)} µm RMS"
         if noise is not None:
-            s += f" (indicator noise: {fmt(noise)} mm)"
+            s += f" (indicator noise: {um(noise, 2)} µm)"
         parts.append(s + ".")
     sim = hidden(result)
     found = [(n, at(ident, n), true_value(sim, n)) for n in names]
@@ -110,7 +111,8 @@ def _found(result: RunResult) -> list[str]:
     if diffs["mm"] or diffs["mrad"]:
         parts.append("This was a simulated run; the identified values differ from the "
                      "virtual machine's hidden ones by at most " + " and ".join(
-                         f"{fmt(max(d))} {u}" for u, d in diffs.items() if d) + ".")
+                         (f"{um(max(d))} µm" if u == "mm" else f"{fmt(max(d), 4)} mm/m")
+                         for u, d in diffs.items() if d) + ".")
     return parts
 
 
@@ -140,12 +142,12 @@ def _verified(result: RunResult) -> list[str]:
         return parts
     worst = max_abs(ver.deviations)
     s = ("A verification measurement shows the legs now parallel to within "
-         f"{fmt(ver.deviations_rms_mm)} mm RMS")
+         f"{um(ver.deviations_rms_mm)} µm RMS")
     if worst is not None:
-        s += f" (largest deviation {fmt(worst)} mm)"
+        s += f" (largest deviation {um(worst)} µm)"
     before = num(result.deviations_rms_mm)
     if before is not None:
-        s += f", against {fmt(before)} mm RMS before calibration"
+        s += f", against {um(before)} µm RMS before calibration"
     s += ": that is the legs' parallelism, the method's means, not the tool's accuracy"
     if tool:
         s += f"; {esc(tool)}"

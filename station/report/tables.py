@@ -11,6 +11,7 @@ from station.report.format import (
     PARAM_NAMES,
     at,
     dev_html,
+    dof_text,
     esc,
     fmt,
     hidden,
@@ -19,6 +20,8 @@ from station.report.format import (
     param_html,
     params_of,
     true_value,
+    um,
+    um_signed,
     unit,
 )
 from station.report.text import model_notes
@@ -41,9 +44,20 @@ def table(head: list[str], rows: list[list[str]], left: int = 1, caption: str = 
 
 
 def params_table(result: RunResult) -> str:
+    """The identified parameters, one table per unit: the lengths (Δρ, ΔL, the gaps)
+    in µm, the tilts in mm/m (= mrad)."""
     names = params_of(result)
     if not names:
         return "<p>No parameters were identified.</p>"
+    tilts = [n for n in names if unit(n) == "mrad"]
+    lengths = [n for n in names if n not in tilts]
+    return "".join(_params_table(result, group, scale, label) for group, scale, label in (
+        (lengths, 1000.0, "µm"), (tilts, 1.0, "mm/m")) if group)
+
+
+def _params_table(result: RunResult, names: list[str], scale: float, label: str) -> str:
+    """``names``' rows, each value times ``scale`` (mm → µm; mrad as mm/m), in
+    ``label`` said once in the first header cell."""
     ident, errs = machine_parameters(result), result.std_errors
     ver = result.verification
     v_ident = ver.identified if ver is not None else {}
@@ -52,22 +66,26 @@ def params_table(result: RunResult) -> str:
     has_truth = any(true_value(sim, n) is not None for n in names)
     dof = num(result.std_errors_dof)
     k = coverage_factor(dof) if dof is not None and dof > 0 else coverage_factor(None)
-    head = ["parameter", "unit", "identified", "σ",
-            f"95 % interval (k = {k:.2f}" + (f", {dof:g} dof)" if dof is not None else ")")]
+    head = [f"parameter ({label})", "identified", "σ",
+            f"95 % interval (k = {fmt(k, 2)}, {dof_text(dof)} dof)"]
     if has_truth:
         head.append("hidden truth")
     if v_ident:
         head += ["after calibration", "σ after"]
+
+    def show(value: float | None, signed: bool = True) -> str:
+        return fmt(None if value is None else value * scale, 1, signed=signed)
+
     rows = []
     for n in names:
         v, s = at(ident, n), at(errs, n)
-        interval = (f"{fmt(v - k * s, signed=True)} … {fmt(v + k * s, signed=True)}"
+        interval = (f"{show(v - k * s)} … {show(v + k * s)}"
                     if v is not None and s is not None else "—")
-        row = [param_html(n), unit(n), fmt(v, signed=True), fmt(s), interval]
+        row = [param_html(n), show(v), show(s, False), interval]
         if has_truth:
-            row.append(fmt(true_value(sim, n), signed=True))
+            row.append(show(true_value(sim, n)))
         if v_ident:
-            row += [fmt(at(v_ident, n), signed=True), fmt(at(v_errs, n))]
+            row += [show(at(v_ident, n)), show(at(v_errs, n), False)]
         rows.append(row)
     return table(head, rows)
 
@@ -86,14 +104,14 @@ def model_section(result: RunResult) -> str:
              fmt(c.F, 2), esc(", ".join(f"{d:g}" for d in c.dof)
                               if c.dof is not None else "—"),
              (f"{c.p_value:.2g}" if num(c.p_value) is not None else "—"),
-             fmt(c.residual_rms_mm, 4),
+             um(c.residual_rms_mm, 2),
              "chosen" if c.model == result.model else
              ("rejected" if c.F is not None else esc(c.note or ""))]
             for c in sel.candidates]
-    return out + table(["candidate", "identifiable", "F", "dof", "p", "residual RMS (mm)",
+    return out + table(["candidate", "identifiable", "F", "dof", "p", "residual RMS (µm)",
                         "verdict"], rows, caption=(
         f"Lack-of-fit F test of each candidate against the noise measured in this run "
-        f"(σ = {fmt(sel.noise_sigma_mm, 5)} mm per deviation, "
+        f"(σ = {um(sel.noise_sigma_mm, 2)} µm per deviation, "
         f"{esc(sel.noise_source)}); the first with p ≥ {esc(sel.level)} "
         "is used."))
 
@@ -134,20 +152,19 @@ def deviations_table(result: RunResult) -> str:
     keys = dev_keys(before, after)
     if not keys:
         return "<p>No deviations were measured.</p>"
-    head = ["deviation", "measured (mm)", "std (mm)", "n", "model (mm)", "residual (mm)"]
+    head = ["deviation (µm)", "measured", "std", "n", "model", "residual"]
     if after:
-        head += ["after: measured (mm)", "after: std (mm)"]
+        head += ["after: measured", "after: std"]
     rows = []
     for k in keys:
         b, a = before.get(k), after.get(k)
         m, f = (num(b.mean), num(b.model)) if b is not None else (None, None)
         resid = m - f if m is not None and f is not None else None
-        row = [dev_html(k), fmt(m, signed=True), fmt(b.std if b is not None else None),
-               esc(b.n) if b is not None else "—", fmt(f, signed=True),
-               fmt(resid, signed=True)]
+        row = [dev_html(k), um_signed(m), um(b.std if b is not None else None),
+               esc(b.n) if b is not None else "—", um_signed(f), um_signed(resid)]
         if after:
-            row += [fmt(a.mean if a is not None else None, signed=True),
-                    fmt(a.std if a is not None else None)]
+            row += [um_signed(a.mean if a is not None else None),
+                    um(a.std if a is not None else None)]
         rows.append(row)
     return table(head, rows, caption=(
         "Π<sub>i</sub><sup>±</sup> along j: reading of the indicator touching leg i in "
@@ -163,8 +180,8 @@ def setups_table(result: RunResult) -> str:
         inds = ", ".join(f"{esc(k)} → {esc(v)}" for k, v in s.indicators.items())
         rows.append([
             f"leg {esc(s.leg)}", inds or "—", f"{esc(s.cycles_used)} of {esc(s.cycles_max)}",
-            esc(s.repeats), fmt(s.spread_mm),
+            esc(s.repeats), um(s.spread_mm),
             "<b>yes</b> — spread above the repeatability limit" if s.flagged else "no",
         ])
     return table(["setup", "indicators (name → direction)", "cycles used", "repeats",
-                  "spread (mm)", "flagged"], rows, left=2)
+                  "spread (µm)", "flagged"], rows, left=2)

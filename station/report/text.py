@@ -20,6 +20,7 @@ from station.report.boundary import ResultLike, as_result
 from station.report.format import (
     NOT_WRITTEN_TEXT,
     fmt,
+    minus_signs,
     num,
     param_line,
     param_plain,
@@ -73,9 +74,12 @@ def summary_text(result: ResultLike, verbose: bool = True) -> str:
     record = as_result(result)
     lines = first_screen.lines(record)
     if not verbose:
-        return "\n".join([*lines, "  details       in the report, or run with --verbose"])
-    details = detail_lines(record)
-    return "\n".join([*lines, *(["details:", *details] if details else [])])
+        lines.append("  details       in the report, or run with --verbose")
+    elif details := detail_lines(record):
+        lines += ["details:", *details]
+    # one minus sign (U+2212) in numbers; the report's path is as the OS has it
+    return "\n".join(line if line.startswith("  report  ") else minus_signs(line)
+                     for line in lines)
 
 
 def detail_lines(record: RunResult) -> list[str]:

@@ -372,19 +372,18 @@ def _before_after(result: RunResult, acc: Accuracy) -> str:
 
 
 def _objectives(result: RunResult, acc: Accuracy) -> str:
-    rows = []
+    rows, offsets = [], []  # the figures in µm, the offsets in mm: one unit a table
     names: tuple[Objective, ...] = ("joints", "tool")
     for name in names:
-        obj = objective(acc, name)
-        if name == acc.objective:
-            mark = "<b>written</b>" if written(result) else "<b>chosen</b> (not written)"
-        else:
-            mark = "not chosen"
-        rows.append([f"{_e(name)}: {_e(OBJECTIVE_TEXT[name])}",
-                     um(obj.after.rms_mm), um(obj.after.max_mm),
-                     *(fmt(at(obj.offsets_mm, a), signed=True) for a in AXES), mark])
-    table = _table(["objective", "after: RMS |E| (µm)", "after: max |E| (µm)",
-                    *(f"offset o<sub>{a}</sub> (mm)" for a in AXES), "this run"], rows)
+        obj, label = objective(acc, name), f"{_e(name)}: {_e(OBJECTIVE_TEXT[name])}"
+        mark = ("not chosen" if name != acc.objective else "<b>written</b>"
+                if written(result) else "<b>chosen</b> (not written)")
+        rows.append([label, um(obj.after.rms_mm), um(obj.after.max_mm), mark])
+        offsets.append([label, *(fmt(at(obj.offsets_mm, a), signed=True) for a in AXES)])
+    table = (_table(["objective (tool error, µm)", "after: RMS |E|", "after: max |E|",
+                     "this run"], rows)
+             + _table(["objective (offsets, mm)", *(f"o<sub>{a}</sub>" for a in AXES)],
+                      offsets))
     return ("<h3>The two objectives</h3>" + table +
             '<p class="small">Each objective\'s predicted figures with its offsets written '
             "exactly, and the offset registers it writes. <code>[writeback] objective</code> "
@@ -414,8 +413,8 @@ def _squareness_html(acc: Accuracy) -> str:
             + (f" ± {fmt(t_se, 4)}" if t_se is not None else ""), verdict])
     ks = {round(s.k, 2) for s in rows if s.k is not None}
     k_text = f"k = {ks.pop():.2f}" if len(ks) == 1 else "k from each interval"
-    out.append(_table(["motions", "squareness (mm/m)", f"± 95 % ({k_text})", "σ (mm/m)",
-                       "axis tilt (mrad) ± σ", "verdict"], table_rows))
+    out.append(_table(["motions (mm/m)", "squareness", f"± 95 % ({k_text})", "σ",
+                       "axis tilt ± σ", "verdict"], table_rows))
     out.append('<p class="small">ISO 230-1 squareness of the tool\'s motions along commanded '
                "x, y and z; to first order it equals the tilts of the actuator axes "
                "(1 mrad = 1 mm/m). The offsets written shear the motions a little, so the two "

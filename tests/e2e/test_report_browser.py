@@ -95,11 +95,46 @@ def test_every_figure_is_drawn_and_nothing_is_wider_than_the_page(report, tmp_pa
     assert "Accuracy at the tool" in facts["headings"]
 
 
-def test_it_prints_to_pdf(report, tmp_path) -> None:
+#: A4 in PDF points (210 × 297 mm), and what a sheet may exceed it by in rounding.
+A4_PT, SLACK_PT = (595.28, 841.89), 1.0
+
+
+def test_it_prints_to_a4_with_the_verdict_and_the_result_table_on_page_one(report, tmp_path
+                                                                          ) -> None:
+    require(_has_pypdf(), "pypdf (pyproject.toml's test extra)")
+    from pypdf import PdfReader
+
     pdf = tmp_path / "report.pdf"
     browse(tmp_path, "--no-pdf-header-footer", f"--print-to-pdf={pdf}", report.as_uri())
     data = pdf.read_bytes()
     assert data.startswith(b"%PDF-")
-    pages = len(re.findall(rb"/Type\s*/Page\b", data))
-    assert pages >= 2  # the whole report, not a blank first sheet
     assert len(data) > 50_000  # the figures are in it, as vectors
+    pages = PdfReader(pdf).pages
+    assert len(pages) >= 2  # the whole report, not a blank first sheet
+    for page in pages:  # the print stylesheet's @page size: every sheet A4, none wider
+        box = page.mediabox
+        assert float(box.width) <= A4_PT[0] + SLACK_PT
+        assert float(box.height) <= A4_PT[1] + SLACK_PT
+        assert float(box.width) >= A4_PT[0] - SLACK_PT  # A4, not Letter's 612 pt
+    first = " ".join(pages[0].extract_text().split())
+    result = golden_result()
+    assert "Completed" in first  # the verdict's badge ("Calibration report … Completed")
+    assert "as found" in first and "as left" in first
+    # every joint's row of the table, its figures as printed (mm, U+2212)
+    for axis in "xyz":
+        left = report_number(result["offsets_final"][axis])
+        assert f"joint {axis}" in first and left in first, (axis, left, first[:600])
+
+
+def report_number(mm: float) -> str:
+    """An offset as the as found / as left table prints it: mm to 4 decimals, signed,
+    the minus sign U+2212."""
+    return f"{mm:+.4f}".replace("-", "\u2212")
+
+
+def _has_pypdf() -> bool:
+    try:
+        import pypdf  # noqa: F401
+    except ImportError:
+        return False
+    return True

@@ -53,6 +53,7 @@ def refused_result() -> dict:
     r["status"] = "refused"
     r["message"] = "correction of axis z exceeds max_abs_offset_mm = 1.0"
     r["offsets_written"] = None
+    r["offsets_final"] = r["offsets_before"]  # nothing written: as the run found them
     r["writeback"] = {"status": "refused", "reason": r["message"]}
     return r
 
@@ -176,13 +177,15 @@ def test_html_contains_the_numbers(tmp_path: Path) -> None:
     for name, value in result["identified"].items():
         assert report.fmt(value, signed=True) in page, name
         assert report.fmt(result["std_errors"][name]) in page, name
-    for key, dev in result["deviations"].items():
-        assert report.fmt(dev["mean"], signed=True) in page, key
-        assert report.fmt(dev["mean"] - dev["model"], signed=True) in page, key
-    for axis, value in result["offsets_written"].items():
-        assert report.fmt(value, signed=True) in page, axis
-    assert report.fmt(result["verification"]["deviations_rms_mm"]) in page
-    assert report.fmt(result["residual_rms_mm"]) in page
+    for name, value in result["identified"].items():  # the table's, in µm
+        assert report.fmt(1000 * value, 1, signed=True) in page, name
+    for key, dev in result["deviations"].items():  # in µm, the table's one unit
+        assert report.fmt(1000 * dev["mean"], 1, signed=True) in page, key
+        assert report.fmt(1000 * (dev["mean"] - dev["model"]), 1, signed=True) in page, key
+    for axis, value in result["offsets_written"].items():  # as left, mm
+        assert report.fmt(value, 4, signed=True) in page, axis
+    assert report.fmt(1000 * result["verification"]["deviations_rms_mm"], 1) in page
+    assert report.fmt(1000 * result["residual_rms_mm"], 2) in page
     assert result["fit_note"] in page
     assert "Π<sub>x</sub><sup>+</sup> along y" in page
     assert "hidden truth" in page
@@ -202,7 +205,10 @@ def test_html_explains_refused_and_missing_sections() -> None:
     refused = report.render_html(refused_result())
     assert "NOT written" in refused
     assert "max_abs_offset_mm = 1.0" in refused
-    assert "not written" in refused  # offsets table column
+    # nothing written: the offsets as left are those as found
+    rows = re.findall(r'<td class="l">joint [xyz]</td><td class="num">(.*?)</td>'
+                      r'<td class="num">(.*?)</td>', refused)
+    assert len(rows) == 3 and all(found == left for found, left in rows)
     failed = report.render_html(failed_result())
     assert "did not complete" in failed
     assert "after measuring 1 of the 3 legs" in failed

@@ -187,14 +187,14 @@ def test_the_joints_sample_reads_as_the_engine_states_it() -> None:
 def test_both_objectives_side_by_side_with_the_written_one_marked(
         sample: dict[str, Any]) -> None:
     sec = section(page_of(sample))
-    part = sec[sec.index("<h3>The two objectives</h3>"):]
-    rows = {r[0].split(":")[0]: r for r in rows_of(part[:part.index("</table>")])}
-    assert set(rows) == {"joints", "tool"}
+    part = sec[sec.index("<h3>The two objectives</h3>"):]  # tool error (µm), offsets (mm)
+    rows, offsets, *_ = ({r[0].split(":")[0]: r for r in rows_of(t)} for t in part.split("</tab"))
+    assert set(rows) == set(offsets) == {"joints", "tool"}
     chosen = sample["accuracy"]["objective"]
     for name, row in rows.items():
         obj = sample["accuracy"]["objectives"][name]
         assert row[1:3] == [um(obj["after"]["rms_mm"]), um(obj["after"]["max_mm"])]
-        assert row[3:6] == [report.fmt(obj["offsets_mm"][a], signed=True) for a in "xyz"]
+        assert offsets[name][1:] == [report.fmt(obj["offsets_mm"][a], signed=True) for a in "xyz"]
         assert row[-1] == ("written" if name == chosen else "not chosen")
 
 

@@ -61,6 +61,14 @@ def test_defaults_preload_is_half_the_stroke(tmp_path: Path) -> None:
     assert config.procedure.cycles == 3 and config.writeback.max_abs_offset_mm == 3.0
 
 
+def test_station_operator_is_read_and_absent_by_default(tmp_path: Path) -> None:
+    assert load_config(write(tmp_path, MINIMAL)).station.operator is None
+    named = load_config(write(tmp_path, '[station]\noperator = "J. Smith"\n' + MINIMAL))
+    assert named.station.operator == "J. Smith"
+    again = StationConfig.model_validate(tomllib.loads(dump_toml(named)))
+    assert again.station.operator == "J. Smith"
+
+
 def test_dump_round_trips(tmp_path: Path) -> None:
     config = load_config(EXAMPLE)
     again = StationConfig.model_validate(tomllib.loads(dump_toml(config)))
@@ -80,6 +88,8 @@ def test_dump_round_trips(tmp_path: Path) -> None:
         # unknown key
         ("[procedure]\ncylces = 3\n", "procedure.cylces", "unknown key"),
         ("[extra]\na = 1\n", "extra", "unknown key"),
+        ("[station]\noperater = 'J. Smith'\n", "station.operater", "unknown key"),
+        ("[station]\noperator = ''\n", "station.operator", "at least 1"),
         # wrong type
         ("[procedure]\nreadings = 'five'\n", "procedure.readings", "valid integer"),
         ("[controller]\nport = true\n", "controller.port", "port number"),

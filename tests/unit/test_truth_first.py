@@ -144,7 +144,9 @@ def test_a_run_whose_station_holds_the_offsets_says_where_to_enter_them() -> Non
     assert "written to the controller" not in page
     assert "The controller's joint zero offset" not in page
     assert "held by the station" in page[page.index("<h2>Result"):]  # the Result paragraph
-    assert "Offsets (held by the station)" in page  # the bottom section's heading
+    # the first section's heading: the offsets as found → as left, the station's
+    assert page.index("Offsets held by the station: as found → as left") < page.index(
+        "<h2>What was done")
 
 
 def test_held_and_not_converged_says_both() -> None:

@@ -22,9 +22,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from pydantic import ValidationError
 
 from station.commands.options import DriveOptions, SimOptions, StationHook
 from station.config import StationConfig, parse_config
+from station.config.messages import format_validation_error
 from station.errors import BadInput
 from station.record.run_dir import MAP_NAME, NVRAM_NAME
 from station.record.simulated import SimulationParams
@@ -101,7 +103,10 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
     from drivers.sim.specs import SIM_ACCEL_MM_S2, SIM_SPEED_MM_S, DriveSpec, GaugeSpec
     from station.commands.simulate.station_setups import SimulatedStation, gauges_for
 
-    sim = SimulationParams.from_header(params)  # an old journal's gaps, in one place
+    try:
+        sim = SimulationParams.from_header(params)  # an old journal's gaps, in one place
+    except ValidationError as exc:  # a --sim-procedure/--sim-report table's bad value
+        raise BadInput(format_validation_error("simulation", exc)) from None
     # A faster virtual machine (tests) keeps the default's speed/acceleration ratio,
     # so its moves stay physical: trapezoids, in-position waits, derived deadlines.
     speed = sim.speed_mm_s or SIM_SPEED_MM_S
