@@ -314,7 +314,8 @@ def select_model(
     skipped = [t for t in tests if not t.identifiable]
     reason = (f"{largest}: no candidate explains the data at level {level:g} ({why_not}; "
               f"{noise_txt}); the largest identifiable model is used: errors outside the "
-              "model remain (play, leg lengths, a loose indicator?)"
+              "model remain (play, leg lengths, a loose indicator, indicator stands "
+              "off the legs' middles, which were taken as placed exactly?)"
               + ("; not identifiable: " + "; ".join(f"{t.model}: {t.note}" for t in skipped)
                  if skipped else ""))
     return ModelSelection(largest, fits[largest], tuple(tests), level, float(noise_sigma),
@@ -420,7 +421,8 @@ def _select_with_stands(
     skipped = [t for t in tests if not t.identifiable]
     reason = (f"{largest}: no candidate explains the data at level {level:g} ({why_not}; "
               f"{noise_txt}); the largest identifiable model is used: errors outside the "
-              "model remain (play, leg lengths, a loose indicator?)"
+              f"model remain (play, leg lengths, a loose indicator, indicator stands "
+              f"further than ±{stands.tolerance:g} mm off the legs' middles?)"
               + ("; not identifiable: " + "; ".join(f"{t.model}: {t.note}" for t in skipped)
                  if skipped else "")
               + f"; {describe_stands(fits[largest].stands, stands)}")

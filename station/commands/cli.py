@@ -285,9 +285,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameters to identify; auto: the smallest model the data's cycle scatter "
         "supports (needs a cycle column)")
     ident.add_argument("--method", choices=["linear", "nonlinear"], default="nonlinear")
-    ident.add_argument("--leg-length", type=float, default=310.25)
-    ident.add_argument("--rho-min", type=float, default=-100.0)
-    ident.add_argument("--rho-max", type=float, default=60.0)
+    ident.add_argument("--leg-length", type=float, default=310.25, metavar="L",
+                       help="leg length, mm (default 310.25, the paper's machine)")
+    ident.add_argument("--rho-min", type=float, default=-100.0, metavar="A",
+                       help="the stroke of Π_i^-: mm from the zero posture Π0, negative (a "
+                            "stroke, not a joint coordinate; default -100)")
+    ident.add_argument("--rho-max", type=float, default=60.0, metavar="B",
+                       help="the stroke of Π_i^+: mm from Π0 (default 60)")
+    # 5 mm: [procedure] stand_tolerance_mm's default, orthocal.stands.DEFAULT_TOLERANCE
+    # (spelled out: numpy is not loaded to parse; tests/e2e/test_cli_identify.py checks it)
+    ident.add_argument(
+        "--mount-error", type=float, default=5.0, metavar="MM",
+        help="how far off the leg's middle the indicator stands may have been placed "
+             "(mm, +-; default 5, a run's stands placed by eye): a CSV carries no stand "
+             "positions, so they are modelled, and no tilt or gap they could make is "
+             "claimed; 0: placed exactly, not modelled")
     ident.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     ident.add_argument("--debug", action="store_true", help="show tracebacks of failures")
 
@@ -296,7 +308,8 @@ def build_parser() -> argparse.ArgumentParser:
         "model, the run time, and better strokes")
     design.add_argument("--config", metavar="FILE", help="station config (TOML)")
     design.add_argument("--model", default=None,
-                        help="model to design for (default: the config's, else rho)")
+                        help="model to design for (default: the config's [procedure] model, "
+                             "else auto, designed for the largest model the stops identify)")
     design.add_argument("--strokes", metavar="A,B,C", default=None,
                         help="stops per leg in mm, replacing [procedure] strokes")
     design.add_argument("--leg-length", type=float, default=310.25)

@@ -133,13 +133,17 @@ def history_main(args: argparse.Namespace) -> int:
           "tool after (µm RMS)   run")
     for e in entries:
         found = (e.get("as_found") or {}).get("joint_error_mm") or {}
-        state = e.get("stopped") or e.get("status") or "—"
+        state = "rolled back" if e.get("rolled_back") else \
+            e.get("stopped") or e.get("status") or "—"
         tool = e.get("tool_after_rms_mm")
         drho = ", ".join(microns(v) for v in _found_drho(e))
         joint = ", ".join(microns((found.get(a) or {}).get("value_mm")) for a in "xyz")
         print(f"{e.get('started') or '—':<26} {e.get('machine_id') or '—':<12} {state:<14} "
               f"{drho:<26} {joint:<26} {'—' if tool is None else f'{1000 * tool:.1f}':<19}"
               f"   {e['run_dir']}")
+        if (back := e.get("rolled_back")) and isinstance(back.get("restored"), dict):
+            print(f"  rolled back {back.get('at') or ''}: offsets restored to " + ", ".join(
+                f"{a} {back['restored'].get(a, float('nan')):+.4f}" for a in "xyz") + " mm")
     if not entries:
         print("(no runs" + (f" of machine {args.machine!r})" if args.machine else ")"))
         return 0

@@ -14,6 +14,11 @@ it is far more often a copy-paste slip than a deliberate repeat.
 ``--model auto`` needs the noise of the measurement: the cycle-to-cycle scatter
 of a CSV with a cycle column (one row per deviation and cycle); a CSV with one value
 per deviation carries none, and auto is refused for it.
+
+A CSV carries no stand positions: where it has the cycle scatter, the indicator
+stands are modelled as placed within ±``--mount-error`` mm of the legs' middles
+(default 5, what a run assumes of stands placed by eye; orthocal.stands), so
+that auto never takes for a tilt or a gap what misplaced stands can make.
 """
 
 from __future__ import annotations
@@ -25,7 +30,9 @@ import math
 from pathlib import Path
 
 from orthocal import Geometry, Identification, IdentificationError, identify, select_model
+from orthocal.noise import noise_from_cycles
 from orthocal.postures import check_posture, stroke
+from orthocal.stands import Stands, describe_stands
 from station.errors import BadInput, read_input
 
 REQUIRED = ("posture", "leg", "direction", "deviation_mm")
@@ -118,7 +125,7 @@ def format_table(result: Identification, geometry: Geometry) -> str:
     lines = [
         f"Identification: model {result.model}, method {result.method}, "
         f"{len(result.keys)} deviations (L = {geometry.leg_length:g}, "
-        f"ρmin = {geometry.rho_min:g}, ρmax = {geometry.rho_max:g} mm)",
+        f"strokes rho_min = {geometry.rho_min:g}, rho_max = {geometry.rho_max:g} mm)",
         "",
         f"  {'parameter':<10} {'value':>10} {'std err':>10}",
     ]
@@ -143,12 +150,27 @@ def format_table(result: Identification, geometry: Geometry) -> str:
     return "\n".join(lines)
 
 
+def _stands(args: argparse.Namespace, data: dict[Key, list[float]]) -> Stands | None:
+    """The stands to model: a CSV says nothing of where they stood, so each is taken
+    within ±--mount-error of the leg's middle (None: 0, placed exactly; or one value
+    per deviation, or repeats without scatter: no noise to weigh their prior against)."""
+    mount_error = args.mount_error
+    if not (math.isfinite(mount_error) and 0.0 <= mount_error <= 50.0):
+        raise BadInput(f"--mount-error must lie in [0, 50] mm, got {mount_error:g}")
+    if mount_error == 0.0 or not any(len(v) >= 2 for v in data.values()):
+        return None
+    if not noise_from_cycles(data)[0] > 0:  # repeats copied: no scatter to weigh with
+        return None
+    return Stands(tolerance=mount_error)
+
+
 def main(args: argparse.Namespace) -> int:
     try:
         geometry = Geometry(leg_length=args.leg_length, rho_min=args.rho_min, rho_max=args.rho_max)
     except ValueError as exc:
         raise BadInput(f"geometry: {exc}") from None
     data = read_deviations(Path(args.csv), geometry)
+    stands = _stands(args, data)
     selection = None
     try:
         if args.model == "auto":
@@ -157,10 +179,13 @@ def main(args: argparse.Namespace) -> int:
                     f"{args.csv}: --model auto needs the noise of the measurement, and one "
                     "value per deviation carries none: give a CSV with a cycle column (one row "
                     "per deviation and cycle) or name a model")
-            selection = select_model(data, geometry, method=args.method)
+            # the stands modelled: a gap or tilt that stands placed within ±--mount-error
+            # could leave is not taken for geometry (orthocal.selection)
+            selection = select_model(data, geometry, method=args.method, stands=stands)
             result = selection.identification
         else:
-            result = identify(data, geometry, model=args.model, method=args.method)
+            result = identify(data, geometry, model=args.model, method=args.method,
+                              stands=stands)
     except IdentificationError as exc:
         raise BadInput(f"{args.csv}: {exc}") from None
     if args.json:
@@ -172,4 +197,17 @@ def main(args: argparse.Namespace) -> int:
         print(format_table(result, geometry))
         if selection is not None:
             print(f"\n  model chosen by auto: {selection.reason}")
+        if selection is None or stands is None:  # auto's reason names modelled stands
+            print(f"\n  {_stands_note(args.mount_error, stands, result)}")
     return 0
+
+
+def _stands_note(mount_error: float, stands: Stands | None, result: Identification) -> str:
+    """One line on the indicator stands: modelled (and what came out), or why not."""
+    if stands is not None:
+        return describe_stands(result.stands, stands)
+    if mount_error == 0.0:
+        return "indicator stands taken exactly at the legs' middles (--mount-error 0)"
+    return (f"indicator stands not modelled: these values carry no noise (cycle "
+            f"scatter) to weigh them against, so tilts and gaps here may be stands placed up to "
+            f"±{mount_error:g} mm off the legs' middles (--mount-error)")

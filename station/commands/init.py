@@ -288,8 +288,8 @@ def render(found: dict[str, Any], args: argparse.Namespace,
         "[machine]                      # EDIT: your machine's nominal geometry (mm)",
         *_machine_id(args, machine),
         _line("leg_length", machine.leg_length),
-        _line("rho_min", machine.rho_min, "Π_i^−: end point at ρmin·e_i"),
-        _line("rho_max", machine.rho_max, "Π_i^+: end point at ρmax·e_i"),
+        _line("rho_min", machine.rho_min, "stroke of Π_i^− from Π0 (joint at L + rho_min)"),
+        _line("rho_max", machine.rho_max, "stroke of Π_i^+ from Π0 (joint at L + rho_max)"),
         "",
     ]
     out += _controller_lines(found["controller"], args, config)

@@ -28,7 +28,9 @@ from station.engine.devices import build_controller, open_devices
 from station.engine.procedure import Run, execute
 from station.engine.recovery import check_reference, home_if_needed
 from station.engine.results import AXES
+from station.engine.rolled_back import change_text, record_rollback
 from station.engine.writeback import rollback as do_rollback
+from station.engine.writeback import rollback_values
 from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
 from station.plan.check import check_plan
 from station.plan.checker import MotionChecker
@@ -367,12 +369,18 @@ def rollback(options: ResumeOptions) -> int:
         operator = _operator(options.yes, station)
         if station is None and not options.yes:
             ConsoleOperator.require_tty_or_yes(False)
-        if not operator.confirm(f"Restore the offsets saved in {run_dir}?"):
+        current, backup = rollback_values(controller, run_dir)
+        if not operator.confirm(f"Restore the offsets saved in {run_dir}: "
+                                f"{change_text(current, backup)}?"):
             raise RunFailed("rollback declined by the operator; offsets unchanged")
         restored = do_rollback(controller, run_dir, journal)
+    result = record_rollback(run_dir, current, restored, figures=config.report.figures)
+    if result is not None and result.finished:
+        record_history(config, result, run_dir.parent)  # the entry says "rolled back"
     if options.json:
-        print(json.dumps({"run_dir": str(run_dir), "status": "ok", "restored": restored}))
+        print(json.dumps({"run_dir": str(run_dir), "status": "ok", "restored": restored,
+                          "replaced": current}))
     else:
-        print("orthocal rollback: offsets restored to " + ", ".join(
-            f"{a} {restored[a]:+.4f}" for a in AXES) + " mm")
+        print(f"orthocal rollback: rolled back, offsets {change_text(current, restored)} "
+              "(restored)")
     return 0

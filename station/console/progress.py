@@ -15,7 +15,8 @@ class Progress:
     The total counts the plan's reads (the one-side approach's extra stop included)
     for the usual run, a measurement and one verification; a further phase (another
     write-back, a pass measured again) or a cycle more in a mounting adds its reads
-    as it starts, so the bar never reads more done than it counts."""
+    as it starts, saying so ("+4 readings: another cycle …", the bar re-based), so
+    the bar never reads more done than it counts and its time left rises only there."""
 
     def __init__(self, plan: Plan, verify: bool, enabled: bool = True) -> None:
         from station.console.terminal import RunProgress
@@ -30,16 +31,22 @@ class Progress:
         self.steps = 0
         self._phases: set[str] = set()
         self._more: set[tuple[str, int, int]] = set()
+        # the cycles each mounting (phase, setup) has taken so far, at least the plan's
+        self._cycles: dict[tuple[str, int], int] = {}
 
-    def _count(self, code: str, setup: int, cycle: int) -> None:
-        """Grow the total by what the run turned out to take beyond the usual."""
+    def _count(self, code: str, phase: str, setup: int, cycle: int) -> None:
+        """Grow the total by what the run turned out to take beyond the usual, and
+        say so."""
         if code not in self._phases:
             self._phases.add(code)
             if len(self._phases) > self.expected_phases:
-                self.bar.total_steps += self.per_phase
+                self.bar.rebase(self.per_phase, f"another pass ({phase})")
+        key = (code, setup)
+        self._cycles[key] = max(self._cycles.get(key, self.plan.cycles), cycle)
         if cycle > self.plan.cycles and (code, setup, cycle) not in self._more:
             self._more.add((code, setup, cycle))
-            self.bar.total_steps += self.per_cycle.get(setup, 0)
+            self.bar.rebase(self.per_cycle.get(setup, 0),
+                            f"another cycle ({phase} setup {setup + 1}, cycle {cycle})")
 
     def __enter__(self) -> Progress:
         self.bar.__enter__()
@@ -69,18 +76,18 @@ class Progress:
         if event == "read":
             self.steps += 1
             sp = self.plan.setups[info["setup"]]
-            self._count(code, sp.index, int(info["cycle"]))
+            self._count(code, phase, sp.index, int(info["cycle"]))
             posture = posture_label(info["sign"], sp.leg)
-            self.bar.total_steps = max(self.bar.total_steps, self.steps)
             self.bar.update(f"{sp.index + 1}/{len(self.plan.setups)} (leg {sp.leg}, {phase})",
-                            posture, max(info["cycle"], 1), self.plan.cycles, self.steps)
+                            posture, max(info["cycle"], 1),
+                            self._cycles.get((code, sp.index), self.plan.cycles), self.steps)
         elif event == "cycle":
             devs = " ".join(f"{k} {v:+.4f}" for k, v in info["deviations"].items())
             self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: {devs} mm")
         elif event == "cycle_replayed":
             # Replayed cycles count as done for the time estimate.
             sp = self.plan.setups[info["setup"]]
-            self._count(code, sp.index, int(info["cycle"]))
+            self._count(code, phase, sp.index, int(info["cycle"]))
             self.steps += self.per_cycle[sp.index] + (1 if info["cycle"] == 1 else 0)
             self.say(f"{phase} setup {info['setup'] + 1} cycle {info['cycle']}: "
                      "from the journal")

@@ -92,6 +92,9 @@ class RunProgress:
         self._steps_done = 0
         self._progress: Progress | None = None
         self._task: TaskID | None = None
+        # The time left last shown: the next is never more (the estimate wanders as
+        # mountings and moves alternate), until the total is re-based (rebase).
+        self._eta_shown: float | None = None
 
     # -- context -------------------------------------------------------------
 
@@ -140,17 +143,37 @@ class RunProgress:
         remaining = max(self.total_steps - self._steps_done, 0)
         return elapsed / self._steps_done * remaining
 
+    def rebase(self, added: int, why: str) -> None:
+        """The run takes ``added`` steps more than counted (another cycle, another
+        pass): the total grows, and says so, and the time left is estimated afresh
+        (it may rise, here only)."""
+        if added <= 0:
+            return
+        self.total_steps += added
+        self._eta_shown = None
+        self.message(f"+{added} readings: {why}; {self.total_steps} in all, "
+                     "time left estimated again")
+
     def update(self, setup: str, posture: str, cycle: int, cycles: int, steps_done: int) -> None:
-        """Report that ``steps_done`` of ``total_steps`` are done and where the run is."""
+        """Report that ``steps_done`` of ``total_steps`` are done and where the run is.
+        The count never passes its total (a step beyond it grows the total, as a
+        caller that counted short would need), and the time left never rises
+        between re-basings."""
         if self.mode == "off":
             return
         if self._started_at is None:
             raise RuntimeError("RunProgress.update() outside its 'with' block")
         self._steps_done = steps_done
-        where = f"setup {setup} · {posture} · cycle {cycle}/{cycles}"
-        eta = format_eta(self.eta_s())
+        self.total_steps = max(self.total_steps, steps_done)
+        where = f"setup {setup} · {posture} · cycle {cycle}/{max(cycles, cycle)}"
+        left = self.eta_s()
+        if left is not None and self._eta_shown is not None:
+            left = min(left, self._eta_shown)
+        self._eta_shown = left if left is not None else self._eta_shown
+        eta = format_eta(left)
         if self._progress is not None and self._task is not None:
-            self._progress.update(self._task, completed=steps_done, description=where, eta=eta)
+            self._progress.update(self._task, completed=steps_done, total=self.total_steps,
+                                  description=where, eta=eta)
         elif self.mode == "plain":
             self._line(f"[{steps_done}/{self.total_steps}] {where} · {eta}")
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from drivers.base import Vec3
 from station.config import StationConfig
+from station.engine.guard_words import AxesSeen, likely_cause
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker, PathRefused
 from station.plan.guard import (
@@ -83,6 +84,8 @@ class PlungerGuard:
         self.polls = 0
         # The smallest distance of a prediction from the margin so far (mm).
         self.slack = np.inf
+        # where the axes stood under the mounting: a stop says what moved
+        self.axes_seen = AxesSeen()
 
     # --- a mounting --------------------------------------------------------------------
 
@@ -105,6 +108,7 @@ class PlungerGuard:
             self._gauges[name] = Gauge(name, direction, -ind.preload,
                                         ind.stroke_mm - ind.preload, float(baseline[name]))
         self._moves = []
+        self.axes_seen = AxesSeen()
         self.predicted = {}
         # the mounting point: travel 0 by definition
         self.stop_signal = {"0": {n: 0.0 for n in self._gauges}}
@@ -144,6 +148,7 @@ class PlungerGuard:
         carried ahead until the move's own samples tell it. ``margin``: this move's,
         instead of plunger_margin_mm (a re-plan from where a plunger stood closer to
         its end: it may come no closer than that)."""
+        self.axes_seen.at([start])
         if not self.watching:
             return
         self._move_margin = self.margin if margin is None else margin
@@ -336,6 +341,7 @@ class PlungerGuard:
         """A stop's mean readings at ``position``: the signal there, exactly. At the
         stop of posture ``sign`` it is also what moves to and from that stop are
         routed with (route_signal)."""
+        self.axes_seen.at([position])
         if not self.watching:
             return
         self._at_rest = True
@@ -382,6 +388,12 @@ class PlungerGuard:
         what = "its stop (pushed in)" if pushed else "the end where the leg leaves it"
         heading = f"heading within {gap:.3f} mm of" if gap >= 0 else \
             f"heading {-gap:.3f} mm past"
+        try:
+            self.axes_seen.at([np.asarray(self._positions(), dtype=float)])
+        except Exception:
+            pass  # the positions unread: what was seen before is said
+        target = ", ".join(f"{a} {v:+.3f}" for a, v in zip("xyz", self._route_legs[-1],
+                                                           strict=True))
         self._journal({"type": "event", "event": {
             "event": "plunger-guard", "indicator": g.name, "where": self._where,
             "move": label, "travel_mm": travel, "predicted_mm": predicted,
@@ -389,9 +401,20 @@ class PlungerGuard:
         raise PlungerGuardTrip(
             f"plunger guard: indicator {g.name} ({g.direction}) on {self._where}, "
             f"move to {label}: its plunger was at {travel:+.3f} mm from the mounting "
-            f"point and {heading} {what} ({end:+.3f} mm; margin {self.margin:g} mm). "
-            f"Re-mount it with {'less' if pushed else 'more'} preload or use a longer stroke",
-            g.name, label)
+            f"point and {heading} {what} ({end:+.3f} mm; margin {self.margin:g} mm); the "
+            f"axes were stopped on their way to {target} mm: {self.axes_seen.text()}. "
+            + self.cause(g.name, pushed), g.name, label)
+
+    def cause(self, name: str, pushed: bool) -> str:
+        """The likely cause of a stop for gauge ``name`` and what to do about it
+        (station.engine.guard_words), from what this mounting showed."""
+        g = self._gauges.get(name)
+        if g is None:
+            return f"Re-mount it with {'less' if pushed else 'more'} preload or use a " \
+                   "longer stroke"
+        text = likely_cause(g, pushed, self._moves, self.stop_signal,
+                            self.config.indicator(name).preload)
+        return text[0].upper() + text[1:]
 
     # --- later cycles --------------------------------------------------------------------
 
@@ -462,6 +485,6 @@ class PlungerGuard:
             "move": label, "cycle": cycle, "margin_mm": self.margin, **extra}})
         raise PlungerGuardStop(
             f"plunger guard: indicator {g.name} ({g.direction}) on {self._where}: cycle "
-            f"{cycle}'s move to {label} {what}; nothing has moved. Re-mount it with "
-            f"{'less' if pushed else 'more'} preload or use a longer stroke")
+            f"{cycle}'s move to {label} {what}; cycle {cycle} has not moved, "
+            f"{self.axes_seen.text()}. {self.cause(g.name, pushed)}")
 

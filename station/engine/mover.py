@@ -105,11 +105,11 @@ class Mover:
         except PathRefused as exc:
             if not (self.mounted and signal is not None):
                 raise  # the plan's own check, from where the machine stands: bad input
+            detail = str(exc).removeprefix("plan: ").removesuffix("; nothing has moved")
             raise PlungerGuardStop(
-                f"plunger guard: with the travel measured under this mounting, "
-                f"{str(exc).removeprefix('plan: ')}. Re-mount the gauge with "
-                f"{'less' if exc.pushed else 'more'} preload or use a longer stroke"
-            ) from None
+                f"plunger guard: with the travel measured under this mounting, {detail}; "
+                f"this move has not started, {self.guard.axes_seen.text(self.position)}. "
+                + self.guard.cause(exc.indicator or "", exc.pushed)) from None
         self.progress("move", label=step.label, targets=step.targets)
         self.at = None
         self._arrived_from = None

@@ -21,9 +21,11 @@ from station.engine.results import base_result, fill_offsets
 from station.engine.sequencer import Sequencer
 from station.errors import BadInput, RunFailed, say, storage_message
 from station.plan.checker import MotionChecker
+from station.plan.steps import Plan
 from station.record import io
-from station.record.result import PlungerGuard, RunResult, Status, Timing
+from station.record.result import PlungerGuard, RunResult, Setup, Status, Timing
 from station.record.run_dir import now_iso
+from station.record.state import RunState
 
 
 def _import_plotting(figures: bool) -> None:
@@ -107,6 +109,23 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
     return (0 if result.status == "ok" else 1), io.validated(result)
 
 
+def measured_setups(plan: Plan, state: RunState, cycles: int) -> list[Setup]:
+    """The measurement's setups the journal holds as done (result.json's ``setups``),
+    for a run that stopped before its identification listed them: its report then
+    shows what was measured, not "nothing"."""
+    out: list[Setup] = []
+    for (phase, index), done in sorted(state.setups_done.items(), key=lambda kv: kv[0][1]):
+        if phase != "m" or not 0 <= index < len(plan.setups):
+            continue
+        sp = plan.setups[index]
+        out.append(Setup(leg=sp.leg, indicators=dict(sp.indicators),
+                         cycles_used=len(done.cycles),
+                         cycles_max=max(cycles, len(done.cycles)),
+                         repeats=done.repeats or 0, flagged=bool(done.flagged),
+                         spread_mm=done.spread_mm))
+    return out
+
+
 def _stopped(seq: Sequencer) -> str:
     if seq.stop_error is None:
         return "axes stopped"
@@ -143,6 +162,8 @@ def _finish(ctx: Run, seq: Sequencer, result: RunResult, status: Status,
                            mountings=state.mountings,
                            operator_s=round(state.operator_s, 3))
     result.plunger_guard = PlungerGuard.model_validate(asdict(state.guard))
+    if not result.setups:  # stopped before its identification: what it measured
+        result.setups = measured_setups(ctx.plan, state, ctx.config.procedure.cycles)
     fill_offsets(result, ctx.devices.controller, state)
     if final:
         ctx.journal.append({"type": "finished", "status": status, "message": message})

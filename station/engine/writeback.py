@@ -246,14 +246,21 @@ def _write(stages: _Stages, controller: ZeroOffsets, run_dir: Path,
     stages.log({"stage": "done", "before": before, "written": readback})
 
 
-def rollback(controller: ZeroOffsets, run_dir: Path, journal: Journal) -> dict[str, float]:
-    """Write the backed-up offsets back; returns them (as read back)."""
+def rollback_values(controller: ZeroOffsets, run_dir: Path
+                    ) -> tuple[dict[str, float], dict[str, float]]:
+    """(the offsets the controller holds now, the backed-up ones a rollback restores):
+    what the operator is asked to confirm. BadInput where the run saved none."""
     from station.errors import BadInput
 
     backup = load_backup(run_dir)
     if backup is None:
         raise BadInput(f"{run_dir}: no {BACKUP_NAME} (the run never reached write-back)")
-    current = _axes(controller.read_offsets())
+    return _axes(controller.read_offsets()), backup
+
+
+def rollback(controller: ZeroOffsets, run_dir: Path, journal: Journal) -> dict[str, float]:
+    """Write the backed-up offsets back; returns them (as read back)."""
+    current, backup = rollback_values(controller, run_dir)
     journal.append({"type": "rollback", "stage": "intent", "current": current,
                     "restore": backup})
     readback = _axes(controller.write_offsets([backup[a] for a in AXES]))

@@ -8,7 +8,9 @@ joint error in the controller's zero frame, e = Δρ − o (mm, per axis): as fo
 the run's statement of Δρ at its start (``remaining.total`` where a verification
 measured after the last write, else the first identification) and its offsets
 before; as left, from the last verification's estimate and the offsets the run left
-(``offsets_final``). Tilts and gaps need no frame: offsets do not move them."""
+(``offsets_final``; after ``orthocal rollback``, those it replaced, under which the
+verification measured: the entry's ``rolled_back`` says so). Tilts and gaps need no
+frame: offsets do not move them."""
 
 from __future__ import annotations
 
@@ -105,8 +107,12 @@ def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str,
     statement = "remaining.total" if rem.get("total") else "identified"
     as_found = _frame(found_drho, found_se or {}, result.get("offsets_before"), found_dof,
                       _certificate(result, statement))
+    # the offsets the last verification measured with: offsets_final, unless a
+    # rollback has since replaced them (e is the machine's own, whatever is held now)
+    back = _mapping(result.get("rolled_back"))
     as_left = None if not rem.get("estimate") else _frame(
-        rem["estimate"], rem.get("std_errors") or {}, result.get("offsets_final"),
+        rem["estimate"], rem.get("std_errors") or {},
+        back.get("replaced") if back else result.get("offsets_final"),
         rem.get("std_errors_dof"))
     acc = _mapping(result.get("accuracy"))
     after = _mapping(acc.get("after"))
@@ -120,6 +126,8 @@ def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str,
         "profile": profile,
         "offsets_before": result.get("offsets_before"),
         "offsets_final": result.get("offsets_final"),
+        # orthocal rollback: when, and the offsets it replaced and restored
+        "rolled_back": back or None,
         "as_found": as_found, "as_left": as_left, "layout": _layout(result),
         "tool_after_rms_mm": _num(after.get("rms_mm")),
         "reversal": _reversal(result), "instruments": _instruments(result),

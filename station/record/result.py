@@ -36,7 +36,8 @@ from station.record.result_sections import (
     UncertaintyBudget,
 )
 
-__all__ = ["SCHEMA_VERSION", "Compensated", "Gauge", "RunResult", "Setup", "Status"]
+__all__ = ["SCHEMA_VERSION", "Compensated", "Gauge", "RolledBack", "RunResult", "Setup",
+           "Status"]
 
 SCHEMA_VERSION: Literal[2] = 2
 
@@ -158,6 +159,15 @@ class Remaining(Closed):
     coverage_factor_95: float | None
 
 
+class RolledBack(Closed):
+    """rolled_back: ``orthocal rollback`` restored the offsets saved before the run's
+    first write-back; the run's offsets_final are those now."""
+
+    at: str = Field(description="when, ISO 8601")
+    replaced: Axis3 = Field(description="the offsets the controller held before, mm")
+    restored: Axis3 = Field(description="the offsets restored (read back), mm")
+
+
 class Setup(Closed):
     """One setup of a measurement: how many cycles it used of how many it could, its
     repeats, and whether its spread was flagged (built by the engine as
@@ -249,6 +259,7 @@ class RunResult(Closed):
     offsets_final: Axis3 | None = Field(description="the journal's last write-back or "
                                                     "rollback, else the offsets before")
     offsets_held_by: Literal["controller", "station"] | None
+    rolled_back: RolledBack | None = Field(None, description="absent unless rolled back")
     offsets_note: str | None = Field(None, description="offsets the station holds")
     writeback: Writeback | None
     verification: Verification | None

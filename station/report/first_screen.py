@@ -37,6 +37,7 @@ from station.report.format import (
     held_offsets_text,
     not_converged_why,
     num,
+    rolled_back_text,
     run_state,
     um,
     um_interval,
@@ -177,6 +178,8 @@ def offsets_item(result: RunResult) -> Item | None:
         status: str = wb.status if wb is not None else "written"
         if held_by_station(result) and status == "written":
             status = "held by the station"
+        if result.rolled_back is not None:
+            status += ", then rolled back"
         return Item("offsets", f"{pairs} mm ({status})")
     if wb is not None:
         reason = f": {wb.reason}" if wb.reason else ""
@@ -318,7 +321,9 @@ def items(result: RunResult) -> list[Item]:
     if (accepted := acceptance_text(result)) is not None:
         out.append(Item("acceptance", accepted))
     out += joint_items(result)
-    out += [i for i in (offsets_item(result), tool_item(result)) if i is not None]
+    back = rolled_back_text(result)
+    out += [i for i in (offsets_item(result), None if back is None else
+                        Item("ROLLED BACK", back), tool_item(result)) if i is not None]
     if held_by_station(result):  # the headline's "enter them in the drive": how
         out.append(Item("offsets held", f"by the station: {result.offsets_note or ''}"))
     out += todo_items(result)

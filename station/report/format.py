@@ -252,6 +252,20 @@ def held_offsets_text(result: RunResult) -> str | None:
     return ", ".join(f"{a} {fmt(v, 4, signed=True)}" for a, v in values) + " mm"
 
 
+def rolled_back_text(result: RunResult) -> str | None:
+    """What ``orthocal rollback`` did to this run's offsets ("on 2025-… the offsets
+    were restored: x +1.8170 → +0.0000, … mm; …"), or None where it was not rolled
+    back."""
+    back = result.rolled_back
+    if back is None:
+        return None
+    pairs = ", ".join(f"{a} {fmt(at(back.replaced, a), 4, signed=True)} → "
+                      f"{fmt(at(back.restored, a), 4, signed=True)}" for a in AXES)
+    return (f"on {back.at} the offsets saved before the first write-back were restored: "
+            f"{pairs} mm; the controller no longer holds what this run wrote, and its "
+            "verification no longer describes the machine")
+
+
 def writeback_text(result: RunResult, status: str) -> str:
     """What a write-back status means for this run: written to the controller, or
     held by the station where the drive takes no offsets."""

@@ -1,6 +1,7 @@
-"""The top of report.html: what happened, before anything else (a closed loop that
-did not converge and why; offsets the station holds, their values and where to
-enter them), so that nothing below can be read against it."""
+"""The top of report.html: what happened, before anything else (a run rolled back,
+the offsets it restored; a closed loop that did not converge and why; offsets the
+station holds, their values and where to enter them), so that nothing below can be
+read against it."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from station.report.format import (
     held_by_station,
     held_offsets_text,
     not_converged_why,
+    rolled_back_text,
     run_state,
 )
 
@@ -55,6 +57,8 @@ def header_boxes(result: RunResult) -> str:
         out.append('<div class="box warn"><b>Not converged</b>: the closed loop did not '
                    f"converge — {esc(not_converged_why(result))}. What each round measured "
                    "and wrote: <i>Closed loop</i>, below.</div>")
+    if (back := rolled_back_text(result)) is not None:
+        out.append(f'<div class="box warn"><b>Rolled back</b>: {esc(back)}.</div>')
     if held_by_station(result):
         out.append(held_box(result))
     return "".join(f"{box}\n" for box in out)

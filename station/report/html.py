@@ -112,8 +112,8 @@ def _offsets_section(result: RunResult) -> str:
 def _machine_text(result: RunResult) -> str:
     m = result.machine
     return ((f"{m.id}: " if m.id else "")
-            + f"leg length L = {fmt(m.leg_length, 2)} mm, joint stroke "
-            f"ρmin = {fmt(m.rho_min, 1)} mm … ρmax = {fmt(m.rho_max, 1)} mm")
+            + f"leg length L = {fmt(m.leg_length, 2)} mm, strokes from Π0 "
+            f"rho_min = {fmt(m.rho_min, 1)} mm … rho_max = {fmt(m.rho_max, 1)} mm")
 
 
 def _where_text(result: RunResult) -> tuple[str, str]:

@@ -3,8 +3,10 @@ report.html (station.report.html lays out the rest)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from orthocal import coverage_factor
-from station.record.result import RunResult
+from station.record.result import RunResult, Setup
 from station.report.format import (
     MODEL_TEXT,
     at,
@@ -31,7 +33,11 @@ def what_was_done(result: RunResult) -> str:
     if cycles:
         cyc = (f" ({cycles[0]} cycle{'s' if cycles[0] != 1 else ''} per leg)"
                if len(cycles) == 1 else f" ({cycles[0]}–{cycles[-1]} cycles per leg)")
-    model = MODEL_TEXT.get(result.model, result.model)
+    # "auto" before its selection (a run stopped before it): the candidates, not a name
+    model = MODEL_TEXT.get(result.model) or (
+        "smallest model the data support (auto: joint offsets Δρ, and the tilts or gaps "
+        "of the actuator axes only where the data show them)" if result.model == "auto"
+        else result.model)
     method = {"linear": "the linearised calibration equations",
               "nonlinear": "the exact kinematic model (iterative least squares)"}[result.method]
     # [procedure] strokes: intermediate stops Π_i(s) beside or instead of Π_i^±.
@@ -46,9 +52,8 @@ def what_was_done(result: RunResult) -> str:
     if result.status in ("failed", "aborted"):
         # The paragraph below describes the whole procedure; say plainly that this
         # run did not get through it, or a reader takes it for a completed calibration.
-        done = len(setups)
-        stopped = (f"<p><b>This run stopped early</b>, after measuring {done} of the "
-                   "3 legs; see the result below.</p>")
+        stopped = f"<p><b>This run stopped early</b>, {measured_so_far(setups)}; see the " \
+                  "result below.</p>"
     return stopped + (
         "<p>Two dial indicators were mounted against each leg of the machine in turn. "
         "For each leg the station moved the machine from the <i>mechanical zero</i> "
@@ -68,6 +73,16 @@ def what_was_done(result: RunResult) -> str:
         "noise measured in this run, k from Student's t on that noise's degrees of "
         "freedom (GUM), so that few cycles do not claim more than they show.</p>"
     )
+
+
+def measured_so_far(setups: Sequence[Setup]) -> str:
+    """What a run that stopped early had measured: "after measuring 1 setup (leg x,
+    2 cycles)", or "before any setup was measured"."""
+    if not setups:
+        return "before any setup was measured"
+    each = ", ".join(f"leg {s.leg}, {s.cycles_used} cycle{'s' if s.cycles_used != 1 else ''}"
+                     for s in setups)
+    return f"after measuring {len(setups)} setup{'s' if len(setups) != 1 else ''} ({each})"
 
 
 def result_paragraph(result: RunResult) -> str:

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+from builders import station_deviations
 
 import orthocal
 from station.commands.cli import main
@@ -183,3 +184,69 @@ def test_a_second_gauge_plane_is_read_from_the_csv_and_its_bows_fitted(tmp_path,
     assert all(params[f"bow_{leg}{d}"] == pytest.approx(0.008, abs=1e-5) for leg, d in gauges)
     code, out, _ = run_cli(capsys, "identify", str(path), "--model", "rho+tilt+form")
     assert code == 0 and "Π_x^+ y @0.75" in out
+
+
+def _station_csv(tmp_path, seed: int, gap: float) -> tuple:
+    """A CSV of the exact model with a cycle column: offsets within ±2 mm, the gaps
+    ``gap`` (gap_xy, -gap_xz, gap_yz), no tilt, 1 µm gauges, 3 cycles of 5 readings, and
+    each gauge's stand up to 5 mm off the leg's middle (a run's stands placed by eye)."""
+    rng = np.random.default_rng(seed)
+    truth = np.r_[rng.uniform(-2, 2, 3), 0, 0, 0, 0, 0, 0, gap, -gap, gap]
+    data, _ = station_deviations(truth, rng, noise=0.001, stands=rng.uniform(-5, 5, 6))
+    path = tmp_path / f"stands_{seed}.csv"
+    path.write_text("posture,leg,direction,deviation_mm,cycle\n" + "".join(
+        f"{s},{i},{j},{v:.7f},{c}\n" for (s, i, j), vs in data.items()
+        for c, v in enumerate(vs, start=1)))
+    return path, truth
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_auto_claims_no_gap_or_tilt_that_misplaced_stands_make(tmp_path, capsys, seed):
+    # No gap, no tilt: what the misplaced stands leave (stand error × leg slope) is
+    # theirs. Without the stands modelled, auto reads it as gaps and tilts.
+    path, truth = _station_csv(tmp_path, seed, gap=0.0)
+    code, out, err = run_cli(capsys, "identify", str(path), "--model", "auto", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["model"] == "rho"
+    assert set(doc["parameters"]) == {"drho_x", "drho_y", "drho_z"}
+    for n, axis in enumerate("xyz"):  # stands within ±5 mm leave a few µm here
+        assert doc["parameters"][f"drho_{axis}"] == pytest.approx(truth[n], abs=0.010)
+    assert doc["model_selection"]["stands"]["tolerance_mm"] == pytest.approx(5.0, abs=1e-12)
+    # the text names the stands it counted
+    code, out, _ = run_cli(capsys, "identify", str(path), "--model", "auto")
+    assert code == 0 and "indicator stands modelled" in out and "±5 mm" in out
+
+
+def test_stands_taken_as_exact_are_read_as_geometry_and_a_real_gap_is_still_found(
+        tmp_path, capsys):
+    path, _ = _station_csv(tmp_path, 1, gap=0.0)
+    # --mount-error 0: the stands' error is left to the geometry (what auto did before)
+    code, out, _ = run_cli(capsys, "identify", str(path), "--model", "auto", "--json",
+                           "--mount-error", "0")
+    assert code == 0 and "gap_xy" in json.loads(out)["parameters"]
+    # 30 µm gaps stand out of what the stands can make
+    path, _ = _station_csv(tmp_path, 1, gap=0.03)
+    code, out, _ = run_cli(capsys, "identify", str(path), "--model", "auto", "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["model"] == "rho+gap"
+    assert doc["parameters"]["gap_xy"] == pytest.approx(0.03, abs=0.015)
+    assert doc["parameters"]["gap_yz"] == pytest.approx(0.03, abs=0.015)
+
+
+def test_mount_error_default_is_what_a_run_assumes_and_bad_values_exit_2(
+        tmp_path, capsys):
+    from orthocal.stands import DEFAULT_TOLERANCE
+    from station.commands.cli import build_parser
+    from station.config import ProcedureConfig
+
+    default = build_parser().parse_args(["identify", "x.csv"]).mount_error
+    assert default == ProcedureConfig().stand_tolerance_mm == DEFAULT_TOLERANCE
+    path, _ = _station_csv(tmp_path, 0, gap=0.0)
+    code, _, err = run_cli(capsys, "identify", str(path), "--mount-error", "-1")
+    assert code == 2 and "--mount-error" in err and "Traceback" not in err
+
+
+def test_one_value_per_deviation_says_the_stands_were_not_modelled(paper_csv, capsys):
+    code, out, _ = run_cli(capsys, "identify", str(paper_csv), "--model", "rho+gap")
+    assert code == 0 and "indicator stands not modelled" in out and "±5 mm" in out

@@ -37,6 +37,54 @@ def test_simulated_run_then_rollback(tmp_path: Path, capsys) -> None:
     nvram = json.loads((run_dir / "controller_nvram.json").read_text())["offsets_mm"]
     assert nvram == pytest.approx([result["offsets_before"][a] for a in "xyz"])
     assert json.loads(out)["restored"] == result["offsets_before"]
+    assert json.loads(out)["replaced"] == pytest.approx(result["offsets_written"], abs=1e-9)
+
+
+def _values(offsets: dict) -> list[str]:
+    """Each offset as the command line says it (4 decimals, signed)."""
+    return [f"{offsets[a]:+.4f}" for a in "xyz"]
+
+
+def _shown(offsets: dict) -> list[str]:
+    """Each offset as the report and the summary show it: the typographic minus, and
+    zero unsigned (station.report.format.fmt: "−0.0000" would read as negative)."""
+    return ["0.0000" if round(offsets[a], 4) == 0 else
+            f"{offsets[a]:+.4f}".replace("-", "−") for a in "xyz"]
+
+
+def test_a_rollback_is_a_state_of_the_run(tmp_path: Path, capsys) -> None:
+    # result.json, report.html, the history and resume say "rolled back", with the
+    # offsets restored; the prompt shows each joint's offset now → restored.
+    code = main(["run", "--simulate", no_figures_file(tmp_path), "--seed", "5",
+                 "--true-drho", "0.9,-0.6,0.3", "--out", str(tmp_path), "--json"])
+    result = json.loads(capsys.readouterr().out)
+    assert code == 0 and result["offsets_written"] is not None
+    run_dir = Path(result["run_dir"])
+    before, written = result["offsets_before"], result["offsets_written"]
+    assert main(["rollback", str(run_dir), "--yes"]) == 0
+    out, err = capsys.readouterr()
+    for a, now, then in zip("xyz", _values(written), _values(before), strict=True):
+        assert f"{a} {now} → {then}" in err  # the question, before anything is written
+        assert f"{a} {now} → {then}" in out and "rolled back" in out
+    stored = json.loads((run_dir / "result.json").read_text())
+    assert stored["rolled_back"]["restored"] == pytest.approx(before, abs=1e-9)
+    assert stored["rolled_back"]["replaced"] == pytest.approx(written, abs=1e-9)
+    assert stored["offsets_final"] == pytest.approx(before, abs=1e-9)
+    html = (run_dir / "report.html").read_text()
+    assert "<b>Rolled back</b>" in html
+    pairs = [f"{a} {now} → {then}" for a, now, then in
+             zip("xyz", _shown(written), _shown(before), strict=True)]
+    assert all(p in html for p in pairs)
+    assert main(["history", "--out", str(tmp_path)]) == 0
+    listing = capsys.readouterr().out
+    assert "rolled back" in listing and all(v in listing for v in _values(before))
+    assert main(["history", "--out", str(tmp_path), "--json"]) == 0
+    entry = json.loads(capsys.readouterr().out)["runs"][-1]
+    assert entry["rolled_back"]["restored"] == pytest.approx(before, abs=1e-9)
+    assert main(["resume", str(run_dir)]) == 0
+    summary = capsys.readouterr().out
+    assert "then rolled back" in summary and "ROLLED BACK" in summary
+    assert all(p in summary for p in pairs)
 
 
 def test_writeback_beyond_the_limit_is_refused_exit_1(tmp_path: Path, capsys) -> None:

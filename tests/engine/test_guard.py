@@ -163,7 +163,9 @@ def test_later_cycles_are_refused_before_moving_when_predicted_too_close() -> No
         guard.check_cycle(2)
     msg = str(info.value)
     assert "indicator A (y) on measurement setup 1 (leg x)" in msg and "cycle 2" in msg
-    assert "nothing has moved" in msg and "more preload" in msg
+    # cycle 1 moved the axes: the stop says so, and why (the stops' signal)
+    assert "cycle 2 has not moved" in msg and "nothing has moved" not in msg
+    assert "more preload" in msg and "Likely cause" in msg
     assert journal[-1]["event"]["event"] == "plunger-guard-refused"
     # the same cycle with a comfortable preload goes ahead
     guard2, _ = _guard(6.25, [])

@@ -178,3 +178,31 @@ def test_the_progress_bar_counts_what_really_happens() -> None:
     assert progress.bar.total_steps == progress.steps == 2 * len(reads) + per_cycle
     phase("v2")  # a second write-back's verification: counted as it starts
     assert progress.bar.total_steps == progress.steps == 3 * len(reads) + per_cycle
+
+
+def test_piped_progress_never_counts_past_its_total(tmp_path, capsys) -> None:
+    # 1 µm gauges and stands taken as exact: the verification's mountings take cycles
+    # beyond the planned two and a second write-back adds a pass; each grows the total
+    # first, saying by how much.
+    import re
+
+    from builders import FAST
+    from fakes import FakeRig, fake_config, run_on
+
+    rig = FakeRig(seed=3, noise_mm=0.001, mount_error_mm=0.0, true_drho=(1.0, -0.8, 0.6))
+    run_on(rig, tmp_path / "runs", fake_config(**{
+        **FAST, "model": "rho", "max_extra_passes": 2, "plunger_guard": False,
+        "stand_tolerance_mm": 0}))
+    lines = capsys.readouterr().err.splitlines()
+    total, said, kinds = None, 0, set()
+    for line in lines:
+        if (grown := re.match(r"\+(\d+) readings: another (cycle|pass)", line)):
+            said += int(grown[1])
+            kinds.add(grown[2])
+        elif (step := re.match(r"\[(\d+)/(\d+)\].* cycle (\d+)/(\d+) ", line)):
+            done, count, cycle, cycles = map(int, step.groups())
+            assert done <= count and cycle <= cycles, line
+            if total is not None:
+                assert count == total + said, line  # grown by exactly what was said
+            total, said = count, 0
+    assert kinds == {"cycle", "pass"}  # the run did both

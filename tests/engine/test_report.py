@@ -211,7 +211,7 @@ def test_html_explains_refused_and_missing_sections() -> None:
     assert len(rows) == 3 and all(found == left for found, left in rows)
     failed = report.render_html(failed_result())
     assert "did not complete" in failed
-    assert "after measuring 1 of the 3 legs" in failed
+    assert "after measuring 1 setup (leg x, 3 cycles)" in failed
     assert "No parameters were identified" in failed
     assert "as configured in the station config" in failed
     no_ver = report.render_html(make_result(verify=False))

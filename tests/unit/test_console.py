@@ -100,3 +100,35 @@ def test_update_outside_with_block_is_an_error() -> None:
 )
 def test_format_eta(seconds: float | None, text: str) -> None:
     assert format_eta(seconds) == text
+
+
+def test_time_left_never_rises_until_the_total_is_rebased_and_says_so() -> None:
+    stream, clock = io.StringIO(), FakeClock()
+    with RunProgress(10, stream=stream, clock=clock) as progress:
+        clock.now += 8.0
+        progress.update("x", "Π0", 1, 3, 1)  # 8 s a step: 72 s left
+        clock.now += 40.0
+        progress.update("x", "Π_x^+", 1, 3, 2)  # 24 s a step would say 192 s
+        clock.now += 5.0
+        progress.update("x", "Π_x^-", 1, 3, 3)  # 53/3 × 7 ≈ 124 s
+        progress.rebase(5, "another cycle (verify setup 1, cycle 4)")
+        clock.now += 5.0
+        progress.update("x", "Π0", 4, 3, 4)  # 58/4 × 11 ≈ 160 s: rises, after saying
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "[1/10] setup x · Π0 · cycle 1/3 · about 70 s left"
+    assert lines[1].endswith("about 70 s left") and lines[2].endswith("about 70 s left")
+    assert lines[3] == ("+5 readings: another cycle (verify setup 1, cycle 4); 15 in all, "
+                        "time left estimated again")
+    # the cycle past the planned three is counted as one of four, never "4/3"
+    assert lines[4] == "[4/15] setup x · Π0 · cycle 4/4 · about 3 min left"
+
+
+def test_live_bar_counts_against_the_rebased_total() -> None:
+    stream, clock = TtyStringIO(), FakeClock()
+    with RunProgress(4, stream=stream, clock=clock) as progress:
+        progress.update("x", "Π0", 1, 1, 4)
+        progress.rebase(2, "another pass (verify 2)")
+        progress.update("x", "Π0", 1, 1, 5)
+    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", stream.getvalue())
+    assert "5/6" in text and "+2 readings: another pass (verify 2)" in text
+    assert "5/4" not in text
