@@ -134,6 +134,9 @@ class Measurement:
     # key -> its cycles from each mounting of its gauges, in order (pooled passes:
     # one per pass); the stands were set again for each (orthocal.Stands.mounts)
     mounts: dict[str, list[int]] = field(default_factory=dict)
+    # keys whose first cycles here continue the mounting the pass before ended with
+    # (gauges left on: station.engine.kept)
+    continued: tuple[str, ...] = ()
 
     def stats(self) -> dict[str, DeviationStats]:
         out: dict[str, DeviationStats] = {}
@@ -170,7 +173,16 @@ def pooled(first: Measurement, more: Measurement) -> Measurement:
         {k: [*first.deviations.get(k, []), *more.deviations.get(k, [])] for k in keys},
         [*first.setups, *more.setups], [*first.within_std, *more.within_std],
         {a: [*first.reversal.get(a, []), *more.reversal.get(a, [])] for a in axes},
-        {k: [*_mounts(first, k), *_mounts(more, k)] for k in keys})
+        {k: _joined_mounts(_mounts(first, k), _mounts(more, k), k in more.continued)
+         for k in keys})
+
+
+def _joined_mounts(first: list[int], more: list[int], continued: bool) -> list[int]:
+    """A key's cycles per mounting over two passes; ``continued``: the second's first
+    mounting is the first's last, kept on."""
+    if continued and first and more:
+        return [*first[:-1], first[-1] + more[0], *more[1:]]
+    return [*first, *more]
 
 
 def _mounts(m: Measurement, key: str) -> list[int]:

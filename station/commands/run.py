@@ -23,9 +23,8 @@ from station.commands.options import ResumeOptions, RunOptions
 from station.commands.simulate.file_options import run_options
 from station.config import load_config, parse_config
 from station.console.operator import ConsoleOperator, Operator, VirtualOperator
-from station.engine.closed_loop import mountings_expected
 from station.engine.devices import build_controller, open_devices
-from station.engine.procedure import Run, execute
+from station.engine.procedure import Run, execute, expected_mountings
 from station.engine.recovery import check_reference, home_if_needed
 from station.engine.results import AXES
 from station.engine.rolled_back import change_text, record_rollback
@@ -169,9 +168,7 @@ def run(options: RunOptions) -> int:
 
 
 def _mountings(config: Any, plan: Any) -> dict[str, int]:
-    proc = config.procedure
-    return mountings_expected(len(plan.setups), proc.max_iterations, proc.max_extra_passes,
-                              proc.verify)
+    return expected_mountings(config, plan)
 
 
 def print_result(as_json: bool, result: RunResult | JsonObject, verbose: bool = False) -> None:

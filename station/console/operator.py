@@ -23,10 +23,14 @@ except ImportError:  # pragma: no cover - not POSIX
 
 class Operator(Protocol):
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
-              all_names: Sequence[str], at: float = MIDDLE) -> None:
+              all_names: Sequence[str], at: float = MIDDLE, *,
+              windows: Windows | None = None, count: Mapping[str, int] | None = None,
+              remount: str | None = None) -> None:
         """Mount ``indicators`` (name -> direction) on ``leg`` at Π0, at the fraction
         ``at`` of its length from the carriage's joint (the middle by default), and
-        remove the others. Returns once done; raises RunFailed if the operator aborts."""
+        remove the others; ``windows``, ``count``, ``remount``: what the prompt says
+        beside it (:func:`mount_instruction`). Returns once done; raises RunFailed if
+        the operator aborts."""
         ...
 
     def confirm(self, question: str) -> bool: ...
@@ -38,8 +42,19 @@ class Operator(Protocol):
         ...
 
 
+#: Per gauge, the preload (mm pushed in at mounting) the plan check allows: (least, most).
+Windows = Mapping[str, tuple[float, float]]
+
+
 def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str, str],
-                      all_names: Sequence[str], at: float = MIDDLE) -> str:
+                      all_names: Sequence[str], at: float = MIDDLE, *,
+                      windows: Windows | None = None, count: Mapping[str, int] | None = None,
+                      remount: str | None = None) -> str:
+    """The mount prompt: what to mount where, each plunger's preload window
+    (``windows``: the plan check's travel, every stop and move of the setup kept
+    inside the stroke less the guard's margin), the mountings the run expects
+    (``count``, at its first: closed_loop.mountings_expected) and, where gauges left
+    on from the pass before are mounted again, why (``remount``)."""
     # "v", "v2", ...: the verification after each write-back of the closed loop.
     what = "verification" if phase.startswith("v") else "measurement"
     mounts = ", ".join(f"{n} along {d}" for n, d in indicators.items())
@@ -47,8 +62,20 @@ def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str,
     remove = f"; remove {', '.join(others)}" if others else ""
     where = "the middle of" if at == MIDDLE else \
         f"{at:g} of the length (from the carriage's joint) of"
-    return (f"{what}, setup {setup + 1}: the machine is at Π0. Mount {mounts} against "
-            f"{where} leg {leg} (plunger pushed in to its preload){remove}.")
+    sit = "; ".join(f"{n} pushed in {lo:.2f}–{hi:.2f} mm" for n, (lo, hi) in
+                    (windows or {}).items() if n in indicators)
+    preload = f"plungers within the plan's preload window: {sit}" if sit else \
+        "plunger pushed in to its preload"
+    text = (f"{what}, setup {setup + 1}: the machine is at Π0. Mount {mounts} against "
+            f"{where} leg {leg} ({preload}){remove}.")
+    if remount:
+        text = (f"{text} Mounted again, not kept from the setup before: with the "
+                f"write-back's shift, {remount}.")
+    if count:
+        text += (f" Mountings: expect {count['usual']} in all ({count['fewest']} if the "
+                 f"machine is within tolerance; {count['per_write_back']} more per further "
+                 f"write-back; up to {count['most']}).")
+    return text
 
 
 class ConsoleOperator:
@@ -102,8 +129,11 @@ class ConsoleOperator:
         return line.strip().lower()
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
-              all_names: Sequence[str], at: float = MIDDLE) -> None:
-        instruction = mount_instruction(phase, setup, leg, indicators, all_names, at)
+              all_names: Sequence[str], at: float = MIDDLE, *,
+              windows: Windows | None = None, count: Mapping[str, int] | None = None,
+              remount: str | None = None) -> None:
+        instruction = mount_instruction(phase, setup, leg, indicators, all_names, at,
+                                        windows=windows, count=count, remount=remount)
         if self.yes:
             self._say(instruction)
             return
@@ -134,7 +164,9 @@ class VirtualOperator:
         self._place = place_fn
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
-              all_names: Sequence[str], at: float = MIDDLE) -> None:
+              all_names: Sequence[str], at: float = MIDDLE, *,
+              windows: Windows | None = None, count: Mapping[str, int] | None = None,
+              remount: str | None = None) -> None:
         for name in all_names:
             if name not in indicators:
                 self._unmount(name)
@@ -144,7 +176,8 @@ class VirtualOperator:
             self._mount(name, leg, direction, at=at)
         if self._say is not None:
             self._say("[virtual operator] " + mount_instruction(
-                phase, setup, leg, indicators, all_names, at))
+                phase, setup, leg, indicators, all_names, at, windows=windows, count=count,
+                remount=remount))
 
     def confirm(self, question: str) -> bool:
         if self._say is not None:

@@ -146,14 +146,18 @@ def next_step(state: LoopState) -> Step:
 def mountings_expected(setups: int, max_iterations: int, max_extra_passes: int,
                        verify: bool = True) -> dict[str, int]:
     """How many times the operator mounts the gauges, from the flow above: every
-    pass of every measurement mounts each of the plan's ``setups`` once.
+    pass of every measurement mounts each of the plan's ``setups``, but every pass
+    after the very first starts with the gauges its pass before ended with, still on
+    (station.engine.kept).
 
     ``fewest``: the first measurement alone (a machine within tolerance, nothing
     written). ``usual``: one write-back and its verification, each decided in one
-    pass. ``most``: every round up to ``max_iterations`` write-backs, each
-    measurement taking all its ``max_extra_passes``. A retake or a resume after a
-    stand was moved adds its own mounting beyond these."""
+    pass. ``per_write_back``: what each write-back and its verification add.
+    ``most``: every round up to ``max_iterations`` write-backs, each measurement
+    taking all its ``max_extra_passes``. A retake, a resume (it mounts afresh) or a
+    kept mounting the plan check refuses after a write-back adds its own beyond these."""
     passes = 1 + max_extra_passes
-    rounds = 1 + (max_iterations if verify else 0)
-    return {"fewest": setups, "usual": setups * (2 if verify else 1),
-            "most": setups * passes * rounds}
+    rounds = max_iterations if verify else 0
+    each = max(setups - 1, 0)
+    return {"fewest": setups, "usual": setups + (each if verify else 0),
+            "per_write_back": each, "most": setups + (passes * (1 + rounds) - 1) * each}

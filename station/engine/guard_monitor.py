@@ -97,16 +97,20 @@ class PlungerGuard:
         return self._setup
 
     def mount(self, setup: SetupPlan, phase: str, mounted: Mapping[str, str],
-              baseline: Mapping[str, float]) -> None:
-        """Start watching a new mounting; ``baseline``: each gauge's Π0 reading."""
+              baseline: Mapping[str, float],
+              preload_shift: Mapping[str, float] | None = None) -> None:
+        """Start watching a new mounting; ``baseline``: each gauge's Π0 reading;
+        ``preload_shift``: the travel a kept mounting's plungers already stand at there
+        (station.engine.kept), their preload's part beyond the config's."""
         self._setup = setup
         self._where = f"{'verification' if phase.startswith('v') else 'measurement'} setup " \
                       f"{setup.index + 1} (leg {setup.leg})"
         self._gauges = {}
         for name, direction in mounted.items():
             ind = self.config.indicator(name)
-            self._gauges[name] = Gauge(name, direction, -ind.preload,
-                                        ind.stroke_mm - ind.preload, float(baseline[name]))
+            preload = ind.preload + (preload_shift or {}).get(name, 0.0)
+            self._gauges[name] = Gauge(name, direction, -preload,
+                                        ind.stroke_mm - preload, float(baseline[name]))
         self._moves = []
         self.axes_seen = AxesSeen()
         self.predicted = {}

@@ -13,8 +13,9 @@ import time
 from dataclasses import asdict
 
 from drivers.device_errors import DeviceError
+from station.config import StationConfig
 from station.console.progress import Progress
-from station.engine.closed_loop import LoopState, next_step
+from station.engine.closed_loop import LoopState, mountings_expected, next_step
 from station.engine.flow import Flow, Run
 from station.engine.recovery import resume_hint
 from station.engine.results import base_result, fill_offsets
@@ -74,6 +75,7 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
         config=ctx.config, plan=ctx.plan, controller=ctx.devices.controller,
         indicators=ctx.devices.indicators, journal=ctx.journal, operator=ctx.operator,
         checker=checker, progress=progress)
+    seq.keeper.expected = expected_mountings(ctx.config, ctx.plan)
     result = base_result(ctx.run_dir, ctx.config, ctx.sim, ctx.started_iso)
     ctx.result = result
     proc = ctx.config.procedure
@@ -124,6 +126,13 @@ def measured_setups(plan: Plan, state: RunState, cycles: int) -> list[Setup]:
                          repeats=done.repeats or 0, flagged=bool(done.flagged),
                          spread_mm=done.spread_mm))
     return out
+
+
+def expected_mountings(config: StationConfig, plan: Plan) -> dict[str, int]:
+    """The mountings the run expects (closed_loop.mountings_expected)."""
+    proc = config.procedure
+    return mountings_expected(len(plan.setups), proc.max_iterations, proc.max_extra_passes,
+                              proc.verify)
 
 
 def _stopped(seq: Sequencer) -> str:

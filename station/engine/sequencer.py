@@ -31,7 +31,7 @@ from typing import Protocol
 
 import numpy as np
 
-from drivers.base import GaugeReadings, Moves, OffsetResolution
+from drivers.base import GaugeReadings, Moves, ZeroOffsets
 from orthocal.lost_motion import reversal_gain
 from orthocal.postures import MIDDLE, plane_at
 from station.analysis.sizing import VerificationSizing
@@ -45,6 +45,7 @@ from station.analysis.statistics import (
 )
 from station.config import StationConfig
 from station.console.operator import Operator
+from station.engine import kept
 from station.engine.guard_monitor import PlungerGuard
 from station.engine.mover import Mover, MoverAxes
 from station.engine.replay import CycleStep, RepeatStep, SetupEnd, Steps
@@ -78,9 +79,10 @@ def _no_progress(event: str, **info: object) -> None:
     del event, info
 
 
-class SequencedAxes(MoverAxes, Moves, OffsetResolution, Protocol):
+class SequencedAxes(MoverAxes, Moves, ZeroOffsets, Protocol):
     """What a sequencer asks of the axes: the mover's, the stop (after a fault, and the
-    guard's), and their offsets' count, by which a verification is sized."""
+    guard's), and their offsets: their count, by which a verification is sized, and
+    their values, whose change shifts the stops under gauges kept mounted."""
 
 
 @dataclass
@@ -140,6 +142,9 @@ class Sequencer:
         # The guard arms at a mounting's first Π0 reading and watches the cycle after it.
         self._guard_pending = False
         self._guard_cycle: int | None = None
+        # The gauges on the machine, kept for the next pass's first setup where the
+        # plan check holds (station.engine.kept).
+        self.keeper = kept.Keeper(config, plan, checker, controller, journal, self.progress)
         self.mover = Mover(config=config, plan=plan, controller=controller,
                            indicators=indicators, checker=checker, guard=self.guard,
                            journal=journal.append, journal_safe=self._journal_safe,
@@ -156,6 +161,7 @@ class Sequencer:
             raise
 
     def abort(self, exc: BaseException) -> None:
+        self.keeper.still = None  # what a fault left on the machine is mounted again
         try:
             self.controller.stop()
         except Exception as stop_exc:  # the fault is what matters; note the failed stop
@@ -181,7 +187,7 @@ class Sequencer:
         outcomes: list[SetupOutcome] = []
         within: list[float] = []
         reversal: dict[str, list[float]] = {}
-        for sp in self.plan.setups:
+        for sp in kept.order(self.plan.setups, self.keeper.last):
             outcome, devs, w, rev = self._run_setup(phase, sp)
             outcomes.append(outcome)
             deviations.update(devs)
@@ -189,7 +195,10 @@ class Sequencer:
             for axis, values in rev.items():
                 reversal.setdefault(axis, []).extend(values)
         mounts = {k: [len(v)] for k, v in deviations.items()}
-        return Measurement(phase, deviations, outcomes, within, reversal, mounts)
+        # a pass whose first setup kept the gauges on: its keys go on with that mounting
+        kept_on = [o.index for o in outcomes[:1] if (phase, o.index) in self.journal.state.kept]
+        continued = tuple(k for i in kept_on for k in kept.keys_of(self.plan.setups[i]))
+        return Measurement(phase, deviations, outcomes, within, reversal, mounts, continued)
 
     def _run_setup(self, phase: str, sp: SetupPlan
                    ) -> tuple[SetupOutcome, dict[str, list[float]], list[float],
@@ -199,6 +208,7 @@ class Sequencer:
         self._live_setup = False
         self.mover.setup = sp
         self.mover.mounted = {}  # a new setup: nothing of ours is mounted until its prompt
+        self.checker.preload_shift = {}
         self.guard.forget()
         self._guard_pending, self._guard_cycle = False, None
         cycle = 0
@@ -248,6 +258,7 @@ class Sequencer:
                          "cycles": outcome.cycles, "repeats": repeats,
                          "spread_mm": spread, "flagged": outcome.flagged})
         self.progress("setup_done", phase=phase, setup=sp.index, outcome=outcome)
+        self.keeper.ended(phase, sp.index, self._live_setup)
         return outcome, devs_by_key, within, reversal
 
     def _converged(self, cycles: list[dict[str, float]]) -> bool:
@@ -281,8 +292,10 @@ class Sequencer:
             # Going live in this setup: mount (or remount after a resume) at Π0 and
             # read the Π0 that opens this cycle under the current mounting.
             self._live_setup = True
-            for step in sp.start_steps(phase, cycle - 1, self.plan.settle_s,
-                                       self.plan.readings):
+            steps = sp.start_steps(phase, cycle - 1, self.plan.settle_s, self.plan.readings)
+            if cycle == 1 and self._keep(phase, sp):
+                steps = [s for s in steps if not isinstance(s, Prompt)]
+            for step in steps:
                 self._execute(phase, step)
         if self._guard_cycle is not None and cycle > self._guard_cycle:
             self.guard.check_cycle(cycle)
@@ -411,6 +424,16 @@ class Sequencer:
             assert self._setup is not None and self._setup.index == step.setup
             self._finish_cycle(phase, self._setup, step.cycle)
 
+    def _keep(self, phase: str, sp: SetupPlan) -> bool:
+        """Whether ``sp`` goes on with its gauges still on from the pass before
+        (station.engine.kept.Keeper), armed as a mounting if so."""
+        if not self.keeper.keep(phase, sp):
+            return False
+        self.mover.mount(dict(sp.indicators))
+        self.guard.forget()
+        self._guard_pending, self._guard_cycle = True, None
+        return True
+
     def _move(self, step: Move) -> None:
         self.mover.move(step)
         self.counters.moves = self.mover.moves
@@ -423,8 +446,9 @@ class Sequencer:
         # mounting): journaled with the mounting, so a resumed run still counts it.
         asked = time.monotonic()
         self.operator.mount(phase, step.setup, step.leg, indicators, self._all_names,
-                            at=step.at)
+                            at=step.at, **self.keeper.prompt_words(phase, step))
         operator_s = time.monotonic() - asked
+        self.keeper.mounted(step.setup, indicators)
         self.mover.mount(indicators)
         self.guard.forget()
         self._guard_pending, self._guard_cycle = True, None
@@ -467,6 +491,7 @@ class Sequencer:
             self._guard_pending = False
             self._guard_cycle = step.cycle + 1
             self.guard.mount(self._setup, step.stop.split(":")[0],
-                             self.mover.mounted, {n: st.mean for n, st in stats.items()})
+                             self.mover.mounted, {n: st.mean for n, st in stats.items()},
+                             preload_shift=self.checker.preload_shift)
         self.progress("read", phase=step.stop.split(":")[0], stop=step.stop, setup=step.setup,
                       cycle=step.cycle, sign=step.sign, values=values)

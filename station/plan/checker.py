@@ -67,6 +67,10 @@ class MotionChecker:
         self._bounds: dict[tuple, motion.Bound | type[Exception]] = {}
         # Each mounting's reading at Π0 (nominal_travel).
         self._zeros: dict[tuple, float] = {}
+        # Per gauge, the travel its plunger already stands at at Π0 from where it was
+        # mounted (a mounting kept across a write-back: station.engine.kept): it sits
+        # as if mounted with that much more preload.
+        self.preload_shift: dict[str, float] = {}
 
     def check(self, start: Vec3 | None, target: Vec3, label: str,
               setup: SetupPlan | None = None, mounted: dict[str, str] | None = None) -> None:
@@ -202,10 +206,12 @@ class MotionChecker:
         names = list(mounted)
         inds = [self.config.indicator(n) for n in names]
         sig = signal or {}
+        preload = np.array([i.preload + self.preload_shift.get(n, 0.0)
+                            for n, i in zip(names, inds, strict=True)])
         return Gauges(
             setup, names, [mounted[n] for n in names],
-            low=np.array([-i.preload for i in inds]),
-            high=np.array([i.stroke_mm - i.preload for i in inds]),
+            low=-preload,
+            high=np.array([i.stroke_mm for i in inds]) - preload,
             sig0=np.array([sig.get(n, (0.0, 0.0))[0] for n in names]),
             sig1=np.array([sig.get(n, (0.0, 0.0))[1] for n in names]),
             pad=SIGNAL_PAD_MM if signal else 0.0,

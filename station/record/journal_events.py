@@ -183,9 +183,24 @@ class Retake(_Body):
     why: str
 
 
+class MountKept(_Body):
+    """The gauges of a round's last setup left on for the next round's first (kept),
+    or taken down because the write-back's shift would not hold (``why``)."""
+
+    event: Literal["mount-kept"]
+    phase: str
+    setup: int
+    indicators: dict[str, str] = Field(description="indicator name → its direction")
+    kept: bool
+    why: str | None = Field(None, description="why not kept, in the plan check's words")
+    travel_mm: dict[str, float] | None = Field(
+        None, description="each gauge's travel at the setup's Π0 now, from its mounting")
+    offsets: list[float] | None = Field(None, description="the offsets now, x, y, z (mm)")
+
+
 EventBody = Annotated[
     Retry | Reconnect | Reconnected | ControllerReferenceCheck | Reopen | Reopened
     | StopFailed | NotHomed | GuardStop | GuardLearned | GuardRefused | GuardRecovery
-    | ZeroCheck | Retake,
+    | ZeroCheck | Retake | MountKept,
     Field(discriminator="event"),
 ]

@@ -35,6 +35,7 @@ from station.record.journal import (
     Setup,
     SetupDone,
     SetupRedo,
+    Stopped,
     Verification,
     Writeback,
     WritebackDone,
@@ -46,6 +47,7 @@ from station.record.journal_events import (
     GuardRecovery,
     GuardRefused,
     GuardStop,
+    MountKept,
     Retake,
     Retry,
 )
@@ -68,6 +70,20 @@ class LiveSetup:
     @property
     def prefix(self) -> str:
         return f"{self.phase}:{self.setup}:"  # of its stop ids (station.plan.steps.stop_id)
+
+
+@dataclass
+class OnMachine:
+    """The gauges last put on (a ``setup`` record, or a ``mount-kept`` event: gauges
+    left on, station.engine.kept): the offsets they were put on under (None: the
+    run's own, no write-back before) and each plunger's travel there from where it
+    was mounted (a kept mounting's; empty for a fresh one)."""
+
+    phase: str
+    setup: int
+    indicators: dict[str, str]
+    offsets: list[float] | None
+    shift: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -101,6 +117,10 @@ class RunState:
     retries: int = 0  # driver retries
     mountings: int = 0  # ``setup`` records: what the operator mounted, and for how long
     operator_s: float = 0.0
+    # (phase, setup) that went on with the gauges left on from the pass before
+    # (``mount-kept`` events, station.engine.kept): no mounting of their own.
+    kept: set[tuple[str, int]] = field(default_factory=set)
+    on: OnMachine | None = None  # None: none, or a fault's session may have moved them
 
     @classmethod
     def of(cls, records: Iterable[JournalRecord]) -> RunState:
@@ -131,7 +151,7 @@ class RunState:
                 self.finished = rec
             case Resumed():
                 self.resumes += 1
-            case Setup():
+            case Setup() | Stopped():
                 self._mounted(rec)
             case Reading():
                 if self.live is not None and rec.stop.startswith(self.live.prefix):
@@ -153,9 +173,14 @@ class RunState:
             case SetupRedo():
                 self._void(rec.phase, rec.setup)
 
-    def _mounted(self, rec: Setup) -> None:
+    def _mounted(self, rec: Setup | Stopped) -> None:
+        if isinstance(rec, Stopped):  # a fault's or Ctrl-C's: what was on is mounted again
+            self.on = None
+            return
         self.mountings += 1
         self.operator_s += float(rec.operator_s or 0.0)
+        self.on = OnMachine(rec.phase, rec.setup, dict(rec.indicators),
+                            None if self.offsets_held is None else list(self.offsets_held))
         if self.live is not None and (self.live.phase, self.live.setup) == (rec.phase,
                                                                             rec.setup):
             self.live.indicators = dict(rec.indicators)  # remounted: its readings stand
@@ -194,6 +219,14 @@ class RunState:
                 self.guard.retakes += 1
             case GuardRefused():
                 self.guard.refused += 1
+            case MountKept(kept=True):
+                # the gauges left on are this setup's: a reference check after homing
+                # checks them as it would a mounting's
+                indicators = dict(event.indicators)
+                self.kept.add((event.phase, event.setup))
+                self.live = LiveSetup(event.phase, event.setup, indicators)
+                self.on = OnMachine(event.phase, event.setup, indicators, event.offsets,
+                                    dict(event.travel_mm or {}))
             case GuardRecovery(result="recovered"):
                 # zero_shift_mm: only where the way back found a gauge's zero moved (a step)
                 self.guard.recovered.append({

@@ -59,8 +59,12 @@ def guard_lines(result: RunResult) -> list[str]:
 
 def mountings_line(expected: Mapping[str, int]) -> str:
     """What the operator will be asked for (station.engine.closed_loop.mountings_expected)."""
+    more = expected.get("per_write_back")
+    each = "" if more is None else (
+        f", {more} more per further write-back (the last setup's gauges stay on across "
+        "each)")
     return (f"mountings: expect {expected['usual']} (one write-back, verified at once); "
-            f"{expected['fewest']} if the machine is within tolerance, up to "
+            f"{expected['fewest']} if the machine is within tolerance{each}; up to "
             f"{expected['most']} if every round takes all its passes")
 
 

@@ -182,7 +182,11 @@ def test_max_iterations_stops_the_loop_and_says_why(tmp_path: Path, capsys) -> N
     assert result["remaining"]["round"] == 2 and last["significant"]
     assert result["remaining"]["estimate"] == {
         n: last["identified"][n] for n in ("drho_x", "drho_y", "drho_z")}
-    assert "left over" in report.summary_text(result)
+    # the first screen's "as left": what the last verification found, at 95 %
+    joints = [ln for ln in report.summary_text(result).splitlines()
+              if ln.startswith("  joint ")]
+    assert len(joints) == 3 and all(" → as left " in ln and "not verified" not in ln
+                                    and "unchanged" not in ln for ln in joints), joints
 
 
 def test_without_verification_nothing_is_claimed_about_what_is_left(tmp_path: Path,
@@ -190,7 +194,10 @@ def test_without_verification_nothing_is_claimed_about_what_is_left(tmp_path: Pa
     result = engine_run(tmp_path, true_drho=(0.3, -0.2, 0.4),
                  procedure={**PROCEDURE, "verify": False})
     assert writes(result) == 1 and len(result["iterations"]) == 1
-    assert result["remaining"] is None and "left over" not in report.summary_text(result)
+    assert result["remaining"] is None
+    joints = [ln for ln in report.summary_text(result).splitlines()
+              if ln.startswith("  joint ")]
+    assert len(joints) == 3 and all("as left not verified" in ln for ln in joints), joints
 
 
 def test_report_says_why_the_loop_did_not_go_on() -> None:

@@ -28,10 +28,18 @@ NOISY = {**FAST, "model": "rho", "max_extra_passes": 1}  # up to 2 × 2 cycles a
 
 
 def test_expected_mountings_follow_the_loop() -> None:
-    # three setups, three write-backs at most, two extra passes each
-    assert mountings_expected(3, 3, 2) == {"fewest": 3, "usual": 6, "most": 36}
-    assert mountings_expected(3, 1, 0) == {"fewest": 3, "usual": 6, "most": 6}
-    assert mountings_expected(1, 3, 0, verify=False) == {"fewest": 1, "usual": 1, "most": 1}
+    # three setups, three write-backs at most, two extra passes each: every pass after
+    # the first starts on the gauges its pass before ended with (3 + 2 × 2 in the
+    # first round, then 3 rounds × 3 passes × 2)
+    assert mountings_expected(3, 3, 2) == {"fewest": 3, "usual": 5, "per_write_back": 2,
+                                           "most": 3 + 2 * 2 + 3 * 3 * 2}
+    assert mountings_expected(3, 1, 0) == {"fewest": 3, "usual": 5, "per_write_back": 2,
+                                           "most": 5}
+    assert mountings_expected(1, 3, 0, verify=False) == {
+        "fewest": 1, "usual": 1, "per_write_back": 0, "most": 1}
+    # a second plane: six setups, five more per pass after the first
+    assert mountings_expected(6, 3, 0) == {"fewest": 6, "usual": 11, "per_write_back": 5,
+                                           "most": 6 + 3 * 5}
 
 
 def _run(tmp_path: Path, capsys, procedure: dict[str, Any]) -> dict[str, Any]:
@@ -79,11 +87,12 @@ def test_the_plan_says_how_many_mountings_to_expect(tmp_path: Path, capsys) -> N
     assert cmd_run.run(simulated(tmp_path / "runs", plan=True, json=False)) == 0
     text = capsys.readouterr().out
     # FAST: 3 setups, max_iterations 3 by default, no extra passes
-    assert "mountings: expect 6 (one write-back, verified at once); 3 if the machine is " \
-           "within tolerance, up to 12" in text
+    assert "mountings: expect 5 (one write-back, verified at once); 3 if the machine is " \
+           "within tolerance, 2 more per further write-back (the last setup's gauges stay " \
+           "on across each); up to 9" in text
     assert cmd_run.run(simulated(tmp_path / "runs", plan=True, json=True)) == 0
     assert json.loads(capsys.readouterr().out)["mountings"] == \
-        {"fewest": 3, "usual": 6, "most": 12}
+        {"fewest": 3, "usual": 5, "per_write_back": 2, "most": 9}
 
 
 def _ident(drho_um: float, se_um: float, **others_um: float) -> SimpleNamespace:
@@ -189,7 +198,7 @@ def test_piped_progress_never_counts_past_its_total(tmp_path, capsys) -> None:
     from builders import FAST
     from fakes import FakeRig, fake_config, run_on
 
-    rig = FakeRig(seed=3, noise_mm=0.001, mount_error_mm=0.0, true_drho=(1.0, -0.8, 0.6))
+    rig = FakeRig(seed=1, noise_mm=0.001, mount_error_mm=0.0, true_drho=(1.0, -0.8, 0.6))
     run_on(rig, tmp_path / "runs", fake_config(**{
         **FAST, "model": "rho", "max_extra_passes": 2, "plunger_guard": False,
         "stand_tolerance_mm": 0}))
