@@ -22,20 +22,28 @@ stopped on a fault or Ctrl-C mounts afresh).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Protocol, TypedDict
 
 import numpy as np
 
 from drivers.base import AxisReadout, ZeroOffsets
 from station.config import StationConfig
+from station.console.operator import Windows
 from station.errors import BadInput
 from station.plan.checker import SIGNAL_PAD_MM, MotionChecker
 from station.plan.steps import Move, Plan, Prompt, SetupPlan
 from station.record.journal import WritebackBackup, WritebackDone, WritebackIntent
 from station.record.journal_file import Journal
 
+
+class PromptWords(TypedDict):
+    """What the mount prompt says beside the mounting (Operator.mount's keywords)."""
+
+    windows: Windows
+    count: Mapping[str, int] | None
+    remount: str | None
 
 class KeptAxes(AxisReadout, ZeroOffsets, Protocol):
     """What the keeper asks of the axes: where they stand and their offsets."""
@@ -170,7 +178,7 @@ class Keeper:
         self.progress("mount_kept", phase=phase, setup=sp.index, travel=found)
         return True
 
-    def prompt_words(self, phase: str, step: Prompt) -> dict[str, Any]:
+    def prompt_words(self, phase: str, step: Prompt) -> PromptWords:
         """The mount prompt's words beyond the mounting (Operator.mount): each
         plunger's preload window from the plan check's travel, the mountings to
         expect at the run's first, why gauges left on are mounted again."""
@@ -182,8 +190,8 @@ class Keeper:
             if travel is not None:
                 windows[name] = window(self.config.indicator(name).stroke_mm, margin, travel)
         first = phase == "m" and self.journal.state.mountings == 0
-        return {"windows": windows, "count": self.expected if first else None,
-                "remount": self.remount}
+        return PromptWords(windows=windows, count=self.expected if first else None,
+                           remount=self.remount)
 
     def _offsets(self) -> np.ndarray:
         return np.asarray(self.controller.read_offsets(), dtype=float)

@@ -34,14 +34,15 @@ import json
 import os
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 from pydantic import ValidationError
 
 from drivers.files import fsync_dir
 from station.errors import BadInput, StorageFull, storage_message
 from station.record.journal import RECORD, JournalRecord
+from station.record.result_base import JsonObject
 from station.record.state import RunState
 
 JOURNAL_NAME = "journal.jsonl"
@@ -76,8 +77,10 @@ class Journal:
     def closed(self) -> bool:
         return self._fd is None
 
-    def append(self, record: dict[str, Any]) -> None:
-        record = {"t": round(time.time(), 6), **record}
+    def append(self, body: Mapping[str, object]) -> None:
+        # Any JSON-able mapping: the line is validated against the journal's typed
+        # records below, before anything is written.
+        record = {"t": round(time.time(), 6), **body}
         line = (json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n").encode()
         # Parsed from the very line a reader will parse; a record of no journal type
         # is a bug, refused before a reader could meet it.
@@ -134,7 +137,7 @@ class Journal:
         self.close()
 
 
-def read_journal(path: str | Path) -> list[dict[str, Any]]:
+def read_journal(path: str | Path) -> list[JsonObject]:
     """All intact records, as JSON objects. A line that does not parse is tolerated
     only if it is the last one (torn by a kill) or is followed by a ``resumed`` or
     ``rollback`` record (the journal reopened after the kill)."""
@@ -163,13 +166,13 @@ def _why(exc: ValidationError) -> str:
     return f"{where}: {first['msg']}{more}"
 
 
-def _lines(path: Path) -> list[tuple[int, dict[str, Any]]]:
+def _lines(path: Path) -> list[tuple[int, JsonObject]]:
     """(line number, record) of every intact line (:func:`read_journal`)."""
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
         raise BadInput(f"{path}: no journal here") from None
-    records: list[tuple[int, dict[str, Any]]] = []
+    records: list[tuple[int, JsonObject]] = []
     pending_bad: int | None = None
     for number, line in enumerate(raw.split(b"\n"), start=1):
         if not line.strip():

@@ -26,12 +26,13 @@ import json
 import os
 import re
 import socket
+from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from station.errors import RunFailed
+from station.record.result_base import JsonObject, JsonValue
 
 
 class MachineBusy(RunFailed):
@@ -58,7 +59,7 @@ def controller_key(transport: str, host: str, port: int | str, device_id: int) -
     return f"{readable}-{digest}"
 
 
-def describe(holder: dict[str, Any]) -> str:
+def describe(holder: JsonObject) -> str:
     return (f"run {holder.get('run_dir') or '?'} ({holder.get('command') or '?'}, "
             f"pid {holder.get('pid', '?')} on {holder.get('host', '?')}, "
             f"since {holder.get('since', '?')})")
@@ -71,7 +72,7 @@ class MachineLock:
     path: Path
     machine: str
     fd: int | None
-    taken_over: dict[str, Any] | None = None
+    taken_over: JsonObject | None = None
 
     def release(self) -> None:
         fd, self.fd = self.fd, None
@@ -88,7 +89,7 @@ class MachineLock:
         self.release()
 
 
-def _read_body(fd: int) -> dict[str, Any] | None:
+def _read_body(fd: int) -> JsonObject | None:
     os.lseek(fd, 0, os.SEEK_SET)
     raw = b""
     while chunk := os.read(fd, 65536):
@@ -135,7 +136,7 @@ def acquire(transport: str, host: str, port: int | str, device_id: int, *,
     return lock
 
 
-def lock_write(lock: MachineLock, body: dict[str, Any]) -> None:
+def lock_write(lock: MachineLock, body: Mapping[str, JsonValue]) -> None:
     """Replace the body (e.g. once the run directory is known)."""
     if lock.fd is None:
         return

@@ -14,13 +14,13 @@ from __future__ import annotations
 import json
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from station.config import StationConfig
 from station.config.toml import dump_toml
 from station.errors import BadInput, RunFailed
 from station.plan.steps import Plan
 from station.record.journal_file import JOURNAL_NAME, read_records
+from station.record.result_base import JsonObject
 from station.record.state import RunState
 
 SIM_NAME = "simulation.json"
@@ -60,7 +60,7 @@ MAP_NAME = "register_map.toml"
 
 
 def write_run_files(run_dir: Path, config: StationConfig, plan: Plan,
-                    sim: dict[str, Any] | None) -> None:
+                    sim: JsonObject | None) -> None:
     """What a run directory holds before the first record of its journal: a register
     map the profile names as a file is copied in (MAP_NAME) and the run's config
     names the copy, so the run resumes and rolls back as it ran whatever becomes of

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 from orthocal import AXES
 from station.record.journal import (
@@ -51,6 +50,7 @@ from station.record.journal_events import (
     Retake,
     Retry,
 )
+from station.record.result_base import JsonObject
 
 Fit = Identification | Verification
 
@@ -91,7 +91,7 @@ class GuardTally:
     """What the plunger guard did in every session (the result's ``plunger_guard``)."""
 
     stops: int = 0  # times it stopped the axes
-    recovered: list[dict[str, Any]] = field(default_factory=list)  # each way back
+    recovered: list[JsonObject] = field(default_factory=list)  # each way back
     retakes: int = 0  # cycles taken again after a knocked stand
     refused: int = 0  # moves refused before they started
 
