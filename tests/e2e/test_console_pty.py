@@ -101,7 +101,9 @@ def test_prompts_never_share_a_line_with_the_live_bar(tmp_path: Path) -> None:
     # written again rather than left: docs/design.md, "Closed loop")
     writes = raw.count(b"[y/N]")
     assert writes >= 1  # the write-back question
-    assert raw.count(b"Press Enter when done") == 3 * (1 + writes)
+    # three mountings a round, less the one each later round keeps on from the round
+    # before (station.engine.kept), unless the write-back's shift made it re-mount
+    assert 3 + 2 * writes <= raw.count(b"Press Enter when done") <= 3 * (1 + writes)
     assert "left" in text  # the live bar with its time estimate was on screen
     assert "\x1b[" in text  # ... drawn as a live display, not plain lines
     for needle in (b"measurement, setup", b"verification, setup", b"Press Enter",

@@ -60,6 +60,10 @@ def lost_readings(records: list[dict[str, Any]], readings: int) -> int:
     journal does not hold in full (every mounted gauge, ``readings`` values)."""
     names = {(r["phase"], r["setup"]): list(r["indicators"]) for r in records
              if r["type"] == "setup"}
+    # a setup whose gauges were left on from the round before is journaled as kept
+    names |= {(e["phase"], e["setup"]): list(e["indicators"]) for r in records
+              if r["type"] == "event" and (e := r["event"])["event"] == "mount-kept"
+              and e["kept"]}
     have = {(r["stop"], r["indicator"]) for r in records
             if r["type"] == "reading" and len(r["values"]) == readings}
     lost = 0

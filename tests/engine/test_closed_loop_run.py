@@ -77,6 +77,12 @@ def test_a_first_round_that_leaves_more_than_converge_mm_takes_a_second(tmp_path
     # last round's uncertainty; what is left is no more than that round resolves
     assert_truth(result, drho(true))
     assert result["remaining"]["estimate"] == {n: its[-1]["identified"][n] for n in drho(true)}
+    # what the verification wrote is its look joined with the rounds before
+    # (iterations[1].joined), the offsets before it minus the joined Δρ̂ (1 µm counts)
+    before, after = its[0]["offsets_written"], its[1]["offsets_written"]
+    for a in "xyz":
+        assert after[a] == pytest.approx(
+            before[a] - its[1]["joined"]["drho_mm"][f"drho_{a}"], abs=5e-4 + 1e-6)
     for a in "xyz":
         name = f"drho_{a}"
         assert result["offsets_written"][a] == pytest.approx(

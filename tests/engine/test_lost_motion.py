@@ -207,7 +207,7 @@ def test_a_square_machine_with_lost_motion_keeps_square_and_its_offsets(tmp_path
 def test_real_tilts_come_out_through_lost_motion(tmp_path: Path) -> None:
     tilt = (0.3, -0.2, 0.25)
     result = run(tmp_path, backlash=BACKLASH_MM, true_tilt=tilt,
-                 procedure={**FAST, "cycles": 3, "model": "rho+tilt", "max_extra_passes": 1})
+                 procedure={**FAST, "cycles": 3, "model": "rho+tilt", "max_extra_passes": 2})
     # the run's statement of the tilts (pooled over its rounds: the first alone also
     # carries the stands' bias, with lost motion or without)
     stated = result["accuracy"]["tilts"]
@@ -217,8 +217,10 @@ def test_real_tilts_come_out_through_lost_motion(tmp_path: Path) -> None:
     # the truth within the run's own statement (the correction plus what the last
     # verification found left). The engine on the fakes steps its own clock and the
     # plunger guard polls once per move, so this seed reads the same every run: it
-    # converges, after a second write-back and a verification measured twice, and the
-    # drive then holds the truth within 3 µm.
+    # converges, after a second write-back and a verification measured again (up to
+    # twice: a round that keeps the last setup's gauges on shares that setup's stands
+    # with the round before, so fewer independent stands average), and the drive then
+    # holds the truth within 3 µm.
     assert_truth(result, drho(TRUE))
     assert result["converged"] is True, result["message"]
     np.testing.assert_allclose(held(result), TRUE, atol=0.003)

@@ -493,8 +493,4 @@ def test_a_verification_s_correction_is_the_one_its_verdict_and_write_rest_on() 
     line = next(ln for ln in report.summary_text(result).splitlines()
                 if ln.strip().startswith("verification 1"))
     assert f"correction max {report.fmt(1000 * joined, 2)} µm, rounds joined" in line
-    # written next: the offsets before it minus the joined Δρ̂ (1 µm counts)
-    before, after = result["iterations"][0]["offsets_written"], it["offsets_written"]
-    for a in "xyz":
-        assert after[a] == pytest.approx(before[a] - it["joined"]["drho_mm"][f"drho_{a}"],
-                                         abs=5e-4 + 1e-6)
+    # that the offsets written next are the joined one: engine/test_closed_loop_run
