@@ -1,6 +1,7 @@
 """How many cycles a mounting takes: the planned ones, and in a verification as many as
 the verdict it must give needs, up to [procedure] max_cycles_in_mounting (docs/design.md,
-"Closed loop")."""
+"Closed loop"). A further pass of the first measurement ("m+1"…) is one: the first
+pass found nothing to write, so the round must now show the machine converged."""
 
 from __future__ import annotations
 
@@ -27,9 +28,9 @@ class VerificationSizing:
 
     def cycle_limit(self, phase: str) -> int:
         """Cycles a mounting may take in ``phase``: the planned ones, and in a
-        verification up to [procedure] max_cycles_in_mounting."""
+        verification (:func:`verifies`) up to [procedure] max_cycles_in_mounting."""
         proc = self.config.procedure
-        if not phase.startswith("v"):
+        if not verifies(phase):
             return proc.cycles
         most = proc.max_cycles_in_mounting or proc.cycles * (1 + proc.max_extra_passes)
         return max(proc.cycles, most)
@@ -43,7 +44,7 @@ class VerificationSizing:
         longer its larger part on any axis still short of it: the stands set by eye
         are the rest, and only another mounting averages them
         (orthocal.design.drho_error_parts). Every other phase: always."""
-        if not phase.startswith("v"):
+        if not verifies(phase):
             return True
         se = cycle_std_error(cycles)
         if self.expected is None or not math.isfinite(se) or se <= 0.0:
@@ -81,3 +82,12 @@ class VerificationSizing:
     def _limit(self) -> float:
         return converge_limit(self.config.procedure.converge_mm,
                               self.controller.offset_resolution_mm())
+
+
+def verifies(phase: str) -> bool:
+    """Whether a pass of ``phase`` must give a verification's verdict: every pass of a
+    verification ("v", "v2+1"), and a further pass of the first measurement ("m+1"),
+    taken because its first pass found no correction to write: the round must now
+    show the machine within converge_mm. The first pass itself: a new mounting is
+    what averages the stands' placement there, and its correction is usually large."""
+    return phase.startswith("v") or "+" in phase

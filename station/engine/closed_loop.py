@@ -28,6 +28,16 @@ the round is measured again, a further pass of the same verification pooled with
 then shows as significant and is written, a machine within converge_mm shows as
 converged. Still undecided, the loop ends "not-converged", saying why.
 
+A first measurement that finds nothing to write is itself the verification of a
+machine already calibrated (a recheck), and is sized like one: its further passes
+("m+1", "m+2"…) take more cycles on the mounted gauges as a verification's do, and it
+may take the passes the rounds it did not need would have taken
+(:func:`extra_passes_allowed`), never more mountings than the run's "most"
+(:func:`mountings_expected`). On a tilted machine with stands set by eye one pass
+cannot show a joint within converge_mm at 95 % (the stands' placement alone makes
+about a micrometre of each Δρ's standard error, and only another mounting averages
+it): ending there "not converged" would call a good machine bad.
+
 States (``len(verdicts)``, ``len(writes)``):
 
     (0, 0)          → measure "m"
@@ -38,6 +48,7 @@ States (``len(verdicts)``, ``len(writes)``):
                         significant, max reached → finish "max_iterations"
                         converged → finish "converged"
                         suspected/unproven, passes left → the round's next pass
+                          (extra_passes_allowed: the first round's are more)
                         suspected/unproven, none left → finish "not-converged"
     (k, k)          → the k-th write's outcome:
                         written and verify → measure the verification of round k
@@ -126,7 +137,8 @@ def next_step(state: LoopState) -> Step:
         if verdict == "converged":
             return Step("finish", reason="converged")
         if verdict in ("suspected", "unproven"):
-            if state.extra[-1] < state.max_extra_passes:
+            if state.extra[-1] < extra_passes_allowed(k - 1, state.max_extra_passes,
+                                                      state.max_iterations, state.verify):
                 extra = state.extra[-1] + 1
                 return Step("measure", phase=phase_of(k - 1, extra), extra=extra)
             return Step("finish", reason="not-converged")
@@ -143,6 +155,20 @@ def next_step(state: LoopState) -> Step:
     raise AssertionError(f"inconsistent loop state: {k} measurements, {w} write-backs")
 
 
+def extra_passes_allowed(measurement: int, max_extra_passes: int, max_iterations: int,
+                         verify: bool = True) -> int:
+    """How many further passes the ``measurement``-th round (0-based) may take while
+    undecided: ``max_extra_passes`` for a verification; for the first measurement,
+    which has written nothing, also the passes of the verifications it did not need,
+    ``(1 + max_extra_passes) · (1 + max_iterations) − 1`` (verify off: no
+    verifications, ``max_extra_passes``): the mountings stay within
+    :func:`mountings_expected`'s ``most``, and a recheck of a calibrated machine has
+    the data a calibration's verifications would have had to show it converged."""
+    if measurement > 0 or not verify:
+        return max_extra_passes
+    return (1 + max_extra_passes) * (1 + max_iterations) - 1
+
+
 def mountings_expected(setups: int, max_iterations: int, max_extra_passes: int,
                        verify: bool = True) -> dict[str, int]:
     """How many times the operator mounts the gauges, from the flow above: every
@@ -150,12 +176,15 @@ def mountings_expected(setups: int, max_iterations: int, max_extra_passes: int,
     after the very first starts with the gauges its pass before ended with, still on
     (station.engine.kept).
 
-    ``fewest``: the first measurement alone (a machine within tolerance, nothing
-    written). ``usual``: one write-back and its verification, each decided in one
+    ``fewest``: the first measurement alone, decided in one pass (a machine within
+    tolerance, nothing written; a recheck that needs further passes to show it takes
+    two more mountings each). ``usual``: one write-back and its verification, each decided in one
     pass. ``per_write_back``: what each write-back and its verification add.
     ``most``: every round up to ``max_iterations`` write-backs, each measurement
-    taking all its ``max_extra_passes``. A retake, a resume (it mounts afresh) or a
-    kept mounting the plan check refuses after a write-back adds its own beyond these."""
+    taking all its ``max_extra_passes``; as many as a first measurement that writes
+    nothing may take in passes (:func:`extra_passes_allowed`). A retake, a resume (it
+    mounts afresh) or a kept mounting the plan check refuses after a write-back adds its
+    own beyond these."""
     passes = 1 + max_extra_passes
     rounds = max_iterations if verify else 0
     each = max(setups - 1, 0)

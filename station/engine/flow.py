@@ -31,7 +31,7 @@ from station.analysis.statistics import Measurement, pooled
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine import results
-from station.engine.closed_loop import round_phase
+from station.engine.closed_loop import extra_passes_allowed, round_phase
 from station.engine.devices import Devices
 from station.engine.replay import RoundFit, Steps
 from station.engine.sequencer import Sequencer
@@ -180,7 +180,8 @@ class Flow:
         joined = self._joined(n, ident)
         judged = verdict.judge(ident, prev, proc.converge_mm,
                                verdict.converge_limit(proc.converge_mm, count), self.target,
-                               passes_left=len(passes) - 1 < proc.max_extra_passes,
+                               passes_left=len(passes) - 1 < extra_passes_allowed(
+                                   n, proc.max_extra_passes, proc.max_iterations, proc.verify),
                                joined=joined if n else None)
         sig = judged.significant
         entry = fields.iteration(phase, judged)

@@ -18,7 +18,14 @@ from orthocal.loop import (
     predicted_after_correction,
     significant_corrections,
 )
-from station.engine.closed_loop import LoopState, Step, next_step, phase_of
+from station.engine.closed_loop import (
+    LoopState,
+    Step,
+    extra_passes_allowed,
+    mountings_expected,
+    next_step,
+    phase_of,
+)
 
 G = Geometry()
 KEYS = [(s, i, j) for i in "xyz" for s in "+-" for j in "xyz" if j != i]
@@ -316,9 +323,28 @@ def test_a_first_measurement_writes_only_what_stands_out_of_its_noise() -> None:
     steps = walk_verdicts(1, ["suspected", "significant", "converged"])
     assert [(s.kind, s.phase or s.round) for s in steps[:-1]] == [
         ("measure", "m"), ("measure", "m+1"), ("write", 1), ("measure", "v")]
-    # never decided: not converged, and nothing written
-    steps = walk_verdicts(1, ["unproven", "unproven"])
+    # never decided: a recheck takes the passes of the verifications it did not need,
+    # (1 + 1 extra) × (1 + 3 write-backs) = 8 in all, then ends not converged, nothing
+    # written
+    steps = walk_verdicts(1, ["unproven"] * 8)
+    assert [s.phase for s in steps if s.kind == "measure"] == \
+        ["m", *(f"m+{i}" for i in range(1, 8))]
     assert steps[-1].reason == "not-converged" and not any(s.kind == "write" for s in steps)
+    # its operator mounts no more than the run's "most": 3 + 7 passes × 2 kept after the
+    # first = 17 for 3 setups, max_extra_passes 1 and 3 write-backs
+    assert mountings_expected(3, 3, 1)["most"] == 3 + 7 * 2
+    # a verification keeps max_extra_passes: v, v+1, then not converged
+    steps = walk_verdicts(1, ["significant", "unproven", "unproven"])
+    assert [s.phase for s in steps if s.kind == "measure"] == ["m", "v", "v+1"]
+    assert steps[-1].reason == "not-converged"
+
+
+def test_a_first_measurement_without_verifications_keeps_max_extra_passes() -> None:
+    # with verify off there are no verifications whose passes it could take
+    assert extra_passes_allowed(0, 2, 3, verify=False) == 2
+    assert extra_passes_allowed(0, 2, 3, verify=True) == 11
+    assert extra_passes_allowed(1, 2, 3, verify=True) == 2
+    assert extra_passes_allowed(0, 0, 1, verify=True) == 1
 
 
 def test_a_verification_joins_the_round_before_it_moved_by_what_was_written() -> None:
