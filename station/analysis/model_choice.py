@@ -5,12 +5,14 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import orthocal
 from orthocal.covariance import with_measured_noise
+from orthocal.measurement import Key
 from orthocal.noise import noise_from_cycles, noise_from_readings
 from orthocal.postures import MIDDLE, split_plane
-from orthocal.selection import CANDIDATES, LEVEL, lack_of_fit
+from orthocal.selection import CANDIDATES, LEVEL, ModelTest, lack_of_fit
 from station.analysis.statistics import Measurement
 from station.config import StationConfig
 from station.errors import RunFailed
@@ -115,12 +117,59 @@ def identify_measurement(config: StationConfig, m: Measurement,
     if noise is not None and selection is not None:
         # the statement's inflation: the misfit beyond the noise alone
         test = lack_of_fit(ident, geometry, noise[0], noise[1])
+    if noise is not None and test is not None and _rejected(test):
+        ident, test = measured_form(config, data, ident, noise, stands, test)
     if noise is not None:
         inflate = 1.0
-        if (test is not None and test.F is not None and test.p_value is not None
-                and test.p_value < LEVEL and test.F > 1.0):  # rejected
-            inflate = math.sqrt(test.F)
+        if test is not None and _rejected(test):
+            inflate = math.sqrt(test.F or 1.0)
         ident = with_measured_noise(ident, geometry, noise[0], inflate=inflate,
                                     noise_dof=noise[1])
     return ident, selection
 
+
+def _rejected(test: ModelTest) -> bool:
+    """Whether the plain lack-of-fit test rejects the model: a misfit beyond the noise."""
+    return (test.F is not None and test.p_value is not None and test.p_value < LEVEL
+            and test.F > 1.0)
+
+
+def form_identifiable(model: str, keys: Iterable[Key], geometry: orthocal.Geometry) -> bool:
+    """Whether ``model`` with one bow per gauge plane beside it is identifiable from the
+    distinct deviations ``keys`` (docs/model.md, "Leg form in the loop"): yes for rho at
+    the legs' middles, never where tilts are kept there (a uniform bow is a tilt)."""
+    from orthocal import design
+
+    distinct = list(dict.fromkeys(keys))
+    q = design.quality(distinct, geometry, model + orthocal.FORM)
+    return q.rank == len(q.names)
+
+
+def measured_form(config: StationConfig, data, ident: orthocal.Identification,
+                  noise: tuple[float, float, str], stands: orthocal.Stands | None,
+                  test: ModelTest) -> tuple[orthocal.Identification, ModelTest]:
+    """Where ``ident``'s model leaves a misfit beyond the noise that the stated leg
+    form excuses (the test with [uncertainty]'s allowance passes) and the bows can be
+    told apart from the model's parameters on these stops, the bows fitted beside it:
+    the identification and its plain lack-of-fit test (``test``: ``ident``'s). A bow is a systematic
+    error of the same shape in every round, so counted as a scatter it inflates every
+    standard error by √F, which no cycle shrinks, and leaves Δρ off by 0.43·h (rho,
+    docs/model.md); fitted, Δρ is free of it and its error is the noise's. Otherwise
+    ``ident`` and ``test`` unchanged."""
+    from station.analysis.run_budget import allowance
+
+    geometry = config.machine.geometry()
+    model = ident.model
+    if model.endswith(orthocal.FORM) or not form_identifiable(model, data, geometry):
+        return ident, test
+    excused = lack_of_fit(ident, geometry, noise[0], noise[1], allowance=allowance(config))
+    if excused.p_value is None or excused.p_value < LEVEL:
+        return ident, test  # more than the stated form can make: not the form
+    proc = config.procedure
+    try:
+        fitted = orthocal.identify(data, geometry, model=model + orthocal.FORM,
+                                   method=proc.method, sigma=noise[0] if stands else None,
+                                   stands=stands)
+    except orthocal.IdentificationError:
+        return ident, test
+    return fitted, lack_of_fit(fitted, geometry, noise[0], noise[1])
