@@ -9,9 +9,9 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from orthocal import AXES
 from station.plan.guard import Gauge, MoveRecord
 
-AXES = ("x", "y", "z")
 # Below this an axis did not move (mm): a count or two of the drive.
 STILL_MM = 0.002
 # A move whose nominal travel spans at least this tells a reversed gauge from its

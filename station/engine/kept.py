@@ -29,6 +29,7 @@ from typing import Protocol, TypedDict
 import numpy as np
 
 from drivers.base import AxisReadout, ZeroOffsets
+from orthocal import AXES
 from station.config import StationConfig
 from station.console.operator import Windows
 from station.errors import BadInput
@@ -149,7 +150,7 @@ class Keeper:
         if offsets is None:  # put on before any write-back: the run's own offsets
             first = next(iter(state.writebacks.get(1, {}).values()), None)
             if isinstance(first, (WritebackBackup, WritebackIntent, WritebackDone)):
-                offsets = [first.before[a] for a in "xyz"]
+                offsets = [first.before[a] for a in AXES]
         return Mounting(setup, dict(on.indicators),
                         self._offsets() if offsets is None else np.asarray(offsets, float),
                         dict(on.shift))

@@ -9,13 +9,12 @@ import json
 from collections.abc import Mapping
 from pathlib import Path
 
+from orthocal import AXES
 from station import report
 from station.errors import say
-from station.record.migrate import migrate
-from station.record.result import RunResult
+from station.record import io
+from station.record.result import RolledBack, RunResult
 from station.record.run_dir import now_iso
-
-AXES = ("x", "y", "z")
 
 
 def change_text(before: Mapping[str, float], after: Mapping[str, float]) -> str:
@@ -36,12 +35,11 @@ def record_rollback(run_dir: Path, replaced: Mapping[str, float],
     if not path.exists():
         return None
     try:
-        doc = migrate(json.loads(path.read_text(encoding="utf-8")))
-        doc["rolled_back"] = {"at": now_iso(), "replaced": dict(replaced),
-                              "restored": dict(restored)}
-        doc["offsets_final"] = dict(restored)
-        report.write_result(doc, run_dir)
-        record = report.as_result(doc)
+        record = report.as_result(json.loads(path.read_text(encoding="utf-8")))
+        record.rolled_back = RolledBack(at=now_iso(), replaced=dict(replaced),
+                                        restored=dict(restored))
+        record.offsets_final = dict(restored)
+        io.write_result(record, run_dir)  # validated as it is written
     except (OSError, ValueError) as exc:  # ValueError: JSON or the record's validation
         say(f"orthocal: {path} does not record the rollback ({type(exc).__name__}: {exc})")
         return None
