@@ -106,9 +106,9 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
     except BadInput:
         _finish(ctx, seq, result, "failed", "refused by a runtime check", final=False)
         raise
-    _finish(ctx, seq, result, result.status, result.message, final=True)
     # the record as written (validated, in result.json's order), for the caller
-    return (0 if result.status == "ok" else 1), io.validated(result)
+    record = _finish(ctx, seq, result, result.status, result.message, final=True)
+    return (0 if record.status == "ok" else 1), record
 
 
 def measured_setups(plan: Plan, state: RunState, cycles: int) -> list[Setup]:
@@ -154,7 +154,9 @@ def _since_last(ctx: Run, result: RunResult) -> None:
 
 
 def _finish(ctx: Run, seq: Sequencer, result: RunResult, status: Status,
-            message: str | None, final: bool) -> None:
+            message: str | None, final: bool) -> RunResult:
+    """The run's end, however it ends: its facts into ``result``, result.json and
+    report.html written. The record as result.json holds it, validated once here."""
     result.status, result.message = status, message
     result.finished = now_iso()
     wall = time.monotonic() - ctx.t0
@@ -182,15 +184,17 @@ def _finish(ctx: Run, seq: Sequencer, result: RunResult, status: Status,
             ctx.journal.flush()
         except Exception:
             pass
+    record = io.validated(result)
     try:
-        io.write_result(result, ctx.run_dir)
+        io.write_result(record, ctx.run_dir)
     except OSError as exc:  # a full disk: the journal holds the run; say so and go on
         say(f"orthocal: result.json not written ({storage_message(ctx.run_dir, exc)})")
-        return
+        return record
     from station import report
 
     try:
-        report.write_html(io.validated(result), ctx.run_dir,
+        report.write_html(record, ctx.run_dir,
                           figures=ctx.config.report.figures)
     except Exception as exc:  # the report is a view; result.json and the journal are the record
         say(f"orthocal: report.html not written ({type(exc).__name__}: {exc})")
+    return record
