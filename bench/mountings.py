@@ -17,6 +17,9 @@ measured on the code before (9 mountings for two write-backs; 30 with a second p
     python bench/mountings.py --in-mounting 3     # without more cycles per mounting
     python bench/mountings.py --drive-profile cosine --runs 3   # a held-out controller
     python bench/mountings.py --second-plane --runs 2   # [[setups]] at 0.75 as well
+    python bench/mountings.py --recheck --runs 3  # then each machine again: writes nothing
+    python bench/mountings.py --recheck --runs 3 --seed 7 --tilt 0.2,0.1,-0.15 \\
+        --gap 0.15,-0.10,0.12 --stated 0.002    # the held-out machine, then again
 """
 
 from __future__ import annotations
@@ -43,27 +46,43 @@ BEFORE = {"1 µm": [(9, 2)] * 6, "held-out cosine drive": [(9, 2), (6, 1), (9, 2
           "second plane": [(30, 2)]}
 
 
-def one_run(seed: int, noise: float, in_mounting: int | None, out: Path,
-            drive_profile: str | None = None, second_plane: bool = False) -> dict[str, Any]:
-    procedure = None if in_mounting is None else {"max_cycles_in_mounting": in_mounting}
+def one_run(seed: int, args: argparse.Namespace, out: Path,
+            true_drho: tuple[float, float, float] | None = None) -> dict[str, Any]:
+    """One whole simulated calibration of the machine ``args`` describe (``true_drho``:
+    its joints' error instead of the seed's)."""
+    procedure = None if args.in_mounting is None else \
+        {"max_cycles_in_mounting": args.in_mounting}
 
     def hook(station: Any) -> None:
         config = station.config
         if procedure is not None:  # what a user writes in the config's [procedure]
             station.config = lambda: {**config(), "procedure": {
                 **config().get("procedure", {}), **procedure}}
-        if second_plane:  # each setup again at three quarters of its leg
+        if args.stated is not None:  # the config's [uncertainty]
+            stated = station.config
+            station.config = lambda: {**stated(), "uncertainty": {
+                "leg_straightness_mm": args.stated}}
+        if args.second_plane:  # each setup again at three quarters of its leg
             setups = station.config
             station.config = lambda: {**setups(), "setups": [
                 *setups()["setups"], *({**x, "at": 0.75} for x in setups()["setups"])]}
 
     # A drive of its own timing (the station is told nothing of it): a held-out controller.
-    drive = DriveOptions(profile=drive_profile)
-    options = RunOptions(sim=SimOptions(seed=seed, noise=noise, station_hook=hook, drive=drive),
+    drive = DriveOptions(profile=args.drive_profile)
+    options = RunOptions(sim=SimOptions(seed=seed, noise=args.noise, station_hook=hook,
+                                        drive=drive, true_drho=true_drho, true_gap=args.gap,
+                                        true_tilt=_triple(args.tilt)),
                          out=out, yes=True, json=True)
     code, result = run_json(options)
     result["exit_code"] = code
     return result
+
+
+def _triple(text: str | None) -> tuple[float, float, float] | None:
+    if text is None:
+        return None
+    x, y, z = (float(v) for v in text.split(","))
+    return x, y, z
 
 
 def judge(result: dict[str, Any], mount_s: float, first: int = 3) -> dict[str, Any]:
@@ -82,6 +101,19 @@ def judge(result: dict[str, Any], mount_s: float, first: int = 3) -> dict[str, A
     }
 
 
+def recheck(args: argparse.Namespace, seed: int, out: Path, first: dict[str, Any]) -> str:
+    """The machine ``first`` calibrated, run again: its joints' error is now what the
+    offsets written left (true Δρ + offsets), as a shop's periodic check finds it."""
+    x, y, z = (first["simulation"]["true_drho"][a] + first["offsets_final"][a]
+               - first["offsets_before"][a] for a in AXES)
+    again = one_run(seed, args, out, true_drho=(x, y, z))
+    changed = max(abs(again["offsets_final"][a] - again["offsets_before"][a]) for a in AXES)
+    return (f"recheck: {again['loop']['stopped']} (exit {again['exit_code']}), "
+            f"{again['loop']['write_backs']} write-back(s), offsets changed by "
+            f"{1000 * changed:.1f} µm, {again['timing']['mountings']} mountings, "
+            f"{len(again['iterations'][0].get('passes') or ['m'])} pass(es)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=5)
@@ -95,6 +127,13 @@ def main() -> None:
                         help="the operator's time per mounting, s")
     parser.add_argument("--second-plane", action="store_true",
                         help="every setup again at 0.75 of its leg ([[setups]] at)")
+    parser.add_argument("--tilt", default=None, help="the axes' tilts X,Y,Z, mrad")
+    parser.add_argument("--gap", default=None, help="the axes' gaps XY,XZ,YZ, mm")
+    parser.add_argument("--stated", type=float, default=None,
+                        help="[uncertainty] leg_straightness_mm (default: the assumed)")
+    parser.add_argument("--recheck", action="store_true",
+                        help="then run the same machine again from the offsets it was left "
+                             "with (run --offsets-from): it should write nothing")
     args = parser.parse_args()
     for name, runs in BEFORE.items():
         print(f"before, {name}: " + ", ".join(f"{m} mountings for {w} write-back(s) "
@@ -107,14 +146,15 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory(prefix="orthocal-mount-") as tmp:
         for k in range(args.runs):
-            r = judge(one_run(args.seed + k, args.noise, args.in_mounting, Path(tmp),
-                              args.drive_profile, args.second_plane),
-                      args.mount_s, 6 if args.second_plane else 3)
+            first = one_run(args.seed + k, args, Path(tmp))
+            r = judge(first, args.mount_s, 6 if args.second_plane else 3)
             rows.append(r)
             print(f"  seed {args.seed + k}: {r['stopped']}, {r['write_backs']} write-back(s), "
                   f"{r['mountings']} mountings (bound {r['bound']}), offsets leave "
                   f"≤ {r['left_um']:.1f} µm, machine {r['wall_s']:.0f} s, whole "
                   f"calibration {r['whole_s'] / 60:.1f} min")
+            if args.recheck:
+                print("    " + recheck(args, args.seed + k, Path(tmp), first))
     mounts = [r["mountings"] for r in rows]
     print(f"mountings: mean {np.mean(mounts):.1f}, max {max(mounts)}; within the bound in "
           f"{sum(r['mountings'] <= r['bound'] for r in rows)} of {len(rows)}; converged in "
