@@ -38,7 +38,9 @@ from orthocal.loop import FALSE_ALARM
 from orthocal.numbers import finite
 from orthocal.tool_interval import after_interval, assumes
 from station.config import StationConfig
+from station.record import result_accuracy as rec
 from station.record.result_accuracy import SquarenessDecision
+from station.record.result_base import Interval, Params
 
 #: Grid nodes per axis of the workspace box (docs/model.md's check values use 7³).
 GRID_POINTS = 7
@@ -212,8 +214,13 @@ def tool_target(config: StationConfig, layout: Layout | None, points: np.ndarray
     return {n: float(v) for n, v in zip(DRHO, best.offsets, strict=True)}
 
 
-def _stats(field: ErrorField) -> dict[str, float]:
-    return {"rms_mm": float(field.rms_mm), "max_mm": float(field.max_mm)}
+def _stats(field: ErrorField) -> rec.ErrorStats:
+    return rec.ErrorStats(rms_mm=float(field.rms_mm), max_mm=float(field.max_mm))
+
+
+def _known(values: Mapping[str, float]) -> Params:
+    """A per-name map as the record holds it: NaN and infinities as null."""
+    return {n: finite(v) for n, v in values.items()}
 
 
 def covariance(now_cov: np.ndarray | None, layout: Layout | None,
@@ -233,11 +240,11 @@ def covariance(now_cov: np.ndarray | None, layout: Layout | None,
     return cov
 
 
-def _interval(layout: Layout, names: Sequence[str]) -> dict[str, list[float]] | None:
+def _interval(layout: Layout, names: Sequence[str]) -> dict[str, Interval] | None:
     """The 95 % intervals of the layout's ``names`` it holds."""
     k = orthocal.coverage_factor(layout.dof)
     se = np.sqrt(np.maximum(np.diag(layout.covariance), 0.0))
-    out = {n: [float(v - k * e), float(v + k * e)]
+    out = {n: (float(v - k * e), float(v + k * e))
            for n, v, e in zip(layout.names, layout.values, se, strict=True) if n in names}
     return out or None
 
@@ -260,7 +267,7 @@ def statement(config: StationConfig, limits: Limits | None, *,
               drho_now_cov: np.ndarray | None, dof: float | None, layout: Layout | None,
               model: str, in_model: Sequence[str], offsets_before: Mapping[str, float] | None,
               target_tool: Mapping[str, float], form: tuple[np.ndarray, str] | None = None
-              ) -> dict[str, object]:
+              ) -> rec.Accuracy:
     """The run JSON's ``accuracy`` (docs/design.md): before and after over the workspace
     with 95 % intervals for the after-figures, both objectives' predicted after-
     figures side by side, squareness and the gaps with what to do, what it all
@@ -280,14 +287,15 @@ def statement(config: StationConfig, limits: Limits | None, *,
     after = after_interval(params(drho_now, lay_v), with_form, dof, zero, points, geometry,
                            frame)
     # Each objective's offsets written exactly: the machine's Δρ at its target.
-    objectives = {}
+    objectives: dict[str, rec.ObjectiveFigures] = {}
     for name, target in (("joints", dict.fromkeys(DRHO, 0.0)), ("tool", target_tool)):
         fld = error_field(points, geometry, params(target, lay_v), zero, frame)
-        registers = None if offsets_before is None else {
+        registers = None if offsets_before is None else _known({
             a: float(offsets_before[a]) - (float(drho_start[f"drho_{a}"])
-                                           - float(target[f"drho_{a}"])) for a in AXES}
-        objectives[name] = {"after": _stats(fld), "offsets_mm": registers,
-                            "target_drho_mm": {n: float(target[n]) for n in DRHO}}
+                                           - float(target[f"drho_{a}"])) for a in AXES})
+        objectives[name] = rec.ObjectiveFigures(
+            after=_stats(fld), offsets_mm=registers,
+            target_drho_mm=_known({n: float(target[n]) for n in DRHO}))
     # what no offsets can reach: the best offsets for the layout, Δρ then nothing
     best = error_field(points, geometry, params(tool_target(config, layout, points), lay_v),
                        zero, frame)
@@ -310,33 +318,47 @@ def statement(config: StationConfig, limits: Limits | None, *,
     rail = config.machine.rho_max - config.machine.rho_min
     decision = squareness_decision(layout, tilts_in_model)
     gap_decision = squareness_decision(layout, gaps_in_model)
-    return {
-        "workspace_mm": config.machine.workspace_box(),
-        "grid": {"points_per_axis": GRID_POINTS, "points": len(points),
-                 "excluded": int(g.excluded)},
-        "frame": frame, "objective": chosen,
-        "before": _stats(before),
-        "after": after.to_dict(),
-        "after_method": after.method,
-        "objectives": objectives,
-        "alternative": {"objective": other, **objectives[other]},
-        "best_offsets_can_do": _stats(best),
-        "squareness_mm_per_m": sq_values,
-        "squareness_std_errors": sq_se,
-        "squareness_decision": None if decision is None else decision.model_dump(),
-        "squareness_advice": squareness_advice(layout, rail, decision),
-        "tilts": None if layout is None else layout.as_dict(),
-        "tilt_std_errors": None if layout is None else layout.std_errors(),
-        "tilt_interval_95": tilt_interval,
-        "gaps": None if layout is None else layout.gaps(),
-        "gap_std_errors": None if layout is None else layout.gap_std_errors(),
-        "gap_interval_95": None if layout is None else _interval(layout, GAP_NAMES),
-        "gap_advice": gap_advice(layout, gap_decision),
-        "field": {"points_mm": np.round(points, 4).tolist(),
-                  "before_mm": np.round(before.field, 6).tolist(),
-                  "after_mm": np.round(after.field.field, 6).tolist()},
-        "assumes": words,
-    }
+    return rec.Accuracy(
+        workspace_mm=[(lo, hi) for lo, hi in config.machine.workspace_box()],
+        grid=rec.Grid(points_per_axis=GRID_POINTS, points=len(points), excluded=int(g.excluded)),
+        frame=frame, objective=chosen,
+        before=_stats(before),
+        after=rec.AfterInterval(rms_mm=float(after.rms_mm), max_mm=float(after.max_mm),
+                                rms_interval_95_mm=_pair(after.rms_interval_mm),
+                                max_interval_95_mm=_pair(after.max_interval_mm)),
+        after_method=after.method,
+        objectives=rec.Objectives(joints=objectives["joints"], tool=objectives["tool"]),
+        alternative=rec.Alternative(objective=other, after=objectives[other].after,
+                                    offsets_mm=objectives[other].offsets_mm,
+                                    target_drho_mm=objectives[other].target_drho_mm),
+        best_offsets_can_do=_stats(best),
+        squareness_mm_per_m=_known(sq_values),
+        squareness_std_errors=_known(sq_se),
+        squareness_decision=decision,
+        squareness_advice=squareness_advice(layout, rail, decision),
+        tilts=None if layout is None else _known(layout.as_dict()),
+        tilt_std_errors=None if layout is None else _known(layout.std_errors()),
+        tilt_interval_95=tilt_interval,
+        gaps=None if layout is None else _maybe_known(layout.gaps()),
+        gap_std_errors=None if layout is None else _maybe_known(layout.gap_std_errors()),
+        gap_interval_95=None if layout is None else _interval(layout, GAP_NAMES),
+        gap_advice=gap_advice(layout, gap_decision),
+        field=rec.ErrorField(points_mm=np.round(points, 4).tolist(),
+                             before_mm=np.round(before.field, 6).tolist(),
+                             after_mm=np.round(after.field.field, 6).tolist()),
+        # put into the controller: stated by station.analysis.compensated once this is
+        compensated=None,
+        assumes=words,
+    )
+
+
+def _pair(values: Sequence[float]) -> Interval:
+    lo, hi = values
+    return float(lo), float(hi)
+
+
+def _maybe_known(values: Mapping[str, float] | None) -> Params | None:
+    return None if values is None else _known(values)
 
 
 _LEANS = {"tilt_yx": ("y", "x"), "tilt_zx": ("z", "x"), "tilt_zy": ("z", "y")}

@@ -8,16 +8,24 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from typing import Literal
 
 import numpy as np
 
 import orthocal
 from orthocal import budget as gum
 from station.config import StationConfig
-from station.record.io import section
 from station.record.result import Remaining
-from station.record.result_base import NotStated
-from station.record.result_sections import BudgetInputs, StatedInput, UncertaintyBudget
+from station.record.result_base import NotStated, Params
+from station.record.result_sections import (
+    BudgetInputs,
+    BudgetSource,
+    Instrument,
+    StatedInput,
+    UncertaintyBudget,
+)
+
+Statement = Literal["remaining.total", "identified"]
 
 # Defaults where the config says nothing, each named in the budget as assumed.
 # A ground steel leg straight to 10 µm over its length: good practice, not a given.
@@ -115,8 +123,8 @@ def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.S
 
 
 def fields(config: StationConfig, ident: orthocal.Identification,
-           type_a_se: Mapping[str, float | None], type_a_dof: float | None, statement: str
-           ) -> dict[str, object] | None:
+           type_a_se: Mapping[str, float | None], type_a_dof: float | None, statement: Statement
+           ) -> UncertaintyBudget | NotStated | None:
     """The run JSON's ``uncertainty_budget`` for the Δρ of ``statement`` (where the
     run states them: "remaining.total" or "identified"), from the identification
     of the round that measured them; None where the model has no Δρ."""
@@ -127,14 +135,16 @@ def fields(config: StationConfig, ident: orthocal.Identification,
     try:
         srcs = sources(config, ident)
     except ValueError as exc:
-        return {"error": f"not stated: {exc}"}
+        return NotStated(error=f"not stated: {exc}")
     # the budget states the Δρ; the tilts and ΔL of the model are propagated too
     trimmed = [replace(s, contributions={n: s.contributions[n] for n in names})
                for s in srcs]
+    # orthocal's figures (JSON-ready, its pure maths) taken into the record's models here
     doc = gum.combine({n: float(v) for n, v in se.items()}, type_a_dof, trimmed)
+    found = [BudgetSource.model_validate(s) for s in doc["sources"]]
     # largest first; ties (to a nanometre: within another CPU's last bits) by name
-    doc["sources"] = [doc["sources"][0], *sorted(doc["sources"][1:], key=lambda s: (
-        -round(1e6 * max(v or 0.0 for v in s["contributions_mm"].values())), s["source"]))]
+    found = [found[0], *sorted(found[1:], key=lambda s: (
+        -round(1e6 * max(v or 0.0 for v in s.contributions_mm.values())), s.source))]
     given = inputs(config)
     alone = {"leg_straightness_mm": given.leg_straightness_mm,
              "temperature_change_c": given.temperature_change_c,
@@ -143,18 +153,27 @@ def fields(config: StationConfig, ident: orthocal.Identification,
     assumed += [f"mpe_mm of {n}: {v.value} ({v.assumed})"
                 for n, v in given.mpe_mm.items() if not v.given]
     # named by what identifies an instrument (its serial), not by its port
-    instruments = [{"name": g.name, "protocol": g.protocol, "serial": g.serial,
-                    "resolution_mm": g.resolution_mm,
-                    "mpe_mm": given.mpe_mm[g.name].value} for g in config.indicators]
-    return {"statement": statement, **doc, "inputs": given.model_dump(exclude_unset=True),
-            "assumed": assumed,
-            "instruments": instruments,
-            "method": ("GUM (JCGM 100:2008): each input through the sensitivity of the "
-                       "round's identification (stands and model included), combined in "
-                       "quadrature with the scatter, Welch-Satterthwaite dof, Student's "
-                       "k for 95 %; the legs' form as independent bows of each gauge "
-                       "plane (rectangular, ±straightness), the gauge MPE over the travel "
-                       "a deviation spans (0.2 mm, in proportion below)")}
+    instruments = [Instrument(name=g.name, protocol=g.protocol, serial=g.serial,
+                              resolution_mm=g.resolution_mm,
+                              mpe_mm=_number(given.mpe_mm[g.name])) for g in config.indicators]
+    return UncertaintyBudget(
+        statement=statement, sources=found, combined_mm=_params(doc["combined_mm"]),
+        effective_dof=_params(doc["effective_dof"]),
+        coverage_factor=_params(doc["coverage_factor"]),
+        expanded_95_mm=_params(doc["expanded_95_mm"]), inputs=given, assumed=assumed,
+        instruments=instruments,
+        method=("GUM (JCGM 100:2008): each input through the sensitivity of the "
+                "round's identification (stands and model included), combined in "
+                "quadrature with the scatter, Welch-Satterthwaite dof, Student's "
+                "k for 95 %; the legs' form as independent bows of each gauge "
+                "plane (rectangular, ±straightness), the gauge MPE over the travel "
+                "a deviation spans (0.2 mm, in proportion below)"))
+
+
+def _params(values: Mapping[str, float | None]) -> Params:
+    """A per-parameter map of orthocal's (infinite and NaN already null), as the
+    record's."""
+    return {n: None if v is None else float(v) for n, v in values.items()}
 
 
 def form_of_layout(config: StationConfig, ident: orthocal.Identification, names: Sequence[str]
@@ -206,12 +225,8 @@ def of_run(config: StationConfig, idents: list[orthocal.Identification],
     if not idents:
         return None
     if remaining is not None:
-        doc = fields(config, idents[-1], remaining.std_errors, remaining.std_errors_dof,
-                     "remaining.total")
-    else:
-        doc = fields(config, idents[-1], dict(idents[-1].std_errors),
-                     idents[-1].std_error_dof, "identified")
-    if doc is None:
-        return None
-    return section(NotStated, doc) if "error" in doc else section(UncertaintyBudget, doc)
+        return fields(config, idents[-1], remaining.std_errors, remaining.std_errors_dof,
+                      "remaining.total")
+    return fields(config, idents[-1], dict(idents[-1].std_errors),
+                  idents[-1].std_error_dof, "identified")
 

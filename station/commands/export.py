@@ -9,11 +9,14 @@ import argparse
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from drivers.files import write_atomic
 from station.commands.history import read_result
 from station.errors import BadInput
+
+if TYPE_CHECKING:
+    from station.record.result import RunResult
 
 #: LinuxCNC's HAL library, where ``HALFILE = LIB:name`` finds its file (Debian's path).
 HALLIB = "/usr/share/linuxcnc/hallib"
@@ -31,7 +34,7 @@ def _read_hal(ini: Path) -> Callable[[str], str | None]:
     return read
 
 
-def kinematics_export(args: argparse.Namespace, result: dict[str, Any]) -> int:
+def kinematics_export(args: argparse.Namespace, result: RunResult) -> int:
     """``export --to linuxcnc --kinematics``: the INI, the geometry's HAL file and the
     component's source, into the folder --out."""
     from importlib.resources import files

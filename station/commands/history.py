@@ -7,9 +7,12 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from station.errors import BadInput
+
+if TYPE_CHECKING:
+    from station.record.result import RunResult
 
 
 def _store(args: argparse.Namespace) -> Any:
@@ -151,28 +154,24 @@ def history_main(args: argparse.Namespace) -> int:
     return 0
 
 
-def read_result(run_dir: str) -> tuple[Path, dict[str, Any]]:
-    """RUN_DIR's result.json (of any version, as the current one: station.record.
-    migrate) and its path; bad input said in one line."""
-    from station.record.migrate import migrate
+def read_result(run_dir: str) -> tuple[Path, RunResult]:
+    """RUN_DIR's result.json (of any version, as the current one: station.record.io.
+    read_result) and its path; what cannot be read said in one line naming the file."""
+    from station.record.io import UnreadableResult
+    from station.record.io import read_result as read_record
 
     path = Path(run_dir) / "result.json"
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-        if not isinstance(doc, dict):
-            raise ValueError("not a JSON object")
-        return path, migrate(doc)
-    except OSError as exc:
-        raise BadInput(f"{path}: cannot read ({exc.strerror})") from None
-    except ValueError as exc:
-        raise BadInput(f"{path}: not a result document ({exc})") from None
+        return path, read_record(path)
+    except UnreadableResult as exc:
+        raise BadInput(str(exc)) from None
 
 
 def _entry_of_dir(run_dir: str) -> dict[str, Any]:
     from station.history.entry import entry_of, profile_of
 
     path, result = read_result(run_dir)
-    if not result.get("finished"):
+    if not result.finished:
         raise BadInput(f"{path}: the run has not finished")
     return entry_of(result, profile_of(Path(run_dir)))
 

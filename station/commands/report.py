@@ -13,8 +13,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pydantic import ValidationError
-
 from drivers.files import write_atomic
 from station.commands.history import read_result
 from station.errors import BadInput, RunFailed
@@ -23,11 +21,7 @@ from station.errors import BadInput, RunFailed
 def main(args: argparse.Namespace) -> int:
     from station import report
 
-    path, doc = read_result(args.run_dir)
-    try:
-        result = report.as_result(doc)
-    except ValidationError as exc:  # edited by hand, or another version's
-        raise BadInput(f"{path}: not a result document ({_first(exc)})") from None
+    path, result = read_result(args.run_dir)  # validated, or one line naming the file
     figures = not args.no_figures
     target = _target(args, path.parent, figures)
     existed = target.exists()
@@ -66,13 +60,3 @@ def _has_figures(page: Path) -> bool:
         return "<svg" in page.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return False  # none to lose
-
-
-def _first(exc: ValidationError) -> str:
-    """The first of the record's complaints, in one line ("timing.wall_s: Field
-    required, and 2 more")."""
-    errors = exc.errors()
-    first = errors[0]
-    where = ".".join(str(p) for p in first["loc"])
-    more = f", and {len(errors) - 1} more" if len(errors) > 1 else ""
-    return f"{where}: {first['msg']}{more}"

@@ -221,7 +221,7 @@ def record_history(config: Any, result: RunResult, runs_dir: Path) -> None:
     url = config.history.url or default_url(runs_dir)
     try:
         with HistoryStore(url) as store:
-            store.record(entry_of(io.jsonable(result), config.controller.profile))
+            store.record(entry_of(result, config.controller.profile))
     except Exception as exc:  # any database error: said, and the run stands
         say(f"orthocal: not recorded in the history at {url} ({type(exc).__name__}: {exc});"
             f" orthocal history --rebuild {runs_dir} makes it again from the run directories")

@@ -13,6 +13,7 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+from pydantic import ValidationError
 
 from drivers.files import write_atomic
 from orthocal import Identification, carry
@@ -434,15 +435,15 @@ class Flow:
         before = self.result.offsets_before
         limits, form = (self.seq.checker.lo, self.seq.checker.hi), self._layout_form(layout)
         try:
-            doc = accuracy.statement(
+            acc = accuracy.statement(
                 cfg, limits, drho_start=start, drho_now=now, drho_now_cov=now_cov,
                 dof=finite(last.std_error_dof), layout=layout, model=last.model,
                 in_model=names, offsets_before=None if before is None else results.known(before),
                 target_tool=self._tool_target(), form=form)
+        except ValidationError:  # a section that does not fit the record: a bug, not a run's
+            raise
         except (ValueError, np.linalg.LinAlgError) as exc:
             return NotStated(error=f"not stated: {exc}")
-        # validated outside the try: a section that does not fit the record is a bug
-        acc = section(Accuracy, {**doc, "compensated": None})
         try:
             acc.compensated = compensated.of_run(
                 cfg, limits, acc, drho_now=now, drho_now_cov=now_cov,

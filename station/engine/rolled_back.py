@@ -5,7 +5,6 @@ controller no longer holds as the run's outcome."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -35,13 +34,20 @@ def record_rollback(run_dir: Path, replaced: Mapping[str, float],
     if not path.exists():
         return None
     try:
-        record = report.as_result(json.loads(path.read_text(encoding="utf-8")))
-        record.rolled_back = RolledBack(at=now_iso(), replaced=dict(replaced),
-                                        restored=dict(restored))
-        record.offsets_final = dict(restored)
-        io.write_result(record, run_dir)  # validated as it is written
-    except (OSError, ValueError) as exc:  # ValueError: JSON or the record's validation
-        say(f"orthocal: {path} does not record the rollback ({type(exc).__name__}: {exc})")
+        record = io.read_result(path)
+    except io.UnreadableResult as exc:  # torn, edited, or of a later version
+        say(f"orthocal: the rollback is not recorded in result.json: {exc}")
+        return None
+    record.rolled_back = RolledBack(at=now_iso(), replaced=dict(replaced),
+                                    restored=dict(restored))
+    record.offsets_final = dict(restored)
+    # validated once for the report, the history and the caller (write_result still
+    # validates what it writes)
+    record = io.validated(record)
+    try:
+        io.write_result(record, run_dir)
+    except OSError as exc:
+        say(f"orthocal: {path} does not record the rollback ({exc.strerror})")
         return None
     try:
         report.write_html(record, run_dir, figures=figures)

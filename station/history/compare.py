@@ -13,7 +13,7 @@ from typing import Any
 from orthocal import coverage_factor
 from station.errors import say
 from station.history.trend import started_at
-from station.record.io import jsonable, section
+from station.record.io import section, validated
 from station.record.result import RunResult
 from station.record.result_sections import NotCompared, SinceLast
 
@@ -165,7 +165,7 @@ def since_last_run(config: Any, result: RunResult, runs_dir: Path
     from station.history.store import HistoryStore, default_url
 
     # the entry of the run as result.json will hold it, as the history files it
-    entry = entry_of(jsonable(result), config.controller.profile)
+    entry = entry_of(validated(result), config.controller.profile)
     if not entry.get("machine_id"):
         return None
     url = config.history.url or default_url(runs_dir)

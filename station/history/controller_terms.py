@@ -1,5 +1,5 @@
 """A run's final offsets in a controller's own terms (docs/design.md, "Machine
-history", export). Pure: from result.json (and a LinuxCNC INI's text) to text.
+history", export). Pure: from result.json (its record) (and a LinuxCNC INI's text) to text.
 
 The station's convention (the register map's ``offset_convention``): a commanded ρ_i
 puts the carriage at ρ_i + o_i. LinuxCNC's ``[JOINT_n] HOME_OFFSET`` is the joint
@@ -12,37 +12,39 @@ from __future__ import annotations
 
 import configparser
 import re
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
 
 from orthocal import AXES
+from station.record.result import RunResult
 
 
 class ExportError(ValueError):
     """What the export cannot do, in one line naming the field or section."""
 
 
-def offset_changes(result: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
+def offset_changes(result: RunResult) -> dict[str, tuple[float, float]]:
     """Per axis (offset before, offset the run left), mm."""
-    before, final = result.get("offsets_before"), result.get("offsets_final")
-    if not isinstance(before, Mapping) or not isinstance(final, Mapping):
+    before, final = result.offsets_before, result.offsets_final
+    if before is None or final is None:
         raise ExportError("result.json: the run states no offsets_before/offsets_final "
                           "(it stopped before reading the controller)")
-    try:
-        return {a: (float(before[a]), float(final[a])) for a in AXES}
-    except (KeyError, TypeError, ValueError):
-        raise ExportError("result.json: offsets_before/offsets_final do not give a number "
-                          f"for each of {', '.join(AXES)}") from None
+    out: dict[str, tuple[float, float]] = {}
+    for a in AXES:
+        b, f = before.get(a), final.get(a)
+        if b is None or f is None:
+            raise ExportError("result.json: offsets_before/offsets_final do not give a "
+                              f"number for each of {', '.join(AXES)}")
+        out[a] = (b, f)
+    return out
 
 
-def reversals(result: Mapping[str, Any]) -> dict[str, tuple[float, float | None]]:
+def reversals(result: RunResult) -> dict[str, tuple[float, float | None]]:
     """Per axis the measured reversal and its standard error (mm), where measured."""
-    rev = result.get("reversal")
-    if not isinstance(rev, Mapping) or not isinstance(rev.get("value_mm"), Mapping):
+    rev = result.reversal
+    if rev is None:
         return {}
-    values, ses = rev["value_mm"], rev.get("std_errors_mm") or {}
-    return {a: (float(values[a]), float(ses[a]) if isinstance(ses.get(a), int | float)
-                else None) for a in AXES if isinstance(values.get(a), int | float)}
+    return {a: (value, rev.std_errors_mm.get(a)) for a in AXES
+            if (value := rev.value_mm.get(a)) is not None}
 
 
 def backlash_stands_out(value: float, se: float | None) -> bool:
@@ -65,7 +67,7 @@ def _backlash_line(value: float, se: float | None) -> str:
     return f"# BACKLASH not written: {not_beyond_noise(value, se)}"
 
 
-def home_changes(result: Mapping[str, Any], controller: str) -> dict[str, float]:
+def home_changes(result: RunResult, controller: str) -> dict[str, float]:
     """Per axis the change of a controller's home (reference) position that moves
     the carriage as the run's offsets did: −(offsets_final − offsets_before), mm.
     Where a controller sets the joint position at its home switch to H, a carriage
@@ -73,7 +75,7 @@ def home_changes(result: Mapping[str, Any], controller: str) -> dict[str, float]
     ρ + o: raising o by Δo is lowering H by Δo. Refused where the drive itself holds
     the offsets the run wrote: ``controller`` would correct the machine twice."""
     changes = offset_changes(result)
-    if result.get("offsets_held_by") == "controller" and any(
+    if result.offsets_held_by == "controller" and any(
             abs(final - before) > 0 for before, final in changes.values()):
         raise ExportError(f"the drive holds the offsets this run wrote (offsets_held_by = "
                           f"controller): writing them into {controller} as well would "
@@ -81,7 +83,7 @@ def home_changes(result: Mapping[str, Any], controller: str) -> dict[str, float]
     return {a: before - final for a, (before, final) in changes.items()}  # no −0.0
 
 
-def linuxcnc(result: Mapping[str, Any], ini_text: str, joints: Sequence[int] = (0, 1, 2),
+def linuxcnc(result: RunResult, ini_text: str, joints: Sequence[int] = (0, 1, 2),
              source: str = "INI", backlash: bool = False) -> str:
     """The machine's INI ``ini_text`` with each ``[JOINT_n] HOME_OFFSET`` calibrated (the
     new value, the old in a comment above it) and everything else kept as it was;
@@ -92,13 +94,13 @@ def linuxcnc(result: Mapping[str, Any], ini_text: str, joints: Sequence[int] = (
     old = _home_offsets(ini_text, joints, source)
     changes = offset_changes(result)
     reversal = reversals(result) if backlash else {}
-    machine = (result.get("machine") or {}).get("id") or "no [machine] id"
+    machine = result.machine.id or "no [machine] id"
     edits: dict[str, tuple[str, list[str]]] = {}
     for axis, joint in zip(AXES, joints, strict=True):
         before, final = changes[axis]
         value = old[joint] + home[axis]
         note = (f"# orthocal: HOME_OFFSET was {old[joint]:.6f}; o_{axis} {before:+.6f} -> "
-                f"{final:+.6f} mm (run {result.get('run_dir')}, machine {machine}; a commanded "
+                f"{final:+.6f} mm (run {result.run_dir}, machine {machine}; a commanded "
                 "rho puts the carriage at rho + o, so HOME_OFFSET moves by -(o change))")
         extra = [_backlash_line(*reversal[axis])] if axis in reversal else []
         edits[f"JOINT_{joint}"] = (f"HOME_OFFSET = {value:.6f}", [note, *extra])
@@ -147,16 +149,16 @@ def _home_offsets(ini_text: str, joints: Sequence[int], source: str) -> dict[int
     return out
 
 
-def csv_lines(result: Mapping[str, Any]) -> str:
+def csv_lines(result: RunResult) -> str:
     """One row per axis: the offsets before and after, their change, the reversal."""
     changes = offset_changes(result)
     reversal = reversals(result)
-    machine = (result.get("machine") or {}).get("id") or ""
+    machine = result.machine.id or ""
     rows = ["axis,offset_before_mm,offset_final_mm,change_mm,reversal_mm,machine_id,run_dir,"
             "convention"]
     for axis in AXES:
         before, final = changes[axis]
         rev = f"{reversal[axis][0]:.6f}" if axis in reversal else ""
         rows.append(f"{axis},{before:.6f},{final:.6f},{final - before:+.6f},{rev},{machine},"
-                    f"{result.get('run_dir')},commanded rho puts the carriage at rho + o")
+                    f"{result.run_dir},commanded rho puts the carriage at rho + o")
     return "\n".join(rows) + "\n"

@@ -19,117 +19,120 @@ from pathlib import Path
 from typing import Any
 
 from orthocal import AXES
+from station.record.result import RunResult
+from station.record.result_base import Axis3, NotStated, Params
 
 
-def _num(value: Any) -> float | None:
-    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
-        else None
-
-
-def _mapping(value: Any) -> Mapping[str, Any]:
-    """``value`` where it is a mapping, else an empty one (a key missing or malformed)."""
-    return value if isinstance(value, Mapping) else {}
-
-
-def _frame(drho: Mapping[str, Any], se: Mapping[str, Any], offsets: Mapping[str, Any] | None,
-           dof: Any, certificate: Mapping[str, Any] | None = None) -> dict[str, Any] | None:
+def _frame(drho: Params, se: Params, offsets: Axis3 | None, dof: float | None,
+           certificate: Mapping[str, float | None] | None = None) -> dict[str, Any] | None:
     """Per axis e = Δρ − o with Δρ's standard error, and ``certificate``'s expanded
     uncertainty of Δρ where it states one (o is exact: e's is Δρ's); None when any
     value is missing."""
-    if not isinstance(offsets, Mapping):
+    if offsets is None:
         return None
     out: dict[str, Any] = {}
     for a in AXES:
-        d, s, o = _num(drho.get(f"drho_{a}")), _num(se.get(f"drho_{a}")), _num(offsets.get(a))
+        d, s, o = drho.get(f"drho_{a}"), se.get(f"drho_{a}"), offsets.get(a)
         if d is None or o is None:
             return None
         out[a] = {"value_mm": d - o, "std_error_mm": s}
-        expanded = _num((certificate or {}).get(f"drho_{a}"))
+        expanded = (certificate or {}).get(f"drho_{a}")
         if expanded is not None:
             out[a]["expanded_95_mm"] = expanded
-    return {"joint_error_mm": out, "dof": _num(dof)}
+    return {"joint_error_mm": out, "dof": dof}
 
 
-def _certificate(result: Mapping[str, Any], statement: str) -> Mapping[str, Any]:
+def _certificate(result: RunResult, statement: str) -> Params:
     """The run's certificate figure per parameter: the uncertainty budget's expanded
     uncertainty (Type A and B, docs/design.md "Uncertainty budget"), where the budget
     states the same Δρ as ``statement`` (``remaining.total`` or ``identified``); else
     none, and the history falls back to the statistical interval, saying so."""
-    budget = _mapping(result.get("uncertainty_budget"))
-    if budget.get("statement") != statement:
+    budget = result.uncertainty_budget
+    if budget is None or isinstance(budget, NotStated) or budget.statement != statement:
         return {}
-    return _mapping(budget.get("expanded_95_mm"))
+    return budget.expanded_95_mm
 
 
-def _layout(result: Mapping[str, Any]) -> dict[str, Any]:
-    acc = _mapping(result.get("accuracy"))
+def _layout(result: RunResult) -> dict[str, Any]:
+    acc = result.accuracy
     out: dict[str, Any] = {}
-    for kind in ("tilt", "gap"):
-        got = _mapping(acc.get(f"{kind}s"))
-        ses = _mapping(acc.get(f"{kind}_std_errors"))
-        intervals = _mapping(acc.get(f"{kind}_interval_95"))
-        for name, value in got.items():
-            if _num(value) is not None:
-                out[name] = {"value": float(value), "std_error": _num(ses.get(name))}
-                # the run's own 95 % interval (Student's t on its dof), as a half-width
-                pair = intervals.get(name)
-                if isinstance(pair, list) and len(pair) == 2 and \
-                        all(_num(x) is not None for x in pair):
-                    out[name]["interval_95"] = (float(pair[1]) - float(pair[0])) / 2.0
+    if acc is None or isinstance(acc, NotStated):
+        return out
+    for got, ses, intervals in ((acc.tilts, acc.tilt_std_errors, acc.tilt_interval_95),
+                                (acc.gaps, acc.gap_std_errors, acc.gap_interval_95)):
+        for name, value in (got or {}).items():
+            if value is None:
+                continue
+            out[name] = {"value": value, "std_error": (ses or {}).get(name)}
+            # the run's own 95 % interval (Student's t on its dof), as a half-width
+            pair = (intervals or {}).get(name)
+            if pair is not None:
+                out[name]["interval_95"] = (pair[1] - pair[0]) / 2.0
     return out
 
 
-def _reversal(result: Mapping[str, Any]) -> dict[str, Any]:
+def _reversal(result: RunResult) -> dict[str, Any]:
     """Each joint's lost motion as the run measured it (mm, with its standard error)."""
-    rev = _mapping(result.get("reversal"))
-    values = _mapping(rev.get("value_mm"))
-    ses = _mapping(rev.get("std_errors_mm"))
-    return {a: {"value_mm": _num(values.get(a)), "std_error_mm": _num(ses.get(a))}
-            for a in AXES if _num(values.get(a)) is not None}
+    rev = result.reversal
+    if rev is None:
+        return {}
+    return {a: {"value_mm": value, "std_error_mm": rev.std_errors_mm.get(a)}
+            for a in AXES if (value := rev.value_mm.get(a)) is not None}
 
 
-def _instruments(result: Mapping[str, Any]) -> list[dict[str, Any]]:
+def _instruments(result: RunResult) -> list[dict[str, Any]]:
     """The gauges by what identifies them (their serials, where the config gives them)."""
-    budget = result.get("uncertainty_budget")
-    found = budget.get("instruments") if isinstance(budget, Mapping) else None
-    return [{"name": i.get("name"), "protocol": i.get("protocol"), "serial": i.get("serial")}
-            for i in (found if isinstance(found, list) else []) if isinstance(i, Mapping)]
+    budget = result.uncertainty_budget
+    if budget is None or isinstance(budget, NotStated):
+        return []
+    return [{"name": i.name, "protocol": i.protocol, "serial": i.serial}
+            for i in budget.instruments]
 
 
-def entry_of(result: Mapping[str, Any], profile: str | None = None) -> dict[str, Any]:
-    """The history entry of a finished run's ``result`` (its result.json);
-    ``profile``: the register map its controller used (from its config)."""
-    machine = _mapping(result.get("machine"))
-    rem = _mapping(result.get("remaining"))
-    found_drho = rem.get("total") or result.get("identified") or {}
-    found_se = rem.get("std_errors") if rem.get("total") else result.get("std_errors") or {}
-    found_dof = rem.get("std_errors_dof") if rem.get("total") else result.get("std_errors_dof")
-    statement = "remaining.total" if rem.get("total") else "identified"
-    as_found = _frame(found_drho, found_se or {}, result.get("offsets_before"), found_dof,
-                      _certificate(result, statement))
-    # the offsets the last verification measured with: offsets_final, unless a
-    # rollback has since replaced them (e is the machine's own, whatever is held now)
-    back = _mapping(result.get("rolled_back"))
-    as_left = None if not rem.get("estimate") else _frame(
-        rem["estimate"], rem.get("std_errors") or {},
-        back.get("replaced") if back else result.get("offsets_final"),
-        rem.get("std_errors_dof"))
-    acc = _mapping(result.get("accuracy"))
-    after = _mapping(acc.get("after"))
-    loop = _mapping(result.get("loop"))
+def _as_found(result: RunResult) -> dict[str, Any] | None:
+    """e at the run's start: from ``remaining.total`` where a verification measured
+    after the last write, else from the first identification."""
+    rem = result.remaining
+    if rem is not None and rem.total:
+        return _frame(rem.total, rem.std_errors, result.offsets_before, rem.std_errors_dof,
+                      _certificate(result, "remaining.total"))
+    return _frame(result.identified, result.std_errors, result.offsets_before,
+                  result.std_errors_dof, _certificate(result, "identified"))
+
+
+def _as_left(result: RunResult) -> dict[str, Any] | None:
+    """e as the run left it: the last verification's estimate, under the offsets it
+    measured with: offsets_final, unless a rollback has since replaced them (e is
+    the machine's own, whatever is held now)."""
+    rem = result.remaining
+    if rem is None or not rem.estimate:
+        return None
+    back = result.rolled_back
+    return _frame(rem.estimate, rem.std_errors,
+                  back.replaced if back is not None else result.offsets_final,
+                  rem.std_errors_dof)
+
+
+def entry_of(result: RunResult, profile: str | None = None) -> dict[str, Any]:
+    """The history entry of a finished run's ``result`` (its result.json, as the
+    record); ``profile``: the register map its controller used (from its config)."""
+    machine, acc = result.machine, result.accuracy
+    after = None if acc is None or isinstance(acc, NotStated) else acc.after.rms_mm
+    back = result.rolled_back
     return {
-        "run_dir": str(result.get("run_dir")), "machine_id": machine.get("id"),
-        "started": result.get("started"), "finished": result.get("finished"),
-        "status": result.get("status"), "stopped": loop.get("stopped"),
-        "model": result.get("model"), "converged": bool(result.get("converged")),
-        "geometry": {k: machine.get(k) for k in ("leg_length", "rho_min", "rho_max")},
+        "run_dir": result.run_dir, "machine_id": machine.id,
+        "started": result.started, "finished": result.finished,
+        "status": result.status, "stopped": None if result.loop is None else result.loop.stopped,
+        "model": result.model, "converged": bool(result.converged),
+        "geometry": {"leg_length": machine.leg_length, "rho_min": machine.rho_min,
+                     "rho_max": machine.rho_max},
         "profile": profile,
-        "offsets_before": result.get("offsets_before"),
-        "offsets_final": result.get("offsets_final"),
+        "offsets_before": result.offsets_before,
+        "offsets_final": result.offsets_final,
         # orthocal rollback: when, and the offsets it replaced and restored
-        "rolled_back": back or None,
-        "as_found": as_found, "as_left": as_left, "layout": _layout(result),
-        "tool_after_rms_mm": _num(after.get("rms_mm")),
+        "rolled_back": None if back is None else back.model_dump(mode="json"),
+        "as_found": _as_found(result), "as_left": _as_left(result), "layout": _layout(result),
+        "tool_after_rms_mm": after,
         "reversal": _reversal(result), "instruments": _instruments(result),
     }
 

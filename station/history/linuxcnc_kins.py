@@ -18,11 +18,11 @@ run's record and the INI's text (and the text of the HAL files it lists) to text
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
 
 from station.history.controller_terms import ExportError, linuxcnc
 from station.record.identified import COMPONENT, IdentifiedMachine
+from station.record.result import RunResult
 
 #: The HAL file the export writes beside the INI.
 GEOMETRY_HAL = "orthoglide-geometry.hal"
@@ -108,7 +108,7 @@ def _check_kins(lines: list[tuple[str, str]], source: str) -> None:
                           "kinematics it names)")
 
 
-def kinematics_ini(result: Mapping[str, Any], machine: IdentifiedMachine, ini_text: str,
+def kinematics_ini(result: RunResult, machine: IdentifiedMachine, ini_text: str,
                    joints: Sequence[int], source: str, backlash: bool,
                    read_hal: Callable[[str], str | None]) -> str:
     """The INI with HOME_OFFSET (as the plain export, or kept where the drive holds

@@ -5,7 +5,6 @@ it, which ``orthocal history --rebuild`` makes again from the run directories.""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -15,8 +14,9 @@ from sqlalchemy import JSON, Boolean, Float, String, create_engine, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column
 
+from station.errors import say
 from station.history.entry import entry_of, profile_of
-from station.record.migrate import migrate
+from station.record.io import UnreadableResult, read_result
 
 #: The file the default store lives in, beside the run directories (--out).
 DEFAULT_NAME = "history.sqlite"
@@ -86,15 +86,17 @@ class HistoryStore:
             return [dict(row.entry) for row in session.scalars(query)]
 
     def rebuild(self, runs_dir: Path) -> int:
-        """Record every finished run under ``runs_dir`` again; how many."""
+        """Record every finished run under ``runs_dir`` again; how many. A result.json
+        this version cannot read (torn, edited, of a later version) is skipped, said
+        in one line naming it."""
         count = 0
         for result_path in sorted(Path(runs_dir).glob("*/result.json")):
             try:
-                result = json.loads(result_path.read_text(encoding="utf-8"))
-            except (OSError, ValueError):
-                continue  # not a finished run's record: the run directory says why
-            if isinstance(result, dict) and result.get("finished"):
-                result = migrate(result)
+                result = read_result(result_path)
+            except UnreadableResult as exc:
+                say(f"orthocal: skipped {exc}")
+                continue
+            if result.finished:  # a run that stopped early: the run directory says why
                 self.record(entry_of(result, profile_of(result_path.parent)))
                 count += 1
         return count

@@ -14,8 +14,7 @@ run does not know what the NC holds now, so the rows state the change to add to 
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
 
 from orthocal import AXES
 from station.history.controller_terms import (
@@ -26,6 +25,7 @@ from station.history.controller_terms import (
     offset_changes,
     reversals,
 )
+from station.record.result import RunResult
 
 #: The NC axes of the joints x, y, z unless told otherwise.
 DEFAULT_AXES = ("Axis 1", "Axis 2", "Axis 3")
@@ -34,9 +34,9 @@ REFERENCE = "Reference position for homing (encoder parameter)"
 BACKLASH = "MC_BacklashCompensation.Backlash (Tc2_MC2; axis parameter Position Correction on)"
 
 
-def _header(result: Mapping[str, Any], machine: str, backlash: bool) -> list[str]:
+def _header(result: RunResult, machine: str, backlash: bool) -> list[str]:
     lines = [
-        f"# orthocal export for TwinCAT 3 NC: machine {machine}, run {result.get('run_dir')}",
+        f"# orthocal export for TwinCAT 3 NC: machine {machine}, run {result.run_dir}",
         "# Each row: the NC axis, the joint it drives, the parameter (as TwinCAT XAE names",
         "# it) and what to do with it, in mm.",
         "# change_mm: add it to the value the axis holds now (new = now + change_mm). It is",
@@ -53,7 +53,7 @@ def _header(result: Mapping[str, Any], machine: str, backlash: bool) -> list[str
     return lines
 
 
-def twincat(result: Mapping[str, Any], axes: Sequence[str] = DEFAULT_AXES,
+def twincat(result: RunResult, axes: Sequence[str] = DEFAULT_AXES,
             backlash: bool = False) -> str:
     """The parameter list of the run ``result`` for the NC ``axes`` of x, y, z;
     ``backlash``: the backlash compensation too, where the reversal stands out.
@@ -63,7 +63,7 @@ def twincat(result: Mapping[str, Any], axes: Sequence[str] = DEFAULT_AXES,
     change = home_changes(result, "TwinCAT")
     offsets = offset_changes(result)
     reversal = reversals(result) if backlash else {}
-    machine = (result.get("machine") or {}).get("id") or "no [machine] id"
+    machine = result.machine.id or "no [machine] id"
     out = _header(result, machine, backlash)
     out.append("nc_axis,joint,parameter,change_mm,value_mm,offset_before_mm,"
                "offset_final_mm,machine_id")

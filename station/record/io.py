@@ -1,6 +1,8 @@
 """The run's result document on disk: result.json, the record (station.record.result.
 RunResult) validated as it is written, atomically, in the record's field order, its
-deviations in the report's (station.record.keys), NaN and infinities as null."""
+deviations in the report's (station.record.keys), NaN and infinities as null; and
+read back, of any version, through the one way in (:func:`read_result`,
+:func:`parse_result`): migrated to the current version, then validated."""
 
 from __future__ import annotations
 
@@ -11,14 +13,16 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TypeVar
 
-from pydantic import BaseModel, JsonValue
+from pydantic import BaseModel, JsonValue, ValidationError
 
 from drivers.files import write_atomic
 from station.record.keys import dev_keys
-from station.record.result import RunResult
+from station.record.migrate import migrate
+from station.record.result import SCHEMA_VERSION, RunResult
 from station.record.result_base import JsonObject
 
-__all__ = ["dumps", "jsonable", "jsonable_value", "section", "validated", "write_result"]
+__all__ = ["UnreadableResult", "dumps", "jsonable", "jsonable_value", "parse_result",
+           "read_result", "section", "validated", "write_result"]
 
 Section = TypeVar("Section", bound=BaseModel)
 
@@ -84,3 +88,53 @@ def write_result(result: RunResult, run_dir: Path) -> Path:
     path = Path(run_dir) / "result.json"
     write_atomic(path, dumps(result) + "\n")
     return path
+
+
+class UnreadableResult(ValueError):
+    """A result.json that is not a run's record this version can read, in one line
+    naming the file (a command's bad input, exit 2)."""
+
+
+def parse_result(doc: Mapping[str, object]) -> RunResult:
+    """``doc`` (a result.json's object, of any version; numpy and NaN taken as JSON
+    takes them) as the record: migrated (station.record.migrate) and validated as
+    strictly as another tool reading the file would (JSON types, no strings taken for
+    numbers). pydantic's ValidationError where it is not one; ``doc`` is left as it
+    was."""
+    values = jsonable_value(doc)
+    assert isinstance(values, dict)
+    return RunResult.model_validate_json(json.dumps(migrate(values), allow_nan=False),
+                                         strict=True)
+
+
+def read_result(path: Path) -> RunResult:
+    """The record in the result.json at ``path``, of any version (:func:`parse_result`);
+    UnreadableResult (one line naming the file) where it cannot be read, is not JSON,
+    is of a later version than this one reads, or is not a run's record."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise UnreadableResult(f"{path}: cannot read ({exc.strerror})") from None
+    except ValueError as exc:
+        raise UnreadableResult(f"{path}: not a result document ({exc})") from None
+    if not isinstance(doc, dict):
+        raise UnreadableResult(f"{path}: not a result document (not a JSON object)")
+    version = doc.get("schema_version")
+    if isinstance(version, int) and not isinstance(version, bool) and version > SCHEMA_VERSION:
+        raise UnreadableResult(f"{path}: schema_version {version}, written by a later "
+                               f"orthocal (this one reads up to {SCHEMA_VERSION})")
+    try:
+        return parse_result(doc)
+    except ValidationError as exc:  # edited by hand, or not a run's record
+        raise UnreadableResult(f"{path}: not a result document ({first_error(exc)})") \
+            from None
+
+
+def first_error(exc: ValidationError) -> str:
+    """The first of the record's complaints, in one line ("timing.wall_s: Field
+    required, and 2 more")."""
+    errors = exc.errors()
+    first = errors[0]
+    where = ".".join(str(p) for p in first["loc"])
+    more = f", and {len(errors) - 1} more" if len(errors) > 1 else ""
+    return f"{where}: {first['msg']}{more}"

@@ -50,7 +50,7 @@ from station.record.journal_events import (
     Retake,
     Retry,
 )
-from station.record.result_base import JsonObject
+from station.record.result_sections import Recovery
 
 Fit = Identification | Verification
 
@@ -91,7 +91,7 @@ class GuardTally:
     """What the plunger guard did in every session (the result's ``plunger_guard``)."""
 
     stops: int = 0  # times it stopped the axes
-    recovered: list[JsonObject] = field(default_factory=list)  # each way back
+    recovered: list[Recovery] = field(default_factory=list)  # each way back
     retakes: int = 0  # cycles taken again after a knocked stand
     refused: int = 0  # moves refused before they started
 
@@ -227,13 +227,17 @@ class RunState:
                 self.live = LiveSetup(event.phase, event.setup, indicators)
                 self.on = OnMachine(event.phase, event.setup, indicators, event.offsets,
                                     dict(event.travel_mm or {}))
-            case GuardRecovery(result="recovered"):
-                # zero_shift_mm: only where the way back found a gauge's zero moved (a step)
-                self.guard.recovered.append({
-                    "where": event.where, "move": event.move, "indicator": event.indicator,
-                    "waypoints": event.waypoints, "speed_mm_s": event.speed_mm_s,
-                    **({"zero_shift_mm": dict(event.zero_shift_mm)}
-                       if event.zero_shift_mm is not None else {})})
+            case GuardRecovery(result="recovered", waypoints=int() as waypoints,
+                               speed_mm_s=float() as speed):
+                # (the mover journals both with every way back that ended "recovered")
+                recovery = Recovery(where=event.where, move=event.move,
+                                    indicator=event.indicator, waypoints=waypoints,
+                                    speed_mm_s=speed)
+                # only where the way back found a gauge's zero moved (a step): set, so
+                # that result.json holds it; absent otherwise
+                if event.zero_shift_mm is not None:
+                    recovery.zero_shift_mm = dict(event.zero_shift_mm)
+                self.guard.recovered.append(recovery)
 
     def _void(self, phase: str, setup: int) -> None:
         """A setup-redo: the setup's steps so far are void (its readings are kept, as

@@ -8,12 +8,10 @@ by the record (station.record.io)."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from pathlib import Path
 
 from station.record import io
-from station.record.migrate import migrate
 from station.record.result import RunResult
 from station.record.result_base import JsonObject
 
@@ -23,17 +21,13 @@ ResultLike = RunResult | Mapping[str, object]
 
 
 def as_result(doc: ResultLike) -> RunResult:
-    """``doc`` as the record: the record itself as it is; a mapping as JSON values
-    (numpy to lists, NaN and infinities to null), migrated from its version
-    (station.record.migrate: a no-op for the current one) and validated as strictly
-    as another tool reading the file would (JSON types, no strings taken for
-    numbers). ``doc`` is left as it was."""
+    """``doc`` as the record: the record itself as it is; a mapping through the
+    record's one way in (station.record.io.parse_result): as JSON values (numpy to
+    lists, NaN and infinities to null), migrated from its version and validated as
+    strictly as another tool reading the file would. ``doc`` is left as it was."""
     if isinstance(doc, RunResult):
         return doc
-    values = io.jsonable_value(doc)
-    assert isinstance(values, dict)
-    text = json.dumps(migrate(values), allow_nan=False)
-    return RunResult.model_validate_json(text, strict=True)
+    return io.parse_result(doc)
 
 
 def jsonable(result: ResultLike) -> JsonObject:

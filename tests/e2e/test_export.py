@@ -11,10 +11,13 @@ from typing import Any
 
 import pytest
 from builders import FAST, Completed, cli, simulated
+from result_builders import golden_result
 
 from station.commands import run as cmd_run
 from station.history.controller_terms import ExportError, csv_lines, linuxcnc
 from station.history.twincat import twincat
+from station.record.result import RunResult
+from station.report import as_result
 
 GATEWAY_NO_OFFSETS = Path(__file__).resolve().parents[2] / "examples" / "maps" / \
     "gateway-3x1-no-offsets.toml"
@@ -31,12 +34,21 @@ HOME_OFFSET = 0
 """
 
 
-def result(**extra: Any) -> dict[str, Any]:
-    return {"run_dir": "/runs/run-1", "machine": {"id": "OG-1"}, "offsets_held_by": "station",
+def document(**extra: Any) -> dict[str, Any]:
+    """A run's result.json (the golden run's) with the offsets, machine and reversal
+    the export is checked against."""
+    doc = golden_result()
+    doc["machine"]["id"] = "OG-1"
+    doc["reversal"].update(value_mm={"x": 0.02, "y": 0.0003, "z": 0.0},
+                           std_errors_mm={"x": 0.001, "y": 0.001, "z": 0.001})
+    return {**doc, "run_dir": "/runs/run-1", "offsets_held_by": "station",
             "offsets_before": {"x": 0.1, "y": 0.0, "z": -0.2},
-            "offsets_final": {"x": 0.6, "y": -0.3, "z": -0.2},
-            "reversal": {"value_mm": {"x": 0.02, "y": 0.0003, "z": 0.0},
-                         "std_errors_mm": {"x": 0.001, "y": 0.001, "z": 0.001}}, **extra}
+            "offsets_final": {"x": 0.6, "y": -0.3, "z": -0.2}, **extra}
+
+
+def result(**extra: Any) -> RunResult:
+    """:func:`document` as the record the export reads."""
+    return as_result(document(**extra))
 
 
 def home_offsets(text: str) -> dict[str, float]:
@@ -53,15 +65,16 @@ def test_the_carriage_stays_where_the_station_put_it() -> None:
     """Station: a commanded ρ puts the carriage at ρ + o + c. LinuxCNC: at switch + ρ −
     HOME_OFFSET. Matched before the run, the exported HOME_OFFSET must put every
     commanded ρ where the offsets the run left put it."""
-    r = result()
+    doc = document()
+    r = as_result(doc)
     switch, c = {"x": 25.0, "y": 25.0, "z": 25.0}, {"x": 3.0, "y": -1.0, "z": 0.5}
-    old = {a: switch[a] - r["offsets_before"][a] - c[a] for a in "xyz"}
+    old = {a: switch[a] - doc["offsets_before"][a] - c[a] for a in "xyz"}
     ini = "".join(f"[JOINT_{j}]\nHOME_OFFSET = {old[a]!r}\n" for j, a in enumerate("xyz"))
     new = home_offsets(linuxcnc(r, ini))
     for j, a in enumerate("xyz"):
         for rho in (-100.0, 0.0, 60.0):
             assert switch[a] + rho - new[f"JOINT_{j}"] == pytest.approx(
-                rho + r["offsets_final"][a] + c[a], abs=1e-9)
+                rho + doc["offsets_final"][a] + c[a], abs=1e-9)
 
 
 def test_linuxcnc_keeps_the_ini_writes_old_beside_new_and_backlash_when_asked() -> None:
@@ -95,7 +108,7 @@ def test_what_cannot_be_exported_is_said_naming_the_field() -> None:
 def test_the_command(tmp_path: Path) -> None:
     run_dir = tmp_path / "run-1"
     run_dir.mkdir()
-    (run_dir / "result.json").write_text(json.dumps(result()))
+    (run_dir / "result.json").write_text(json.dumps(document()))
     (tmp_path / "og.ini").write_text(INI)
 
     def orthocal(*argv: str) -> Completed:
@@ -116,14 +129,19 @@ def test_the_command(tmp_path: Path) -> None:
         assert bad.returncode == 2 and words in bad.stderr
         assert len(bad.stderr.strip().splitlines()) == 1 and "Traceback" not in bad.stderr
     # offsets the drive itself holds: neither controller may be told them again
-    (run_dir / "result.json").write_text(json.dumps(result(offsets_held_by="controller")))
+    (run_dir / "result.json").write_text(json.dumps(document(offsets_held_by="controller")))
     for target in (["--to", "twincat"], ["--to", "linuxcnc", "--ini", "og.ini"]):
         refused = orthocal(*target)
         assert refused.returncode == 2 and "correct the machine twice" in refused.stderr
         assert len(refused.stderr.strip().splitlines()) == 1
-    (run_dir / "result.json").write_text(json.dumps(result(offsets_before={"x": "?"})))
-    broken = orthocal("--to", "twincat")
-    assert broken.returncode == 2 and "offsets_before/offsets_final" in broken.stderr
+    (run_dir / "result.json").write_text(json.dumps(document(offsets_before={"x": "?"})))
+    broken = orthocal("--to", "twincat")  # not a record: said before anything is exported
+    assert broken.returncode == 2 and "result.json: not a result document (offsets_before.x" \
+        in broken.stderr and len(broken.stderr.strip().splitlines()) == 1
+    # a record whose run stopped before it read the controller: nothing to export
+    (run_dir / "result.json").write_text(json.dumps(document(offsets_final=None)))
+    stopped = orthocal("--to", "csv")
+    assert stopped.returncode == 2 and "offsets_before/offsets_final" in stopped.stderr
 
 
 def twincat_rows(text: str) -> list[dict[str, str]]:
@@ -136,7 +154,8 @@ def test_twincat_reference_positions_carry_the_station_s_change() -> None:
     """TwinCAT sets the axis position at the reference cam to R: a carriage commanded
     to ρ sits at cam + ρ − R. With R matched to the offsets before the run, R + change
     must put every commanded ρ where the offsets the run left put it."""
-    r = result()
+    doc = document()
+    r = as_result(doc)
     text = twincat(r)
     rows = twincat_rows(text)
     assert [row["nc_axis"] for row in rows] == ["Axis 1", "Axis 2", "Axis 3"]
@@ -145,11 +164,11 @@ def test_twincat_reference_positions_carry_the_station_s_change() -> None:
     for row in rows:
         a = row["joint"]
         change = float(row["change_mm"])
-        assert change == pytest.approx(-(r["offsets_final"][a] - r["offsets_before"][a]))
-        old = cam - r["offsets_before"][a] - c[a]
+        assert change == pytest.approx(-(doc["offsets_final"][a] - doc["offsets_before"][a]))
+        old = cam - doc["offsets_before"][a] - c[a]
         for rho in (-100.0, 0.0, 60.0):
             assert cam + rho - (old + change) == pytest.approx(
-                rho + r["offsets_final"][a] + c[a], abs=1e-9)
+                rho + doc["offsets_final"][a] + c[a], abs=1e-9)
         assert row["machine_id"] == "OG-1"
     assert "machine OG-1" in text and "Position Bias" in text and "never both" in text
     assert "MC_BacklashCompensation" not in text  # not asked for

@@ -3,7 +3,6 @@ PNG or SVG, with each parameter's drift per month (station.history.trend)."""
 
 from __future__ import annotations
 
-import json
 import math
 import xml.etree.ElementTree as ET
 from datetime import UTC, datetime, timedelta
@@ -12,13 +11,14 @@ from typing import Any
 
 import pytest
 from builders import Completed, cli
+from result_builders import golden_result
 
 from station.history.entry import entry_of
 from station.history.store import HistoryStore, default_url
 from station.history.trend import MIN_SPAN_DAYS, MONTH_DAYS, drift, series, why_no_drift
+from station.report import as_result
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def _frame(x: float, se: float = 0.0005) -> dict[str, Any]:
@@ -138,18 +138,18 @@ def test_no_drift_from_runs_less_than_a_week_apart(tmp_path: Path) -> None:
 
 
 def test_error_bars_are_the_certificates_expanded_uncertainty() -> None:
-    result = json.loads((DATA / "golden_run" / "result.json").read_text())
+    result = golden_result()
     budget = result["uncertainty_budget"]
     assert budget["statement"] == "remaining.total"
-    entry = {**entry_of(result), "machine_id": "OG-1", "started": "2026-01-01T10:00:00+00:00",
-             "finished": "2026-01-01T10:20:00+00:00"}
+    entry = {**entry_of(as_result(result)), "machine_id": "OG-1",
+             "started": "2026-01-01T10:00:00+00:00", "finished": "2026-01-01T10:20:00+00:00"}
     found = [p for p in series([entry])["drho_x"] if p.state == "as found"]
     assert found[0].certified and \
         found[0].expanded_95 == pytest.approx(budget["expanded_95_mm"]["drho_x"])  # 11.8 µm
     assert found[0].expanded_95 > 10 * 2.2 * found[0].std_error  # not the scatter's
     # a run whose budget states nothing: the statistical interval, and said to be one
-    bare = {**entry, "as_found": entry_of({**result, "uncertainty_budget": {
-        "error": "not stated: a model without Δρ"}})["as_found"]}
+    bare = {**entry, "as_found": entry_of(as_result({**result, "uncertainty_budget": {
+        "error": "not stated: a model without Δρ"}}))["as_found"]}
     fallback = next(p for p in series([bare])["drho_x"] if p.state == "as found")
     assert not fallback.certified and fallback.expanded_95 < 0.002
 

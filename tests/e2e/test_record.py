@@ -12,10 +12,12 @@ from typing import Any
 import pytest
 from builders import simulated
 from jsonschema import Draft202012Validator
+from result_builders import golden_result
 
 from station.commands import run as cmd_run
 from station.commands.cli import main
 from station.commands.history import read_result
+from station.errors import BadInput
 from station.record import schema_files as schema
 from station.record.migrate import migrate
 from station.record.result import SCHEMA_VERSION, RunResult
@@ -108,10 +110,32 @@ def test_an_older_result_is_read_as_the_current_version(name: str, tmp_path: Pat
         doc.setdefault(key, value)
     doc["timing"].setdefault("wall_s", 1.0)
     assert errors("result", doc) == []
-    RunResult.model_validate_json(json.dumps(doc), strict=True)
-    # every reader of a run directory reads it so (orthocal report, compare, export)
-    (tmp_path / "result.json").write_text(json.dumps(old))
-    assert read_result(str(tmp_path))[1]["schema_version"] == SCHEMA_VERSION
+    expected = RunResult.model_validate_json(json.dumps(doc), strict=True)
+    # every reader of a run directory reads it so (orthocal report, compare, export,
+    # the history): the file as its run wrote it, what the test data leave out put back
+    whole = {"run_dir": "RUN_DIR", "started": "WHEN", "finished": "WHEN", "duration_s": 1.0,
+             **old, "timing": {"wall_s": 1.0, **old["timing"]}}
+    (tmp_path / "result.json").write_text(json.dumps(whole))
+    record = read_result(str(tmp_path))[1]
+    assert record.schema_version == SCHEMA_VERSION and record == expected
+
+
+def test_a_result_this_version_cannot_read_is_one_line_naming_the_file(
+        tmp_path: Path) -> None:
+    """Torn, not a record, or of a later version: one line naming result.json (a
+    command's bad input, exit 2), never a traceback or a half-read record."""
+    golden = golden_result()
+    path = tmp_path / "result.json"
+    for text, words in (("{\"status\": \"ok\"", "not a result document"),
+                        ("[1, 2]", "not a JSON object"),
+                        (json.dumps({**golden, "schema_version": SCHEMA_VERSION + 1}),
+                         f"schema_version {SCHEMA_VERSION + 1}, written by a later"),
+                        (json.dumps({**golden, "status": "fine"}), "status")):
+        path.write_text(text)
+        with pytest.raises(BadInput) as got:
+            read_result(str(tmp_path))
+        said = str(got.value)
+        assert said.startswith(f"{path}: ") and words in said and "\n" not in said, said
 
 
 def test_an_old_journals_simulation_is_read_with_what_that_run_had() -> None:

@@ -26,8 +26,9 @@ def _records(result: dict[str, Any]) -> list[dict[str, Any]]:
 def test_a_recheck_of_the_calibrated_held_out_machine_writes_nothing_and_converges(
         tmp_path: Path) -> None:
     # One seed here; more seeds are a figure: python bench/mountings.py --recheck
-    rig = FakeRig(seed=heldout.HELD_OUT_SEED, noise_mm=0.001, true_drho=heldout.DRHO, true_tilt=heldout.TILT,
-                  true_gap=heldout.GAP, mount_error_mm=DEFAULT_MOUNT_ERROR_MM)
+    rig = FakeRig(seed=heldout.HELD_OUT_SEED, noise_mm=0.001, true_drho=heldout.DRHO,
+                  true_tilt=heldout.TILT, true_gap=heldout.GAP,
+                  mount_error_mm=DEFAULT_MOUNT_ERROR_MM)
     config = fake_config(uncertainty={"leg_straightness_mm": 0.002}, settle_s=0.0)
     code, first = run_on(rig, tmp_path, config)
     assert code == 0 and first["loop"]["stopped"] == "converged"

@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from result_builders import golden_result
 
 from orthocal import PARAM_NAMES
 from station.record.model import MachineModel
@@ -64,10 +65,11 @@ def write_run(path: Path, kind: str = "tilted", *, status: str = "ok", model: bo
     """A run directory at ``path``; ``limits``: where its soft limits are ("plan":
     plan.json, "config": config.toml only, None: nowhere)."""
     path.mkdir(parents=True)
-    result = {"run_dir": str(path), "status": status, "finished": True,
-              "machine": {"id": f"OG-{kind}"}, "offsets_held_by": "controller",
-              "remaining": {"std_errors": {n: 0.001 for n in DRHO_NOW},
-                            "std_errors_dof": 12.0}}
+    # a whole record (the golden run's): export reads result.json validated
+    result = {**golden_result(), "run_dir": str(path), "status": status,
+              "offsets_held_by": "controller"}
+    result["machine"]["id"] = f"OG-{kind}"
+    result["remaining"].update(std_errors={n: 0.001 for n in DRHO_NOW}, std_errors_dof=12.0)
     if status != "ok":
         result["message"] = "the indicator on leg y stopped answering"
     (path / "result.json").write_text(json.dumps(result, indent=1))
