@@ -78,6 +78,13 @@ class Identification:
     stand_model: Stands | None = None
     #: σ of one deviation that weighed the stands' prior against the data (mm).
     stand_sigma: float | None = None
+    #: Another model that explains the same deviations as well (``ambiguous_with``:
+    #: the legs' bows where these are the axes' tilts; at the legs' middles a uniform
+    #: bow is a tilt, docs/model.md "Leg form against tilts and gaps") and how far its
+    #: parameters lie from these, per shared parameter (mm): what the data cannot
+    #: decide. Empty where nothing was found to explain them as well.
+    ambiguity_mm: dict[str, float] = field(default_factory=dict)
+    ambiguous_with: str | None = None
 
     @property
     def std_error_dof(self) -> float:
@@ -133,7 +140,10 @@ class Identification:
         } | ({} if self.stand_model is None else {"stands": {
             **self.stand_model.to_dict(),
             "sigma_mm": finite(self.stand_sigma) if self.stand_sigma is not None else None,
-            "estimates": {n: e.to_dict() for n, e in self.stands.items()}}})
+            "estimates": {n: e.to_dict() for n, e in self.stands.items()}}}) \
+          | ({} if not self.ambiguity_mm else {
+              "ambiguous_with": self.ambiguous_with,
+              "ambiguity_mm": {k: finite(v) for k, v in self.ambiguity_mm.items()}})
 
 
 def _postures_per_leg(keys: Sequence[Key]) -> int:

@@ -37,6 +37,7 @@ from orthocal.accuracy import (
 from orthocal.loop import FALSE_ALARM
 from orthocal.numbers import finite
 from orthocal.tool_interval import after_interval, assumes
+from station.analysis.rail_advice import gap_advice, squareness_advice, undecided_advice
 from station.config import StationConfig
 from station.record import result_accuracy as rec
 from station.record.result_accuracy import SquarenessDecision
@@ -266,15 +267,17 @@ def statement(config: StationConfig, limits: Limits | None, *,
               drho_start: Mapping[str, float], drho_now: Mapping[str, float],
               drho_now_cov: np.ndarray | None, dof: float | None, layout: Layout | None,
               model: str, in_model: Sequence[str], offsets_before: Mapping[str, float] | None,
-              target_tool: Mapping[str, float], form: tuple[np.ndarray, str] | None = None
-              ) -> rec.Accuracy:
+              target_tool: Mapping[str, float], form: tuple[np.ndarray, str] | None = None,
+              undecided: str | None = None) -> rec.Accuracy:
     """The run JSON's ``accuracy`` (docs/design.md): before and after over the workspace
     with 95 % intervals for the after-figures, both objectives' predicted after-
     figures side by side, squareness and the gaps with what to do, what it all
     assumes. ``in_model``: the parameter names of the model the run kept.
     ``form``: what the legs' form may leave in the layout (covariance over
     ``layout.names``, orthocal.budget.form_covariance) and its words: the after-
-    figures' intervals carry it."""
+    figures' intervals carry it. ``undecided``: the model that explains the data as
+    well as the layout's (the legs' bows, model_choice.measured_form): then no rail is
+    to be shimmed or moved on these figures (:func:`undecided_advice`)."""
     geometry = config.machine.geometry()
     g = grid(config, limits)
     points = g.points
@@ -335,14 +338,16 @@ def statement(config: StationConfig, limits: Limits | None, *,
         squareness_mm_per_m=_known(sq_values),
         squareness_std_errors=_known(sq_se),
         squareness_decision=decision,
-        squareness_advice=squareness_advice(layout, rail, decision),
+        squareness_advice=undecided_advice(undecided) if undecided else
+        squareness_advice(layout, rail, decision),
         tilts=None if layout is None else _known(layout.as_dict()),
         tilt_std_errors=None if layout is None else _known(layout.std_errors()),
         tilt_interval_95=tilt_interval,
         gaps=None if layout is None else _maybe_known(layout.gaps()),
         gap_std_errors=None if layout is None else _maybe_known(layout.gap_std_errors()),
         gap_interval_95=None if layout is None else _interval(layout, GAP_NAMES),
-        gap_advice=gap_advice(layout, gap_decision),
+        gap_advice=undecided_advice(undecided) if undecided else
+        gap_advice(layout, gap_decision),
         field=rec.ErrorField(points_mm=np.round(points, 4).tolist(),
                              before_mm=np.round(before.field, 6).tolist(),
                              after_mm=np.round(after.field.field, 6).tolist()),
@@ -361,9 +366,6 @@ def _maybe_known(values: Mapping[str, float] | None) -> Params | None:
     return None if values is None else _known(values)
 
 
-_LEANS = {"tilt_yx": ("y", "x"), "tilt_zx": ("z", "x"), "tilt_zy": ("z", "y")}
-
-
 def squareness_decision(tilts: Layout | None, tilts_in_model: bool
                         ) -> SquarenessDecision | None:
     """When an axis counts as leaning (what the advice and the report judge by):
@@ -380,65 +382,6 @@ def squareness_decision(tilts: Layout | None, tilts_in_model: bool
     return SquarenessDecision(k=k, rule=f"an axis counts as leaning beyond {k:.2f} standard "
                                         f"errors (Student's t on {tilts.dof:g} dof: one false "
                                         "alarm in a thousand square machines)")
-
-
-def squareness_advice(tilts: Layout | None, rail_mm: float,
-                      decision: SquarenessDecision | None) -> list[str]:
-    """What to do about each axis that leans (``decision``: squareness_decision's; the tilts, the
-    axes' own: the squareness of the tool's motions also holds what the offsets
-    written shear them by): shim the rail (tilt × its travel) or compensate in the
-    controller's kinematics (model.json holds the machine)."""
-    if tilts is None:
-        return ["the tilts were not identified: squareness not stated"]
-    k = orthocal.coverage_factor(tilts.dof)
-    k_decide = None if decision is None else decision.k
-    out = []
-    for (name, value), se in zip(tilts.as_dict().items(), tilts.std_errors().values(),
-                                 strict=True):
-        axis, toward = _LEANS[name]
-        if k_decide is None or abs(value) <= k_decide * se:
-            why = "the model test kept no tilt" if k_decide is None else \
-                f"not beyond {k_decide:.2f} standard errors"
-            out.append(f"axis {axis} toward {toward} ({name}): {value:+.3f} ± {k * se:.3f} "
-                       f"mm/m (95 %), {why}: nothing to do")
-            continue
-        shim = abs(value) * rail_mm / 1000.0
-        out.append(f"axis {axis} leans {'toward +' if value > 0 else 'away from +'}{toward} "
-                   f"by {abs(value):.3f} ± {k * se:.3f} mm/m ({name}): offsets cannot fix "
-                   f"it; shim its rail by {1000 * shim:.0f} µm over its {rail_mm:g} mm of "
-                   "travel, or put the geometry into the controller (orthocal export "
-                   "--kinematics, or orthocal compensate)")
-    return out
-
-
-_PASSES = {"gap_xy": ("x", "y", "z"), "gap_xz": ("x", "z", "y"), "gap_yz": ("y", "z", "x")}
-
-
-def gap_advice(layout: Layout | None, decision: SquarenessDecision | None) -> list[str]:
-    """What to do about each pair of axes that pass each other (the gaps' rule is the
-    tilts', ``decision``): offsets cannot fix a gap; the controller's kinematics can
-    (model.json holds the machine), and so can moving a rail across by the gap."""
-    gaps = None if layout is None else layout.gaps()
-    if layout is None or not gaps:
-        return ["the gaps between the axes were not identified: not stated"]
-    se = layout.gap_std_errors() or {}
-    k = orthocal.coverage_factor(layout.dof)
-    k_decide = None if decision is None else decision.k
-    out = []
-    for name, value in gaps.items():
-        a, b, along = _PASSES[name]
-        if k_decide is None or abs(value) <= k_decide * se[name]:
-            why = "the model test kept no gap" if k_decide is None else \
-                f"not beyond {k_decide:.2f} standard errors"
-            out.append(f"axes {a} and {b} ({name}): {1000 * value:+.1f} ± "
-                       f"{1000 * k * se[name]:.1f} µm (95 %), {why}: nothing to do")
-            continue
-        out.append(f"axis {a} passes axis {b} {1000 * abs(value):.0f} ± "
-                   f"{1000 * k * se[name]:.0f} µm {'above' if value > 0 else 'below'} it "
-                   f"along {along} ({name}): offsets cannot fix it; put the geometry into "
-                   "the controller (orthocal export --kinematics, or orthocal compensate), or "
-                   "move a rail across by the gap")
-    return out
 
 
 def model_export(config: StationConfig, *, drho_start: Mapping[str, float],

@@ -151,11 +151,18 @@ def measured_form(config: StationConfig, data, ident: orthocal.Identification,
     """Where ``ident``'s model leaves a misfit beyond the noise that the stated leg
     form excuses (the test with [uncertainty]'s allowance passes) and the bows can be
     told apart from the model's parameters on these stops, the bows fitted beside it:
-    the identification and its plain lack-of-fit test (``test``: ``ident``'s). A bow is a systematic
-    error of the same shape in every round, so counted as a scatter it inflates every
-    standard error by √F, which no cycle shrinks, and leaves Δρ off by 0.43·h (rho,
-    docs/model.md); fitted, Δρ is free of it and its error is the noise's. Otherwise
-    ``ident`` and ``test`` unchanged."""
+    the identification and its plain lack-of-fit test (``test``: ``ident``'s). A bow is a
+    systematic error of the same shape in every round, so counted as a scatter it
+    inflates every standard error by √F, which no cycle shrinks, and leaves Δρ off by
+    0.43·h (rho, docs/model.md); fitted, Δρ is free of it and its error is the noise's.
+
+    Unless the axes' tilts explain the same misfit as well (the model with tilts
+    passes against the noise alone): at the legs' middles a uniform bow is a tilt, and
+    the data cannot say which the machine has. Then the tilts' fit is returned (the
+    rigid geometry, whose budget carries the stated straightness through its
+    sensitivity), marked with how far the bows' explanation puts each parameter
+    (``ambiguity_mm``): no verdict may claim more than that allows (docs/model.md,
+    "Tilts or bows"). Otherwise ``ident`` and ``test`` unchanged."""
     from station.analysis.run_budget import allowance
 
     geometry = config.machine.geometry()
@@ -165,11 +172,43 @@ def measured_form(config: StationConfig, data, ident: orthocal.Identification,
     excused = lack_of_fit(ident, geometry, noise[0], noise[1], allowance=allowance(config))
     if excused.p_value is None or excused.p_value < LEVEL:
         return ident, test  # more than the stated form can make: not the form
-    proc = config.procedure
-    try:
-        fitted = orthocal.identify(data, geometry, model=model + orthocal.FORM,
-                                   method=proc.method, sigma=noise[0] if stands else None,
-                                   stands=stands)
-    except orthocal.IdentificationError:
+    fitted = _fit(config, data, model + orthocal.FORM, noise, stands)
+    if fitted is None:
         return ident, test
+    tilted = _fit(config, data, with_tilts(model), noise, stands)
+    if tilted is not None:
+        tilt_test = lack_of_fit(tilted, geometry, noise[0], noise[1])
+        if not _rejected(tilt_test):
+            return ambiguous(tilted, fitted), tilt_test
     return fitted, lack_of_fit(fitted, geometry, noise[0], noise[1])
+
+
+def with_tilts(model: str) -> str:
+    """``model`` with the axes' tilts ("rho+gap" → "rho+tilt+gap"); itself if it has
+    them."""
+    parts = model.split("+")
+    if "tilt" in parts:
+        return model
+    return "+".join([parts[0], "tilt", *parts[1:]])
+
+
+def ambiguous(tilted: orthocal.Identification,
+              bowed: orthocal.Identification) -> orthocal.Identification:
+    """``tilted`` marked with how far ``bowed`` (the same data explained by the legs'
+    bows) puts the parameters both hold: what the data cannot decide."""
+    from dataclasses import replace
+
+    shared = [n for n in tilted.names if n in bowed.parameters]
+    return replace(tilted, ambiguous_with=bowed.model, ambiguity_mm={
+        n: abs(tilted.parameters[n] - bowed.parameters[n]) for n in shared})
+
+
+def _fit(config: StationConfig, data, model: str, noise: tuple[float, float, str],
+         stands: orthocal.Stands | None) -> orthocal.Identification | None:
+    """``model`` fitted to ``data`` as the round's own fit was; None if it cannot be."""
+    try:
+        return orthocal.identify(data, config.machine.geometry(), model=model,
+                                 method=config.procedure.method,
+                                 sigma=noise[0] if stands else None, stands=stands)
+    except orthocal.IdentificationError:
+        return None

@@ -54,9 +54,11 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
     Converged: every axis shown within ``limit`` at 95 % (orthocal.loop.shown_within):
     for a first measurement, a machine within tolerance that nothing is written
     to. Otherwise suspected (the 95 % interval excludes the aim on some axis) or
-    unproven. ``joined``: the round's Δρ̂ and standard errors joined with the rounds
-    before it (orthocal.loop.joined_with_previous): what the machine is shown
-    within and seen off by; the corrections stand out of this round's own noise."""
+    unproven; ambiguous where an axis is out because another model explains the data
+    as well (``ident.ambiguity_mm``, added to what the axis is shown within).
+    ``joined``: the round's Δρ̂ and standard errors joined with the rounds before it
+    (orthocal.loop.joined_with_previous): what the machine is shown within and seen
+    off by; the corrections stand out of this round's own noise."""
     aim = target if previous else None
     beyond_noise = significant_corrections(
         ident.parameters, ident.std_errors, 0.0,
@@ -66,7 +68,11 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
     sig = [n for n in beyond_noise
            if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
     values, ses = joined or (ident.parameters, ident.std_errors)
-    shown = shown_within(values, ses, ident.std_error_dof, target=target)
+    # what the data cannot decide (another model explaining them as well) is no
+    # closer than it is, whatever the noise
+    apart = ident.ambiguity_mm
+    shown = {n: v + apart.get(n, 0.0)
+             for n, v in shown_within(values, ses, ident.std_error_dof, target=target).items()}
     out = [n for n, v in shown.items() if v > limit]
     seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
     if not sig and previous is not None and out:
@@ -82,6 +88,8 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
     verdict = "significant" if sig else "converged"
     if not sig and out:
         verdict = "suspected" if any(v > 0 for v in seen.values()) else "unproven"
+        if any(apart.get(n, 0.0) > 0.0 for n in out):
+            verdict = "ambiguous"
     return Verdict(verdict, sig, shown)
 
 
@@ -134,6 +142,15 @@ def not_converged(entry: Iteration, converge_mm: float, offset_count_mm: float) 
     said = (f"after {passes} pass(es) of its last verification, Δρ_{worst[-1]} may still "
             f"be off {how} at 95 %, more than converge_mm = {1000 * converge_mm:g} µm + "
             f"half the drive's count ({500 * offset_count_mm:g} µm), and {seen}{noise}")
+    if entry.ambiguity is not None:
+        apart = max(v or 0.0 for k, v in entry.ambiguity.apart_mm.items() if k in WRITABLE)
+        return (f"{said}; the axes' tilts ({entry.model}) and the legs' bows within the "
+                f"stated straightness ({entry.ambiguity.explained_by}) explain the "
+                f"deviations alike, and put Δρ up to {1000 * apart:.1f} µm apart; at the "
+                "legs' middles a uniform bow is a tilt, so more cycles, passes or "
+                "write-backs cannot decide it: read a second gauge plane ([[setups]] "
+                "again with at = 0.75), or, if the legs are straighter than stated, state "
+                "their measured straightness ([uncertainty] leg_straightness_mm)")
     if entry.fit_ok is False:
         # the noise is not the cause: more of the same measurement cannot help
         return (f"{said}; the cause is the model, not the noise: model {entry.model} "

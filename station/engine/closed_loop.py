@@ -16,7 +16,9 @@ both rounds and beyond converge_mm: write it), "converged" (the remaining Δρ i
 shown within ±converge_mm at 95 % on every axis: orthocal.loop.shown_within), or
 neither: "suspected" (a correction the round sees at 95 % that is not written: a
 first measurement's under converge_mm, or one on an axis already shown within the
-limit) or "unproven" (the round's noise hides whatever is left). Each
+limit) or "unproven" (the round's noise hides whatever is left), or "ambiguous"
+(what keeps it undecided is not noise: the axes' tilts and the legs' bows explain
+its deviations alike, station.analysis.model_choice.measured_form). Each
 setup of a verification has already taken more cycles on its mounted gauges where
 its own scatter said the verdict needed them ([procedure] max_cycles_in_mounting,
 station.engine.sequencer). After a write-back, a leftover under converge_mm that the
@@ -50,6 +52,7 @@ States (``len(verdicts)``, ``len(writes)``):
                         suspected/unproven, passes left → the round's next pass
                           (extra_passes_allowed: the first round's are more)
                         suspected/unproven, none left → finish "not-converged"
+                        ambiguous → finish "not-converged" (no pass can decide it)
     (k, k)          → the k-th write's outcome:
                         written and verify → measure the verification of round k
                         written, no verify → finish "not verified"
@@ -65,7 +68,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 StepKind = Literal["measure", "write", "finish"]
-Verdict = Literal["significant", "converged", "suspected", "unproven"]
+Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous"]
 
 #: Why the loop stopped (the run JSON's ``loop.stopped``): the first is success; the
 #: report says each in words (station.report.rounds.STOP_TEXT).
@@ -136,6 +139,8 @@ def next_step(state: LoopState) -> Step:
         verdict = state.verdicts[-1]
         if verdict == "converged":
             return Step("finish", reason="converged")
+        if verdict == "ambiguous":  # what limits it is not noise: a pass cannot help
+            return Step("finish", reason="not-converged")
         if verdict in ("suspected", "unproven"):
             if state.extra[-1] < extra_passes_allowed(k - 1, state.max_extra_passes,
                                                       state.max_iterations, state.verify):

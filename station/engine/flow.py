@@ -43,7 +43,7 @@ from station.plan.steps import Plan
 from station.record.io import jsonable_value, section
 from station.record.journal_file import Journal
 from station.record.model import MachineModel
-from station.record.result import Iteration, Joined, Loop, RunResult, Status
+from station.record.result import Ambiguity, Iteration, Joined, Loop, RunResult, Status
 from station.record.result_accuracy import Accuracy
 from station.record.result_base import JsonObject, NotStated
 from station.record.result_sections import ModelSelection
@@ -189,6 +189,9 @@ class Flow:
         part = verdict.stands_part(ident, ctx.config.machine.geometry())
         if part is not None:
             entry.stands_part_mm = part
+        if ident.ambiguous_with is not None:
+            entry.ambiguity = Ambiguity(explained_by=ident.ambiguous_with,
+                                        apart_mm={**ident.ambiguity_mm})
         if n:
             entry.joined = Joined(drho_mm=joined[0], std_errors_mm=joined[1])
         if again:
@@ -439,7 +442,7 @@ class Flow:
                 cfg, limits, drho_start=start, drho_now=now, drho_now_cov=now_cov,
                 dof=finite(last.std_error_dof), layout=layout, model=last.model,
                 in_model=names, offsets_before=None if before is None else results.known(before),
-                target_tool=self._tool_target(), form=form)
+                target_tool=self._tool_target(), form=form, undecided=last.ambiguous_with)
         except ValidationError:  # a section that does not fit the record: a bug, not a run's
             raise
         except (ValueError, np.linalg.LinAlgError) as exc:

@@ -43,7 +43,7 @@ SCHEMA_VERSION: Literal[2] = 2
 
 Stopped = Literal["converged", "max_iterations", "not-converged", "refused", "declined",
                   "failed", "skipped", "not-verified"]
-Verdict = Literal["significant", "converged", "suspected", "unproven"]
+Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous"]
 Status = Literal["ok", "failed", "refused", "aborted"]
 
 
@@ -120,6 +120,15 @@ class Joined(Closed):
     std_errors_mm: Params
 
 
+class Ambiguity(Closed):
+    """What a round's data cannot decide: another model explains its deviations as
+    well (docs/model.md, "Tilts or bows")."""
+
+    explained_by: str = Field(description="the other model: the legs' bows where the fit "
+                                          "has the axes' tilts")
+    apart_mm: Params = Field(description="how far it puts each parameter from the fit's")
+
+
 class Iteration(Closed):
     """iterations[]: one identification round."""
 
@@ -144,6 +153,8 @@ class Iteration(Closed):
         None, description="of each Δρ standard error, the part the stands set by eye make "
                           "(more cycles in a mounting do not shrink it, more mountings do)")
     target_drho: Params | None = Field(None, description="the Δρ aimed at, objective tool")
+    ambiguity: Ambiguity | None = Field(
+        None, description="where the data cannot tell the axes' tilts from the legs' bows")
 
 
 class Remaining(Closed):

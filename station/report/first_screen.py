@@ -147,7 +147,8 @@ def _nothing_written(result: RunResult) -> bool:
 
 def as_left(result: RunResult, name: str) -> str:
     """Joint ``name``'s Δρ as the run leaves it: what the last verification found
-    left (± its 95 % half-width), or why there is no such figure."""
+    left (± its 95 % half-width, widened by what the data cannot decide), or why there
+    is no such figure."""
     if _nothing_written(result):
         return "unchanged (nothing written)"
     rem = result.remaining
@@ -155,7 +156,11 @@ def as_left(result: RunResult, name: str) -> str:
         return "not verified (the correction written, not measured after)"
     k = num(rem.coverage_factor_95) or coverage_factor(num(rem.std_errors_dof))
     se = at(rem.std_errors, name)
-    text = value_pm(at(rem.estimate, name), None if se is None else k * se)
+    # where the legs' bows explain the data as well, how far they put it: the noise's
+    # interval alone would claim what the data cannot decide (verdict.judge adds it too)
+    last = result.iterations[-1] if result.iterations else None
+    apart = (at(last.ambiguity.apart_mm, name) or 0.0) if last and last.ambiguity else 0.0
+    text = value_pm(at(rem.estimate, name), None if se is None else k * se + apart)
     aim = rounds.aim_of(result, len(result.iterations or []) - 1).get(name)
     if aim:
         text += f" (aimed at {value_pm(aim, None)}, objective tool)"
@@ -285,7 +290,12 @@ def actions(result: RunResult) -> list[str]:
     if result.status != "ok":
         return []
     acc, _ = tool.statement(result)
-    out = _geometry_actions(acc) if acc is not None else []
+    last = result.iterations[-1] if result.iterations else None
+    if acc is not None and last is not None and last.ambiguity is not None:
+        # tilts and gaps the legs' bows explain as well: the record's one word on them
+        out = acc.squareness_advice[:1]
+    else:
+        out = _geometry_actions(acc) if acc is not None else []
     if (play := _reversal_action(result, acc)) is not None:
         out.append(play)
     return out

@@ -42,6 +42,7 @@ VERDICT_TEXT = {
     "converged": "shown converged",
     "suspected": "seen at 95 %, not beyond the noise of both rounds",
     "unproven": "hidden in its noise",
+    "ambiguous": "undecided: the axes' tilts and the legs' bows explain it alike",
 }
 
 

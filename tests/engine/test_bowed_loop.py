@@ -1,11 +1,11 @@
 """The closed loop on a machine whose legs are bowed (docs/model.md, "Leg form in the
-loop"), in a whole run of the engine on the Protocol-level fakes: 8 µm bows on every
-gauge plane, the legs stated straight to 10 µm, 1 µm gauges, stands by eye, three
-cycles of three readings. The bows leave a misfit that rho cannot fit and that the
-stated form excuses; taken for a scatter it would hold every standard error at
-about 3 µm whatever the cycles, and leave Δρ off by 0.43·h. The loop fits the bows
-beside Δρ instead, and converges, with the offsets near the truth, in the fewest
-mountings."""
+loop"), in a whole run of the engine on the Protocol-level fakes: legs x and z bowed
+8 µm one way, leg y the other, stated straight to 10 µm, 1 µm gauges, stands by eye,
+three cycles of three readings. The bows leave a misfit that rho cannot fit and that
+the stated form excuses; taken for a scatter it would hold every standard error at
+about 3 µm whatever the cycles. Bows of both signs are no tilt of the axes (a uniform
+bow would be: tests/engine/test_tilts_or_bows.py), so the loop fits the bows beside
+Δρ, and converges, with the offsets near the truth, in the fewest mountings."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ STATED_MM = 0.010
 
 
 def test_bowed_legs_converge_with_the_bows_fitted(tmp_path: Path) -> None:
-    rig = FakeRig(seed=7, noise_mm=0.001, true_drho=DRHO, leg_bow=(BOW_MM,) * 3,
+    rig = FakeRig(seed=7, noise_mm=0.001, true_drho=DRHO, leg_bow=(BOW_MM, -BOW_MM, BOW_MM),
                   mount_error_mm=DEFAULT_MOUNT_ERROR_MM)
     config = fake_config(uncertainty={"leg_straightness_mm": STATED_MM}, settle_s=0.0,
                          cycles=3, readings=3)

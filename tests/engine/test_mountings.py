@@ -99,7 +99,8 @@ def _ident(drho_um: float, se_um: float, **others_um: float) -> SimpleNamespace:
     names = ("drho_x", "drho_y", "drho_z")
     values = {n: 0.0 for n in names} | {"drho_x": drho_um} | others_um
     return SimpleNamespace(parameters={n: v / 1000 for n, v in values.items()},
-                           std_errors=dict.fromkeys(names, se_um / 1000), std_error_dof=None)
+                           std_errors=dict.fromkeys(names, se_um / 1000), std_error_dof=None,
+                           ambiguity_mm={})
 
 
 def _judged(own: SimpleNamespace, previous: SimpleNamespace | None, converge_mm: float = 0.002,
