@@ -25,12 +25,13 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, JsonValue, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 import orthocal
 from orthocal import AXES, MODELS, PARAM_NAMES
-from station.record.migrate import migrate
+from station.record.io import UnreadableResult, read_result
 from station.record.model import MachineModel
+from station.record.result import RunResult
 from station.record.result_base import JsonObject
 
 #: orthoglidekins' pins in PARAM_NAMES order (docs/design.md, "The geometry in the
@@ -119,11 +120,14 @@ def identified_machine(run_dir: str | Path) -> IdentifiedMachine:
     """The machine the run in ``run_dir`` identified; NotACalibration (one line) for a run
     that failed, was aborted or identified nothing."""
     run = Path(run_dir)
-    result = migrate(_read(run / "result.json", "result document"))
-    status = result.get("status")
+    try:
+        result = read_result(run / "result.json")
+    except UnreadableResult as exc:
+        raise NotACalibration(str(exc)) from None
+    status = result.status
     if status in ("failed", "aborted"):
-        raise NotACalibration(f"{run}: the run {status} ({result.get('message') or 'no message'})"
-                          ": it is no calibration to put into a controller")
+        raise NotACalibration(f"{run}: the run {status} ({result.message or 'no message'})"
+                              ": it is no calibration to put into a controller")
     if not (run / "model.json").exists():
         raise NotACalibration(f"{run}: the run identified nothing (no model.json)")
     try:
@@ -135,7 +139,7 @@ def identified_machine(run_dir: str | Path) -> IdentifiedMachine:
     return _machine(run, result, model)
 
 
-def _machine(run: Path, result: JsonObject, model: MachineModel) -> IdentifiedMachine:
+def _machine(run: Path, result: RunResult, model: MachineModel) -> IdentifiedMachine:
     kept = model.model
     if kept not in MODELS:
         raise NotACalibration(f"{run / 'model.json'}: model {kept!r} is not one of orthocal's")
@@ -147,37 +151,25 @@ def _machine(run: Path, result: JsonObject, model: MachineModel) -> IdentifiedMa
         missing = [n for n in names if n not in getattr(model, field)]
         if missing:
             raise NotACalibration(f"{run / 'model.json'}: {field}: no {', '.join(missing)}")
-    remaining = _section(result, "remaining")
-    now_se = _section(remaining, "std_errors")
-    k_now = orthocal.coverage_factor(_number(remaining.get("std_errors_dof")))
+    remaining = result.remaining
+    now_se = remaining.std_errors if remaining is not None else {}
+    k_now = orthocal.coverage_factor(remaining.std_errors_dof if remaining else None)
     k = orthocal.coverage_factor(model.std_errors_dof)
     values = []
     for c, name in enumerate(PARAM_NAMES):
         kind = name.split("_")[0]
         if kind == "drho":
-            values.append(_drho(name, model.drho_now[name], _number(now_se.get(name)), k_now))
+            values.append(_drho(name, model.drho_now[name], now_se.get(name), k_now))
             continue
         told = c in columns and name in model.estimated
         values.append(_layout_value(name, kind, model, told, k))
     estimate = [model.drho_now[n] if n.startswith("drho") else model.parameters[n]
                 for n in PARAM_NAMES]
-    machine_id = _section(result, "machine").get("id")
     return IdentifiedMachine.model_validate(dict(
-        run_dir=str(result.get("run_dir") or run), machine_id=machine_id, model=kept,
+        run_dir=result.run_dir or str(run), machine_id=result.machine.id, model=kept,
         leg_length=model.geometry.leg_length_mm, rho_min=model.geometry.rho_min_mm,
-        rho_max=model.geometry.rho_max_mm, offsets_held_by=result.get("offsets_held_by"),
+        rho_max=model.geometry.rho_max_mm, offsets_held_by=result.offsets_held_by,
         values=tuple(values), estimate=tuple(float(v) for v in estimate)))
-
-
-def _section(doc: JsonObject, key: str) -> JsonObject:
-    """``doc[key]`` where it is an object, else empty (a section the run did not reach)."""
-    value = doc.get(key)
-    return value if isinstance(value, dict) else {}
-
-
-def _number(value: JsonValue) -> float | None:
-    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
-        else None
 
 
 def _drho(name: str, value: float, se: float | None, k: float) -> GeometryValue:

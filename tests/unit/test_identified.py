@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from result_builders import golden_result
 
 from orthocal import PARAM_NAMES, coverage_factor
 from station.record.identified import NotACalibration, identified_machine
@@ -50,11 +51,12 @@ def run_dir(tmp_path: Path, model: str = "rho+tilt+gap", status: str = "ok",
             with_model: bool = True) -> Path:
     d = tmp_path / f"run-{model}-{status}"
     d.mkdir()
-    result = {"run_dir": str(d), "status": status, "message": None,
-              "machine": {"id": "OG-7", "leg_length": 310.25, "rho_min": -100.0,
-                          "rho_max": 60.0},
-              "offsets_held_by": "controller",
-              "remaining": {"std_errors": {n: 0.0008 for n in NOW}, "std_errors_dof": 60.0}}
+    # a whole record (the golden run's), with what this test's run says
+    result = golden_result()
+    result.update(run_dir=str(d), status=status, message=None, offsets_held_by="controller")
+    result["machine"]["id"] = "OG-7"
+    assert result["remaining"] is not None
+    result["remaining"].update(std_errors={n: 0.0008 for n in NOW}, std_errors_dof=60.0)
     (d / "result.json").write_text(json.dumps(result))
     if with_model:
         (d / "model.json").write_text(json.dumps(model_json(model)))
@@ -102,7 +104,7 @@ def test_a_run_that_did_not_finish_is_refused(tmp_path: Path, status: str) -> No
 def test_a_run_that_identified_nothing_is_refused(tmp_path: Path) -> None:
     with pytest.raises(NotACalibration, match="identified nothing"):
         identified_machine(run_dir(tmp_path, with_model=False))
-    with pytest.raises(NotACalibration, match="no result document"):
+    with pytest.raises(NotACalibration, match=r"result\.json: cannot read"):
         identified_machine(tmp_path / "nowhere")
 
 
