@@ -128,6 +128,15 @@ def identified_machine(run_dir: str | Path) -> IdentifiedMachine:
     if status in ("failed", "aborted"):
         raise NotACalibration(f"{run}: the run {status} ({result.message or 'no message'})"
                               ": it is no calibration to put into a controller")
+    last = result.iterations[-1] if result.iterations else None
+    if last is not None and last.ambiguity is not None:
+        # a tilt there may be a bow, which the tool never sees: put into the controller,
+        # it would move the tool by what the bows only seemed to be
+        raise NotACalibration(
+            f"{run}: the run could not tell the axes' tilts from the legs' bows "
+            f"({last.model} or {last.ambiguity.explained_by}): its geometry is no "
+            "calibration to put into a controller; read a second gauge plane ([[setups]] "
+            "again with at = 0.75) and calibrate again")
     if not (run / "model.json").exists():
         raise NotACalibration(f"{run}: the run identified nothing (no model.json)")
     try:

@@ -48,7 +48,7 @@ def model_json(model: str) -> dict[str, Any]:
 
 
 def run_dir(tmp_path: Path, model: str = "rho+tilt+gap", status: str = "ok",
-            with_model: bool = True) -> Path:
+            with_model: bool = True, ambiguous: bool = False) -> Path:
     d = tmp_path / f"run-{model}-{status}"
     d.mkdir()
     # a whole record (the golden run's), with what this test's run says
@@ -57,6 +57,10 @@ def run_dir(tmp_path: Path, model: str = "rho+tilt+gap", status: str = "ok",
     result["machine"]["id"] = "OG-7"
     assert result["remaining"] is not None
     result["remaining"].update(std_errors={n: 0.0008 for n in NOW}, std_errors_dof=60.0)
+    if ambiguous:  # the legs' bows explained its last round as well as the tilts
+        result["iterations"][-1]["model"] = model
+        result["iterations"][-1]["ambiguity"] = {
+            "explained_by": "rho+gap+form", "apart_mm": {"drho_x": 0.015}}
     (d / "result.json").write_text(json.dumps(result))
     if with_model:
         (d / "model.json").write_text(json.dumps(model_json(model)))
@@ -115,3 +119,12 @@ def test_a_damaged_model_is_named(tmp_path: Path) -> None:
     (d / "model.json").write_text(json.dumps(doc))
     with pytest.raises(NotACalibration, match=r"model\.json: drho_now"):
         identified_machine(d)
+
+
+def test_a_run_that_could_not_tell_tilts_from_bows_is_refused(tmp_path: Path) -> None:
+    # docs/model.md, "Tilts or bows": put into a controller, tilts that may be bows
+    # would move the tool by what the bows only seemed to be
+    with pytest.raises(NotACalibration, match="could not tell the axes' tilts from the legs' "
+                                              r"bows \(rho\+tilt\+gap or rho\+gap\+form\)"):
+        identified_machine(run_dir(tmp_path, ambiguous=True))
+    assert identified_machine(run_dir(tmp_path, model="rho+tilt")).model == "rho+tilt"
