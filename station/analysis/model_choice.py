@@ -118,7 +118,8 @@ def identify_measurement(config: StationConfig, m: Measurement,
         # the statement's inflation: the misfit beyond the noise alone
         test = lack_of_fit(ident, geometry, noise[0], noise[1])
     if noise is not None and test is not None and _rejected(test):
-        ident, test = measured_form(config, data, ident, noise, stands, test)
+        ident, test = measured_form(config, data, ident, noise, stands, test,
+                                    tilts_possible=model == "auto")
     if noise is not None:
         inflate = 1.0
         if test is not None and _rejected(test):
@@ -147,7 +148,8 @@ def form_identifiable(model: str, keys: Iterable[Key], geometry: orthocal.Geomet
 
 def measured_form(config: StationConfig, data, ident: orthocal.Identification,
                   noise: tuple[float, float, str], stands: orthocal.Stands | None,
-                  test: ModelTest) -> tuple[orthocal.Identification, ModelTest]:
+                  test: ModelTest, tilts_possible: bool = True
+                  ) -> tuple[orthocal.Identification, ModelTest]:
     """Where ``ident``'s model leaves a misfit beyond the noise that the stated leg
     form excuses (the test with [uncertainty]'s allowance passes) and the bows can be
     told apart from the model's parameters on these stops, the bows fitted beside it:
@@ -157,8 +159,10 @@ def measured_form(config: StationConfig, data, ident: orthocal.Identification,
     0.43·h (rho, docs/model.md); fitted, Δρ is free of it and its error is the noise's.
 
     Unless the axes' tilts explain the same misfit as well (the model with tilts
-    passes against the noise alone): at the legs' middles a uniform bow is a tilt, and
-    the data cannot say which the machine has. Then the tilts' fit is returned (the
+    passes against the noise alone), where they are possible (``tilts_possible``:
+    model auto; a model the operator named without tilts says the axes are square):
+    at the legs' middles a uniform bow is a tilt, and the data cannot say which the
+    machine has. Then the tilts' fit is returned (the
     rigid geometry, whose budget carries the stated straightness through its
     sensitivity), marked with how far the bows' explanation puts each parameter
     (``ambiguity_mm``): no verdict may claim more than that allows (docs/model.md,
@@ -175,7 +179,7 @@ def measured_form(config: StationConfig, data, ident: orthocal.Identification,
     fitted = _fit(config, data, model + orthocal.FORM, noise, stands)
     if fitted is None:
         return ident, test
-    tilted = _fit(config, data, with_tilts(model), noise, stands)
+    tilted = _fit(config, data, with_tilts(model), noise, stands) if tilts_possible else None
     if tilted is not None:
         tilt_test = lack_of_fit(tilted, geometry, noise[0], noise[1])
         if not _rejected(tilt_test):
