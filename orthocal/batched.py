@@ -108,9 +108,22 @@ def deviations_batch(keys: Sequence[Key], geometry: Geometry, params_rows,
     return (reading_s - reading_0) + (bow_at(t_s, bows) - bow_at(t_0, bows))
 
 
-def _bow_columns(table: KeyTable, rows: np.ndarray) -> np.ndarray:
-    """The BOW_NAMES column of each key's gauge (leg, direction)."""
+def _bow_column_table() -> np.ndarray:
+    """The BOW_NAMES column of the gauge (leg, direction), by their axis indices (−1
+    where leg and direction are one axis: no gauge)."""
     names = "xyz"
-    return np.array([BOW_NAMES.index(f"bow_{names[leg]}{names[d]}")
-                     for leg, d in zip(table.legs[rows], table.dirs[rows], strict=True)],
-                    dtype=int)
+    table = np.full((3, 3), -1, dtype=int)
+    for leg in range(3):
+        for d in range(3):
+            if leg != d:
+                table[leg, d] = BOW_NAMES.index(f"bow_{names[leg]}{names[d]}")
+    return table
+
+
+_BOW_COLUMN = _bow_column_table()
+
+
+def _bow_columns(table: KeyTable, rows: np.ndarray) -> np.ndarray:
+    """The BOW_NAMES column of each key's gauge (leg, direction): looked up, not
+    searched by name per key (the fit's Jacobian asks at every step)."""
+    return _BOW_COLUMN[table.legs[rows], table.dirs[rows]]

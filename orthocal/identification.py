@@ -405,6 +405,7 @@ def _identify_with_stands(
             "the stands act through the product of their offset and the legs' slopes, which "
             "the linearised system (7) lacks: model the stands with method 'nonlinear'")
     sig, sig_dof = _stand_sigma(deviations_in, sigma)
+    rows = tuple(keys)  # one object for every step's KeyTable (orthocal.measurement)
     cols = list(MODELS[model])
     p = len(cols)
     stand_names, S = incidence(keys, stands)
@@ -433,13 +434,13 @@ def _identify_with_stands(
     prior_w = 1.0 / stands.prior_sd
 
     def residual(x: np.ndarray) -> np.ndarray:
-        r = deviations(keys, geometry, full_of(x[:p]), S @ x[p:]) - y
+        r = deviations(rows, geometry, full_of(x[:p]), S @ x[p:]) - y
         return np.concatenate([r / sig, x[p:] * prior_w])
 
     def jac(x: np.ndarray) -> np.ndarray:
         full = full_of(x[:p])
-        Jt = exact_jacobian(keys, geometry, full, model, S @ x[p:])
-        Jm = stand_jacobian(keys, geometry, full, S)
+        Jt = exact_jacobian(rows, geometry, full, model, S @ x[p:])
+        Jm = stand_jacobian(rows, geometry, full, S)
         lower = np.hstack([np.zeros((k, p)), prior_w * np.eye(k)])
         return np.vstack([np.hstack([Jt, Jm]) / sig, lower])
 

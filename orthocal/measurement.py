@@ -107,12 +107,37 @@ def bow_at(t, h) -> np.ndarray:
     return 4.0 * np.asarray(h, dtype=float) * t * (1.0 - t)
 
 
+# The last end points _leg_solve found: its exact arguments' bytes and (P, u, c).
+# The simulated gauges of one leg read the same joints one after another (and
+# contact_fraction after leg_reading): P does not depend on the gauge or its plane.
+_last_leg: tuple[Geometry, bytes, tuple[Any, ...]] | None = None
+
+
+def _exact(*arrays: np.ndarray | None) -> bytes:
+    """The arrays' shapes and values as bytes, None marked: equal bytes, equal inputs."""
+    return b"|".join(b"N" if a is None else repr(a.shape).encode() + a.tobytes()
+                     for a in arrays)
+
+
 def _leg_solve(rho, geometry: Geometry, drho, dL, mount, tilt, gap) -> tuple[Any, ...]:
-    """(ρ, P, Δρ, M, u, c) of :func:`leg_reading` and :func:`contact_fraction`."""
+    """(ρ, P, Δρ, M, u, c) of :func:`leg_reading` and :func:`contact_fraction`; P, u
+    and c read-only (the last solve is given again for the same exact arguments)."""
+    global _last_leg
     drho_v = np.zeros(3) if drho is None else np.asarray(drho, dtype=float)
     rho = np.asarray(rho, dtype=float)
-    u, c = axis_directions(tilt), axis_origins(gap)
-    p = forward_on_axes(rho, geometry, drho_v, dL, u, c)
+    dL_v, tilt_v, gap_v = (None if a is None else np.asarray(a, dtype=float)
+                           for a in (dL, tilt, gap))
+    exact = _exact(rho, drho_v, dL_v, tilt_v, gap_v)
+    last = _last_leg  # one read: another thread may replace it meanwhile
+    if last is not None and last[0] == geometry and last[1] == exact:
+        p, u, c = last[2]
+    else:
+        u, c = axis_directions(tilt_v), axis_origins(gap_v)
+        p = forward_on_axes(rho, geometry, drho_v, dL_v, u, c)
+        for array in (p, u, c):
+            if array is not None:
+                array.flags.writeable = False
+        _last_leg = (geometry, exact, (p, u, c))
     m = geometry.mount_plane if mount is None else mount
     return rho, p, drho_v, m, u, c
 
@@ -251,12 +276,28 @@ class KeyTable:
 
     @staticmethod
     def of(keys: Sequence[Key], geometry: Geometry) -> KeyTable:
+        global _last_table
+        last = _last_table  # one read: another thread may replace it meanwhile
+        # A tuple of keys is immutable: the same object means the same table (the
+        # fit passes one tuple at every step; hashing it each time cost more).
+        if last is not None and keys is last[0] and last[1] == geometry:
+            return last[2]
+        table = KeyTable._of(keys, geometry)
+        if type(keys) is tuple and all(type(k) is tuple for k in keys):
+            _last_table = (keys, geometry, table)
+        return table
+
+    @staticmethod
+    def _of(keys: Sequence[Key], geometry: Geometry) -> KeyTable:
         try:
             frozen = tuple(tuple(k) for k in keys)
             hash(frozen)
         except TypeError:  # not a sequence of keys: let the checks below say so
             return _key_table(keys, geometry)
         return _cached_key_table(frozen, geometry)
+
+
+_last_table: tuple[Sequence[Key], Geometry, KeyTable] | None = None
 
 
 def _key_table(keys: Sequence[Key], geometry: Geometry) -> KeyTable:
@@ -296,17 +337,35 @@ def _row_bows(keys: Sequence[Key], bow: Bows) -> np.ndarray:
     return np.array([float(bow.get((k[1], k[2]), 0.0)) for k in keys])
 
 
+# The last solve (_solve): its table, geometry, parameters' bytes and result. The fit
+# with stands reads the same parameters in three planes per step (its residual,
+# then its Jacobian's stand columns at offsets 1 and 0: orthocal.stands); the end
+# points do not depend on the plane, so the two later calls take the first's.
+_last_solve: tuple[KeyTable, Geometry, bytes, tuple[Any, ...]] | None = None
+
+
 def _solve(table: KeyTable, geometry: Geometry, drho: np.ndarray, dL: np.ndarray,
            tilt: np.ndarray, gap: np.ndarray) -> tuple[Any, ...]:
     """The end points of the table's distinct keys' test postures and of Π0 (its last row),
     in one solve (Newton when tilted or the axes do not meet): (each key's row
     among the distinct ones, their leg and direction indices, their joints, Π0's
-    joints, the end points, the axis directions, the axes' points)."""
+    joints, the end points, the axis directions, the axes' points). The arrays
+    are read-only: the last solve is given again for the same exact arguments."""
+    global _last_solve
     # Repeated keys (one per cycle) share one solve: the fit calls this per step.
+    exact = np.concatenate([drho, dL, tilt, gap]).astype(float).tobytes()
+    last = _last_solve  # one read: another thread may replace it meanwhile
+    if last is not None and last[0] is table and last[1] == geometry and last[2] == exact:
+        return last[3]
     rows, legs, dirs, rho_s, rho_0 = table.rows, table.legs, table.dirs, table.rho_s, table.rho_0
     u, c = axis_directions(tilt), axis_origins(gap)
     p_all = forward_on_axes(np.vstack([rho_s, rho_0]), geometry, drho, dL, u, c)
-    return rows, legs, dirs, rho_s, rho_0, p_all, u, c
+    for array in (p_all, u, c):
+        if array is not None:
+            array.flags.writeable = False
+    solved = (rows, legs, dirs, rho_s, rho_0, p_all, u, c)
+    _last_solve = (table, geometry, exact, solved)
+    return solved
 
 
 def _deviations_mounted(table: KeyTable, geometry: Geometry, drho: np.ndarray,

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from functools import lru_cache
 
 import numpy as np
 
@@ -37,25 +38,74 @@ def row_correlation(keys: Sequence[Key], shared_zero: bool = True) -> np.ndarray
     cycle, in cycle order). Without ``shared_zero`` the rows are independent;
     with it, the station's Π0 sharing correlates rows of one gauge (leg,
     direction): 1/3 in the same cycle, 1/6 in adjacent cycles."""
+    frozen = _frozen(keys)
+    if frozen is None:
+        return _row_correlation(keys, shared_zero)
+    return _cached_row_correlation(frozen, shared_zero).copy()
+
+
+def _frozen(keys: Sequence[Key]) -> tuple[Key, ...] | None:
+    """``keys`` as a hashable tuple, None when they are not hashable (then not cached)."""
+    try:
+        frozen = tuple(keys)
+        hash(frozen)
+    except TypeError:
+        return None
+    return frozen
+
+
+# A model selection asks for the same rows' correlation a dozen times (each
+# candidate's lack of fit, each nested test, each covariance); read-only copies kept.
+@lru_cache(maxsize=64)
+def _cached_row_correlation(keys: tuple[Key, ...], shared_zero: bool) -> np.ndarray:
+    C = _row_correlation(keys, shared_zero)
+    C.flags.writeable = False
+    return C
+
+
+def _row_correlation(keys: Sequence[Key], shared_zero: bool) -> np.ndarray:
     n = len(keys)
     C = np.eye(n)
-    if shared_zero:
+    if shared_zero and n > 1:
         rows = _gauge_rows(keys)
-        for a in range(n):
-            for b in range(a + 1, n):
-                (ga, ca), (gb, cb) = rows[a], rows[b]
-                if ga != gb:
-                    continue
-                if ca == cb:
-                    C[a, b] = C[b, a] = _SAME_CYCLE
-                elif abs(ca - cb) == 1:
-                    C[a, b] = C[b, a] = _ADJACENT_CYCLE
+        ids: dict[tuple[str, str], int] = {}
+        gauge = np.array([ids.setdefault(g, len(ids)) for g, _ in rows])
+        cycle = np.array([c for _, c in rows])
+        same = gauge[:, None] == gauge[None, :]
+        lag = np.abs(cycle[:, None] - cycle[None, :])
+        C[same & (lag == 0) & ~np.eye(n, dtype=bool)] = _SAME_CYCLE
+        C[same & (lag == 1)] = _ADJACENT_CYCLE
     return C
+
+
+def key_rows(keys: Sequence[Key]) -> tuple[list[Key], list[np.ndarray]]:
+    """The distinct keys in order of first appearance and the indices of each one's
+    rows (its cycles), ascending: ``values[rows]`` are the rows ``k == key`` picks."""
+    index: dict[Key, list[int]] = {}
+    for r, key in enumerate(keys):
+        index.setdefault(key, []).append(r)
+    return list(index), [np.array(v, dtype=int) for v in index.values()]
 
 
 def means_covariance(keys: Sequence[Key], shared_zero: bool = True) -> tuple[list[Key], np.ndarray]:
     """Distinct keys and the covariance of their means in units of σ², the
     variance of one per-cycle deviation (rows as for :func:`row_correlation`)."""
+    frozen = _frozen(keys)
+    if frozen is None:
+        return _means_covariance(keys, shared_zero)
+    distinct, M = _cached_means_covariance(frozen, shared_zero)
+    return list(distinct), M.copy()
+
+
+@lru_cache(maxsize=64)
+def _cached_means_covariance(keys: tuple[Key, ...], shared_zero: bool
+                             ) -> tuple[tuple[Key, ...], np.ndarray]:
+    distinct, M = _means_covariance(keys, shared_zero)
+    M.flags.writeable = False
+    return tuple(distinct), M
+
+
+def _means_covariance(keys: Sequence[Key], shared_zero: bool) -> tuple[list[Key], np.ndarray]:
     distinct = list(dict.fromkeys(keys))
     index = {k: n for n, k in enumerate(distinct)}
     n = len(keys)

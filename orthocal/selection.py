@@ -63,7 +63,7 @@ from orthocal.inputs import IdentificationError
 from orthocal.lattice import ModelTest, also_passing, best_passing, excused_note, lattice_levels
 from orthocal.measurement import Key
 from orthocal.misfit import Allowance, bounded_rss, columns
-from orthocal.noise import means_covariance, noise_from_cycles
+from orthocal.noise import key_rows, means_covariance, noise_from_cycles
 from orthocal.stands import Stands, describe_stands
 
 CANDIDATES: tuple[str, ...] = ("rho", "rho+gap", "rho+tilt", "rho+tilt+gap", "full+tilt",
@@ -105,10 +105,22 @@ class ModelSelection:
 
 def _means(result: Identification, distinct: Sequence[Key]) -> tuple[np.ndarray, np.ndarray]:
     """(the deviation means, the fit's residual at them) per distinct key."""
-    keys = list(result.keys)
-    rows = [[k == d for k in keys] for d in distinct]
-    return (np.array([np.mean(np.asarray(result.values)[r]) for r in rows]),
+    rows = _rows_of(result, distinct)
+    values = np.asarray(result.values)
+    return (np.array([np.mean(values[r]) for r in rows]),
             np.array([np.mean(result.residuals[r]) for r in rows]))
+
+
+def _rows_of(result: Identification, distinct: Sequence[Key]) -> list[np.ndarray]:
+    """The rows of each of ``distinct`` (means_covariance's, first-appearance order)."""
+    order, rows = key_rows(result.keys)
+    assert order == list(distinct)
+    return rows
+
+
+def _mean_residuals(result: Identification, distinct: Sequence[Key]) -> np.ndarray:
+    """The fit's residual averaged over each distinct key's rows."""
+    return np.array([np.mean(result.residuals[r]) for r in _rows_of(result, distinct)])
 
 
 def _allowed_rss(result: Identification, geometry: Geometry, noise_sigma: float,
@@ -162,8 +174,7 @@ def lack_of_fit(result: Identification, geometry: Geometry, noise_sigma: float,
     elif result.stand_model is not None:
         rss = _marginal_rss(result, geometry, noise_sigma, shared_zero)
     else:
-        mean_res = np.array([np.mean(result.residuals[[k == d for k in keys]])
-                             for d in distinct])
+        mean_res = _mean_residuals(result, distinct)
         J = exact_jacobian(distinct, geometry, result.fit_vector, result.model)
         W = np.linalg.inv(C)
         g = J.T @ W @ mean_res
@@ -192,7 +203,7 @@ def _marginal_rss(result: Identification, geometry: Geometry, noise_sigma: float
     assert stands is not None
     keys = list(result.keys)
     distinct, C = means_covariance(keys, shared_zero)
-    mean_res = np.array([np.mean(result.residuals[[k == d for k in keys]]) for d in distinct])
+    mean_res = _mean_residuals(result, distinct)
     J_t, J_m, m = stand_design(result, geometry, distinct)
     r_star = mean_res + J_m @ m
     V = C + (stands.prior_sd / noise_sigma) ** 2 * (J_m @ J_m.T)
