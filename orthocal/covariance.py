@@ -9,7 +9,7 @@ import numpy as np
 
 from orthocal.calibration import jacobian
 from orthocal.geometry import Geometry
-from orthocal.identification import Identification, exact_jacobian
+from orthocal.identification import Identification, PriorWeight, exact_jacobian
 from orthocal.measurement import Key
 from orthocal.noise import row_correlation
 from orthocal.stands import (
@@ -43,14 +43,28 @@ def with_measured_noise(result: Identification, geometry: Geometry, noise_sigma:
         J = exact_jacobian(keys, geometry, result.fit_vector, result.model)
     else:
         J = jacobian(keys, geometry, result.model)
-    bread = np.linalg.inv(J.T @ J)
     C = row_correlation(keys, shared_zero)
-    covariance = (inflate * noise_sigma) ** 2 * bread @ J.T @ C @ J @ bread
+    if result.prior is not None:
+        covariance = _joined_sandwich(J, result.prior, (inflate * noise_sigma) ** 2 * C)
+    else:
+        bread = np.linalg.inv(J.T @ J)
+        covariance = (inflate * noise_sigma) ** 2 * bread @ J.T @ C @ J @ bread
     std = np.sqrt(np.diag(covariance))
     correlation = covariance / np.outer(std, std)
     return replace(result, covariance=covariance, correlation=correlation,
                    std_errors={n: float(s) for n, s in zip(result.names, std, strict=True)},
                    se_dof=None if noise_dof is None else float(noise_dof))
+
+
+def _joined_sandwich(J: np.ndarray, prior: PriorWeight, noise_cov: np.ndarray) -> np.ndarray:
+    """The covariance of a fit joined with a prior (orthocal.carry.joined_fit: data
+    weighed by 1/σ², prior information I_p) when the rows' noise is ``noise_cov``:
+    B·(Jᵀ·Cov(e)·J/σ⁴ + I_p)·B, B = (JᵀJ/σ² + I_p)⁻¹; (JᵀJ/σ² + I_p)⁻¹ itself where
+    Cov(e) = σ²·I."""
+    w = 1.0 / prior.sigma**2
+    B = np.linalg.inv(w * J.T @ J + prior.information)
+    cov = B @ (w * w * J.T @ noise_cov @ J + prior.information) @ B
+    return (cov + cov.T) / 2.0
 
 
 def stand_design(result: Identification, geometry: Geometry, keys: Sequence[Key]

@@ -47,6 +47,18 @@ _START_SIGMA = 1e-3
 
 
 @dataclass(frozen=True)
+class PriorWeight:
+    """What a joined fit (orthocal.carry.joined_fit) added to the data's normal
+    equations: the prior's ``information`` over the fit's names (mm⁻², mrad⁻²; zero
+    rows and columns for names without a prior) against data rows weighed by
+    ``sigma`` (mm). The covariance and the sensitivity of such a fit need it: its
+    data Jacobian alone may be singular (a uniform bow is a tilt at the middles)."""
+
+    information: np.ndarray
+    sigma: float
+
+
+@dataclass(frozen=True)
 class Identification:
     """Result of :func:`identify`. Lengths in mm."""
 
@@ -85,6 +97,9 @@ class Identification:
     #: decide. Empty where nothing was found to explain them as well.
     ambiguity_mm: dict[str, float] = field(default_factory=dict)
     ambiguous_with: str | None = None
+    #: An earlier measurement of some parameters joined into this fit as
+    #: pseudo-observations (orthocal.carry.joined_fit), None for the data's alone.
+    prior: PriorWeight | None = None
 
     @property
     def std_error_dof(self) -> float:

@@ -90,7 +90,9 @@ def sensitivity(ident: Identification, geometry: Geometry | None = None) -> np.n
     identified parameters per change of each measured deviation, at the solution
     (GUM 5.1.3, the sensitivity coefficients).
 
-    The identification's own Jacobian J (orthocal.identification.exact_jacobian
+    A fit joined with a prior (its ``prior``): the data's share of its gain, the
+    prior's information added to JᵀJ as the stands' is. The identification's own
+    Jacobian J (orthocal.identification.exact_jacobian
     at the solution; (7) for the linear method), pseudo-inverted: K = J⁺. With
     the stands modelled (orthocal.stands) the estimate minimises
     |f(θ, m) − y|² + mᵀΛm, A = [J_θ, J_M], Λ = σ²/σ_M² on the stands, and
@@ -106,6 +108,12 @@ def sensitivity(ident: Identification, geometry: Geometry | None = None) -> np.n
     """
     geometry = geometry or Geometry()
     check_geometry(ident, geometry)
+    if ident.prior is not None:
+        # a fit joined with a prior (orthocal.carry.joined_fit): the data's share of
+        # its gain, (JᵀJ + σ²·I_p)⁻¹Jᵀ; the prior takes the rest
+        J_t = fit_design(ident, geometry)[0]
+        s2 = ident.prior.sigma**2
+        return np.linalg.solve(J_t.T @ J_t + s2 * ident.prior.information, J_t.T)
     return estimate_gain(*fit_design(ident, geometry))[: len(ident.names)]
 
 

@@ -8,6 +8,7 @@ import math
 from collections.abc import Iterable
 
 import orthocal
+from orthocal import carry
 from orthocal.covariance import with_measured_noise
 from orthocal.measurement import Key
 from orthocal.noise import noise_from_cycles, noise_from_readings
@@ -51,12 +52,50 @@ def second_plane(keys) -> bool:
     return any(split_plane(k[0])[1] != MIDDLE for k in keys)
 
 
+def planned_second_plane(config: StationConfig) -> bool:
+    """Whether the plan reads any gauge in a second plane (SetupConfig.at)."""
+    return any(setup.at != MIDDLE for setup in config.setups)
+
+
 def with_form(model: str, keys) -> str:
     """``model`` with the legs' bows fitted beside it (orthocal.FORM) where the
     gauges were read in a second plane: the bows are then measured, not assumed."""
     if model.endswith(orthocal.FORM) or model == "auto" or not second_plane(keys):
         return model
     return model + orthocal.FORM
+
+
+def carried_form(config: StationConfig, m: Measurement,
+                 first: orthocal.Identification) -> orthocal.Identification | None:
+    """A pass measured at the legs' middles alone after the ``first`` round that read
+    a second gauge plane and fitted the legs' bows (station.plan.steps.Plan.setups_of:
+    the run's second pass): that round's model fitted to this pass's data joined with
+    what no offset changes, that round's tilts, gaps, leg lengths and bows with their
+    joint covariance (orthocal.carry.joined_fit: the
+    middles alone take a uniform bow for a tilt, and carried as fitted apart, the
+    bows' strong correlation with the tilts would be lost). Standard errors from the
+    noise this measurement shows (with_measured_noise). None where it does not
+    apply: the verification is identified on its own (identify_measurement)."""
+    data = m.for_identify()
+    if second_plane(data) or not second_plane(first.keys) \
+            or not first.model.endswith(orthocal.FORM):
+        return None
+    proc, geometry = config.procedure, config.machine.geometry()
+    prior = carry.Prior.of(first, [n for n in first.names if not n.startswith("drho_")])
+    try:
+        noise: tuple[float, float, str] | None = measurement_noise(config, m)
+    except RunFailed:
+        noise = None
+    # without a noise estimate, the gauges' quantisation weighs the data
+    floor = min(ind.resolution_mm for ind in config.indicators) / math.sqrt(12.0)
+    try:
+        ident = carry.joined_fit(data, geometry, first.model, prior,
+                                 noise[0] if noise else floor, method=proc.method)
+    except orthocal.IdentificationError as exc:
+        raise RunFailed(f"identification failed: {exc}") from None
+    if noise is None:
+        return ident
+    return with_measured_noise(ident, geometry, noise[0], noise_dof=noise[1])
 
 
 def identify_measurement(config: StationConfig, m: Measurement,
@@ -117,7 +156,11 @@ def identify_measurement(config: StationConfig, m: Measurement,
     if noise is not None and selection is not None:
         # the statement's inflation: the misfit beyond the noise alone
         test = lack_of_fit(ident, geometry, noise[0], noise[1])
-    if noise is not None and test is not None and _rejected(test):
+    # A pass at the middles of a plan that reads a second gauge plane in another pass
+    # (station.plan.steps.Plan.setups_of) does not claim the bows: there a uniform bow
+    # is a tilt, and the pass that reads both planes measures them.
+    if noise is not None and test is not None and _rejected(test) \
+            and not (planned_second_plane(config) and not second_plane(data)):
         ident, test = measured_form(config, data, ident, noise, stands, test,
                                     tilts_possible=model == "auto")
     if noise is not None:

@@ -106,9 +106,13 @@ def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.S
     def per_plane(table: dict[str, StatedInput]) -> dict[tuple[str, str], float]:
         return {plane: _number(table[name]) for plane, name in planes.items()}
 
+    # Where the fit holds the legs' bows (measured in a second gauge plane, or carried
+    # from the round that measured them: orthocal.carry.joined_fit) they are
+    # parameters, their uncertainty in its covariance: not unknown bows of ±s again.
+    form_fitted = any(n in ident.names for n in orthocal.BOW_NAMES)
     out = gum.budget_sources(
         ident, config.machine.geometry(),
-        straightness=given.leg_straightness_mm.value,
+        straightness=None if form_fitted else given.leg_straightness_mm.value,
         mpe=per_plane(given.mpe_mm), resolution=per_plane(given.resolution_mm),
         plunger_angle_deg=_number(given.plunger_angle_deg),
         temperature_change=_number(given.temperature_change_c))
@@ -167,7 +171,11 @@ def fields(config: StationConfig, ident: orthocal.Identification,
                 "quadrature with the scatter, Welch-Satterthwaite dof, Student's "
                 "k for 95 %; the legs' form as independent bows of each gauge "
                 "plane (rectangular, ±straightness), the gauge MPE over the travel "
-                "a deviation spans (0.2 mm, in proportion below)"))
+                "a deviation spans (0.2 mm, in proportion below)"
+                + ("; the legs' bows are the fit's own parameters (a second gauge "
+                   "plane, or carried from the round that measured it): their "
+                   "uncertainty is in the scatter's part, not the straightness's"
+                   if any(n in ident.names for n in orthocal.BOW_NAMES) else "")))
 
 
 def _params(values: Mapping[str, float | None]) -> Params:

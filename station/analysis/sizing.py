@@ -25,6 +25,9 @@ class VerificationSizing:
         # last round's fit, offsets at their aim after a write-back (set by the flow).
         self.expected: tuple[str, np.ndarray] | None = None
         self._target: float | None = None  # see verdict_se
+        # The run's pass being measured (0-based; the sequencer sets it): its setups
+        # are the plan's Plan.setups_of(pass_index).
+        self.pass_index = 0
 
     def cycle_limit(self, phase: str) -> int:
         """Cycles a mounting may take in ``phase``: the planned ones, and in a
@@ -46,15 +49,26 @@ class VerificationSizing:
         (orthocal.design.drho_error_parts). Every other phase: always."""
         if not verifies(phase):
             return True
+        if self.plan.passes() is not None and self.pass_index == self.plan.two_plane_pass:
+            # The one pass that reads the second gauge plane: every later pass carries
+            # the bows it measures, whose noise only its cycles shrink (the later
+            # passes' Δρ cannot be known better than they are): all its cycles.
+            return False
         se = cycle_std_error(cycles)
         if self.expected is None or not math.isfinite(se) or se <= 0.0:
             # no scatter at all (quantised readings that never move): nothing to average
             return se <= self.verdict_se()
-        from orthocal import design
+        from orthocal import FORM, design
+        from station.analysis.model_choice import second_plane, with_form
 
         proc = self.config.procedure
         model, params = self.expected
-        keys, _ = self.plan.deviation_keys()
+        keys, _ = self.plan.deviation_keys(self.pass_index)
+        # The pass that reads a second gauge plane measures the bows every later pass
+        # carries (Plan.setups_of): sized for the bows' share of Δρ's error, so that
+        # more cycles on its mountings, not more mountings, make it small; a pass at the
+        # middles alone carries them, known.
+        model = with_form(model, keys) if second_plane(keys) else model.removesuffix(FORM)
         noise, stands = design.drho_error_parts(
             keys, self.config.machine.geometry(), model, params, se,
             proc.stand_tolerance_mm / math.sqrt(3.0))
@@ -73,7 +87,9 @@ class VerificationSizing:
 
             proc = self.config.procedure
             model = "rho" if proc.model == "auto" else proc.model
-            keys, _ = self.plan.deviation_keys()
+            # the stops of a pass at the legs' middles alone, where a second gauge
+            # plane is read in one pass only (Plan.setups_of): the larger gain
+            keys, _ = self.plan.deviation_keys(self.plan.two_plane_pass + 1)
             q = design.quality(keys, self.config.machine.geometry(), model)
             gain = max(v for n, v in q.noise_gain.items() if n.startswith("drho"))
             self._target = self._limit() / (3.0 * gain) if math.isfinite(gain) else 0.0

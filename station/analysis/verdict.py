@@ -5,6 +5,7 @@ words why a run that stopped undecided is not converged (docs/design.md, "Closed
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from orthocal import Identification
@@ -18,7 +19,7 @@ from orthocal.loop import (
 )
 from orthocal.noise import coverage_factor
 from orthocal.numbers import finite
-from station.record.result import Iteration
+from station.record.result import Ambiguity, Iteration
 from station.record.result_base import Params
 
 Joined = tuple[dict[str, float], dict[str, float | None]]  # Δρ̂ and standard errors
@@ -35,6 +36,20 @@ class Verdict:
         return {k: finite(v) for k, v in self.shown_mm.items()}
 
 
+def _form_limits(se: float | None, floor: float | None, passes: tuple[int, int],
+                 dof: float, limit: float) -> bool:
+    """Whether the carried ``floor`` alone keeps an axis from being shown within
+    ``limit``: were Δρ̂ at the aim, after all the passes left, k·√(floor² + (se² −
+    floor²)·done/(done + left)) (the part above the floor averaged over the passes
+    as independent data) would not be within it, and without the floor it would."""
+    if se is None or floor is None or not math.isfinite(se):
+        return False
+    done, left = passes
+    data = max(se**2 - floor**2, 0.0) * done / (done + left)
+    k = coverage_factor(dof, 0.95)
+    return k * math.sqrt(floor**2 + data) >= limit > k * math.sqrt(data)
+
+
 def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
     """converge_mm plus half a count of the drive's offsets: "converged" claims each
     joint zero within this at 95 % (a correction is rounded to the count)."""
@@ -43,7 +58,8 @@ def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
 
 def judge(ident: Identification, previous: Identification | None, converge_mm: float, limit: float,
           target: dict[str, float] | None, passes_left: bool = False,
-          joined: Joined | None = None) -> Verdict:
+          joined: Joined | None = None, floor: dict[str, float] | None = None,
+          passes: tuple[int, int] = (1, 0)) -> Verdict:
     """The verdict on round ``ident`` (``previous``: the identification whose
     correction it verifies; None for the first measurement, judged against its
     own noise alone). Significant: beyond k standard errors of both rounds (of
@@ -58,7 +74,11 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
     as well (``ident.ambiguity_mm``, added to what the axis is shown within).
     ``joined``: the round's Δρ̂ and standard errors joined with the rounds before it
     (orthocal.loop.joined_with_previous): what the machine is shown within and seen
-    off by; the corrections stand out of this round's own noise."""
+    off by; the corrections stand out of this round's own noise. ``floor``: the part
+    of each Δρ standard error that further passes at the same stops cannot shrink
+    (orthocal.carry.prior_floor), ``passes``: the round's passes so far and those left;
+    form-limited where, with Δρ̂ at its aim, the passes left could not show an axis
+    within ``limit`` for that part alone (:func:`_form_limits`)."""
     aim = target if previous else None
     beyond_noise = significant_corrections(
         ident.parameters, ident.std_errors, 0.0,
@@ -90,6 +110,9 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
         verdict = "suspected" if any(v > 0 for v in seen.values()) else "unproven"
         if any(apart.get(n, 0.0) > 0.0 for n in out):
             verdict = "ambiguous"
+        elif floor and any(_form_limits(ident.std_errors.get(n), floor.get(n), passes,
+                                        ident.std_error_dof, limit) for n in out):
+            verdict = "form-limited"
     return Verdict(verdict, sig, shown)
 
 
@@ -122,13 +145,48 @@ def stands_part(ident: Identification, geometry: Geometry) -> Params | None:
     return {f"drho_{a}": float(v) for a, v in zip(AXES, part, strict=True)}
 
 
+def annotate(entry: Iteration, ident: Identification, geometry: Geometry,
+             floor: dict[str, float]) -> None:
+    """What a round's ``iterations`` entry says beside its verdict of what limits it:
+    the stands' part of Δρ's error, another model that explains the data as well, and
+    the part the carried bows leave (``floor``, orthocal.carry.prior_floor)."""
+    part = stands_part(ident, geometry)
+    if part is not None:
+        entry.stands_part_mm = part
+    if ident.ambiguous_with is not None:
+        entry.ambiguity = Ambiguity(explained_by=ident.ambiguous_with,
+                                    apart_mm={**ident.ambiguity_mm})
+    if floor:
+        entry.form_floor_mm = {n: finite(v) for n, v in floor.items() if n in WRITABLE}
+
+
+def _form_advice(worst: str, rounds: Sequence[Iteration]) -> str:
+    """What would know the carried bows better: the round that measured them (the last
+    one fitted with the bows and carrying none) says whether its error was the stands'
+    set by eye, which only another mounting or a mark averages, or its gauges' noise,
+    which more cycles average."""
+    source = [r for r in rounds if r.model and r.model.endswith("+form")
+              and r.form_floor_mm is None]
+    part = (source[-1].stands_part_mm or {}).get(worst) if source else None
+    se = source[-1].std_errors.get(worst) if source else None
+    if part is not None and se and part > 0.5 * se:
+        return (f"there the stands set by eye made {1000 * part:.1f} µm of Δρ_{worst[-1]}'s "
+                f"{1000 * se:.1f} µm: to show the offsets converged, set the stands "
+                "against a mark at each gauge plane and state [procedure] "
+                "stand_tolerance_mm (more cycles cannot shrink that part)")
+    return ("to show the offsets converged, read the second plane with more cycles "
+            "([procedure] max_cycles_in_mounting) or quieter gauges")
+
+
 def _or_inf(bound: float | None) -> float:
     return math.inf if bound is None else bound
 
 
-def not_converged(entry: Iteration, converge_mm: float, offset_count_mm: float) -> str:
-    """Why the last verification (its ``iterations`` entry) could not show the machine
-    converged, in words: how far the worst axis may still be off, and what to change."""
+def not_converged(entry: Iteration, converge_mm: float, offset_count_mm: float,
+                  rounds: Sequence[Iteration] = ()) -> str:
+    """Why the last verification (its ``iterations`` entry; ``rounds``: every entry)
+    could not show the machine converged, in words: how far the worst axis may still
+    be off, and what to change."""
     shown = entry.shown_within_95_mm or {}
     passes = len(entry.passes or [entry.phase])
     worst = max(shown, key=lambda k: _or_inf(shown[k]))
@@ -151,6 +209,13 @@ def not_converged(entry: Iteration, converge_mm: float, offset_count_mm: float) 
                 "write-backs cannot decide it: read a second gauge plane ([[setups]] "
                 "again with at = 0.75), or, if the legs are straighter than stated, state "
                 "their measured straightness ([uncertainty] leg_straightness_mm)")
+    floor = (entry.form_floor_mm or {}).get(worst)
+    if entry.verdict == "form-limited" and floor is not None:
+        return (f"{said}; of that standard error, {1000 * floor:.1f} µm comes from the "
+                "legs' bows, which the pass with the second gauge plane measured and "
+                "every later pass at the legs' middles carries (at the middles a "
+                "uniform bow is a tilt, and it moves Δρ): more passes at the middles "
+                "cannot shrink it, so none was taken; " + _form_advice(worst, rounds))
     if entry.fit_ok is False:
         # the noise is not the cause: more of the same measurement cannot help
         return (f"{said}; the cause is the model, not the noise: model {entry.model} "

@@ -13,7 +13,8 @@ class Progress:
     terminal, plain lines in a log); one step per stop read.
 
     The total counts the plan's reads (the one-side approach's extra stop included)
-    for the usual run, a measurement and one verification; a further phase (another
+    for the usual run, a measurement and one verification (each pass's own setups: a
+    second gauge plane is read in the run's second pass alone); a further phase (another
     write-back, a pass measured again) or a cycle more in a mounting adds its reads
     as it starts, saying so ("+4 readings: another cycle …", the bar re-based), so
     the bar never reads more done than it counts and its time left rises only there."""
@@ -22,12 +23,14 @@ class Progress:
         from station.console.terminal import RunProgress
 
         self.plan = plan
+        # a pass's reads: the run's pass n measures the plan's setups_of(n), a second
+        # gauge plane in one pass alone (station.plan.steps.Plan.setups_of)
+        self.per_pass = [self._reads(n) for n in (0, 1, 2)]
         reads = [s for s in plan.steps("m") if isinstance(s, Read)]
-        self.per_phase = len(reads)
         self.per_cycle = {sp.index: sum(1 for r in reads if r.setup == sp.index
                                         and r.cycle == 1) for sp in plan.setups}
         self.expected_phases = 2 if verify else 1
-        self.bar = RunProgress(self.per_phase * self.expected_phases, enabled=enabled)
+        self.bar = RunProgress(sum(self.per_pass[:self.expected_phases]), enabled=enabled)
         self.steps = 0
         self._phases: set[str] = set()
         self._more: set[tuple[str, int, int]] = set()
@@ -40,13 +43,18 @@ class Progress:
         if code not in self._phases:
             self._phases.add(code)
             if len(self._phases) > self.expected_phases:
-                self.bar.rebase(self.per_phase, f"another pass ({phase})")
+                n = min(len(self._phases), len(self.per_pass)) - 1
+                self.bar.rebase(self.per_pass[n], f"another pass ({phase})")
         key = (code, setup)
         self._cycles[key] = max(self._cycles.get(key, self.plan.cycles), cycle)
         if cycle > self.plan.cycles and (code, setup, cycle) not in self._more:
             self._more.add((code, setup, cycle))
             self.bar.rebase(self.per_cycle.get(setup, 0),
                             f"another cycle ({phase} setup {setup + 1}, cycle {cycle})")
+
+    def _reads(self, index: int) -> int:
+        """The reads of the run's pass ``index`` at the planned cycles."""
+        return sum(1 for s in self.plan.steps("m", index) if isinstance(s, Read))
 
     def __enter__(self) -> Progress:
         self.bar.__enter__()

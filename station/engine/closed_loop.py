@@ -16,7 +16,8 @@ both rounds and beyond converge_mm: write it), "converged" (the remaining Δρ i
 shown within ±converge_mm at 95 % on every axis: orthocal.loop.shown_within), or
 neither: "suspected" (a correction the round sees at 95 % that is not written: a
 first measurement's under converge_mm, or one on an axis already shown within the
-limit) or "unproven" (the round's noise hides whatever is left), or "ambiguous"
+limit) or "unproven" (the round's noise hides whatever is left), "form-limited"
+(what is left hides in the bows carried from a second gauge plane), or "ambiguous"
 (what keeps it undecided is not noise: the axes' tilts and the legs' bows explain
 its deviations alike, station.analysis.model_choice.measured_form). Each
 setup of a verification has already taken more cycles on its mounted gauges where
@@ -53,6 +54,9 @@ States (``len(verdicts)``, ``len(writes)``):
                           (extra_passes_allowed: the first round's are more)
                         suspected/unproven, none left → finish "not-converged"
                         ambiguous → finish "not-converged" (no pass can decide it)
+                        form-limited → finish "not-converged" (the bows carried
+                          from the second gauge plane hold Δρ's error; no pass
+                          at the middles shrinks it)
     (k, k)          → the k-th write's outcome:
                         written and verify → measure the verification of round k
                         written, no verify → finish "not verified"
@@ -68,7 +72,8 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 StepKind = Literal["measure", "write", "finish"]
-Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous"]
+Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous",
+                  "form-limited"]
 
 #: Why the loop stopped (the run JSON's ``loop.stopped``): the first is success; the
 #: report says each in words (station.report.rounds.STOP_TEXT).
@@ -139,7 +144,7 @@ def next_step(state: LoopState) -> Step:
         verdict = state.verdicts[-1]
         if verdict == "converged":
             return Step("finish", reason="converged")
-        if verdict == "ambiguous":  # what limits it is not noise: a pass cannot help
+        if verdict in ("ambiguous", "form-limited"):  # not noise: a pass cannot help
             return Step("finish", reason="not-converged")
         if verdict in ("suspected", "unproven"):
             if state.extra[-1] < extra_passes_allowed(k - 1, state.max_extra_passes,
@@ -175,23 +180,27 @@ def extra_passes_allowed(measurement: int, max_extra_passes: int, max_iterations
 
 
 def mountings_expected(setups: int, max_iterations: int, max_extra_passes: int,
-                       verify: bool = True) -> dict[str, int]:
-    """How many times the operator mounts the gauges, from the flow above: every
-    pass of every measurement mounts each of the plan's ``setups``, but every pass
+                       verify: bool = True, second: int | None = None,
+                       later: int | None = None) -> dict[str, int]:
+    """How many times the operator mounts the gauges, from the flow above: the run's
+    first pass mounts each of its ``setups``, its second pass each of ``second`` and
+    every later pass each of ``later`` (station.plan.steps.Plan.setups_of: a second
+    gauge plane is read in the second pass alone; None: ``setups``), but every pass
     after the very first starts with the gauges its pass before ended with, still on
     (station.engine.kept).
 
     ``fewest``: the first measurement alone, decided in one pass (a machine within
     tolerance, nothing written; a recheck that needs further passes to show it takes
-    two more mountings each). ``usual``: one write-back and its verification, each decided in one
-    pass. ``per_write_back``: what each write-back and its verification add.
-    ``most``: every round up to ``max_iterations`` write-backs, each measurement
+    their mountings too). ``usual``: one write-back and its verification, each decided
+    in one pass. ``per_write_back``: what each further write-back and its verification
+    add. ``most``: every round up to ``max_iterations`` write-backs, each measurement
     taking all its ``max_extra_passes``; as many as a first measurement that writes
     nothing may take in passes (:func:`extra_passes_allowed`). A retake, a resume (it
     mounts afresh) or a kept mounting the plan check refuses after a write-back adds its
     own beyond these."""
-    passes = 1 + max_extra_passes
-    rounds = max_iterations if verify else 0
-    each = max(setups - 1, 0)
-    return {"fewest": setups, "usual": setups + (each if verify else 0),
-            "per_write_back": each, "most": setups + (passes * (1 + rounds) - 1) * each}
+    total = (1 + max_extra_passes) * (1 + (max_iterations if verify else 0))
+    two = max((setups if second is None else second) - 1, 0)
+    each = max((setups if later is None else later) - 1, 0)
+    return {"fewest": setups, "usual": setups + (two if verify else 0),
+            "per_write_back": each,
+            "most": setups + (two if total > 1 else 0) + max(total - 2, 0) * each}

@@ -17,7 +17,7 @@ from pydantic import ValidationError
 
 from drivers.files import write_atomic
 from orthocal import Identification, carry
-from orthocal.geometry import BOW_NAMES, params_vector
+from orthocal.geometry import params_vector
 from orthocal.loop import (
     WRITABLE,
     after_correction,
@@ -28,22 +28,24 @@ from orthocal.numbers import finite
 from station.analysis import acceptance, compensated, reversal, verdict
 from station.analysis import accuracy_statement as accuracy
 from station.analysis import run_budget as budget
+from station.analysis.model_choice import carried_form
 from station.analysis.statistics import Measurement, pooled
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine import results
 from station.engine.closed_loop import extra_passes_allowed, round_phase
 from station.engine.devices import Devices
+from station.engine.layouts import Layouts
 from station.engine.replay import RoundFit, Steps
 from station.engine.sequencer import Sequencer
 from station.engine.writeback import WritebackOutcome, write_back
-from station.errors import RunFailed, say, storage_message
+from station.errors import say, storage_message
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan
 from station.record.io import jsonable_value, section
 from station.record.journal_file import Journal
 from station.record.model import MachineModel
-from station.record.result import Ambiguity, Iteration, Joined, Loop, RunResult, Status
+from station.record.result import Iteration, Joined, Loop, RunResult, Status
 from station.record.result_accuracy import Accuracy
 from station.record.result_base import JsonObject, NotStated
 from station.record.result_sections import ModelSelection
@@ -85,15 +87,9 @@ class Flow:
         self.idents: list[Identification] = []  # identification of each round, in order
         self.measurements: list[Measurement] = []  # each round's, its passes pooled
         self.reversal: Reversal | None = None  # the joints' lost motion
-        # each round's rho+tilt fit, for the tilts the run states (engine.accuracy)
-        self.layout_rounds: list[accuracy.RoundLayout] = []
-        # Each round's fit of the legs' bows (a second gauge plane): no offset
-        # changes them either, so later rounds join them as they join the layout.
-        self.form_rounds: list[accuracy.RoundLayout] = []
-        # The fit each round's layout came from: what the legs' form may leave in the
-        # layout (one gauge plane per leg) is read off it once, for the tool's
-        # intervals (orthocal.budget.form_covariance).
-        self.layout_fits: dict[str, Identification] = {}
+        # what no offset changes, round by round: the axes' layout and the legs' bows
+        self.layouts = Layouts(ctx.config.machine.geometry(),
+                               lambda m, model: _identify(ctx, m, model)[0])
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
         # the joint errors that leave the least tool error (engine.accuracy)
         self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
@@ -156,7 +152,11 @@ class Flow:
         # first round by (stand error × leg tilt), a misfit no model explains that
         # can push the choice to a tilt model on a square machine; it vanishes with
         # the offsets, so a later round's choice sees the machine as it is.
-        ident, selection = _identify(ctx, m)
+        # At the middles alone after a round that read the second gauge plane: that
+        # round's widest layout fit, bows and all, carried (model_choice.carried_form).
+        first = self.layouts.form_fit(phase)
+        carried = carried_form(ctx.config, m, first) if first is not None else None
+        ident, selection = (carried, None) if carried is not None else _identify(ctx, m)
         if n == 0 and selection is not None:
             self.result.model_selection = section(ModelSelection, selection)
         # Lost motion: the joints' reversal from every round so far; every stop was
@@ -166,9 +166,9 @@ class Flow:
         self.result.reversal = reversal.fields(ctx.config, rev)
         reversal.check_overrun(ctx.config, rev)
         self.reversal = rev
-        self._layout_of(phase, m, ident)
-        if n:
-            ident = self._carried(phase, ident)
+        if carried is None:  # a carried round's layout is the earlier rounds' own
+            self.layouts.add(phase, m, ident)
+            ident = self.layouts.carried(phase, ident) if n else ident
         ident = band_middle(ident, rev, ctx.config.procedure.approach)
         if again:
             self.idents[-1] = ident
@@ -179,19 +179,16 @@ class Flow:
         proc = ctx.config.procedure
         count = ctx.devices.controller.offset_resolution_mm()
         joined = self._joined(n, ident)
+        floor = carry.prior_floor(ident, ctx.config.machine.geometry())
+        left = extra_passes_allowed(n, proc.max_extra_passes, proc.max_iterations,
+                                    proc.verify) - (len(passes) - 1)
         judged = verdict.judge(ident, prev, proc.converge_mm,
                                verdict.converge_limit(proc.converge_mm, count), self.target,
-                               passes_left=len(passes) - 1 < extra_passes_allowed(
-                                   n, proc.max_extra_passes, proc.max_iterations, proc.verify),
-                               joined=joined if n else None)
+                               passes_left=left > 0, joined=joined if n else None,
+                               floor=floor, passes=(len(passes), left))
         sig = judged.significant
         entry = fields.iteration(phase, judged)
-        part = verdict.stands_part(ident, ctx.config.machine.geometry())
-        if part is not None:
-            entry.stands_part_mm = part
-        if ident.ambiguous_with is not None:
-            entry.ambiguity = Ambiguity(explained_by=ident.ambiguous_with,
-                                        apart_mm={**ident.ambiguity_mm})
+        verdict.annotate(entry, ident, ctx.config.machine.geometry(), floor)
         if n:
             entry.joined = Joined(drho_mm=joined[0], std_errors_mm=joined[1])
         if again:
@@ -281,7 +278,8 @@ class Flow:
                        "correction; run again or look for errors outside the model")
         count = self.ctx.devices.controller.offset_resolution_mm()
         if reason == "not-converged":
-            detail = verdict.not_converged(self.iterations[-1], proc.converge_mm, count)
+            detail = verdict.not_converged(self.iterations[-1], proc.converge_mm, count,
+                                           self.iterations)
             message = f"closed loop did not converge: {detail}"
         if last is None:
             # nothing written: the offsets as found are the run's before and after
@@ -312,54 +310,6 @@ class Flow:
 
     # --- accuracy at the tool ------------------------------------------------------
 
-    def _layout_of(self, phase: str, m: Measurement, ident: Identification) -> None:
-        """The round's axes layout (tilts and gaps): from its own fit if it has them
-        all, else from a rho+tilt+gap fit of the same measurement (what the run could
-        not rule out; rho+tilt where the gaps cannot be told); a round measured again
-        replaces what its earlier passes gave."""
-        self.layout_rounds = [t for t in self.layout_rounds if t.phase != phase]
-        self.form_rounds = [t for t in self.form_rounds if t.phase != phase]
-        form = accuracy.round_form(phase, ident)
-        if form is not None:
-            self.form_rounds.append(form)
-        layout, source = accuracy.round_layout(phase, ident), ident
-        whole = layout is not None and len(layout.names) == len(accuracy.LAYOUT_NAMES)
-        for model in () if whole or not len(m.deviations) else accuracy.LAYOUT_MODELS:
-            try:
-                fit, _ = _identify(self.ctx, m, model)
-            except RunFailed:
-                continue  # too little data for this layout: try the smaller one
-            if (found := accuracy.round_layout(phase, fit)) is not None:
-                layout, source = found, fit
-            break
-        if layout is not None:
-            self.layout_rounds.append(layout)
-            self.layout_fits[phase] = source
-
-    def _carried(self, phase: str, ident: Identification) -> Identification:
-        """A verification's identification joined with the axes' layout (tilts, gaps)
-        and the legs' bows the earlier rounds measured, which no offset changed
-        (orthocal.carry; the two are independent measurements, joined one after the
-        other): its Δρ gains, never loses. Without an earlier round of its model's
-        names: as it is."""
-        for rounds, names in ((self.layout_rounds, accuracy.LAYOUT_NAMES),
-                              (self.form_rounds, BOW_NAMES)):
-            ident = self._carry(phase, ident, rounds, names)
-        return ident
-
-    def _carry(self, phase: str, ident: Identification, rounds: list[accuracy.RoundLayout],
-               names: tuple[str, ...]) -> Identification:
-        held = [n for n in names if n in ident.names]
-        prior = accuracy.pool_layout([r for r in rounds if r.phase != phase])
-        if not held or prior is None or not set(held) <= set(prior.names):
-            return ident
-        idx = [prior.names.index(n) for n in held]
-        try:
-            return carry.carried(ident, self.ctx.config.machine.geometry(), held,
-                                 prior.values[idx], prior.covariance[np.ix_(idx, idx)])
-        except (ValueError, np.linalg.LinAlgError):
-            return ident  # the round's own fit stands
-
     def _points(self) -> np.ndarray:
         if self._grid is None:
             c = self.seq.checker
@@ -378,13 +328,14 @@ class Flow:
         not show would chase noise (on a square machine whose axes meet, objective
         tool then writes what objective joints does)."""
         last = self.idents[-1] if self.idents else None
-        return accuracy.tool_target(self.ctx.config, accuracy.pool_layout(self.layout_rounds),
-                                    self._points(), () if last is None else last.names)
+        pooled = accuracy.pool_layout(self.layouts.layout_rounds)
+        return accuracy.tool_target(self.ctx.config, pooled, self._points(),
+                                    () if last is None else last.names)
 
     def _objective_note(self, ident: Identification) -> str:
         """What the write-back prompt says of the objective and what each buys."""
         cfg = self.ctx.config
-        layout = accuracy.pool_layout(self.layout_rounds)
+        layout = accuracy.pool_layout(self.layouts.layout_rounds)
         tv = layout.vector() if layout is not None else np.zeros(6)
         points, frame = self._points(), cfg.writeback.frame
         geometry = cfg.machine.geometry()
@@ -406,7 +357,7 @@ class Flow:
         (every round sees the same legs, so it is not averaged)."""
         if layout is None or not layout.rounds:
             return None
-        fit = self.layout_fits.get(layout.rounds[-1])
+        fit = self.layouts.layout_fits.get(layout.rounds[-1])
         return None if fit is None else budget.form_of_layout(self.ctx.config, fit,
                                                               layout.names)
 
@@ -414,7 +365,7 @@ class Flow:
         """The run's statement at the tool (result ``accuracy``) and model.json."""
         if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
             return
-        layout = accuracy.pool_layout(self.layout_rounds)
+        layout = accuracy.pool_layout(self.layouts.layout_rounds)
         remaining = self.result.remaining
         start = results.known((remaining.total if remaining is not None else None) or {
             n: self.result.identified.get(n, 0.0) for n in WRITABLE})

@@ -131,8 +131,10 @@ def measured_setups(plan: Plan, state: RunState, cycles: int) -> list[Setup]:
 def expected_mountings(config: StationConfig, plan: Plan) -> dict[str, int]:
     """The mountings the run expects (closed_loop.mountings_expected)."""
     proc = config.procedure
-    return mountings_expected(len(plan.setups), proc.max_iterations, proc.max_extra_passes,
-                              proc.verify)
+    return mountings_expected(len(plan.setups_of(0)), proc.max_iterations,
+                              proc.max_extra_passes, proc.verify,
+                              second=len(plan.setups_of(1)),
+                              later=len(plan.setups_of(2)))
 
 
 def _stopped(seq: Sequencer) -> str:

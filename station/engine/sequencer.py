@@ -122,6 +122,7 @@ class Sequencer:
         self.steps = Steps(journal)
         self.progress = progress or _no_progress
         self.counters = Counters()
+        self.passes = 0  # measured or replayed so far: the next's setups, Plan.setups_of
         # Why the stop after a fault did not reach the drive (None: it did, or no
         # fault), so that the operator is never told the axes stopped when unknown.
         self.stop_error: str | None = None
@@ -187,7 +188,9 @@ class Sequencer:
         outcomes: list[SetupOutcome] = []
         within: list[float] = []
         reversal: dict[str, list[float]] = {}
-        for sp in kept.order(self.plan.setups, self.keeper.last):
+        index, self.passes = self.passes, self.passes + 1
+        self.sizing.pass_index = index
+        for sp in kept.order(self.plan.setups_of(index), self.keeper.last):
             outcome, devs, w, rev = self._run_setup(phase, sp)
             outcomes.append(outcome)
             deviations.update(devs)

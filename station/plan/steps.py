@@ -183,13 +183,51 @@ class Plan:
     motion: str | None = None
     routes: dict[tuple, list[tuple[float, float, float]]] = field(default_factory=dict)
     start: tuple[float, ...] | None = None
+    # The run's pass (0-based) that reads a second gauge plane (setups_of): the second,
+    # the first taken with the offsets small; the first where nothing is verified.
+    two_plane_pass: int = 1
 
-    def deviation_keys(self) -> tuple[list[tuple[str, str, str]], list[list[int]]]:
-        """The deviation keys the plan measures and, per mounted indicator, its rows in
-        the order a cycle visits the stops (for orthocal.design.run_std_errors)."""
+    def setups_of(self, index: int) -> list[SetupPlan]:
+        """The setups the run's pass ``index`` (0-based, every pass of every measurement
+        counted in order, further passes too) measures, in the order it measures them
+        where no gauges are still on (station.engine.kept puts the pass before's last
+        first). A plan with a second gauge plane beside the legs' middles reads that
+        plane once, in the run's second pass (:attr:`two_plane_pass`: the verification
+        of the first write-back, or the first measurement's further pass where it wrote
+        nothing; the first pass where nothing is verified), its setups first so that
+        the pass ends at a leg's middle, whose gauges the next pass keeps; every other
+        pass reads the middles alone. The first pass is measured with the offsets still
+        large, where the stands set by eye blur the bows; the legs' form does not change
+        when offsets are written, so the later passes carry the bows the second
+        measured (docs/design.md, "A second gauge plane, read once"; docs/model.md,
+        "The second gauge plane"). A function of the index and the plan
+        alone: a resumed run measures every pass as it was."""
+        middles = [sp for sp in self.setups if sp.at == MIDDLE]
+        if not middles or len(middles) == len(self.setups):
+            return list(self.setups)
+        if index == self.two_plane_pass:
+            return [sp for sp in self.setups if sp.at != MIDDLE] + middles
+        return middles
+
+    def passes(self) -> dict[str, list[int]] | None:
+        """Which setups (1-based, in order) the run's first pass, its second and every
+        later one measure, where a second gauge plane makes them differ
+        (:meth:`setups_of`); else None."""
+        first, second, later = (self.setups_of(i) for i in (0, 1, 2))
+        if len(first) == len(second):
+            return None
+        return {"first": [sp.index + 1 for sp in first],
+                "second": [sp.index + 1 for sp in second],
+                "later": [sp.index + 1 for sp in later]}
+
+    def deviation_keys(self, index: int | None = None
+                       ) -> tuple[list[tuple[str, str, str]], list[list[int]]]:
+        """The deviation keys the run's pass ``index`` (:meth:`setups_of`; None: every
+        setup of the plan) measures and, per mounted indicator, its rows in the order a
+        cycle visits the stops (for orthocal.design.run_std_errors)."""
         keys: list[tuple[str, str, str]] = []
         indicators: list[list[int]] = []
-        for sp in self.setups:
+        for sp in self._pass(index):
             for direction in sp.indicators.values():
                 rows = []
                 for posture in sp.order:
@@ -210,19 +248,37 @@ class Plan:
                 position = step.targets
             yield step, via
 
-    def steps(self, phase: str = "m") -> Iterator[Step]:
-        """Every step of one phase at the configured number of cycles."""
-        for sp in self.setups:
+    def steps(self, phase: str = "m", index: int | None = None) -> Iterator[Step]:
+        """Every step of one pass of ``phase`` at the configured number of cycles: the
+        setups of the run's pass ``index`` (:meth:`setups_of`), None: every setup of
+        the plan in its order (the listing, the plan check's order)."""
+        for sp in self._pass(index):
             yield from sp.start_steps(phase, 0, self.settle_s, self.readings)
             for cycle in range(1, self.cycles + 1):
                 yield from sp.cycle_steps(phase, cycle, self.settle_s, self.readings)
+
+    def _passes_line(self, passes: dict[str, list[int]]) -> str:
+        both = "(the second gauge plane first, ending at a leg's middle)"
+        if self.two_plane_pass == 0:
+            return (f"passes: the first measures setups {_numbers(passes['first'])} {both}; "
+                    f"every later one setups {_numbers(passes['later'])} (the legs' "
+                    "middles), carrying the bows the first measured")
+        return (f"passes: the first measures setups {_numbers(passes['first'])} (the legs' "
+                "middles); the second (the first verification, or the first measurement's "
+                f"further pass) setups {_numbers(passes['second'])} {both}; every later one "
+                f"setups {_numbers(passes['later'])}, carrying the bows the second measured")
+
+    def _pass(self, index: int | None) -> list[SetupPlan]:
+        return list(self.setups) if index is None else self.setups_of(index)
 
     def to_json(self) -> dict:
         # Only a plan with [procedure] strokes says so: the default's JSON stays as it was.
         strokes = {} if self.setups[0].order == ("+", "-") else {
             "test_postures": list(self.setups[0].order)}
+        passes = self.passes()
         return {
             **strokes,
+            **({} if passes is None else {"passes": passes}),
             "cycles": self.cycles,
             "readings": self.readings,
             "settle_s": self.settle_s,
@@ -257,6 +313,8 @@ class Plan:
             lines.append(f"controller path: {self.motion} axes: {motion.GUARANTEE[self.motion]}"
                          "; a move that could take a plunger out of its stroke goes via "
                          "waypoints, one COMMAND 1 each")
+        if (passes := self.passes()) is not None:
+            lines.append(self._passes_line(passes))
         sp0 = self.setups[0]
         if sp0.overrun is not None or sp0.reversal_overrun is not None:
             lines.append(approach_words(sp0.overrun, sp0.reversal_overrun))
@@ -275,7 +333,8 @@ class Plan:
             elif isinstance(step, Prompt):
                 lines.append(f"setup {step.setup + 1}: leg {step.leg}")
                 text = ("prompt: mount " + ", ".join(f"{n} ({d})" for n, d in step.indicators)
-                        + f" at the middle of leg {step.leg} at Π0; remove the others")
+                        + (f" at the middle of leg {step.leg}" if step.at == MIDDLE else
+                           f" at {step.at:g} of leg {step.leg}") + " at Π0; remove the others")
             elif isinstance(step, Settle):
                 text = f"settle {step.seconds:g} s"
             elif isinstance(step, Read):
@@ -333,7 +392,9 @@ def build_plan(config: StationConfig, strokes: Sequence[float] | None = None) ->
         }
         setups.append(SetupPlan(idx, setup.leg, dict(setup.indicators), targets,
                                 order, *approach_overruns(config), at=setup.at))
-    return Plan(setups, proc.cycles, proc.readings, proc.settle_s)
+    # with nothing verified the first pass may be the run's only one
+    return Plan(setups, proc.cycles, proc.readings, proc.settle_s,
+                two_plane_pass=1 if proc.verify else 0)
 
 
 def approach_overruns(config: StationConfig) -> tuple[float | None, float | None]:
@@ -347,3 +408,7 @@ def approach_overruns(config: StationConfig) -> tuple[float | None, float | None
     stops, other = (o, -o) if proc.approach == "above" else \
         ((-o if proc.approach == "below" else None), o)
     return stops, (other if proc.measure_reversal else None)
+
+
+def _numbers(setups: list[int]) -> str:
+    return ", ".join(str(n) for n in setups)

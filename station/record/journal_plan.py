@@ -90,3 +90,7 @@ class PlanRecord(_Closed):
     steps: list[PlanStep]
     test_postures: list[str] | None = Field(
         None, description="a cycle's postures, where [procedure] strokes names them")
+    passes: dict[str, list[int]] | None = Field(
+        None, description="the setups (1-based, in order) the run's first pass (first), its "
+        "second (second) and every later one (later) measure, where a second gauge plane "
+        "makes them differ")

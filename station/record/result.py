@@ -43,7 +43,8 @@ SCHEMA_VERSION: Literal[2] = 2
 
 Stopped = Literal["converged", "max_iterations", "not-converged", "refused", "declined",
                   "failed", "skipped", "not-verified"]
-Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous"]
+Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous",
+                  "form-limited"]
 Status = Literal["ok", "failed", "refused", "aborted"]
 
 
@@ -155,6 +156,10 @@ class Iteration(Closed):
     target_drho: Params | None = Field(None, description="the Δρ aimed at, objective tool")
     ambiguity: Ambiguity | None = Field(
         None, description="where the data cannot tell the axes' tilts from the legs' bows")
+    form_floor_mm: Params | None = Field(
+        None, description="of each Δρ standard error, the part the legs' bows carried from "
+                          "the pass that read a second gauge plane leave however often the "
+                          "legs' middles are read again (orthocal.carry.prior_floor)")
 
 
 class Remaining(Closed):

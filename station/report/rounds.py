@@ -43,6 +43,7 @@ VERDICT_TEXT = {
     "suspected": "seen at 95 %, not beyond the noise of both rounds",
     "unproven": "hidden in its noise",
     "ambiguous": "undecided: the axes' tilts and the legs' bows explain it alike",
+    "form-limited": "undecided: the legs' bows, measured once, are known too loosely",
 }
 
 

@@ -37,9 +37,17 @@ def test_expected_mountings_follow_the_loop() -> None:
                                            "most": 5}
     assert mountings_expected(1, 3, 0, verify=False) == {
         "fewest": 1, "usual": 1, "per_write_back": 0, "most": 1}
-    # a second plane: six setups, five more per pass after the first
-    assert mountings_expected(6, 3, 0) == {"fewest": 6, "usual": 11, "per_write_back": 5,
-                                           "most": 6 + 3 * 5}
+    # a second gauge plane, read in the run's second pass alone (Plan.setups_of): the
+    # three middles first, then all six with the last middle's gauges kept (five new),
+    # then the middles again (two new): 3 + 5 + 2 for two write-backs
+    plane = mountings_expected(3, 3, 0, second=6, later=3)
+    assert plane == {"fewest": 3, "usual": 8, "per_write_back": 2, "most": 3 + 5 + 2 * 2}
+    assert plane["usual"] + plane["per_write_back"] == 10
+    # one further pass a round, two write-backs: 3 × 2 passes, the first two as above
+    assert mountings_expected(3, 2, 1, second=6, later=3)["most"] == 3 + 5 + 4 * 2
+    # nothing verified: the first measurement's passes alone, a recheck's second
+    # pass reads both planes too
+    assert mountings_expected(3, 2, 1, verify=False, second=6, later=3)["most"] == 3 + 5
 
 
 def _run(tmp_path: Path, capsys, procedure: dict[str, Any]) -> dict[str, Any]:
@@ -216,3 +224,27 @@ def test_piped_progress_never_counts_past_its_total(tmp_path, capsys) -> None:
                 assert count == total + said, line  # grown by exactly what was said
             total, said = count, 0
     assert kinds == {"cycle", "pass"}  # the run did both
+
+
+def test_a_verification_held_by_the_carried_bows_is_form_limited_only_where_they_hold_it(
+) -> None:
+    # 1.0 ± 1.6 µm after a write-back, two passes left, of which 1.2 µm is the floor
+    # the bows carried from the second plane leave (orthocal.carry.prior_floor): even at
+    # Δρ̂ = 0 the passes could reach 1.96 × √(1.2² + (1.6² − 1.2²)/3) = 2.64 µm, not
+    # 2.5, and without the floor 1.20: the bows hold it, no pass is taken
+    own, previous = _ident(1.0, 1.6), _ident(0.0, 1.6)
+    held = judge(own, previous, 0.002, 0.0025, None, passes_left=True,
+                 floor=dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0012), passes=(1, 2))
+    assert held.verdict == "form-limited"
+    # a floor of 0.6 µm: 1.96 × √(0.36 + 2.2/3) = 2.05 µm is within reach: measured again
+    light = judge(own, previous, 0.002, 0.0025, None, passes_left=True,
+                  floor=dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0006), passes=(1, 2))
+    assert light.verdict == "unproven"
+    # no pass left, and the noise alone (1.96 × √(1.6² − 1.2²) = 2.07 µm) within it: still
+    # the bows'; with a noisier round (2.5 µm: the noise alone is out too) it is not
+    last = judge(own, previous, 0.002, 0.0025, None, passes_left=False,
+                 floor=dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0012), passes=(3, 0))
+    assert last.verdict == "form-limited"
+    noisy = judge(_ident(1.0, 2.5), _ident(0.0, 2.5), 0.002, 0.0025, None, passes_left=False,
+                  floor=dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0012), passes=(3, 0))
+    assert noisy.verdict == "unproven"

@@ -86,7 +86,8 @@ def journal_header(**fields: Any) -> dict[str, Any]:
 def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
               procedure: dict[str, Any] | None = FAST, hook: Any = None, yes: bool = False,
               json: bool = True, plan: bool = False, true_drho: Any = None,
-              true_dl: Any = None, true_tilt: Any = None, mount_error: float | None = None,
+              true_dl: Any = None, true_tilt: Any = None, true_gap: Any = None,
+              mount_error: float | None = None,
               motion: str | None = None, drive_profile: str | None = None,
               drive_accel: str | None = None, drive_delays: str | None = None,
               drive_sequence: str | None = None, indicators: int = 2,
@@ -112,7 +113,8 @@ def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
                 inner(station)
 
     sim = SimOptions(
-        seed=seed, true_drho=true_drho, true_dl=true_dl, true_tilt=true_tilt, noise=noise,
+        seed=seed, true_drho=true_drho, true_dl=true_dl, true_tilt=true_tilt,
+        true_gap=true_gap, noise=noise,
         mount_error=mount_error, backlash=backlash, leg_bow=leg_bow,
         gauge_scale=gauge_scale, profile=profile,
         drive=DriveOptions(motion=motion, profile=drive_profile, accel=drive_accel,
