@@ -369,6 +369,9 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--kinematics", action="store_true", help="LinuxCNC: the whole "
                         "identified geometry, in the orthoglidekins kinematics component (the "
                         "INI, orthoglide-geometry.hal and orthoglidekins.comp into --out)")
+    export.add_argument("--force", action="store_true", help="export a run that did not "
+                        "converge, or whose last round was ambiguous, all the same (its "
+                        "header says so)")
 
     comp = sub.add_parser("compensate", help="rewrite a G-code program for a controller "
                           "with the nominal kinematics, so that the identified machine's "

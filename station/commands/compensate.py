@@ -76,9 +76,11 @@ def output_path(program: Path, out: str | None, mark: str) -> Path:
 
 def _job(args: argparse.Namespace) -> Job:
     """The run's identified machine and soft limits, the tolerance and work offset."""
+    from station.commands.history import read_result
     from station.gcode.rewrite import Job
     from station.gcode.soft_bounds import LimitsError, run_limits
     from station.gcode.subdivide import Machine
+    from station.record.exportable import ambiguous
     from station.record.identified import NotACalibration, identified_machine
 
     lo, hi = TOLERANCE_RANGE
@@ -89,6 +91,14 @@ def _job(args: argparse.Namespace) -> Job:
         limits = run_limits(Path(args.run))
     except (NotACalibration, LimitsError) as exc:
         raise BadInput(str(exc)) from None
+    _, result = read_result(args.run)
+    if (why := ambiguous(result)) is not None:
+        # a tilt there may be a bow, which the tool never sees: compensated for, it
+        # would move the tool by what the bows only seemed to be (no --force here: a
+        # program is run as it is written)
+        raise BadInput(f"{args.run}: {why}: its geometry is no calibration to compensate "
+                       "for; read a second gauge plane ([[setups]] again with at = 0.75) and "
+                       "calibrate again")
     theta = machine.theta_c()
     told = ", ".join(f"{v.name} {t:+.4f} {v.unit}" for v, t in zip(machine.values, theta,
                                                                   strict=True) if t != 0.0)

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from drivers.files import write_atomic
 from station.commands.history import read_result
-from station.errors import BadInput
+from station.errors import BadInput, say
 
 if TYPE_CHECKING:
     from station.record.result import RunResult
@@ -34,6 +34,26 @@ def _read_hal(ini: Path) -> Callable[[str], str | None]:
     return read
 
 
+def _may_export(args: argparse.Namespace, result: RunResult) -> bool:
+    """Whether the run goes out as it is, for every target (station.record.exportable,
+    the one decision): a run that did not converge, or whose last round was
+    ambiguous, only with --force (then True: its header says what it carries);
+    without, one line naming the run and why (exit 2). The machine's later runs in
+    the history are named before anything is written."""
+    from station.history.later import later_warning
+    from station.record.exportable import refusal
+
+    why = refusal(result, args.run_dir)
+    if why is not None and not args.force:
+        raise BadInput(why)
+    line = later_warning(Path(args.run_dir), result.machine.id, result.started,
+                         "this run's offsets are older than theirs: exported, they "
+                         "replace what those runs left")
+    if line is not None:
+        say(line)
+    return why is not None
+
+
 def kinematics_export(args: argparse.Namespace, result: RunResult) -> int:
     """``export --to linuxcnc --kinematics``: the INI, the geometry's HAL file and the
     component's source, into the folder --out."""
@@ -46,6 +66,7 @@ def kinematics_export(args: argparse.Namespace, result: RunResult) -> int:
         geometry_hal,
         kinematics_ini,
     )
+    from station.record.exportable import header_lines
     from station.record.identified import NotACalibration, identified_machine
 
     if args.to != "linuxcnc":
@@ -59,6 +80,7 @@ def kinematics_export(args: argparse.Namespace, result: RunResult) -> int:
     if target.resolve() == ini.resolve():
         raise BadInput(f"--out: {out} holds the machine's own INI: the export would "
                        "overwrite it; give another folder")
+    forced = _may_export(args, result)
     try:
         ini_text = ini.read_text(encoding="utf-8")
     except OSError as exc:
@@ -66,14 +88,14 @@ def kinematics_export(args: argparse.Namespace, result: RunResult) -> int:
     try:
         machine = identified_machine(args.run_dir)
         text = kinematics_ini(result, machine, ini_text, _joints(args.joints), str(ini),
-                              args.backlash, _read_hal(ini))
+                              args.backlash, _read_hal(ini), forced)
     except (NotACalibration, ExportError) as exc:
         raise BadInput(str(exc)) from None
     comp = (files("orthocal") / COMPONENT_FILE).read_text(encoding="utf-8")
     try:
         out.mkdir(parents=True, exist_ok=True)
-        for name, body in ((ini.name, text), (GEOMETRY_HAL, geometry_hal(machine)),
-                           (COMPONENT_FILE, comp)):
+        hal = geometry_hal(machine, header_lines(result, forced))
+        for name, body in ((ini.name, text), (GEOMETRY_HAL, hal), (COMPONENT_FILE, comp)):
             write_atomic(out / name, body)
     except OSError as exc:
         raise BadInput(f"--out: cannot write into {out} ({exc.strerror})") from None
@@ -103,11 +125,13 @@ def export_main(args: argparse.Namespace) -> int:
     _, result = read_result(args.run_dir)
     if args.kinematics:
         return kinematics_export(args, result)
+    forced = _may_export(args, result)
     try:
         if args.to == "csv":
-            text = csv_lines(result)
+            text = csv_lines(result, forced)
         elif args.to == "twincat":
-            text = twincat(result, args.axes.split(","), backlash=args.backlash)
+            text = twincat(result, args.axes.split(","), backlash=args.backlash,
+                           forced=forced)
         else:
             if args.ini is None:
                 raise BadInput("--ini: LinuxCNC takes HOME_OFFSET as a value, not a "
@@ -120,7 +144,7 @@ def export_main(args: argparse.Namespace) -> int:
             if len(joints) != 3:
                 raise BadInput(f"--joints: three joint numbers for x,y,z, got {args.joints}")
             text = linuxcnc(result, ini_text, joints, source=str(args.ini),
-                            backlash=args.backlash)
+                            backlash=args.backlash, forced=forced)
     except ExportError as exc:
         raise BadInput(str(exc)) from None
     except ValueError as exc:

@@ -15,6 +15,7 @@ import re
 from collections.abc import Sequence
 
 from orthocal import AXES
+from station.record.exportable import HEADER, header_lines
 from station.record.result import RunResult
 
 
@@ -84,9 +85,11 @@ def home_changes(result: RunResult, controller: str) -> dict[str, float]:
 
 
 def linuxcnc(result: RunResult, ini_text: str, joints: Sequence[int] = (0, 1, 2),
-             source: str = "INI", backlash: bool = False) -> str:
+             source: str = "INI", backlash: bool = False, forced: bool = False) -> str:
     """The machine's INI ``ini_text`` with each ``[JOINT_n] HOME_OFFSET`` calibrated (the
-    new value, the old in a comment above it) and everything else kept as it was;
+    new value, the old in a comment above it) and everything else kept as it was,
+    under the export's header (station.record.exportable; ``forced``: exported with
+    --force, and why it needed it; an earlier export's header replaced);
     ``backlash``: BACKLASH too, where the run's reversal stands beyond its noise.
     Refused where the drive itself holds the offsets the run wrote: the controller
     would correct the machine twice."""
@@ -104,9 +107,11 @@ def linuxcnc(result: RunResult, ini_text: str, joints: Sequence[int] = (0, 1, 2)
                 "rho puts the carriage at rho + o, so HOME_OFFSET moves by -(o change))")
         extra = [_backlash_line(*reversal[axis])] if axis in reversal else []
         edits[f"JOINT_{joint}"] = (f"HOME_OFFSET = {value:.6f}", [note, *extra])
-    out: list[str] = []
+    out: list[str] = header_lines(result, forced)
     section = ""
     for line in ini_text.splitlines():
+        if line.startswith(HEADER):
+            continue  # an earlier export's header: this one's stands above
         header = re.match(r"\s*\[([^\]]+)\]", line)
         if header:
             section = header.group(1).strip()
@@ -149,12 +154,14 @@ def _home_offsets(ini_text: str, joints: Sequence[int], source: str) -> dict[int
     return out
 
 
-def csv_lines(result: RunResult) -> str:
-    """One row per axis: the offsets before and after, their change, the reversal."""
+def csv_lines(result: RunResult, forced: bool = False) -> str:
+    """One row per axis: the offsets before and after, their change, the reversal;
+    under the export's header as comment lines (``forced``: as in :func:`linuxcnc`)."""
     changes = offset_changes(result)
     reversal = reversals(result)
     machine = result.machine.id or ""
-    rows = ["axis,offset_before_mm,offset_final_mm,change_mm,reversal_mm,machine_id,run_dir,"
+    rows = [*header_lines(result, forced),
+            "axis,offset_before_mm,offset_final_mm,change_mm,reversal_mm,machine_id,run_dir,"
             "convention"]
     for axis in AXES:
         before, final = changes[axis]

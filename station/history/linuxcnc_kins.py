@@ -21,6 +21,7 @@ import re
 from collections.abc import Callable, Sequence
 
 from station.history.controller_terms import ExportError, linuxcnc
+from station.record.exportable import HEADER, header_lines
 from station.record.identified import COMPONENT, IdentifiedMachine
 from station.record.result import RunResult
 
@@ -32,13 +33,15 @@ _SECTION = re.compile(r"\s*\[([^\]]+)\]")
 #: Comment lines an earlier --kinematics export wrote, which this one writes afresh:
 #: kept, an export onto an exported INI would name the run before beside this one.
 _OWN = ("# orthocal export --kinematics:", "# orthocal: the geometry of ",
-        "# orthocal: HOME_OFFSET left as it was:")
+        "# orthocal: HOME_OFFSET left as it was:", HEADER)
 
 
-def geometry_hal(machine: IdentifiedMachine) -> str:
+def geometry_hal(machine: IdentifiedMachine, header: Sequence[str] = ()) -> str:
     """One ``setp orthoglidekins.<pin> <value>`` per pin, each with its meaning and
-    95 % interval, and the run, the machine and the model in the header."""
+    95 % interval, and the run, the machine and the model in the header, under the
+    export's ``header`` lines (station.record.exportable.header_lines)."""
     lines = [
+        *header,
         f"# {GEOMETRY_HAL}: the machine's geometry for the {COMPONENT} kinematics, written",
         f"# by orthocal export --kinematics from {machine.describe()}.",
         "# Units: mm (leg lengths L + dL, gaps, drho), mrad (tilts); conventions of",
@@ -110,9 +113,10 @@ def _check_kins(lines: list[tuple[str, str]], source: str) -> None:
 
 def kinematics_ini(result: RunResult, machine: IdentifiedMachine, ini_text: str,
                    joints: Sequence[int], source: str, backlash: bool,
-                   read_hal: Callable[[str], str | None]) -> str:
+                   read_hal: Callable[[str], str | None], forced: bool = False) -> str:
     """The INI with HOME_OFFSET (as the plain export, or kept where the drive holds
-    the offsets), the component as its kinematics and the geometry's HAL file."""
+    the offsets), the component as its kinematics and the geometry's HAL file, under
+    the export's header (``forced``: exported with --force, and why it needed it)."""
     held = machine.offsets_held_by == "controller"
     text = ini_text if held else linuxcnc(result, ini_text, joints, source, backlash)
     lines = _sections(text)
@@ -141,6 +145,7 @@ def kinematics_ini(result: RunResult, machine: IdentifiedMachine, ini_text: str,
     if not any(sec == "KINS" and _key(line) == "JOINTS" for sec, line in lines):
         at = max(i for i, line in enumerate(out) if line.startswith("KINEMATICS = "))
         out.insert(at + 1, "JOINTS = 3")
-    header = [f"# orthocal export --kinematics: {machine.describe()}. Build the "
+    header = [*header_lines(result, forced),
+              f"# orthocal export --kinematics: {machine.describe()}. Build the "
               f"kinematics once: sudo halcompile --install {COMPONENT_FILE}"]
     return "\n".join(header + out) + "\n"

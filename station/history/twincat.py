@@ -25,6 +25,7 @@ from station.history.controller_terms import (
     offset_changes,
     reversals,
 )
+from station.record.exportable import header_lines
 from station.record.result import RunResult
 
 #: The NC axes of the joints x, y, z unless told otherwise.
@@ -34,8 +35,9 @@ REFERENCE = "Reference position for homing (encoder parameter)"
 BACKLASH = "MC_BacklashCompensation.Backlash (Tc2_MC2; axis parameter Position Correction on)"
 
 
-def _header(result: RunResult, machine: str, backlash: bool) -> list[str]:
+def _header(result: RunResult, machine: str, backlash: bool, forced: bool) -> list[str]:
     lines = [
+        *header_lines(result, forced),
         f"# orthocal export for TwinCAT 3 NC: machine {machine}, run {result.run_dir}",
         "# Each row: the NC axis, the joint it drives, the parameter (as TwinCAT XAE names",
         "# it) and what to do with it, in mm.",
@@ -54,17 +56,18 @@ def _header(result: RunResult, machine: str, backlash: bool) -> list[str]:
 
 
 def twincat(result: RunResult, axes: Sequence[str] = DEFAULT_AXES,
-            backlash: bool = False) -> str:
+            backlash: bool = False, forced: bool = False) -> str:
     """The parameter list of the run ``result`` for the NC ``axes`` of x, y, z;
-    ``backlash``: the backlash compensation too, where the reversal stands out.
-    Refused where the drive holds the offsets the run wrote (home_changes)."""
+    ``backlash``: the backlash compensation too, where the reversal stands out;
+    ``forced``: exported with --force, its header says why it needed it. Refused
+    where the drive holds the offsets the run wrote (home_changes)."""
     if len(axes) != len(AXES) or not all(a.strip() for a in axes):
         raise ExportError(f"--axes: three NC axis names for x,y,z, got {','.join(axes)!r}")
     change = home_changes(result, "TwinCAT")
     offsets = offset_changes(result)
     reversal = reversals(result) if backlash else {}
     machine = result.machine.id or "no [machine] id"
-    out = _header(result, machine, backlash)
+    out = _header(result, machine, backlash, forced)
     out.append("nc_axis,joint,parameter,change_mm,value_mm,offset_before_mm,"
                "offset_final_mm,machine_id")
     for axis, name in zip(AXES, axes, strict=True):

@@ -14,7 +14,9 @@ told (``theta_c``, orthocal/compensation.py) holds, per parameter:
 - ΔL: where the kept model identified it; else nominal (L), named.
 
 Refused, in one line: a run that failed or was aborted, or that identified
-nothing (no model.json).
+nothing (no model.json). Whether a run that completed may be put into a controller
+as it stands (converged, its last round not ambiguous) is the caller's to ask, of
+station.record.exportable: an export may be forced, ``orthocal compensate`` may not.
 """
 
 from __future__ import annotations
@@ -118,7 +120,8 @@ def _read(path: Path, what: str) -> JsonObject:
 
 def identified_machine(run_dir: str | Path) -> IdentifiedMachine:
     """The machine the run in ``run_dir`` identified; NotACalibration (one line) for a run
-    that failed, was aborted or identified nothing."""
+    that failed, was aborted or identified nothing (station.record.exportable says
+    whether one that completed is a calibration to trust)."""
     run = Path(run_dir)
     try:
         result = read_result(run / "result.json")
@@ -128,15 +131,6 @@ def identified_machine(run_dir: str | Path) -> IdentifiedMachine:
     if status in ("failed", "aborted"):
         raise NotACalibration(f"{run}: the run {status} ({result.message or 'no message'})"
                               ": it is no calibration to put into a controller")
-    last = result.iterations[-1] if result.iterations else None
-    if last is not None and last.ambiguity is not None:
-        # a tilt there may be a bow, which the tool never sees: put into the controller,
-        # it would move the tool by what the bows only seemed to be
-        raise NotACalibration(
-            f"{run}: the run could not tell the axes' tilts from the legs' bows "
-            f"({last.model} or {last.ambiguity.explained_by}): its geometry is no "
-            "calibration to put into a controller; read a second gauge plane ([[setups]] "
-            "again with at = 0.75) and calibrate again")
     if not (run / "model.json").exists():
         raise NotACalibration(f"{run}: the run identified nothing (no model.json)")
     try:

@@ -16,6 +16,7 @@ from result_builders import golden_result
 from station.commands import run as cmd_run
 from station.history.controller_terms import ExportError, csv_lines, linuxcnc
 from station.history.twincat import twincat
+from station.record.exportable import HEADER
 from station.record.result import RunResult
 from station.report import as_result
 
@@ -116,7 +117,7 @@ def test_the_command(tmp_path: Path) -> None:
 
     ok = orthocal("--to", "linuxcnc", "--ini", str(tmp_path / "og.ini"))
     assert ok.returncode == 0 and home_offsets(ok.stdout)["JOINT_0"] == pytest.approx(9.5)
-    rows = orthocal("--to", "csv").stdout.splitlines()
+    rows = [r for r in orthocal("--to", "csv").stdout.splitlines() if not r.startswith("#")]
     assert rows[1].startswith("x,0.100000,0.600000,+0.500000,0.020000,OG-1,")
     tc = orthocal("--to", "twincat", "--axes", "X1,Y1,Z1")
     assert tc.returncode == 0 and tc.stdout.count("\nX1,x,") == 1
@@ -190,10 +191,20 @@ def test_twincat_from_a_run_whose_station_held_the_offsets(tmp_path: Path, capsy
     done = json.loads(capsys.readouterr().out)
     assert done["offsets_held_by"] == "station"
     out = tmp_path / "og.csv"
+    # two cycles a setup leave z undecided: the run is no calibration without --force
+    assert done["loop"]["stopped"] == "not-converged"
+    refused = cli("export", done["run_dir"], "--to", "twincat", "--out", str(out),
+                  cwd=tmp_path)
+    assert refused.returncode == 2 and not out.exists()
     made = cli("export", done["run_dir"], "--to", "twincat", "--backlash", "--out", str(out),
-               cwd=tmp_path)
+               "--force", cwd=tmp_path)
     assert made.returncode == 0, made.stderr
-    rows = twincat_rows(out.read_text())
+    text = out.read_text()
+    header = [line for line in text.splitlines() if line.startswith(HEADER)]
+    said = " ".join(line.removeprefix(HEADER).strip() for line in header)
+    assert "EXPORTED WITH --force" in said and "the run did not converge (not-converged)" \
+        in said and "may still be off by up to" in said, said
+    rows = twincat_rows(text)
     for row in rows:
         a = row["joint"]
         if "Reference" not in row["parameter"]:
@@ -205,3 +216,90 @@ def test_twincat_from_a_run_whose_station_held_the_offsets(tmp_path: Path, capsy
     backlash = {row["joint"]: float(row["value_mm"]) for row in rows
                 if "Backlash" in row["parameter"]}
     assert set(backlash) == {"x"} and abs(backlash["x"] - 0.03) < 0.01
+
+
+#: What the record of a run that did not resolve the machine says (the engine's words,
+#: station.analysis.verdict.not_converged), per case: its changes and the words the
+#: refusal and the forced header must carry.
+DETAIL = ("after 2 pass(es) of its last verification, Δρ_x may still be off by up to 17.3 µm "
+          "at 95 %, more than converge_mm = 2 µm")
+
+
+def unresolved(case: str) -> dict[str, Any]:
+    doc = document()
+    last = doc["iterations"][-1]
+    if case in ("not converged", "both"):
+        doc["converged"] = False
+        doc["loop"].update(stopped="not-converged", detail=DETAIL)
+        doc["message"] = f"closed loop did not converge: {DETAIL}"
+        last.update(verdict="unproven", shown_within_95_mm={
+            "drho_x": 0.0173, "drho_y": 0.0021, "drho_z": 0.0009})
+    if case in ("ambiguous", "both"):
+        last.update(model="rho+tilt", ambiguity={"explained_by": "rho+form",
+                                                 "apart_mm": {"drho_x": 0.015}})
+    return doc
+
+
+REASONS = {"not converged": ["the run did not converge (not-converged): Δρ_x may still be "
+                             "off by up to 17.3 µm at 95 %"],
+           "ambiguous": ["its last round could not tell the axes' tilts from the legs' bows "
+                         "(rho+tilt or rho+form)"]}
+REASONS["both"] = REASONS["not converged"] + REASONS["ambiguous"]
+
+
+def header_of(text: str) -> str:
+    """The export's header comment, its lines joined as one text."""
+    return " ".join(line.removeprefix(HEADER).strip() for line in text.splitlines()
+                    if line.startswith(HEADER))
+
+
+@pytest.mark.parametrize("case", REASONS)
+def test_an_unresolved_run_is_exported_only_with_force(case: str, tmp_path: Path) -> None:
+    run_dir = tmp_path / "run-1"
+    run_dir.mkdir()
+    (run_dir / "result.json").write_text(json.dumps({**unresolved(case),
+                                                     "run_dir": str(run_dir)}))
+    (tmp_path / "og.ini").write_text(INI)
+    out = tmp_path / "exported"
+    for target in (["--to", "linuxcnc", "--ini", "og.ini"], ["--to", "twincat"],
+                   ["--to", "csv"]):
+        refused = cli("export", str(run_dir), *target, "--out", str(out), cwd=tmp_path)
+        assert refused.returncode == 2 and refused.stdout == "", (target, refused.stderr)
+        (line,) = refused.stderr.strip().splitlines()
+        assert line.startswith(f"orthocal: error: {run_dir}: not exported: ")
+        assert all(reason in line for reason in REASONS[case]) and "--force" in line, line
+        assert ("second gauge plane" in line) == (case != "not converged")
+        assert not out.exists()
+        forced = cli("export", str(run_dir), *target, "--out", str(out), "--force",
+                     cwd=tmp_path)
+        assert forced.returncode == 0, forced.stderr
+        said = header_of(out.read_text())
+        assert f"run {run_dir}, machine OG-1" in said
+        assert "EXPORTED WITH --force, NOT A CALIBRATION TO TRUST AS IT STANDS" in said
+        assert all(reason in said for reason in REASONS[case]), said
+        # the verdict, and the run's own words where it has them
+        assert ("verdict: NOT CONVERGED (not-converged)" in said) == (case != "ambiguous")
+        assert ("AMBIGUOUS last round" in said) == (case != "not converged")
+        assert (f"The run says: {DETAIL}" in said) == (case != "ambiguous")
+        out.unlink()
+
+
+def test_every_export_names_the_run_the_machine_and_the_verdict(tmp_path: Path) -> None:
+    anonymous = result()
+    anonymous.machine.id = None
+    ini = linuxcnc(anonymous, INI, source="og.ini")
+    for text in (ini, twincat(anonymous), csv_lines(anonymous)):
+        said = header_of(text)
+        assert said.startswith("run /runs/run-1, machine no [machine] id verdict: "
+                               "converged: every joint offset shown within ±2.5 µm at "
+                               "95 %, 1 write-back(s)"), said
+        assert "--force" not in said
+    # an export onto the INI an earlier one wrote writes its header afresh, once
+    again = linuxcnc(result(), ini, source="og.ini")
+    assert header_of(again).count("verdict:") == 1 and "machine OG-1" in header_of(again)
+    assert "no [machine] id" not in header_of(again)
+    # a rolled-back run says so: its offsets are no longer those the controller holds
+    back = result(rolled_back={"at": "2026-12-01T10:00:00+00:00",
+                               "replaced": {"x": 0.6, "y": -0.3, "z": -0.2},
+                               "restored": {"x": 0.1, "y": 0.0, "z": -0.2}})
+    assert "rolled back on 2026-12-01T10:00:00+00:00" in header_of(csv_lines(back))

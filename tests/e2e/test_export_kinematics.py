@@ -22,6 +22,7 @@ from test_export import home_offsets  # as LinuxCNC reads HOME_OFFSET
 from station.commands import export as cmd_export
 from station.commands.cli import main
 from station.history.linuxcnc_kins import COMPONENT_FILE, GEOMETRY_HAL
+from station.record.exportable import HEADER
 from station.record.identified import PINS, identified_machine
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "linuxcnc"
@@ -303,3 +304,45 @@ def test_a_refusal_is_one_line_and_leaves_no_file(case: str, tmp_path: Path,
     assert len(err) == 1 and names in err[0], err
     assert not (tmp_path / "out").exists()
     assert snapshot(tmp_path) == before  # nothing written, the machine's INI untouched
+
+
+#: Per case: what the run's record says, and what the refusal and the header name.
+UNRESOLVED = {
+    "ambiguous": ({"model": "rho+tilt+gap", "ambiguity": {
+        "explained_by": "rho+gap+form", "apart_mm": {"drho_x": 0.015}}},
+        "could not tell the axes' tilts from the legs' bows (rho+tilt+gap or rho+gap+form)"),
+    "not converged": ({"verdict": "unproven", "shown_within_95_mm": {
+        "drho_x": 0.0031, "drho_y": 0.0173, "drho_z": 0.0009}},
+        "did not converge (not-converged): Δρ_y may still be off by up to 17.3 µm"),
+}
+
+
+@pytest.mark.parametrize("case", UNRESOLVED)
+def test_an_unresolved_run_goes_into_the_controller_only_with_force(
+        case: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The plain export's one decision (station.record.exportable) holds here too: a
+    geometry the run did not resolve is refused, one line and no file, and with
+    --force every file's header says what it carries."""
+    last_round, words = UNRESOLVED[case]
+    run_dir = write_run(tmp_path / "run")
+    doc = json.loads((run_dir / "result.json").read_text())
+    doc["iterations"][-1].update(last_round)
+    if case == "not converged":
+        doc["converged"] = False
+        doc["loop"]["stopped"] = "not-converged"
+    (run_dir / "result.json").write_text(json.dumps(doc))
+    ini = machine(tmp_path / "machine")
+    before = snapshot(tmp_path)
+    argv = ["export", str(run_dir), "--to", "linuxcnc", "--kinematics", "--ini", str(ini),
+            "--out", str(tmp_path / "out")]
+    assert main(argv) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert f"{run_dir}: not exported: " in line and words in line and "--force" in line
+    assert snapshot(tmp_path) == before
+    assert main([*argv, "--force"]) == 0
+    capsys.readouterr()
+    for name in (INI, GEOMETRY_HAL):
+        said = " ".join(line.removeprefix(HEADER).strip() for line in (
+            tmp_path / "out" / name).read_text().splitlines() if line.startswith(HEADER))
+        assert f"run {run_dir}, machine OG-tilted" in said and "verdict: " in said, name
+        assert "EXPORTED WITH --force" in said and words in said, (name, said)

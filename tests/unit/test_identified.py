@@ -10,10 +10,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+from builders import cli
 from result_builders import golden_result
 
 from orthocal import PARAM_NAMES, coverage_factor
+from station.record import exportable
 from station.record.identified import NotACalibration, identified_machine
+from station.record.io import read_result
 from station.record.model import MachineModel
 
 LAYOUT = {"tilt_yx": 0.2, "tilt_zx": 0.1, "tilt_zy": -0.15, "gap_xy": 0.15,
@@ -121,10 +124,25 @@ def test_a_damaged_model_is_named(tmp_path: Path) -> None:
         identified_machine(d)
 
 
-def test_a_run_that_could_not_tell_tilts_from_bows_is_refused(tmp_path: Path) -> None:
+def test_a_run_that_could_not_tell_tilts_from_bows_is_no_calibration(tmp_path: Path) -> None:
     # docs/model.md, "Tilts or bows": put into a controller, tilts that may be bows
-    # would move the tool by what the bows only seemed to be
-    with pytest.raises(NotACalibration, match="could not tell the axes' tilts from the legs' "
-                                              r"bows \(rho\+tilt\+gap or rho\+gap\+form\)"):
-        identified_machine(run_dir(tmp_path, ambiguous=True))
-    assert identified_machine(run_dir(tmp_path, model="rho+tilt")).model == "rho+tilt"
+    # would move the tool by what the bows only seemed to be. The machine is read as
+    # it is; whether it may go out is the one decision of station.record.exportable,
+    # which export (--force) and compensate (never) ask.
+    ambiguous_dir = run_dir(tmp_path, ambiguous=True)
+    assert identified_machine(ambiguous_dir).model == "rho+tilt+gap"
+    record = read_result(ambiguous_dir / "result.json")
+    assert exportable.ambiguous(record) == ("its last round could not tell the axes' tilts "
+                                            "from the legs' bows (rho+tilt+gap or "
+                                            "rho+gap+form)")
+    assert exportable.unresolved(record) == [exportable.ambiguous(record)]
+    plain = read_result(run_dir(tmp_path, model="rho+tilt") / "result.json")
+    assert exportable.ambiguous(plain) is None and exportable.unresolved(plain) == []
+    program = tmp_path / "part.ngc"
+    program.write_text("G0 X0 Y0 Z0\nG1 X1 F100\nM2\n")
+    refused = cli("compensate", str(program), "--run", str(ambiguous_dir), cwd=tmp_path)
+    assert refused.returncode == 2 and refused.stdout == ""
+    (line,) = refused.stderr.strip().splitlines()
+    assert "could not tell the axes' tilts from the legs' bows" in line
+    assert str(ambiguous_dir) in line
+    assert not list(tmp_path.glob("part.compensated*"))
