@@ -27,7 +27,12 @@ from station.engine.devices import build_controller, open_devices
 from station.engine.procedure import Run, execute, expected_mountings
 from station.engine.recovery import check_reference, home_if_needed
 from station.engine.results import AXES
-from station.engine.rolled_back import change_text, record_rollback
+from station.engine.rolled_back import (
+    change_text,
+    nothing_to_undo,
+    record_rollback,
+    when_rolled_back,
+)
 from station.engine.writeback import rollback as do_rollback
 from station.engine.writeback import rollback_values
 from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
@@ -237,12 +242,23 @@ def resume(options: ResumeOptions) -> int:
     run_dir, state = reopen(options.run_dir)
     if state.header is None:
         raise BadInput(f"{run_dir / JOURNAL_NAME}: no run header (not a run journal)")
+    back = when_rolled_back(state)
     if state.finished is not None:
         result_path = run_dir / "result.json"
         found = migrate(json.loads(result_path.read_text())) if result_path.exists() else {}
-        say(f"orthocal: {run_dir} already finished ({state.finished.status})")
+        # a rolled-back run's summary no longer describes the machine: said first
+        then = "" if back is None else f", then rolled back on {back}: the machine is " \
+            "back as found"
+        say(f"orthocal: {run_dir} already finished ({state.finished.status}){then}")
         print_result(options.json, found, options.verbose)
         return exit_status(found, 0 if state.finished.status == "ok" else 1)
+    if back is not None:
+        # Its journal holds write-backs the controller no longer holds: resumed, the
+        # loop would measure the machine as found and write its correction a second
+        # time on top of what it believes is written.
+        raise BadInput(f"{run_dir} was rolled back on {back}: the machine is back as found "
+                       "and the run cannot go on from its journal; start a new run "
+                       "(orthocal run) to calibrate it")
     config = _held_offsets(load_config(run_dir / "config.toml"), state)
     sim = _simulation(state)
     with ExitStack() as stack:
@@ -352,6 +368,17 @@ def _stop_quietly(controller: Moves) -> None:
         pass  # the fault being raised says what went wrong
 
 
+def _warn_later(run_dir: Path, config: Any, state: RunState, consequence: str) -> None:
+    """The machine's later runs in the history, named before a rollback changes what
+    they left (station.history.later)."""
+    from station.history.later import later_warning
+
+    started = state.header.started if state.header is not None else None
+    line = later_warning(run_dir, config.machine.id, started, consequence)
+    if line is not None:
+        say(line)
+
+
 def rollback(options: ResumeOptions) -> int:
     run_dir, state = reopen(options.run_dir)
     config = _held_offsets(load_config(run_dir / "config.toml"), state)
@@ -367,6 +394,12 @@ def rollback(options: ResumeOptions) -> int:
         if station is None and not options.yes:
             ConsoleOperator.require_tty_or_yes(False)
         current, backup = rollback_values(controller, run_dir)
+        refused = nothing_to_undo(run_dir, state, current, backup,
+                                  controller.offset_resolution_mm())
+        if refused is not None:
+            raise BadInput(refused)
+        _warn_later(run_dir, config, state, "rolling this run back writes the offsets from "
+                    "before it over what they left")
         if not operator.confirm(f"Restore the offsets saved in {run_dir}: "
                                 f"{change_text(current, backup)}?"):
             raise RunFailed("rollback declined by the operator; offsets unchanged")

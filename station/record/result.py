@@ -15,6 +15,9 @@ older version no longer validates (adding an optional field does not):
 - 2: every section typed and closed; a field the engine always writes is required
   (nullable where it may be null), so older files are read through
   ``migrate()``, which fills what they lack.
+
+Optional fields added within version 2 (a file without them reads as it is):
+``rollbacks``, every rollback in turn, where ``rolled_back`` alone kept the last.
 """
 
 from __future__ import annotations
@@ -176,8 +179,8 @@ class Remaining(Closed):
 
 
 class RolledBack(Closed):
-    """rolled_back: ``orthocal rollback`` restored the offsets saved before the run's
-    first write-back; the run's offsets_final are those now."""
+    """One ``orthocal rollback``: it restored the offsets saved before the run's first
+    write-back (``rolled_back``, the last; ``rollbacks``, each in turn)."""
 
     at: str = Field(description="when, ISO 8601")
     replaced: Axis3 = Field(description="the offsets the controller held before, mm")
@@ -275,7 +278,13 @@ class RunResult(Closed):
     offsets_final: Axis3 | None = Field(description="the journal's last write-back or "
                                                     "rollback, else the offsets before")
     offsets_held_by: Literal["controller", "station"] | None
-    rolled_back: RolledBack | None = Field(None, description="absent unless rolled back")
+    rolled_back: RolledBack | None = Field(
+        None, description="the last rollback, whose restored offsets are offsets_final; "
+                          "absent unless rolled back")
+    rollbacks: list[RolledBack] | None = Field(
+        None, description="every rollback of the run, oldest first (the last is "
+                          "rolled_back); absent unless rolled back, and in a record "
+                          "written before rollbacks were kept, where rolled_back is the one")
     offsets_note: str | None = Field(None, description="offsets the station holds")
     writeback: Writeback | None
     verification: Verification | None
@@ -292,3 +301,10 @@ class RunResult(Closed):
         None, description="the tool against [acceptance] at 95 %; absent without it")
     since_last: SinceLast | NotCompared | None = Field(
         None, description="absent without [machine] id or an earlier run in the history")
+
+    def rollback_history(self) -> list[RolledBack]:
+        """Every rollback of the run, oldest first: ``rollbacks``, or in a record
+        written before they were kept, ``rolled_back`` alone."""
+        if self.rollbacks:
+            return list(self.rollbacks)
+        return [] if self.rolled_back is None else [self.rolled_back]

@@ -113,6 +113,9 @@ class RunState:
     # What the journal's own write-backs and rollbacks leave the offsets at (x, y, z),
     # None while it has none.
     offsets_held: list[float] | None = None
+    # Each rollback the operator made, in journal order: a rollback is an event of the
+    # run, never an overwrite of the one before.
+    rollbacks: list[RollbackDone] = field(default_factory=list)
     guard: GuardTally = field(default_factory=GuardTally)
     retries: int = 0  # driver retries
     mountings: int = 0  # ``setup`` records: what the operator mounted, and for how long
@@ -168,6 +171,7 @@ class RunState:
                 self._writeback(rec)
             case RollbackDone():
                 self.offsets_held = [float(rec.restored[a]) for a in AXES]
+                self.rollbacks.append(rec)
             case Event():
                 self._event(rec.event)
             case SetupRedo():

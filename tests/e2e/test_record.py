@@ -209,3 +209,47 @@ def test_a_simulated_runs_result_fits_a_schema_with_no_open_section(tmp_path: Pa
     assert result["reversal"] is not None and result["iterations"]
     # --json prints the document the file holds
     assert printed == result
+
+
+def test_a_rollback_is_appended_to_a_record_that_kept_only_the_last(tmp_path: Path) -> None:
+    """A record written before rollbacks were kept has ``rolled_back`` alone: it reads
+    as it is, that one is its history, and the next rollback is added after it."""
+    from station.engine.rolled_back import record_rollback
+
+    old = {"at": "2026-01-02T10:00:00+00:00", "replaced": {"x": 0.5, "y": -0.2, "z": 0.1},
+           "restored": {"x": 0.0, "y": 0.0, "z": 0.0}}
+    doc = {**golden_result(), "run_dir": str(tmp_path), "rolled_back": old}
+    assert "rollbacks" not in doc and errors("result", doc) == []
+    (tmp_path / "result.json").write_text(json.dumps(doc))
+    _, record = read_result(str(tmp_path))
+    assert [b.model_dump() for b in record.rollback_history()] == [old]
+    replaced, restored = {"x": 0.3, "y": 0.1, "z": -0.1}, {"x": 0.0, "y": 0.0, "z": 0.0}
+    after = record_rollback(tmp_path, replaced, restored, figures=False)
+    assert after is not None
+    stored = json.loads((tmp_path / "result.json").read_text())
+    assert stored["rollbacks"][0] == old and stored["rollbacks"][1]["replaced"] == replaced
+    assert stored["rolled_back"] == stored["rollbacks"][1] and stored["rolled_back"] != old
+    assert stored["offsets_final"] == restored and errors("result", stored) == []
+
+
+def test_a_rolled_back_run_that_never_finished_is_not_resumed(tmp_path: Path,
+                                                              capsys) -> None:
+    """Its journal holds a write-back the controller no longer holds: resumed, the loop
+    would measure the machine as found and write its correction again on top."""
+    from builders import journal_header
+
+    from station.record.journal_file import Journal
+
+    run_dir = tmp_path / "run-1"
+    run_dir.mkdir()
+    offsets = {"x": 0.0, "y": 0.0, "z": 0.0}
+    with Journal(run_dir / "journal.jsonl") as journal:
+        journal.append(journal_header())
+        journal.append({"type": "rollback", "stage": "intent", "restore": offsets,
+                        "current": {"x": -0.4, "y": 0.3, "z": -0.2}})
+        journal.append({"type": "rollback", "stage": "done", "restored": offsets})
+    assert main(["resume", str(run_dir), "--yes"]) == 2
+    captured = capsys.readouterr()
+    (line,) = captured.err.strip().splitlines()
+    assert f"{run_dir} was rolled back on " in line and "back as found" in line
+    assert "orthocal run" in line and captured.out == ""
