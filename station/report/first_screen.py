@@ -71,7 +71,9 @@ def headline(result: RunResult) -> str:
     drive (the "offsets held" line below says where)."""
     state = run_state(result)
     head = f"orthocal run: {STATE_TEXT[state].upper()}"
-    if state == "not-converged":
+    if result.rolled_back is not None:
+        head += rolled_back_head(result)
+    elif state == "not-converged":
         head += f" — {not_converged_why(result)}"
     elif result.message:
         head += f" — {result.message}"
@@ -81,6 +83,17 @@ def headline(result: RunResult) -> str:
                  + (f": {values}" if values else "")
                  + "; enter them in the drive (see \"offsets held\" below)")
     return head
+
+
+def rolled_back_head(result: RunResult) -> str:
+    """The headline of a rolled-back run: when, the tool as it now is (back as found)
+    and what to do; the figures the run left describe a machine no longer there."""
+    back = result.rolled_back
+    acc, _ = tool.statement(result)
+    now = "" if acc is None else f", at the tool {um(acc.before.rms_mm)} µm RMS"
+    when = "" if back is None else f" on {back.at}"
+    return (f", then rolled back{when} — the machine is back as found{now}; to do: "
+            "calibrate it again")
 
 
 def acceptance_text(result: RunResult) -> str | None:
@@ -151,6 +164,9 @@ def as_left(result: RunResult, name: str) -> str:
     is no such figure."""
     if _nothing_written(result):
         return "unchanged (nothing written)"
+    if result.rolled_back is not None:  # the offsets from before: Δρ is as found again
+        value, half = as_found(result).get(name, (None, None))
+        return f"{value_pm(value, half)}, rolled back"
     rem = result.remaining
     if rem is None or at(rem.estimate, name) is None:
         return "not verified (the correction written, not measured after)"
@@ -210,7 +226,7 @@ def tool_item(result: RunResult) -> Item | None:
         return Item("at the tool", f"not stated: {why}") if why else None
     a, b = acc.after, acc.before
     rms_iv, max_iv = um_interval(a.rms_interval_95_mm), um_interval(a.max_interval_95_mm)
-    if tool.written(result):
+    if tool.written(result) and result.rolled_back is None:
         text = (f"{_figure(b.rms_mm, a.rms_mm, rms_iv, ' RMS')}, max "
                 f"{_figure(b.max_mm, a.max_mm, max_iv)}, over {box_text(acc.workspace_mm)}, "
                 "with the offsets written")
@@ -302,6 +318,9 @@ def actions(result: RunResult) -> list[str]:
 
 
 def todo_items(result: RunResult) -> list[Item]:
+    if result.rolled_back is not None:  # what the run found no longer applies as it stands
+        return [Item("to do", "calibrate the machine again (orthocal run): the offsets "
+                              "this run wrote were rolled back")]
     todo = actions(result)
     if not todo:
         return [Item("to do", "nothing further: nothing else stands out of the noise")] \

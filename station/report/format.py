@@ -261,9 +261,11 @@ def rolled_back_text(result: RunResult) -> str | None:
         return None
     pairs = ", ".join(f"{a} {fmt(at(back.replaced, a), 4, signed=True)} → "
                       f"{fmt(at(back.restored, a), 4, signed=True)}" for a in AXES)
+    earlier = [b.at for b in result.rollback_history()[:-1]]
+    before = f" (rolled back before on {', '.join(earlier)})" if earlier else ""
     return (f"on {back.at} the offsets saved before the first write-back were restored: "
-            f"{pairs} mm; the controller no longer holds what this run wrote, and its "
-            "verification no longer describes the machine")
+            f"{pairs} mm{before}; the controller no longer holds what this run wrote, and "
+            "its verification no longer describes the machine")
 
 
 def writeback_text(result: RunResult, status: str) -> str:

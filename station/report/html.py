@@ -71,9 +71,15 @@ def _writeback_box(result: RunResult) -> str:
     if wb is None:
         return ""
     held = held_by_station(result)
-    cls = "box" if wb.status == "written" and not held else "box warn"
+    back = result.rolled_back
+    cls = "box" if wb.status == "written" and not held and back is None else "box warn"
     label = "held by the station" if held and wb.status == "written" else wb.status
     reason = f"<br>Reason: {esc(wb.reason)}" if wb.reason else ""
+    if back is not None:  # what was written is no longer there: said before the table
+        return (f'<div class="{cls}"><b>Write-back: {esc(label)}, then rolled back</b> — '
+                f"on {esc(back.at)} <code>orthocal rollback</code> restored the offsets "
+                "saved before the run: the machine is back as found, and the table below "
+                f"shows the offsets it holds now.{reason}</div>")
     return (f'<div class="{cls}"><b>Write-back: {esc(label)}</b> — '
             f"{esc(writeback_text(result, wb.status))}.{reason}</div>")
 
@@ -81,10 +87,13 @@ def _writeback_box(result: RunResult) -> str:
 def _offsets_section(result: RunResult) -> str:
     """The operator's result, first on the page: each joint's zero offset as found
     (read before the run) and as left (the last write-back or rollback, else as
-    found), in mm, with what became of the correction above it."""
+    found), in mm, with what became of the correction above it; for a rolled-back run
+    also what was written, so that the page never shows a write-back above offsets
+    that merely came back."""
     before, written = result.offsets_before or {}, result.offsets_written or {}
     left = result.offsets_final or written or before
     held = held_by_station(result)
+    back = result.rolled_back
     out = [_writeback_box(result)]
     if before or left:
         rows = []
@@ -93,17 +102,24 @@ def _offsets_section(result: RunResult) -> str:
                 continue
             b, w = at(before, a), at(left, a)
             change = fmt(w - b, 4, signed=True) if b is not None and w is not None else "—"
-            rows.append([f"joint {a}", fmt(b, 4, signed=True), fmt(w, 4, signed=True),
-                         change])
+            shown = [fmt(b, 4, signed=True), fmt(w, 4, signed=True), change]
+            if back is not None:
+                shown.insert(1, fmt(at(written, a), 4, signed=True))
+            rows.append([f"joint {a}", *shown])
         whose = ("The joint zero offset o<sub>i</sub> the station holds (the drive takes "
                  "none over Modbus)" if held else
                  "The controller's joint zero offset o<sub>i</sub>")
-        out.append(table(["joint (offsets in mm)", "as found", "as left", "change"],
-                         rows, caption=(
-            f"{whose}: as found, read before the run; as left, "
-            f"{'held' if held else 'written and read back'} at its end "
-            "(o<sub>i</sub> ← o<sub>i</sub> − Δρ<sub>i</sub>). The old values are saved in "
-            "the run directory, so <code>orthocal rollback</code> can restore them.")))
+        how = (f"written by the run, then restored by <code>orthocal rollback</code> on "
+               f"{esc(back.at)}" if back is not None else
+               f"{'held' if held else 'written and read back'} at its end "
+               "(o<sub>i</sub> ← o<sub>i</sub> − Δρ<sub>i</sub>)")
+        heads = ["joint (offsets in mm)", "as found", "as left", "change"]
+        if back is not None:
+            heads.insert(2, "written, rolled back")
+        out.append(table(heads, rows, caption=(
+            f"{whose}: as found, read before the run; as left, {how}. The old values are "
+            "saved in the run directory, so <code>orthocal rollback</code> can restore "
+            "them.")))
     # where the station holds them, the box at the top (header_boxes) says where to
     # enter them, just above
     return "".join(out) or "<p>The controller's offsets were not read.</p>"
@@ -225,12 +241,15 @@ def _title(result: RunResult, figures: bool) -> str:
     """The page's heading with its badges, the meta line, and how to draw the
     figures of a page drawn without them."""
     state = run_state(result)
-    # A loop that did not converge, offsets the station holds: the warning colour
-    # (st-refused's), never the green of a run that did all it set out to.
+    # A loop that did not converge, a rollback, offsets the station holds: the warning
+    # colour (st-refused's), never the green of a run that did all it set out to.
     status_cls = ("st-refused st-not-converged" if state == "not-converged" else
+                  "st-refused" if state == "ok" and result.rolled_back is not None else
                   f"st-{state}" if state in STATE_TEXT else "st-failed")
     sim_tag = " (simulated)" if result.simulated else ""
     badge = f'<span class="status {status_cls}">{esc(STATE_TEXT[state])}</span>'
+    if result.rolled_back is not None:
+        badge += '<span class="status st-refused st-rolled-back">Rolled back</span>'
     if held_by_station(result):
         badge += '<span class="status st-refused st-held">Offsets held by the station</span>'
     meta = ("Orthoglide-type parallel machine · leg-parallelism calibration · "
