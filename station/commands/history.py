@@ -77,17 +77,20 @@ def _plot_path(args: argparse.Namespace) -> Path | None:
 #: holds (e.g. −1818.6 µm), which alone would read as a machine 1.8 mm off.
 LEGEND = ("Δρ as found: each joint's zero error at the run's start, with the offsets o "
           "the controller held then: what the run set out to correct (near 0 on a machine "
-          "still in calibration).\n"
+          "still in calibration). Δρ as left: the same at the run's end, with the offsets "
+          "it left (after a rollback, as found again).\n"
           "e = Δρ − o: the same error without any offset, the machine's own (≈ −o on a "
           "machine in calibration): only e "
           "compares across runs whatever offsets were written in between, and its drift "
           "is the machine's.")
 
 
-def _found_drho(entry: dict[str, Any]) -> list[float | None]:
-    """Δρ as found per axis: e + o with the offsets the run started from."""
-    found = (entry.get("as_found") or {}).get("joint_error_mm") or {}
-    held = entry.get("offsets_before") or {}
+def _found_drho(entry: dict[str, Any], state: str = "as_found",
+                offsets: str = "offsets_before") -> list[float | None]:
+    """Δρ as found per axis: e + o with the offsets the run started from (``state``
+    "as_left", ``offsets`` "offsets_final": Δρ as the run left the machine)."""
+    found = (entry.get(state) or {}).get("joint_error_mm") or {}
+    held = entry.get(offsets) or {}
     out: list[float | None] = []
     for a in "xyz":
         e, o = (found.get(a) or {}).get("value_mm"), held.get(a)
@@ -132,18 +135,20 @@ def history_main(args: argparse.Namespace) -> int:
         print(json.dumps({"machine_id": args.machine, "runs": entries}, indent=2))
         return 0
     print(f"{'started':<26} {'machine':<12} {'state':<14} "
-          f"{'as found Δρ (µm) x, y, z':<26} {'e = Δρ − o (µm) x, y, z':<26} "
-          "tool after (µm RMS)   run")
+          f"{'as found Δρ (µm) x, y, z':<26} {'as left Δρ (µm) x, y, z':<26} "
+          f"{'e = Δρ − o (µm) x, y, z':<26} tool after (µm RMS)   run")
     for e in entries:
         found = (e.get("as_found") or {}).get("joint_error_mm") or {}
         state = "rolled back" if e.get("rolled_back") else \
             e.get("stopped") or e.get("status") or "—"
         tool = e.get("tool_after_rms_mm")
         drho = ", ".join(microns(v) for v in _found_drho(e))
+        # as left: e + the offsets the run left (after a rollback, back as found)
+        left = ", ".join(microns(v) for v in _found_drho(e, "as_left", "offsets_final"))
         joint = ", ".join(microns((found.get(a) or {}).get("value_mm")) for a in "xyz")
         print(f"{e.get('started') or '—':<26} {e.get('machine_id') or '—':<12} {state:<14} "
-              f"{drho:<26} {joint:<26} {'—' if tool is None else f'{1000 * tool:.1f}':<19}"
-              f"   {e['run_dir']}")
+              f"{drho:<26} {left:<26} {joint:<26} "
+              f"{'—' if tool is None else f'{1000 * tool:.1f}':<19}   {e['run_dir']}")
         if (back := e.get("rolled_back")) and isinstance(back.get("restored"), dict):
             print(f"  rolled back {back.get('at') or ''}: offsets restored to " + ", ".join(
                 f"{a} {back['restored'].get(a, float('nan')):+.4f}" for a in "xyz") + " mm")

@@ -7,10 +7,12 @@ machine, and can be compared between runs whatever was written in between, is th
 joint error in the controller's zero frame, e = Δρ − o (mm, per axis): as found, from
 the run's statement of Δρ at its start (``remaining.total`` where a verification
 measured after the last write, else the first identification) and its offsets
-before; as left, from the last verification's estimate and the offsets the run left
-(``offsets_final``; after ``orthocal rollback``, those it replaced, under which the
-verification measured: the entry's ``rolled_back`` says so). Tilts and gaps need no
-frame: offsets do not move them."""
+before; as left, from the last verification's estimate and the offsets it measured
+with (those the run wrote; a rollback does not change the machine's e). Each state
+also says what the machine runs with: ``drho_mm``, Δρ = e + o with the offsets it
+held then (``offsets_mm``): as found the offsets before, as left those the run left
+(``offsets_final``), so that a run left at +1.2 µm says +1.2 µm as left, and a
+rolled-back run, whose offsets are back as found, says its as-found Δρ again."""
 
 from __future__ import annotations
 
@@ -24,22 +26,28 @@ from station.record.result_base import Axis3, NotStated, Params
 
 
 def _frame(drho: Params, se: Params, offsets: Axis3 | None, dof: float | None,
-           certificate: Mapping[str, float | None] | None = None) -> dict[str, Any] | None:
-    """Per axis e = Δρ − o with Δρ's standard error, and ``certificate``'s expanded
-    uncertainty of Δρ where it states one (o is exact: e's is Δρ's); None when any
-    value is missing."""
+           certificate: Mapping[str, float | None] | None = None,
+           held: Axis3 | None = None) -> dict[str, Any] | None:
+    """Per axis e = Δρ − o (``offsets``: those Δρ was measured with) with Δρ's
+    standard error, and ``certificate``'s expanded uncertainty of Δρ where it states
+    one (o is exact: e's is Δρ's); and Δρ = e + o with the offsets ``held`` (default
+    ``offsets``) as ``drho_mm``. None when any value is missing."""
     if offsets is None:
         return None
+    held = offsets if held is None else held
     out: dict[str, Any] = {}
+    runs_with: dict[str, Any] = {}
     for a in AXES:
-        d, s, o = drho.get(f"drho_{a}"), se.get(f"drho_{a}"), offsets.get(a)
-        if d is None or o is None:
+        d, s, o, h = drho.get(f"drho_{a}"), se.get(f"drho_{a}"), offsets.get(a), held.get(a)
+        if d is None or o is None or h is None:
             return None
         out[a] = {"value_mm": d - o, "std_error_mm": s}
+        runs_with[a] = {"value_mm": d - o + h, "std_error_mm": s}
         expanded = (certificate or {}).get(f"drho_{a}")
         if expanded is not None:
             out[a]["expanded_95_mm"] = expanded
-    return {"joint_error_mm": out, "dof": dof}
+    return {"joint_error_mm": out, "drho_mm": runs_with, "offsets_mm": dict(held),
+            "dof": dof}
 
 
 def _certificate(result: RunResult, statement: str) -> Params:
@@ -101,24 +109,27 @@ def _as_found(result: RunResult) -> dict[str, Any] | None:
 
 
 def _as_left(result: RunResult) -> dict[str, Any] | None:
-    """e as the run left it: the last verification's estimate, under the offsets it
-    measured with: offsets_final, unless a rollback has since replaced them (e is
-    the machine's own, whatever is held now)."""
+    """The machine as the run left it: e from the last verification's estimate under
+    the offsets it measured with (those the run wrote, which a rollback since replaced
+    are its first ``replaced``), and Δρ with the offsets the run left (offsets_final:
+    after a rollback, the restored ones, so Δρ is back as found)."""
     rem = result.remaining
     if rem is None or not rem.estimate:
         return None
-    back = result.rolled_back
-    return _frame(rem.estimate, rem.std_errors,
-                  back.replaced if back is not None else result.offsets_final,
-                  rem.std_errors_dof)
+    backs = result.rollback_history()
+    measured_with = backs[0].replaced if backs else result.offsets_final
+    return _frame(rem.estimate, rem.std_errors, measured_with, rem.std_errors_dof,
+                  held=result.offsets_final)
 
 
 def entry_of(result: RunResult, profile: str | None = None) -> dict[str, Any]:
     """The history entry of a finished run's ``result`` (its result.json, as the
     record); ``profile``: the register map its controller used (from its config)."""
     machine, acc = result.machine, result.accuracy
-    after = None if acc is None or isinstance(acc, NotStated) else acc.after.rms_mm
     back = result.rolled_back
+    # the tool as the run left it: after a rollback, as it was found
+    after = None if acc is None or isinstance(acc, NotStated) else \
+        acc.before.rms_mm if back is not None else acc.after.rms_mm
     return {
         "run_dir": result.run_dir, "machine_id": machine.id,
         "started": result.started, "finished": result.finished,
@@ -129,8 +140,10 @@ def entry_of(result: RunResult, profile: str | None = None) -> dict[str, Any]:
         "profile": profile,
         "offsets_before": result.offsets_before,
         "offsets_final": result.offsets_final,
-        # orthocal rollback: when, and the offsets it replaced and restored
+        # orthocal rollback: the last (when, the offsets it replaced and restored), and
+        # every one in turn
         "rolled_back": None if back is None else back.model_dump(mode="json"),
+        "rollbacks": [b.model_dump(mode="json") for b in result.rollback_history()],
         "as_found": _as_found(result), "as_left": _as_left(result), "layout": _layout(result),
         "tool_after_rms_mm": after,
         "reversal": _reversal(result), "instruments": _instruments(result),

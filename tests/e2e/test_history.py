@@ -288,3 +288,100 @@ def test_a_machine_recalibrated_from_the_offsets_it_was_left_with(tmp_path: Path
     refused = orthocal("export", second["run_dir"], "--to", "twincat", cwd=tmp_path)
     assert refused.returncode == 2 and "correct the machine twice" in refused.stderr
     assert len(refused.stderr.strip().splitlines()) == 1
+
+
+def _frame_values(frame: dict[str, Any], key: str) -> list[float]:
+    return [frame[key][a]["value_mm"] for a in "xyz"]
+
+
+def test_the_record_keeps_its_rollbacks_and_says_so_first(tmp_path: Path) -> None:
+    """A rollback is an event of the run: kept beside any other, refused where there
+    is nothing to undo, said first by resume and the report, and warned of where the
+    machine has later runs; the history's as left is what the run left."""
+    out = tmp_path / "runs"
+    done = _run(out, "OG-RB")
+    run_dir = Path(done["run_dir"])
+    rem = done["remaining"]["estimate"]
+    # as left, the machine runs with the Δρ the last verification found left (a few µm);
+    # as found, with the one it was found with (TRUE, 0.2–0.4 mm): not the same frame
+    with HistoryStore(default_url(out)) as store:
+        (entry,) = store.entries("OG-RB")
+        store.record(_entry("/elsewhere/later", "OG-RB", "2099-01-01T00:00:00+00:00"))
+        store.record(_entry("/elsewhere/of-another", "OG-2", "2099-01-02T00:00:00+00:00"))
+        store.record(_entry("/elsewhere/earlier", "OG-RB", "2000-01-01T00:00:00+00:00"))
+    left, found = entry["as_left"], entry["as_found"]
+    assert _frame_values(left, "drho_mm") == pytest.approx(
+        [rem[f"drho_{a}"] for a in "xyz"], abs=1e-9)
+    assert _frame_values(found, "drho_mm") == pytest.approx(list(TRUE), abs=0.01)
+    assert all(abs(v) < 0.01 for v in _frame_values(left, "drho_mm"))
+    assert left["offsets_mm"] == pytest.approx(done["offsets_final"], abs=1e-12)
+    # e, the machine's own, is what compare reads: the same machine at both ends
+    assert _frame_values(left, "joint_error_mm") == pytest.approx(
+        _frame_values(found, "joint_error_mm"), abs=1e-6)
+
+    back = cli("rollback", str(run_dir), "--yes", cwd=tmp_path)
+    assert back.returncode == 0, back.stderr
+    (warning,) = [line for line in back.stderr.splitlines() if "later run" in line]
+    assert "machine OG-RB has 1 later run(s)" in warning and "/elsewhere/later" in warning
+    assert "of-another" not in warning and "earlier" not in warning
+    record = json.loads((run_dir / "result.json").read_text())
+    first = record["rolled_back"]
+    assert record["rollbacks"] == [first] and errors("result", record) == []
+
+    # nothing left to undo: refused in one line saying when, nothing journaled
+    journal = (run_dir / "journal.jsonl").read_bytes()
+    again = cli("rollback", str(run_dir), "--yes", cwd=tmp_path)
+    assert again.returncode == 2 and again.stdout == ""
+    (line,) = again.stderr.strip().splitlines()
+    assert f"{run_dir} was already rolled back on {first['at']}" in line, line
+    assert "nothing to undo" in line
+    assert (run_dir / "journal.jsonl").read_bytes() == journal
+    assert json.loads((run_dir / "result.json").read_text())["rollbacks"] == [first]
+
+    # resume and the report say so first: the tool as found, and what to do
+    resumed_run = cli("resume", str(run_dir), cwd=tmp_path)
+    head = resumed_run.stdout.splitlines()[0]
+    tool_before = done["accuracy"]["before"]["rms_mm"]
+    assert "rolled back" in head and f"at the tool {1000 * tool_before:.1f} µm RMS" in head
+    assert "back as found" in head and "calibrate it again" in head, head
+    assert "nothing further" not in resumed_run.stdout
+    assert "rolled back" in resumed_run.stderr.splitlines()[0]
+    page = (run_dir / "report.html").read_text()
+    assert '<span class="status st-refused st-rolled-back">Rolled back</span>' in page
+    glance = page[page.index('id="first-screen"'):]
+    verdict = glance[glance.index("<dd>") + 4:glance.index("</dd>")]
+    assert "rolled back" in verdict and "back as found" in verdict, verdict
+    assert "<b>Write-back: written</b>" not in page
+    assert "<b>Write-back: written, then rolled back</b>" in page
+
+    # after the rollback the run left the machine as found; e has not moved
+    with HistoryStore(default_url(out)) as store:
+        (entry,) = [e for e in store.entries("OG-RB") if e["run_dir"] == done["run_dir"]]
+    assert _frame_values(entry["as_left"], "drho_mm") == pytest.approx(
+        _frame_values(entry["as_found"], "drho_mm"), abs=1e-6)
+    assert _frame_values(entry["as_left"], "joint_error_mm") == pytest.approx(
+        _frame_values(left, "joint_error_mm"), abs=1e-12)
+    assert entry["tool_after_rms_mm"] == pytest.approx(tool_before)
+
+    # offsets changed since (the drive's memory edited, as a later run would): a second
+    # rollback undoes something, and is kept beside the first, which stays as it was
+    nvram = run_dir / "controller_nvram.json"
+    memory = json.loads(nvram.read_text())
+    memory["offsets_mm"] = [0.05, -0.02, 0.01]
+    nvram.write_text(json.dumps(memory))
+    second = cli("rollback", str(run_dir), "--yes", cwd=tmp_path)
+    assert second.returncode == 0, second.stderr
+    record = json.loads((run_dir / "result.json").read_text())
+    assert record["rollbacks"][0] == first and len(record["rollbacks"]) == 2
+    assert record["rolled_back"] == record["rollbacks"][1]
+    assert record["rolled_back"]["replaced"] == pytest.approx({"x": 0.05, "y": -0.02,
+                                                               "z": 0.01}, abs=1e-9)
+    stages = [json.loads(x)["stage"] for x in (run_dir / "journal.jsonl").read_text()
+              .splitlines() if json.loads(x)["type"] == "rollback"]
+    assert stages == ["intent", "done", "intent", "done"]
+
+    # an export of a machine with later runs names them too
+    exported = cli("export", str(run_dir), "--to", "csv", "--force", cwd=tmp_path)
+    assert exported.returncode == 0, exported.stderr
+    assert "machine OG-RB has 1 later run(s)" in exported.stderr
+    assert "/elsewhere/later" in exported.stderr
