@@ -2,16 +2,23 @@
 
 ``run``, ``resume`` and ``rollback`` take an exclusive lock on the controller they
 drive (its transport address and device id) before anything moves or is written,
-and hold it until the command ends. The lock is an ``fcntl.flock`` on a file in a
-per-user state directory (``$ORTHOCAL_STATE_DIR``, else
-``$XDG_STATE_HOME/orthocal``, else ``~/.local/state/orthocal``), ``locks/<key>``;
-the file's body names the holder (run directory, pid, host, command, since) so a
-refusal can say who holds the machine.
+and hold it until the command ends. The lock lives in a per-user state directory
+(``$ORTHOCAL_STATE_DIR``, else ``$XDG_STATE_HOME/orthocal``, else
+``~/.local/state/orthocal``), as two files per controller under ``locks/``:
 
-The kernel releases a flock when its process dies, however it dies, so a lock
-left by a killed run (kill -9, a crash, a power cut of the station PC) is simply
-taken; the body it left behind is then reported as taken over. A clean exit
-clears the body before unlocking.
+* ``<key>.lock``, the lock itself: a ``filelock.FileLock``, taken without waiting.
+  That is ``fcntl.flock`` on Linux and macOS and ``LockFileEx`` on Windows: the
+  operating system drops it when its process dies, however it dies (kill -9, a
+  crash, a power cut of the station PC). Where neither exists, filelock keeps a
+  marker file naming its process instead, and takes it over once that process is
+  gone from this host.
+* ``<key>``, the holder's body (run directory, pid, host, command, since), so that
+  a refusal can say who holds the machine. It is a file of its own because the
+  lock file cannot carry it: Windows locks are mandatory, so nobody else could
+  read a body under one.
+
+A clean exit removes the body before unlocking; a body found by whoever takes the
+lock was left by a run that died holding it, and is reported as taken over.
 
 Two stations on two computers sharing one controller are not seen by a local
 lock; the lock guards one station PC (the usual case: one PC per machine).
@@ -20,16 +27,18 @@ lock; the lock guards one station PC (the usual case: one PC per machine).
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import hashlib
 import json
 import os
 import re
 import socket
+import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+
+import filelock
 
 from station.errors import RunFailed
 from station.record.result_base import JsonObject, JsonValue
@@ -67,20 +76,21 @@ def describe(holder: JsonObject) -> str:
 
 @dataclass
 class MachineLock:
-    """A held lock; ``taken_over`` is the body a dead holder left behind, if any."""
+    """A held lock: ``path`` is the holder's body, ``held`` the operating system's
+    lock beside it (None once released); ``taken_over`` is the body a dead holder
+    left behind, if any."""
 
     path: Path
     machine: str
-    fd: int | None
+    held: filelock.BaseFileLock | None
     taken_over: JsonObject | None = None
 
     def release(self) -> None:
-        fd, self.fd = self.fd, None
-        if fd is None:
+        held, self.held = self.held, None
+        if held is None:
             return
-        with contextlib.suppress(OSError):
-            os.ftruncate(fd, 0)  # a clean exit leaves nothing to take over
-        os.close(fd)  # closing the last descriptor drops the flock
+        _clear_body(self.path)  # a clean exit leaves nothing to take over
+        held.release()
 
     def __enter__(self) -> MachineLock:
         return self
@@ -89,11 +99,11 @@ class MachineLock:
         self.release()
 
 
-def _read_body(fd: int) -> JsonObject | None:
-    os.lseek(fd, 0, os.SEEK_SET)
-    raw = b""
-    while chunk := os.read(fd, 65536):
-        raw += chunk
+def _read_body(path: Path) -> JsonObject | None:
+    try:
+        raw = path.read_bytes()
+    except OSError:  # none (a clean exit removed it), or not readable now
+        return None
     if not raw.strip():
         return None
     try:
@@ -103,56 +113,71 @@ def _read_body(fd: int) -> JsonObject | None:
     return body if isinstance(body, dict) else {"note": "unreadable lock body"}
 
 
+def _clear_body(path: Path) -> None:
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:  # Windows: someone refused is reading it this instant
+        with contextlib.suppress(OSError):
+            path.write_bytes(b"")
+
+
 def acquire(transport: str, host: str, port: int | str, device_id: int, *,
             command: str, run_dir: str | Path | None) -> MachineLock:
     """Take the machine's lock at once or raise MachineBusy naming the holder."""
     machine = (f"controller {host}:{port}" if transport == "tcp" else f"controller {port}") + \
         f" (device {device_id})"
     directory = state_dir() / "locks"
+    key = controller_key(transport, host, port, device_id)
+    path = directory / key
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        path = directory / controller_key(transport, host, port, device_id)
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
         raise RunFailed(f"cannot create the machine lock in {directory}: {exc.strerror or exc}"
                         " (set ORTHOCAL_STATE_DIR to a writable directory)") from None
+    # thread_local=False: the run may end (and release) on another thread than it began
+    held = filelock.FileLock(directory / f"{key}.lock", timeout=0, thread_local=False)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = _read_body(fd) or {}
-        os.close(fd)
+        held.acquire()
+    except filelock.Timeout:
+        holder = _read_body(path) or {}
         raise MachineBusy(f"{machine} is in use by {describe(holder)}; one station per "
                           "machine: wait for it to end (or stop it), then run this again"
                           ) from None
     except OSError as exc:
-        os.close(fd)
-        raise RunFailed(f"cannot lock {path}: {exc.strerror or exc}") from None
-    stale = _read_body(fd)
+        raise RunFailed(f"cannot lock {held.lock_file}: {exc.strerror or exc}") from None
+    stale = _read_body(path)
     body = {"run_dir": None if run_dir is None else str(run_dir), "pid": os.getpid(),
             "host": socket.gethostname(), "command": command, "machine": machine,
             "since": datetime.now(UTC).astimezone().isoformat(timespec="seconds")}
-    lock = MachineLock(path, machine, fd, stale)
+    lock = MachineLock(path, machine, held, stale)
     lock_write(lock, body)
     return lock
 
 
 def lock_write(lock: MachineLock, body: Mapping[str, JsonValue]) -> None:
-    """Replace the body (e.g. once the run directory is known)."""
-    if lock.fd is None:
+    """Replace the body (e.g. once the run directory is known): written beside it and
+    renamed over it, so that one refused meanwhile reads the old body or the new."""
+    if lock.held is None:
         return
     data = (json.dumps(body) + "\n").encode()
     try:
-        os.ftruncate(lock.fd, 0)
-        os.lseek(lock.fd, 0, os.SEEK_SET)
-        os.write(lock.fd, data)
+        fd, tmp = tempfile.mkstemp(prefix=f".{lock.path.name}.", dir=lock.path.parent)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+            os.replace(tmp, lock.path)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
     except OSError:
         pass  # the lock holds without its body; a refusal then names no run
 
 
 def update_run_dir(lock: MachineLock, run_dir: str | Path) -> None:
-    if lock.fd is None:
+    if lock.held is None:
         return
-    body = _read_body(lock.fd) or {}
+    body = _read_body(lock.path) or {}
     body["run_dir"] = str(run_dir)
     lock_write(lock, body)
 
