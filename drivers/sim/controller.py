@@ -39,7 +39,7 @@ import socket
 import struct
 import threading
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pymodbus.constants import ExcCodes
@@ -53,7 +53,9 @@ from drivers.registers import GENERIC, RegisterMap
 from drivers.sim.drive import DriveRegisters
 from drivers.sim.faults import Faults, SimStats
 from drivers.sim.machine import VirtualOrthoglide
-from drivers.sim.ptypair import PtyPair
+
+if TYPE_CHECKING:  # pseudo-terminals (tty) are loaded only by an RTU simulator
+    from drivers.sim.ptypair import PtyPair
 
 _pymodbus_log = logging.getLogger("pymodbus")
 if _pymodbus_log.level == logging.NOTSET:
@@ -198,6 +200,8 @@ class SimController(DriveRegisters):
         if self._thread is not None:
             return self
         if self.transport == "rtu":
+            from drivers.sim.ptypair import PtyPair
+
             self._pty = PtyPair(name="orthocal-sim-pty").open()
         self._ready.clear()
         self._thread = threading.Thread(target=self._run, name=f"orthocal-sim-{self.transport}",
