@@ -1,11 +1,15 @@
-"""Simulated dial indicators behind pseudo-terminals.
+"""Simulated dial indicators behind pseudo-terminals, or TCP sockets where there are none.
 
-Each :class:`SimIndicator` owns a pty pair: the simulator keeps the master and
-``.port`` is the slave's path, which the real driver opens with pyserial like
-any other serial device. So tests and dry runs exercise the driver's real byte
-handling; only the gauge is virtual.
+Each :class:`SimIndicator` owns the gauge's end of a serial line
+(:mod:`drivers.sim.gauge_lines`): a pty pair whose master the simulator keeps
+(``line="pty"``, the default), or a socket on 127.0.0.1 (``line="tcp"``, for
+Windows). ``.port`` is the other end, the slave's path or the URL
+``socket://127.0.0.1:PORT``, which the real driver opens with pyserial like any
+other serial port. So tests and dry runs exercise the driver's real byte handling;
+only the gauge is virtual. Both lines carry the same bytes: the protocol, its
+timing and its faults are the gauge's, here; the line only moves them.
 
-What a pty does not do, the simulator emulates:
+What a pty (or a socket) does not do, the simulator emulates:
 
 * line time: a pty delivers at memory speed whatever the baud rate, so with
   ``baud`` set a request counts as arrived only once its characters would
@@ -17,14 +21,16 @@ What a pty does not do, the simulator emulates:
 * faults (:class:`~drivers.sim.faults.IndicatorFaults`, changeable while running, drawn from a
   seeded RNG so a failing run can be replayed).
 
-Unplugging (``faults.unplugged = True`` or :meth:`SimIndicator.unplug`) closes
-both pty ends: the path disappears, the driver's open port fails with EIO and a
-reopen finds no device, as with a pulled USB adapter. Beware that the kernel may
-reuse the path for a pty created later. With ``link`` (a stable path, as
-``/dev/serial/by-id/...`` is) :attr:`SimIndicator.port` is that symlink: an
-unplug removes it, :meth:`SimIndicator.replug` opens a new pty and points the
+Unplugging (``faults.unplugged = True`` or :meth:`SimIndicator.unplug`) removes
+the line's end: both pty ends close, the path disappears, the driver's open port
+fails with EIO and a reopen finds no device, as with a pulled USB adapter (a TCP
+line stops listening: the connection drops, a reopen is refused). Beware that the
+kernel may reuse a pty's path for a pty created later. With ``link`` (a stable
+path, as ``/dev/serial/by-id/...`` is) :attr:`SimIndicator.port` is that symlink:
+an unplug removes it, :meth:`SimIndicator.replug` opens a new pty and points the
 link at it (``unplug_for(s)`` does both, s apart), so a driver that opened the
-link can open it again.
+link can open it again. A TCP line is plugged back at the same port: its URL is
+stable by itself.
 
 An unmounted indicator (``unmount()``) answers as a gauge lying on the bench
 does: a constant reading (``unmounted_mm``) plus noise.
@@ -46,20 +52,18 @@ gauge's own :meth:`SimIndicator.travel_mm` and :meth:`SimIndicator.stroke_limits
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import random
-import select
 import threading
 import time
-import tty
 from collections.abc import Callable
 from types import TracebackType
 from typing import Any, Self
 
 from drivers.indicator_protocols import IndicatorProtocol, make_protocol
 from drivers.sim.faults import IndicatorFaults
+from drivers.sim.gauge_lines import GaugeLine, open_line
 
 Source = Callable[[], float]
 
@@ -77,7 +81,8 @@ BURST_S = 0.002
 
 
 class SimIndicator:
-    """A virtual dial indicator on a pseudo-terminal.
+    """A virtual dial indicator on a pseudo-terminal (``line="pty"``) or a TCP socket
+    on 127.0.0.1 (``line="tcp"``).
 
     Reading = ``(1 + scale_error) * sign * (source() - zero) + noise``, quantised to
     ``resolution_mm`` and written in the protocol's ``reply_format``. ``zero``
@@ -105,6 +110,7 @@ class SimIndicator:
         link: str | os.PathLike[str] | None = None,
         time_scale: float = 1.0,
         scale_error: float = 0.0,
+        line: str = "pty",
     ) -> None:
         self.protocol = make_protocol(protocol) if isinstance(protocol, str) else protocol
         if self.protocol.reply_format is None:
@@ -160,37 +166,20 @@ class SimIndicator:
         self.on_fault: Callable[[str], None] | None = None
 
         self.link = None if link is None else os.fspath(link)
-        self._master = self._slave = -1
-        self.tty = ""
-        self._plug_in()
-        self.port: str = self.link if self.link is not None else self.tty
-        self._wake_r, self._wake_w = os.pipe()
+        self._wire: GaugeLine = open_line(line, name, link)
+        #: Which kind of line (drivers.sim.gauge_lines.LINES) the gauge is served on.
+        self.line = line
+        self.port: str = self._wire.port
         self._stop = threading.Event()
         self._pulled = threading.Event()
         self._thread: threading.Thread | None = None
         self._replug_timer: threading.Timer | None = None
         self._closed = False
 
-    def _plug_in(self) -> None:
-        master, slave = os.openpty()
-        # Raw on both ends: otherwise the line discipline turns CR into LF and
-        # echoes requests back to the driver.
-        tty.setraw(master)
-        tty.setraw(slave)
-        # A full slave buffer (nobody reading) must drop bytes, as a UART
-        # overrun does, never block the simulator thread.
-        os.set_blocking(master, False)
-        self._master = master
-        # Keep the slave open: with no slave opener the master reads EIO, which
-        # would make select() spin while the driver has the port closed.
-        self._slave = slave
-        self.tty = os.ttyname(slave)
-        if self.link is not None:
-            tmp = f"{self.link}.new"
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
-            os.symlink(self.tty, tmp)
-            os.replace(tmp, self.link)  # the link never points nowhere while plugged
+    @property
+    def tty(self) -> str:
+        """The pty a pty line's port is (its link points at it); "" on a TCP line."""
+        return str(getattr(self._wire, "tty", ""))
 
     # --- what the gauge shows ------------------------------------------------------
 
@@ -335,8 +324,9 @@ class SimIndicator:
             raise TimeoutError(f"simulated indicator {self.name} did not unplug in {timeout_s} s")
 
     def replug(self) -> None:
-        """Plug the adapter back in: a new pty behind the same ``link``."""
-        if self.link is None:
+        """Plug the adapter back in: a new pty behind the same ``link``, or a TCP line
+        listening at its port again."""
+        if not self._wire.stable:
             raise RuntimeError("replug needs a stable link (the pty path would change)")
         if self._closed:
             return
@@ -345,7 +335,7 @@ class SimIndicator:
             self._thread = None
         self._pull_plug()
         self._pulled.clear()
-        self._plug_in()
+        self._wire.plug_in()
         self.faults.unplugged = False
         self.start()
 
@@ -374,8 +364,7 @@ class SimIndicator:
                 raise RuntimeError(f"simulated indicator {self.name} thread did not stop")
         self._closed = True
         self._pull_plug()
-        for fd in (self._wake_r, self._wake_w):
-            os.close(fd)
+        self._wire.close()
 
     def __enter__(self) -> Self:
         return self.start()
@@ -389,18 +378,10 @@ class SimIndicator:
         self.close()
 
     def _wake(self) -> None:
-        with contextlib.suppress(OSError):
-            os.write(self._wake_w, b"x")
+        self._wire.wake()
 
     def _pull_plug(self) -> None:
-        if self.link is not None:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.link)
-        for attr in ("_master", "_slave"):
-            fd = getattr(self, attr)
-            if fd >= 0:
-                setattr(self, attr, -1)
-                os.close(fd)
+        self._wire.pull_plug()
         self._pulled.set()
 
     def _sleep_until(self, t: float) -> bool:
@@ -436,16 +417,13 @@ class SimIndicator:
         return True
 
     def _write(self, data: bytes) -> None:
-        try:
-            os.write(self._master, data)
-        except BlockingIOError:
-            pass  # slave buffer full: the bytes are lost, as on an overrun UART
+        self._wire.write(data)  # what does not fit is lost, as on an overrun UART
 
     def _run(self) -> None:
         try:
             self._serve()
         finally:
-            # However the loop ended (mid-reply included), an unplug means the pty goes.
+            # However the loop ended (mid-reply included), an unplug means the line goes.
             if self.faults.unplugged and not self._stop.is_set():
                 self._pull_plug()
 
@@ -456,20 +434,16 @@ class SimIndicator:
             if self.faults.unplugged:
                 return
             # The timeout only bounds how late a runtime change of faults.unplugged
-            # is noticed; close() and unplug() wake the select at once.
-            ready, _, _ = select.select([self._master, self._wake_r], [], [], 0.05)
-            if self._wake_r in ready:
-                os.read(self._wake_r, 512)
-            if self._master not in ready:
+            # is noticed; close() and unplug() wake the wait at once.
+            try:
+                data = self._wire.receive(0.05)
+            except OSError:
+                # EIO: the pty's slave side went away; nothing can be answered any more.
+                return
+            if not data:
                 continue
             arrived = time.monotonic()
-            try:
-                buf += os.read(self._master, 1024)
-            except (BlockingIOError, InterruptedError):
-                continue
-            except OSError:
-                # EIO: the slave side went away; nothing can be answered any more.
-                return
+            buf += data
             while (i := buf.find(request)) >= 0:
                 buf = buf[i + len(request) :]
                 self.requests += 1

@@ -19,6 +19,7 @@ from typing import Any
 from drivers.registers import RegisterMap
 from drivers.sim.drive_motion import DriveMotion
 from drivers.sim.faults import Faults, IndicatorFaults
+from drivers.sim.gauge_lines import LINES
 from orthocal import Geometry
 
 # Fast but physical: moves still take time, so in-position waits are real.
@@ -111,7 +112,11 @@ class GaugeSpec:
     Stands: placed by eye, each mounting off its plane by a hidden error drawn
     uniform in ±``mount_error_mm`` unless ``mount_errors`` fixes it (name -> mm);
     ``mounted``: the gauges on the machine from the start (name, leg, direction),
-    for a station in another process that cannot be told where they are put."""
+    for a station in another process that cannot be told where they are put.
+
+    ``line``: where their serial lines end (:data:`drivers.sim.gauge_lines.LINES`):
+    pseudo-terminals ("pty"), or sockets on 127.0.0.1 that pyserial opens as
+    ``socket://`` URLs ("tcp", where there are no pseudo-terminals)."""
 
     names: tuple[str, ...] = ("A", "B")
     protocol: str = "mitutoyo"
@@ -123,6 +128,7 @@ class GaugeSpec:
     mount_error_mm: float = 0.0
     mount_errors: Mapping[str, float] = field(default_factory=dict)
     mounted: tuple[Mounting, ...] = ()
+    line: str = "pty"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "names", tuple(self.names))
@@ -131,6 +137,8 @@ class GaugeSpec:
             raise ValueError(f"gauge names must be distinct and at least one, got {self.names}")
         if not (math.isfinite(self.mount_error_mm) and self.mount_error_mm >= 0):
             raise ValueError(f"mount_error_mm must be >= 0, got {self.mount_error_mm}")
+        if self.line not in LINES:
+            raise ValueError(f"line must be one of {', '.join(LINES)}, got {self.line!r}")
         # What is given by name is checked against the names when a station is built
         # (per_gauge_scale): a spec may be made first and named after (dataclasses.replace).
 

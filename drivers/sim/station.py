@@ -1,5 +1,6 @@
 """The whole virtual station in-process: a simulated controller (real Modbus TCP
-server on 127.0.0.1, ephemeral port) and simulated dial indicators on ptys, all
+server on 127.0.0.1, ephemeral port) and simulated dial indicators on ptys (or on
+TCP sockets, ``GaugeSpec.line``, where there are none), all
 looking at one :class:`~drivers.sim.machine.VirtualOrthoglide` with hidden
 errors. What it is made of comes as specs (:mod:`drivers.sim.specs`): the
 machine's hidden truth, the drive, the gauges and their stands, the devices'
@@ -188,9 +189,11 @@ class VirtualStation:
         self._mounts: dict[str, dict[str, Any]] = {}
         #: (stroke, preload) per gauge, mm; a test may change one before a run reads it.
         self.strokes = {n: gauges.stroke_of(n) for n in gauges.names}
-        # Stable paths, as /dev/serial/by-id/... gives a real USB adapter: a gauge
-        # unplugged and plugged back (SimIndicator.unplug_for) keeps its port.
-        self._link_dir = Path(tempfile.mkdtemp(prefix="orthocal-serial-by-id-"))
+        # Stable paths, as /dev/serial/by-id/... gives a real USB adapter: a gauge on a
+        # pty unplugged and plugged back (SimIndicator.unplug_for) keeps its port (a
+        # TCP line keeps its URL by itself).
+        self._link_dir = Path(tempfile.mkdtemp(prefix="orthocal-serial-by-id-")) \
+            if gauges.line == "pty" else None
         self.controller = self._controller(faults)
         self.indicators: dict[str, SimIndicator] = {}
         try:
@@ -239,8 +242,10 @@ class VirtualStation:
                                faults=faults.gauges.get(name),
                                seed=None if self._seed is None else self._seed * 101 + i,
                                name=name, stroke_mm=stroke, preload_mm=preload,
-                               link=self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00",
-                               time_scale=self.time_scale, scale_error=self.gauge_scale[name])
+                               link=None if self._link_dir is None else
+                               self._link_dir / f"usb-orthocal-sim-gauge-{name}-if00",
+                               time_scale=self.time_scale, scale_error=self.gauge_scale[name],
+                               line=spec.line)
             sim.unmount()
             sim.at_rest = lambda: self.machine.rest_reported
             self.indicators[name] = sim
@@ -393,7 +398,8 @@ class VirtualStation:
             sim.close()
         self.indicators = {}
         self.controller.close()
-        shutil.rmtree(self._link_dir, ignore_errors=True)
+        if self._link_dir is not None:
+            shutil.rmtree(self._link_dir, ignore_errors=True)
 
     def __enter__(self) -> VirtualStation:
         return self
