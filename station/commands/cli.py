@@ -148,6 +148,12 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
              "hidden random amount uniform in +-MM (default 5; 0: perfectly placed)",
     )
     p.add_argument(
+        "--gauges", choices=["pty", "tcp"], default=None,
+        help="where the virtual gauges' serial lines end: pseudo-terminals (pty, the "
+             "default where the system has them: Linux, macOS) or sockets on 127.0.0.1 "
+             "that the station opens as socket:// URLs (tcp, the default elsewhere: Windows)",
+    )
+    p.add_argument(
         "--motion", choices=["coordinated", "independent"], default=None,
         help="how the virtual controller moves its axes: together on the straight line "
              "(coordinated, the default; the config then says so) or each on its own "

@@ -54,6 +54,7 @@ class SimOptions:
     leg_bow: str | None = None  # "X,Y,Z" or one value, mm: each leg's sagitta
     gauge_scale: str | None = None  # one relative error for all gauges, or one each
     profile: str | None = None  # the register map the virtual drive serves
+    gauges: str | None = None  # "pty" or "tcp": where the gauges' lines end (None: the system's)
     drive: DriveOptions = field(default_factory=DriveOptions)
     indicators: int = 2
     procedure: Mapping[str, Any] | None = None
@@ -71,7 +72,7 @@ class SimOptions:
                    noise=args.noise, mount_error=args.mount_error,
                    backlash=args.backlash, leg_bow=args.leg_bow,
                    gauge_scale=args.gauge_scale, profile=args.profile,
-                   drive=DriveOptions.from_args(args),
+                   gauges=args.gauges, drive=DriveOptions.from_args(args),
                    procedure=getattr(args, "sim_procedure", None),
                    speed_mm_s=getattr(args, "sim_speed", None))
 

@@ -2,7 +2,9 @@
 
 Runs until SIGINT/SIGTERM and writes a station config (TOML) pointing at it
 (Modbus TCP on 127.0.0.1, or with ``--transport rtu`` Modbus RTU over a
-pseudo-terminal pair whose client end the config names), so
+pseudo-terminal pair whose client end the config names; the gauges on
+pseudo-terminals, or with ``--gauges tcp`` on sockets of 127.0.0.1 that the config
+names as ``socket://`` URLs), so
 ``orthocal run --config FILE`` can rehearse the real workflow from another
 terminal. A separate process cannot be told where the operator mounted the
 gauges, so six fixed indicators stand two per leg, all mounted at once.
@@ -27,6 +29,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from drivers.sim.gauge_lines import pseudo_terminals
 from drivers.sim.specs import DriveSpec, GaugeSpec, MachineTruth
 from station.commands.options import DriveOptions
 from station.commands.simulate.launch import (
@@ -36,6 +39,7 @@ from station.commands.simulate.launch import (
     drive_motion,
     drive_params,
     gaps_mm,
+    gauge_line,
     gauge_scales,
     leg_bow_mm,
     map_profile,
@@ -104,6 +108,10 @@ def _specs(args: argparse.Namespace, seed: int
     if args.speed is not None and not args.speed > 0:
         raise BadInput(f"--speed: must be > 0 mm/s, got {args.speed}")
     profile = map_profile(args.profile)
+    line = gauge_line(args.gauges)
+    if args.transport == "rtu" and not pseudo_terminals():
+        raise BadInput("--transport rtu: the virtual drive's RTU line is a pseudo-terminal "
+                       "pair, which this system lacks; give --transport tcp")
     # As run --simulate: axes on separate drives cannot move on one line.
     drive = drive_params(DriveOptions.from_args(args), separate_drives=separate_drives(profile))
     zero = (0.0, 0.0, 0.0)
@@ -118,7 +126,8 @@ def _specs(args: argparse.Namespace, seed: int
     drive_spec = DriveSpec(motion=drive_motion(drive), port=args.port,
                            controller_options={"transport": args.transport}, **kwargs)
     gauges = gauges_for(SIX_GAUGES, GaugeSpec(protocol=args.protocol, noise_mm=noise,
-                                              mount_error_mm=mount_error, scale=scale),
+                                              mount_error_mm=mount_error, scale=scale,
+                                              line=line),
                         mounted=True)
     return truth, drive_spec, gauges, drive
 
@@ -138,8 +147,10 @@ def _announce(args: argparse.Namespace, station: SimulatedStation, out: Path,
     ctl = station.controller
     link = (f"Modbus TCP on 127.0.0.1:{ctl.port}" if args.transport == "tcp" else
             f"Modbus RTU on {ctl.serial_port} ({ctl.baudrate} 8N1, a pseudo-terminal)")
-    print(f"orthocal sim: {link}, {len(station.indicators)} indicators ({args.protocol}); "
-          f"config written to {out}", file=sys.stderr, flush=True)
+    lines = ("on pseudo-terminals" if station.gauge_spec.line == "pty" else
+             "on TCP 127.0.0.1, socket:// URLs")
+    print(f"orthocal sim: {link}, {len(station.indicators)} indicators ({args.protocol}, "
+          f"{lines}); config written to {out}", file=sys.stderr, flush=True)
     gaps = f", axis gaps = {list(truth.gap)} mm" if any(truth.gap) else ""
     print(f"orthocal sim: hidden Δρ = {list(truth.drho)} mm, tilts = {list(truth.tilt)} "
           f"mrad{gaps}; stop with Ctrl-C", file=sys.stderr, flush=True)

@@ -39,6 +39,8 @@ class SimulationParams(BaseModel):
     gauge_scale: list[float] | float = Field(0.0, description="each gauge's scale error")
     indicators: int = 2
     profile: str | None = Field(None, description="the map the drive serves: a name or a file")
+    gauges: Literal["pty", "tcp"] | None = Field(
+        None, description="where the gauges' lines end: pseudo-terminals or TCP; absent: pty")
     speed_mm_s: float | None = None
     # the virtual drive (station.commands.simulate.launch.drive_params); absent: the plain
     # drive of ``motion``, coordinated where that is absent too

@@ -72,6 +72,8 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
     profile = map_profile(options.profile)
     return {
         "seed": seed,
+        # where the gauges' lines end, kept for resume: the same virtual station
+        "gauges": gauge_line(options.gauges),
         "true_drho": drho,
         "true_dl": dl,
         "true_tilt": tilt,
@@ -114,9 +116,24 @@ def start_station(params: dict[str, Any], nvram: Path | None) -> Any:
                       accel_mm_s2=SIM_ACCEL_MM_S2 * speed / SIM_SPEED_MM_S,
                       **served_map(params.get("profile")))
     gauges = gauges_for(sim.indicators, GaugeSpec(
-        noise_mm=sim.noise_mm, mount_error_mm=sim.mount_error_mm, scale=sim.gauge_scale))
+        noise_mm=sim.noise_mm, mount_error_mm=sim.mount_error_mm, scale=sim.gauge_scale,
+        line=gauge_line(sim.gauges or "pty")))  # a journal without it: its run had ptys
     return SimulatedStation(machine_truth(sim), drive, gauges, seed=sim.seed,
                             nvram_path=nvram)
+
+
+def gauge_line(given: str | None) -> str:
+    """``--gauges``: where the virtual gauges' lines end, "pty" or "tcp" (None: pty
+    where the system has pseudo-terminals, else tcp); BadInput for pty where there
+    are none."""
+    from drivers.sim.gauge_lines import default_line, pseudo_terminals
+
+    if given is None:
+        return default_line()
+    if given == "pty" and not pseudo_terminals():
+        raise BadInput("--gauges pty: this system has no pseudo-terminals; "
+                       "give --gauges tcp (the gauges on sockets of 127.0.0.1)")
+    return given
 
 
 def machine_truth(sim: SimulationParams) -> MachineTruth:

@@ -58,6 +58,8 @@ class SimulationTable(_Strict):
     gauge_scale: float | list[float] | None = None
     profile: str | None = Field(
         None, description="a built-in map name, or a map file (relative to this file)")
+    gauges: Literal["pty", "tcp"] | None = Field(
+        None, description="the gauges' lines: pseudo-terminals or TCP (default: the system's)")
     drive: DriveTable = DriveTable()
 
 
