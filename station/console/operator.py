@@ -15,10 +15,19 @@ from typing import Protocol, TextIO
 from orthocal.postures import MIDDLE
 from station.errors import BadInput, RunFailed
 
+# Keys typed ahead are dropped through the terminal's own module: termios on POSIX,
+# msvcrt on Windows; with neither, nothing is dropped (a prompt is still answered).
 try:
     import termios
-except ImportError:  # pragma: no cover - not POSIX
+except ImportError:  # not POSIX
     termios = None  # type: ignore[assignment]  # the module where there is one
+try:
+    import msvcrt
+except ImportError:  # not Windows
+    msvcrt = None  # type: ignore[assignment]  # the module where there is one
+#: What asking a stream that is not a terminal raises (termios.error is no OSError).
+_NOT_A_TERMINAL: tuple[type[Exception], ...] = (AttributeError, OSError, ValueError) + (
+    () if termios is None else (termios.error,))
 
 
 class Operator(Protocol):
@@ -109,13 +118,16 @@ class ConsoleOperator:
         """Forget keys typed before the question was shown: an Enter pressed during
         a move must not answer the next prompt (a write-back among them), and an
         answer consumed before its question would let the live bar redraw over it."""
-        if termios is None:
-            return
         try:
-            if self._in.isatty():
+            if not self._in.isatty():
+                return  # a pipe, a test stream: nothing typed ahead to drop
+            if termios is not None:
                 termios.tcflush(self._in.fileno(), termios.TCIFLUSH)
-        except (AttributeError, OSError, ValueError, termios.error):
-            pass  # not a terminal (a pipe, a test stream): nothing typed ahead to drop
+            elif msvcrt is not None and self._in is sys.stdin:
+                while msvcrt.kbhit():  # the console's keys not yet read
+                    msvcrt.getwch()
+        except _NOT_A_TERMINAL:
+            pass  # not a terminal after all: nothing typed ahead to drop
 
     def _ask(self, prompt: str, preamble: str = "") -> str:
         with self.pause():
