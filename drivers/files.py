@@ -15,6 +15,8 @@ from pathlib import Path
 
 def fsync_dir(path: Path) -> None:
     """Make a new directory entry (a file created or renamed there) itself durable."""
+    if os.name == "nt":
+        return  # Windows opens no directory (EACCES); NTFS journals a rename itself
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
@@ -33,7 +35,8 @@ def write_atomic(path: Path, text: str, mode: int = 0o644) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            os.fchmod(fh.fileno(), mode)
+            if hasattr(os, "fchmod"):  # Windows before Python 3.13: none, nor POSIX modes
+                os.fchmod(fh.fileno(), mode)
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())

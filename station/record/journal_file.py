@@ -62,8 +62,10 @@ class Journal:
             state = RunState() if new else RunState.of(read_records(self.path))
         self.state = state
         # Unbuffered: a failed write must not leave bytes in a buffer that a later
-        # flush or close would write after the truncation.
-        self._fd: int | None = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        # flush or close would write after the truncation. O_BINARY (Windows): each
+        # record ends in \n, not \r\n, as the torn-line check below reads it.
+        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_BINARY", 0)
+        self._fd: int | None = os.open(self.path, flags, 0o644)
         self._good = os.fstat(self._fd).st_size  # length up to the last whole record
         self.torn = False
         if not new and self._good > 0:

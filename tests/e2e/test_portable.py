@@ -220,3 +220,14 @@ def test_without_termios_or_msvcrt_a_question_is_still_asked_and_answered(
     finally:
         inp.close()
         os.close(master)
+
+
+def test_a_file_is_written_whole_where_os_has_no_fchmod(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Windows before Python 3.13 has no os.fchmod (nor POSIX permissions to set)
+    from drivers.files import write_atomic
+
+    monkeypatch.delattr(os, "fchmod")
+    write_atomic(tmp_path / "result.json", '{"status": "ok"}\n')
+    assert (tmp_path / "result.json").read_text() == '{"status": "ok"}\n'
+    assert [p.name for p in tmp_path.iterdir()] == ["result.json"]  # no temporary left
