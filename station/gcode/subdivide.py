@@ -29,7 +29,7 @@ over their points.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +37,7 @@ import numpy as np
 from orthocal import Geometry
 from orthocal.compensation import compensated_points, controller_joints, landed
 from station.gcode.paths import Curves
+from station.gcode.reach import Bounds, guarded, joints_at, refusal, why_out
 from station.gcode.words import GcodeError
 
 FRACTIONS = np.linspace(0.0, 1.0, 9)
@@ -157,73 +158,52 @@ def _judge(curves: Curves, grid: Grid, machine: Machine, limits: Limits, toleran
     """Which segments keep the tool within the tolerance (and, those kept, within the
     soft limits), and each segment's end point as written."""
     g, theta = machine.geometry, machine.theta_c
+    bounds = _bounds(machine, limits)
     ends = curves.at(ci, np.stack([ta, tb], axis=1)) + grid.offset
-    sent = _guarded(lambda p: compensated_points(p, g, theta), ends)
+    sent = guarded(lambda p: compensated_points(p, g, theta), ends)
     beyond = np.isnan(sent).any(axis=(1, 2))
     if beyond.any():
         k = int(np.argmax(beyond))
-        _refuse_point(labels[int(ci[k])], ends[k], sent[k], grid.offset)
+        _refuse_point(curves, grid, bounds, labels, int(ci[k]), ends[k])
     written = grid.written(ci, sent)
     sent = grid.machine(ci, written)
     chord = sent[:, :1] + FRACTIONS[None, :, None] * (sent[:, 1:] - sent[:, :1])
-    rho = _guarded(lambda s: controller_joints(s, g, None), chord)
-    tool = _guarded(lambda r: landed(r, g, theta), rho)
+    rho = guarded(lambda s: controller_joints(s, g, None), chord)
+    tool = guarded(lambda r: landed(r, g, theta), rho)
     fractions = ta[:, None] + FRACTIONS[None, :] * (tb - ta)[:, None]
     wanted = curves.at(ci, fractions) + grid.offset
     deviation = np.linalg.norm(tool - wanted, axis=2).max(axis=1)
     ok = deviation <= MARGIN * tolerance  # NaN (a chord beyond reach): halved
-    _check_limits(rho[ok], ci[ok], limits, labels)
+    _check_limits(curves, grid, bounds, rho[ok], ci[ok], wanted[ok], labels)
     return ok, written[:, 1]
 
 
-def _guarded(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
-    """``fn`` of the rows of ``x`` (m, k, 3), NaN rows where it has no answer (the
-    kinematics raise ValueError for a whole array when one point is beyond reach:
-    the array is halved until the rows that fail are found)."""
-    out = np.full_like(x, np.nan)
-    finite = np.isfinite(x).all(axis=(1, 2))
-    if finite.any():
-        out[finite] = _halving(fn, x[finite])
-    return out
+def _bounds(machine: Machine, limits: Limits) -> Bounds:
+    return Bounds(machine.geometry, machine.theta_c, limits.lower, limits.upper,
+                  limits.source)
 
 
-def _halving(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
-    try:
-        return fn(x)
-    except ValueError:
-        if len(x) == 1:
-            return np.full_like(x, np.nan)
-        h = len(x) // 2
-        return np.concatenate([_halving(fn, x[:h]), _halving(fn, x[h:])])
+def _refuse_point(curves: Curves, grid: Grid, bounds: Bounds,
+                  labels: Sequence[tuple[int, str]], ci: int, ends: np.ndarray) -> None:
+    """A segment with an end the identified machine cannot reach: the program's first
+    point out of reach named (station.gcode.reach), not the segment's start."""
+    beyond = np.isnan(joints_at(ends[None], bounds)[0]).any(axis=1)
+    point = ends[int(np.argmax(beyond))]
+    raise refusal(curves, grid.offset, bounds, labels, ci, point,
+                  "the path leaves the workspace, beyond a leg's reach,")
 
 
-def _refuse_point(label: tuple[int, str], ends: np.ndarray, sent: np.ndarray,
-                  offset: np.ndarray) -> None:
-    """The programmed point with no joints on the identified machine, named."""
-    lineno, word = label
-    p = ends[int(np.argmax(np.isnan(sent).any(axis=1)))]
-    raise GcodeError(lineno, word, "the path passes outside the workspace, beyond a leg's "
-                     "reach, at machine point X{:.3f} Y{:.3f} Z{:.3f} mm (work offset "
-                     "{:.3f},{:.3f},{:.3f})".format(*p, *offset))
-
-
-def _check_limits(rho: np.ndarray, ci: np.ndarray, limits: Limits,
+def _check_limits(curves: Curves, grid: Grid, bounds: Bounds, rho: np.ndarray,
+                  ci: np.ndarray, wanted: np.ndarray,
                   labels: Sequence[tuple[int, str]]) -> None:
-    """GcodeError for the first segment whose joints leave the soft limits."""
+    """GcodeError for the first point out of reach where a segment's joints leave the
+    soft limits (``rho``, ``wanted``: its chord's joints and programmed points)."""
     # per segment (numpy's stubs type a reduction over axes as maybe a scalar)
-    low = np.asarray((rho < limits.lower).any(axis=(1, 2)))
-    high = np.asarray((rho > limits.upper).any(axis=(1, 2)))
-    out = low | high
+    with np.errstate(invalid="ignore"):
+        out = np.asarray(((rho < bounds.lower) | (rho > bounds.upper)).any(axis=2))
     if not out.any():
         return
-    k = int(np.argmax(out))
-    lineno, word = labels[int(ci[k])]
-    if low[k]:
-        axis = int(np.argmax((rho[k] < limits.lower).any(axis=0)))
-        value, bound, side = rho[k][:, axis].min(), limits.lower[axis], "lower"
-    else:
-        axis = int(np.argmax((rho[k] > limits.upper).any(axis=0)))
-        value, bound, side = rho[k][:, axis].max(), limits.upper[axis], "upper"
-    raise GcodeError(lineno, word, f"joint {'xyz'[axis]} would be commanded to "
-                     f"{value:.3f} mm, beyond the controller's {side} soft limit "
-                     f"{bound:.3f} mm ({limits.source})")
+    k = int(np.argmax(np.asarray(out.any(axis=1))))
+    j = int(np.argmax(out[k]))
+    raise refusal(curves, grid.offset, bounds, labels, int(ci[k]), wanted[k, j],
+                  why_out(rho[k, j], bounds))

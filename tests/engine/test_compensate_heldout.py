@@ -134,8 +134,9 @@ def test_sent_as_written_the_program_misses_by_tens_of_micrometres(held_out) -> 
 
 @pytest.mark.parametrize("line,word,why", [
     ("G33 X10 K0.5", "G33", "spindle-synchronised motion is not compensated"),
-    ("G1 X400 Y0 Z0", "G1", "beyond a leg's reach"),
-], ids=["G33", "outside-the-workspace"])
+    # the run's soft limits come before the workspace's edge along the line
+    ("G1 X400 Y0 Z0", "G1", "joint x beyond the controller's upper soft limit"),
+], ids=["G33", "outside-the-soft-limits"])
 def test_a_block_that_cannot_be_compensated_leaves_no_file(
         held_out, tmp_path, capsys, line, word, why) -> None:
     # on the engine's own run directory, deep in a program whose earlier motions

@@ -336,7 +336,9 @@ def test_the_first_motion_must_say_where_the_tool_goes(tmp_path, capsys, first,
 
 
 @pytest.mark.parametrize("line,limits,why", [
-    ("G1 X400 Y0 Z0", "plan", "beyond a leg's reach"),
+    ("G1 X400 Y0 Z0", None, "beyond a leg's reach"),
+    # the soft limits come before the workspace's edge along the same line
+    ("G1 X400 Y0 Z0", "plan", "upper soft limit 380.250 mm (plan.json)"),
     ("G1 X75 Y0 Z0", "plan", "upper soft limit 380.250 mm (plan.json)"),
     # ends inside the limits (joint x 376.4 mm), the middle beyond them (382.25 mm)
     ("G1 X72 Y60 Z0", "config", "upper soft limit 380.250 mm (config.toml [controller])"),
@@ -350,6 +352,55 @@ def test_a_path_outside_the_workspace_or_the_soft_limits_is_refused(
     (message,) = err.strip().splitlines()
     assert "part.ngc:3: G1: " in message and why in message
     assert not out.exists()
+
+
+def _named_point(message: str) -> np.ndarray:
+    found = re.search(r"at machine point X(\S+) Y(\S+) Z(\S+) mm", message)
+    assert found is not None, message
+    return np.array([float(v) for v in found.groups()])
+
+
+@pytest.mark.parametrize("limits", ["plan", None])
+def test_the_first_point_out_of_reach_is_named_not_the_motions_start(
+        tmp_path, capsys, limits) -> None:
+    # G0 X500 from X0 Y0 Z10: the start is within reach; the line leaves the soft
+    # limits of joint x (380.25 mm) near X70, and without them the workspace near X310
+    from orthocal.compensation import controller_joints
+
+    run = write_run(tmp_path / "run", limits=limits)
+    rc, out, err = compensate(tmp_path, capsys, "G21 G90\nG0 X0 Y0 Z10\nG0 X500\n"
+                              "G1 X0\n", run=run)
+    assert rc == 2 and not out.exists()
+    (message,) = err.strip().splitlines()
+    assert "part.ngc:3: G0: " in message and "first point out of reach" in message
+    point = _named_point(message)
+    assert point[1] == 0.0 and point[2] == 10.0 and 1.0 < point[0] < 500.0
+    # on either side of the named point, 0.005 mm along the line: within, and out of
+    # reach, by the kinematics themselves (the message rounds to 0.001 mm)
+    step = np.array([0.005, 0.0, 0.0])
+    before, after = point - step, point + step
+    if limits == "plan":
+        assert "joint x beyond the controller's upper soft limit 380.250 mm" in message
+        rho = controller_joints(np.array([before, after]), G, TILTED)
+        assert rho[0, 0] < 380.25 < rho[1, 0]
+    else:
+        assert "leaves the workspace, beyond a leg's reach" in message
+        controller_joints(before, G, TILTED)  # reached
+        with pytest.raises(ValueError):
+            controller_joints(after, G, TILTED)
+
+
+def test_the_first_motion_out_of_reach_is_named_in_program_order(tmp_path, capsys) -> None:
+    # line 3 leaves the soft limits only between its ends (each end within), line 4
+    # ends beyond them: line 3 is the first, and its point is where joint x passes
+    run = write_run(tmp_path / "run", limits="plan")
+    rc, _, err = compensate(tmp_path, capsys, "G21 G90\nG0 X72 Y-60 Z0\n"
+                            "G1 X72 Y60 Z0\nG1 X400 Y60 Z0\n", run=run)
+    assert rc == 2
+    (message,) = err.strip().splitlines()
+    assert "part.ngc:3: G1: " in message and "upper soft limit 380.250 mm" in message
+    point = _named_point(message)
+    assert point[0] == 72.0 and -60.0 < point[1] < 0.0  # before the middle, where x peaks
 
 
 def test_without_soft_limits_the_header_says_so(tmp_path, capsys) -> None:
