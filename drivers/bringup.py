@@ -73,6 +73,9 @@ class PortProbe:
     # False: the port names no device at all (a typo, an adapter unplugged), which
     # the command refuses as bad input; a silent port that exists is a finding.
     exists: bool = True
+    # False: the port is there but cannot be opened or used (permissions, not a
+    # serial device, busy): the probe fails (exit 1), after the findings.
+    usable: bool = True
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -115,6 +118,7 @@ def probe_port(port: str, timeout_s: float = 0.5,
             raw = _exchange(port, p, timeout_s, factory)
         except PORT_ERRORS as exc:
             result.reason = f"cannot open or use the port: {exc}"
+            result.usable = False
             return result
         if not raw:
             continue

@@ -10,20 +10,22 @@ answer. It never moves an axis and never writes a register: only reading
 requests go out (drivers.bringup).
 
 Exit status: 0 when everything asked for was probed (a silent port is a
-finding, not a failure); 1 when the controller could not be reached; 2 bad
-arguments, and a port that does not exist (a typo, an adapter unplugged: what
-``orthocal run`` refuses too), said in one line after the findings.
+finding, not a failure); 1 when a port that exists cannot be opened or used
+(permissions, not a serial device, busy) or the controller could not be reached;
+2 bad arguments, and a port that does not exist (a typo, an adapter unplugged:
+what ``orthocal run`` refuses too). Either is said in one line after the findings.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import sys
 from pathlib import Path
 from typing import Any
 
-from station.errors import BadInput
+from station.errors import BadInput, RunFailed
 
 DEFAULT_TIMEOUT_S = 0.5
 
@@ -118,8 +120,16 @@ def main(args: argparse.Namespace) -> int:
     if missing:
         raise BadInput(f"probe: port {missing[0]} does not exist" if len(missing) == 1 else
                        f"probe: ports {', '.join(missing)} do not exist")
+    # A port that is there but cannot be used, a controller that does not answer: the
+    # probe failed (exit 1), said in one line after the findings.
+    failed = [f"port {ind['port']}: {ind['reason']}" for ind in found["indicators"]
+              if not ind.get("usable", True)]
     controller = found["controller"]
-    return 1 if controller is not None and "error" in controller else 0
+    if controller is not None and "error" in controller:
+        failed.append(f"controller {controller['address']}: {controller['error']}")
+    if failed:
+        raise RunFailed("probe: " + "; ".join(failed))
+    return 0
 
 
 def _mm(values: dict[str, float] | None) -> str:
@@ -133,7 +143,13 @@ def print_human(found: dict[str, Any], stream: Any = None) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    console = Console(file=stream or sys.stdout, highlight=False, soft_wrap=False)
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:
+            # rich's own ends the process (SystemExit, a descriptor left open); the
+            # command line ends every command whose reader has gone alike
+            raise BrokenPipeError(errno.EPIPE, "stdout's reader is gone")
+
+    console = _Console(file=stream or sys.stdout, highlight=False, soft_wrap=False)
     inds = found["indicators"]
     if not inds:
         console.print("indicators: no serial ports found (name them: orthocal probe PORT ...)")
