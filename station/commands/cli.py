@@ -6,7 +6,10 @@ input (config, CSV, arguments), with a message that names the offending field
 or line; 3 the run completed but its closed loop did not converge (the
 summary's first line says why); 4 the run completed and converged but the tool
 is not shown within the config's [acceptance] limit at 95 % (FAIL, or not
-decided). No traceback reaches the operator unless
+decided). Every fault is one line on stderr (docs/design.md, "Exit status"): a bad
+argument value names the option (station.commands.arg_types), a path the user gave
+that cannot be used names it (station.commands.given_paths), and a stdout whose reader
+has gone ends the command quietly (exit 1). No traceback reaches the operator unless
 ``--debug`` is given.
 """
 
@@ -16,6 +19,17 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+
+from station.commands.arg_types import (
+    ArgumentsRefused,
+    Parser,
+    json_table,
+    not_negative,
+    number,
+    positive,
+    triple,
+    whole,
+)
 
 # orthocal.MODELS, spelled out: the command line is parsed before numpy is loaded
 # (tests/engine/test_gaps.py checks that the two agree).
@@ -47,29 +61,6 @@ _COMMANDS = {
 }
 
 
-def _triple(text: str) -> tuple[float, float, float]:
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y,Z in mm, got {text!r}") from None
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"expected three values X,Y,Z, got {text!r}")
-    return values
-
-
-def _json_table(text: str) -> dict:
-    import json
-
-    try:
-        value = json.loads(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}: {exc}") from None
-    if not isinstance(value, dict):
-        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
-    return value
-
-
 def _verbose(p: argparse.ArgumentParser) -> None:
     p.add_argument("--verbose", action="store_true",
                    help="print the whole summary, not its first screen only")
@@ -83,22 +74,22 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _sim_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, default=None, help="seed of the virtual machine")
+    p.add_argument("--seed", type=whole(0), default=None, help="seed of the virtual machine")
     p.add_argument(
         "--true-drho",
-        type=_triple,
+        type=triple,
         metavar="X,Y,Z",
         help="hidden joint offsets of the virtual machine (mm; random if absent)",
     )
     p.add_argument(
         "--true-dl",
-        type=_triple,
+        type=triple,
         metavar="X,Y,Z",
         help="hidden leg-length errors of the virtual machine (mm; zero if absent)",
     )
     p.add_argument(
         "--true-tilt",
-        type=_triple,
+        type=triple,
         metavar="X,Y,Z",
         help="hidden actuator axis tilts tilt_yx, tilt_zx, tilt_zy of the virtual machine "
         "(mrad; zero if absent)",
@@ -115,7 +106,8 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         "passes z along +y, y passes z along +x",
     )
     p.add_argument(
-        "--noise", type=float, default=None, metavar="MM", help="indicator noise sigma in mm"
+        "--noise", type=not_negative, default=None, metavar="MM",
+        help="indicator noise sigma in mm"
     )
     p.add_argument(
         "--profile", metavar="MAP", default=None,
@@ -143,7 +135,7 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
              "of the config's indicators; default 0",
     )
     p.add_argument(
-        "--mount-error", type=float, default=None, metavar="MM",
+        "--mount-error", type=not_negative, default=None, metavar="MM",
         help="indicator stands placed by eye: each mounting is off the leg's middle by a "
              "hidden random amount uniform in +-MM (default 5; 0: perfectly placed)",
     )
@@ -191,17 +183,19 @@ def _probe_options(p: argparse.ArgumentParser) -> None:
                    help="serial ports to probe (default: every port the system lists)")
     p.add_argument("--controller", metavar="HOST:PORT",
                    help="Modbus TCP controller to probe (or a serial device: Modbus RTU)")
-    p.add_argument("--device-id", type=int, default=1, help="Modbus device id (default 1)")
+    p.add_argument("--device-id", type=whole(0, 247), default=1,
+                   help="Modbus device id (default 1)")
     p.add_argument("--profile", metavar="MAP", default=None,
                    help="the controller's register map: a built-in name or a .toml file "
                         "(docs/design.md, Register-map files; default orthocal-generic)")
-    p.add_argument("--baudrate", type=int, default=19200, help="RTU line speed (default 19200)")
-    p.add_argument("--timeout", type=float, default=0.5, metavar="S",
+    p.add_argument("--baudrate", type=whole(1), default=19200,
+                   help="RTU line speed (default 19200)")
+    p.add_argument("--timeout", type=positive, default=0.5, metavar="S",
                    help="wait per protocol tried on a port (default 0.5 s)")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="orthocal",
         description="Calibration station for Orthoglide-type parallel machines.",
     )
@@ -228,9 +222,9 @@ def build_parser() -> argparse.ArgumentParser:
     # speed (mm/s), so that tests driving the real command line in a subprocess
     # (Ctrl-C, kill -9 and resume) can make a simulated run short. Both are saved
     # with the run, so resume reuses them.
-    run.add_argument("--sim-procedure", type=_json_table, default=None,
+    run.add_argument("--sim-procedure", type=json_table, default=None,
                      help=argparse.SUPPRESS)
-    run.add_argument("--sim-speed", type=float, default=None, help=argparse.SUPPRESS)
+    run.add_argument("--sim-speed", type=positive, default=None, help=argparse.SUPPRESS)
     _common(run)
     _verbose(run)
 
@@ -250,10 +244,11 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="write a station config pointing at the virtual station",
     )
-    sim.add_argument("--port", type=int, default=0, help="Modbus TCP port (0: any free one)")
+    sim.add_argument("--port", type=whole(0, 65535), default=0,
+                     help="Modbus TCP port (0: any free one)")
     sim.add_argument("--transport", choices=["tcp", "rtu"], default="tcp",
                      help="Modbus TCP on 127.0.0.1, or RTU over a pseudo-terminal pair")
-    sim.add_argument("--speed", type=float, default=None, help="axis speed, mm/s")
+    sim.add_argument("--speed", type=positive, default=None, help="axis speed, mm/s")
     sim.add_argument(
         "--protocol",
         default="mitutoyo",
@@ -291,17 +286,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameters to identify; auto: the smallest model the data's cycle scatter "
         "supports (needs a cycle column)")
     ident.add_argument("--method", choices=["linear", "nonlinear"], default="nonlinear")
-    ident.add_argument("--leg-length", type=float, default=310.25, metavar="L",
+    ident.add_argument("--leg-length", type=positive, default=310.25, metavar="L",
                        help="leg length, mm (default 310.25, the paper's machine)")
-    ident.add_argument("--rho-min", type=float, default=-100.0, metavar="A",
+    ident.add_argument("--rho-min", type=number, default=-100.0, metavar="A",
                        help="the stroke of Π_i^-: mm from the zero posture Π0, negative (a "
                             "stroke, not a joint coordinate; default -100)")
-    ident.add_argument("--rho-max", type=float, default=60.0, metavar="B",
+    ident.add_argument("--rho-max", type=number, default=60.0, metavar="B",
                        help="the stroke of Π_i^+: mm from Π0 (default 60)")
     # 5 mm: [procedure] stand_tolerance_mm's default, orthocal.stands.DEFAULT_TOLERANCE
     # (spelled out: numpy is not loaded to parse; tests/e2e/test_cli_identify.py checks it)
     ident.add_argument(
-        "--mount-error", type=float, default=5.0, metavar="MM",
+        "--mount-error", type=not_negative, default=5.0, metavar="MM",
         help="how far off the leg's middle the indicator stands may have been placed "
              "(mm, +-; default 5, a run's stands placed by eye): a CSV carries no stand "
              "positions, so they are modelled, and no tilt or gap they could make is "
@@ -318,9 +313,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "else auto, designed for the largest model the stops identify)")
     design.add_argument("--strokes", metavar="A,B,C", default=None,
                         help="stops per leg in mm, replacing [procedure] strokes")
-    design.add_argument("--leg-length", type=float, default=310.25)
-    design.add_argument("--rho-min", type=float, default=-100.0)
-    design.add_argument("--rho-max", type=float, default=60.0)
+    design.add_argument("--leg-length", type=positive, default=310.25)
+    design.add_argument("--rho-min", type=number, default=-100.0)
+    design.add_argument("--rho-max", type=number, default=60.0)
     design.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     design.add_argument("--debug", action="store_true", help="show tracebacks of failures")
 
@@ -388,10 +383,10 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("--out", metavar="FILE", help="the program to write (default "
                       "PROGRAM's <stem>.compensated<suffix> beside it; never overwrites a "
                       "file compensate did not write)")
-    comp.add_argument("--tolerance", type=float, default=0.001, metavar="MM",
+    comp.add_argument("--tolerance", type=positive, default=0.001, metavar="MM",
                       help="how far the tool may stray from the programmed path, between "
                            "the points written as well as at them (default 0.001 mm)")
-    comp.add_argument("--work-offset", type=_triple, default=(0.0, 0.0, 0.0),
+    comp.add_argument("--work-offset", type=triple, default=(0.0, 0.0, 0.0),
                       metavar="X,Y,Z", help="where the program's work origin sits in machine "
                       "coordinates, mm (P = 0 at the mechanical zero Π0; default 0,0,0)")
     comp.add_argument("--debug", action="store_true", help="show tracebacks of failures")
@@ -433,10 +428,24 @@ def _catch_ctrl_c() -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     _ignore_file_size_signal()
     _catch_ctrl_c()
-    args = build_parser().parse_args(argv)  # bad arguments: argparse exits 2 with usage
+    try:
+        args = build_parser().parse_args(argv)
+    except ArgumentsRefused as exc:  # one line naming the option and the value
+        _fail(argparse.Namespace(), f"error: {exc}")
+        return EXIT_BAD_INPUT
+    try:
+        code = _handle(args)
+        sys.stdout.flush()  # a reader gone is found here, not at the interpreter's exit
+        return code
+    except BrokenPipeError:
+        return _reader_gone()
+
+
+def _handle(args: argparse.Namespace) -> int:
+    """The command's exit status, every failure said in one line on stderr."""
     module_name, func_name = _COMMANDS[args.command].split(":")
     from drivers.device_errors import DeviceError
-    from station.errors import BadInput, RunFailed
+    from station.errors import BadInput, RunFailed, path_message
 
     try:
         handler = getattr(importlib.import_module(module_name), func_name)
@@ -450,9 +459,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         _fail(args, "aborted by the operator (Ctrl-C)")
         return EXIT_FAILED
+    except BrokenPipeError:
+        raise  # stdout's reader is gone (main): nothing to say, nobody to say it to
+    except OSError as exc:
+        # A file the command did not check first (those the user names are, exit 2):
+        # a failure during the command, said with the path.
+        _fail(args, f"failed: {path_message(exc)}")
+        return EXIT_FAILED
     except Exception as exc:
         _fail(args, f"internal error: {type(exc).__name__}: {exc} (rerun with --debug)")
         return EXIT_FAILED
+
+
+def _reader_gone() -> int:
+    """stdout's reader went away (``orthocal history | head -1``): end quietly. What
+    is still buffered for it goes nowhere, so that the interpreter's last flush does
+    not fail again and print a traceback of its own (Python's documented recipe:
+    docs.python.org/3/library/signal.html, "Note on SIGPIPE")."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass  # a stdout without a descriptor (an embedding application's): nothing to do
+    return EXIT_FAILED
 
 
 def _fail(args: argparse.Namespace, line: str) -> None:
@@ -460,4 +492,10 @@ def _fail(args: argparse.Namespace, line: str) -> None:
         import traceback
 
         traceback.print_exc()
-    print(f"orthocal: {line}", file=sys.stderr)
+    # One line, whatever the message a library gave us holds (a database driver's
+    # has several: the error, the statement, a link).
+    one = " ".join(part.strip() for part in line.splitlines() if part.strip())
+    try:
+        print(f"orthocal: {one}", file=sys.stderr, flush=True)
+    except OSError:
+        pass  # stderr closed too: the exit status says it
