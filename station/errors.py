@@ -21,19 +21,40 @@ class StorageFull(RunFailed):
     was reached (EFBIG). Nothing half-written is left behind."""
 
 
+def why_not(exc: OSError) -> str:
+    """What a file system's refusal means, in words for the operator (a full disk said
+    as such)."""
+    import errno
+
+    words = {
+        errno.ENOENT: "no such file or folder",
+        errno.ENOTDIR: "a file stands where a folder is expected",
+        errno.EISDIR: "a folder, not a file",
+        errno.EEXIST: "exists already",
+        errno.EACCES: "permission denied",
+        errno.EPERM: "not permitted",
+        errno.EROFS: "a read-only file system",
+        errno.ENOSPC: "the disk is full (no space left on the device)",
+        errno.EFBIG: "the disk is full for this run (file-size limit reached)",
+        errno.EDQUOT: "the disk quota is exceeded",
+        errno.ENAMETOOLONG: "the name is too long",
+    }
+    return words.get(exc.errno or 0) or (exc.strerror or str(exc))
+
+
 def storage_message(path: Path, exc: OSError) -> str:
     """One line saying what could not be saved and why, naming a full disk as such."""
     import errno
 
-    if exc.errno == errno.ENOSPC:
-        why = "the disk is full (no space left on the device)"
-    elif exc.errno == errno.EFBIG:
-        why = "the disk is full for this run (file-size limit reached)"
-    elif exc.errno == errno.EDQUOT:
-        why = "the disk quota is exceeded"
-    else:
-        why = f"cannot write ({exc.strerror or exc})"
-    return f"{path}: {why}"
+    if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+        return f"{path}: {why_not(exc)}"
+    return f"{path}: cannot write ({why_not(exc)})"
+
+
+def path_message(exc: OSError) -> str:
+    """An OSError nobody caught nearer, in one line naming its path(s) where it has any."""
+    where = " → ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+    return f"{where}: {why_not(exc)}" if where else why_not(exc)
 
 
 def read_input(path: Path, encoding: str = "utf-8") -> str:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from station.commands.given_paths import file_to_write
 from station.errors import BadInput, read_input, storage_message
 
 if TYPE_CHECKING:
@@ -47,7 +48,7 @@ def main(args: argparse.Namespace) -> int:
     try:
         write_atomic(out, result.text)
     except OSError as exc:
-        raise BadInput(storage_message(out, exc)) from None
+        raise BadInput(f"--out {storage_message(out, exc)}") from None
     print(f"orthocal: {result.motions} motions of {program} written as {result.segments} "
           f"segments within {job.tolerance:g} mm", file=sys.stderr)
     print(out)
@@ -62,6 +63,9 @@ def output_path(program: Path, out: str | None, mark: str) -> Path:
     if path.resolve() == program.resolve() or (
             path.exists() and os.path.samefile(path, program)):
         raise BadInput(f"--out: {path} is the program itself; give another file")
+    # a folder, a device or a pipe, a folder that is not there or takes no file:
+    # said before anything is read or computed
+    file_to_write("--out", path, replace=True)
     if path.exists():
         try:
             with path.open(encoding="utf-8", errors="replace") as fh:

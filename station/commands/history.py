@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from station.commands.given_paths import file_to_write
 from station.errors import BadInput
 
 if TYPE_CHECKING:
@@ -69,6 +70,7 @@ def _plot_path(args: argparse.Namespace) -> Path | None:
     if path.suffix.lower() not in FORMATS:
         raise BadInput(f"--plot: {args.plot}: suffix {path.suffix or '(none)'!r} is not "
                        "a figure format; give FILE.png or FILE.svg")
+    file_to_write("--plot", path, replace=True)  # its folder too, before anything is read
     return path
 
 
@@ -123,6 +125,8 @@ def history_main(args: argparse.Namespace) -> int:
     from station.history.compare import microns
 
     plot = _plot_path(args)
+    if args.rebuild is not None and not Path(args.rebuild).is_dir():
+        raise BadInput(f"--rebuild {args.rebuild}: no such folder of runs")
     with _store(args) as store:
         if args.rebuild is not None:
             count = store.rebuild(Path(args.rebuild))

@@ -36,6 +36,7 @@ from typing import Any, get_args
 
 from pydantic import BaseModel
 
+from station.commands.given_paths import file_to_write
 from station.commands.probe import gather
 from station.config import (
     ControllerConfig,
@@ -345,6 +346,7 @@ def main(args: argparse.Namespace) -> int:
     if out.exists():
         raise BadInput(f"--out: {out} exists; init never overwrites a config "
                        "(choose another name or remove it)")
+    file_to_write("--out", out, replace=False)  # its folder, before the ports are probed
     found = gather(args)  # --config: its errors are probe's, one line, exit 2
     config = load_config(args.config) if getattr(args, "config", None) else None
     text = render(found, args, config)

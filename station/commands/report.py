@@ -14,8 +14,9 @@ import argparse
 from pathlib import Path
 
 from drivers.files import write_atomic
+from station.commands.given_paths import file_to_write
 from station.commands.history import read_result
-from station.errors import BadInput, RunFailed
+from station.errors import BadInput, why_not
 
 
 def main(args: argparse.Namespace) -> int:
@@ -27,8 +28,8 @@ def main(args: argparse.Namespace) -> int:
     existed = target.exists()
     try:
         write_atomic(target, report.render_html(result, figures))
-    except OSError as exc:
-        raise RunFailed(f"{target}: not written ({exc.strerror})") from None
+    except OSError as exc:  # a path the user named (RUN_DIR, --out): bad input, exit 2
+        raise BadInput(f"{target}: not written: {why_not(exc)}") from None
     print(f"replaced {target}" if existed else target)
     return 0
 
@@ -47,6 +48,9 @@ def _target(args: argparse.Namespace, run_dir: Path, figures: bool) -> Path:
             raise BadInput(f"--out {target}: no folder {target.parent}")
         if target.exists() and not force:
             raise BadInput(f"--out {target}: the file exists; give --force to replace it")
+        # a device or a pipe is never replaced, --force or not; a folder that takes no
+        # file is said now, before the report is drawn
+        file_to_write("--out", target, replace=True)
         return target
     target = run_dir / "report.html"
     if not figures and not force and _has_figures(target):

@@ -19,6 +19,7 @@ from typing import Any
 
 from drivers.base import Moves
 from station import report
+from station.commands.given_paths import folder_to_write
 from station.commands.options import ResumeOptions, RunOptions
 from station.commands.simulate.file_options import run_options
 from station.config import load_config, parse_config
@@ -87,6 +88,8 @@ def rollback_command(args: argparse.Namespace) -> int:
 
 
 def run(options: RunOptions) -> int:
+    if not options.plan:  # --plan writes nothing
+        folder_to_write("--out", options.out)  # before anything starts: bad input, exit 2
     with ExitStack() as stack:
         station = None
         sim = None
@@ -149,7 +152,10 @@ def run(options: RunOptions) -> int:
         check_plan(plan, config, limits, start=devices.controller.read_positions(),
                    checker=checker)
 
-        run_dir = new_run_dir(options.out)
+        try:
+            run_dir = new_run_dir(options.out)
+        except OSError as exc:  # --out was checked: the disk filled, or it was taken away
+            raise StorageFull(f"{storage_message(options.out, exc)}; nothing moved") from None
         update_run_dir(lock, run_dir)
         try:
             if station is not None:

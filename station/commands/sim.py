@@ -31,6 +31,7 @@ from typing import Any
 
 from drivers.sim.gauge_lines import pseudo_terminals
 from drivers.sim.specs import DriveSpec, GaugeSpec, MachineTruth
+from station.commands.given_paths import file_to_write, write_new
 from station.commands.options import DriveOptions
 from station.commands.simulate.launch import (
     DEFAULT_MOUNT_ERROR_MM,
@@ -60,6 +61,9 @@ def main(args: argparse.Namespace) -> int:
     seed = args.seed if args.seed is not None else random.randrange(2**31)
     truth, drive_spec, gauges, drive = _specs(args, seed)
     out = Path(args.config_out)
+    # Before the station starts: a config there is the user's (never overwritten, as
+    # init), a folder that is not there or takes no file is bad input.
+    file_to_write("--config-out", out, replace=False)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: object) -> None:
@@ -80,7 +84,7 @@ def main(args: argparse.Namespace) -> int:
             # its motion be one run accepts (checked by run's own rule).
             config = parse_config(station_config(station, {}), "orthocal sim")
             motion_model(config)
-            out.write_text(dump_toml(config, header))
+            write_new("--config-out", out, dump_toml(config, header))
             _announce(args, station, out, truth)
             while not stop.wait(0.5):
                 pass
