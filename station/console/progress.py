@@ -66,6 +66,14 @@ class Progress:
     def say(self, text: str) -> None:
         self.bar.message(text)
 
+    def finished(self) -> None:
+        """The run's readings are all taken (its closed loop has finished): the one
+        place the bar says "done"."""
+        try:
+            self.bar.finish()
+        except Exception:
+            pass  # a display glitch must never stop a run
+
     def __call__(self, event: str, **info: Any) -> None:
         try:
             self._event(event, info)

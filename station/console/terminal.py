@@ -46,12 +46,17 @@ def _stop_and_join(progress: Progress) -> None:
         thread.join(timeout=5.0)
 
 
+#: The time left when every reading counted so far is taken: not "done", since the
+#: run may count more (another cycle, another pass) until it ends (RunProgress.finish).
+NONE_LEFT = "no reading left as counted"
+
+
 def format_eta(seconds: float | None) -> str:
     """'about 3 min left': rounded coarsely, because the estimate is no better."""
     if seconds is None:
         return "estimating time left"
     if seconds <= 0:
-        return "done"
+        return NONE_LEFT
     if seconds < 10:
         return "a few seconds left"
     if seconds < 90:
@@ -176,6 +181,19 @@ class RunProgress:
                                   description=where, eta=eta)
         elif self.mode == "plain":
             self._line(f"[{steps_done}/{self.total_steps}] {where} · {eta}")
+
+    def finish(self) -> None:
+        """The run has taken its last reading: "done", said here alone (the total may
+        grow until the end), the count made what was taken (a run that needed fewer
+        passes than counted ends below its total)."""
+        if self.mode == "off" or self._started_at is None:
+            return
+        self.total_steps = self._steps_done
+        if self._progress is not None and self._task is not None:
+            self._progress.update(self._task, completed=self._steps_done,
+                                  total=self.total_steps, eta="done")
+        elif self.mode == "plain":
+            self._line(f"[{self._steps_done}/{self.total_steps}] done: every reading taken")
 
     def message(self, text: str) -> None:
         """A line for the operator, printed above the live bar rather than through it."""

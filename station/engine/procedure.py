@@ -92,6 +92,7 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
             else:
                 loop.wrote(flow.write(step.round))
         flow.stopped(step.reason or "converged")
+        progress.finished()  # every reading taken: "done" said here, never before
     except KeyboardInterrupt:
         message = (f"aborted by the operator (Ctrl-C); {_stopped(seq)}, journal kept. "
                    f"Continue with: orthocal resume {ctx.run_dir}")

@@ -10,6 +10,7 @@ import threading
 import pytest
 
 from station.console.terminal import RunProgress, format_eta
+from station.plan.steps import Read, build_plan
 
 
 class FakeClock:
@@ -94,7 +95,8 @@ def test_update_outside_with_block_is_an_error() -> None:
 
 @pytest.mark.parametrize(
     ("seconds", "text"),
-    [(None, "estimating time left"), (0.0, "done"), (3.2, "a few seconds left"),
+    [(None, "estimating time left"), (0.0, "no reading left as counted"),
+     (3.2, "a few seconds left"),
      (42, "about 40 s left"),
      (3600, "about 60 min left"), (3 * 3600, "about 3.0 h left")],
 )
@@ -132,3 +134,47 @@ def test_live_bar_counts_against_the_rebased_total() -> None:
     text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", stream.getvalue())
     assert "5/6" in text and "+2 readings: another pass (verify 2)" in text
     assert "5/4" not in text
+
+
+def test_done_is_said_at_the_end_alone_however_the_total_grows() -> None:
+    # A run reaches the readings counted (the usual measurement and one verification),
+    # then takes a cycle more in a mounting and another pass: it said "[86/86] ... done"
+    # there and counted on. Only the run's end says done.
+    from builders import station_config
+
+    from station.console.progress import Progress
+
+    plan = build_plan(station_config())
+    stream = io.StringIO()
+    progress = Progress(plan, verify=True)
+    progress.bar = RunProgress(progress.bar.total_steps, stream=stream, clock=FakeClock())
+
+    def read(phase: str, pass_index: int, cycle_shift: int = 0) -> None:
+        for step in plan.steps("m", pass_index):
+            if isinstance(step, Read):
+                progress("read", phase=phase, setup=step.setup, sign=step.sign,
+                         cycle=step.cycle + cycle_shift)
+
+    with progress:
+        read("m", 0)
+        read("v", 1)  # every reading counted is taken: the count at its total
+        first = plan.setups[0].index
+        for step in plan.steps("m", 1):  # a cycle more in the first setup
+            if isinstance(step, Read) and step.setup == first and step.cycle == 1:
+                progress("read", phase="v", setup=step.setup, sign=step.sign,
+                         cycle=plan.cycles + 1)
+        read("v2", 2)  # and another pass
+        before_end = stream.getvalue().splitlines()
+        progress.finished()
+    lines = stream.getvalue().splitlines()
+    counts = [tuple(map(int, m.groups())) for line in lines
+              if (m := re.match(r"\[(\d+)/(\d+)\]", line))]
+    assert all(done <= total for done, total in counts)
+    reached = [line for line in before_end if re.match(r"\[(\d+)/\1\]", line)]
+    assert reached and all(line.endswith("no reading left as counted") for line in reached)
+    assert not [line for line in before_end if "done" in line.split(" · ")[-1]]
+    assert any(line.startswith("+") and "another cycle" in line for line in before_end)
+    assert any(line.startswith("+") and "another pass" in line for line in before_end)
+    done, total = counts[-1]
+    assert lines[-1] == f"[{done}/{total}] done: every reading taken" and done == total
+    assert done == len(before_end) - sum(1 for line in before_end if line.startswith("+"))
