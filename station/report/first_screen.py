@@ -332,16 +332,19 @@ def todo_items(result: RunResult) -> list[Item]:
 
 
 def timing_text(result: RunResult) -> str | None:
-    """The mountings the run took and the operator's time at them, or None (an older
-    result without them)."""
-    timing = result.timing
-    if timing.mountings is None:
+    """The mountings the run took and the operator's time at them (format.
+    mountings_text), and the whole run from its journal's header to its end, every
+    session of a resumed run and the pauses between (``duration_s``; ``timing.wall_s``
+    is the last session's alone), or None (an older result without mountings)."""
+    from station.report.format import format_duration, mountings_text
+
+    mountings = mountings_text(result)
+    if mountings is None:
         return None
-    operator = num(timing.operator_s)
-    took = f", {operator:.0f} s at the machine" if operator is not None else ""
-    wall = num(timing.wall_s)
-    total = f"; the whole run {wall:.0f} s" if wall is not None else ""
-    return f"{timing.mountings}{took}{total}"
+    whole = num(result.duration_s)
+    whole = num(result.timing.wall_s) if whole is None else whole
+    total = f"; the whole run {format_duration(whole)}" if whole is not None else ""
+    return f"{mountings}{total}"
 
 
 def items(result: RunResult) -> list[Item]:

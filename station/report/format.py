@@ -319,6 +319,25 @@ def format_duration(seconds: float | None) -> str:
     return f"{hours} h {minutes:02d} min"
 
 
+def mountings_text(result: RunResult) -> str | None:
+    """The mountings the run took and the operator's time at them, or None (an older
+    result without them). Mountings nobody waited at are said so, not "0 s at the
+    machine": a simulated run's virtual operator mounts at once, and on real devices
+    prompts answered within half a second in all were answered by --yes (a person
+    takes a minute or two per mounting)."""
+    t = result.timing
+    if t.mountings is None:
+        return None
+    operator = num(t.operator_s)
+    if result.simulation is not None:
+        return f"{t.mountings} (mounted by the simulator: nobody waited)"
+    if operator is None:
+        return str(t.mountings)
+    if operator < 0.5:
+        return f"{t.mountings} (answered by --yes: nobody waited at the machine)"
+    return f"{t.mountings}, {format_duration(operator)} at the machine"
+
+
 def max_abs(devs: Mapping[str, Deviation]) -> float | None:
     values = [num(d.mean) for d in devs.values()]
     finite = [abs(v) for v in values if v is not None]

@@ -23,6 +23,7 @@ from station.report.format import (
     format_when,
     held_by_station,
     minus_signs_html,
+    mountings_text,
     run_state,
     um,
     writeback_text,
@@ -144,11 +145,12 @@ def _where_text(result: RunResult) -> tuple[str, str]:
 
 
 def _timing_text(result: RunResult) -> str:
+    """The last session's work (the whole run's time is "duration")."""
     t = result.timing
-    return (f"wall {format_duration(t.wall_s)}, {t.moves} moves, "
-            f"{t.readings} readings, retries: {t.retries}"
-            + (f"; {t.mountings} mountings, {t.operator_s or 0:.0f} s at the "
-               "machine" if t.mountings is not None else ""))
+    mountings = mountings_text(result)
+    return (f"{t.moves} moves, {t.readings} readings, retries: {t.retries}, in "
+            f"{format_duration(t.wall_s)} (its last session)"
+            + (f"; mountings {mountings}" if mountings is not None else ""))
 
 
 def _info_list(result: RunResult) -> str:

@@ -83,9 +83,9 @@ def normal_html(page: str, run_dir: str) -> str:
     page = page.replace(run_dir, "RUN_DIR")
     page = re.sub(r"\d{4}-\d\d-\d\d[ T]\d\d:\d\d(:\d\d)?([+-]\d\d:?\d\d)?", "WHEN", page)
     page = re.sub(r"\d{1,2} \w{3} \d{4},? \d\d:\d\d(:\d\d)?", "WHEN", page)
-    page = re.sub(r"wall [^,<]*,", "wall WALL,", page)
-    page = re.sub(r"\d+ s at the machine", "OPERATOR s at the machine", page)
-    page = re.sub(r"the whole run \d+ s", "the whole run WALL s", page)
+    page = re.sub(r", in [^(<]* \(its last session\)", ", in WALL (its last session)", page)
+    page = re.sub(r"\d[\d.]*( min \d+)? s at the machine", "OPERATOR at the machine", page)
+    page = re.sub(r"the whole run [^<]*", "the whole run WALL", page)
     page = re.sub(r"(duration</dt><dd>)[^<]*", r"\1DURATION", page)
     # matplotlib names an SVG's markers and clip paths after object ids
     page = re.sub(r"\b([mp])[0-9a-f]{10}\b", r"\1ID", page)
