@@ -112,7 +112,8 @@ def measurement_fields(config: StationConfig, m: Measurement, ident: Identificat
     expected = max(expected, resolution)
     resid = float(ident.residual_rms)
     fit_ok = resid <= 3.0 * expected
-    fit_note = (f"residual {resid:.4f} mm vs {expected:.4f} mm expected from the scatter: "
+    fit_note = (f"residual {1000 * resid:.1f} µm vs {1000 * expected:.1f} µm expected from "
+                "the scatter: "
                 + ("the model explains the data" if fit_ok else
                    "larger than the noise explains: errors outside the model (leg lengths, "
                    "play, a loose indicator?)"))

@@ -90,31 +90,23 @@ def changes(joints: dict[str, Any], layout: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def microns(value: float | None) -> str:
-    """A length in mm shown in µm, signed, to 0.1 µm; — where not stated."""
-    return "—" if value is None else f"{1000 * value:+.1f}"
-
-
-def length_text(value: float | None, signed: bool = True) -> str:
-    """A length in mm in the unit its size calls for, to 0.1 µm either way: µm below
-    a millimetre (a joint's drift, a gap), mm from one up (an offset the controller
-    holds); — where not stated."""
-    if value is None:
-        return "—"
-    sign = "+" if signed else ""
-    return f"{1000 * value:{sign}.1f} µm" if abs(value) < 1.0 else f"{value:{sign}.4f} mm"
+def microns(value: float | None, signed: bool = True) -> str:
+    """A length in mm shown in µm to 0.1 µm, whatever its size (a joint's e, about
+    −o on a calibrated machine, is thousands: −1818.6); — where not stated."""
+    return "—" if value is None else f"{1000 * value:{'+' if signed else ''}.1f}"
 
 
 def tilt_text(value: float | None, signed: bool = True) -> str:
-    """A tilt in mrad (= mm/m) to three significant digits: a tilt is stated to a
-    few per cent of itself (its standard error), so more digits would be noise and
-    fewer would round a small one to zero; — where not stated."""
+    """A tilt in mrad (= mm/m) to three significant digits, the number alone (its
+    line names the unit): a tilt is stated to a few per cent of itself (its standard
+    error), so more digits would be noise and fewer would round a small one to zero;
+    — where not stated."""
     if value is None:
         return "—"
     size = abs(value)
     decimals = 3 if size == 0 or not math.isfinite(size) else \
         min(6, max(0, 2 - math.floor(math.log10(size))))
-    return f"{value:{'+' if signed else ''}.{decimals}f} mrad"
+    return f"{value:{'+' if signed else ''}.{decimals}f}"
 
 
 #: What ``significant`` means, said once under a comparison's lines.
@@ -134,18 +126,18 @@ def _significance(flag: bool | None) -> str:
 def change_lines(doc: Mapping[str, Any]) -> list[str]:
     """One line per parameter of a comparison (``compare``'s ``joint_error_mm`` and
     ``layout``): before → after, the change ± its 95 % half-width, and whether it is
-    significant (CRITERION), each value in the unit its size calls for (length_text,
-    tilt_text)."""
-    # (name, before, after, change, ± half-width, significance) per parameter
+    significant (CRITERION). Each line names its one unit and its numbers carry none,
+    so that a column never mixes two: the joints' e and the gaps in µm to 0.1 µm
+    (microns), the tilts in mrad to three significant digits (tilt_text)."""
+    # (name (unit), before, after, change, ± half-width, significance) per parameter
     rows: list[list[str]] = []
     for axis, c in (doc.get("joint_error_mm") or {}).items():
-        rows.append([f"joint {axis} e", *(length_text(c[k]) for k in ("before", "after",
-                                                                       "change")),
-                     length_text(c["interval_95"], signed=False),
-                     _significance(c["significant"])])
+        rows.append([f"joint {axis} e (µm)", *(microns(c[k]) for k in ("before", "after",
+                                                                        "change")),
+                     microns(c["interval_95"], signed=False), _significance(c["significant"])])
     for name, c in (doc.get("layout") or {}).items():
-        text = length_text if name.startswith("gap") else tilt_text
-        rows.append([name, *(text(c[k]) for k in ("before", "after", "change")),
+        text, unit = (microns, "µm") if name.startswith("gap") else (tilt_text, "mrad")
+        rows.append([f"{name} ({unit})", *(text(c[k]) for k in ("before", "after", "change")),
                      text(c["interval_95"], signed=False), _significance(c["significant"])])
     widths = [max((len(r[i]) for r in rows), default=0) for i in range(5)]
     return [f"{r[0]:<{widths[0]}}  {r[1]:>{widths[1]}} → {r[2]:>{widths[2]}}  change "

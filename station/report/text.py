@@ -25,6 +25,7 @@ from station.report.format import (
     param_line,
     param_plain,
     params_of,
+    um,
     unit,
 )
 
@@ -120,9 +121,10 @@ def _fit_lines(result: RunResult) -> list[str]:
     why = (f" (auto: F = {fmt(chosen[0].F, 2)}, p = {fmt(chosen[0].p_value)}"
            f" against the measured noise, level {sel.level})" if chosen and sel else
            " (auto: no candidate explains the data)" if sel else "")
-    resid = f"  residual      {fmt(result.residual_rms_mm)} mm RMS"
+    # the small errors in µm, as the report's tables and the closed loop's lines say them
+    resid = f"  residual      {um(result.residual_rms_mm)} µm RMS"
     if (noise := num(result.noise_mm)) is not None:
-        resid += f" (indicator noise {fmt(noise)} mm)"
+        resid += f" (indicator noise {um(noise)} µm)"
     if result.fit_note:
         resid += f": {result.fit_note}"
     # Δρ is the first screen's "as found"; the other parameters here, at 95 %
@@ -139,8 +141,8 @@ def _verification_lines(result: RunResult) -> list[str]:
     # the tool's accuracy is the "at the tool" line's, and the two differ.
     return [
         f"  verification  legs' parallelism (the method's means, not the tool's accuracy):"
-        f" deviations RMS {fmt(result.deviations_rms_mm)} → "
-        f"{fmt(ver.deviations_rms_mm)} mm; re-identified "
+        f" deviations RMS {um(result.deviations_rms_mm)} → "
+        f"{um(ver.deviations_rms_mm)} µm; re-identified "
         + "  ".join(f"{param_plain(n)} = {fmt(v, signed=True)} {unit(n)}"
                     for n, v in ver.identified.items())
     ]

@@ -26,6 +26,7 @@ from result_builders import (
 from orthocal import coverage_factor
 from station import report
 from station.record.result import SCHEMA_VERSION
+from station.report.format import um
 
 
 def failed_result() -> dict:
@@ -259,11 +260,12 @@ def test_summary_names_status_values_and_report() -> None:
         assert float(found[1].replace("−", "-")) == pytest.approx(value, abs=0.0005)
         half = coverage_factor(result.get("std_errors_dof")) * result["std_errors"][name]
         assert float(found[2]) == pytest.approx(1000 * half, abs=0.05)
-    assert report.fmt(result["residual_rms_mm"]) in text
+    # the small errors in µm, as the closed loop's lines and the report's tables say them
+    assert f"residual      {um(result['residual_rms_mm'])} µm RMS" in text
     for axis in AXES:
         assert report.fmt(result["offsets_written"][axis]) in text
     before, after = result["deviations_rms_mm"], result["verification"]["deviations_rms_mm"]
-    assert f"{report.fmt(before)} → {report.fmt(after)}" in text
+    assert f"deviations RMS {um(before)} → {um(after)} µm" in text
     assert str(Path(result["run_dir"]) / "report.html") in text
     assert len(report.summary_text(result, verbose=False).splitlines()) <= 12
 

@@ -1,6 +1,6 @@
 """``orthocal compare``'s words (station.history.compare): a run is not compared with
 itself, each change says whether it is significant and by which criterion, and each
-value is printed in the unit its size calls for."""
+line names its one unit: lengths in µm to 0.1 µm whatever their size, tilts in mrad."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from station.history.compare import (
     Incomparable,
     change_lines,
     compare,
-    length_text,
+    microns,
     tilt_text,
 )
 
@@ -40,15 +40,15 @@ def test_a_run_compared_with_itself_is_refused() -> None:
 
 
 @pytest.mark.parametrize(("value", "text"), [
-    (0.0004, "+0.4 µm"), (-0.0123456, "-12.3 µm"), (0.0, "+0.0 µm"),
-    (-0.9994, "-999.4 µm"), (-1.8186, "-1.8186 mm"), (12.5, "+12.5000 mm"), (None, "—")])
-def test_lengths_in_um_to_a_tenth_below_a_millimetre(value, text: str) -> None:
-    assert length_text(value) == text
+    (0.0004, "+0.4"), (-0.0123456, "-12.3"), (0.0, "+0.0"),
+    (-0.9994, "-999.4"), (-1.8186, "-1818.6"), (12.5, "+12500.0"), (None, "—")])
+def test_lengths_in_um_to_a_tenth_whatever_their_size(value, text: str) -> None:
+    assert microns(value) == text
 
 
 @pytest.mark.parametrize(("value", "text"), [
-    (0.152, "+0.152 mrad"), (-0.00521, "-0.00521 mrad"), (1.5, "+1.50 mrad"),
-    (12.34, "+12.3 mrad"), (0.0, "+0.000 mrad"), (None, "—")])
+    (0.152, "+0.152"), (-0.00521, "-0.00521"), (1.5, "+1.50"),
+    (12.34, "+12.3"), (0.0, "+0.000"), (None, "—")])
 def test_tilts_in_mrad_to_three_significant_digits(value, text: str) -> None:
     assert tilt_text(value) == text
 
@@ -58,12 +58,25 @@ def test_each_change_says_whether_it_is_significant() -> None:
     b = _entry("/runs/b", 0.4200, 0.1005, 0.00505)  # x moved 20 µm; the rest is noise
     lines = change_lines(compare(a, b))
     by_name = {line.split("  ")[0].strip(): line for line in lines}
-    assert by_name["joint x e"].endswith("  significant")
-    assert by_name["joint y e"].endswith("not significant")
-    assert by_name["tilt_yx"].endswith("not significant")
-    assert "+400.0 µm →" in by_name["joint x e"] and "+20.0 µm" in by_name["joint x e"]
-    assert "+0.100 mrad" in by_name["tilt_yx"] and "+0.000500 mrad" in by_name["tilt_yx"]
-    assert "+5.0 µm" in by_name["gap_xy"]
-    for line in lines:  # no µm to a thousandth
-        assert not re.search(r"\d\.\d\d+ µm", line), line
+    assert by_name["joint x e (µm)"].endswith("  significant")
+    assert by_name["joint y e (µm)"].endswith("not significant")
+    assert by_name["tilt_yx (mrad)"].endswith("not significant")
+    assert "+400.0 →" in by_name["joint x e (µm)"] and "+20.0" in by_name["joint x e (µm)"]
+    assert "+0.100 →" in by_name["tilt_yx (mrad)"] and "+0.000500" in by_name["tilt_yx (mrad)"]
+    assert "+5.0" in by_name["gap_xy (µm)"]
+
+
+def test_a_column_holds_one_unit_a_joint_beyond_a_millimetre_too() -> None:
+    # a calibrated machine's e is about −o: −1.5 mm, said in µm as the history lists it,
+    # not "-1.5019 mm" in a column whose other lines are in µm
+    a = _entry("/runs/a", -1.5019, 0.100, 0.0050)
+    b = _entry("/runs/b", -1.4990, 0.1005, 0.00505)
+    lines = change_lines(compare(a, b))
+    joint = next(line for line in lines if line.startswith("joint x e (µm)"))
+    assert "-1501.9 → -1499.0" in joint and re.search(r"change +\+2\.9 ± 1\.4 ", joint)
+    for line in lines:  # the unit in the line's name, none among its numbers
+        name, _, numbers = line.partition(")")
+        assert name.endswith(("(µm", "(mrad")), line
+        assert not re.search(r"\d\s*(mm|µm|mrad)\b", numbers), line
+        assert not re.search(r"\d\.\d\d+ µm", line), line  # no µm to a thousandth
     assert "95 % interval" in CRITERION and "excludes zero" in CRITERION
