@@ -139,12 +139,10 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
         help="indicator stands placed by eye: each mounting is off the leg's middle by a "
              "hidden random amount uniform in +-MM (default 5; 0: perfectly placed)",
     )
-    p.add_argument(
-        "--gauges", choices=["pty", "tcp"], default=None,
-        help="where the virtual gauges' serial lines end: pseudo-terminals (pty, the "
-             "default where the system has them: Linux, macOS) or sockets on 127.0.0.1 "
-             "that the station opens as socket:// URLs (tcp, the default elsewhere: Windows)",
-    )
+    p.add_argument("--gauges", choices=["pty", "tcp"], default=None, help=(
+        "where the virtual gauges' serial lines end: pseudo-terminals (pty, the default "
+        "where the system has them: Linux, macOS) or sockets on 127.0.0.1 that the station "
+        "opens as socket:// URLs (tcp, the default elsewhere: Windows)"))
     p.add_argument(
         "--motion", choices=["coordinated", "independent"], default=None,
         help="how the virtual controller moves its axes: together on the straight line "
