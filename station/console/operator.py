@@ -14,6 +14,7 @@ from typing import Protocol, TextIO
 
 from orthocal.postures import MIDDLE
 from station.errors import BadInput, RunFailed
+from station.plan.mounting import GaugeMount, MountingSheet
 
 # Keys typed ahead are dropped through the terminal's own module: termios on POSIX,
 # msvcrt on Windows; with neither, nothing is dropped (a prompt is still answered).
@@ -33,13 +34,13 @@ _NOT_A_TERMINAL: tuple[type[Exception], ...] = (AttributeError, OSError, ValueEr
 class Operator(Protocol):
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
               all_names: Sequence[str], at: float = MIDDLE, *,
-              windows: Windows | None = None, count: Mapping[str, int] | None = None,
-              remount: str | None = None) -> None:
+              sheet: MountingSheet | None = None, picture: str | None = None,
+              count: Mapping[str, int] | None = None, remount: str | None = None) -> None:
         """Mount ``indicators`` (name -> direction) on ``leg`` at Π0, at the fraction
         ``at`` of its length from the carriage's joint (the middle by default), and
-        remove the others; ``windows``, ``count``, ``remount``: what the prompt says
-        beside it (:func:`mount_instruction`). Returns once done; raises RunFailed if
-        the operator aborts."""
+        remove the others; ``sheet``, ``picture``, ``count``, ``remount``: what the
+        prompt says beside it (:func:`mount_instruction`). Returns once done; raises
+        RunFailed if the operator aborts."""
         ...
 
     def confirm(self, question: str) -> bool: ...
@@ -51,40 +52,61 @@ class Operator(Protocol):
         ...
 
 
-#: Per gauge, the preload (mm pushed in at mounting) the plan check allows: (least, most).
-Windows = Mapping[str, tuple[float, float]]
+def gauge_words(g: GaugeMount) -> str:
+    """One gauge's line of the prompt: its direction, side and face, its sign and
+    its preload window (station.plan.mounting's conventions)."""
+    rev = " (reversed)" if g.reversed else ""
+    window = (f"push in {g.window_mm[0]:.2f}–{g.window_mm[1]:.2f} mm"
+              if g.window_mm is not None else f"push in {g.preload_mm:.2f} mm")
+    return (f"{g.name} along {g.face}{rev}: on the {g.face} side, plunger onto the "
+            f"{g.face} face; reads + as the leg moves {g.face}; {window}")
+
+
+def sheet_lines(sheet: MountingSheet) -> list[str]:
+    """The mounting in words, as its picture draws it: the stand's place and
+    tolerance, the bar, each gauge."""
+    frac = "L/2" if sheet.middle else f"{sheet.at:g}·L"
+    return [f"stand: {sheet.from_carriage_mm:.1f} mm ({frac}) from the centre of the "
+            f"carriage's joint, along the leg; {sheet.tolerance_words()}",
+            "plungers: square to the leg, on the parallelogram's bar on their side "
+            f"(the same bar at every mounting of leg {sheet.leg})",
+            *(gauge_words(g) for g in sheet.gauges)]
 
 
 def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str, str],
                       all_names: Sequence[str], at: float = MIDDLE, *,
-                      windows: Windows | None = None, count: Mapping[str, int] | None = None,
+                      sheet: MountingSheet | None = None, picture: str | None = None,
+                      count: Mapping[str, int] | None = None,
                       remount: str | None = None) -> str:
-    """The mount prompt: what to mount where, each plunger's preload window
-    (``windows``: the plan check's travel, every stop and move of the setup kept
-    inside the stroke less the guard's margin), the mountings the run expects
+    """The mount prompt, a few short lines: what to mount where and what to remove,
+    the picture (``picture``: its path) and, from ``sheet`` (station.plan.mounting:
+    the plan check's preload windows, every stop and move of the setup kept inside
+    the stroke less the guard's margin), the stand's place and tolerance, the bar and
+    each plunger's side, face, sign and window; the mountings the run expects
     (``count``, at its first: closed_loop.mountings_expected) and, where gauges left
     on from the pass before are mounted again, why (``remount``)."""
     # "v", "v2", ...: the verification after each write-back of the closed loop.
     what = "verification" if phase.startswith("v") else "measurement"
-    mounts = ", ".join(f"{n} along {d}" for n, d in indicators.items())
     others = [n for n in all_names if n not in indicators]
     remove = f"; remove {', '.join(others)}" if others else ""
     where = "the middle of" if at == MIDDLE else \
         f"{at:g} of the length (from the carriage's joint) of"
-    sit = "; ".join(f"{n} pushed in {lo:.2f}–{hi:.2f} mm" for n, (lo, hi) in
-                    (windows or {}).items() if n in indicators)
-    preload = f"plungers within the plan's preload window: {sit}" if sit else \
-        "plunger pushed in to its preload"
-    text = (f"{what}, setup {setup + 1}: the machine is at Π0. Mount {mounts} against "
-            f"{where} leg {leg} ({preload}){remove}.")
+    lines = [f"{what}, setup {setup + 1}: the machine is at Π0. Mount "
+             f"{', '.join(indicators)} against {where} leg {leg}{remove}."]
+    if picture:
+        lines.append(f"picture: {picture}")
+    if sheet is not None:
+        lines.extend(sheet_lines(sheet))
+    else:
+        lines.extend(f"{n} along {d}" for n, d in indicators.items())
     if remount:
-        text = (f"{text} Mounted again, not kept from the setup before: with the "
-                f"write-back's shift, {remount}.")
+        lines.append(f"Mounted again, not kept from the setup before: with the "
+                     f"write-back's shift, {remount}.")
     if count:
-        text += (f" Mountings: expect {count['usual']} in all ({count['fewest']} if the "
-                 f"machine is within tolerance; {count['per_write_back']} more per further "
-                 f"write-back; up to {count['most']}).")
-    return text
+        lines.append(f"Mountings: expect {count['usual']} in all ({count['fewest']} if "
+                     f"the machine is within tolerance; {count['per_write_back']} more per "
+                     f"further write-back; up to {count['most']}).")
+    return "\n  ".join(lines)
 
 
 class ConsoleOperator:
@@ -142,10 +164,11 @@ class ConsoleOperator:
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
               all_names: Sequence[str], at: float = MIDDLE, *,
-              windows: Windows | None = None, count: Mapping[str, int] | None = None,
-              remount: str | None = None) -> None:
+              sheet: MountingSheet | None = None, picture: str | None = None,
+              count: Mapping[str, int] | None = None, remount: str | None = None) -> None:
         instruction = mount_instruction(phase, setup, leg, indicators, all_names, at,
-                                        windows=windows, count=count, remount=remount)
+                                        sheet=sheet, picture=picture, count=count,
+                                        remount=remount)
         if self.yes:
             self._say(instruction)
             return
@@ -177,8 +200,8 @@ class VirtualOperator:
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
               all_names: Sequence[str], at: float = MIDDLE, *,
-              windows: Windows | None = None, count: Mapping[str, int] | None = None,
-              remount: str | None = None) -> None:
+              sheet: MountingSheet | None = None, picture: str | None = None,
+              count: Mapping[str, int] | None = None, remount: str | None = None) -> None:
         for name in all_names:
             if name not in indicators:
                 self._unmount(name)
@@ -188,8 +211,8 @@ class VirtualOperator:
             self._mount(name, leg, direction, at=at)
         if self._say is not None:
             self._say("[virtual operator] " + mount_instruction(
-                phase, setup, leg, indicators, all_names, at, windows=windows, count=count,
-                remount=remount))
+                phase, setup, leg, indicators, all_names, at, sheet=sheet, picture=picture,
+                count=count, remount=remount))
 
     def confirm(self, question: str) -> bool:
         if self._say is not None:

@@ -31,9 +31,9 @@ import numpy as np
 from drivers.base import AxisReadout, ZeroOffsets
 from orthocal import AXES
 from station.config import StationConfig
-from station.console.operator import Windows
 from station.errors import BadInput
 from station.plan.checker import SIGNAL_PAD_MM, MotionChecker
+from station.plan.mounting import MountingSheet, sheet_of
 from station.plan.steps import Move, Plan, Prompt, SetupPlan
 from station.record.journal import WritebackBackup, WritebackDone, WritebackIntent
 from station.record.journal_file import Journal
@@ -42,7 +42,8 @@ from station.record.journal_file import Journal
 class PromptWords(TypedDict):
     """What the mount prompt says beside the mounting (Operator.mount's keywords)."""
 
-    windows: Windows
+    sheet: MountingSheet
+    picture: str
     count: Mapping[str, int] | None
     remount: str | None
 
@@ -100,12 +101,6 @@ def keys_of(sp: SetupPlan) -> list[str]:
     """The deviation keys ``sp``'s gauges read ("+xy", "+@0.75xy"…)."""
     return [f"{sp.key_posture(p)}{sp.leg}{d.lstrip('-')}" for d in sp.indicators.values()
             for p in sp.order]
-
-
-def window(stroke: float, margin: float, travel: tuple[float, float]) -> tuple[float, float]:
-    """The preload (mm pushed in at mounting) that keeps ``travel`` (min, max, from the
-    mounting point) inside the stroke less ``margin`` at both ends."""
-    return margin - travel[0], stroke - margin - travel[1]
 
 
 class Keeper:
@@ -180,19 +175,14 @@ class Keeper:
         return True
 
     def prompt_words(self, phase: str, step: Prompt) -> PromptWords:
-        """The mount prompt's words beyond the mounting (Operator.mount): each
-        plunger's preload window from the plan check's travel, the mountings to
+        """The mount prompt's words beyond the mounting (Operator.mount): the
+        mounting's sheet (each plunger's preload window from the plan check's travel,
+        station.plan.mounting) and its picture in the run directory, the mountings to
         expect at the run's first, why gauges left on are mounted again."""
-        sp = self.plan.setups[step.setup]
-        margin = self.config.procedure.plunger_margin_mm
-        windows = {}
-        for name, _ in step.indicators:
-            travel = self.plan.travel.get(f"{name} on leg {sp.leg} (setup {sp.index + 1})")
-            if travel is not None:
-                windows[name] = window(self.config.indicator(name).stroke_mm, margin, travel)
+        sheet = sheet_of(self.config, self.plan, self.plan.setups[step.setup])
         first = phase == "m" and self.journal.state.mountings == 0
-        return PromptWords(windows=windows, count=self.expected if first else None,
-                           remount=self.remount)
+        return PromptWords(sheet=sheet, picture=str(self.journal.path.parent / sheet.file_name),
+                           count=self.expected if first else None, remount=self.remount)
 
     def _offsets(self) -> np.ndarray:
         return np.asarray(self.controller.read_offsets(), dtype=float)

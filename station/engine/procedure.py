@@ -20,13 +20,15 @@ from station.engine.flow import Flow, Run
 from station.engine.recovery import resume_hint
 from station.engine.results import base_result, fill_offsets
 from station.engine.sequencer import Sequencer
-from station.errors import BadInput, RunFailed, say, storage_message
+from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
 from station.plan.checker import MotionChecker
+from station.plan.mounting import sheets_of
 from station.plan.steps import Plan
 from station.record import io
 from station.record.result import PlungerGuard, RunResult, Setup, Status, Timing
 from station.record.run_dir import now_iso
 from station.record.state import RunState
+from station.report.mounting_files import write_pictures
 
 
 def _import_plotting(figures: bool) -> None:
@@ -71,6 +73,7 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
     # The plan check's checker, where the command made one: its routes and bounds
     # are the first cycle's (each sub-move decided again from where the axes stand).
     checker = ctx.checker or MotionChecker(ctx.config, ctx.devices.controller.soft_limits())
+    draw_mountings(ctx)
     seq = Sequencer(
         config=ctx.config, plan=ctx.plan, controller=ctx.devices.controller,
         indicators=ctx.devices.indicators, journal=ctx.journal, operator=ctx.operator,
@@ -110,6 +113,15 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
     # the record as written (validated, in result.json's order), for the caller
     record = _finish(ctx, seq, result, result.status, result.message, final=True)
     return (0 if record.status == "ok" else 1), record
+
+
+def draw_mountings(ctx: Run) -> None:
+    """Each setup's mounting picture into the run directory before the first prompt
+    names one; a resumed run draws only those missing (its operator saw the others)."""
+    try:
+        write_pictures(ctx.run_dir, sheets_of(ctx.config, ctx.plan), missing_only=True)
+    except OSError as exc:
+        raise StorageFull(storage_message(ctx.run_dir, exc)) from None
 
 
 def measured_setups(plan: Plan, state: RunState, cycles: int) -> list[Setup]:

@@ -17,8 +17,10 @@ from fakes import FakeRig, fake_config, run_on
 from station.commands.simulate.launch import DEFAULT_MOUNT_ERROR_MM
 from station.console.operator import mount_instruction
 from station.engine import kept
+from station.plan import mounting
 from station.plan.check import check_plan
 from station.plan.checker import MotionChecker
+from station.plan.mounting import sheet_of
 from station.plan.steps import build_plan
 from station.record.journal_file import read_journal
 
@@ -80,21 +82,24 @@ def test_the_mount_prompt_says_each_plungers_preload_window() -> None:
     check_plan(plan, config, ([-1e9] * 3, [1e9] * 3), checker=checker)
     sp = plan.setups[0]
     margin = config.procedure.plunger_margin_mm
-    windows = {}
+    sheet = sheet_of(config, plan, sp)
+    windows = {g.name: g.window_mm for g in sheet.gauges}
     for name in sp.indicators:
         lo, hi = plan.travel[f"{name} on leg {sp.leg} (setup 1)"]
         stroke = config.indicator(name).stroke_mm
-        windows[name] = kept.window(stroke, margin, (lo, hi))
+        assert windows[name] == mounting.window(stroke, margin, (lo, hi))
         # the window keeps the whole travel inside the stroke less the margin
         least, most = windows[name]
         assert least == pytest.approx(margin - lo, abs=1e-12)
         assert most == pytest.approx(stroke - margin - hi, abs=1e-12)
         assert 0.0 < least < most < stroke
-    text = mount_instruction("m", 0, sp.leg, sp.indicators, ["A", "B"], windows=windows,
+    text = mount_instruction("m", 0, sp.leg, sp.indicators, ["A", "B"], sheet=sheet,
                              count={"usual": 5, "fewest": 3, "per_write_back": 2,
                                     "most": 9})
-    for name, (least, most) in windows.items():
-        assert f"{name} pushed in {least:.2f}–{most:.2f} mm" in text
+    for name, window in windows.items():
+        assert window is not None
+        assert f"{name} along " in text
+        assert f"push in {window[0]:.2f}–{window[1]:.2f} mm" in text
     assert "Mountings: expect 5 in all (3 if the machine is within tolerance; 2 more per " \
            "further write-back; up to 9)" in text
 
