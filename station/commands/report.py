@@ -21,13 +21,14 @@ from station.errors import BadInput, why_not
 
 def main(args: argparse.Namespace) -> int:
     from station import report
+    from station.report.mounting_files import pictures_in
 
     path, result = read_result(args.run_dir)  # validated, or one line naming the file
     figures = not args.no_figures
     target = _target(args, path.parent, figures)
     existed = target.exists()
     try:
-        write_atomic(target, report.render_html(result, figures))
+        write_atomic(target, report.render_html(result, figures, pictures_in(path.parent)))
     except OSError as exc:  # a path the user named (RUN_DIR, --out): bad input, exit 2
         raise BadInput(f"{target}: not written: {why_not(exc)}") from None
     print(f"replaced {target}" if existed else target)
@@ -61,6 +62,10 @@ def _target(args: argparse.Namespace, run_dir: Path, figures: bool) -> Path:
 
 def _has_figures(page: Path) -> bool:
     try:
-        return "<svg" in page.read_text(encoding="utf-8", errors="replace")
+        text = page.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return False  # none to lose
+    # the mounting pictures are drawn with or without figures: not figures to lose
+    from station.report.mounting_files import without_pictures
+
+    return "<svg" in without_pictures(text)

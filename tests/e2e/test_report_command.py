@@ -17,10 +17,13 @@ from result_builders import GOLDEN, golden_result
 
 from station.config import StationConfig, parse_config
 from station.config.toml import dump_toml
+from station.report.mounting_files import without_pictures
 
 
 def _figures(page: str) -> int:
-    return page.count("<svg")
+    """The report's figures: its SVGs less the mounting pictures, drawn with or
+    without figures (docs/design.md, "Mounting pictures")."""
+    return without_pictures(page).count("<svg")
 
 
 def _run(orthocal, tmp_path: Path, *more: str, figures: bool = False):
@@ -35,6 +38,7 @@ def test_a_run_without_figures_then_the_report_command_draws_them(orthocal, tmp_
     assert run.code in (0, 3), run.err
     page = (run.run_dir / "report.html").read_text(encoding="utf-8")
     assert _figures(page) == 0
+    assert page.count('<figure class="mounting">') == 3  # the mountings, all the same
     assert f"orthocal report {run.run_dir}" in page  # says how to draw them
     saved = tomllib.loads((run.run_dir / "config.toml").read_text(encoding="utf-8"))
     assert saved["report"] == {"figures": False}
@@ -46,6 +50,7 @@ def test_a_run_without_figures_then_the_report_command_draws_them(orthocal, tmp_
     page = (run.run_dir / "report.html").read_text(encoding="utf-8")
     # the error field at the tool, the deviations, the parameters, the loop's rounds
     assert _figures(page) >= 3 and "Figure 1." in page
+    assert page.count('<figure class="mounting">') == 3
     assert "orthocal report" not in page
 
     # without its figures over the report with them: refused, the report kept
