@@ -134,7 +134,9 @@ def run(options: RunOptions) -> int:
             summary = design_summary(config, config.procedure.model,
                                      controller_limits=controller.soft_limits())
             mounts = _mountings(config, plan)
-            print(json.dumps({**plan.to_json(), "mountings": mounts, "design": summary})
+            pictures = plan_pictures(config, plan, options.out)
+            print(json.dumps({**plan.to_json(), "mountings": mounts, "design": summary,
+                              "pictures": [str(p) for p in pictures]})
                   if options.json else plan.format() + "\n" + report.mountings_line(mounts)
                   + "\n" + format_summary(summary))
             return 0
@@ -176,6 +178,29 @@ def run(options: RunOptions) -> int:
         code, result = execute(ctx)
         record_history(config, result, run_dir.parent)
         return _report(options.json, code, result, options.verbose)
+
+
+#: Where ``run --plan`` draws the mounting pictures, under ``--out``: the next run
+#: draws the same into its own run directory.
+PLAN_PICTURES = "mountings"
+
+
+def plan_pictures(config: Any, plan: Any, out: Path) -> list[Path]:
+    """``run --plan``: each setup's mounting picture into ``out``/mountings (replaced:
+    they are the config's, drawn again), said on stderr; one line, exit 2, where the
+    folder cannot be written (``--out`` is the user's)."""
+    from station.plan.mounting import sheets_of
+    from station.report.mounting_files import write_pictures
+
+    folder = out / PLAN_PICTURES
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = write_pictures(folder, sheets_of(config, plan))
+    except OSError as exc:
+        raise BadInput(f"--out {storage_message(folder, exc)}; nothing moved") from None
+    say(f"orthocal: mounting pictures, one per setup, in {folder}: "
+        + ", ".join(p.name for p in paths))
+    return paths
 
 
 def _mountings(config: Any, plan: Any) -> dict[str, int]:

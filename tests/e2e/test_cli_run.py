@@ -128,9 +128,22 @@ def station_toml(tmp_path: Path):
 def test_plan_lists_and_exits_0_without_moving(station_toml, tmp_path: Path, capsys) -> None:
     path = station_toml()
     assert main(["run", "--config", str(path), "--plan", "--out", str(tmp_path)]) == 0
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert "Π_x^+" in out and "plan checked" in out
     assert not list(tmp_path.glob("run-*"))
+    # each setup's mounting picture, drawn under --out (docs/design.md, "Mounting pictures")
+    folder = tmp_path / "mountings"
+    drawn = sorted(p.name for p in folder.glob("*.svg"))
+    assert drawn == ["mounting-1-leg-x.svg", "mounting-2-leg-y.svg", "mounting-3-leg-z.svg"]
+    assert f"mounting pictures, one per setup, in {folder}: " + ", ".join(drawn) in err
+    assert main(["run", "--config", str(path), "--plan", "--json", "--out",
+                 str(tmp_path)]) == 0
+    listed = json.loads(capsys.readouterr().out)["pictures"]
+    assert listed == [str(folder / name) for name in drawn]
+    # a folder that cannot be written: one line, exit 2, nothing moved
+    assert main(["run", "--config", str(path), "--plan", "--out", "/proc/nope"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "/proc/nope/mountings" in err and "internal" not in err
 
 
 def test_plan_refused_by_stroke_exit_2(station_toml, tmp_path: Path, capsys) -> None:
