@@ -11,23 +11,17 @@ process group, so nothing is left behind."""
 from __future__ import annotations
 
 import json
-import os
 import re
 import shutil
-import signal
-import subprocess
 from pathlib import Path
 
 import pytest
+from browser import browse, chromium
 from builders import cli
 from result_builders import golden_result
 from system import require
 
 GOLDEN = Path(__file__).parents[1] / "data" / "golden_run"
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         "--disable-dev-shm-usage", "--window-size=1000,1400"]
-TIMEOUT_S = 90.0
 #: What the page says of itself once laid out: every figure's box, how wide the
 #: document scrolls against the window, the headings in order.
 PROBE = """<script>
@@ -42,28 +36,6 @@ window.addEventListener("load", () => {
   document.body.appendChild(out);
 });
 </script>"""
-
-
-def chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-def browse(tmp: Path, *args: str) -> str:
-    """Run headless Chromium to completion; its stdout. The whole process group is
-    killed on a timeout (Chromium's zygote and renderers are its children)."""
-    exe = chromium()
-    assert exe is not None
-    proc = subprocess.Popen([exe, *FLAGS, f"--user-data-dir={tmp / 'profile'}", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                            start_new_session=True, env={**os.environ, "HOME": str(tmp)})
-    try:
-        out, _ = proc.communicate(timeout=TIMEOUT_S)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=10)
-    assert proc.returncode == 0, f"chromium exited {proc.returncode}"
-    return out
 
 
 @pytest.fixture(scope="module")
