@@ -3,7 +3,8 @@ rollback.
 
 A run directory holds everything needed to understand and to continue a run:
 config.toml (the config it ran with), plan.txt / plan.json, journal.jsonl,
-offsets_backup.json, result.json, report.html, model.json (the identified machine)
+offsets_backup.json, result.json, report.html, model.json (the identified machine),
+mounting-N-leg-L.svg (each setup's mounting picture, station.report.mounting_files)
 and, for a simulated run,
 simulation.json (the hidden errors, to restart the virtual station on resume) and
 controller_nvram.json (the virtual controller's non-volatile offsets).
