@@ -247,12 +247,14 @@ def _section_gauge(g: GaugeMount, a: str, other: int) -> str:
     m1 = _screen(ua * (R_BAR + 32), ub * (R_BAR + 32))
     out.append(arrow(m0[0] + sx, m0[1] + sy, m1[0] + sx, m1[1] + sy, MOVE, 2.5,
                      data={"gauge": g.name, "part": "positive"}))
-    # the face's name by the body, on the side away from the other gauge; and
-    # "reversed" beside it for a reversed mount
+    # the face's name by the body, and "reversed" beside it for a reversed mount:
+    # above a body beside the bar (higher where the positive arrow runs above the
+    # plunger), right of one above or below it
     words = [f"{g.face} face", *(["(reversed)"] if g.reversed else [])]
+    lift = 18.0 if sy < 0 else 0.0
     for n, word in enumerate(words):
-        if across:  # above the body, the last line nearest it
-            out.append(text(ex, ey - 24 - 16 * (len(words) - 1 - n), word, 13, fill=FACE,
+        if across:  # the last line nearest the body
+            out.append(text(ex, ey - 24 - lift - 16 * (len(words) - 1 - n), word, 13, fill=FACE,
                             weight="bold",
                             anchor="end" if ua > 0 else "start"))
         else:  # right of the body, stacked downward
