@@ -46,6 +46,21 @@ from orthocal.geometry import (
 )
 from orthocal.identification import Identification, cannot_identify, exact_jacobian, identify
 from orthocal.inputs import IdentificationError
+from orthocal.joint_error import (
+    JointErrors,
+    JointRangeError,
+    JointTable,
+    Lead,
+    iso230_table,
+    joint_error_deviations,
+    lead_deviation_change,
+    lead_table,
+    lead_um_per_m,
+    pitch_table,
+    posture_joint_range,
+    screw_table,
+    workspace_joint_range,
+)
 from orthocal.kinematics import axis_directions, axis_origins, forward, inverse
 from orthocal.measurement import bow_at, contact_fraction, deviation, deviations, leg_reading
 from orthocal.misfit import Allowance
@@ -74,6 +89,10 @@ __all__ = [
     "Grid",
     "Identification",
     "IdentificationError",
+    "JointErrors",
+    "JointRangeError",
+    "JointTable",
+    "Lead",
     "ModelSelection",
     "OptimalOffsets",
     "Source",
@@ -104,16 +123,24 @@ __all__ = [
     "forward",
     "identify",
     "inverse",
+    "iso230_table",
     "jacobian",
+    "joint_error_deviations",
     "key_sensitivity",
+    "lead_deviation_change",
+    "lead_table",
+    "lead_um_per_m",
     "leg_reading",
     "linear_deviations",
     "optimal_offsets",
+    "pitch_table",
     "plane_at",
     "posture",
+    "posture_joint_range",
     "posture_point",
     "propagation",
     "rigid_fit",
+    "screw_table",
     "select_model",
     "sensitivity",
     "squareness",
@@ -121,4 +148,5 @@ __all__ = [
     "tilt_coefficient",
     "tool_error",
     "workspace_grid",
+    "workspace_joint_range",
 ]

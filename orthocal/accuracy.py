@@ -37,6 +37,7 @@ from orthocal.geometry import (
     params_vector,
     split_params,
 )
+from orthocal.joint_error import Direction, JointErrors
 from orthocal.kinematics import axis_directions, axis_origins, carriages, forward, inverse
 
 FRAMES: tuple[str, str] = ("translation", "rigid")
@@ -164,17 +165,27 @@ def workspace_grid(box=None, n: int = 7, geometry: Geometry | None = None,
 # --- the field -----------------------------------------------------------------------
 
 
-def tool_error(points, geometry: Geometry, params, offsets) -> np.ndarray:
+def tool_error(points, geometry: Geometry, params, offsets,
+               joint_errors: JointErrors | None = None,
+               direction: Direction = "mean") -> np.ndarray:
     """E = P − p (n, 3) mm at commanded tool points ``points`` (n, 3) mm, for the
     machine of parameters ``params`` (12-, 9- or 6-vector of PARAM_NAMES, or a dict
     by name) with the offset registers changed by ``offsets`` o (3, mm; None: 0)
     since delivery: P = forward(IK_nominal(p) + o, geometry, Δρ, ΔL, tilt, gap)
     (docs/model.md, "Accuracy at the tool"; the axes may pass each other: "Axes that do
-    not meet")."""
+    not meet").
+
+    ``joint_errors``: each joint's positioning error ε (docs/model.md, "Joint
+    positioning errors", (J1)), taken at the joint input x = IK_nominal(p) + o and
+    ``direction`` (default the bidirectional mean, to which Δρ refers; or each point
+    reached from a stated side): P = forward(x + ε(x, direction), …). None: exact
+    joints, bit for bit the field without the argument."""
     p = np.asarray(points, dtype=float)
     drho, dL, tilt, gap = split_params(parameter_vector(params))
-    rho = inverse(p, geometry)
-    return forward(rho + offset_vector(offsets), geometry, drho, dL, tilt, gap) - p
+    rho = inverse(p, geometry) + offset_vector(offsets)
+    if joint_errors is not None:
+        rho = joint_errors.joints(rho, direction)
+    return forward(rho, geometry, drho, dL, tilt, gap) - p
 
 
 def rigid_fit(points, landed) -> tuple[np.ndarray, np.ndarray]:
@@ -228,19 +239,25 @@ class ErrorField:
         return {"rms_mm": self.rms_mm, "max_mm": self.max_mm}
 
 
-def fitted_field(points, geometry, theta, offsets, frame) -> np.ndarray:
-    return fit_frame(points, tool_error(points, geometry, theta, offsets), frame)
+def fitted_field(points, geometry, theta, offsets, frame,
+                 joint_errors: JointErrors | None = None,
+                 direction: Direction = "mean") -> np.ndarray:
+    return fit_frame(points, tool_error(points, geometry, theta, offsets, joint_errors,
+                                        direction), frame)
 
 
 def error_field(points, geometry: Geometry, params, offsets,
-                frame: str = "translation") -> ErrorField:
+                frame: str = "translation", joint_errors: JointErrors | None = None,
+                direction: Direction = "mean") -> ErrorField:
     """:func:`tool_error` over ``points`` after ``frame`` (:func:`fit_frame`), with
-    its :func:`field_stats`."""
+    its :func:`field_stats`; ``joint_errors`` and ``direction`` as for
+    :func:`tool_error` (None: exact joints)."""
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
     p = np.asarray(points, dtype=float)
     o = offset_vector(offsets)
-    fitted = fitted_field(p, geometry, parameter_vector(params), o, frame)
+    fitted = fitted_field(p, geometry, parameter_vector(params), o, frame, joint_errors,
+                          direction)
     rms, mx = field_stats(fitted)
     return ErrorField(frame, rms, mx, fitted, p, o)
 
@@ -256,14 +273,17 @@ class OptimalOffsets(NamedTuple):
 
 
 def optimal_offsets(points, geometry: Geometry, params, frame: str = "translation",
-                    max_abs_offset_mm: float | None = None, start=None) -> OptimalOffsets:
+                    max_abs_offset_mm: float | None = None, start=None,
+                    joint_errors: JointErrors | None = None,
+                    direction: Direction = "mean") -> OptimalOffsets:
     """The offset-register changes o minimising the RMS of the tool error after
     ``frame`` (the frame is fitted inside the objective: the residual vector is
     fit_frame(E(o)), whose sum of squares is n·RMS²), by nonlinear least squares
     over ``points`` (scipy ``least_squares``), each |o_i| ≤ ``max_abs_offset_mm``
     when given. Start: ``start``, default −Δρ (the paper's correction), clipped to
     the bounds. docs/model.md: the offsets can cancel part of the field the tilts leave,
-    so this beats −Δρ whenever the tilts are not zero."""
+    so this beats −Δρ whenever the tilts are not zero. ``joint_errors``,
+    ``direction``: as for :func:`tool_error` (None: exact joints)."""
     from scipy.optimize import least_squares  # ~0.3 s to import; only here
 
     if frame not in FRAMES:
@@ -273,7 +293,7 @@ def optimal_offsets(points, geometry: Geometry, params, frame: str = "translatio
     x0 = -theta[:3] if start is None else offset_vector(start)
 
     def residual(o: np.ndarray) -> np.ndarray:
-        return fitted_field(p, geometry, theta, o, frame).ravel()
+        return fitted_field(p, geometry, theta, o, frame, joint_errors, direction).ravel()
 
     opts = dict(xtol=1e-12, ftol=1e-12, gtol=1e-12, diff_step=1e-7)
     if max_abs_offset_mm is None:
@@ -284,7 +304,7 @@ def optimal_offsets(points, geometry: Geometry, params, frame: str = "translatio
             raise ValueError(f"max_abs_offset_mm must be > 0, got {max_abs_offset_mm}")
         sol = least_squares(residual, np.clip(x0, -m, m), bounds=(-m, m), method="trf", **opts)
     o = np.asarray(sol.x, dtype=float)
-    return OptimalOffsets(o, error_field(p, geometry, theta, o, frame))
+    return OptimalOffsets(o, error_field(p, geometry, theta, o, frame, joint_errors, direction))
 
 
 # --- squareness ----------------------------------------------------------------------

@@ -38,6 +38,7 @@ from orthocal.accuracy import (
     parameter_vector,
 )
 from orthocal.geometry import PARAM_NAMES, Geometry, split_params
+from orthocal.joint_error import Direction, JointErrors
 from orthocal.kinematics import forward, inverse
 
 
@@ -63,27 +64,43 @@ def nominal_path(points_sent, geometry: Geometry, theta_c) -> np.ndarray:
                    drho, dL, tilt, gap)
 
 
-def landed(joints, geometry: Geometry, truth) -> np.ndarray:
+def landed(joints, geometry: Geometry, truth, joint_errors: JointErrors | None = None,
+           direction: Direction = "mean") -> np.ndarray:
     """P = FK_θ(ρ): where the real machine ``truth`` puts the tool for joints ρ
-    (the joint frame of θ: the offsets in the controller are already in its Δρ)."""
+    (the joint frame of θ: the offsets in the controller are already in its Δρ).
+    ``joint_errors``: each joint's ε (docs/model.md, "Joint positioning errors"),
+    taken at the joints commanded and ``direction``: P = FK_θ(ρ + ε(ρ, direction)).
+    The offsets written since the joints were tested move where on its screw a
+    joint stands by o, which this leaves out: ε'·o, 0.1 µm for 100 µm/m and 1 mm.
+    None: exact joints, bit for bit as without the argument."""
     drho, dL, tilt, gap = split_params(parameter_vector(truth))
-    return forward(np.asarray(joints, dtype=float), geometry, drho, dL, tilt, gap)
+    rho = np.asarray(joints, dtype=float)
+    if joint_errors is not None:
+        rho = joint_errors.joints(rho, direction)
+    return forward(rho, geometry, drho, dL, tilt, gap)
 
 
-def compensated_error(points, geometry: Geometry, truth, theta_c) -> np.ndarray:
-    """E_c(p) = FK_θ(IK_c(p)) − p (K3), (n, 3) mm."""
+def compensated_error(points, geometry: Geometry, truth, theta_c,
+                      joint_errors: JointErrors | None = None,
+                      direction: Direction = "mean") -> np.ndarray:
+    """E_c(p) = FK_θ(IK_c(p)) − p (K3), (n, 3) mm; ``joint_errors`` and
+    ``direction`` as for :func:`landed` (None: exact joints)."""
     p = np.asarray(points, dtype=float)
-    return landed(controller_joints(p, geometry, theta_c), geometry, truth) - p
+    return landed(controller_joints(p, geometry, theta_c), geometry, truth, joint_errors,
+                  direction) - p
 
 
 def compensated_field(points, geometry: Geometry, truth, theta_c,
-                      frame: str = "translation") -> ErrorField:
+                      frame: str = "translation", joint_errors: JointErrors | None = None,
+                      direction: Direction = "mean") -> ErrorField:
     """(K3) over ``points`` after ``frame`` (docs/model.md, "Accuracy at the tool"),
-    with its RMS and max of |E|."""
+    with its RMS and max of |E|; ``joint_errors`` and ``direction`` as for
+    :func:`landed` (None: exact joints)."""
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
     p = np.asarray(points, dtype=float)
-    fitted = fit_frame(p, compensated_error(p, geometry, truth, theta_c), frame)
+    fitted = fit_frame(p, compensated_error(p, geometry, truth, theta_c, joint_errors,
+                                            direction), frame)
     rms, mx = field_stats(fitted)
     return ErrorField(frame, rms, mx, fitted, p, np.zeros(3))
 
