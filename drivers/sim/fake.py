@@ -195,7 +195,9 @@ class FakeRig:
                                          true_tilt=truth.tilt, true_gap=truth.gap,
                                          speed_mm_s=1000.0, accel_mm_s2=20000.0,
                                          motion="coordinated", clock=self.clock,
-                                         backlash=truth.backlash, leg_bow=truth.leg_bow)
+                                         backlash=truth.backlash, leg_bow=truth.leg_bow,
+                                         joint_lead=truth.joint_lead,
+                                         joint_pitch=truth.joint_pitch)
         # stands placed by eye: each mounting off the leg's middle by a draw uniform
         # in ±mount_error_mm (a stream of its own: the gauges' noise is unchanged)
         self.mount_error_mm = mount_error_mm

@@ -10,6 +10,7 @@ import numpy as np
 import orthocal
 from drivers.sim import bowed_legs as form
 from drivers.sim.drive_motion import SAMPLE_DT_S, SAMPLE_MIN, Segment
+from drivers.sim.screws import Screws
 from orthocal import Geometry
 
 #: Noise-free readings remembered by leg_reading (cleared when full).
@@ -29,6 +30,7 @@ class GaugeView:
     leg_bow: np.ndarray
     offsets_initial: np.ndarray
     _half_band: np.ndarray
+    screws: Screws
     _lock: threading.RLock
     _clock: Callable[[], float]
     _carriage: Callable[[float], np.ndarray]
@@ -42,8 +44,9 @@ class GaugeView:
         drivers.sim.machine, "Frames")."""
         times, motor = segment.sample(max_dt_s, min_samples, extra_times)
         c0 = segment.motion.carriage0
-        carriage = motor if c0 is None else \
-            np.clip(c0, motor - self._half_band, motor + self._half_band)
+        nut = self.screws.nut(motor)
+        carriage = nut if c0 is None else \
+            np.clip(c0, nut - self._half_band, nut + self._half_band)
         return times, carriage - self.offsets_initial
 
     def joint_values(self) -> np.ndarray:

@@ -31,7 +31,9 @@ B, a play operator (docs/model.md, "Lost motion"): after a move up it sits B/2 b
 where the count puts the band's middle, after a move down B/2 above. Within a
 move each axis is monotone, so the carriage is clamp(c_start, m − B/2, m + B/2).
 The controller reports the count; the legs, the gauges and the end point see
-the carriage.
+the carriage. Screws (``joint_lead`` µm/m per joint, ``joint_pitch`` (amplitude
+µm, period mm), :mod:`drivers.sim.screws`): the band follows the nut, the motor
+plus each joint's positioning error counted from home (homed at Π0 by default).
 
 Bowed legs (``leg_bow``, mm per leg: the sagitta h of each leg's surface at its
 middle, :mod:`drivers.sim.bowed_legs`): a gauge's coordinate gets 4·h·t·(1 − t), t
@@ -67,6 +69,7 @@ from drivers.sim.drive_motion import (
     start_offsets,
 )
 from drivers.sim.legs import GaugeView
+from drivers.sim.screws import Screws
 from orthocal import Geometry
 
 #: Alarm raised by a move commanded before homing (IAI drives do the same).
@@ -101,8 +104,8 @@ class VirtualOrthoglide(GaugeView):
     tilt_zy, mrad; docs/model.md "Extended model"); ``true_gap``: how far the axes pass
     each other (gap_xy, gap_xz, gap_yz, mm; docs/model.md "Axes that do not meet"); or
     pass ``true_params`` as the 6-, 9- or 12-vector of :data:`orthocal.PARAM_NAMES`;
-    ``leg_bow``: each leg's hidden bow
-    (mm, module docstring). ``offsets``: the controller's zero offsets at
+    ``leg_bow``: each leg's hidden bow (mm), ``joint_lead``, ``joint_pitch``: its
+    screws' errors (module docstring). ``offsets``: the controller's zero offsets at
     delivery (o_initial). ``start``: initial controller positions ρ (default Π0).
     ``motion``: a :class:`DriveMotion`, or "coordinated" / "independent"
     (:meth:`DriveMotion.named`); ``accel_mm_s2`` is the acceleration of every axis
@@ -139,6 +142,8 @@ class VirtualOrthoglide(GaugeView):
         time_scale: float = 1.0,
         backlash: Sequence[float] | None = None,
         leg_bow: Sequence[float] | None = None,
+        joint_lead: Sequence[float] | None = None,
+        joint_pitch: Sequence[float] | None = None,
     ) -> None:
         self.geometry = geometry or Geometry()
         if true_params is not None:
@@ -177,9 +182,11 @@ class VirtualOrthoglide(GaugeView):
         self._half_band = 0.5 * b
         #: Each leg's bow: the sagitta of its surface at its middle (mm, x, y, z).
         self.leg_bow = _vec(leg_bow if leg_bow is not None else (0, 0, 0), 3, "leg_bow")
-        self._carriage_rest = self._rest.copy()  # where the carriages stand at rest
-        self._target_m = self._rest.copy()
         self._home_m = home_rho + self.offsets_initial  # the home switches do not move
+        #: Each joint's screw: where its nut is for its motor's count from home.
+        self.screws = Screws.of(joint_lead, joint_pitch, self._home_m)
+        self._carriage_rest = self.screws.nut(self._rest.copy())  # the carriages at rest
+        self._target_m = self._rest.copy()
         self._motion: Motion | None = None
         self._homed = bool(homed)
         self._alarm = 0
@@ -228,7 +235,8 @@ class VirtualOrthoglide(GaugeView):
         from where they stood as the motion began (at rest: where they stand)."""
         c0 = self._carriage_rest if self._motion is None or self._motion.carriage0 is None \
             else self._motion.carriage0
-        return np.clip(c0, motor - self._half_band, motor + self._half_band)
+        nut = self.screws.nut(motor)
+        return np.clip(c0, nut - self._half_band, nut + self._half_band)
 
     def _carriage(self, now: float) -> np.ndarray:
         """Machine-scale carriage positions at ``now``."""
@@ -292,8 +300,9 @@ class VirtualOrthoglide(GaugeView):
         dist = float(np.max(np.abs(delta)))
         self._target_m = target_m.copy()
         if dist <= EPS:
-            self._carriage_rest = np.clip(carriage, target_m - self._half_band,
-                                          target_m + self._half_band)
+            nut = self.screws.nut(target_m)
+            self._carriage_rest = np.clip(carriage, nut - self._half_band,
+                                          nut + self._half_band)
             self._rest = target_m.copy()
             self._motion = None
             if homing:

@@ -49,7 +49,9 @@ class MachineTruth:
     (mm); ``tilt``: the actuator axes' tilts (mrad); ``gap``: how far the axes pass
     each other, gap_xy, gap_xz, gap_yz (mm); ``backlash``: each joint's lost motion
     (mm); ``leg_bow``: each leg's sagitta at its middle (mm, :mod:`drivers.sim.bowed_legs`);
-    ``geometry``: the nominal machine they are errors of."""
+    ``joint_lead``: each joint's lead error (µm per metre of travel from home) and
+    ``joint_pitch``: one periodic error for all joints, (amplitude µm, period mm)
+    (:mod:`drivers.sim.screws`); ``geometry``: the nominal machine they are errors of."""
 
     drho: Sequence[float] = ZERO3
     dl: Sequence[float] = ZERO3
@@ -57,10 +59,13 @@ class MachineTruth:
     gap: Sequence[float] = ZERO3
     backlash: Sequence[float] = ZERO3
     leg_bow: Sequence[float] = ZERO3
+    joint_lead: Sequence[float] = ZERO3
+    joint_pitch: Sequence[float] = (0.0, 0.0)
     geometry: Geometry = field(default_factory=Geometry)
 
     def __post_init__(self) -> None:
-        for name in ("drho", "dl", "tilt", "gap", "backlash", "leg_bow"):
+        for name in ("drho", "dl", "tilt", "gap", "backlash", "leg_bow", "joint_lead",
+                     "joint_pitch"):
             object.__setattr__(self, name, _floats(getattr(self, name)))
 
 

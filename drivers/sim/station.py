@@ -212,7 +212,8 @@ class VirtualStation:
             self.geometry, t.drho, t.dl, true_tilt=t.tilt, true_gap=t.gap,
             speed_mm_s=d.speed_mm_s, accel_mm_s2=d.moving_accel_mm_s2, motion=d.motion,
             clock=clock, time_scale=1.0 if clock is not None else self.time_scale,
-            backlash=t.backlash, leg_bow=t.leg_bow)
+            backlash=t.backlash, leg_bow=t.leg_bow, joint_lead=t.joint_lead,
+            joint_pitch=t.joint_pitch)
         if nvram_path is not None:
             path = Path(nvram_path)
             if path.exists():

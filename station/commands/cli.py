@@ -129,6 +129,17 @@ def _sim_options(p: argparse.ArgumentParser) -> None:
              "fraction t along it); one value for all legs or x,y,z; default 0",
     )
     p.add_argument(
+        "--joint-lead", type=str, default=None, metavar="X,Y,Z",
+        help="lead error of each joint's screw, µm per metre of travel from home (the "
+             "virtual drive homes at Π0): the carriage travels (1 + k·1e-6) times what "
+             "the drive counts; one value for all or x,y,z; default 0",
+    )
+    p.add_argument(
+        "--joint-pitch", type=str, default=None, metavar="AMPLITUDE_UM,PERIOD_MM",
+        help="periodic (pitch) error of every joint's screw: A·sin(2π·travel/P) from "
+             "home, amplitude in µm and period in mm; default none",
+    )
+    p.add_argument(
         "--gauge-scale", type=str, default=None, metavar="S[,S...]",
         help="scale error of the gauges, relative (0.002: each reads 0.2%% too much of "
              "its plunger's travel); one value for all or one per gauge in the order "

@@ -38,7 +38,7 @@ class DriveOptions:
 class SimOptions:
     """The virtual station of ``run --simulate``: its hidden errors (None: random
     offsets, no leg-length error, no tilt, axes that meet, straight legs, true
-    gauges), noise, stands and drive; and what the command line does not offer: the
+    gauges, exact screws), noise, stands and drive; and what the command line does not offer: the
     six-indicator style, procedure, write-back and report overrides, a faster machine, and a
     hook that reaches the running station."""
 
@@ -53,6 +53,8 @@ class SimOptions:
     backlash: str | None = None  # "X,Y,Z" or one value, mm
     leg_bow: str | None = None  # "X,Y,Z" or one value, mm: each leg's sagitta
     gauge_scale: str | None = None  # one relative error for all gauges, or one each
+    joint_lead: str | None = None  # "X,Y,Z" or one value, µm per metre of travel from home
+    joint_pitch: str | None = None  # "AMPLITUDE_UM,PERIOD_MM": one periodic error for all
     profile: str | None = None  # the register map the virtual drive serves
     gauges: str | None = None  # "pty" or "tcp": where the gauges' lines end (None: the system's)
     drive: DriveOptions = field(default_factory=DriveOptions)
@@ -72,7 +74,8 @@ class SimOptions:
                    noise=args.noise, mount_error=args.mount_error,
                    backlash=args.backlash, leg_bow=args.leg_bow,
                    gauge_scale=args.gauge_scale, profile=args.profile,
-                   gauges=args.gauges, drive=DriveOptions.from_args(args),
+                   gauges=args.gauges, joint_lead=args.joint_lead,
+                   joint_pitch=args.joint_pitch, drive=DriveOptions.from_args(args),
                    procedure=getattr(args, "sim_procedure", None),
                    speed_mm_s=getattr(args, "sim_speed", None))
 

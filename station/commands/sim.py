@@ -42,6 +42,8 @@ from station.commands.simulate.launch import (
     gaps_mm,
     gauge_line,
     gauge_scales,
+    joint_lead,
+    joint_pitch,
     leg_bow_mm,
     map_profile,
     separate_drives,
@@ -122,7 +124,9 @@ def _specs(args: argparse.Namespace, seed: int
     truth = MachineTruth(drho=drho, dl=zero if args.true_dl is None else args.true_dl,
                          tilt=zero if args.true_tilt is None else args.true_tilt,
                          gap=gaps_mm(args.true_gap),
-                         backlash=backlash_mm(args.backlash), leg_bow=leg_bow_mm(args.leg_bow))
+                         backlash=backlash_mm(args.backlash), leg_bow=leg_bow_mm(args.leg_bow),
+                         joint_lead=joint_lead(args.joint_lead),
+                         joint_pitch=joint_pitch(args.joint_pitch))
     scale = gauge_scales(args.gauge_scale, SIX_GAUGES)
     kwargs: dict[str, Any] = served_map(profile)
     if args.speed is not None:
@@ -142,7 +146,8 @@ def _hidden(truth: MachineTruth, gauges: GaugeSpec) -> str:
     return (f"hidden Δρ = {list(t.drho)} mm, ΔL = {list(t.dl)} mm, tilts = {list(t.tilt)} "
             f"mrad, axis gaps = {list(t.gap)} mm, noise {gauges.noise_mm} mm, stands off by "
             f"up to {gauges.mount_error_mm} mm, lost motion {list(t.backlash)} mm, legs "
-            f"bowed {list(t.leg_bow)} mm, gauge scale errors {gauges.scale}")
+            f"bowed {list(t.leg_bow)} mm, gauge scale errors {gauges.scale}, joint leads "
+            f"{list(t.joint_lead)} µm/m, joint pitch {list(t.joint_pitch)} (µm, mm)")
 
 
 def _announce(args: argparse.Namespace, station: SimulatedStation, out: Path,

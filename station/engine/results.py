@@ -263,7 +263,10 @@ def _simulation(sim: SimulationParams, gauges: list[str]) -> Simulation:
         backlash_mm=dict(zip(AXES, sim.backlash_mm, strict=True)),
         # each leg's bow (sagitta at its middle, mm) and each gauge's scale error
         leg_bow_mm=dict(zip(AXES, sim.leg_bow_mm, strict=True)),
-        gauge_scale=dict(zip(gauges, sim.gauge_scales(len(gauges)), strict=True)))
+        gauge_scale=dict(zip(gauges, sim.gauge_scales(len(gauges)), strict=True)),
+        # the joints' screws: lead errors (µm/m from home) and one periodic error
+        joint_lead_um_per_m=dict(zip(AXES, sim.joint_lead_um_per_m, strict=True)),
+        joint_pitch_um=sim.joint_pitch[0], joint_pitch_period_mm=sim.joint_pitch[1])
 
 
 def base_result(run_dir: Path, config: StationConfig, sim: JsonObject | None,

@@ -7,7 +7,8 @@ fields every run now writes, and a file of an older version lacks those that did
 not exist when it was written. They are filled with what that run had where that is
 known (a simulation without tilts, gaps, lost motion, bowed legs or gauge scale
 errors had none of them: 0, as station.record.simulated reads its journal; a loop
-without extra passes had none) and with null where it is not (a verdict, a
+without extra passes had none; a simulation of any version without the joints'
+screws had exact ones: 0) and with null where it is not (a verdict, a
 squareness rule, a figure not computed then). Nothing present is changed, and a
 document missing whole sections (a fragment, a run that stopped early) is migrated
 as far as it goes: migrate() never validates."""
@@ -44,7 +45,21 @@ def migrate(doc: Mapping[str, object]) -> JsonObject:
         return out
     for step in _STEPS[version - 1:]:
         step(out)
+    _fill(out)
     return out
+
+
+def _fill(doc: JsonObject) -> None:
+    """What the current version added as optional fields, filled where a file of it
+    (or of an older one) lacks them: a simulation's screws were exact."""
+    sim = doc.get("simulation")
+    if isinstance(sim, dict):
+        exact: tuple[tuple[str, JsonValue], ...] = (
+            ("joint_lead_um_per_m", dict.fromkeys(_AXES, 0.0)), ("joint_pitch_um", 0.0),
+            ("joint_pitch_period_mm", 0.0))
+        for key, none in exact:
+            if sim.get(key) is None:
+                sim[key] = none
 
 
 def _to_2(doc: JsonObject) -> None:

@@ -83,6 +83,12 @@ class Simulation(Closed):
                                            "value), mm")
     leg_bow_mm: Axis3 = Field(description="each leg's bow, the sagitta at its middle, mm")
     gauge_scale: dict[str, float] = Field(description="each gauge's scale error, relative")
+    joint_lead_um_per_m: Axis3 = Field(
+        default_factory=lambda: dict.fromkeys(("x", "y", "z"), 0.0),  # type: ignore[arg-type]
+        description="each joint's lead error, µm per metre of travel from home (0: exact)")
+    joint_pitch_um: float = Field(0.0, description="the joints' periodic error: amplitude, "
+                                                   "µm (0: none)")
+    joint_pitch_period_mm: float = Field(0.0, description="its period, mm (0: none)")
 
 
 class Timing(Closed):

@@ -23,7 +23,7 @@ _ZERO: Triple = (0.0, 0.0, 0.0)
 class SimulationParams(BaseModel):
     """The hidden machine, its gauges and its drive. A null or missing field of an
     old journal is what that run had: no tilts, axes that meet, perfect stands, no
-    lost motion, straight legs, true gauges, the plain coordinated drive."""
+    lost motion, straight legs, true gauges, exact screws, the plain coordinated drive."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -37,6 +37,10 @@ class SimulationParams(BaseModel):
     backlash_mm: Triple = Field(_ZERO, description="each joint's reversal value, mm")
     leg_bow_mm: Triple = Field(_ZERO, description="each leg's sagitta at its middle, mm")
     gauge_scale: list[float] | float = Field(0.0, description="each gauge's scale error")
+    joint_lead_um_per_m: Triple = Field(
+        _ZERO, description="each joint's lead error, µm per metre of travel from home")
+    joint_pitch: tuple[float, float] = Field(
+        (0.0, 0.0), description="one periodic error for all joints: amplitude µm, period mm")
     indicators: int = 2
     profile: str | None = Field(None, description="the map the drive serves: a name or a file")
     gauges: Literal["pty", "tcp"] | None = Field(
@@ -55,7 +59,7 @@ class SimulationParams(BaseModel):
     report: ReportOverrides | None = None
 
     @field_validator("true_tilt", "true_gap", "backlash_mm", "leg_bow_mm", "gauge_scale",
-                     "mount_error_mm", mode="before")
+                     "mount_error_mm", "joint_lead_um_per_m", "joint_pitch", mode="before")
     @classmethod
     def _old_journal(cls, value: Any, info: Any) -> Any:
         # a header written before the field existed holds null (or nothing)

@@ -46,9 +46,11 @@ class FakeRig(fake.FakeRig):
                  true_gap: Sequence[float] = (0.0, 0.0, 0.0),
                  backlash: Sequence[float] = (0.0, 0.0, 0.0), mount_error_mm: float = 0.0,
                  leg_bow: Sequence[float] = (0.0, 0.0, 0.0), noise_mm: float = 0.0,
-                 seed: int = 1) -> None:
+                 joint_lead: Sequence[float] = (0.0, 0.0, 0.0),
+                 joint_pitch: Sequence[float] = (0.0, 0.0), seed: int = 1) -> None:
         truth = MachineTruth(drho=true_drho, tilt=true_tilt, gap=true_gap,
-                             backlash=backlash, leg_bow=leg_bow)
+                             backlash=backlash, leg_bow=leg_bow, joint_lead=joint_lead,
+                             joint_pitch=joint_pitch)
         super().__init__(truth, noise_mm=noise_mm, mount_error_mm=mount_error_mm, seed=seed)
 
     def devices(self) -> Devices:
@@ -66,7 +68,8 @@ class FakeRig(fake.FakeRig):
         return {"seed": self.seed, "true_drho": list(t.drho), "true_dl": list(t.dl),
                 "true_tilt": list(t.tilt), "true_gap": list(t.gap),
                 "noise_mm": self.noise_mm, "mount_error_mm": self.mount_error_mm,
-                "backlash_mm": list(t.backlash), "leg_bow_mm": list(t.leg_bow)}
+                "backlash_mm": list(t.backlash), "leg_bow_mm": list(t.leg_bow),
+                "joint_lead_um_per_m": list(t.joint_lead), "joint_pitch": list(t.joint_pitch)}
 
 
 def fake_config(*, uncertainty: dict[str, Any] | None = None,

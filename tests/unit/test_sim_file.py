@@ -8,11 +8,13 @@ import json
 from pathlib import Path
 
 import pytest
+from jsonschema import Draft202012Validator
 
 from station.commands import cli
 from station.commands.options import RunOptions
 from station.commands.simulate.file_options import run_options
 from station.commands.simulate.launch import sim_params
+from station.record import schema_files
 
 SIM = """
 [simulation]
@@ -24,6 +26,8 @@ noise = 0.0
 mount_error = 0.0
 backlash = [0.004, 0, 0.002]
 leg_bow = 0.003
+joint_lead = [100, -80, 60]
+joint_pitch = [1.0, 5.0]
 
 [simulation.drive]
 motion = "independent"
@@ -57,6 +61,8 @@ def test_the_file_gives_every_option_and_the_command_line_wins(tmp_path: Path) -
     assert params["true_gap"] == pytest.approx([0.2, -0.1, 0.15])
     assert params["backlash_mm"] == [0.004, 0.0, 0.002]
     assert params["leg_bow_mm"] == [0.003] * 3 and params["mount_error_mm"] == 0.0
+    assert params["joint_lead_um_per_m"] == [100.0, -80.0, 60.0]
+    assert params["joint_pitch"] == [1.0, 5.0]
     assert params["drive_profile"] == ["scurve", "cosine", "trapezoid"]
     assert params["drive_delays_s"] == [0.0, 0.004, 0.008]
     assert params["procedure"]["cycles"] == 2
@@ -66,6 +72,8 @@ def test_the_file_gives_every_option_and_the_command_line_wins(tmp_path: Path) -
     assert over["seed"] == 9 and over["true_drho"] == [0.0, 0.0, 1.0]
     assert over["drive_profile"] == ["cosine"] * 3
     assert over["true_gap"] == params["true_gap"] and over["backlash_mm"] == [0.004, 0.0, 0.002]
+    lead = sim_params(options("--simulate", str(path), "--joint-lead", "5").sim)  # type: ignore[arg-type]
+    assert lead["joint_lead_um_per_m"] == [5.0] * 3 and lead["joint_pitch"] == [1.0, 5.0]
     # --simulate alone is the options alone, as before
     assert options("--simulate", "--seed", "3").sim.seed == 3  # type: ignore[union-attr]
 
@@ -89,6 +97,14 @@ def test_a_run_from_the_file_is_the_machine_it_describes(
     assert sim["noise_mm"] == 0.0 and sim["mount_error_mm"] == 0.0
     assert [sim["true_tilt"][k] for k in ("tilt_yx", "tilt_zx", "tilt_zy")] == \
         [0.05, 0.0, -0.03]
+    # the screws
+    assert [sim["joint_lead_um_per_m"][a] for a in "xyz"] == [100.0, -80.0, 60.0]
+    assert (sim["joint_pitch_um"], sim["joint_pitch_period_mm"]) == (1.0, 5.0)
+    # the record validates against the schema the package ships, as another tool reads it
+    schema = json.loads(schema_files.shipped("result"))
+    (run_dir,) = (tmp_path / "runs").glob("run-*")
+    on_disk = json.loads((run_dir / "result.json").read_text())
+    assert [e.message for e in Draft202012Validator(schema).iter_errors(on_disk)] == []
 
 
 @pytest.mark.parametrize(("text", "said"), [

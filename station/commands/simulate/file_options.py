@@ -43,6 +43,7 @@ def load_simulation(path: str | Path) -> SimOptions:
         true_gap=s.true_gap, noise=s.noise, mount_error=s.mount_error,
         backlash=as_text(s.backlash), leg_bow=as_text(s.leg_bow),
         gauge_scale=as_text(s.gauge_scale), profile=profile, gauges=s.gauges,
+        joint_lead=as_text(s.joint_lead), joint_pitch=as_text(s.joint_pitch),
         drive=DriveOptions(motion=d.motion, profile=as_text(d.profile), accel=as_text(d.accel),
                            delays=as_text(d.delays), sequence=d.sequence),
         procedure=_given(doc.procedure), writeback=_given(doc.writeback),

@@ -10,7 +10,8 @@ the plain drive of its ``motion``. So with the legs' form and the gauges' scale
 (``--leg-bow``, ``--gauge-scale``): kept in the header, absent from
 older journals, whose runs had straight legs and true gauges. And with the axes'
 gaps (``--true-gap``, gap_xy, gap_xz, gap_yz in mm): absent from journals of runs
-before them, whose machines' axes met."""
+before them, whose machines' axes met; and the joints' screws (``--joint-lead``,
+``--joint-pitch``), absent where they were exact."""
 
 from __future__ import annotations
 
@@ -48,6 +49,9 @@ DEFAULT_MOUNT_ERROR_MM = 5.0
 # 8 µm is an 8 mm bow; 0.2 for 0.2 % a gauge reading a fifth too much.
 MAX_LEG_BOW_MM = 1.0
 MAX_GAUGE_SCALE = 0.1
+# 10 000 µm/m is 1 %: a screw that far off is a unit slipped (0.1 for 100 µm/m).
+MAX_JOINT_LEAD_UM_PER_M = 10_000.0
+MAX_JOINT_PITCH_UM = 1_000.0
 
 
 def sim_params(options: SimOptions) -> dict[str, Any]:
@@ -69,6 +73,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
     backlash = backlash_mm(options.backlash)
     bow = leg_bow_mm(options.leg_bow)
     scale = gauge_scales(options.gauge_scale, int(options.indicators))
+    lead, pitch = joint_lead(options.joint_lead), joint_pitch(options.joint_pitch)
     profile = map_profile(options.profile)
     return {
         "seed": seed,
@@ -85,6 +90,10 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         # gauge, in the config's order), kept for resume
         "leg_bow_mm": bow,
         "gauge_scale": scale,
+        # the screws: each joint's lead error (µm/m) and one periodic error for all
+        # (amplitude µm, period mm), counted from home
+        "joint_lead_um_per_m": lead,
+        "joint_pitch": pitch,
         # the register map the virtual drive serves (a built-in name or a file's
         # absolute path), kept for resume
         "profile": profile,
@@ -141,7 +150,8 @@ def machine_truth(sim: SimulationParams) -> MachineTruth:
     from drivers.sim.specs import MachineTruth
 
     return MachineTruth(drho=sim.true_drho, dl=sim.true_dl, tilt=sim.true_tilt,
-                        gap=sim.true_gap, backlash=sim.backlash_mm, leg_bow=sim.leg_bow_mm)
+                        gap=sim.true_gap, backlash=sim.backlash_mm, leg_bow=sim.leg_bow_mm,
+                        joint_lead=sim.joint_lead_um_per_m, joint_pitch=sim.joint_pitch)
 
 
 def map_profile(profile: str | None) -> str | None:
@@ -217,6 +227,39 @@ def leg_bow_mm(text: str | None) -> list[float]:
         raise BadInput(f"--leg-bow: a leg's form error is within ±{MAX_LEG_BOW_MM:g} mm "
                        f"(0.008 is 8 µm), got {text!r}")
     return values * 3 if len(values) == 1 else values
+
+
+def joint_lead(text: str | None) -> list[float]:
+    """``--joint-lead X,Y,Z`` (or one value for all joints): each joint's lead error,
+    µm per metre of travel from home, either sign, each within
+    ±MAX_JOINT_LEAD_UM_PER_M; BadInput naming it."""
+    if text is None:
+        return [0.0, 0.0, 0.0]
+    values = _floats("--joint-lead", str(text), (1, 3), "µm/m")
+    if not all(abs(v) <= MAX_JOINT_LEAD_UM_PER_M for v in values):  # nan included
+        raise BadInput(f"--joint-lead: a lead error in µm per metre of travel, within "
+                       f"±{MAX_JOINT_LEAD_UM_PER_M:g} (100 is 0.01 %), got {text!r}")
+    return values * 3 if len(values) == 1 else values
+
+
+def joint_pitch(text: str | None) -> list[float]:
+    """``--joint-pitch AMPLITUDE_UM,PERIOD_MM``: one periodic error for every joint's
+    screw (amplitude 0 to MAX_JOINT_PITCH_UM µm, period > 0 mm); BadInput naming it."""
+    if text is None:
+        return [0.0, 0.0]
+    try:
+        values = [float(p) for p in str(text).split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 2:
+        raise BadInput(f"--joint-pitch: expected AMPLITUDE_UM,PERIOD_MM, got {text!r}")
+    amplitude, period = values
+    if not 0.0 <= amplitude <= MAX_JOINT_PITCH_UM:  # nan included
+        raise BadInput(f"--joint-pitch: the amplitude is 0 to {MAX_JOINT_PITCH_UM:g} µm, "
+                       f"got {text!r}")
+    if not (math.isfinite(period) and period > 0):
+        raise BadInput(f"--joint-pitch: the period must be > 0 mm, got {text!r}")
+    return values
 
 
 def gauge_scales(text: str | None, gauges: int) -> list[float]:

@@ -7,7 +7,8 @@ and may hold the station's own ``[procedure]``, ``[writeback]`` and ``[report]``
 tables for the run. Every key is the long option of ``run --simulate`` without its dashes
 (``--true-drho`` is ``true_drho``, ``--drive-profile`` is ``drive.profile``);
 an option given on the command line wins over the file. Values are TOML's own:
-``true_drho = [0.7, -1.1, 0.35]``, ``backlash = 0.01`` or ``[0.01, 0, 0.02]``.
+``true_drho = [0.7, -1.1, 0.35]``, ``backlash = 0.01`` or ``[0.01, 0, 0.02]``,
+``joint_lead = [100, -80, 60]`` (µm/m), ``joint_pitch = [2.0, 5.0]`` (µm, mm).
 
 Loading checks the whole of it (the same checks as the options): a wrong key or
 value is one line naming the file and the key, exit 2, before anything starts.
@@ -56,6 +57,10 @@ class SimulationTable(_Strict):
     backlash: float | Triple | None = None
     leg_bow: float | Triple | None = None
     gauge_scale: float | list[float] | None = None
+    joint_lead: float | Triple | None = Field(
+        None, description="each joint's lead error, µm/m from home; one, or x, y, z")
+    joint_pitch: tuple[float, float] | None = Field(
+        None, description="one periodic error for all joints: [amplitude µm, period mm]")
     profile: str | None = Field(
         None, description="a built-in map name, or a map file (relative to this file)")
     gauges: Literal["pty", "tcp"] | None = Field(
