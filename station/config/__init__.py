@@ -22,6 +22,7 @@ from pydantic import (
     model_validator,
 )
 
+from station.config.joint_tests import JointsConfig, resolved
 from station.config.messages import format_validation_error
 from station.errors import BadInput, read_input
 
@@ -331,6 +332,9 @@ class UncertaintyConfig(_Strict):
     temperature_change_c: float | None = Field(None, ge=0, le=50)
     # How far a plunger may be set off the leg's normal (degrees).
     plunger_angle_deg: float | None = Field(None, ge=0, le=30)
+    # Each joint's positioning error where no test of it is given ([joints] tests): a
+    # bound per metre of travel from home, rectangular (µm/m; station.analysis.joints).
+    joint_positioning_um_per_m: float | None = Field(None, ge=0, le=10_000)
 
     @field_validator("leg_straightness_mm")
     @classmethod
@@ -384,6 +388,7 @@ class StationConfig(_Strict):
     procedure: ProcedureConfig = Field(default_factory=ProcedureConfig)
     writeback: WritebackConfig = Field(default_factory=WritebackConfig)
     uncertainty: UncertaintyConfig = Field(default_factory=UncertaintyConfig)
+    joints: JointsConfig = Field(default_factory=JointsConfig)
     history: HistoryConfig = Field(default_factory=HistoryConfig)
     report: ReportConfig = Field(default_factory=ReportConfig)
     acceptance: AcceptanceConfig = Field(default_factory=AcceptanceConfig)
@@ -444,9 +449,9 @@ def parse_config(data: dict[str, Any], source: str = "config") -> StationConfig:
 
 
 def load_config(path: str | Path) -> StationConfig:
-    """The config file at ``path``; a register-map file its profile names is read
-    from the config's folder (and checked here: a map's errors exit 2 before
-    anything moves, naming the file and the entry)."""
+    """The config file at ``path``; a register-map file its profile names and the
+    joints' test files are read from the config's folder (and checked here: their
+    errors exit 2 before anything moves, naming the file and the entry or line)."""
     path = Path(path)
     source = str(path)
     text = read_input(path)
@@ -455,8 +460,9 @@ def load_config(path: str | Path) -> StationConfig:
     except tomllib.TOMLDecodeError as exc:
         # tomllib's message carries "(at line N, column M)".
         raise BadInput(f"{source}: not valid TOML: {exc}") from None
-    config = parse_config(data, source)
-    return with_map_file(config, path.parent, source)
+    config = with_map_file(parse_config(data, source), path.parent, source)
+    joints = resolved(config.joints, path.parent)  # each test read: a bad row exits 2
+    return config if joints is config.joints else config.model_copy(update={"joints": joints})
 
 
 def with_map_file(config: StationConfig, base_dir: Path, source: str = "config"

@@ -59,10 +59,13 @@ def toml_text(data: dict[str, Any], header: str = "") -> str:
     for array in ("indicators", "setups"):
         for item in data.get(array) or ():
             table(f"[[{array}]]", item)
-    for section in ("procedure", "writeback", "uncertainty", "history", "report"):
-        # an empty [uncertainty] (every input at its default) is left out
-        if data.get(section) is not None and (section != "uncertainty" or data[section]):
-            table(f"[{section}]", data[section])
+    for section in ("procedure", "writeback", "uncertainty", "joints", "history", "report"):
+        # an empty [uncertainty] (every input at its default) and [joints] (no test
+        # given) are left out
+        values = data.get(section)
+        if values is not None and (section not in ("uncertainty", "joints") or any(
+                v not in ({}, None) for v in values.values())):
+            table(f"[{section}]", values)
     return "\n".join(lines)
 
 

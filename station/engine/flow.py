@@ -25,7 +25,7 @@ from orthocal.loop import (
 )
 from orthocal.lost_motion import Reversal, band_middle, edge_of
 from orthocal.numbers import finite
-from station.analysis import acceptance, compensated, reversal, verdict
+from station.analysis import acceptance, compensated, joints, reversal, verdict
 from station.analysis import accuracy_statement as accuracy
 from station.analysis import run_budget as budget
 from station.analysis.model_choice import carried_form
@@ -164,6 +164,8 @@ class Flow:
         # what is stated and written is its middle.
         rev = reversal.estimate(ctx.config, self.measurements)
         self.result.reversal = reversal.fields(ctx.config, rev)
+        self.result.joints = joints.fields(joints.of_run_config(ctx.config).with_reversal(
+            rev.value))  # the measured B wins over a table's reversal
         reversal.check_overrun(ctx.config, rev)
         self.reversal = rev
         if carried is None:  # a carried round's layout is the earlier rounds' own

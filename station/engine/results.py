@@ -15,6 +15,7 @@ from drivers.base import ZeroOffsets
 from orthocal import AXES, Identification, coverage_factor
 from orthocal.loop import WRITABLE, predicted_after_correction
 from orthocal.numbers import finite
+from station.analysis import joints
 from station.analysis.statistics import Measurement, split_key
 from station.analysis.verdict import Verdict
 from station.config import StationConfig
@@ -292,4 +293,7 @@ def base_result(run_dir: Path, config: StationConfig, sim: JsonObject | None,
         model=config.procedure.model, method=config.procedure.method,
         identified={}, std_errors={}, offsets_before=None, offsets_written=None,
         writeback=None, verification=None,
+        # each joint's positioning error as the shop stated it (the run's measured
+        # lost motion replaces a table's reversal once measured: flow's reversal)
+        joints=joints.fields(joints.of_run_config(config)),
     )

@@ -26,6 +26,7 @@ import numpy as np
 from drivers.base import Vec3
 from station.config import StationConfig
 from station.plan.checker import MotionChecker
+from station.plan.joint_travel import check_joint_tests
 from station.plan.limits import limits_source
 from station.plan.steps import Move, Plan, Prompt, joint_triple, route_key
 
@@ -63,7 +64,9 @@ def check_plan(
     ``checker``: one made for this config and these limits, shared by the checks of
     many plans (its bounds remembered; plan.travel then spans all of them).
     ``travel`` False: only whether the plan holds (a search over candidate plans),
-    not the sharp plunger travel of every sub-move that plan.travel lists."""
+    not the sharp plunger travel of every sub-move that plan.travel lists. A joint
+    test ([joints] tests) must span the travel the plan and the workspace need."""
+    check_joint_tests(config, plan, controller_limits)
     checker = checker or MotionChecker(config, controller_limits)
     key = _key(plan, config, controller_limits, start, travel, checker) \
         if checker.fresh() else None

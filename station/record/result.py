@@ -5,7 +5,8 @@ engine adds and these models do not know fails as result.json is written
 (station.record.io.write_result validates it). Floats that were NaN or infinite are
 written as null. The larger sections live beside this file: ``accuracy`` in
 result_accuracy.py; ``model_selection``, ``stands``, ``uncertainty_budget``,
-``reversal``, ``plunger_guard`` and ``since_last`` in result_sections.py. Files
+``reversal``, ``plunger_guard`` and ``since_last`` in result_sections.py; ``joints``
+in result_joints.py. Files
 written by an older version are read through station.record.migrate.
 
 schema_version, bumped when a field changes meaning, goes away, or a file of the
@@ -29,6 +30,7 @@ from pydantic import Field
 from station.record.result_acceptance import Acceptance
 from station.record.result_accuracy import Accuracy, Compensated
 from station.record.result_base import Axis3, Closed, NotStated, Params
+from station.record.result_joints import Joints
 from station.record.result_sections import (
     ModelSelection,
     NotCompared,
@@ -301,6 +303,9 @@ class RunResult(Closed):
     accuracy: Accuracy | NotStated | None = None
     uncertainty_budget: UncertaintyBudget | NotStated | None = None
     reversal: Reversal | None = None
+    joints: Joints | None = Field(
+        None, description="each joint's positioning error as the run took it: tested, "
+                          "measured by the station or assumed (absent in older runs)")
     plunger_guard: PlungerGuard
     timing: Timing
     acceptance: Acceptance | None = Field(

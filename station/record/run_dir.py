@@ -4,8 +4,9 @@ rollback.
 A run directory holds everything needed to understand and to continue a run:
 config.toml (the config it ran with), plan.txt / plan.json, journal.jsonl,
 offsets_backup.json, result.json, report.html, model.json (the identified machine),
-mounting-N-leg-L.svg (each setup's mounting picture, station.report.mounting_files)
-and, for a simulated run,
+mounting-N-leg-L.svg (each setup's mounting picture, station.report.mounting_files),
+copies of the register-map and joint-test files the config names and, for a
+simulated run,
 simulation.json (the hidden errors, to restart the virtual station on resume) and
 controller_nvram.json (the virtual controller's non-volatile offsets).
 """
@@ -13,6 +14,7 @@ controller_nvram.json (the virtual controller's non-volatile offsets).
 from __future__ import annotations
 
 import json
+import shutil
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -58,6 +60,8 @@ def new_run_dir(out: Path) -> Path:
 
 #: A run directory's copy of the register-map file its config's profile names.
 MAP_NAME = "register_map.toml"
+#: A run directory's copy of each joint's test file ([joints] tests), by joint.
+JOINT_TEST_NAME = "joint_test_{axis}.csv"
 
 
 def write_run_files(run_dir: Path, config: StationConfig, plan: Plan,
@@ -65,7 +69,7 @@ def write_run_files(run_dir: Path, config: StationConfig, plan: Plan,
     """What a run directory holds before the first record of its journal: a register
     map the profile names as a file is copied in (MAP_NAME) and the run's config
     names the copy, so the run resumes and rolls back as it ran whatever becomes of
-    the file."""
+    the file; so are the joints' test files (JOINT_TEST_NAME)."""
     from drivers.map_files import is_map_file, map_to_toml, resolve_map
 
     if sim is not None:
@@ -77,6 +81,12 @@ def write_run_files(run_dir: Path, config: StationConfig, plan: Plan,
                                                     f"copied from {profile}"))
         config = config.model_copy(update={"controller": config.controller.model_copy(
             update={"profile": MAP_NAME})})
+    tests = {axis: JOINT_TEST_NAME.format(axis=axis) for axis in config.joints.tests}
+    if tests != config.joints.tests:
+        for axis, path in config.joints.tests.items():
+            shutil.copyfile(path, run_dir / tests[axis])
+        config = config.model_copy(update={"joints": config.joints.model_copy(
+            update={"tests": tests})})
     (run_dir / "config.toml").write_text(dump_toml(config))
     (run_dir / "plan.txt").write_text(plan.format() + "\n")
     (run_dir / "plan.json").write_text(json.dumps(plan.to_json(), indent=1) + "\n")

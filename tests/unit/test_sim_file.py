@@ -97,9 +97,12 @@ def test_a_run_from_the_file_is_the_machine_it_describes(
     assert sim["noise_mm"] == 0.0 and sim["mount_error_mm"] == 0.0
     assert [sim["true_tilt"][k] for k in ("tilt_yx", "tilt_zx", "tilt_zy")] == \
         [0.05, 0.0, -0.03]
-    # the screws
+    # the screws, and what the station took the joints to be: nothing told it, assumed
     assert [sim["joint_lead_um_per_m"][a] for a in "xyz"] == [100.0, -80.0, 60.0]
     assert (sim["joint_pitch_um"], sim["joint_pitch_period_mm"]) == (1.0, 5.0)
+    joints = result["joints"]
+    assert [joints[a]["source"] for a in "xyz"] == ["assumed"] * 3
+    assert joints["bound"]["given"] is False and joints["x"]["bound_um_per_m"] == 170.0
     # the record validates against the schema the package ships, as another tool reads it
     schema = json.loads(schema_files.shipped("result"))
     (run_dir,) = (tmp_path / "runs").glob("run-*")
