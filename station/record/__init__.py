@@ -1,7 +1,7 @@
 """The run's record as typed models: result.json (:mod:`station.record.result`, its
-larger sections in result_accuracy.py and result_sections.py, their common parts in
-result_base.py; a file of an older version read through :mod:`station.record.migrate`),
-the journal's records (:mod:`station.record.journal`) and model.json
+larger sections in result_accuracy.py, result_sections.py and result_joints.py, their
+common parts in result_base.py; a file of an older version read through
+:mod:`station.record.migrate`), the journal's records (:mod:`station.record.journal`) and model.json
 (:mod:`station.record.model`), with the JSON Schema other tools validate them against
 (:mod:`station.record.schema_files`, ``orthocal schema``); result.json's writer
 (:mod:`station.record.io`) and its deviation keys' order (:mod:`station.record.keys`)."""
