@@ -1,7 +1,9 @@
 """``orthocal export``: a run's result in a controller's terms (docs/design.md,
-"Machine history", export; "The geometry in the controller"): the offsets as LinuxCNC's
-HOME_OFFSET, a TwinCAT parameter list or CSV, and with ``--kinematics`` the whole
-identified geometry for LinuxCNC's orthoglidekins component."""
+"Machine history", export; "The geometry in the controller"; "Joint tables in the
+controller"): the offsets as LinuxCNC's HOME_OFFSET, a TwinCAT parameter list or CSV,
+with ``--kinematics`` the whole identified geometry for LinuxCNC's orthoglidekins
+component, and for LinuxCNC and TwinCAT each joint's table of its positioning error
+(a compensation file, a leadscrew error compensation list) beside them."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from station.commands.history import read_result
 from station.errors import BadInput, say
 
 if TYPE_CHECKING:
+    from station.record.controller_tables import ControllerTables
     from station.record.result import RunResult
 
 #: LinuxCNC's HAL library, where ``HALFILE = LIB:name`` finds its file (Debian's path).
@@ -54,18 +57,51 @@ def _may_export(args: argparse.Namespace, result: RunResult) -> bool:
     return why is not None
 
 
+def _tables(result: RunResult) -> ControllerTables:
+    """The run's joint tables in the controller's joints (BadInput: one line)."""
+    from station.record.controller_tables import NoJointFrame, controller_tables
+
+    try:
+        return controller_tables(result)
+    except NoJointFrame as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _write_files(folder: Path, files: dict[str, str]) -> list[Path]:
+    """Each file into ``folder`` whole (BadInput naming --out where it cannot)."""
+    written = []
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, body in files.items():
+            write_atomic(folder / name, body)
+            written.append(folder / name)
+    except OSError as exc:
+        raise BadInput(f"--out: cannot write into {folder} ({exc.strerror})") from None
+    return written
+
+
+def _needs_out(args: argparse.Namespace, tables: ControllerTables) -> None:
+    """A run with joint tables writes files beside --out: it must be given."""
+    if tables.tabled and not args.out:
+        axes = ", ".join(j.axis for j in tables.tabled)
+        raise BadInput(f"--out: the run has joint tables ({axes}): give --out FILE; their "
+                       "compensation files are written beside it")
+
+
 def kinematics_export(args: argparse.Namespace, result: RunResult) -> int:
     """``export --to linuxcnc --kinematics``: the INI, the geometry's HAL file and the
     component's source, into the folder --out."""
     from importlib.resources import files
 
     from station.history.controller_terms import ExportError
+    from station.history.linuxcnc_comp import comp_files, with_comp_files
     from station.history.linuxcnc_kins import (
         COMPONENT_FILE,
         GEOMETRY_HAL,
         geometry_hal,
         kinematics_ini,
     )
+    from station.record.controller_tables import header_words
     from station.record.exportable import header_lines
     from station.record.identified import NotACalibration, identified_machine
 
@@ -85,26 +121,30 @@ def kinematics_export(args: argparse.Namespace, result: RunResult) -> int:
         ini_text = ini.read_text(encoding="utf-8")
     except OSError as exc:
         raise BadInput(f"--ini: cannot read {ini} ({exc.strerror})") from None
+    tables = _tables(result)
+    words = header_words(tables, "kinematics")
+    joints = _joints(args.joints)
+    tabled = [j.axis for j in tables.tabled]
     try:
         machine = identified_machine(args.run_dir)
-        text = kinematics_ini(result, machine, ini_text, _joints(args.joints), str(ini),
-                              args.backlash, _read_hal(ini), forced)
+        text = kinematics_ini(result, machine, ini_text, joints, str(ini), args.backlash,
+                              _read_hal(ini), forced, words, tabled)
+        text = with_comp_files(text, tables, joints, str(ini))
+        comps = comp_files(tables, joints, [*header_lines(result, forced), *words])
     except (NotACalibration, ExportError) as exc:
         raise BadInput(str(exc)) from None
     comp = (files("orthocal") / COMPONENT_FILE).read_text(encoding="utf-8")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        hal = geometry_hal(machine, header_lines(result, forced))
-        for name, body in ((ini.name, text), (GEOMETRY_HAL, hal), (COMPONENT_FILE, comp)):
-            write_atomic(out / name, body)
-    except OSError as exc:
-        raise BadInput(f"--out: cannot write into {out} ({exc.strerror})") from None
-    print(f"wrote {target}, {out / GEOMETRY_HAL} and {out / COMPONENT_FILE}")
-    # LinuxCNC reads the INI's relative files (HALFILEs, tool table, parameter file)
-    # from the INI's own folder: started from --out it stops at the first HAL file
-    print(f"to use them: copy {ini.name} and {GEOMETRY_HAL} into {ini.parent} (over the "
-          f"INI there), and build the component once: sudo halcompile --install "
-          f"{out / COMPONENT_FILE}")
+    hal = geometry_hal(machine, [*header_lines(result, forced), *words])
+    _write_files(out, {ini.name: text, GEOMETRY_HAL: hal, COMPONENT_FILE: comp, **comps})
+    print(f"wrote {target}, {out / GEOMETRY_HAL} and {out / COMPONENT_FILE}"
+          + "".join(f", {out / name}" for name in comps))
+    # LinuxCNC reads the INI's relative files (HALFILEs, tool table, parameter file,
+    # compensation files) from the INI's own folder: started from --out it stops at
+    # the first HAL file
+    names = [ini.name, GEOMETRY_HAL, *comps]
+    moved = ", ".join(names[:-1]) + f" and {names[-1]}"
+    print(f"to use them: copy {moved} into {ini.parent} (over the INI there), and build "
+          f"the component once: sudo halcompile --install {out / COMPONENT_FILE}")
     return 0
 
 
@@ -118,33 +158,56 @@ def _joints(text: str) -> list[int]:
     return joints
 
 
-def export_main(args: argparse.Namespace) -> int:
-    from station.history.controller_terms import ExportError, csv_lines, linuxcnc
+def _plain(args: argparse.Namespace, result: RunResult, forced: bool,
+           tables: ControllerTables) -> tuple[str, dict[str, str]]:
+    """The export's text and the files beside it (name → text), without --kinematics."""
+    from orthocal.joint_compensation import ROUTES
+    from station.history.controller_terms import csv_lines, linuxcnc
+    from station.history.linuxcnc_comp import comp_files, with_comp_files
     from station.history.twincat import twincat
+    from station.history.twincat_lsec import lsec_lists
+    from station.record.controller_tables import header_words
+    from station.record.exportable import HEADER, header_lines
+
+    tabled = [j.axis for j in tables.tabled]
+    if args.to == "csv":  # the offsets alone: a table is no row of this file
+        words = [f"{HEADER}takes into account: {ROUTES['offsets']}"]
+        if tabled:
+            words.append(f"{HEADER}joint tables ({', '.join(tabled)}): not in this file; "
+                         "export --to linuxcnc or --to twincat writes them")
+        return csv_lines(result, forced, words), {}
+    words = header_words(tables, "offsets")
+    _needs_out(args, tables)
+    header = [*header_lines(result, forced), *words]
+    if args.to == "twincat":
+        axes = args.axes.split(",")
+        text = twincat(result, axes, backlash=args.backlash, forced=forced, words=words,
+                       tabled=tabled)
+        return text, lsec_lists(tables.joints, axes, header)
+    if args.ini is None:
+        raise BadInput("--ini: LinuxCNC takes HOME_OFFSET as a value, not a "
+                       "correction; give the machine's INI file")
+    try:
+        ini_text = Path(args.ini).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise BadInput(f"--ini: cannot read {args.ini} ({exc.strerror})") from None
+    joints = _joints(args.joints)
+    text = linuxcnc(result, ini_text, joints, source=str(args.ini), backlash=args.backlash,
+                    forced=forced, words=words, tabled=tabled)
+    return with_comp_files(text, tables, joints, str(args.ini)), \
+        comp_files(tables, joints, header)
+
+
+def export_main(args: argparse.Namespace) -> int:
+    from station.history.controller_terms import ExportError
 
     _, result = read_result(args.run_dir)
     if args.kinematics:
         return kinematics_export(args, result)
     forced = _may_export(args, result)
+    tables = _tables(result)
     try:
-        if args.to == "csv":
-            text = csv_lines(result, forced)
-        elif args.to == "twincat":
-            text = twincat(result, args.axes.split(","), backlash=args.backlash,
-                           forced=forced)
-        else:
-            if args.ini is None:
-                raise BadInput("--ini: LinuxCNC takes HOME_OFFSET as a value, not a "
-                               "correction; give the machine's INI file")
-            try:
-                ini_text = Path(args.ini).read_text(encoding="utf-8")
-            except OSError as exc:
-                raise BadInput(f"--ini: cannot read {args.ini} ({exc.strerror})") from None
-            joints = [int(j) for j in args.joints.split(",")]
-            if len(joints) != 3:
-                raise BadInput(f"--joints: three joint numbers for x,y,z, got {args.joints}")
-            text = linuxcnc(result, ini_text, joints, source=str(args.ini),
-                            backlash=args.backlash, forced=forced)
+        text, beside = _plain(args, result, forced, tables)
     except ExportError as exc:
         raise BadInput(str(exc)) from None
     except ValueError as exc:
@@ -154,6 +217,8 @@ def export_main(args: argparse.Namespace) -> int:
             Path(args.out).write_text(text, encoding="utf-8")
         except OSError as exc:
             raise BadInput(f"--out: cannot write {args.out} ({exc.strerror})") from None
+        for path in _write_files(Path(args.out).parent, beside):
+            say(f"wrote {path}: copy it beside the controller's configuration")
     else:
         sys.stdout.write(text)
     return 0

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import configparser
 import re
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
 from orthocal import AXES
 from station.record.exportable import HEADER, header_lines
@@ -85,14 +85,17 @@ def home_changes(result: RunResult, controller: str) -> dict[str, float]:
 
 
 def linuxcnc(result: RunResult, ini_text: str, joints: Sequence[int] = (0, 1, 2),
-             source: str = "INI", backlash: bool = False, forced: bool = False) -> str:
+             source: str = "INI", backlash: bool = False, forced: bool = False,
+             words: Sequence[str] = (), tabled: Collection[str] = ()) -> str:
     """The machine's INI ``ini_text`` with each ``[JOINT_n] HOME_OFFSET`` calibrated (the
     new value, the old in a comment above it) and everything else kept as it was,
     under the export's header (station.record.exportable; ``forced``: exported with
-    --force, and why it needed it; an earlier export's header replaced);
-    ``backlash``: BACKLASH too, where the run's reversal stands beyond its noise.
-    Refused where the drive itself holds the offsets the run wrote: the controller
-    would correct the machine twice."""
+    --force, and why it needed it; an earlier export's header replaced) and the
+    header lines ``words`` (what the export takes into account); ``backlash``:
+    BACKLASH too, where the run's reversal stands beyond its noise, except for the
+    joints ``tabled`` (axes), whose compensation file carries the reversal and makes
+    LinuxCNC ignore BACKLASH. Refused where the drive itself holds the offsets the run
+    wrote: the controller would correct the machine twice."""
     home = home_changes(result, "LinuxCNC")
     old = _home_offsets(ini_text, joints, source)
     changes = offset_changes(result)
@@ -106,8 +109,11 @@ def linuxcnc(result: RunResult, ini_text: str, joints: Sequence[int] = (0, 1, 2)
                 f"{final:+.6f} mm (run {result.run_dir}, machine {machine}; a commanded "
                 "rho puts the carriage at rho + o, so HOME_OFFSET moves by -(o change))")
         extra = [_backlash_line(*reversal[axis])] if axis in reversal else []
+        if extra and axis in tabled:
+            extra = ["# BACKLASH not written: the joint's COMP_FILE carries its reversal "
+                     "(LinuxCNC ignores BACKLASH where a joint has a COMP_FILE)"]
         edits[f"JOINT_{joint}"] = (f"HOME_OFFSET = {value:.6f}", [note, *extra])
-    out: list[str] = header_lines(result, forced)
+    out: list[str] = [*header_lines(result, forced), *words]
     section = ""
     for line in ini_text.splitlines():
         if line.startswith(HEADER):
@@ -154,13 +160,14 @@ def _home_offsets(ini_text: str, joints: Sequence[int], source: str) -> dict[int
     return out
 
 
-def csv_lines(result: RunResult, forced: bool = False) -> str:
+def csv_lines(result: RunResult, forced: bool = False, words: Sequence[str] = ()) -> str:
     """One row per axis: the offsets before and after, their change, the reversal;
-    under the export's header as comment lines (``forced``: as in :func:`linuxcnc`)."""
+    under the export's header as comment lines (``forced``, ``words``: as in
+    :func:`linuxcnc`)."""
     changes = offset_changes(result)
     reversal = reversals(result)
     machine = result.machine.id or ""
-    rows = [*header_lines(result, forced),
+    rows = [*header_lines(result, forced), *words,
             "axis,offset_before_mm,offset_final_mm,change_mm,reversal_mm,machine_id,run_dir,"
             "convention"]
     for axis in AXES:

@@ -113,12 +113,16 @@ def _check_kins(lines: list[tuple[str, str]], source: str) -> None:
 
 def kinematics_ini(result: RunResult, machine: IdentifiedMachine, ini_text: str,
                    joints: Sequence[int], source: str, backlash: bool,
-                   read_hal: Callable[[str], str | None], forced: bool = False) -> str:
+                   read_hal: Callable[[str], str | None], forced: bool = False,
+                   words: Sequence[str] = (), tabled: Sequence[str] = ()) -> str:
     """The INI with HOME_OFFSET (as the plain export, or kept where the drive holds
     the offsets), the component as its kinematics and the geometry's HAL file, under
-    the export's header (``forced``: exported with --force, and why it needed it)."""
+    the export's header (``forced``: exported with --force, and why it needed it) and
+    ``words`` (what the export takes into account); ``tabled``: the joints whose
+    compensation file carries their reversal (no BACKLASH for them)."""
     held = machine.offsets_held_by == "controller"
-    text = ini_text if held else linuxcnc(result, ini_text, joints, source, backlash)
+    text = ini_text if held else linuxcnc(result, ini_text, joints, source, backlash,
+                                          tabled=tabled)
     lines = _sections(text)
     _check_kins(lines, source)
     after_hal = _hal_line(lines, read_hal)
@@ -145,7 +149,7 @@ def kinematics_ini(result: RunResult, machine: IdentifiedMachine, ini_text: str,
     if not any(sec == "KINS" and _key(line) == "JOINTS" for sec, line in lines):
         at = max(i for i, line in enumerate(out) if line.startswith("KINEMATICS = "))
         out.insert(at + 1, "JOINTS = 3")
-    header = [*header_lines(result, forced),
+    header = [*header_lines(result, forced), *words,
               f"# orthocal export --kinematics: {machine.describe()}. Build the "
               f"kinematics once: sudo halcompile --install {COMPONENT_FILE}"]
     return "\n".join(header + out) + "\n"

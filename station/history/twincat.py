@@ -35,9 +35,11 @@ REFERENCE = "Reference position for homing (encoder parameter)"
 BACKLASH = "MC_BacklashCompensation.Backlash (Tc2_MC2; axis parameter Position Correction on)"
 
 
-def _header(result: RunResult, machine: str, backlash: bool, forced: bool) -> list[str]:
+def _header(result: RunResult, machine: str, backlash: bool, forced: bool,
+            words: Sequence[str]) -> list[str]:
     lines = [
         *header_lines(result, forced),
+        *words,
         f"# orthocal export for TwinCAT 3 NC: machine {machine}, run {result.run_dir}",
         "# Each row: the NC axis, the joint it drives, the parameter (as TwinCAT XAE names",
         "# it) and what to do with it, in mm.",
@@ -56,18 +58,21 @@ def _header(result: RunResult, machine: str, backlash: bool, forced: bool) -> li
 
 
 def twincat(result: RunResult, axes: Sequence[str] = DEFAULT_AXES,
-            backlash: bool = False, forced: bool = False) -> str:
+            backlash: bool = False, forced: bool = False, words: Sequence[str] = (),
+            tabled: Sequence[str] = ()) -> str:
     """The parameter list of the run ``result`` for the NC ``axes`` of x, y, z;
-    ``backlash``: the backlash compensation too, where the reversal stands out;
-    ``forced``: exported with --force, its header says why it needed it. Refused
-    where the drive holds the offsets the run wrote (home_changes)."""
+    ``backlash``: the backlash compensation too, where the reversal stands out, except
+    for the joints ``tabled`` (axes), whose bilateral leadscrew error compensation
+    list carries the reversal; ``forced``: exported with --force, its header says why
+    it needed it; ``words``: header lines (what the export takes into account).
+    Refused where the drive holds the offsets the run wrote (home_changes)."""
     if len(axes) != len(AXES) or not all(a.strip() for a in axes):
         raise ExportError(f"--axes: three NC axis names for x,y,z, got {','.join(axes)!r}")
     change = home_changes(result, "TwinCAT")
     offsets = offset_changes(result)
     reversal = reversals(result) if backlash else {}
     machine = result.machine.id or "no [machine] id"
-    out = _header(result, machine, backlash, forced)
+    out = _header(result, machine, backlash, forced, words)
     out.append("nc_axis,joint,parameter,change_mm,value_mm,offset_before_mm,"
                "offset_final_mm,machine_id")
     for axis, name in zip(AXES, axes, strict=True):
@@ -76,7 +81,10 @@ def twincat(result: RunResult, axes: Sequence[str] = DEFAULT_AXES,
         out.append(f"{name.strip()},{axis},{REFERENCE},{change[axis]:+.6f},,{tail}")
         if not backlash:
             continue
-        if axis not in reversal:
+        if axis in tabled:
+            out.append(f"# {name.strip()} ({axis}): no backlash: its bilateral leadscrew "
+                       "error compensation list carries the reversal")
+        elif axis not in reversal:
             out.append(f"# {name.strip()} ({axis}): no backlash: the run measured no reversal")
         elif backlash_stands_out(*reversal[axis]):
             out.append(f"{name.strip()},{axis},{BACKLASH},,{reversal[axis][0]:.6f},{tail}")
