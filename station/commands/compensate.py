@@ -84,6 +84,7 @@ def _job(args: argparse.Namespace) -> Job:
     from station.gcode.rewrite import Job
     from station.gcode.soft_bounds import LimitsError, run_limits
     from station.gcode.subdivide import Machine
+    from station.record.controller_tables import NoJointFrame, controller_tables
     from station.record.exportable import ambiguous
     from station.record.identified import NotACalibration, identified_machine
 
@@ -96,6 +97,10 @@ def _job(args: argparse.Namespace) -> Job:
     except (NotACalibration, LimitsError) as exc:
         raise BadInput(str(exc)) from None
     _, result = read_result(args.run)
+    try:
+        tables = controller_tables(result)
+    except NoJointFrame as exc:
+        raise BadInput(f"{args.run}: {exc}") from None
     if (why := ambiguous(result)) is not None:
         # a tilt there may be a bow, which the tool never sees: compensated for, it
         # would move the tool by what the bows only seemed to be (no --force here: a
@@ -106,9 +111,16 @@ def _job(args: argparse.Namespace) -> Job:
     theta = machine.theta_c()
     told = ", ".join(f"{v.name} {t:+.4f} {v.unit}" for v, t in zip(machine.values, theta,
                                                                   strict=True) if t != 0.0)
-    notes = [f"compensated for: {told or 'nothing, the machine is nominal'}"]
+    notes = [f"compensated for: {told or 'nothing, the machine is nominal'}",
+             *tables.words("program")]
+    if tables.tabled:
+        notes.append("each joint's error is taken for the direction the program moves it; "
+                     "where a joint turns back, its point is written twice: reached with "
+                     "the counts of the old direction, left with those of the new, so "
+                     "that the joint takes up its reversal while the tool stands")
     if machine.offsets_held_by == "station":
         notes.append("the run's offsets were held by the station: the controller must hold "
                      "them too (orthocal export) before this program runs")
-    return Job(Machine(machine.geometry, theta), limits, float(args.tolerance),
+    joints = tables.errors() if tables.tabled else None
+    return Job(Machine(machine.geometry, theta, joints), limits, float(args.tolerance),
                np.asarray(args.work_offset, dtype=float), machine.describe(), tuple(notes))

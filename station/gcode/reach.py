@@ -67,6 +67,29 @@ def _halving(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarra
         return np.concatenate([_halving(fn, x[:h]), _halving(fn, x[h:])])
 
 
+def guarded_with(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], x: np.ndarray,
+                 aligned: np.ndarray) -> np.ndarray:
+    """:func:`guarded` of ``fn(rows, their aligned rows)``: each row of ``aligned`` (one
+    per row of x: a segment's directions) handed over with its own row of x."""
+    out = np.full_like(x, np.nan)
+    finite = np.isfinite(x).all(axis=(1, 2))
+    if finite.any():
+        out[finite] = _halving_with(fn, x[finite], aligned[finite])
+    return out
+
+
+def _halving_with(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], x: np.ndarray,
+                  aligned: np.ndarray) -> np.ndarray:
+    try:
+        return fn(x, aligned)
+    except ValueError:
+        if len(x) == 1:
+            return np.full_like(x, np.nan)
+        h = len(x) // 2
+        return np.concatenate([_halving_with(fn, x[:h], aligned[:h]),
+                               _halving_with(fn, x[h:], aligned[h:])])
+
+
 def joints_at(points: np.ndarray, bounds: Bounds) -> np.ndarray:
     """The controller's joints for machine points (..., 3), NaN where out of reach."""
     shape = points.shape

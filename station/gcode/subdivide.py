@@ -22,6 +22,17 @@ The method, adaptive bisection with a conservative chord check:
    point of the programmed path beyond a leg's reach, or a chord the nominal
    kinematics cannot follow, is refused naming its line.
 
+With the joints' tables (``Machine.joints``, docs/design.md "Joint tables in the
+controller") the motions are first cut where a joint turns back
+(station.gcode.directions), so that on each piece every joint moves one way, and each
+piece carries its joints' directions. A point is then sent where the joints counted
+c = (J5) of q = IK_c(p) in those directions put a nominal controller
+(p' = FK_nominal(c)), and the tool between points stands where the joints counted
+ρ(f) put it: FK_c(ρ(f) + ε(ρ(f), dir)), ε linear between the table's targets as the
+joint's own error is taken to be. Where a joint turns back, its count must change by
+its reversal while the tool stays: the point is written twice, reached with the old
+directions' counts and left with the new ones (:func:`subdivide` returns both).
+
 All motions of a program are judged together, in chunks, each step vectorised
 over their points.
 """
@@ -34,10 +45,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthocal import Geometry
+from orthocal import Geometry, JointErrors
 from orthocal.compensation import compensated_points, controller_joints, landed
+from orthocal.joint_compensation import counted_joints, standing
+from orthocal.kinematics import forward
+from station.gcode.directions import piece_directions, turning_points
 from station.gcode.paths import Curves
-from station.gcode.reach import Bounds, guarded, joints_at, refusal, why_out
+from station.gcode.reach import Bounds, guarded, guarded_with, joints_at, refusal, why_out
 from station.gcode.words import GcodeError
 
 FRACTIONS = np.linspace(0.0, 1.0, 9)
@@ -53,10 +67,32 @@ _FIRST_SAGITTA = 0.9
 @dataclass(frozen=True)
 class Machine:
     """The identified machine a program is compensated for: its nominal geometry and
-    θ_c, the 12-vector of PARAM_NAMES a nominal controller is not told."""
+    θ_c, the 12-vector of PARAM_NAMES a nominal controller is not told; ``joints``:
+    each joint's table in the joints the controller commands (None: exact joints)."""
 
     geometry: Geometry
     theta_c: np.ndarray
+    joints: JointErrors | None = None
+
+    def needed(self, p: np.ndarray) -> np.ndarray:
+        """q = IK_c(p): the joints the identified machine needs at machine points p."""
+        return controller_joints(p, self.geometry, self.theta_c)
+
+    def sent(self, p: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """Where to send a nominal controller for machine points ``p`` (m, k, 3),
+        each joint approached in ``dirs`` (m, 3): FK_nominal of the counts (J5)."""
+        if self.joints is None:
+            return compensated_points(p, self.geometry, self.theta_c)
+        q = self.needed(p)
+        c = counted_joints(self.joints, q, np.broadcast_to(dirs[:, None, :], q.shape))
+        return forward(c, self.geometry)
+
+    def tool(self, rho: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """Where the identified machine's tool stands for joints counted ``rho``
+        (m, k, 3) moving in ``dirs`` (m, 3)."""
+        if self.joints is not None:
+            rho = standing(self.joints, rho, np.broadcast_to(dirs[:, None, :], rho.shape))
+        return landed(rho, self.geometry, self.theta_c)
 
 
 @dataclass(frozen=True)
@@ -91,33 +127,43 @@ class _Pending:
     ci: np.ndarray
     ta: np.ndarray
     tb: np.ndarray
+    dirs: np.ndarray  # (m, 3): each joint's direction on the segment (0: no tables)
 
 
 def subdivide(curves: Curves, grid: Grid, machine: Machine, limits: Limits,
               tolerance: float, labels: Sequence[tuple[int, str]]) -> list[np.ndarray]:
     """Per motion, the points to send (program units, rounded; the segments' ends in
-    order, its start not repeated). GcodeError naming the line where the path leaves
-    the workspace or the soft limits, or cannot be kept within ``tolerance`` (mm)."""
+    order, its start not repeated; where a joint turns back, the turning point once
+    more, with the new directions' counts, before the segment that leaves it).
+    GcodeError naming the line where the path leaves the workspace, the soft limits or
+    a joint's table, or cannot be kept within ``tolerance`` (mm)."""
     if not len(curves):
         return []
     pending = _initial(curves, tolerance)
-    kept_ci, kept_ta, kept_end = [], [], []
+    if machine.joints is not None:
+        pending = _directed(pending, curves, grid, machine)
+    kept: list[tuple[np.ndarray, ...]] = []
     while len(pending.ci):
         ok = np.zeros(len(pending.ci), dtype=bool)
-        ends = np.empty((len(pending.ci), 3))
+        ends = np.empty((len(pending.ci), 2, 3))
         for lo in range(0, len(pending.ci), _CHUNK):
             part = slice(lo, lo + _CHUNK)
             ok[part], ends[part] = _judge(curves, grid, machine, limits, tolerance, labels,
                                           pending.ci[part], pending.ta[part],
-                                          pending.tb[part])
-        kept_ci.append(pending.ci[ok])
-        kept_ta.append(pending.ta[ok])
-        kept_end.append(ends[ok])
+                                          pending.tb[part], pending.dirs[part])
+        kept.append((pending.ci[ok], pending.ta[ok], ends[ok], pending.dirs[ok]))
         pending = _halve(pending, ~ok, labels, tolerance)
-    ci, ta, end = (np.concatenate(a) for a in (kept_ci, kept_ta, kept_end))
+    ci, ta, end, dirs = (np.concatenate(a) for a in zip(*kept, strict=True))
     order = np.lexsort((ta, ci))
-    counts = np.bincount(ci, minlength=len(curves))
-    return np.split(end[order], np.cumsum(counts)[:-1])
+    ci, end, dirs = ci[order], end[order], dirs[order]
+    turned = np.zeros(len(ci), dtype=bool)
+    turned[1:] = np.any(dirs[1:] != dirs[:-1], axis=1)  # a joint turns back here
+    points = [[] for _ in range(len(curves))]  # type: list[list[np.ndarray]]
+    for k in range(len(ci)):
+        if turned[k]:
+            points[ci[k]].append(end[k, 0])
+        points[ci[k]].append(end[k, 1])
+    return [np.array(p) for p in points]
 
 
 def _initial(curves: Curves, tolerance: float) -> _Pending:
@@ -135,13 +181,37 @@ def _initial(curves: Curves, tolerance: float) -> _Pending:
     first = np.cumsum(pieces) - pieces
     k = np.arange(len(ci)) - np.repeat(first, pieces)
     n = pieces[ci]
-    return _Pending(ci, k / n, np.where(k + 1 == n, 1.0, (k + 1) / n))
+    return _Pending(ci, k / n, np.where(k + 1 == n, 1.0, (k + 1) / n),
+                    np.zeros((len(ci), 3)))
+
+
+def _directed(pending: _Pending, curves: Curves, grid: Grid, machine: Machine) -> _Pending:
+    """The first cut cut again where a joint turns back, each piece with its joints'
+    directions (station.gcode.directions)."""
+    turns = turning_points(curves, grid.offset,
+                           lambda p: guarded(machine.needed, p[:, None, :])[:, 0])
+    ci, ta, tb = [], [], []
+    for c, a, b in zip(pending.ci, pending.ta, pending.tb, strict=True):
+        inner = turns[c][(turns[c] > a) & (turns[c] < b)]
+        cuts = np.concatenate([[a], inner, [b]])
+        ci += [c] * (len(cuts) - 1)
+        ta += cuts[:-1].tolist()
+        tb += cuts[1:].tolist()
+    ci_a, ta_a, tb_a = np.array(ci, dtype=int), np.array(ta), np.array(tb)
+    at = curves.at(ci_a, np.stack([ta_a, tb_a], axis=1)) + grid.offset
+    q = guarded(machine.needed, at)
+    dirs = piece_directions(q[:, 0], q[:, 1])
+    assert machine.joints is not None
+    tabled = [machine.joints.table(a) is not None for a in "xyz"]
+    # a joint without a table errs alike both ways: its turns change nothing written
+    return _Pending(ci_a, ta_a, tb_a, np.where(tabled, dirs, 0.0))
 
 
 def _halve(bad: _Pending, mask: np.ndarray, labels: Sequence[tuple[int, str]],
            tolerance: float) -> _Pending:
-    """The segments not kept, each halved in t."""
-    ci, ta, tb = bad.ci[mask], bad.ta[mask], bad.tb[mask]
+    """The segments not kept, each halved in t (its directions kept: a joint that moves
+    one way over a segment moves so over its halves)."""
+    ci, ta, tb, dirs = bad.ci[mask], bad.ta[mask], bad.tb[mask], bad.dirs[mask]
     if len(ci) and np.min(tb - ta) * MAX_SEGMENTS < 1.0:
         lineno, label = labels[int(ci[np.argmin(tb - ta)])]
         raise GcodeError(lineno, label, f"the path cannot be kept within {tolerance:g} mm "
@@ -149,18 +219,20 @@ def _halve(bad: _Pending, mask: np.ndarray, labels: Sequence[tuple[int, str]],
                          "kinematics can follow, or the tolerance is too tight")
     mid = (ta + tb) / 2.0
     return _Pending(np.concatenate([ci, ci]), np.concatenate([ta, mid]),
-                    np.concatenate([mid, tb]))
+                    np.concatenate([mid, tb]), np.concatenate([dirs, dirs]))
 
 
 def _judge(curves: Curves, grid: Grid, machine: Machine, limits: Limits, tolerance: float,
            labels: Sequence[tuple[int, str]], ci: np.ndarray, ta: np.ndarray,
-           tb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+           tb: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Which segments keep the tool within the tolerance (and, those kept, within the
-    soft limits), and each segment's end point as written."""
-    g, theta = machine.geometry, machine.theta_c
+    soft limits), and each segment's start and end points as written (m, 2, 3)."""
+    g = machine.geometry
     bounds = _bounds(machine, limits)
     ends = curves.at(ci, np.stack([ta, tb], axis=1)) + grid.offset
-    sent = guarded(lambda p: compensated_points(p, g, theta), ends)
+    if machine.joints is not None:
+        _check_tables(ends, ci, machine, labels)
+    sent = guarded_with(machine.sent, ends, dirs)
     beyond = np.isnan(sent).any(axis=(1, 2))
     if beyond.any():
         k = int(np.argmax(beyond))
@@ -169,18 +241,41 @@ def _judge(curves: Curves, grid: Grid, machine: Machine, limits: Limits, toleran
     sent = grid.machine(ci, written)
     chord = sent[:, :1] + FRACTIONS[None, :, None] * (sent[:, 1:] - sent[:, :1])
     rho = guarded(lambda s: controller_joints(s, g, None), chord)
-    tool = guarded(lambda r: landed(r, g, theta), rho)
+    tool = guarded_with(machine.tool, rho, dirs)
     fractions = ta[:, None] + FRACTIONS[None, :] * (tb - ta)[:, None]
     wanted = curves.at(ci, fractions) + grid.offset
     deviation = np.linalg.norm(tool - wanted, axis=2).max(axis=1)
     ok = deviation <= MARGIN * tolerance  # NaN (a chord beyond reach): halved
     _check_limits(curves, grid, bounds, rho[ok], ci[ok], wanted[ok], labels)
-    return ok, written[:, 1]
+    return ok, written
 
 
 def _bounds(machine: Machine, limits: Limits) -> Bounds:
     return Bounds(machine.geometry, machine.theta_c, limits.lower, limits.upper,
                   limits.source)
+
+
+def _check_tables(ends: np.ndarray, ci: np.ndarray, machine: Machine,
+                  labels: Sequence[tuple[int, str]]) -> None:
+    """GcodeError for the first segment end where a joint would stand outside its
+    table: its error there is not known (a table is never extrapolated). The ends hold
+    every joint's extremes: the motions are cut where a joint turns back."""
+    assert machine.joints is not None
+    q = guarded(machine.needed, ends)
+    for i, axis in enumerate("xyz"):
+        table = machine.joints.table(axis)
+        if table is None:
+            continue
+        lo, hi = table.span
+        with np.errstate(invalid="ignore"):
+            out = np.any((q[..., i] < lo - 1e-9) | (q[..., i] > hi + 1e-9), axis=1)
+        if out.any():
+            k = int(np.argmax(out))
+            lineno, word = labels[int(ci[k])]
+            value = q[k, :, i][np.argmax(np.abs(q[k, :, i] - (lo + hi) / 2))]
+            raise GcodeError(lineno, word, f"joint {axis} would stand at {value:.3f} mm, "
+                             f"outside its table ({lo:.3f} to {hi:.3f} mm, the run's joint "
+                             "test): its error there is not known")
 
 
 def _refuse_point(curves: Curves, grid: Grid, bounds: Bounds,
