@@ -73,14 +73,17 @@ class FakeRig(fake.FakeRig):
 
 
 def fake_config(*, uncertainty: dict[str, Any] | None = None,
-                writeback: dict[str, Any] | None = None, **procedure: Any) -> StationConfig:
+                writeback: dict[str, Any] | None = None,
+                joints: dict[str, Any] | None = None, **procedure: Any) -> StationConfig:
     """The tests' two-gauge station (builders.BASE), coordinated axes, no figures,
     no history store, and what a simulated run starts from (station.commands.
     simulation: SIM_PROCEDURE, offsets up to 3 mm) with these [procedure] keys, and
-    [uncertainty] and [writeback] keys where given."""
+    [uncertainty], [writeback] and [joints] keys where given."""
     sections: dict[str, Any] = {}
     if uncertainty is not None:
         sections["uncertainty"] = uncertainty
+    if joints is not None:
+        sections["joints"] = joints
     return station_config(controller={"motion": "coordinated"},
                           procedure={**SIM_PROCEDURE, **procedure},
                           writeback={"max_abs_offset_mm": 3.0, **(writeback or {})},

@@ -62,15 +62,23 @@ class LinuxCNCFailed(RuntimeError):
 
 @dataclass(frozen=True)
 class Run:
-    """Per target: the joints (``stat.joint[n]["output"]``), the commanded and the
-    actual tool point; the run's wall time from LinuxCNC's start to everything
-    stopped."""
+    """Per target: the joints (``stat.joint[n]["output"]``, before screw
+    compensation), the commanded and the actual tool point, the motors' commands
+    (``joint.N.motor-pos-cmd``) and offsets (``joint.N.motor-offset``); the run's wall
+    time from LinuxCNC's start to everything stopped."""
 
     joints: list[list[float]]
     position: list[list[float]]
     actual_position: list[list[float]]
     kinematics_type: int
     seconds: float
+    motor: list[list[float]]
+    motor_offset: list[list[float]]
+
+    def motor_joints(self) -> list[list[float]]:
+        """motor-pos-cmd less motor-offset: the joint commanded with its compensation."""
+        return [[m - o for m, o in zip(ms, os_, strict=True)]
+                for ms, os_ in zip(self.motor, self.motor_offset, strict=True)]
 
 
 def available() -> bool:
@@ -171,7 +179,8 @@ def mdi(config: Path, targets: Sequence[Sequence[float]], ini: str = "orthoglide
         raise LinuxCNCFailed(f"the MDI display failed: {results['error']}")
     points = results["points"]
     return Run([p["joints"] for p in points], [p["position"] for p in points],
-               [p["actual_position"] for p in points], results["kinematics_type"], seconds)
+               [p["actual_position"] for p in points], results["kinematics_type"], seconds,
+               [p["motor"] for p in points], [p["motor_offset"] for p in points])
 
 
 def _runs_as() -> pwd.struct_passwd | None:

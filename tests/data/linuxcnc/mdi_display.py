@@ -8,9 +8,13 @@ not under the project's virtualenv. It reads the job, ``mdi_job.json`` beside th
 machine up (E-stop reset, machine on, every joint homed), sends each target in MDI
 (G0, or G1 at the feed), waits for the motion to end, records where the joints and the
 tool point stand, and writes ``mdi_results.json`` beside it:
-``{"points": [{"target", "joints", "position", "actual_position"}], "error": null or
-text, "kinematics_type"}``. Every wait has a deadline; any failure is written as
-``error`` and the exit status is 1.
+``{"points": [{"target", "joints", "position", "actual_position", "motor",
+"motor_offset"}], "error": null or text, "kinematics_type"}``. ``joints`` are the
+joints commanded (``joint.N.output``, before screw compensation); ``motor`` the HAL
+pins ``joint.N.motor-pos-cmd`` and ``motor_offset`` ``joint.N.motor-offset``, read
+through a HAL component of its own: motor-pos-cmd less motor-offset is the joint
+commanded with its compensation (a COMP_FILE's trim) added. Every wait has a deadline;
+any failure is written as ``error`` and the exit status is 1.
 """
 
 import json
@@ -18,6 +22,7 @@ import os
 import sys
 import time
 
+import hal
 import linuxcnc
 
 POLL_S = 0.02
@@ -31,6 +36,7 @@ class Failed(Exception):
 class Machine:
     def __init__(self, timeout_s):
         self.timeout_s = timeout_s
+        self.pins = None
         deadline = time.monotonic() + timeout_s
         while True:  # the task's NML channels, normally up before the display starts
             try:
@@ -43,6 +49,21 @@ class Machine:
                 if time.monotonic() > deadline:
                     raise
                 time.sleep(POLL_S)
+
+    def attach_hal(self):
+        """A HAL component of the display's own, so that it may read pins."""
+        self.pins = hal.component("orthocal-mdi-display")
+        self.pins.ready()
+
+    def detach_hal(self):
+        if self.pins is not None:
+            self.pins.exit()
+            self.pins = None
+
+    def motors(self, joints):
+        """(motor-pos-cmd, motor-offset) of each joint."""
+        return ([hal.get_value(f"joint.{n}.motor-pos-cmd") for n in range(joints)],
+                [hal.get_value(f"joint.{n}.motor-offset") for n in range(joints)])
 
     def poll(self):
         self.stat.poll()
@@ -96,19 +117,23 @@ class Machine:
         words = " ".join(f"{a}{v:.17f}" for a, v in zip("XYZ", target, strict=True))
         self.mdi(f"G0 {words}" if feed is None else f"G1 {words} F{feed:.6f}")
         s = self.settled()
+        motor, offset = self.motors(s.joints)
         return {"target": list(target),
                 "joints": [s.joint[n]["output"] for n in range(s.joints)],
                 "position": list(s.position[:3]),
-                "actual_position": list(s.actual_position[:3])}
+                "actual_position": list(s.actual_position[:3]),
+                "motor": motor, "motor_offset": offset}
 
     def settled(self):
         """The status once the feedback stands still: in position is reached a servo
         cycle or two before actual_position (the kinematics' forward of the joints'
-        feedback) has caught up, so two polls in a row must agree (poll() refreshes
-        one stat object: its values are copied to compare)."""
+        feedback) has caught up, and a compensation's trim ramps to its value after the
+        move, so two polls in a row must agree (poll() refreshes one stat object: its
+        values are copied to compare)."""
         def seen(s):
             return (list(s.actual_position[:3]),
-                    [s.joint[n]["output"] for n in range(s.joints)])
+                    [s.joint[n]["output"] for n in range(s.joints)],
+                    self.motors(s.joints))
 
         deadline = time.monotonic() + self.timeout_s
         last = seen(self.poll())
@@ -133,6 +158,7 @@ def run(folder):
     machine = None
     try:
         machine = Machine(float(job.get("timeout_s", 30.0)))
+        machine.attach_hal()
         machine.start()
         out["kinematics_type"] = machine.poll().kinematics_type
         for target in job["targets"]:
@@ -145,6 +171,7 @@ def run(folder):
                 machine.stop()
             except linuxcnc.error as exc:
                 out["error"] = out["error"] or f"E-stop failed: {exc}"
+            machine.detach_hal()
         partial = os.path.join(folder, RESULTS + ".part")
         with open(partial, "w") as f:
             json.dump(out, f)
