@@ -1,7 +1,8 @@
 """How well the after-figures of accuracy at the tool are known (docs/model.md,
-"Accuracy at the tool"): the RMS and max of the field left once offsets are
-written, with a 95 % interval from the parameters' covariance, and the words
-that say what such a figure takes as known (``assumes``).
+"Accuracy at the tool" and "Intervals at the tool"): the RMS and max of the field
+left once offsets are written, with 95 % intervals by Monte Carlo over the inputs'
+joint distribution (orthocal.field_mc), and the words that say what such a figure
+takes as known (``assumes``).
 """
 
 from __future__ import annotations
@@ -20,6 +21,14 @@ from orthocal.accuracy import (
     fitted_field,
     offset_vector,
     parameter_vector,
+    tool_error,
+)
+from orthocal.field_mc import (
+    Bounded,
+    active_columns,
+    field_inputs,
+    figures,
+    parameter_inputs,
 )
 from orthocal.geometry import MODELS, PARAM_NAMES, TILT_NAMES, Geometry
 
@@ -28,23 +37,18 @@ from orthocal.geometry import MODELS, PARAM_NAMES, TILT_NAMES, Geometry
 
 @dataclass(frozen=True, eq=False)
 class AfterInterval:
-    """The predicted after-field (plug-in at the estimate) and 95 % intervals of
-    its RMS and max of |E| (mm) (see :func:`after_interval`)."""
+    """The after-field: ``field`` the plug-in at the estimate, ``rms_mm`` and
+    ``max_mm`` the figures stated for the true machine and their 95 % intervals
+    (mm; see :func:`after_interval`)."""
 
     field: ErrorField
+    rms_mm: float
+    max_mm: float
     rms_interval_mm: tuple[float, float]
     max_interval_mm: tuple[float, float]
     level: float
     dof: float | None
     method: str
-
-    @property
-    def rms_mm(self) -> float:
-        return self.field.rms_mm
-
-    @property
-    def max_mm(self) -> float:
-        return self.field.max_mm
 
     def to_dict(self) -> dict[str, object]:
         """docs/design.md's ``"after"`` object."""
@@ -70,128 +74,94 @@ def field_jacobian(points, geometry: Geometry, params, offsets, frame: str,
     return G
 
 
-def _coverage_factor(p: float, dof: float | None) -> float:
-    """The p-quantile of the standard normal (dof None or infinite) or Student t."""
-    from scipy import special  # imported here (scipy.stats would cost seconds)
+def joint_jacobian(points, geometry: Geometry, params, offsets) -> np.ndarray:
+    """∂E_k/∂q_k (n, 3, 3): the tool's raw error (before the frame) at each point per
+    error of its counted joints (a joint off by e at that point moves the carriage as
+    Δρ does there), central differences of the exact model at ``params``."""
+    p = np.asarray(points, dtype=float)
+    theta = parameter_vector(params)
+    o = offset_vector(offsets)
+    J = np.empty((len(p), 3, 3))
+    for i in range(3):
+        step = np.zeros(len(PARAM_NAMES))
+        step[i] = DIFF_STEP
+        J[:, :, i] = (tool_error(p, geometry, theta + step, o)
+                      - tool_error(p, geometry, theta - step, o)) / (2 * DIFF_STEP)
+    return J
 
-    if dof is None or not np.isfinite(dof):
-        return float(special.ndtri(p))
-    if dof <= 0:
-        raise ValueError(f"dof must be > 0, got {dof}")
-    return float(special.stdtrit(dof, p))
 
-
-def _bounds(G: np.ndarray, cov: np.ndarray, dof: float | None, level: float, draws: int,
-            seed: int) -> dict[str, float]:
-    """The constants of :func:`after_interval` for B = G·Σ^½ (3n × k):
-
-    s_rms: the largest standard deviation of a unit linear functional of the field in
-    the RMS inner product, sqrt(λ_max(BᵀB)/n); q_b: the (1 − α/4) quantile of
-    ‖Bδ‖²_rms; s_pt: the largest standard deviation of the error of one point along
-    any direction, max_k sqrt(λ_max(B_k B_kᵀ)); q_max: the (1 − α/2) quantile of
-    ‖Bδ‖_max. δ ~ t_ν(0, I) (normal when ν is None), seeded Monte Carlo."""
-    w, V = np.linalg.eigh(cov)
-    B = G @ (V * np.sqrt(np.clip(w, 0.0, None)))  # Σ = root·rootᵀ (Σ may be singular)
-    n = G.shape[0] // 3
-    alpha = 1.0 - level
-    M = B.T @ B / n
-    s_rms = float(np.sqrt(max(np.linalg.eigvalsh(M)[-1], 0.0)))
-    Bk = B.reshape(n, 3, -1)
-    point_cov = Bk @ Bk.transpose(0, 2, 1)
-    s_pt = float(np.sqrt(max(np.linalg.eigvalsh(point_cov)[:, -1].max(), 0.0)))
-    rng = np.random.default_rng(seed)
-    z = rng.standard_normal((draws, B.shape[1]))
-    if dof is not None and np.isfinite(dof):
-        if dof <= 0:
-            raise ValueError(f"dof must be > 0, got {dof}")
-        z /= np.sqrt(rng.chisquare(dof, size=(draws, 1)) / dof)
-    b = np.einsum("ij,jk,ik->i", z, M, z)
-    mx = np.empty(draws)
-    for lo in range(0, draws, 500):  # the max norm needs the whole field; in chunks
-        d = (z[lo:lo + 500] @ B.T).reshape(-1, n, 3)
-        mx[lo:lo + 500] = np.sqrt(np.einsum("dnk,dnk->dn", d, d).max(axis=1))
-    return {"s_rms": s_rms, "q_b": float(np.quantile(b, 1.0 - alpha / 4)), "s_pt": s_pt,
-            "q_max": float(np.quantile(mx, 1.0 - alpha / 2))}
+def _law(dof: float | None) -> str:
+    return "normal" if dof is None or not np.isfinite(dof) else f"Student t, {dof:g} dof"
 
 
 def after_interval(params, covariance, dof: float | None, offsets, points,
                    geometry: Geometry | None = None, frame: str = "translation",
                    names: Sequence[str] | None = None, level: float = 0.95,
-                   draws: int = 4000, seed: int = 0) -> AfterInterval:
-    """RMS and max of |E| of the after-field (the machine of the estimate θ̂ =
-    ``params`` with ``offsets`` o written, over ``points``, after ``frame``) and
-    their ``level`` (95 %) intervals for the TRUE machine θ, given the covariance
-    Σ of θ̂ (9×9 with zeros where not estimated, a dict by name, or k×k with
-    ``names``: :func:`covariance_matrix`) with ``dof`` degrees of freedom (Student
-    t; None: Σ known, normal).
+                   draws: int = 4000, seed: int = 0, *, systematic=None,
+                   bounded: Bounded | Sequence[Bounded] = (), field_errors=None,
+                   joint_errors=None, in_truth: Sequence[str] = ()) -> AfterInterval:
+    """RMS and max of |E| of the field of the TRUE machine θ with ``offsets`` o
+    written, over ``points``, after ``frame``, and their ``level`` (95 %) intervals,
+    from the estimate θ̂ = ``params`` and the joint distribution of its error δ =
+    θ̂ − θ (docs/model.md, "Intervals at the tool"; orthocal.field_mc):
 
-    Method: a confidence bound that holds for every θ, not plug-in Monte Carlo.
-    Let F(θ) be the fitted field (3n-vector), linear over Σ: F(θ̂) = F(θ) + B·δ,
-    B = G·Σ^½ with G = ∂F/∂θ over the estimated parameters (:func:`field_jacobian`)
-    and δ ~ t_ν(0, I) (normal: ν None). Write r = ‖F(θ)‖ (the truth), T = ‖F(θ̂)‖
-    (the plug-in), ⟨·,·⟩ and ‖·‖ the RMS inner product and norm over the points,
-    u = F(θ)/r, a = ⟨u, B·δ⟩, whose standard deviation is at most s, the largest
-    over unit directions (s² = λ_max(BᵀB)/n). Exactly, T² = r² + 2·r·a + ‖B·δ‖².
+    - ``covariance`` Σ (9×9 or 12×12 with zeros where not estimated, a dict by name,
+      or k×k with ``names``: :func:`covariance_matrix`) with ``dof`` (Student t, one
+      χ² per draw; None: normal): the statistical part;
+    - ``systematic``: a systematic part known by its covariance alone (any form
+      :func:`covariance_matrix` takes; normal, infinite dof);
+    - ``bounded``: bounded systematic inputs over the parameters (a :class:`Bounded`
+      or several; each input uniform in ±its bound), e.g. the legs' form through
+      the fit's sensitivity (orthocal.budget.form_columns);
+    - ``field_errors``, ``joint_errors``: errors of the true machine the estimate does
+      not hold, drawn per draw: the tool's raw error (before the frame), and the
+      counted joints' positioning error at each point's joints (through
+      :func:`joint_jacobian`); each a callable ``(rng, draws) -> (draws, n, 3)`` mm, a
+      :class:`Bounded` over the 3n values (x, y, z of each point), or a list of them;
+    - ``in_truth``: the parameters (names) whose error is the true machine's, not the
+      plug-in's: their value in ``params`` is an aim this estimate was used to reach
+      (offsets written from it, no verification since: Δρ's names). The others'
+      error is in the plug-in, whose norm it biases upward, and the interval inverts
+      the plug-in's noncentral distribution there (orthocal.field_mc).
 
-    - upper end: T ≥ ⟨u, F(θ̂)⟩ = r + a (Cauchy–Schwarz), so r ≤ T + z_{1−α/2}·s
-      fails with probability ≤ α/2;
-    - lower end: T² ≤ r² + 2·r·z_{1−α/4}·s + q_b fails with probability ≤ α/2
-      (union of a > z·s and ‖B·δ‖² > q_b, q_b its 1 − α/4 quantile, Monte Carlo),
-      so r ≥ sqrt(z²s² + T² − q_b) − z·s, and r ≥ 0 only when T² ≤ q_b.
+    The field is linear in δ over the draws' size (F(θ̂ − δ) = F(θ̂) − G·δ, G =
+    :func:`field_jacobian`; docs/model.md states the tolerance against the exact
+    model). The same call states the before-figures: θ̂ at the start, o = 0.
 
-    So the interval covers with probability ≥ level whatever θ is, to the accuracy
-    of the linearisation (µm and hundredths of a mrad: negligible). z from Student
-    t with ν dof (normal when ν is None). Near a field of zero T is larger than r
-    (the bias of a norm: plug-in Monte Carlo around θ̂ then misses a small truth
-    almost always); here the lower end is 0 whenever T is within the noise. For a
-    large field it is T − z·s … T + z·s up to a term q_b/(2T): as wide as the delta
-    method when the field lies along the most uncertain direction, wider by
-    s / s_u otherwise.
-
-    Max of |E|, the same way with the max norm: upper r ≤ T + z_{1−α/2}·s_pt (s_pt
-    the largest standard deviation of one point's error along any direction;
-    T ≥ the landed error at the true worst point along its direction), lower
-    r ≥ T − q_max (reverse triangle inequality, q_max the 1 − α/2 quantile of
-    max_k |(B·δ)_k|).
-
-    It holds for the parameters Σ describes: anything not estimated (zero rows of
-    Σ) is taken as exactly the value in ``params``; :func:`assumes` says so. When
-    the model test kept 'rho', the tilts it could not see can be carried by giving
-    the rho+tilt fit's tilt block of Σ with the tilts at 0 in ``params``."""
+    A parameter no input moves is taken as exactly the value in ``params``;
+    :func:`assumes` says so. When the model test kept 'rho', the tilts it could not
+    see can be carried by giving the rho+tilt fit's tilt block of Σ with the tilts at
+    0 in ``params``."""
     geometry = geometry or Geometry()
-    if not 0 < level < 1:
-        raise ValueError(f"level must lie in (0, 1), got {level}")
     theta = parameter_vector(params)
     cov = covariance_matrix(covariance, names)
-    if not np.all(np.isfinite(cov)):
-        raise ValueError("covariance has non-finite entries")
-    columns = [c for c in range(len(PARAM_NAMES)) if cov[c, c] > 0]
+    sys_cov = None if systematic is None else covariance_matrix(systematic)
+    kept = [bounded] if isinstance(bounded, Bounded) else list(bounded)
+    for c in (cov, sys_cov):
+        if c is not None and not np.all(np.isfinite(c)):
+            raise ValueError("covariance has non-finite entries")
     p = np.asarray(points, dtype=float)
     o = offset_vector(offsets)
     fld = error_field(p, geometry, theta, o, frame)
-    alpha = 1.0 - level
-    T, Tm = fld.rms_mm, fld.max_mm
-    if columns:
-        G = field_jacobian(p, geometry, theta, o, frame, columns)
-        k = _bounds(G, cov[np.ix_(columns, columns)], dof, level, draws, seed)
-        z_up = _coverage_factor(1.0 - alpha / 2, dof)
-        z_lo = _coverage_factor(1.0 - alpha / 4, dof)
-        zs = z_lo * k["s_rms"]
-        rms_lo = 0.0 if T**2 <= k["q_b"] else float(np.sqrt(zs**2 + T**2 - k["q_b"]) - zs)
-        rms_iv = (max(rms_lo, 0.0), T + z_up * k["s_rms"])
-        max_iv = (max(Tm - k["q_max"], 0.0), Tm + z_up * k["s_pt"])
-    else:
-        rms_iv, max_iv = (T, T), (Tm, Tm)
-    law = "normal" if dof is None or not np.isfinite(dof) else f"Student t, {dof:g} dof"
+    columns = active_columns(cov, sys_cov, kept)
+    G = field_jacobian(p, geometry, theta, o, frame, columns)
+    fields = field_inputs(p, frame, field_errors, joint_errors,
+                          lambda: joint_jacobian(p, geometry, theta, o))
+    unknown = set(in_truth) - set(PARAM_NAMES)
+    if unknown:
+        raise ValueError(f"in_truth: unknown parameter name(s) {sorted(unknown)}")
+    inputs = parameter_inputs(G, columns, cov, dof, systematic=sys_cov, bounded=kept,
+                              fields=fields,
+                              observed=[n not in in_truth for n in PARAM_NAMES])
+    fig = figures(fld.field, inputs, level, draws, seed)
     return AfterInterval(
-        field=fld,
-        rms_interval_mm=rms_iv,
-        max_interval_mm=max_iv,
-        level=level,
-        dof=None if dof is None or not np.isfinite(dof) else float(dof),
-        method=("Cauchy-Schwarz bound over all directions of the parameter error, "
-                f"linearised ({law}; Monte Carlo quantiles, {draws} draws)"),
-    )
+        field=fld, rms_mm=fig.rms_mm, max_mm=fig.max_mm,
+        rms_interval_mm=fig.rms_interval_mm, max_interval_mm=fig.max_interval_mm,
+        level=level, dof=None if dof is None or not np.isfinite(dof) else float(dof),
+        method=("Monte Carlo over the inputs' joint distribution (GUM Supplement 1), the "
+                f"field linearised ({_law(dof)}; bounded inputs rectangular; {draws} draws); "
+                "the interval inverts the plug-in's noncentral distribution, so it reaches "
+                "a field near zero"))
 
 
 # --- what the figure takes as known ---------------------------------------------------
@@ -245,5 +215,5 @@ def assumes(model: str, frame: str = "translation", tilt_interval: Mapping | Non
                    "(the least-squares rigid motion is removed)")
     law = f"Student t with {dof:g} dof" if dof is not None and np.isfinite(dof) else "normal"
     out.append(f"the 95 % intervals propagate the fit's covariance ({law}) through the exact "
-               "model, linearised, and hold only under the assumptions above")
+               "model, linearised, by Monte Carlo, and hold only under the assumptions above")
     return out

@@ -99,9 +99,10 @@ def statement(points: np.ndarray, frame: str, *, drho_now: Mapping[str, float],
           if not names[0].startswith("dL")),
         "ΔL = 0 (leg lengths nominal; not identified beside the tilts and gaps from two "
         "stops per leg); a leg 0.1 mm long changes the field",
-        "the figure is what the identification's statistical error leaves, the legs "
-        "straight; " + (form_words.replace("after-figures", "figures") if form_words
-                        else "no systematic error is stated"),
+        "the figures are the mean and 95 % interval of what the identification's error "
+        "leaves; " + (form_words.replace("the 95 % intervals of the after-figures",
+                                         "they") if form_words
+                      else "no systematic error is stated"),
         "orthocal compensate adds at most its --tolerance (default 1 µm) along the path",
     ]
     return Compensated(

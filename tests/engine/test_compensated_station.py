@@ -56,12 +56,18 @@ def test_the_geometry_in_the_controller_takes_the_tool_to_a_micrometre(held_out)
 
 
 def test_the_prediction_says_what_the_hidden_machine_does(held_out) -> None:
+    """The figure is the mean over everything the run states, the legs' form within the
+    stated 2 µm included, and the hidden legs are straight: the truth lies inside the
+    interval, the figure never below it by more than 20 % + 1 µm (it would promise what
+    the machine does not do), and the interval is a useful size (not the 25 µm a
+    normal of the legs' worst case gave whatever the machine)."""
     comp = held_out["accuracy"]["compensated"]
     true = true_figures(held_out)
     predicted = 1000 * comp["rms_mm"]
-    assert abs(predicted - true["rms"]) <= 0.2 * true["rms"] + 1.0
     lo, hi = (1000 * v for v in comp["rms_interval_95_mm"])
     assert lo <= true["rms"] <= hi
+    assert lo <= predicted <= hi and predicted >= true["rms"] - (0.2 * true["rms"] + 1.0)
+    assert hi < 8.0
     assert comp["told"] == ["drho_x", "drho_y", "drho_z", "tilt_yx", "tilt_zx", "tilt_zy",
                             "gap_xy", "gap_xz", "gap_yz"]
     assert sorted(comp["nominal"]) == ["dL_x", "dL_y", "dL_z"]
