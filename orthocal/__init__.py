@@ -23,6 +23,7 @@ from orthocal.budget import (
     budget_sources,
     combine,
     expected_lack_of_fit,
+    form_columns,
     form_vector,
     propagation,
 )
@@ -33,6 +34,7 @@ from orthocal.calibration import (
     statistical_floor,
     tilt_coefficient,
 )
+from orthocal.field_mc import Bounded
 from orthocal.geometry import (
     AXES,
     BOW_NAMES,
@@ -83,6 +85,7 @@ __all__ = [
     "TILT_NAMES",
     "AfterInterval",
     "Allowance",
+    "Bounded",
     "ErrorField",
     "ExpectedLackOfFit",
     "Geometry",
@@ -119,6 +122,7 @@ __all__ = [
     "field_jacobian",
     "field_stats",
     "fit_frame",
+    "form_columns",
     "form_vector",
     "forward",
     "identify",

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from orthocal.field_mc import Bounded
 from orthocal.geometry import AXES, Geometry, split_params
 from orthocal.identification import Identification
 from orthocal.measurement import Key, bow_at, contact_fraction, row_planes
@@ -194,11 +195,11 @@ def _per(value, names: Sequence, what: str) -> dict:
     return {n: _non_negative(value[n], what) for n in names}
 
 
-def _plane_forms(prop: Propagation, straightness
+def _plane_units(prop: Propagation, straightness
                  ) -> tuple[dict[str, float], dict[Gauge, np.ndarray]]:
-    """(each leg's straightness s, each gauge plane's deviations per one standard
-    uncertainty of its bow, g_p·u with u = s/√3: :func:`form_vector` on the plane's
-    keys). ``straightness`` as for :func:`straightness_sources`."""
+    """(each leg's straightness s, each gauge plane's deviations per unit sagitta of
+    its bow, g_p: :func:`form_vector` on the plane's keys). ``straightness`` as for
+    :func:`straightness_sources`."""
     legs = list(dict.fromkeys(g[0] for g in prop.gauges))
     if isinstance(straightness, Sequence):
         if len(straightness) != len(AXES):
@@ -206,7 +207,16 @@ def _plane_forms(prop: Propagation, straightness
         straightness = dict(zip(AXES, straightness, strict=True))
     s_of = _per(straightness, legs, "leg straightness")
     g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
-    return s_of, {gg: g * prop.mask(gg) * s_of[gg[0]] / math.sqrt(3.0) for gg in prop.gauges}
+    return s_of, {gg: g * prop.mask(gg) for gg in prop.gauges}
+
+
+def _plane_forms(prop: Propagation, straightness
+                 ) -> tuple[dict[str, float], dict[Gauge, np.ndarray]]:
+    """(each leg's straightness s, each gauge plane's deviations per one standard
+    uncertainty of its bow, g_p·u with u = s/√3). ``straightness`` as for
+    :func:`straightness_sources`."""
+    s_of, units = _plane_units(prop, straightness)
+    return s_of, {gg: g * s_of[gg[0]] / math.sqrt(3.0) for gg, g in units.items()}
 
 
 def straightness_sources(prop: Propagation, straightness) -> list[Source]:
@@ -249,6 +259,33 @@ def form_covariance(prop: Propagation, straightness) -> np.ndarray:
     v = sum(w, np.zeros(len(prop.names)))
     return np.outer(v, v) + sum((np.outer(x, x) for x in w),
                                 np.zeros((len(prop.names), len(prop.names))))
+
+
+def form_columns(prop: Propagation, straightness, alike: float = 0.0) -> Bounded:
+    """The legs' form as what it is, bounded systematic inputs of the identified
+    parameters (docs/model.md, "Intervals at the tool"): the bow of gauge plane p of
+    leg i has a sagitta h_p within ±s_i and moves the parameters by h_p·K·g_p (g_p:
+    :func:`form_vector` on the plane's keys, K the identification's sensitivity).
+
+    h_p = s_i·(a·u₀ + (1 − a)·u_p), a = ``alike``, u₀ and each u_p uniform in ±1 and
+    independent: a = 0 (default) every plane's bow rectangular and independent of the
+    others'; a = 1 every plane bowed alike (a uniform bow reads exactly as tilts);
+    between, that share of each bound common to all planes. |h_p| ≤ s_i either way.
+    Columns over ``prop.names``: one per gauge plane in ``prop.gauges`` order (bound
+    (1 − a)·s_i), then, for a > 0, the shared one Σ_p K·g_p·s_i (bound a).
+    ``straightness`` as for :func:`straightness_sources`. For a = 0 their covariance,
+    Σ_p K·g_p·(K·g_p)ᵀ·s_i²/3, is :func:`form_covariance`'s per-plane part."""
+    if not 0.0 <= float(alike) <= 1.0:
+        raise ValueError(f"alike must lie in [0, 1], got {alike!r}")
+    s_of, units = _plane_units(prop, straightness)
+    cols = [prop.K @ g for g in units.values()]
+    bounds = [(1.0 - alike) * s_of[gg[0]] for gg in units]
+    if alike > 0:
+        cols.append(sum((c * s_of[gg[0]] for c, gg in zip(cols, units, strict=True)),
+                        np.zeros(len(prop.names))))
+        bounds.append(float(alike))
+    return Bounded(np.column_stack(cols) if cols else np.zeros((len(prop.names), 0)),
+                   np.array(bounds), tuple(prop.names))
 
 
 def _per_deviation(prop: Propagation, name: str, distribution: str, value_of: dict,

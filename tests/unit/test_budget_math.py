@@ -32,6 +32,8 @@ from orthocal.budget import (
     budget_sources,
     combine,
     expected_lack_of_fit,
+    form_columns,
+    form_covariance,
     form_vector,
     mpe_sources,
     plunger_angle_source,
@@ -330,6 +332,34 @@ def test_each_source_is_its_gum_formula(fit):
     assert src.value_mm == pytest.approx(half)
     want = np.sqrt((K**2).sum(axis=1)) * half / math.sqrt(3)
     assert list(src.contributions.values()) == pytest.approx(want, rel=1e-12)
+
+
+def test_the_form_as_bounded_inputs_is_each_planes_bow(fit):
+    """form_columns: one column K·g_p per gauge plane, bound the leg's straightness
+    (rectangular, for the tool's Monte Carlo); their covariance is form_covariance's
+    per-plane part, the planes' sum its shared bow; alike = 1 is that shared bow alone,
+    drawn within ±s like every plane's."""
+    prop = propagation(fit, G)
+    s = 0.010
+    b = form_columns(prop, s)
+    g = form_vector(list(prop.keys), G, fit.vector)
+    assert b.names == tuple(prop.names) and b.columns.shape == (len(prop.names), 6)
+    for col, gauge in zip(b.columns.T, prop.gauges, strict=True):
+        assert col == pytest.approx(prop.K @ (g * prop.mask(gauge)), rel=1e-12)
+    assert np.all(b.bounds == s)
+    per_plane = b.columns @ np.diag(b.bounds**2 / 3) @ b.columns.T
+    shared = b.columns.sum(axis=1) * s / math.sqrt(3)
+    assert form_covariance(prop, s) == pytest.approx(per_plane + np.outer(shared, shared),
+                                                     rel=1e-12)
+    alike = form_columns(prop, s, alike=1.0)
+    assert np.all(alike.bounds[:6] == 0) and alike.bounds[6] == 1.0
+    assert alike.columns[:, 6] == pytest.approx(b.columns.sum(axis=1) * s, rel=1e-12)
+    half = form_columns(prop, [0.004, 0.010, 0.006], alike=0.5)
+    legs = [gauge[0] for gauge in prop.gauges]
+    assert half.bounds[:6] == pytest.approx([0.5 * {"x": 0.004, "y": 0.010, "z": 0.006}[leg]
+                                             for leg in legs])
+    with pytest.raises(ValueError, match="alike"):
+        form_columns(prop, s, alike=1.5)
 
 
 def test_a_source_given_zero_contributes_zero(fit):
