@@ -366,7 +366,7 @@ class _Confidence:
     (Xie and Singh 2013), on nodes: C⁻¹(½) is the median-unbiased λ, and C⁻¹(α/2) …
     C⁻¹(1 − α/2) the Neyman interval of λ from the statistic's noncentral
     distribution over the draws. ``floor``: C⁻¹ for t = a zero field's median
-    statistic (None where it cannot matter)."""
+    statistic, where t is below it (None otherwise: it cannot matter)."""
 
     lam: np.ndarray
     c: np.ndarray
@@ -392,9 +392,8 @@ def _confidence(stat: Callable[[np.ndarray], np.ndarray], t: float, scale: float
         values[0] = zero
     c = np.maximum.accumulate(np.mean(values >= t, axis=1))
     c[-1] = 1.0  # every draw is above t there (triangle inequality)
-    floor = None
-    if t > null and bottom <= (null + reach) / scale:
-        floor = _confidence(stat, null, scale, reach, nodes, zero)
+    # below a zero field's median the upper end is that median's (C⁻¹ falls with t)
+    floor = _confidence(stat, null, scale, reach, nodes, zero) if t < null else None
     return _Confidence(lam, c, floor)
 
 

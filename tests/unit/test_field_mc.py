@@ -144,6 +144,21 @@ def test_a_zero_field_within_the_noise_reaches_zero_and_the_plug_in_does_not(gri
                                    "max_interval_95_mm"}
 
 
+def test_a_plug_in_below_the_noise_keeps_the_noises_upper_end(grid) -> None:
+    """An estimate exactly on the square machine (a plug-in of zero, below what the
+    noise alone leaves almost always): the interval is not the point 0 it would
+    claim, its upper end is the one a zero field's median plug-in gets (power-
+    constrained), a plug-in at the noise's level gets no less."""
+    zero = after_interval(np.zeros(12), COV, None, None, grid, G, seed=3)
+    assert zero.rms_interval_mm[0] == 0.0 and zero.rms_interval_mm[1] > 0.5 * UM
+    assert zero.max_interval_mm[1] > zero.rms_interval_mm[1]
+    rng = np.random.default_rng(8)
+    noisy = [after_interval(np.r_[0, 0, 0, 0, 0, 0, rng.standard_normal(6) * SE[6:]], COV,
+                            None, None, grid, G, seed=3) for _ in range(5)]
+    assert zero.rms_interval_mm[1] <= min(iv.rms_interval_mm[1] for iv in noisy) * 1.02
+    ordered(zero)
+
+
 def test_a_large_field_is_plain_s1(grid) -> None:
     """Far from zero the interval is plain S1's (the truth F(θ̂ − δ), δ drawn; its
     probabilistically symmetric interval) within the Monte Carlo's own scatter."""
