@@ -19,9 +19,10 @@ Per figure (:func:`figures`), with v = F̂/‖F̂‖ and F_s = λ·v: the same d
 distribution of the plug-in's figure at λ (noncentral: the plug-in of a norm is
 biased upward by the noise, and plain S1, F̂ − N, misses a truth near zero), hence λ's
 confidence distribution C(λ) = P_λ(figure ≥ observed); λ_d = C⁻¹(u_d) paired with the
-truth's draws gives the predictive distribution of the truth's figure. Its mean is
-the value, its 97.5 % point the upper end (never below a zero field's: power-
-constrained), and the lesser of its 2.5 % point and the truth's at C⁻¹(2.5 %) the lower.
+truth's draws gives the predictive distribution of the truth's figure (a plug-in
+below a zero field's median figure read as that median: power-constrained). Its mean
+is the value, its 97.5 % point the upper end, and the lesser of its 2.5 % point and the
+truth's at C⁻¹(2.5 %) the lower.
 
 With no N_o it is plain S1 (the probabilistically symmetric interval of the draws);
 with no N_t the Neyman interval of λ; for a large field both are F̂'s figure ± the
@@ -365,12 +366,10 @@ class _Confidence:
     """λ's confidence distribution from a statistic of the plug-in, C(λ) = P_λ(stat ≥ t)
     (Xie and Singh 2013), on nodes: C⁻¹(½) is the median-unbiased λ, and C⁻¹(α/2) …
     C⁻¹(1 − α/2) the Neyman interval of λ from the statistic's noncentral
-    distribution over the draws. ``floor``: C⁻¹ for t = a zero field's median
-    statistic, where t is below it (None otherwise: it cannot matter)."""
+    distribution over the draws."""
 
     lam: np.ndarray
     c: np.ndarray
-    floor: _Confidence | None = None
 
     def at(self, p):
         """C⁻¹(p) (p a number or an array); a mass at the lowest node (0 when it is 0)
@@ -379,12 +378,15 @@ class _Confidence:
 
 
 def _confidence(stat: Callable[[np.ndarray], np.ndarray], t: float, scale: float,
-                reach: float, nodes: int, zero: np.ndarray | None = None) -> _Confidence:
-    """:class:`_Confidence` of ``stat`` observed at ``t``; stat(λ) lies within
-    scale·λ ± ``reach`` (triangle inequality), so the nodes span only what that
-    leaves possible."""
-    zero = stat(np.zeros(1))[0] if zero is None else zero
-    null = float(np.median(zero))
+                reach: float, nodes: int) -> _Confidence:
+    """:class:`_Confidence` of ``stat`` observed at ``t``, read as no less than a zero
+    field's median statistic (a power-constrained limit, Cowan, Cranmer, Gross and
+    Vitells 2011: below it C⁻¹ would shrink with the noise's luck, to a point at 0 for
+    a plug-in of nothing; the upper end never claims less than what the noise alone
+    leaves). stat(λ) lies within scale·λ ± ``reach`` (triangle inequality), so the
+    nodes span only what that leaves possible."""
+    zero = stat(np.zeros(1))[0]
+    t = max(t, float(np.median(zero)))
     bottom = max(0.0, (t - reach) / scale)
     lam = np.linspace(bottom, (t + reach) / scale + 1e-12, nodes)
     values = stat(lam)
@@ -392,9 +394,7 @@ def _confidence(stat: Callable[[np.ndarray], np.ndarray], t: float, scale: float
         values[0] = zero
     c = np.maximum.accumulate(np.mean(values >= t, axis=1))
     c[-1] = 1.0  # every draw is above t there (triangle inequality)
-    # below a zero field's median the upper end is that median's (C⁻¹ falls with t)
-    floor = _confidence(stat, null, scale, reach, nodes, zero) if t < null else None
-    return _Confidence(lam, c, floor)
+    return _Confidence(lam, c)
 
 
 def _figure(conf: _Confidence | None, truth: Callable[[np.ndarray], np.ndarray],
@@ -404,12 +404,11 @@ def _figure(conf: _Confidence | None, truth: Callable[[np.ndarray], np.ndarray],
     plug-in's scale): ``paired(λ)`` the truth's draws each at its own λ_d,
     ``truth(λs)`` its draws at each of the λs. The predictive distribution: λ_d =
     C⁻¹(u_d) paired at random with the truth's draws (Shen, Liu and Xie 2018); its
-    mean (JCGM 101, 5.1.1: the estimate is the expectation) and upper quantile (never
-    below a zero field's, the floor), and as lower end the lesser of its lower quantile
-    and the truth's lower quantile at λ's lower end. The predictive alone is exact
-    where the figure is linear in both errors (a large field: plug-in ± z·s, plain
-    S1's); near zero its λ_d ≥ 0 only lift the truth, so the lower end takes the
-    union's there."""
+    mean (JCGM 101, 5.1.1: the estimate is the expectation) and upper quantile, and as
+    lower end the lesser of its lower quantile and the truth's lower quantile at λ's
+    lower end. The predictive alone is exact where the figure is linear in both errors
+    (a large field: plug-in ± z·s, plain S1's); near zero its λ_d ≥ 0 only lift the
+    truth, so the lower end takes the union's there."""
     p = (1.0 - level) / 2.0, (1.0 + level) / 2.0
     if conf is None:
         x = paired(np.full(len(u), plug_in))
@@ -417,8 +416,6 @@ def _figure(conf: _Confidence | None, truth: Callable[[np.ndarray], np.ndarray],
     else:
         x = paired(conf.at(u))
         lo, hi = np.quantile(x, p)
-        if conf.floor is not None:
-            hi = max(hi, float(np.quantile(paired(conf.floor.at(u)), p[1])))
         lo = min(lo, float(np.quantile(truth(np.array([float(conf.at(p[0]))]))[0], p[0])))
     # the mean lies inside but where a tail is extreme: then the nearer end
     return float(np.clip(np.mean(x), lo, hi)), float(lo), float(hi)
