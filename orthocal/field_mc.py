@@ -43,6 +43,9 @@ from orthocal.geometry import PARAM_NAMES
 FieldDraws = Callable[[np.random.Generator, int], np.ndarray]
 #: Draws per chunk: a chunk's fields are draws × 3n floats (about 8 MB on the 7³ grid).
 CHUNK = 1000
+#: The power-constrained limit's threshold: a plug-in is read as no less than a zero
+#: field's figure at this quantile (Cowan et al. 2011 propose 0.16, one σ below the median).
+POWER = 0.16
 #: Nodes of λ at which a statistic's distribution is drawn (C(λ) between them linear).
 RMS_NODES, MAX_NODES = 65, 13
 
@@ -380,13 +383,12 @@ class _Confidence:
 def _confidence(stat: Callable[[np.ndarray], np.ndarray], t: float, scale: float,
                 reach: float, nodes: int) -> _Confidence:
     """:class:`_Confidence` of ``stat`` observed at ``t``, read as no less than a zero
-    field's median statistic (a power-constrained limit, Cowan, Cranmer, Gross and
-    Vitells 2011: below it C⁻¹ would shrink with the noise's luck, to a point at 0 for
-    a plug-in of nothing; the upper end never claims less than what the noise alone
-    leaves). stat(λ) lies within scale·λ ± ``reach`` (triangle inequality), so the
-    nodes span only what that leaves possible."""
+    field's statistic at its POWER quantile (a power-constrained limit, Cowan, Cranmer,
+    Gross and Vitells 2011: below it C⁻¹ would shrink with the noise's luck, to a
+    point at 0 for a plug-in of nothing). stat(λ) lies within scale·λ ± ``reach``
+    (triangle inequality), so the nodes span only what that leaves possible."""
     zero = stat(np.zeros(1))[0]
-    t = max(t, float(np.median(zero)))
+    t = max(t, float(np.quantile(zero, POWER)))
     bottom = max(0.0, (t - reach) / scale)
     lam = np.linspace(bottom, (t + reach) / scale + 1e-12, nodes)
     values = stat(lam)

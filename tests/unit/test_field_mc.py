@@ -147,8 +147,8 @@ def test_a_zero_field_within_the_noise_reaches_zero_and_the_plug_in_does_not(gri
 def test_a_plug_in_below_the_noise_keeps_the_noises_upper_end(grid) -> None:
     """An estimate exactly on the square machine (a plug-in of zero, below what the
     noise alone leaves almost always): the interval is not the point 0 it would
-    claim, its upper end is the one a zero field's median plug-in gets (power-
-    constrained), a plug-in at the noise's level gets no less."""
+    claim, its upper end is the one a zero field's plug-in at its 16 % point gets
+    (power-constrained), and a plug-in at the noise's level gets no less."""
     zero = after_interval(np.zeros(12), COV, None, None, grid, G, seed=3)
     assert zero.rms_interval_mm[0] == 0.0 and zero.rms_interval_mm[1] > 0.5 * UM
     assert zero.max_interval_mm[1] > zero.rms_interval_mm[1]
