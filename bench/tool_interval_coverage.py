@@ -18,7 +18,7 @@ Regimes (the tilted and gapped machine: tilts (0.2, 0.1, −0.15) mrad, gaps (0.
   Student t in the draws) and the tilts off by a bounded form-like input (rectangular,
   ±0.01 mrad per column);
 * ``after-large-lead``: the same, and the joints' lead errors within ±20 µm/m, in the
-  truth only (the joint_errors hook);
+  truth only (the joint_draws hook);
 * ``after-square``: offsets alone on the square machine (~0.4 µm RMS: near zero);
 * ``after-written-square``: the square machine, its offsets written from this very
   estimate (Δρ's error in the truth: ``in_truth``);
@@ -100,7 +100,7 @@ def trial(regime: str, k: int, rng: np.random.Generator, grid: np.ndarray, draws
         kw["in_truth"] = DRHO
     if regime == "after-large-lead":
         cols = lead_columns(grid, o)
-        kw["joint_errors"] = Bounded(cols, [LEAD] * 3)
+        kw["joint_draws"] = Bounded(cols, [LEAD] * 3)
         e = (cols @ rng.uniform(-LEAD, LEAD, 3)).reshape(-1, 3)
         landed = forward(inverse(grid, G) + o + e, G, truth[:3], None, truth[6:9], truth[9:])
         true = field_stats(fit_frame(grid, landed - grid))

@@ -114,10 +114,12 @@ def compensated_field(points, geometry: Geometry, truth, theta_c,
 
 
 def truth_jacobian(points, geometry: Geometry, truth, theta_c, frame: str,
-                   columns) -> np.ndarray:
+                   columns, joint_errors: JointErrors | None = None,
+                   direction: Direction = "mean") -> np.ndarray:
     """∂ fit_frame(E_c)/∂θ over the real machine's parameters ``columns`` (3n ×
     len(columns), mm per mm or mrad), the controller's joints held: central
-    differences (h = DIFF_STEP) of the exact forward kinematics."""
+    differences (h = DIFF_STEP) of the exact forward kinematics; ``joint_errors``
+    and ``direction`` as for :func:`landed`."""
     p = np.asarray(points, dtype=float)
     rho = controller_joints(p, geometry, theta_c)
     theta = parameter_vector(truth)
@@ -125,8 +127,8 @@ def truth_jacobian(points, geometry: Geometry, truth, theta_c, frame: str,
     for k, c in enumerate(columns):
         step = np.zeros(len(PARAM_NAMES))
         step[c] = DIFF_STEP
-        plus = fit_frame(p, landed(rho, geometry, theta + step) - p, frame)
-        minus = fit_frame(p, landed(rho, geometry, theta - step) - p, frame)
+        plus, minus = (fit_frame(p, landed(rho, geometry, t, joint_errors, direction) - p,
+                                 frame) for t in (theta + step, theta - step))
         G[:, k] = (plus - minus).ravel() / (2 * DIFF_STEP)
     return G
 
@@ -149,10 +151,13 @@ class CompensatedInterval:
     method: str
 
 
-def joint_jacobian(points, geometry: Geometry, truth, theta_c) -> np.ndarray:
+def joint_jacobian(points, geometry: Geometry, truth, theta_c,
+                   joint_errors: JointErrors | None = None,
+                   direction: Direction = "mean") -> np.ndarray:
     """∂E_c,k/∂q_k (n, 3, 3): the tool's raw error at each point per error of the real
     machine's counted joints at the controller's joints IK_c(p), central differences
-    of the exact forward kinematics at ``truth``."""
+    of the exact forward kinematics at ``truth`` (``joint_errors`` and ``direction``
+    as for :func:`landed`)."""
     p = np.asarray(points, dtype=float)
     rho = controller_joints(p, geometry, theta_c)
     theta = parameter_vector(truth)
@@ -160,8 +165,9 @@ def joint_jacobian(points, geometry: Geometry, truth, theta_c) -> np.ndarray:
     for i in range(3):
         step = np.zeros(len(PARAM_NAMES))
         step[i] = DIFF_STEP
-        J[:, :, i] = (landed(rho, geometry, theta + step)
-                      - landed(rho, geometry, theta - step)) / (2 * DIFF_STEP)
+        J[:, :, i] = (landed(rho, geometry, theta + step, joint_errors, direction)
+                      - landed(rho, geometry, theta - step, joint_errors, direction)
+                      ) / (2 * DIFF_STEP)
     return J
 
 
@@ -169,8 +175,9 @@ def compensated_interval(theta_c, estimate, covariance, dof: float | None, point
                          geometry: Geometry | None = None, frame: str = "translation",
                          systematic=None, level: float = 0.95, draws: int = 4000,
                          seed: int = 0, absent=None, *,
-                         bounded: Bounded | Sequence[Bounded] = (), field_errors=None,
-                         joint_errors=None) -> CompensatedInterval:
+                         bounded: Bounded | Sequence[Bounded] = (), field_draws=None,
+                         joint_draws=None, joint_errors: JointErrors | None = None,
+                         direction: Direction = "mean") -> CompensatedInterval:
     """The tool error (K3) a controller with the machine ``theta_c`` leaves on the
     real machine, which the run knows as ``estimate`` (12-vector: θ_c where the
     controller was told a parameter, the run's best value where it was not), with
@@ -179,9 +186,10 @@ def compensated_interval(theta_c, estimate, covariance, dof: float | None, point
     ``covariance`` (any form :func:`covariance_matrix` takes; Student t on ``dof``,
     None: normal), ``systematic`` a systematic part known by its covariance alone
     (normal), ``bounded`` rectangular ones over the parameters (e.g. the legs' form,
-    orthocal.budget.form_columns), ``field_errors`` and ``joint_errors`` the real
+    orthocal.budget.form_columns), ``field_draws`` and ``joint_draws`` the real
     machine's further errors as :func:`orthocal.tool_interval.after_interval` takes
-    them (the joints' through :func:`joint_jacobian`).
+    them (the joints' through :func:`joint_jacobian`); ``joint_errors`` and
+    ``direction`` the real machine's joint tables as known (:func:`landed`).
 
     Linearised in the real machine's error δ: F(θ) = F₀ − G·δ, F₀ the fitted field
     at the estimate (zero where the controller was told everything), G
@@ -204,11 +212,12 @@ def compensated_interval(theta_c, estimate, covariance, dof: float | None, point
         if c is not None and not np.all(np.isfinite(c)):
             raise ValueError("covariance has non-finite entries")
     p = np.asarray(points, dtype=float)
-    base = compensated_field(p, geometry, estimate, theta_c, frame)
+    base = compensated_field(p, geometry, estimate, theta_c, frame, joint_errors, direction)
     columns = active_columns(cov, sys_cov, kept)
-    G = truth_jacobian(p, geometry, estimate, theta_c, frame, columns)
-    fields = field_inputs(p, frame, field_errors, joint_errors,
-                          lambda: joint_jacobian(p, geometry, estimate, theta_c))
+    G = truth_jacobian(p, geometry, estimate, theta_c, frame, columns, joint_errors,
+                       direction)
+    fields = field_inputs(p, frame, field_draws, joint_draws, lambda: joint_jacobian(
+        p, geometry, estimate, theta_c, joint_errors, direction))
     observed = np.zeros(len(PARAM_NAMES), dtype=bool) if absent is None else \
         np.asarray(absent, dtype=bool)
     inputs = parameter_inputs(G, columns, cov, dof, systematic=sys_cov, bounded=kept,

@@ -233,10 +233,10 @@ def active_columns(covariance: np.ndarray, systematic: np.ndarray | None,
     return [int(c) for c in np.flatnonzero(act)]
 
 
-def field_inputs(points, frame: str, field_errors, joint_errors,
+def field_inputs(points, frame: str, field_draws, joint_draws,
                  joint_jacobian: Callable[[], np.ndarray]) -> tuple[FieldDraws | Bounded, ...]:
     """The truth's further field errors as :class:`Inputs` takes them, in ``frame``:
-    ``field_errors`` the tool's raw error (before the frame) and ``joint_errors`` the
+    ``field_draws`` the tool's raw error (before the frame) and ``joint_draws`` the
     joints' positioning error at each point's joints, each a :data:`FieldDraws`
     ((draws, n, 3) mm), a :class:`Bounded` over the 3n values, or a sequence of them;
     ``joint_jacobian()`` (n, 3, 3) ∂E_k/∂q_k, the tool's raw error per joint error at
@@ -247,9 +247,9 @@ def field_inputs(points, frame: str, field_errors, joint_errors,
     def listed(x) -> list:
         return [] if x is None else [x] if isinstance(x, Bounded) or callable(x) else list(x)
 
-    joints = listed(joint_errors)
+    joints = listed(joint_draws)
     J = joint_jacobian() if joints else None
-    return tuple([_framed(item, "field", None, project, n) for item in listed(field_errors)]
+    return tuple([_framed(item, "field", None, project, n) for item in listed(field_draws)]
                  + [_framed(item, "joint", J, project, n) for item in joints])
 
 

@@ -31,6 +31,7 @@ from orthocal.field_mc import (
     parameter_inputs,
 )
 from orthocal.geometry import MODELS, PARAM_NAMES, TILT_NAMES, Geometry
+from orthocal.joint_error import Direction, JointErrors
 
 # --- uncertainty of the after-field --------------------------------------------------
 
@@ -58,9 +59,11 @@ class AfterInterval:
 
 
 def field_jacobian(points, geometry: Geometry, params, offsets, frame: str,
-                   columns: Sequence[int]) -> np.ndarray:
+                   columns: Sequence[int], joint_errors: JointErrors | None = None,
+                   direction: Direction = "mean") -> np.ndarray:
     """∂ fit_frame(E)/∂θ_c (3n × len(columns), mm per mm or mrad), central
-    differences (h = 1e-4) of the exact model at ``params``, offsets fixed."""
+    differences (h = 1e-4) of the exact model at ``params``, offsets fixed;
+    ``joint_errors`` and ``direction`` as for orthocal.accuracy.tool_error."""
     p = np.asarray(points, dtype=float)
     theta = parameter_vector(params)
     o = offset_vector(offsets)
@@ -68,16 +71,19 @@ def field_jacobian(points, geometry: Geometry, params, offsets, frame: str,
     for k, c in enumerate(columns):
         step = np.zeros(len(PARAM_NAMES))
         step[c] = DIFF_STEP
-        plus = fitted_field(p, geometry, theta + step, o, frame)
-        minus = fitted_field(p, geometry, theta - step, o, frame)
+        plus = fitted_field(p, geometry, theta + step, o, frame, joint_errors, direction)
+        minus = fitted_field(p, geometry, theta - step, o, frame, joint_errors, direction)
         G[:, k] = (plus - minus).ravel() / (2 * DIFF_STEP)
     return G
 
 
-def joint_jacobian(points, geometry: Geometry, params, offsets) -> np.ndarray:
+def joint_jacobian(points, geometry: Geometry, params, offsets,
+                   joint_errors: JointErrors | None = None,
+                   direction: Direction = "mean") -> np.ndarray:
     """∂E_k/∂q_k (n, 3, 3): the tool's raw error (before the frame) at each point per
     error of its counted joints (a joint off by e at that point moves the carriage as
-    Δρ does there), central differences of the exact model at ``params``."""
+    Δρ does there), central differences of the exact model at ``params``
+    (``joint_errors`` and ``direction`` as for orthocal.accuracy.tool_error)."""
     p = np.asarray(points, dtype=float)
     theta = parameter_vector(params)
     o = offset_vector(offsets)
@@ -85,8 +91,9 @@ def joint_jacobian(points, geometry: Geometry, params, offsets) -> np.ndarray:
     for i in range(3):
         step = np.zeros(len(PARAM_NAMES))
         step[i] = DIFF_STEP
-        J[:, :, i] = (tool_error(p, geometry, theta + step, o)
-                      - tool_error(p, geometry, theta - step, o)) / (2 * DIFF_STEP)
+        J[:, :, i] = (tool_error(p, geometry, theta + step, o, joint_errors, direction)
+                      - tool_error(p, geometry, theta - step, o, joint_errors, direction)
+                      ) / (2 * DIFF_STEP)
     return J
 
 
@@ -98,8 +105,10 @@ def after_interval(params, covariance, dof: float | None, offsets, points,
                    geometry: Geometry | None = None, frame: str = "translation",
                    names: Sequence[str] | None = None, level: float = 0.95,
                    draws: int = 4000, seed: int = 0, *, systematic=None,
-                   bounded: Bounded | Sequence[Bounded] = (), field_errors=None,
-                   joint_errors=None, in_truth: Sequence[str] = ()) -> AfterInterval:
+                   bounded: Bounded | Sequence[Bounded] = (), field_draws=None,
+                   joint_draws=None, in_truth: Sequence[str] = (),
+                   joint_errors: JointErrors | None = None,
+                   direction: Direction = "mean") -> AfterInterval:
     """RMS and max of |E| of the field of the TRUE machine θ with ``offsets`` o
     written, over ``points``, after ``frame``, and their ``level`` (95 %) intervals,
     from the estimate θ̂ = ``params`` and the joint distribution of its error δ =
@@ -113,11 +122,16 @@ def after_interval(params, covariance, dof: float | None, offsets, points,
     - ``bounded``: bounded systematic inputs over the parameters (a :class:`Bounded`
       or several; each input uniform in ±its bound), e.g. the legs' form through
       the fit's sensitivity (orthocal.budget.form_columns);
-    - ``field_errors``, ``joint_errors``: errors of the true machine the estimate does
+    - ``field_draws``, ``joint_draws``: errors of the true machine the estimate does
       not hold, drawn per draw: the tool's raw error (before the frame), and the
-      counted joints' positioning error at each point's joints (through
+      counted joints' positioning error ε at each point's joints (through
       :func:`joint_jacobian`); each a callable ``(rng, draws) -> (draws, n, 3)`` mm, a
-      :class:`Bounded` over the 3n values (x, y, z of each point), or a list of them;
+      :class:`Bounded` over the 3n values (x, y, z of each point), or a list of them.
+      A draw of joint tables (orthocal.joint_error.JointErrors, one per draw) is
+      ``lambda rng, d: np.stack([draw(rng).error(x, direction) for _ in range(d)])``
+      with x the points' joint inputs IK_nominal(p) + o;
+    - ``joint_errors``, ``direction``: the joints' tables as known, in the plug-in and
+      the Jacobians (orthocal.accuracy.tool_error; None: exact joints);
     - ``in_truth``: the parameters (names) whose error is the true machine's, not the
       plug-in's: their value in ``params`` is an aim this estimate was used to reach
       (offsets written from it, no verification since: Δρ's names). The others'
@@ -142,11 +156,11 @@ def after_interval(params, covariance, dof: float | None, offsets, points,
             raise ValueError("covariance has non-finite entries")
     p = np.asarray(points, dtype=float)
     o = offset_vector(offsets)
-    fld = error_field(p, geometry, theta, o, frame)
+    fld = error_field(p, geometry, theta, o, frame, joint_errors, direction)
     columns = active_columns(cov, sys_cov, kept)
-    G = field_jacobian(p, geometry, theta, o, frame, columns)
-    fields = field_inputs(p, frame, field_errors, joint_errors,
-                          lambda: joint_jacobian(p, geometry, theta, o))
+    G = field_jacobian(p, geometry, theta, o, frame, columns, joint_errors, direction)
+    fields = field_inputs(p, frame, field_draws, joint_draws, lambda: joint_jacobian(
+        p, geometry, theta, o, joint_errors, direction))
     unknown = set(in_truth) - set(PARAM_NAMES)
     if unknown:
         raise ValueError(f"in_truth: unknown parameter name(s) {sorted(unknown)}")

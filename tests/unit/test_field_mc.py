@@ -15,6 +15,7 @@ from orthocal import Geometry, workspace_grid
 from orthocal.accuracy import error_field, fitted_field, tool_error
 from orthocal.compensation import compensated_field, compensated_interval, truth_jacobian
 from orthocal.field_mc import Bounded, Inputs, figures, frame_projection
+from orthocal.joint_error import JointErrors
 from orthocal.kinematics import forward, inverse
 from orthocal.tool_interval import after_interval, field_jacobian, joint_jacobian
 
@@ -231,7 +232,7 @@ def test_a_lead_error_is_a_field_error_drawn_per_draw(grid) -> None:
     only_x = np.zeros((len(grid) * 3, 1))
     only_x[:, 0] = lead_columns(grid)[:, 0]
     iv = after_interval(np.zeros(12), np.zeros((12, 12)), None, None, grid, G, draws=4000,
-                        seed=2, joint_errors=Bounded(only_x, [b]))
+                        seed=2, joint_draws=Bounded(only_x, [b]))
     J = joint_jacobian(grid, G, np.zeros(12), None)
     unit = frame_projection(grid, "translation")(
         np.einsum("kij,kj->ki", J, only_x[:, 0].reshape(-1, 3)))
@@ -245,9 +246,9 @@ def test_a_lead_error_is_a_field_error_drawn_per_draw(grid) -> None:
     def draw(rng: np.random.Generator, n: int) -> np.ndarray:
         return (rng.uniform(-b, b, (n, 3)) @ lead_columns(grid).T).reshape(n, -1, 3)
     every = after_interval(np.zeros(12), np.zeros((12, 12)), None, None, grid, G, draws=4000,
-                           seed=2, joint_errors=Bounded(lead_columns(grid), [b] * 3))
+                           seed=2, joint_draws=Bounded(lead_columns(grid), [b] * 3))
     called = after_interval(np.zeros(12), np.zeros((12, 12)), None, None, grid, G,
-                            draws=4000, seed=5, joint_errors=draw)
+                            draws=4000, seed=5, joint_draws=draw)
     assert called.rms_interval_mm == pytest.approx(every.rms_interval_mm, rel=0.05)
     assert called.max_interval_mm == pytest.approx(every.max_interval_mm, rel=0.05)
     ordered(called)
@@ -255,9 +256,37 @@ def test_a_lead_error_is_a_field_error_drawn_per_draw(grid) -> None:
     scale = np.zeros((len(grid) * 3, 1))
     scale[0::3, 0] = grid[:, 0]
     fe = after_interval(np.zeros(12), np.zeros((12, 12)), None, None, grid, G, draws=4000,
-                        seed=2, field_errors=Bounded(scale, [b]))
+                        seed=2, field_draws=Bounded(scale, [b]))
     x = grid[:, 0] - grid[:, 0].mean()
     assert fe.rms_interval_mm[1] == pytest.approx(0.975 * b * np.sqrt(np.mean(x**2)), rel=0.05)
+
+
+def test_a_draw_of_joint_tables_is_a_joint_draw(grid) -> None:
+    """The joints' tables (orthocal.joint_error) reach the interval two ways: a table
+    known is in the plug-in (the field error_field gives with it), and a table drawn
+    per draw (a lead within ±50 µm/m on each screw, homed at Π0) is the joint_draws
+    hook, the same distribution as the lead's bounded columns."""
+    b = 50.0  # µm/m
+    x = inverse(grid, G)
+    span = (float(x.min()) - 1.0, float(x.max()) + 1.0)
+
+    def draw(rng: np.random.Generator, n: int) -> np.ndarray:
+        return np.stack([JointErrors.screws(G, span, rng.uniform(-b, b, 3)).error(x)
+                         for _ in range(n)])
+    tables = after_interval(np.zeros(12), np.zeros((12, 12)), None, None, grid, G,
+                            draws=1000, seed=4, joint_draws=draw)
+    columns = after_interval(np.zeros(12), np.zeros((12, 12)), None, None, grid, G,
+                             draws=1000, seed=4, joint_draws=Bounded(lead_columns(grid),
+                                                                     [1e-6 * b] * 3))
+    assert tables.rms_interval_mm == pytest.approx(columns.rms_interval_mm, rel=0.06)
+    assert tables.max_interval_mm == pytest.approx(columns.max_interval_mm, rel=0.06)
+    known = JointErrors.screws(G, span, (30.0, -20.0, 10.0))
+    iv = after_interval(MACHINE, COV, None, None, grid, G, joint_errors=known)
+    plug = error_field(grid, G, MACHINE, None, joint_errors=known)
+    assert iv.field.rms_mm == plug.rms_mm != error_field(grid, G, MACHINE, None).rms_mm
+    comp = compensated_interval(MACHINE, MACHINE, COV, None, grid, G, joint_errors=known)
+    assert comp.field.rms_mm == compensated_field(grid, G, MACHINE, MACHINE,
+                                                  joint_errors=known).rms_mm > 1e-3
 
 
 def test_bad_inputs_are_named() -> None:
@@ -270,6 +299,6 @@ def test_bad_inputs_are_named() -> None:
     pts = workspace_grid(None, 3, G).points
     with pytest.raises(ValueError, match="joint errors"):
         after_interval(np.zeros(12), np.zeros((12, 12)), None, None, pts, G,
-                       joint_errors=Bounded(np.zeros((3, 1)), [1.0]))
+                       joint_draws=Bounded(np.zeros((3, 1)), [1.0]))
     with pytest.raises(ValueError, match="dof"):
         after_interval(MACHINE, COV, -1, None, pts, G)

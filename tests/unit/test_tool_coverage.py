@@ -87,7 +87,7 @@ def simulate(regime: str, runs: int, grid: np.ndarray, seed: int
             landed = forward(inverse(grid, G) + e, G, truth[:3], None, truth[6:9], truth[9:])
             true = field_stats(fit_frame(grid, landed - grid))
             iv = after_interval(est, cov, dof, None, grid, G, draws=500, seed=k,
-                                joint_errors=Bounded(lead_columns(grid), [LEAD] * 3))
+                                joint_draws=Bounded(lead_columns(grid), [LEAD] * 3))
         else:
             f = error_field(grid, G, truth, None)
             true = (f.rms_mm, f.max_mm)
