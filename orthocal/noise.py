@@ -14,6 +14,7 @@ import numpy as np
 
 from orthocal.inputs import flatten_deviations
 from orthocal.measurement import Key
+from orthocal.postures import split_plane
 
 # Consecutive cycles share their Π0 stop (station.engine.sequencer): a per-cycle
 # deviation P − (Z_before + Z_after)/2 has variance 1.5·s² with s² the variance
@@ -23,12 +24,15 @@ _SAME_CYCLE, _ADJACENT_CYCLE = 0.5 / 1.5, 0.25 / 1.5
 SHARED_ZERO_LAG1 = _ADJACENT_CYCLE  # = 1/6, station.engine.sequencer.SHARED_P0_CORRELATION
 
 
-def _gauge_rows(keys: Sequence[Key]) -> list[tuple[tuple[str, str], int]]:
-    """(gauge, cycle index) of each row: a key's repeats are its cycles in order."""
+def _gauge_rows(keys: Sequence[Key]) -> list[tuple[tuple[str, str, float], int]]:
+    """(gauge, cycle index) of each row: a key's repeats are its cycles in order. A
+    gauge is its leg, direction and plane: read in a second plane (``"+@0.75"``) it
+    was mounted there in setups of its own, with Π0 readings of their own, and shares
+    none with its rows at the leg's middle."""
     count: dict[Key, int] = {}
     rows = []
     for key in keys:
-        rows.append(((key[1], key[2]), count.get(key, 0)))
+        rows.append(((key[1], key[2], split_plane(key[0])[1]), count.get(key, 0)))
         count[key] = count.get(key, 0) + 1
     return rows
 
@@ -68,7 +72,7 @@ def _row_correlation(keys: Sequence[Key], shared_zero: bool) -> np.ndarray:
     C = np.eye(n)
     if shared_zero and n > 1:
         rows = _gauge_rows(keys)
-        ids: dict[tuple[str, str], int] = {}
+        ids: dict[tuple[str, str, float], int] = {}
         gauge = np.array([ids.setdefault(g, len(ids)) for g, _ in rows])
         cycle = np.array([c for _, c in rows])
         same = gauge[:, None] == gauge[None, :]
