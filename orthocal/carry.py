@@ -29,8 +29,9 @@ as the prior holds what the data cannot tell.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -103,9 +104,15 @@ def carried(own: Identification, geometry: Geometry, names: Sequence[str],
     new = cov @ rhs
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     params = {n: float(v) for n, v in zip(own.names, new, strict=True)}
+    # ∂θ'/∂ℓ_p = C'·Pᵀ·Σ_p⁻¹ for this prior; a prior ``own`` already carried enters
+    # through θ̂, which θ' takes with the gain C'·C⁻¹ (docs/model.md, (14))
+    gain = np.zeros((len(own.names), len(own.names)))
+    gain[:, idx] = cov[:, idx] @ prior_info
+    if own.prior_gain is not None:
+        gain += cov @ info @ own.prior_gain
     joined = replace(own, parameters=params,
                      std_errors={n: float(s) for n, s in zip(own.names, std, strict=True)},
-                     covariance=cov, correlation=cov / np.outer(std, std))
+                     covariance=cov, correlation=cov / np.outer(std, std), prior_gain=gain)
     if own.method != "nonlinear":
         return joined
     model_values = deviations(list(own.keys), geometry, joined.fit_vector, own.mount_offsets)
@@ -165,6 +172,7 @@ def joined_fit(deviations_in: Mapping | Sequence, geometry: Geometry, model: str
     cov = (cov + cov.T) / 2.0
     std = np.sqrt(np.diag(cov))
     residuals = y - model_values
+    gain = cov @ info  # ∂θ'/∂ℓ_p at the solution: (JᵀJ/σ² + I_p)⁻¹·Pᵀ·Σ_p⁻¹, (14)
     dof = len(y) - len(cols)
     predicted: dict = {}
     for key, value in zip(keys, model_values, strict=True):
@@ -178,7 +186,7 @@ def joined_fit(deviations_in: Mapping | Sequence, geometry: Geometry, model: str
         sigma=float(np.sqrt(residuals @ residuals / dof)) if dof > 0 else float("nan"),
         dof=dof, condition_number=condition, keys=tuple(keys), values=y,
         residuals=residuals, predicted=predicted, converged=converged,
-        prior=PriorWeight(information=info, sigma=float(sigma)))
+        prior=PriorWeight(information=info, sigma=float(sigma)), prior_gain=gain)
 
 
 def _condition(H: np.ndarray, names: Sequence[str]) -> float:
@@ -212,3 +220,53 @@ def prior_floor(ident: Identification, geometry: Geometry) -> dict[str, float]:
     H = FLOOR_REPEATS * (J.T @ J) / ident.prior.sigma**2 + ident.prior.information
     C = np.linalg.inv(H)
     return {n: float(np.sqrt(max(C[i, i], 0.0))) for i, n in enumerate(ident.names)}
+
+
+@dataclass(frozen=True)
+class CarriedPrior:
+    """How the prior a round carried was made and how it entered the round's Δρ: the
+    prior ℓ_p (over ``names``) is Σ_s W_s·ℓ_s over earlier, independent fits ℓ_s
+    (``weights``: source key → W_s, len(names) × the source's size: its own names for
+    a fit carried whole, the pooling weights Σ_p·Σ_s⁻¹ for a pool), and it moves the
+    round's Δρ by ``gain``·δℓ_p (3 × len(names): Δρ's rows of the fit's prior_gain)."""
+
+    names: tuple[str, ...]
+    gain: np.ndarray
+    weights: Mapping[Any, np.ndarray]
+
+
+def drho_gain(ident: Identification, names: Sequence[str]) -> np.ndarray:
+    """∂Δρ/∂ℓ_p of a fit that carried a prior over ``names`` (3 × len(names); zeros for
+    a fit that carried none): the Δρ rows of its ``prior_gain``."""
+    out = np.zeros((3, len(names)))
+    if ident.prior_gain is None:
+        return out
+    rows = [ident.names.index(f"drho_{a}") for a in "xyz"]
+    for c, name in enumerate(names):
+        if name in ident.names:
+            out[:, c] = ident.prior_gain[rows, ident.names.index(name)]
+    return out
+
+
+def cross_covariance(k: CarriedPrior, r: CarriedPrior | None,
+                     own_r: Mapping[Any, np.ndarray],
+                     source_cov: Callable[[Any, Any], np.ndarray | None]) -> np.ndarray:
+    """Cov(Δρ̂_k, Δρ̂_r) (3 × 3) of a round k that carried the prior ``k`` and an earlier
+    round r (``r``: the prior it carried, None if none), docs/model.md, (14):
+
+        Cov(Δρ̂_k, Δρ̂_r) = G_k · Σ_s W_ks · Cov(ℓ_s, Δρ̂_r),
+        Cov(ℓ_s, Δρ̂_r) = X_s,rᵀ + Σ_s' Cov(ℓ_s, ℓ_s')·W_rs'ᵀ·G_rᵀ
+
+    k's own data being independent of everything before it. ``own_r``: X_s,r =
+    Cov(Δρ̂_r, ℓ_s) (3 × the source's size) for each source s that round r's own data
+    made; ``source_cov(s, s')``: Cov(ℓ_s, ℓ_s') of two sources, None where independent."""
+    total = np.zeros((len(k.names), 3))
+    for s, W in k.weights.items():
+        with_r = np.zeros((W.shape[1], 3)) if s not in own_r else np.asarray(own_r[s]).T
+        if r is not None:
+            for s2, W2 in r.weights.items():
+                c = source_cov(s, s2)
+                if c is not None:
+                    with_r = with_r + c @ W2.T @ r.gain.T
+        total += W @ with_r
+    return k.gain @ total

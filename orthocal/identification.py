@@ -100,6 +100,12 @@ class Identification:
     #: An earlier measurement of some parameters joined into this fit as
     #: pseudo-observations (orthocal.carry.joined_fit), None for the data's alone.
     prior: PriorWeight | None = None
+    #: How an earlier measurement joined into this fit (orthocal.carry: ``carried``,
+    #: ``joined_fit``) moves it: ∂θ/∂ℓ_p over ``names`` × ``names``, nonzero only in the
+    #: columns of the prior's names, so that the prior's error enters the parameters as
+    #: prior_gain · δℓ_p (docs/model.md, "Rounds that carry an earlier round", (14)).
+    #: None for the data's alone.
+    prior_gain: np.ndarray | None = None
 
     @property
     def std_error_dof(self) -> float:

@@ -146,18 +146,48 @@ def shown_within(parameters: Mapping[str, float], std_errors: Mapping[str, float
     return out
 
 
+def joined_axis(value: float, se: float | None, previous: float, previous_se: float | None,
+                covariance: float, k: float) -> tuple[float, float, float] | None:
+    """One axis of a round's Δρ̂ (``value``, ``se``) joined with what the rounds before
+    said of the same joint (``previous``, already moved by the offsets written since,
+    ``previous_se``), the two sharing ``covariance`` (mm²: what a carried prior makes
+    them share, docs/model.md (14); 0 for independent rounds): the GUM combination
+    (1 − λ)·a + λ·b with the least variance,
+
+        λ = (se² − c) / (se² + se_p² − 2c),  clipped to [0, 1],
+        u² = (1 − λ)²·se² + λ²·se_p² + 2·λ·(1 − λ)·c
+
+    (inverse variance where c = 0). Returns (value, standard error, λ), or None where
+    either has no standard error, or the two disagree beyond ``k`` standard errors of
+    their difference, √(se² + se_p² − 2c): the write did not move the joint as written,
+    or a round's model is wrong, and the round alone is what the machine shows."""
+    if se is None or previous_se is None or se <= 0 or previous_se <= 0:
+        return None
+    c = float(np.clip(covariance, -se * previous_se, se * previous_se))
+    spread = se**2 + previous_se**2 - 2.0 * c
+    if spread <= 0.0:  # one and the same measurement: nothing to join
+        return None
+    if abs(value - previous) > k * math.sqrt(spread):
+        return None
+    lam = min(max((se**2 - c) / spread, 0.0), 1.0)
+    var = (1 - lam) ** 2 * se**2 + lam**2 * previous_se**2 + 2 * lam * (1 - lam) * c
+    return (1 - lam) * value + lam * previous, math.sqrt(max(var, 0.0)), lam
+
+
 def joined_with_previous(values: Mapping[str, float], std_errors: Mapping[str, float | None],
                          previous: Mapping[str, float], previous_std_errors:
                          Mapping[str, float | None], moved: Mapping[str, float],
-                         k: float) -> tuple[dict[str, float], dict[str, float | None]]:
+                         k: float, covariance: Mapping[str, float] | None = None
+                         ) -> tuple[dict[str, float], dict[str, float | None]]:
     """A verification's Δρ̂ joined with what the round before it knew of the same
     joints: that round's Δρ̂ moved by the offsets written since (``moved``, mm per
     writable name: the write-back read back, o_new − o_old, which moves Δρ by as
-    much). Two independent measurements of one quantity, per axis by inverse
-    variance: se² = 1/(1/se² + 1/se_prev²). An axis whose two disagree beyond ``k``
-    standard errors of their difference is not joined: the write did not move the
-    joint as written, or a round's model is wrong, and the verification alone is
-    what the machine shows. An axis without a standard error in either: this one's."""
+    much), per axis by :func:`joined_axis`: by inverse variance, se² = 1/(1/se² +
+    1/se_prev²), where the two are independent; with ``covariance`` (mm² per name:
+    what the two share, a prior the round carried) the GUM combination with it. An
+    axis whose two disagree beyond ``k`` standard errors of their difference is not
+    joined: the verification alone is what the machine shows. An axis without a
+    standard error in either: this one's."""
     out_v: dict[str, float] = {}
     out_se: dict[str, float | None] = {}
     for name in WRITABLE:
@@ -165,15 +195,13 @@ def joined_with_previous(values: Mapping[str, float], std_errors: Mapping[str, f
             continue
         v, se = float(values[name]), finite(std_errors.get(name))
         out_v[name], out_se[name] = v, se
-        prev_se = finite(previous_std_errors.get(name))
-        if se is None or prev_se is None or name not in previous or se <= 0 or prev_se <= 0:
+        if name not in previous:
             continue
         p = float(previous[name]) + float(moved.get(name, 0.0))
-        if abs(v - p) > k * math.hypot(se, prev_se):
-            continue
-        w, w_p = 1.0 / se**2, 1.0 / prev_se**2
-        out_v[name] = (w * v + w_p * p) / (w + w_p)
-        out_se[name] = 1.0 / math.sqrt(w + w_p)
+        both = joined_axis(v, se, p, finite(previous_std_errors.get(name)),
+                           float((covariance or {}).get(name, 0.0)), k)
+        if both is not None:
+            out_v[name], out_se[name] = both[0], both[1]
     return out_v, out_se
 
 

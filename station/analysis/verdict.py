@@ -7,13 +7,16 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
 
 from orthocal import Identification
 from orthocal.geometry import AXES, Geometry
 from orthocal.loop import (
     FALSE_ALARM,
     WRITABLE,
-    joined_with_previous,
+    joined_axis,
     shown_within,
     significant_corrections,
 )
@@ -22,7 +25,15 @@ from orthocal.numbers import finite
 from station.record.result import Ambiguity, Iteration
 from station.record.result_base import Params
 
-Joined = tuple[dict[str, float], dict[str, float | None]]  # Δρ̂ and standard errors
+
+class Joined(NamedTuple):
+    """A round's Δρ̂ joined with the rounds before it (:func:`joined_round`): the values,
+    their standard errors, and per axis each round's weight in the value (round 0
+    first), which the next round's covariance with it is summed over."""
+
+    values: dict[str, float]
+    std_errors: dict[str, float | None]
+    weights: dict[str, tuple[float, ...]]
 
 
 @dataclass(frozen=True)
@@ -87,7 +98,7 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
         target=aim)
     sig = [n for n in beyond_noise
            if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
-    values, ses = joined or (ident.parameters, ident.std_errors)
+    values, ses = (joined[0], joined[1]) if joined else (ident.parameters, ident.std_errors)
     # what the data cannot decide (another model explaining them as well) is no
     # closer than it is, whatever the noise
     apart = ident.ambiguity_mm
@@ -118,17 +129,37 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
 
 def joined_round(ident: Identification, before: Joined | None,
                  offsets_before: dict[str, float] | None,
-                 offsets_written: dict[str, float] | None) -> Joined:
+                 offsets_written: dict[str, float] | None,
+                 shared: Sequence[np.ndarray] = ()) -> Joined:
     """A round's Δρ̂ joined with ``before`` (the rounds before it, joined alike; None:
     the first round), moved by the offsets its write-back changed from
-    ``offsets_before`` to ``offsets_written`` (read back; None: nothing written), by
-    orthocal.loop.joined_with_previous at the loop's false-alarm k."""
-    own: Joined = (dict(ident.parameters), dict(ident.std_errors))
+    ``offsets_before`` to ``offsets_written`` (read back; None: nothing written), per
+    axis by orthocal.loop.joined_axis at the loop's false-alarm k. ``shared``: the
+    round's Δρ̂ covariance (3 × 3) with each round before it, in order
+    (orthocal.carry.cross_covariance: a prior it carried); their covariance with the
+    joined value is that summed with the rounds' weights in it (GUM). Without: the
+    rounds independent."""
+    n = 0 if before is None else len(next(iter(before.weights.values()), ()))
+    own = Joined(dict(ident.parameters), dict(ident.std_errors),
+                 {name: (0.0,) * n + (1.0,) for name in WRITABLE if name in ident.parameters})
     if before is None:
         return own
     moved = {} if offsets_before is None or offsets_written is None else \
         {f"drho_{a}": offsets_written[a] - offsets_before[a] for a in AXES}
-    return joined_with_previous(*own, *before, moved, coverage_factor(None, 1.0 - FALSE_ALARM))
+    k = coverage_factor(None, 1.0 - FALSE_ALARM)
+    for i, name in enumerate(WRITABLE):
+        if name not in own.values or name not in before.values:
+            continue
+        w = before.weights.get(name) or (0.0,) * (n - 1) + (1.0,)
+        c = sum(wr * float(np.asarray(cov)[i, i]) for wr, cov in zip(w, shared, strict=False))
+        both = joined_axis(own.values[name], finite(own.std_errors.get(name)),
+                           before.values[name] + moved.get(name, 0.0),
+                           finite(before.std_errors.get(name)), c, k)
+        if both is None:
+            continue
+        own.values[name], own.std_errors[name], lam = both
+        own.weights[name] = (*(lam * x for x in w), 1.0 - lam)
+    return own
 
 
 def stands_part(ident: Identification, geometry: Geometry) -> Params | None:

@@ -28,7 +28,6 @@ from orthocal.numbers import finite
 from station.analysis import acceptance, compensated, joints, reversal, verdict
 from station.analysis import accuracy_statement as accuracy
 from station.analysis import run_budget as budget
-from station.analysis.model_choice import carried_form
 from station.analysis.statistics import Measurement, pooled
 from station.config import StationConfig
 from station.console.operator import Operator
@@ -132,13 +131,15 @@ class Flow:
             else ident.parameters
         self.seq.sizing.expected = (ident.model, params_vector(values))
 
-    def _joined(self, n: int, ident: Identification) -> verdict.Joined:
+    def _joined(self, n: int, ident: Identification, phase: str) -> verdict.Joined:
         """Round ``n``'s Δρ̂ joined with the rounds before it (verdict.joined_round),
-        kept per round."""
+        with the error it shares with them through what it carried; kept per round."""
         outcome = self.outcomes[n - 1] if 0 < n <= len(self.outcomes) else None
+        earlier = zip(self.iterations[:n], self.idents[:n], strict=True)
+        shared = self.layouts.shared(phase, [(it.phase, i) for it, i in earlier])
         joined = verdict.joined_round(ident, self.joined[n - 1] if n else None,
                                       outcome.before if outcome else None,
-                                      outcome.written if outcome else None)
+                                      outcome.written if outcome else None, shared)
         del self.joined[n:]
         self.joined.append(joined)
         return joined
@@ -154,8 +155,7 @@ class Flow:
         # the offsets, so a later round's choice sees the machine as it is.
         # At the middles alone after a round that read the second gauge plane: that
         # round's widest layout fit, bows and all, carried (model_choice.carried_form).
-        first = self.layouts.form_fit(phase)
-        carried = carried_form(ctx.config, m, first) if first is not None else None
+        carried = self.layouts.carry_form(phase, ctx.config, m)
         ident, selection = (carried, None) if carried is not None else _identify(ctx, m)
         if n == 0 and selection is not None:
             self.result.model_selection = section(ModelSelection, selection)
@@ -180,7 +180,7 @@ class Flow:
         prev = self.idents[n - 1] if n else None
         proc = ctx.config.procedure
         count = ctx.devices.controller.offset_resolution_mm()
-        joined = self._joined(n, ident)
+        joined = self._joined(n, ident, phase)
         floor = carry.prior_floor(ident, ctx.config.machine.geometry())
         left = extra_passes_allowed(n, proc.max_extra_passes, proc.max_iterations,
                                     proc.verify) - (len(passes) - 1)
