@@ -29,7 +29,7 @@ import numpy as np
 from orthocal.field_mc import Bounded
 from orthocal.geometry import AXES, Geometry, split_params
 from orthocal.identification import Identification
-from orthocal.measurement import Key, bow_at, contact_fraction, row_planes
+from orthocal.measurement import Key, bow_at, contact_fraction, deviations, row_planes
 from orthocal.noise import coverage_factor, row_correlation
 from orthocal.numbers import finite
 from orthocal.postures import posture
@@ -351,6 +351,26 @@ def temperature_source(prop: Propagation, temperature_change: float,
     return _source(prop, "temperature", "rectangular", half, u, u**2 * np.eye(len(prop.keys)),
                    temperature_change_k=dt, alpha_per_k=alpha,
                    leg_length_mm=prop.geometry.leg_length)
+
+
+def stands_source(prop: Propagation, tolerance: float) -> Source:
+    """The indicator stands set by eye within ±``tolerance`` mm of the legs' middles and
+    not modelled (docs/model.md, "Where the indicator plane is"): each gauge's stand
+    off by an unknown m, rectangular, u = a/√3, moving each of its deviations by
+    (∂Δ/∂m)·m (exact: Δ with every plane 1 mm further less Δ as fitted; orthocal.stands),
+    independent between gauges. A Type B term where no noise estimate weighs a prior
+    on them against the data (one value per deviation)."""
+    a = _non_negative(tolerance, "stand tolerance")
+    keys = list(prop.keys)
+    per_mm = (deviations(keys, prop.geometry, prop.params, prop.mount_offsets + 1.0)
+              - deviations(keys, prop.geometry, prop.params, prop.mount_offsets))
+    u = a / math.sqrt(3.0)
+    cov = np.zeros((len(keys), len(keys)))
+    for gauge in prop.gauges:
+        v = u * per_mm * prop.mask(gauge)
+        cov += np.outer(v, v)
+    return _source(prop, "indicator stands", "rectangular", None, u, cov,
+                   stand_tolerance_mm=a)
 
 
 def budget_sources(ident: Identification, geometry: Geometry | None = None, *,

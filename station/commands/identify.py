@@ -30,7 +30,9 @@ import math
 from pathlib import Path
 
 from orthocal import Geometry, Identification, IdentificationError, identify, select_model
-from orthocal.noise import noise_from_cycles
+from orthocal.budget import combine, propagation, stands_source
+from orthocal.noise import coverage_factor, noise_from_cycles
+from orthocal.numbers import finite
 from orthocal.postures import check_posture, stroke
 from orthocal.stands import Stands, describe_stands
 from station.errors import BadInput, read_input
@@ -119,21 +121,26 @@ def _parse_row(where: str, cell: dict[str, str], geometry: Geometry | None
     return (sign, leg, direction), value_mm
 
 
-def format_table(result: Identification, geometry: Geometry) -> str:
-    """Human-readable result: parameters ± standard errors, fit, per-deviation table."""
+def format_table(result: Identification, geometry: Geometry,
+                 stated: dict | None = None) -> str:
+    """Human-readable result: each parameter with its 95 % expanded uncertainty
+    (``stated``: :func:`uncertainty`; None: none can be stated), k and dof said once,
+    the fit, and the per-deviation table."""
     width = max(10, *(len(f"Π_{k[1]}({k[0]}) {k[2]}") for k in result.keys))
     lines = [
         f"Identification: model {result.model}, method {result.method}, "
         f"{len(result.keys)} deviations (L = {geometry.leg_length:g}, "
         f"strokes rho_min = {geometry.rho_min:g}, rho_max = {geometry.rho_max:g} mm)",
         "",
-        f"  {'parameter':<10} {'value':>10} {'std err':>10}",
+        f"  {'parameter':<10} {'value':>10} {'± (95 %)':>10}",
     ]
+    expanded = (stated or {}).get("expanded", {})
     for name in result.names:
-        se = result.std_errors[name]
-        se_text = f"{se:10.4f}" if math.isfinite(se) else f"{'n/a':>10}"
+        u = expanded.get(name)
+        u_text = f"{u:10.4f}" if u is not None and math.isfinite(u) else f"{'n/a':>10}"
         unit = "mrad" if name.startswith("tilt_") else "mm"
-        lines.append(f"  {name:<10} {result.parameters[name]:10.4f} {se_text} {unit}")
+        lines.append(f"  {name:<10} {result.parameters[name]:10.4f} {u_text} {unit}")
+    lines += ["", f"  {_coverage_line(stated)}"]
     sigma = f"{result.sigma:.4f} mm" if math.isfinite(result.sigma) else "n/a (no redundancy)"
     lines += [
         "",
@@ -148,6 +155,73 @@ def format_table(result: Identification, geometry: Geometry) -> str:
         label = f"Π_{key[1]}{posture} {key[2]}" + (f" @{plane}" if plane else "")
         lines.append(f"  {label:<{width}} {value:10.4f} {value - res:10.4f} {res:10.4f}")
     return "\n".join(lines)
+
+
+def _coverage_line(stated: dict | None) -> str:
+    """k and the degrees of freedom of every ± above, said once."""
+    if stated is None:
+        return ("no ± can be stated: as many parameters as deviations leave no residual "
+                "to estimate the noise from, and there is no cycle column")
+    dof = stated["dof"]
+    on = "infinite degrees of freedom (the normal's)" if dof is None else \
+        f"{dof:.1f} degrees of freedom"
+    extra = f"; Type B: {', '.join(stated['type_b'])}" if stated["type_b"] else ""
+    return (f"each ± is the 95 % expanded uncertainty U = k·u, k = {stated['k']:.2f} "
+            f"(Student's t on {on}; Type A: {stated['type_a']}{extra})")
+
+
+def has_noise(data: dict[Key, list[float]]) -> bool:
+    """Whether the CSV carries a noise estimate: repeats (a cycle column) that scatter."""
+    if not any(len(v) >= 2 for v in data.values()):
+        return False
+    return noise_from_cycles(data)[0] > 0
+
+
+def uncertainty(result: Identification, geometry: Geometry, data: dict[Key, list[float]],
+                mount_error: float) -> dict | None:
+    """The 95 % intervals the identification can state (GUM: u_c of Type A and Type B
+    parts, k from Student's t on the effective dof, one k for every parameter: the
+    largest). With a noise estimate (a cycle column whose repeats scatter), the fit's
+    standard errors on the noise's dof, the stands modelled in the fit. Without one, the
+    fit's standard errors from its residual (K − p dof), which misplaced stands bias
+    rather than scatter, and the stands set within ±``mount_error`` of the legs'
+    middles carried as a Type B term (orthocal.budget.stands_source). None where no
+    standard error exists (no residual: as many parameters as deviations)."""
+    se = {n: float(result.std_errors[n]) for n in result.names}
+    noise = has_noise(data)
+    dof = result.std_error_dof if noise else float(result.dof)
+    if not (dof > 0 and all(math.isfinite(v) for v in se.values())):
+        return None
+    sources = [] if noise or mount_error == 0.0 else \
+        [stands_source(propagation(result, geometry), mount_error)]
+    budget = combine(se, dof, sources)
+    dofs = [v for v in budget["effective_dof"].values() if v is not None]
+    nu = min(dofs) if dofs else None
+    k = coverage_factor(nu)
+    standard = {n: float(budget["combined_mm"][n]) for n in result.names}
+    expanded = {n: k * u for n, u in standard.items()}
+    type_b = [] if not sources else \
+        [f"indicator stands within ±{mount_error:g} mm of the legs' middles (--mount-error)"]
+    return {"level": 0.95, "k": k, "dof": nu, "standard": standard, "expanded": expanded,
+            "interval_95": {n: [result.parameters[n] - u, result.parameters[n] + u]
+                            for n, u in expanded.items()},
+            "type_a": ("the cycle-to-cycle scatter" if noise
+                       else "the fit's own residual, no cycle column"),
+            "type_b": type_b}
+
+
+def not_known(data: dict[Key, list[float]], mount_error: float) -> list[str]:
+    """What a CSV without a noise estimate cannot tell, in words (empty where it has one)."""
+    if has_noise(data):
+        return []
+    stands = (f"their placement within ±{mount_error:g} mm of the legs' middles "
+              "(--mount-error) is carried in every ± as a Type B term instead"
+              if mount_error > 0 else "they are taken exactly at the legs' middles "
+              "(--mount-error 0)")
+    return ["without a cycle column (repeats that scatter) there is no noise estimate: the "
+            "σ̂ above is the fit's residual, misfit and noise alike",
+            "so no model test (--model auto needs the noise) and no prior weight for the "
+            f"indicator stands: {stands}"]
 
 
 def _stands(args: argparse.Namespace, data: dict[Key, list[float]]) -> Stands | None:
@@ -188,16 +262,29 @@ def main(args: argparse.Namespace) -> int:
                               stands=stands)
     except IdentificationError as exc:
         raise BadInput(f"{args.csv}: {exc}") from None
+    stated = uncertainty(result, geometry, data, args.mount_error)
+    unknown = not_known(data, args.mount_error)
     if args.json:
         doc = result.to_dict()
         if selection is not None:
             doc["model_selection"] = selection.to_dict()
+        doc["uncertainty_95"] = None if stated is None else {
+            **{k: v for k, v in stated.items() if k not in ("standard", "expanded",
+                                                             "interval_95", "dof")},
+            "dof": finite(stated["dof"]),
+            "standard": {n: finite(v) for n, v in stated["standard"].items()},
+            "expanded": {n: finite(v) for n, v in stated["expanded"].items()},
+            "interval_95": {n: [finite(a), finite(b)]
+                            for n, (a, b) in stated["interval_95"].items()}}
+        doc["not_known"] = unknown
         print(json.dumps(doc, indent=2))
     else:
-        print(format_table(result, geometry))
+        print(format_table(result, geometry, stated))
         if selection is not None:
             print(f"\n  model chosen by auto: {selection.reason}")
-        if selection is None or stands is None:  # auto's reason names modelled stands
+        if unknown:
+            print("\n" + "\n".join(f"  {line}" for line in unknown))
+        elif selection is None or stands is None:  # auto's reason names modelled stands
             print(f"\n  {_stands_note(args.mount_error, stands, result)}")
     return 0
 
