@@ -16,6 +16,7 @@ straightness stated in ``[uncertainty]``. For every run, from the hidden machine
     python bench/gaps_vs_truth.py                         # 3 seeds of the held-out machine
     python bench/gaps_vs_truth.py --case gaps05 --runs 5  # gaps of 0.05 mm alone
     python bench/gaps_vs_truth.py --objective tool
+    python bench/gaps_vs_truth.py --case gaps --runs 20   # gaps alone: as many larger as smaller?
 """
 
 from __future__ import annotations
@@ -43,6 +44,8 @@ CASES: dict[str, dict[str, Any]] = {
     # the held-out machine: axes that neither meet nor stand square, legs straight to 2 µm
     "held-out": {"gap": (0.15, -0.10, 0.12), "tilt": (0.2, 0.1, -0.15), "straightness": 0.002},
     "gaps05": {"gap": (0.05, 0.05, 0.05), "tilt": (0.0, 0.0, 0.0), "straightness": 0.002},
+    # the gapped run of `orthocal run --simulate --true-gap 0.15,-0.10,0.12`
+    "gaps": {"gap": (0.15, -0.10, 0.12), "tilt": (0.0, 0.0, 0.0), "straightness": None},
     "square": {"gap": (0.0, 0.0, 0.0), "tilt": (0.0, 0.0, 0.0), "straightness": None},
 }
 
@@ -81,7 +84,14 @@ def judge(result: dict[str, Any], case: dict[str, Any]) -> dict[str, Any]:
     best = optimal_offsets(points, geometry, truth, acc["frame"]).field.rms_mm
     gaps = acc.get("gaps") or {}
     tilts = acc.get("tilts") or {}
+    interval = acc.get("gap_interval_95") or {}
     return {
+        # per gap the truth is not 0: stated larger in magnitude than it, and within the
+        # stated 95 % interval
+        "larger": [abs(gaps[n]) > abs(t) for n, t in zip(GAP_NAMES, case["gap"], strict=True)
+                   if t and n in gaps],
+        "held": [interval[n][0] <= t <= interval[n][1]
+                 for n, t in zip(GAP_NAMES, case["gap"], strict=True) if t and n in interval],
         "model": result["model"], "stopped": result["loop"]["stopped"],
         "detail": result["loop"].get("detail"),
         "rounds": [(it.get("model"), it.get("decision") or it.get("verdict"),
@@ -109,6 +119,8 @@ def main() -> None:
     print(f"case {args.case}: gaps {case['gap']} mm, tilts {case['tilt']} mrad, Δρ {DRHO} mm, "
           f"legs stated straight to {case['straightness']} mm, noise {1000 * NOISE_MM:g} µm, "
           f"objective {args.objective}, default procedure, stands by eye")
+    larger: list[bool] = []
+    held: list[bool] = []
     with tempfile.TemporaryDirectory(prefix="orthocal-gaps-") as tmp:
         for k in range(args.runs):
             t0 = time.monotonic()
@@ -120,10 +132,16 @@ def main() -> None:
                   f"after {r['predicted_um']:.1f} µm RMS predicted, {r['true_um']:.1f} true "
                   f"({'within' if ok_tool else 'NOT within'} 10 % + 3 µm), best offsets "
                   f"{r['best_um']:.1f}; {r['mountings']} mountings; {time.monotonic() - t0:.0f} s")
+            larger += r["larger"]
+            held += r["held"]
             if r["stopped"] != "converged":
                 print(f"    {r['detail']}")
                 for round_ in r["rounds"]:
                     print(f"    round {round_}")
+    if held:
+        print(f"gaps stated larger in magnitude than the truth: {sum(larger)} of {len(larger)} "
+              f"(unbiased: half, ±{1.5 * len(larger) ** 0.5:.1f} at 3σ); their 95 % intervals "
+              f"hold the truth: {sum(held)} of {len(held)}")
 
 
 if __name__ == "__main__":
