@@ -241,13 +241,27 @@ def with_tilts(model: str) -> str:
 
 def ambiguous(tilted: orthocal.Identification,
               bowed: orthocal.Identification) -> orthocal.Identification:
-    """``tilted`` marked with how far ``bowed`` (the same data explained by the legs'
-    bows) puts the parameters both hold: what the data cannot decide."""
+    """``tilted`` where ``bowed`` explains the same data as well (the legs' bows for
+    the axes' tilts), with the Δρ whose worst error over the two explanations is least,
+    their midpoint: what the round states and the loop writes (docs/model.md, "Tilts or
+    bows"). Marked with how far the explanations lie from the values stated, per
+    parameter both hold (``ambiguity_mm``: half their distance for Δρ, all of it for
+    the others, which keep the tilts' fit): what the data cannot decide, which every
+    interval adds to its half-width."""
     from dataclasses import replace
 
+    from orthocal.loop import WRITABLE
+
     shared = [n for n in tilted.names if n in bowed.parameters]
-    return replace(tilted, ambiguous_with=bowed.model, ambiguity_mm={
-        n: abs(tilted.parameters[n] - bowed.parameters[n]) for n in shared})
+    params = dict(tilted.parameters)
+    apart = {}
+    for n in shared:
+        t, b = tilted.parameters[n], bowed.parameters[n]
+        if n in WRITABLE:
+            params[n], apart[n] = 0.5 * (t + b), 0.5 * abs(t - b)
+        else:
+            apart[n] = abs(t - b)
+    return replace(tilted, parameters=params, ambiguous_with=bowed.model, ambiguity_mm=apart)
 
 
 def _fit(config: StationConfig, data, model: str, noise: tuple[float, float, str],

@@ -235,7 +235,9 @@ def not_converged(entry: Iteration, converge_mm: float, offset_count_mm: float,
         apart = max(v or 0.0 for k, v in entry.ambiguity.apart_mm.items() if k in WRITABLE)
         return (f"{said}; the axes' tilts ({entry.model}) and the legs' bows within the "
                 f"stated straightness ({entry.ambiguity.explained_by}) explain the "
-                f"deviations alike, and put Δρ up to {1000 * apart:.1f} µm apart; at the "
+                f"deviations alike, and put Δρ up to {2000 * apart:.1f} µm apart (what is "
+                f"stated and written is their midpoint, within {1000 * apart:.1f} µm of "
+                "either); at the "
                 "legs' middles a uniform bow is a tilt, so more cycles, passes or "
                 "write-backs cannot decide it: read a second gauge plane ([[setups]] "
                 "again with at = 0.75), or, if the legs are straighter than stated, state "

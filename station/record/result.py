@@ -138,7 +138,9 @@ class Ambiguity(Closed):
 
     explained_by: str = Field(description="the other model: the legs' bows where the fit "
                                           "has the axes' tilts")
-    apart_mm: Params = Field(description="how far it puts each parameter from the fit's")
+    apart_mm: Params = Field(description="how far the two explanations lie from each value "
+                                         "stated: half their distance for Δρ, stated and "
+                                         "written at their midpoint; all of it for the others")
 
 
 class Iteration(Closed):
