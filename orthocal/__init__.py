@@ -18,11 +18,9 @@ from orthocal.accuracy import (
     workspace_grid,
 )
 from orthocal.budget import (
-    ExpectedLackOfFit,
     Source,
     budget_sources,
     combine,
-    expected_lack_of_fit,
     form_columns,
     form_vector,
     propagation,
@@ -64,6 +62,7 @@ from orthocal.joint_error import (
     workspace_joint_range,
 )
 from orthocal.kinematics import axis_directions, axis_origins, forward, inverse
+from orthocal.lack_of_fit import ExpectedLackOfFit, expected_lack_of_fit
 from orthocal.measurement import bow_at, contact_fraction, deviation, deviations, leg_reading
 from orthocal.misfit import Allowance
 from orthocal.noise import coverage_factor

@@ -31,7 +31,6 @@ from orthocal.budget import (
     STEEL_ALPHA,
     budget_sources,
     combine,
-    expected_lack_of_fit,
     form_columns,
     form_covariance,
     form_vector,
@@ -44,6 +43,7 @@ from orthocal.budget import (
     temperature_source,
     welch_satterthwaite,
 )
+from orthocal.lack_of_fit import expected_lack_of_fit
 from orthocal.sensitivities import key_sensitivity, sensitivity
 from orthocal.stands import GAUGES
 
