@@ -1,6 +1,6 @@
 """Drives as they come, end to end over the simulators: every built-in map
 runs a whole calibration; a layout the project has never seen, described only by the
-README's worked example (examples/maps/), calibrates within 3 µm with nothing out of
+docs/drive.md's worked example (examples/maps/), calibrates within 3 µm with nothing out of
 stroke, once with home-offset registers and once with the offsets held by the
 station; a held run resumes, rolls back and hands its offsets to the next run; probe
 reads every register of that map."""

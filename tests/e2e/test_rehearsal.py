@@ -1,4 +1,4 @@
-"""Rehearsal works as the README says: ``orthocal sim --profile MAP
+"""Rehearsal works as docs/drive.md says: ``orthocal sim --profile MAP
 --config-out FILE`` hands out a config that ``orthocal run --config FILE --plan``
 accepts for every shipped and every example map (a map whose axes are separate
 drives gets no ``motion = "coordinated"``); ``orthocal init`` writes the documented
@@ -37,12 +37,12 @@ EXAMPLES = sorted((ROOT / "examples" / "maps").glob("*.toml"))
 GATEWAY = ROOT / "examples" / "maps" / "gateway-3x1.toml"
 HELD = ROOT / "examples" / "maps" / "gateway-3x1-no-offsets.toml"  # no OFFSET registers
 # Every map a user may rehearse: the built-in ones (orthocal-generic and the files of
-# drivers/maps/) by name, the README's examples by path.
+# drivers/maps/) by name, docs/drive.md's examples by path.
 MAPS = [*sorted(builtin_maps()), *(str(p) for p in EXAMPLES)]
 
 
 def separate_drives(profile: str) -> bool:
-    """The map's three targets are on different unit ids (the README's "Devices")."""
+    """The map's three targets are on different unit ids (docs/drive.md, "A map of your own")."""
     return len({r.device_id for r in resolve_map(profile).axis_registers("TARGET")}) > 1
 
 
@@ -65,7 +65,7 @@ def no_design(monkeypatch: pytest.MonkeyPatch) -> None:
 
 @pytest.fixture
 def sim_config(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Path]:
-    """``orthocal sim --profile MAP --config-out FILE`` as the README runs it, in its own
+    """``orthocal sim --profile MAP --config-out FILE`` as docs/drive.md runs it, in its own
     process: FILE once written; stopped with Ctrl-C (SIGINT) afterwards, exit 0."""
     config_path = tmp_path / "sim.toml"
     proc = subprocess.Popen(
@@ -144,7 +144,7 @@ def test_init_writes_the_documented_defaults(tmp_path: Path) -> None:
 
 def test_init_config_probes_its_devices_and_writes_a_config_run_accepts(
         tmp_path: Path, capsys, no_design: None) -> None:
-    # A drive without soft-limit registers or writable offsets (the README's gateway,
+    # A drive without soft-limit registers or writable offsets (docs/drive.md's gateway,
     # the station holding the offsets), its map beside the config, the starter config
     # written into another folder.
     (tmp_path / "a" / "maps").mkdir(parents=True)
