@@ -98,7 +98,7 @@ def test_every_document_the_code_cites_is_in_the_repo() -> None:
     # A user's clone holds the repo and nothing else: "docs/model.md, (12)" in a
     # docstring must lead to a file of it, and a numbered entry of a tracker the clone
     # does not have leads nowhere (the docs and BENCHMARKS.md keep the history instead).
-    texts = [*python_files(), ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    texts = [*python_files(), ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
     cited: dict[str, set[str]] = {}
     trackers: list[str] = []
     for path in texts:
@@ -125,7 +125,7 @@ def test_no_text_speaks_of_a_tracker_or_of_the_house() -> None:
     words = re.compile(r"\b(issues?|house)\b|\b(this|last|next|previous) turn\b|\bturn \d",
                        re.IGNORECASE)
     texts = [p for p in python_files() if p != Path(__file__).resolve()]
-    texts += [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+    texts += [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")),
               *sorted(p for p in (ROOT / "examples").rglob("*") if p.is_file())]
     found = [f"{path.relative_to(ROOT)}:{n}: {line.strip()}" for path in texts
              for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
