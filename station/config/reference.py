@@ -140,6 +140,11 @@ MEANINGS: dict[str, str] = {
     "uncertainty.temperature_change_c": "The temperature change during the run, K.",
     "uncertainty.plunger_angle_deg": "How far a plunger may be off the leg's normal, "
     "degrees.",
+    "uncertainty.joint_positioning_um_per_m": "A bound on an untested joint's positioning "
+    "error per metre of travel from Π0, µm/m ([design.md, \"Joints\"](design.md#joints)).",
+    "joints.tests": "Each joint's ISO 230-2 test as CSV, any subset of the joints "
+    "(`{ x = \"x.csv\" }`), paths relative to the config's folder "
+    "([design.md, \"Joints\"](design.md#joints)).",
     "history.url": "Where finished runs are recorded: a database URL (`sqlite:///…`, "
     "`postgresql://…`); absent: `history.sqlite` beside the runs.",
     "history.enabled": "Record finished runs in the history.",
