@@ -413,6 +413,7 @@ class StationConfig(_Strict):
                         f"(have {', '.join(names)})"
                     )
         self._planes()
+        self.joints.check_station_test(names)  # its reference and gauges
         return self
 
     def _planes(self) -> None:

@@ -24,11 +24,24 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    field_validator,
+    model_serializer,
+)
 
+from station.config.joint_reference import DEFAULT_REPEATS, DEFAULT_TARGETS, ReferenceConfig
 from station.errors import BadInput, read_input
 
 Joint = Literal["x", "y", "z"]
+#: The keys of the station's own test and their defaults: left out of a dump that
+#: has them so, a config without the test dumps as it did before the test existed.
+STATION_DEFAULTS: dict[str, object] = {"station_test": [], "station_gauge": None,
+                                       "station_repeats": DEFAULT_REPEATS,
+                                       "station_targets": DEFAULT_TARGETS, "reference": None}
 #: The columns of a test file: required, then optional.
 COLUMNS = ("target_mm", "forward_um", "reverse_um")
 OPTIONAL = ("u_um",)
@@ -36,11 +49,64 @@ OPTIONAL = ("u_um",)
 
 class JointsConfig(BaseModel):
     """``[joints]``: ``tests`` maps a joint (any of x, y, z) to its ISO 230-2 test
-    file, a path relative to the config's folder (made absolute as the config loads)."""
+    file, a path relative to the config's folder (made absolute as the config loads).
+    ``station_test``: the joints the station tests itself against ``reference``
+    (station.config.joint_reference), with the indicator ``station_gauge`` (one for
+    all, or one per joint; None: the config's first), ``station_repeats`` approaches
+    of each target from each side and, with gauge blocks, ``station_targets``
+    targets."""
 
     model_config = ConfigDict(extra="forbid", validate_default=True)
 
     tests: dict[Joint, str] = Field(default_factory=dict)
+    station_test: list[Joint] = Field(default_factory=list, max_length=3)
+    station_gauge: str | dict[Joint, str] | None = None
+    station_repeats: int = Field(DEFAULT_REPEATS, ge=2, le=20)
+    station_targets: int = Field(DEFAULT_TARGETS, ge=5, le=50)
+    reference: ReferenceConfig | None = None
+
+    @field_validator("station_test")
+    @classmethod
+    def _once(cls, value: list[str]) -> list[str]:
+        if len(set(value)) != len(value):
+            raise ValueError("a joint named twice")
+        return value
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, object]:
+        data = handler(self)
+        for name, default in STATION_DEFAULTS.items():
+            if name in data and getattr(self, name) == default:
+                del data[name]
+        return data
+
+    def check_station_test(self, names: list[str]) -> None:
+        """ValueError unless the station's own test has a reference and each of its
+        joints a gauge among ``names`` (the config's indicators)."""
+        if not self.station_test:
+            return
+        if self.reference is None:
+            raise ValueError("joints.station_test: needs [joints.reference], the length "
+                             "reference the station's gauge reads")
+        if isinstance(self.station_gauge, dict):
+            missing = [a for a in self.station_test if a not in self.station_gauge]
+            if missing:
+                raise ValueError(f"joints.station_gauge: no gauge for joint(s) "
+                                 f"{', '.join(missing)} of station_test")
+        for axis in self.station_test:
+            gauge = self.gauge_of(axis, names[0])
+            if gauge not in names:
+                raise ValueError(f"joints.station_gauge: no indicator {gauge!r} "
+                                 f"(have {', '.join(names)})")
+
+    def gauge_of(self, axis: str, first: str) -> str:
+        """The indicator that tests joint ``axis`` (``first``: the config's first)."""
+        g = self.station_gauge
+        if g is None:
+            return first
+        if isinstance(g, str):
+            return g
+        return next((name for joint, name in g.items() if joint == axis), first)
 
     @field_validator("tests")
     @classmethod

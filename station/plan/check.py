@@ -26,6 +26,7 @@ import numpy as np
 from drivers.base import Vec3
 from station.config import StationConfig
 from station.plan.checker import MotionChecker
+from station.plan.joint_test_plan import plan_station_test
 from station.plan.joint_travel import check_joint_tests
 from station.plan.limits import limits_source
 from station.plan.steps import Move, Plan, Prompt, joint_triple, route_key
@@ -65,7 +66,9 @@ def check_plan(
     many plans (its bounds remembered; plan.travel then spans all of them).
     ``travel`` False: only whether the plan holds (a search over candidate plans),
     not the sharp plunger travel of every sub-move that plan.travel lists. A joint
-    test ([joints] tests) must span the travel the plan and the workspace need."""
+    test ([joints] tests) must span the travel the plan and the workspace need; the
+    station's own ([joints] station_test) is planned and checked here too
+    (plan.station_test)."""
     check_joint_tests(config, plan, controller_limits)
     checker = checker or MotionChecker(config, controller_limits)
     key = _key(plan, config, controller_limits, start, travel, checker) \
@@ -79,6 +82,9 @@ def check_plan(
             _keep(key, plan, checker)
     plan.travel = checker.travel
     plan.motion = checker.motion
+    # the station's own test of the joints, before the first measurement, from where
+    # the axes stand (station.plan.joint_test_plan)
+    plan.station_test = plan_station_test(config, plan, controller_limits, checker, start)
     return plan
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
+from typing import Protocol
 
 import orthocal
 from drivers.base import Vec3
@@ -112,6 +113,15 @@ class Checkpoint:
 Step = Prompt | Move | Settle | Read | Checkpoint
 
 
+class Listed(Protocol):
+    """A part of the plan beside its setups, with its own steps: the station's own test
+    of the joints (station.plan.joint_test_plan.StationTest)."""
+
+    def to_json(self) -> dict[str, object]: ...
+
+    def lines(self) -> list[str]: ...
+
+
 @dataclass
 class SetupPlan:
     index: int
@@ -186,6 +196,9 @@ class Plan:
     # The run's pass (0-based) that reads a second gauge plane (setups_of): the second,
     # the first taken with the offsets small; the first where nothing is verified.
     two_plane_pass: int = 1
+    # The station's own test of the joints, before the first measurement: planned and
+    # checked with the plan (station.plan.joint_test_plan), None without one.
+    station_test: Listed | None = None
 
     def setups_of(self, index: int) -> list[SetupPlan]:
         """The setups the run's pass ``index`` (0-based, every pass of every measurement
@@ -279,6 +292,8 @@ class Plan:
         return {
             **strokes,
             **({} if passes is None else {"passes": passes}),
+            **({} if self.station_test is None else
+               {"station_test": self.station_test.to_json()}),
             "cycles": self.cycles,
             "readings": self.readings,
             "settle_s": self.settle_s,
@@ -318,6 +333,8 @@ class Plan:
         sp0 = self.setups[0]
         if sp0.overrun is not None or sp0.reversal_overrun is not None:
             lines.append(approach_words(sp0.overrun, sp0.reversal_overrun))
+        if self.station_test is not None:
+            lines += self.station_test.lines()
         number = 0
         for step, via in self.waypoints_of():
             number += 1

@@ -4,7 +4,7 @@ measurement phase's, tagged by ``kind``.
 
 A field that a later version added is optional: journals written before it lack it
 (soft limits' ``source``, the controller's path model ``motion``, a move's
-``approach`` and ``via``, a prompt's ``at``, ``test_postures``)."""
+``approach`` and ``via``, a prompt's ``at``, ``test_postures``, ``station_test``)."""
 
 from __future__ import annotations
 
@@ -76,6 +76,31 @@ PlanStep = Annotated[PromptStep | MoveStep | SettleStep | ReadStep | CheckpointS
                      Field(discriminator="kind")]
 
 
+class JointTestPlanRecord(_Closed):
+    """One joint's own test as planned and checked (station.plan.joint_test_plan)."""
+
+    axis: str
+    gauge: str
+    reference: str
+    plunger: str
+    targets_mm: list[float] = Field(description="in the order read, the datum first")
+    faces_mm: list[float] = Field(description="set at each target, from the datum face")
+    sides: list[tuple[bool, bool]] = Field(description="approached from below, from above")
+    overrun_mm: float
+    repeats: int
+    readings: int
+    needed_mm: tuple[float, float] = Field(description="the travel the run needs")
+    travel_mm: tuple[float, float] | None = Field(description="the plunger's push-in from "
+                                                              "its mounting, least and most")
+    window_mm: tuple[float, float] | None = Field(description="the preload window")
+
+
+class StationTestPlanRecord(_Closed):
+    """The station's own test of the joints, before the first measurement."""
+
+    joints: list[JointTestPlanRecord]
+
+
 class PlanRecord(_Closed):
     """The plan every move of the run was checked against."""
 
@@ -90,6 +115,8 @@ class PlanRecord(_Closed):
     steps: list[PlanStep]
     test_postures: list[str] | None = Field(
         None, description="a cycle's postures, where [procedure] strokes names them")
+    station_test: StationTestPlanRecord | None = Field(
+        None, description="the station's own test of the joints ([joints] station_test)")
     passes: dict[str, list[int]] | None = Field(
         None, description="the setups (1-based, in order) the run's first pass (first), its "
         "second (second) and every later one (later) measure, where a second gauge plane "
