@@ -27,6 +27,7 @@ from drivers.base import AxisStatus, HeldBy, Vec3
 from drivers.device_errors import AlarmError, MoveTimeout, ReadbackMismatch
 from drivers.sim.drive import default_soft_limits
 from drivers.sim.machine import VirtualOrthoglide
+from drivers.sim.reference import VirtualReference
 from drivers.sim.specs import MachineTruth
 from orthocal import plane_at
 
@@ -204,6 +205,8 @@ class FakeRig:
         self._stands = np.random.default_rng([seed, 7])
         self.axes = FakeAxes(self.machine, self.clock)
         self.gauges = {n: FakeGauge(n, noise_mm, seed * 101 + i) for i, n in enumerate(names)}
+        #: The length references of the joints' own tests (drivers.sim.reference).
+        self.reference = VirtualReference(self.machine.joint_values)
 
     def mount(self, name: str, leg: str, direction: str, at: float = 0.5) -> None:
         sign = -1.0 if direction.startswith("-") else 1.0
@@ -215,3 +218,14 @@ class FakeRig:
 
     def unmount(self, name: str) -> None:
         self.gauges[name].unmount()
+
+    def mount_joint_gauge(self, name: str, axis: str, plunger: int) -> None:
+        """Gauge ``name`` clamped to carriage ``axis`` on a reference's datum face
+        (drivers.sim.reference; ``plunger`` −1: pointing toward lower ρ)."""
+        self.gauges[name].mount(self.reference.mount(axis, plunger))
+
+    def set_face(self, axis: str, face_mm: float) -> None:
+        self.reference.set_face(axis, face_mm)
+
+    def remove_reference(self, axis: str) -> None:
+        self.reference.remove(axis)

@@ -79,6 +79,7 @@ from drivers.indicator_protocols import make_protocol
 from drivers.sim.controller import SimController
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.pty_gauges import SimIndicator
+from drivers.sim.reference import VirtualReference
 from drivers.sim.specs import DeviceFaults, DriveSpec, GaugeSpec, MachineTruth
 from drivers.sim.strokes import OutOfStroke, StrokeWatch
 from orthocal import plane_at
@@ -183,6 +184,9 @@ class VirtualStation:
         #: Every mounting: (indicator, leg, direction, mount error in mm), in order.
         self.mount_log: list[tuple[str, str, str, float]] = []
         self.machine = self._machine(clock, nvram_path)
+        #: The length references of the joints' own tests (drivers.sim.reference),
+        #: read through the carriages' true positions.
+        self.reference = VirtualReference(self.machine.joint_values)
         # Out-of-stroke accounting and knocks (drivers.sim.strokes).
         self._watch = StrokeWatch(self.machine, self.geometry, self._mounted_gauges)
         self.mounts_path: Path | None = None
@@ -326,6 +330,28 @@ class VirtualStation:
         # A stream of its own (crc32 of the placement): the gauges' noise is unchanged.
         key = zlib.crc32(f"{where}:{name}:{leg}".encode())
         return float(np.random.default_rng([self._seed, 7, key]).uniform(-1.0, 1.0))
+
+    def mount_joint_gauge(self, name: str, axis: str, plunger: int) -> None:
+        """Clamp indicator ``name`` to carriage ``axis``, its plunger along the axis
+        (``plunger``: −1 pointing toward lower ρ, +1 higher) on the datum face of a
+        reference beside the rail (drivers.sim.reference), and zero it there: the
+        station's own test of the joint. Not kept across a restart (a test resumed is
+        mounted again)."""
+        gauge = self.indicators[name]
+        self._watch.flush()
+        self._watch.unmounted(name)
+        if self._mounts.pop(name, None) is not None:
+            self._save_mounts()
+        gauge.mount(self.reference.mount(axis, plunger))
+
+    def set_face(self, axis: str, face_mm: float) -> None:
+        """The operator sets the reference's face ``face_mm`` from its datum at the
+        plunger of joint ``axis``'s test."""
+        self.reference.set_face(axis, face_mm)
+
+    def remove_reference(self, axis: str) -> None:
+        """The operator takes joint ``axis``'s reference off the base."""
+        self.reference.remove(axis)
 
     def unmount(self, name: str) -> None:
         self._watch.flush()

@@ -32,7 +32,13 @@ import numpy as np
 from orthocal import JointErrors, JointTable, iso230_table, lead_um_per_m
 from station.config import StationConfig
 from station.config.joint_tests import Joint, JointTest, read_joint_tests
-from station.record.result_joints import JointRecord, Joints, JointSource, JointTableRecord
+from station.record.result_joints import (
+    JointRecord,
+    Joints,
+    JointSource,
+    JointTableRecord,
+    StationTestRecord,
+)
 from station.record.result_sections import StatedInput
 
 #: [uncertainty] joint_positioning_um_per_m where the config says nothing: a rolled ball
@@ -179,10 +185,12 @@ def joint_knowledge(config: StationConfig, tests: Mapping[Joint, JointTest] | No
     return JointKnowledge(joints[0], joints[1], joints[2], bound)
 
 
-def of_run_config(config: StationConfig) -> JointKnowledge:
+def of_run_config(config: StationConfig, station: Mapping[str, JointTable] | None = None
+                  ) -> JointKnowledge:
     """:func:`joint_knowledge` of ``config`` with its [joints] tests read from their
-    files (BadInput naming a file and line)."""
-    return joint_knowledge(config, read_joint_tests(config.joints.tests))
+    files (BadInput naming a file and line), and the station's own tables where its
+    test found them (``station``, station.analysis.joint_readings.tables_of)."""
+    return joint_knowledge(config, read_joint_tests(config.joints.tests), station)
 
 
 def _table_record(j: KnownJoint) -> JointTableRecord | None:
@@ -197,12 +205,17 @@ def _table_record(j: KnownJoint) -> JointTableRecord | None:
         shift_um=1e3 * t.shift_mm, reversal_from=j.reversal_from or "test")
 
 
-def fields(knowledge: JointKnowledge) -> Joints:
-    """result.json's ``joints`` of ``knowledge``."""
+def fields(knowledge: JointKnowledge,
+           station: Mapping[str, StationTestRecord] | None = None) -> Joints:
+    """result.json's ``joints`` of ``knowledge``; ``station``: how the station's own test
+    found the tables of source "station" (station.analysis.joint_readings.details_of)."""
     def record(j: KnownJoint) -> JointRecord:
-        return JointRecord(source=j.source, file=j.file, lead_um_per_m=j.lead_um_per_m,
-                           lead_interval_95_um_per_m=j.lead_interval_95_um_per_m,
-                           bound_um_per_m=j.bound_um_per_m, table=_table_record(j))
+        out = JointRecord(source=j.source, file=j.file, lead_um_per_m=j.lead_um_per_m,
+                          lead_interval_95_um_per_m=j.lead_interval_95_um_per_m,
+                          bound_um_per_m=j.bound_um_per_m, table=_table_record(j))
+        if j.source == "station" and station and j.axis in station:
+            out.station_test = station[j.axis]
+        return out
 
     return Joints(x=record(knowledge.x), y=record(knowledge.y), z=record(knowledge.z),
                   bound=knowledge.bound, assumed=knowledge.assumed, convention=CONVENTION)

@@ -55,6 +55,8 @@ class SimOptions:
     gauge_scale: str | None = None  # one relative error for all gauges, or one each
     joint_lead: str | None = None  # "X,Y,Z" or one value, µm per metre of travel from home
     joint_pitch: str | None = None  # "AMPLITUDE_UM,PERIOD_MM": one periodic error for all
+    # the station's own test of the joints against the virtual gauge blocks (--joint-test)
+    joint_test: bool | None = None
     profile: str | None = None  # the register map the virtual drive serves
     gauges: str | None = None  # "pty" or "tcp": where the gauges' lines end (None: the system's)
     drive: DriveOptions = field(default_factory=DriveOptions)
@@ -75,7 +77,8 @@ class SimOptions:
                    backlash=args.backlash, leg_bow=args.leg_bow,
                    gauge_scale=args.gauge_scale, profile=args.profile,
                    gauges=args.gauges, joint_lead=args.joint_lead,
-                   joint_pitch=args.joint_pitch, drive=DriveOptions.from_args(args),
+                   joint_pitch=args.joint_pitch, joint_test=args.joint_test,
+                   drive=DriveOptions.from_args(args),
                    procedure=getattr(args, "sim_procedure", None),
                    speed_mm_s=getattr(args, "sim_speed", None))
 

@@ -60,7 +60,8 @@ from station.record.state import RunState
 
 def _operator(yes: bool, station: Any) -> Operator:
     if station is not None:
-        return VirtualOperator(station.mount, station.unmount, say=say, place_fn=station.place)
+        return VirtualOperator(station.mount, station.unmount, say=say, place_fn=station.place,
+                               joint_hands=station)
     return ConsoleOperator(yes=yes)
 
 

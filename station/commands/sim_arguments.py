@@ -79,6 +79,13 @@ def add_sim_options(p: argparse.ArgumentParser) -> None:
              "home, amplitude in µm and period in mm; default none",
     )
     p.add_argument(
+        "--joint-test", action="store_true", default=None,
+        help="the station tests each joint's positioning itself before the calibration, "
+             "against the virtual station's gauge blocks read with its gauge A on the "
+             "carriage ([joints] station_test; docs/model.md, \"The station's own joint "
+             "test\"): what --joint-lead and --joint-pitch do, it finds",
+    )
+    p.add_argument(
         "--gauge-scale", type=str, default=None, metavar="S[,S...]",
         help="scale error of the gauges, relative (0.002: each reads 0.2%% too much of "
              "its plunger's travel); one value for all or one per gauge in the order "

@@ -13,7 +13,9 @@ from contextlib import AbstractContextManager, nullcontext
 from typing import Protocol, TextIO
 
 from orthocal.postures import MIDDLE
+from station.console.joint_prompts import JointPrompt, joint_instruction
 from station.errors import BadInput, RunFailed
+from station.plan.joint_test_plan import FaceSet, JointMount, JointTestPlan
 from station.plan.mounting import GaugeMount, MountingSheet
 
 # Keys typed ahead are dropped through the terminal's own module: termios on POSIX,
@@ -44,6 +46,15 @@ class Operator(Protocol):
         ...
 
     def confirm(self, question: str) -> bool: ...
+
+    def joint_test(self, step: JointPrompt, test: JointTestPlan, all_names: Sequence[str],
+                   *, picture: str | None = None) -> None:
+        """The operator's part of joint ``test.axis``'s own test: mount its gauge on the
+        carriage against the reference (taking every other gauge off), set a face at
+        the plunger, or take the gauge and the reference off
+        (station.console.joint_prompts). Returns once done; raises RunFailed if the
+        operator aborts."""
+        ...
 
     def attach(self, say: Callable[[str], None],
                pause: Callable[[], AbstractContextManager[None]]) -> None:
@@ -182,21 +193,47 @@ class ConsoleOperator:
             return True
         return self._ask(f"{question} [y/N] ") in ("y", "yes")
 
+    def joint_test(self, step: JointPrompt, test: JointTestPlan, all_names: Sequence[str],
+                   *, picture: str | None = None) -> None:
+        instruction = joint_instruction(step, test, [n for n in all_names if n != test.gauge],
+                                        picture)
+        if self.yes:
+            self._say(instruction)
+            return
+        answer = self._ask("Press Enter when done (or type 'abort'): ", instruction)
+        if answer in ("a", "abort", "q", "quit", "n", "no"):
+            raise RunFailed(f"aborted by the operator in joint {test.axis}'s own test")
+
+
+class JointHands(Protocol):
+    """What a virtual operator does for the station's own joint test: a gauge clamped to
+    a carriage on a reference's datum face, a face set, the reference taken off
+    (drivers.sim: the virtual station's and the fake rig's)."""
+
+    def mount_joint_gauge(self, name: str, axis: str, plunger: int) -> None: ...
+
+    def set_face(self, axis: str, face_mm: float) -> None: ...
+
+    def remove_reference(self, axis: str) -> None: ...
+
 
 class VirtualOperator:
     """Mounts simulated indicators through ``mount_fn(name, leg, direction, at=…)`` and
     ``unmount_fn(name)``; says yes to every question. ``place_fn("phase:setup")``,
     if given, is told which placement the next mountings are, so that a simulated
-    stand placed again for the same setup after a resume stands where it stood."""
+    stand placed again for the same setup after a resume stands where it stood.
+    ``joint_hands``: the simulator's hands for the station's own joint test."""
 
     def __init__(self, mount_fn: Callable[..., None],  # (name, leg, direction, *, at)
                  unmount_fn: Callable[[str], None],
                  say: Callable[[str], None] | None = None,
-                 place_fn: Callable[[str], None] | None = None) -> None:
+                 place_fn: Callable[[str], None] | None = None,
+                 joint_hands: JointHands | None = None) -> None:
         self._mount = mount_fn
         self._unmount = unmount_fn
         self._say = say
         self._place = place_fn
+        self._hands = joint_hands
 
     def mount(self, phase: str, setup: int, leg: str, indicators: Mapping[str, str],
               all_names: Sequence[str], at: float = MIDDLE, *,
@@ -218,6 +255,23 @@ class VirtualOperator:
         if self._say is not None:
             self._say(f"[virtual operator] {question} yes")
         return True
+
+    def joint_test(self, step: JointPrompt, test: JointTestPlan, all_names: Sequence[str],
+                   *, picture: str | None = None) -> None:
+        if self._hands is None:
+            raise RunFailed("the virtual operator has no hands for a joint's own test")
+        if isinstance(step, JointMount):
+            for name in all_names:
+                self._unmount(name)
+            self._hands.mount_joint_gauge(step.gauge, step.axis, test.sign)
+        elif isinstance(step, FaceSet):
+            self._hands.set_face(step.axis, step.face_mm)
+        else:
+            self._unmount(step.gauge)
+            self._hands.remove_reference(step.axis)
+        if self._say is not None:
+            self._say("[virtual operator] " + joint_instruction(
+                step, test, [n for n in all_names if n != test.gauge], picture))
 
     def attach(self, say: Callable[[str], None],
                pause: Callable[[], AbstractContextManager[None]]) -> None:

@@ -115,3 +115,9 @@ class Progress:
             flag = " (FLAGGED: above repeatability_mm)" if o.flagged else ""
             self.say(f"{phase} setup {o.index + 1} done: {o.cycles_used} cycle(s), "
                      f"spread {o.spread_mm:.4f} mm{flag}")
+        elif event == "joint_tested":
+            rec = info["record"]
+            how = "from the journal" if info.get("replayed") else \
+                f"{len(rec.targets_mm)} targets, drift {rec.test.drift_um:+.1f} µm"
+            self.say(f"joint {rec.joint}'s own test against the {rec.test.reference}: "
+                     f"{how}")

@@ -28,6 +28,7 @@ from orthocal.numbers import finite
 from station.analysis import acceptance, compensated, joints, reversal, verdict
 from station.analysis import accuracy_statement as accuracy
 from station.analysis import run_budget as budget
+from station.analysis.joint_readings import details_of, tables_of
 from station.analysis.statistics import Measurement, pooled
 from station.config import StationConfig
 from station.console.operator import Operator
@@ -42,6 +43,7 @@ from station.errors import say, storage_message
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan
 from station.record.io import jsonable_value, section
+from station.record.journal import JointTested
 from station.record.journal_file import Journal
 from station.record.model import MachineModel
 from station.record.result import Iteration, Joined, Loop, RunResult, Status
@@ -99,6 +101,8 @@ class Flow:
         result.iterations = self.iterations  # filled round by round
         # each round's Δρ̂ and standard errors joined with the rounds before (_joined)
         self.joined: list[verdict.Joined] = []
+        # the station's own test of the joints, by axis (station.engine.joint_station)
+        self.joint_tests: dict[str, JointTested] = {}
 
     def measure(self, phase: str) -> str:
         """Measure (or replay) a round's first pass and identify it: its verdict
@@ -164,8 +168,9 @@ class Flow:
         # what is stated and written is its middle.
         rev = reversal.estimate(ctx.config, self.measurements)
         self.result.reversal = reversal.fields(ctx.config, rev)
-        self.result.joints = joints.fields(joints.of_run_config(ctx.config).with_reversal(
-            rev.value))  # the measured B wins over a table's reversal
+        known = joints.of_run_config(ctx.config, tables_of(self.joint_tests))
+        self.result.joints = joints.fields(  # the measured B wins over a table's reversal
+            known.with_reversal(rev.value), details_of(self.joint_tests))
         reversal.check_overrun(ctx.config, rev)
         self.reversal = rev
         if carried is None:  # a carried round's layout is the earlier rounds' own

@@ -15,6 +15,7 @@ from dataclasses import asdict
 from drivers.device_errors import DeviceError
 from station.config import StationConfig
 from station.console.progress import Progress
+from station.engine import joint_station
 from station.engine.closed_loop import LoopState, mountings_expected, next_step
 from station.engine.flow import Flow, Run
 from station.engine.recovery import resume_hint
@@ -86,6 +87,9 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
     loop = LoopState(max_iterations=proc.max_iterations, verify=proc.verify,
                      max_extra_passes=proc.max_extra_passes)
     try:
+        # The station's own test of the joints first: the identification and the
+        # tool's statement rest on its tables (station.engine.joint_station).
+        flow.joint_tests = joint_station.test_joints(ctx, seq, result, progress)
         # The whole flow: station.engine.closed_loop decides, Flow performs (or replays) the step.
         while (step := next_step(loop)).kind != "finish":
             if step.kind == "measure" and step.extra:

@@ -18,7 +18,8 @@ exactly as the run it continues. The kinds of step:
 - a round's identification (:class:`RoundFit`: ``identification`` for the
   measurement, round 0; ``verification`` for round n), with the passes it pooled;
 - a write-back round (:class:`WritebackRound`, whose record is its final stage) and
-  each of its stages (:class:`WritebackStage`: backup, intent).
+  each of its stages (:class:`WritebackStage`: backup, intent);
+- the station's own test of a joint (:class:`JointTestStep`, ``joint-test``).
 
 The records a ``setup-redo`` voided are not in the state: a setup measured again is
 measured from its first cycle. The sequencer, the flow and write-back never look the
@@ -31,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, TypeVar
 
-from station.record.journal import Cycle, Repeat, SetupDone, Writeback
+from station.record.journal import Cycle, JointTested, Repeat, SetupDone, Writeback
 from station.record.journal_file import Journal
 from station.record.state import Fit, RunState
 
@@ -75,6 +76,17 @@ class RepeatStep:
 
     def find(self, state: RunState) -> Repeat | None:
         return state.repeats.get((self.phase, self.setup, self.repeat))
+
+
+@dataclass(frozen=True)
+class JointTestStep:
+    """The station's own test of ``joint``, whose record (``joint-test``) holds its table:
+    a test cut off before it is taken again from its mounting."""
+
+    joint: str
+
+    def find(self, state: RunState) -> JointTested | None:
+        return state.joint_tests.get(self.joint)
 
 
 @dataclass(frozen=True)

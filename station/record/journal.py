@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 from station.config import StationConfig
 from station.record.journal_events import EventBody
 from station.record.journal_plan import PlanRecord
+from station.record.result_joints import StationTestRecord
 from station.record.simulated import SimulationParams
 
 Offsets = dict[str, float]  # axis (x, y, z) → zero offset, mm
@@ -263,6 +264,51 @@ class SetupRedo(_Record):
     cycles_dropped: list[int] | None = None
 
 
+class JointMounted(_Record):
+    """The station's own test of ``joint``: the operator clamped ``gauge`` to its
+    carriage against the reference's datum face and took every other gauge off."""
+
+    type: Literal["joint-mount"]
+    joint: str
+    gauge: str
+    operator_s: float | None = None
+    position: list[float] | None = Field(None, description="the joints when mounted, mm")
+
+
+class JointFace(_Record):
+    """The operator set the reference's face ``face_mm`` (from its datum) at the plunger
+    for the test's target ``target`` (its count of targets: the datum again)."""
+
+    type: Literal["joint-face"]
+    joint: str
+    target: int
+    face_mm: float
+    operator_s: float | None = None
+
+
+class JointUnmounted(_Record):
+    """The operator took the test's gauge and reference off."""
+
+    type: Literal["joint-unmount"]
+    joint: str
+    gauge: str
+    operator_s: float | None = None
+
+
+class JointTested(_Record):
+    """A joint's own test done: its table as found (targets ascending, deviations
+    actual − target from below and from above relative to the datum, their expanded
+    uncertainty), not yet referred to Π0, and how it was found."""
+
+    type: Literal["joint-test"]
+    joint: str
+    targets_mm: list[float]
+    forward_um: list[float]
+    reverse_um: list[float]
+    u95_um: list[float]
+    test: StationTestRecord
+
+
 class Rollback(_Record):
     """A stage of the operator's rollback to the backed-up offsets."""
 
@@ -287,7 +333,8 @@ AnyRollback = Annotated[RollbackIntent | RollbackDone, Field(discriminator="stag
 JournalRecord = Annotated[
     Header | Setup | Reading | Outlier | Cycle | SetupDone | Repeat | Identification
     | Verification | AnyWriteback | Event | Finished | Stopped | Resumed | Homed
-    | ReferenceCheck | SetupRedo | AnyRollback,
+    | ReferenceCheck | SetupRedo | AnyRollback | JointMounted | JointFace | JointUnmounted
+    | JointTested,
     Field(discriminator="type"),
 ]
 

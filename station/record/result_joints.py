@@ -33,6 +33,35 @@ class JointTableRecord(Closed):
                     "mean + B/2), which wins where both exist")
 
 
+class StationTestRecord(Closed):
+    """How the station's own test found a joint's table (source "station"; docs/model.md,
+    "The station's own joint test"): the reference and the gauge, the test's shape, the
+    datum's drift, the repeatability and each target's standard uncertainties by
+    source, in the table's order."""
+
+    reference: str = Field(description='the reference\'s kind: "gauge blocks", "step gauge" '
+                                       'or "length bar"')
+    gauge: str = Field(description="the indicator on the carriage")
+    plunger: Literal["-", "+"] = Field(description='"-": pointing toward lower ρ')
+    faces_mm: list[float] = Field(description="the face set at each target, its distance "
+                                              "from the datum face (as calibrated, at 20 °C)")
+    repeats: int = Field(description="approaches of each target from each side")
+    readings: int = Field(description="readings per approach")
+    temperature_c: float = Field(description="the reference's temperature its lengths were "
+                                             "taken at (given, or assumed 20)")
+    drift_um: float = Field(description="the datum's reading at the end less at the start, "
+                                        "taken out linearly in the targets' order")
+    noise_um: float = Field(description="one approach's repeatability (standard deviation)")
+    noise_dof: int
+    u_um: dict[str, list[float]] = Field(
+        description="per target, the standard uncertainty of each source: reference, "
+                    "gauge, temperature, noise (u95_um is twice their quadrature)")
+    inferred: list[str] = Field(description="the sides not approached (the soft limits "
+                                            "leave no room), taken from a neighbour's reversal")
+    assumed: list[str] = Field(description="what the uncertainty rests on without being "
+                                           "stated, with why")
+
+
 class JointRecord(Closed):
     """One joint: where its error comes from, its lead and the table used."""
 
@@ -48,6 +77,8 @@ class JointRecord(Closed):
     bound_um_per_m: float | None = Field(description="the assumed bound per metre of "
                                                      "travel from home (source assumed)")
     table: JointTableRecord | None = Field(description="the table used (null where assumed)")
+    station_test: StationTestRecord | None = Field(
+        None, description="how the station's own test found it (source station)")
 
 
 class Joints(Closed):

@@ -41,6 +41,8 @@ class SimulationParams(BaseModel):
         _ZERO, description="each joint's lead error, µm per metre of travel from home")
     joint_pitch: tuple[float, float] = Field(
         (0.0, 0.0), description="one periodic error for all joints: amplitude µm, period mm")
+    joint_test: bool = Field(False, description="the station tested its joints itself "
+                                                "against the virtual gauge blocks")
     indicators: int = 2
     profile: str | None = Field(None, description="the map the drive serves: a name or a file")
     gauges: Literal["pty", "tcp"] | None = Field(

@@ -26,6 +26,10 @@ from station.record.journal import (
     Finished,
     Header,
     Identification,
+    JointFace,
+    JointMounted,
+    JointTested,
+    JointUnmounted,
     JournalRecord,
     Reading,
     Repeat,
@@ -124,6 +128,8 @@ class RunState:
     # (``mount-kept`` events, station.engine.kept): no mounting of their own.
     kept: set[tuple[str, int]] = field(default_factory=set)
     on: OnMachine | None = None  # None: none, or a fault's session may have moved them
+    # The joints the station's own test is done with, by axis (station.engine.joint_station).
+    joint_tests: dict[str, JointTested] = field(default_factory=dict)
 
     @classmethod
     def of(cls, records: Iterable[JournalRecord]) -> RunState:
@@ -148,10 +154,8 @@ class RunState:
         """Fold one more record in (outliers, homing, reference checks and the
         records of a fault are read by nothing that resumes or sums a run)."""
         match rec:
-            case Header():
-                self.header = rec
-            case Finished():
-                self.finished = rec
+            case Header() | Finished():
+                self._ends(rec)
             case Resumed():
                 self.resumes += 1
             case Setup() | Stopped():
@@ -176,6 +180,26 @@ class RunState:
                 self._event(rec.event)
             case SetupRedo():
                 self._void(rec.phase, rec.setup)
+            case JointMounted() | JointFace() | JointUnmounted() | JointTested():
+                self._joint_test(rec)
+
+    def _joint_test(self, rec: JointMounted | JointFace | JointUnmounted | JointTested
+                    ) -> None:
+        """The station's own test of a joint: its record once done; the operator's part,
+        its time, and a mounting of its own with no leg gauge left on."""
+        if isinstance(rec, JointTested):
+            self.joint_tests[rec.joint] = rec
+            return
+        self.operator_s += float(rec.operator_s or 0.0)
+        if isinstance(rec, JointMounted):
+            self.mountings += 1
+            self.on, self.live = None, None
+
+    def _ends(self, rec: Header | Finished) -> None:
+        if isinstance(rec, Header):
+            self.header = rec
+        else:
+            self.finished = rec
 
     def _mounted(self, rec: Setup | Stopped) -> None:
         if isinstance(rec, Stopped):  # a fault's or Ctrl-C's: what was on is mounted again

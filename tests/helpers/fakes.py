@@ -59,7 +59,7 @@ class FakeRig(fake.FakeRig):
         return devices
 
     def operator(self) -> VirtualOperator:
-        return VirtualOperator(self.mount, self.unmount)
+        return VirtualOperator(self.mount, self.unmount, joint_hands=self)
 
     def simulation(self) -> dict[str, Any]:
         """The hidden machine as a simulated run's journal header keeps it

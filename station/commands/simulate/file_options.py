@@ -44,6 +44,7 @@ def load_simulation(path: str | Path) -> SimOptions:
         backlash=as_text(s.backlash), leg_bow=as_text(s.leg_bow),
         gauge_scale=as_text(s.gauge_scale), profile=profile, gauges=s.gauges,
         joint_lead=as_text(s.joint_lead), joint_pitch=as_text(s.joint_pitch),
+        joint_test=s.joint_test,
         drive=DriveOptions(motion=d.motion, profile=as_text(d.profile), accel=as_text(d.accel),
                            delays=as_text(d.delays), sequence=d.sequence),
         procedure=_given(doc.procedure), writeback=_given(doc.writeback),

@@ -94,6 +94,8 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         # (amplitude µm, period mm), counted from home
         "joint_lead_um_per_m": lead,
         "joint_pitch": pitch,
+        # the station's own test of the joints against the virtual gauge blocks
+        **({"joint_test": True} if options.joint_test else {}),
         # the register map the virtual drive serves (a built-in name or a file's
         # absolute path), kept for resume
         "profile": profile,
@@ -393,15 +395,27 @@ SIM_PROCEDURE: dict[str, Any] = {
 }
 
 
+#: The virtual station's length reference, as its config states it ([joints.reference]):
+#: gauge blocks at 20 °C, calibrated to 0.5 µm (the virtual ones are exact), the
+#: station's gauge A on the carriage pointing toward lower ρ.
+SIM_REFERENCE: dict[str, Any] = {"kind": "gauge blocks", "u_mm": 0.0005,
+                                 "temperature_c": 20.0, "plunger": "-"}
+
+
 def station_config(station: Any, params: dict[str, Any]) -> dict[str, Any]:
     """The config a simulated run uses (station.toml's shape): the virtual station's
     hardware as it describes itself, the procedure (SIM_PROCEDURE, then the
     simulation's ``procedure``) and the write-back (``max_abs_offset_mm`` 3 mm, then
-    the simulation's ``writeback``), and the simulation's ``report``. What a test
+    the simulation's ``writeback``), the simulation's ``report``, and with its
+    ``joint_test`` the station's own test of the joints against the virtual gauge
+    blocks (SIM_REFERENCE). What a test
     hook put in the station's own description wins: it stands for what a user writes
     in the file."""
     hardware = station.config()
+    joints = {**({"station_test": ["x", "y", "z"], "reference": SIM_REFERENCE}
+                 if params.get("joint_test") else {}), **hardware.get("joints", {})}
     return {**hardware,
+            **({"joints": joints} if joints else {}),
             "procedure": {**SIM_PROCEDURE, **(params.get("procedure") or {}),
                           **hardware.get("procedure", {})},
             "writeback": {"max_abs_offset_mm": 3.0, **(params.get("writeback") or {}),

@@ -8,7 +8,8 @@ tables for the run. Every key is the long option of ``run --simulate`` without i
 (``--true-drho`` is ``true_drho``, ``--drive-profile`` is ``drive.profile``);
 an option given on the command line wins over the file. Values are TOML's own:
 ``true_drho = [0.7, -1.1, 0.35]``, ``backlash = 0.01`` or ``[0.01, 0, 0.02]``,
-``joint_lead = [100, -80, 60]`` (µm/m), ``joint_pitch = [2.0, 5.0]`` (µm, mm).
+``joint_lead = [100, -80, 60]`` (µm/m), ``joint_pitch = [2.0, 5.0]`` (µm, mm),
+``joint_test = true``.
 
 Loading checks the whole of it (the same checks as the options): a wrong key or
 value is one line naming the file and the key, exit 2, before anything starts.
@@ -61,6 +62,9 @@ class SimulationTable(_Strict):
         None, description="each joint's lead error, µm/m from home; one, or x, y, z")
     joint_pitch: tuple[float, float] | None = Field(
         None, description="one periodic error for all joints: [amplitude µm, period mm]")
+    joint_test: bool | None = Field(
+        None, description="the station tests its joints itself against the virtual "
+                          "gauge blocks before the calibration")
     profile: str | None = Field(
         None, description="a built-in map name, or a map file (relative to this file)")
     gauges: Literal["pty", "tcp"] | None = Field(

@@ -1,0 +1,58 @@
+"""``orthocal run --simulate --joint-test`` (docs/design.md, "The station's own joint
+test"): the command line's virtual station (a Modbus server, gauges on pseudo-
+terminals) has gauge blocks that its gauge A, clamped to a carriage, reads through the
+carriage's true position; with ``--joint-lead 100,-80,60`` the station's own test,
+before the calibration, finds each lead within 10 µm/m and result.json states it.
+``--plan`` lists the test and ``SIM.toml`` says ``joint_test = true`` as well."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from builders import Rig
+
+SEED = "31"  # a fixed draw of the virtual gauges' 1 µm noise
+SHORT = '{"cycles": 2, "readings": 5, "settle_s": 0, "verify": false, "max_iterations": 1}'
+
+
+def two_repeats(rig: Rig, station: Any) -> None:
+    """What a user writes in the file: two approaches of each target from each side."""
+    describe = station.config
+    station.config = lambda: {**describe(), "joints": {"station_repeats": 2}}
+
+
+def test_run_simulate_joint_test_finds_the_leads(orthocal, tmp_path: Path) -> None:
+    run = orthocal("run", "--simulate", "--seed", SEED, "--noise", "0.001", "--joint-lead",
+                   "100,-80,60", "--backlash", "0.005,0,0", "--joint-test", "--yes", "--json",
+                   "--sim-procedure", SHORT, "--out", str(tmp_path / "runs"),
+                   prepare=two_repeats)
+    assert run.code in (0, 3), run.err
+    result = json.loads(run.out)
+    assert result["status"] == "ok"
+    for axis, k in zip("xyz", (100.0, -80.0, 60.0), strict=True):
+        j = result["joints"][axis]
+        assert j["source"] == "station", j
+        assert k - 10.0 < j["lead_um_per_m"] < k + 10.0, (axis, j["lead_um_per_m"])
+        assert j["station_test"]["repeats"] == 2
+    assert result["simulation"]["joint_lead_um_per_m"] == {"x": 100.0, "y": -80.0, "z": 60.0}
+    run_dir = Path(result["run_dir"])
+    assert (run_dir / "joint-test-x.svg").is_file()
+    # the virtual operator was told what to do, in the prompts' words
+    assert "joint x's own test: the machine is at ρ_x = 200.250 mm (its datum)" in run.err
+    assert "set a stack of gauge blocks of" in run.err
+    # the run directory's config keeps the test and its reference: a resume runs it so
+    saved = (run_dir / "config.toml").read_text(encoding="utf-8")
+    assert 'station_test = ["x", "y", "z"]' in saved and 'kind = "gauge blocks"' in saved
+
+
+def test_plan_lists_the_test_and_a_sim_file_asks_for_it(orthocal, tmp_path: Path) -> None:
+    sim = tmp_path / "rehearsal.toml"
+    sim.write_text("[simulation]\nseed = 3\njoint_test = true\n", encoding="utf-8")
+    listed = orthocal("run", "--simulate", str(sim), "--plan", "--out", str(tmp_path / "plan"))
+    assert listed.code == 0, listed.err
+    for axis in "xyz":
+        assert f"joint {axis}'s own test: gauge A on carriage {axis}, plunger toward lower ρ, " \
+               f"against the gauge blocks; ρ_{axis} from 200.250 to 370.250 mm" in listed.out
+    assert "target 0: ρ = 200.250 mm, face 0.000 mm, from above only" in listed.out
