@@ -146,12 +146,18 @@ def measured_setups(plan: Plan, state: RunState, cycles: int) -> list[Setup]:
 
 
 def expected_mountings(config: StationConfig, plan: Plan) -> dict[str, int]:
-    """The mountings the run expects (closed_loop.mountings_expected)."""
+    """The mountings the run expects (closed_loop.mountings_expected), the station's own
+    test of the joints' one per joint before them (``joint_test``, where it has one)."""
     proc = config.procedure
-    return mountings_expected(len(plan.setups_of(0)), proc.max_iterations,
-                              proc.max_extra_passes, proc.verify,
-                              second=len(plan.setups_of(1)),
-                              later=len(plan.setups_of(2)))
+    counts = mountings_expected(len(plan.setups_of(0)), proc.max_iterations,
+                                proc.max_extra_passes, proc.verify,
+                                second=len(plan.setups_of(1)),
+                                later=len(plan.setups_of(2)))
+    tested = len(config.joints.station_test)
+    if not tested:
+        return counts
+    return {**{k: v + (0 if k == "per_write_back" else tested) for k, v in counts.items()},
+            "joint_test": tested}
 
 
 def _stopped(seq: Sequencer) -> str:

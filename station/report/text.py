@@ -64,8 +64,10 @@ def mountings_line(expected: Mapping[str, int]) -> str:
     each = "" if more is None else (
         f", {more} more per further write-back (the last setup's gauges stay on across "
         "each)")
-    return (f"mountings: expect {expected['usual']} (one write-back, verified at once); "
-            f"{expected['fewest']} if the machine is within tolerance{each}; up to "
+    tested = expected.get("joint_test")
+    joints = "" if not tested else f" (the joints' own test's {tested} first)"
+    return (f"mountings: expect {expected['usual']}{joints} (one write-back, verified at "
+            f"once); {expected['fewest']} if the machine is within tolerance{each}; up to "
             f"{expected['most']} if every round takes all its passes")
 
 
