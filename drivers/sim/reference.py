@@ -56,6 +56,22 @@ class VirtualReference:
             return s * (self._x(axis) - x0) + face
         return source
 
+    def standing(self, axis: str, plunger: int, faces_mm: list[float],
+                 x_datum: float) -> Callable[[], float]:
+        """A reference standing beside joint ``axis`` from the start, for a station in
+        another process, which cannot be told what its operator sets: the face at the
+        plunger is the one whose null (``x_datum`` − s·f, the carriage where face f
+        meets the plunger as the datum did) lies nearest the carriage, as an operator
+        setting each face the station asks for would leave it. The gauge's source, 0 at
+        each null."""
+        faces = np.asarray(faces_mm, dtype=float)
+
+        def source() -> float:
+            x = self._x(axis)
+            f = float(faces[np.argmin(np.abs(x - (x_datum - plunger * faces)))])
+            return plunger * (x - x_datum) + f
+        return source
+
     def set_face(self, axis: str, face_mm: float) -> None:
         """The operator sets the face ``face_mm`` from the datum at the plunger."""
         with self._lock:

@@ -344,6 +344,18 @@ class VirtualStation:
             self._save_mounts()
         gauge.mount(self.reference.mount(axis, plunger))
 
+    def stand_joint_gauge(self, name: str, axis: str, plunger: int, faces_mm: list[float],
+                          datum_mm: float) -> None:
+        """Indicator ``name`` on carriage ``axis`` from the start, against a reference
+        standing beside its rail whose face is set as the station asks
+        (drivers.sim.reference.VirtualReference.standing): its datum's null where the
+        joint counts ``datum_mm``, the gauge reading 0 at every null. For a station in
+        another process (``orthocal sim``)."""
+        i = "xyz".index(axis)
+        x_datum = float(datum_mm) + float(self.machine.true_drho[i])
+        self.indicators[name].mount(self.reference.standing(axis, plunger, list(faces_mm),
+                                                            x_datum), zero_mm=0.0)
+
     def set_face(self, axis: str, face_mm: float) -> None:
         """The operator sets the reference's face ``face_mm`` from its datum at the
         plunger of joint ``axis``'s test."""

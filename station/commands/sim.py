@@ -7,7 +7,9 @@ pseudo-terminals, or with ``--gauges tcp`` on sockets of 127.0.0.1 that the conf
 names as ``socket://`` URLs), so
 ``orthocal run --config FILE`` can rehearse the real workflow from another
 terminal. A separate process cannot be told where the operator mounted the
-gauges, so six fixed indicators stand two per leg, all mounted at once.
+gauges, so six fixed indicators stand two per leg, all mounted at once; with
+``--joint-test`` three more stand on the carriages against step gauges whose faces
+set themselves as the station asks (station.commands.simulate.station_setups).
 The drive moves as ``--motion`` and ``--drive-*`` say (station.commands.simulate.launch), and
 the config it writes tells the station only what an integrator would: that the
 axes are coordinated, if they are, and the default acceleration. A map whose axes
@@ -20,6 +22,7 @@ are separate drives (unit ids) gets a drive that does not interpolate, as with
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import random
@@ -50,7 +53,7 @@ from station.commands.simulate.launch import (
     served_map,
     station_config,
 )
-from station.commands.simulate.station_setups import SimulatedStation, gauges_for
+from station.commands.simulate.station_setups import JOINT_GAUGES, SimulatedStation, gauges_for
 from station.config import parse_config
 from station.config.toml import dump_toml
 from station.errors import BadInput
@@ -79,6 +82,8 @@ def main(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise BadInput(f"--port: cannot serve on 127.0.0.1:{args.port} ({exc})") from None
         with station:
+            if args.joint_test:
+                station.stand_joint_gauges()
             header = (f"orthocal sim (pid {os.getpid()}): seed {seed}, "
                       f"{_hidden(truth, gauges)}, drive {_describe(drive)}\n"
                       f"Use: orthocal run --config {out}")
@@ -137,6 +142,9 @@ def _specs(args: argparse.Namespace, seed: int
                                               mount_error_mm=mount_error, scale=scale,
                                               line=line),
                         mounted=True)
+    if args.joint_test:  # a gauge on each carriage for the joints' own test
+        gauges = dataclasses.replace(gauges, names=(*gauges.names, *JOINT_GAUGES.values()),
+                                     scale=[*scale, 0.0, 0.0, 0.0])
     return truth, drive_spec, gauges, drive
 
 

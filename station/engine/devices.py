@@ -104,7 +104,10 @@ def open_devices(config: StationConfig, on_event: Callable[[dict[str, object]], 
     try:
         controller = build_controller(config, on_event)
         stack.callback(controller.close)
-        used = sorted({n for s in config.setups for n in s.indicators})
+        # the setups' gauges and the station's own joint test's
+        first = config.indicators[0].name
+        used = sorted({n for s in config.setups for n in s.indicators}
+                      | {config.joints.gauge_of(a, first) for a in config.joints.station_test})
         indicators = build_indicators(config, used, on_event)
         stack.callback(indicators.close)
     except BaseException:

@@ -3,15 +3,22 @@ test"): the command line's virtual station (a Modbus server, gauges on pseudo-
 terminals) has gauge blocks that its gauge A, clamped to a carriage, reads through the
 carriage's true position; with ``--joint-lead 100,-80,60`` the station's own test,
 before the calibration, finds each lead within 10 µm/m and result.json states it.
-``--plan`` lists the test and ``SIM.toml`` says ``joint_test = true`` as well."""
+``--plan`` lists the test and ``SIM.toml`` says ``joint_test = true`` as well. ``orthocal
+sim --joint-test``, a station in another process, stands a gauge on each carriage
+against a step gauge whose face is set as the station asks, and ``run --config``
+against it finds the leads too."""
 
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 from typing import Any
 
-from builders import Rig
+from builders import Rig, cli
 
 SEED = "31"  # a fixed draw of the virtual gauges' 1 µm noise
 SHORT = '{"cycles": 2, "readings": 5, "settle_s": 0, "verify": false, "max_iterations": 1}'
@@ -59,3 +66,42 @@ def test_plan_lists_the_test_and_a_sim_file_asks_for_it(orthocal, tmp_path: Path
         assert f"joint {axis}'s own test: gauge A on carriage {axis}, plunger toward lower ρ, " \
                f"against the gauge blocks; ρ_{axis} from 200.250 to 370.250 mm" in listed.out
     assert "target 0: ρ = 200.250 mm, face 0.000 mm, from above only" in listed.out
+
+
+def test_a_station_in_another_process_serves_the_test(tmp_path: Path) -> None:
+    config = tmp_path / "sim.toml"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station", "sim", "--config-out", str(config), "--seed", "4",
+         "--noise", "0.001", "--joint-lead", "100,-80,60", "--joint-test"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while not config.exists() or "[joints]" not in config.read_text(encoding="utf-8"):
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, "orthocal sim wrote no config in 30 s"
+            time.sleep(0.05)
+        text = config.read_text(encoding="utf-8")
+        assert 'station_gauge = { x = "G", y = "H", z = "I" }' in text
+        assert 'kind = "step gauge"' in text
+        # what a user may write: a shorter test and a calibration without verification
+        config.write_text(text.replace('station_test = ["x", "y", "z"]',
+                                       'station_test = ["x", "y", "z"]\nstation_repeats = 2')
+                          .replace("verify = true", "verify = false"), encoding="utf-8")
+        run = cli("run", "--config", str(config), "--yes", "--json", "--out",
+                  str(tmp_path / "runs"), cwd=tmp_path)
+        assert run.returncode in (0, 3), run.stderr
+        result = json.loads(run.stdout)
+        for axis, k in zip("xyz", (100.0, -80.0, 60.0), strict=True):
+            j = result["joints"][axis]
+            assert j["source"] == "station" and j["station_test"]["reference"] == "step gauge"
+            assert k - 10.0 < j["lead_um_per_m"] < k + 10.0, (axis, j["lead_um_per_m"])
+            assert j["table"]["targets_mm"] == [200.25 + 20.0 * n for n in range(10)]
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=10)
+        proc.stdout.close()
+        proc.stderr.close()

@@ -31,6 +31,14 @@ SIX_SETUPS: list[dict[str, Any]] = [
 # The controller's reply timeout the description gives: a virtual drive on the
 # loopback answers in milliseconds, and a lost reply is found out in a second.
 CONTROLLER_TIMEOUT_S = 1.0
+#: A station in another process (``orthocal sim --joint-test``): a gauge on each
+#: carriage from the start and a step gauge standing beside each rail, 20 mm faces
+#: calibrated to 0.5 µm at 20 °C, its face set as the station asks
+#: (drivers.sim.reference.VirtualReference.standing), the datum where the station puts
+#: it for this machine: on the lower soft limit (station.plan.joint_test_plan).
+JOINT_GAUGES = {"x": "G", "y": "H", "z": "I"}
+STEP_GAUGE: dict[str, Any] = {"kind": "step gauge", "faces_mm": [20.0 * k for k in range(11)],
+                              "u_mm": 0.0005, "temperature_c": 20.0, "plunger": "-"}
 
 
 def setups_of(count: int) -> list[dict[str, Any]]:
@@ -62,10 +70,27 @@ class SimulatedStation(VirtualStation):
     A test may replace ``config`` on an instance: its description stands for what a
     user writes in the file."""
 
+    def stand_joint_gauges(self) -> None:
+        """:data:`JOINT_GAUGES` on their carriages against :data:`STEP_GAUGE` beside
+        each rail, the datum on the drive's lower soft limit: what a station in another
+        process tests its joints with."""
+        for axis, name in JOINT_GAUGES.items():
+            i = "xyz".index(axis)
+            self.stand_joint_gauge(name, axis, -1, STEP_GAUGE["faces_mm"],
+                                   float(self.controller.soft_min[i]))
+        self._joint_gauges = dict(JOINT_GAUGES)
+
+    @property
+    def joint_gauges(self) -> dict[str, str]:
+        """The gauges standing on the carriages for the joints' own test, by joint
+        (none until :meth:`stand_joint_gauges`)."""
+        return dict(getattr(self, "_joint_gauges", {}))
+
     @property
     def setups(self) -> list[dict[str, Any]]:
-        """The setups of its gauges (A and B: moved leg to leg; A..F: two per leg)."""
-        names = self.gauge_spec.names
+        """The setups of its gauges (A and B: moved leg to leg; A..F: two per leg; the
+        joints' own test's gauges aside)."""
+        names = tuple(n for n in self.gauge_spec.names if n not in JOINT_GAUGES.values())
         for setups in (TWO_SETUPS, SIX_SETUPS):
             if names == _names(setups):
                 return setups
@@ -104,4 +129,7 @@ class SimulatedStation(VirtualStation):
                             "stroke_mm": self.strokes[n][0], "preload_mm": self.strokes[n][1]}
                            for n, s in self.indicators.items()],
             "setups": [dict(s) for s in self.setups],
+            **({"joints": {"station_test": list(self.joint_gauges),
+                           "station_gauge": dict(self.joint_gauges), "reference": STEP_GAUGE}}
+               if self.joint_gauges else {}),
         }
