@@ -191,17 +191,22 @@ def plan_pictures(config: Any, plan: Any, out: Path) -> list[Path]:
     they are the config's, drawn again), said on stderr; one line, exit 2, where the
     folder cannot be written (``--out`` is the user's)."""
     from station.plan.mounting import sheets_of
+    from station.report.joint_picture import write_joint_pictures
     from station.report.mounting_files import write_pictures
 
     folder = out / PLAN_PICTURES
     try:
         folder.mkdir(parents=True, exist_ok=True)
         paths = write_pictures(folder, sheets_of(config, plan))
+        joints = [] if plan.station_test is None else \
+            write_joint_pictures(folder, plan.station_test, config)
     except OSError as exc:
         raise BadInput(f"--out {storage_message(folder, exc)}; nothing moved") from None
     say(f"orthocal: mounting pictures, one per setup, in {folder}: "
-        + ", ".join(p.name for p in paths))
-    return paths
+        + ", ".join(p.name for p in paths)
+        + ("" if not joints else "; the joints' own test's: "
+           + ", ".join(p.name for p in joints)))
+    return paths + joints
 
 
 def _mountings(config: Any, plan: Any) -> dict[str, int]:

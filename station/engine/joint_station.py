@@ -39,7 +39,7 @@ from station.plan.joint_test_plan import (
 from station.plan.steps import Move, Settle
 from station.record.journal import JointTested
 from station.record.result import RunResult
-from station.report.joint_picture import draw, file_name
+from station.report.joint_picture import file_name, write_joint_pictures
 
 
 def station_test(ctx: Run) -> StationTest | None:
@@ -53,15 +53,12 @@ def draw_pictures(ctx: Run) -> None:
     """Each tested joint's set-up picture into the run directory, before its first
     prompt names it (a resumed run draws only those missing)."""
     test = station_test(ctx)
-    for jp in test.joints if test is not None else []:
-        path = ctx.run_dir / file_name(jp.axis)
-        if path.exists():
-            continue
-        ind = ctx.config.indicator(jp.gauge)
-        try:
-            path.write_text(draw(jp, ind.stroke_mm, ind.preload), encoding="utf-8")
-        except OSError as exc:
-            raise StorageFull(storage_message(ctx.run_dir, exc)) from None
+    if test is None:
+        return
+    try:
+        write_joint_pictures(ctx.run_dir, test, ctx.config, missing_only=True)
+    except OSError as exc:
+        raise StorageFull(storage_message(ctx.run_dir, exc)) from None
 
 
 def test_joints(ctx: Run, seq: Sequencer, result: RunResult,

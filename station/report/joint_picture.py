@@ -10,9 +10,12 @@ attributes (the part, the face) so that a test can find what is drawn where."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from xml.sax.saxutils import escape
 
-from station.plan.joint_test_plan import JointTestPlan
+from drivers.files import write_atomic
+from station.config import StationConfig
+from station.plan.joint_test_plan import JointTestPlan, StationTest
 from station.report.mounting_picture import (
     BAND,
     FONT,
@@ -138,3 +141,18 @@ def draw(test: JointTestPlan, stroke_mm: float, preload_mm: float) -> str:
             f'viewBox="0 0 {WIDTH} {HEIGHT}" font-family="{FONT}" role="img" '
             f'data-joint="{test.axis}">'
             f"<title>{escape(title)}</title>{''.join(body)}</svg>\n")
+
+
+def write_joint_pictures(directory: Path, test: StationTest, config: StationConfig, *,
+                         missing_only: bool = False) -> list[Path]:
+    """Each tested joint's picture into ``directory`` (:func:`file_name`), atomically;
+    with ``missing_only`` those already there are left as they are (a resumed run's
+    operator saw them). OSError is the caller's to word."""
+    paths = []
+    for jp in test.joints:
+        path = Path(directory) / file_name(jp.axis)
+        if not (missing_only and path.exists()):
+            ind = config.indicator(jp.gauge)
+            write_atomic(path, draw(jp, ind.stroke_mm, ind.preload))
+        paths.append(path)
+    return paths

@@ -6,11 +6,13 @@ before the calibration, finds each lead within 10 µm/m and result.json states i
 ``--plan`` lists the test and ``SIM.toml`` says ``joint_test = true`` as well. ``orthocal
 sim --joint-test``, a station in another process, stands a gauge on each carriage
 against a step gauge whose face is set as the station asks, and ``run --config``
-against it finds the leads too."""
+against it finds the leads too. A run killed (SIGKILL) in the middle of a joint's test
+resumes it from its mounting."""
 
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -18,7 +20,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from builders import Rig, cli
+from builders import Rig, cli, no_figures_file
+from forked import STATION, Forked
+
+from station.record.journal_file import read_journal
 
 SEED = "31"  # a fixed draw of the virtual gauges' 1 µm noise
 SHORT = '{"cycles": 2, "readings": 5, "settle_s": 0, "verify": false, "max_iterations": 1}'
@@ -66,6 +71,10 @@ def test_plan_lists_the_test_and_a_sim_file_asks_for_it(orthocal, tmp_path: Path
         assert f"joint {axis}'s own test: gauge A on carriage {axis}, plunger toward lower ρ, " \
                f"against the gauge blocks; ρ_{axis} from 200.250 to 370.250 mm" in listed.out
     assert "target 0: ρ = 200.250 mm, face 0.000 mm, from above only" in listed.out
+    # the set-up pictures drawn before anything moves, beside the mountings'
+    drawn = sorted(p.name for p in (tmp_path / "plan" / "mountings").iterdir())
+    assert drawn[:3] == ["joint-test-x.svg", "joint-test-y.svg", "joint-test-z.svg"]
+    assert drawn[3:] == [f"mounting-{n}-leg-{a}.svg" for n, a in ((1, "x"), (2, "y"), (3, "z"))]
 
 
 def test_a_station_in_another_process_serves_the_test(tmp_path: Path) -> None:
@@ -105,3 +114,57 @@ def test_a_station_in_another_process_serves_the_test(tmp_path: Path) -> None:
             proc.wait(timeout=10)
         proc.stdout.close()
         proc.stderr.close()
+
+
+# The command line in a process of its own, two approaches a side, SIGKILLing itself once
+# the journal holds the ``nth`` record matching ``match`` (argv[1]).
+KILLER = r"""
+import json, os, signal, sys
+import station.commands.simulate.launch as launch
+import station.record.journal_file as journal
+from station.commands.cli import main
+
+spec = json.loads(sys.argv[1])
+described = launch.station_config
+launch.station_config = lambda station, params: (lambda c: {
+    **c, "joints": {**c["joints"], "station_repeats": 2}})(described(station, params))
+real_append = journal.Journal.append
+seen = [0]
+
+def append(self, record):
+    real_append(self, record)
+    if all(record.get(k) == v for k, v in spec["match"].items()):
+        seen[0] += 1
+        if seen[0] == spec["nth"]:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+journal.Journal.append = append
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def test_a_run_killed_in_a_joints_test_resumes_it(tmp_path: Path) -> None:
+    out = tmp_path / "runs"
+    argv = ["run", "--simulate", no_figures_file(tmp_path), "--seed", SEED, "--noise", "0.001",
+            "--joint-lead", "100,-80,60", "--joint-test", "--sim-speed", "20000",
+            "--sim-procedure", SHORT, "--yes", "--json", "--out", str(out)]
+    spec = {"match": {"type": "joint-face", "joint": "y"}, "nth": 3}
+    env = dict(os.environ)  # the tests' clock (conftest.py) included
+    killed = Forked(KILLER, [json.dumps(spec), *argv], tmp_path, env)
+    killed.communicate(timeout=120)
+    assert killed.returncode == -signal.SIGKILL
+    (run_dir,) = list(out.glob("run-*"))
+    before = (run_dir / "journal.jsonl").read_bytes()
+    records = read_journal(run_dir / "journal.jsonl")
+    assert [r["joint"] for r in records if r["type"] == "joint-test"] == ["x"]
+    resumed = Forked(STATION, ["resume", str(run_dir), "--json"], tmp_path, env)
+    stdout, stderr = resumed.communicate(timeout=120)
+    assert resumed.returncode in (0, 3), stderr
+    after = (run_dir / "journal.jsonl").read_bytes()
+    assert after.startswith(before)  # the journal only grew
+    records = read_journal(run_dir / "journal.jsonl")
+    assert [r["joint"] for r in records if r["type"] == "joint-test"] == ["x", "y", "z"]
+    assert [r["joint"] for r in records if r["type"] == "joint-mount"] == ["x", "y", "y", "z"]
+    result = json.loads(stdout)
+    for axis, k in zip("xyz", (100.0, -80.0, 60.0), strict=True):
+        assert k - 10.0 < result["joints"][axis]["lead_um_per_m"] < k + 10.0
