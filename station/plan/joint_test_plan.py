@@ -336,8 +336,8 @@ def check_joint(jp: JointTestPlan, config: StationConfig, checker: MotionChecker
     position = None if start is None else np.asarray(start, dtype=float)
     for step in jp.steps():
         if isinstance(step, Move):
-            checker.route(position, step.targets, f"{where}, {step.label}", approach=step.approach,
-                          travel=False)
+            checker.route(position, step.targets, f"{step.label}, in {where}",
+                          approach=step.approach, travel=False)
             position = np.asarray(step.targets, dtype=float)
     rho, push, most = plunger_travel(jp)
     pad = 1e-6 * WORST_ERROR_UM_PER_M * np.abs(rho - jp.targets[0])

@@ -203,9 +203,26 @@ def test_a_reference_that_cannot_span_the_travel_is_refused() -> None:
 def test_a_test_that_would_leave_the_soft_limits_is_refused() -> None:
     cfg = config()
     plan = build_plan(cfg)
-    with pytest.raises(BadInput, match=r"the station's test of joint x, joint x datum: ρ_x = "
-                                       r"150.000 mm is outside the soft limits"):
+    with pytest.raises(BadInput, match=r"^plan: move to joint x datum, in the station's test "
+                                       r"of joint x: ρ_x = 150.000 mm is outside the soft "
+                                       r"limits"):
         plan_station_test(cfg, plan, LIMITS, MotionChecker(cfg, LIMITS), start=(150.0, L, L))
+
+
+def test_a_test_that_would_leave_the_workspace_is_refused() -> None:
+    # a short-legged machine and a bar longer than its travel: joint x alone 150 mm
+    # out from Π0, the others at L, takes the end point beyond the legs' reach
+    data = station_data(machine={"leg_length": 200.0, "workspace": [[-60, 60]] * 3},
+                        controller={"motion": "coordinated"},
+                        joints={"station_test": ["x"], "reference": {
+                            "kind": "length bar", "length_mm": 300.0, "u_mm": 0.0005}})
+    cfg = parse_config(data)
+    wide = ([0.0] * 3, [1000.0] * 3)
+    with pytest.raises(BadInput, match=r"^plan: move to joint x ρ=350.000 \(face 1\), in the "
+                                       r"station's test of joint x: outside the machine's "
+                                       r"workspace; nothing has moved"):
+        plan_station_test(cfg, build_plan(cfg), wide, MotionChecker(cfg, wide),
+                          start=(200.0, 200.0, 200.0))
 
 
 # --- the operator's words and the picture -------------------------------------------------------
