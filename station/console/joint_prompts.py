@@ -43,7 +43,7 @@ def face_words(test: JointTestPlan, step: FaceSet) -> str:
 
 
 def joint_instruction(step: JointPrompt, test: JointTestPlan, others: Sequence[str],
-                      picture: str | None = None, preload_mm: float | None = None) -> str:
+                      picture: str | None = None) -> str:
     """The prompt of ``step`` of joint ``test.axis``'s own test, a few short lines;
     ``others``: the gauges to take off at the mounting; ``picture``: its file."""
     a = test.axis
@@ -61,9 +61,8 @@ def joint_instruction(step: JointPrompt, test: JointTestPlan, others: Sequence[s
                  f"{_toward(test)} side")
     window = "" if test.window is None else \
         f"; push in {test.window[0]:.2f}–{test.window[1]:.2f} mm"
-    aim = "" if preload_mm is None else f" (aim at {preload_mm:.2f})"
     lines.append(f"gauge {test.gauge}: clamped to carriage {a}, its plunger along the axis "
-                 f"pointing toward {_toward(test)}, onto the datum face{window}{aim}")
+                 f"pointing toward {_toward(test)}, onto the datum face{window}")
     lines.append(f"then {len(test.targets) - 1} face(s) in turn, each asked for; the joint "
                  f"alone moves, from ρ_{a} = {min(test.targets):.3f} to "
                  f"{max(test.targets):.3f} mm")

@@ -231,12 +231,12 @@ def test_a_test_that_would_leave_the_workspace_is_refused() -> None:
 def test_the_prompts_say_what_to_do_at_each_step() -> None:
     jp = planned(config(joints=("x",))).of("x")
     steps = jp.steps()
-    mount = joint_instruction(steps[1], jp, ["B"], "run/joint-test-x.svg", 6.25)
+    mount = joint_instruction(steps[1], jp, ["B"], "run/joint-test-x.svg")
     assert mount.startswith("joint x's own test: the machine is at ρ_x = 200.250 mm (its "
                             "datum), the other joints at Π0. Take B off.")
     assert "picture: run/joint-test-x.svg" in mount
     assert "gauge A: clamped to carriage x, its plunger along the axis pointing toward " \
-           "lower ρ, onto the datum face; push in 0.37–12.08 mm (aim at 6.25)" in mount
+           "lower ρ, onto the datum face; push in 0.37–12.08 mm" in mount
     faces = [s for s in steps if isinstance(s, FaceSet)]
     assert joint_instruction(faces[2], jp, ["B"]) == (
         "joint x, target 3 of 7: lift the plunger, set a stack of gauge blocks of 77.157 mm "
