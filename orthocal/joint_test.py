@@ -9,25 +9,25 @@ carriage i, its plunger along the axis, pointing toward lower ρ (plunger s = �
 "-") or higher ρ (s = +1, "+"). Face k stands on the plunger's side, further from
 the gauge than the datum face by f_k − f_0:
 
-    F_k = F_0 − s·(f_k − f_0)                                                      (J5)
+    F_k = F_0 − s·(f_k − f_0)                                                      (J8)
 
 A reading is the plunger's push-in, r = s·(x − F) + c, x the carriage's true position
 (x = ρ + Δρ + ε(ρ, dir), up to a constant). Target k is the null of face k: the joint
 commanded where face k stands at the plunger as face 0 stood at the datum,
 
-    ρ_k = ρ_0 − s·(f_k − f_0)                                                      (J6)
+    ρ_k = ρ_0 − s·(f_k − f_0)                                                      (J9)
 
 where the gauge reads, relative to the datum,
 
-    r_k − r_0 = s·[(ρ_k − ρ_0) + ε_k − ε_0] + (f_k − f_0)  =  s·(ε_k − ε_0)          (J7)
+    r_k − r_0 = s·[(ρ_k − ρ_0) + ε_k − ε_0] + (f_k − f_0)  =  s·(ε_k − ε_0)          (J10)
 
 and the deviation found at target k, whatever was commanded there, is
 
-    ε_k − ε_0 = s·[(r_k − r_0) − (f_k − f_0)] − (ρ_k − ρ_0)                          (J8)
+    ε_k − ε_0 = s·[(r_k − r_0) − (f_k − f_0)] − (ρ_k − ρ_0)                          (J11)
 
 The datum is read first and again last; a linear drift of the reading between the two
 (the stand warming, the reference's temperature) is taken out in the order the targets
-were read (J9). Lengths in mm.
+were read (J12). Lengths in mm.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ _GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 def plunger_sign(plunger: str | int) -> int:
-    """s of (J5): −1 for "-" (toward lower ρ), +1 for "+"."""
+    """s of (J8): −1 for "-" (toward lower ρ), +1 for "+"."""
     if isinstance(plunger, str):
         if plunger not in PLUNGERS:
             raise ValueError(f"plunger must be '-' or '+', got {plunger!r}")
@@ -79,7 +79,7 @@ def iso_targets(lo_mm: float, hi_mm: float, count: int) -> np.ndarray:
 
 def null_targets(datum_mm: float, faces_mm: Sequence[float], plunger: str | int
                  ) -> np.ndarray:
-    """ρ_k of (J6): the joint where each face stands at the plunger as face 0 (the
+    """ρ_k of (J9): the joint where each face stands at the plunger as face 0 (the
     first) stood at the datum ρ_0 = ``datum_mm``."""
     s = plunger_sign(plunger)
     f = np.asarray(faces_mm, dtype=float)
@@ -98,7 +98,7 @@ def gauge_readings(targets_mm: Sequence[float], faces_mm: Sequence[float],
                    plunger: str | int, forward_error_mm: Sequence[float],
                    reverse_error_mm: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     """What the gauge reads at each target approached in +ρ and in −ρ, relative to its
-    reading at the datum (the first target) in the middle of the two (J7):
+    reading at the datum (the first target) in the middle of the two (J10):
     s·[(ρ_k − ρ_0) + ε_k − ε̄_0] + (f_k − f_0), ε the joint's error at the target from
     each side (``forward_error_mm``, ``reverse_error_mm``: a screw's and its lost
     motion's, docs/model.md (J1), (J2)), ε̄_0 their mean at the datum."""
@@ -181,18 +181,18 @@ def station_table(targets_mm: Sequence[float], faces_mm: Sequence[float] | np.nd
                   *, reference_u95_mm: Sequence[float] | float, mpe_mm: float,
                   alpha_per_k: float, temperature_change_k: float,
                   positions_mm: Sequence[float] | None = None) -> StationTable:
-    """The table of one joint's test (J8)–(J10).
+    """The table of one joint's test (J11)–(J13).
 
     ``targets_mm`` (n,): the targets as commanded, in the order read, the datum first;
     ``faces_mm`` (n,): the faces set at them (their distances at the test's temperature,
     :func:`reference_lengths`); ``forward_mm``/``reverse_mm`` (n, R): each approach's
     mean reading from below / from above (NaN: not approached from that side);
-    ``closing_*`` (R,): the datum's, read again last. The drift line (J9)
+    ``closing_*`` (R,): the datum's, read again last. The drift line (J12)
 
         D(k) = D_open + (D_close − D_open)·k/n
 
     through the datum's means (its sides read both times) is each target's r_0 in
-    (J8). The expanded uncertainty (J10) per target is 2·sqrt(Σ u²) of: the
+    (J11). The expanded uncertainty (J13) per target is 2·sqrt(Σ u²) of: the
     reference's calibration, ``reference_u95_mm`` (of each face from the datum: one
     value, or one per face) / 2; the gauge, ``mpe_mm`` over the reading's span from
     the datum (in proportion below 0.2 mm, as the run's budget reads an MPE),
@@ -220,8 +220,8 @@ def station_table(targets_mm: Sequence[float], faces_mm: Sequence[float] | np.nd
     d_open = float(np.mean([open_sides[i] for i in used]))
     d_shut = float(np.mean([shut_sides[i] for i in used]))
     w = np.arange(n, dtype=float) / n
-    line = d_open + (d_shut - d_open) * w  # (J9)
-    dev_f = s * ((m_f - line) - (f - f[0])) - (rho - rho[0])  # (J8)
+    line = d_open + (d_shut - d_open) * w  # (J12)
+    dev_f = s * ((m_f - line) - (f - f[0])) - (rho - rho[0])  # (J11)
     dev_r = s * ((m_r - line) - (f - f[0])) - (rho - rho[0])
     dev_f, dev_r, inferred = _fill_sides(t, dev_f, dev_r)
     groups = [*fwd_all, *rev_all, close_f, close_r]
@@ -236,7 +236,7 @@ def station_table(targets_mm: Sequence[float], faces_mm: Sequence[float] | np.nd
     u_ref = np.where(np.arange(n) == 0, 0.0, u_ref)
     u_temp = alpha_per_k * temperature_change_k * np.abs(f - f[0]) / math.sqrt(3.0)
     parts = {"reference": u_ref, "gauge": u_gauge, "temperature": u_temp, "noise": u_noise}
-    u95 = 2.0 * np.sqrt(sum(p**2 for p in parts.values()))  # (J10)
+    u95 = 2.0 * np.sqrt(sum(p**2 for p in parts.values()))  # (J13)
     order = np.argsort(t)
     table = JointTable(t[order], dev_f[order], dev_r[order], u95[order])
     return StationTable(table, {k: np.asarray(v, dtype=float)[order] for k, v in parts.items()},

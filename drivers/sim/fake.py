@@ -26,8 +26,8 @@ import numpy as np
 from drivers.base import AxisStatus, HeldBy, Vec3
 from drivers.device_errors import AlarmError, MoveTimeout, ReadbackMismatch
 from drivers.sim.drive import default_soft_limits
+from drivers.sim.length_reference import VirtualReference
 from drivers.sim.machine import VirtualOrthoglide
-from drivers.sim.reference import VirtualReference
 from drivers.sim.specs import MachineTruth
 from orthocal import plane_at
 
@@ -205,7 +205,7 @@ class FakeRig:
         self._stands = np.random.default_rng([seed, 7])
         self.axes = FakeAxes(self.machine, self.clock)
         self.gauges = {n: FakeGauge(n, noise_mm, seed * 101 + i) for i, n in enumerate(names)}
-        #: The length references of the joints' own tests (drivers.sim.reference).
+        #: The length references of the joints' own tests (drivers.sim.length_reference).
         self.reference = VirtualReference(self.machine.joint_values)
 
     def mount(self, name: str, leg: str, direction: str, at: float = 0.5) -> None:
@@ -221,7 +221,7 @@ class FakeRig:
 
     def mount_joint_gauge(self, name: str, axis: str, plunger: int) -> None:
         """Gauge ``name`` clamped to carriage ``axis`` on a reference's datum face
-        (drivers.sim.reference; ``plunger`` −1: pointing toward lower ρ)."""
+        (drivers.sim.length_reference; ``plunger`` −1: pointing toward lower ρ)."""
         self.gauges[name].mount(self.reference.mount(axis, plunger))
 
     def set_face(self, axis: str, face_mm: float) -> None:

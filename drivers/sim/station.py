@@ -77,9 +77,9 @@ from drivers.base import Vec3
 from drivers.files import write_atomic
 from drivers.indicator_protocols import make_protocol
 from drivers.sim.controller import SimController
+from drivers.sim.length_reference import VirtualReference
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.pty_gauges import SimIndicator
-from drivers.sim.reference import VirtualReference
 from drivers.sim.specs import DeviceFaults, DriveSpec, GaugeSpec, MachineTruth
 from drivers.sim.strokes import OutOfStroke, StrokeWatch
 from orthocal import plane_at
@@ -184,7 +184,7 @@ class VirtualStation:
         #: Every mounting: (indicator, leg, direction, mount error in mm), in order.
         self.mount_log: list[tuple[str, str, str, float]] = []
         self.machine = self._machine(clock, nvram_path)
-        #: The length references of the joints' own tests (drivers.sim.reference),
+        #: The length references of the joints' own tests (drivers.sim.length_reference),
         #: read through the carriages' true positions.
         self.reference = VirtualReference(self.machine.joint_values)
         # Out-of-stroke accounting and knocks (drivers.sim.strokes).
@@ -334,7 +334,7 @@ class VirtualStation:
     def mount_joint_gauge(self, name: str, axis: str, plunger: int) -> None:
         """Clamp indicator ``name`` to carriage ``axis``, its plunger along the axis
         (``plunger``: −1 pointing toward lower ρ, +1 higher) on the datum face of a
-        reference beside the rail (drivers.sim.reference), and zero it there: the
+        reference beside the rail (drivers.sim.length_reference), and zero it there: the
         station's own test of the joint. Not kept across a restart (a test resumed is
         mounted again)."""
         gauge = self.indicators[name]
@@ -348,7 +348,7 @@ class VirtualStation:
                           datum_mm: float) -> None:
         """Indicator ``name`` on carriage ``axis`` from the start, against a reference
         standing beside its rail whose face is set as the station asks
-        (drivers.sim.reference.VirtualReference.standing): its datum's null where the
+        (drivers.sim.length_reference.VirtualReference.standing): its datum's null where the
         joint counts ``datum_mm``, the gauge reading 0 at every null. For a station in
         another process (``orthocal sim``)."""
         i = "xyz".index(axis)

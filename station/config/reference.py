@@ -145,6 +145,26 @@ MEANINGS: dict[str, str] = {
     "joints.tests": "Each joint's ISO 230-2 test as CSV, any subset of the joints "
     "(`{ x = \"x.csv\" }`), paths relative to the config's folder "
     "([design.md, \"Joints\"](design.md#joints)).",
+    "joints.station_test": "The joints the station tests itself before the calibration, "
+    "against `[joints.reference]` read with one of its gauges on each carriage "
+    "([design.md, \"The station's own joint test\"](design.md#the-stations-own-joint-test)).",
+    "joints.station_gauge": "The indicator on the carriage: one for all, or "
+    "`{ x = \"A\", y = \"B\" }`; absent: the config's first.",
+    "joints.station_repeats": "Approaches of each target from each side (ISO 230-2: five).",
+    "joints.station_targets": "With gauge blocks, the targets over the joint's travel (ISO "
+    "230-2's irregular spacing).",
+    "joints.reference": "`[joints.reference]`: the length reference the station's own test "
+    "reads.",
+    "joints.reference.kind": "Gauge blocks (the station chooses the stacks), a step gauge "
+    "(`faces_mm`) or a length bar (`length_mm`).",
+    "joints.reference.faces_mm": "A step gauge's faces' calibrated distances from its "
+    "first, mm, increasing.",
+    "joints.reference.length_mm": "A length bar's calibrated length, mm.",
+    "joints.reference.expansion_per_k": "The reference's linear expansion, 1/K (steel).",
+    "joints.reference.temperature_c": "The reference's temperature during the test, °C: "
+    "its lengths are taken at it; absent: 20 ± 5 °C, assumed and named.",
+    "joints.reference.plunger": "The gauge's plunger along the joint: `-` toward lower ρ "
+    "(the datum at the low end of the travel), `+` toward higher.",
     "history.url": "Where finished runs are recorded: a database URL (`sqlite:///…`, "
     "`postgresql://…`); absent: `history.sqlite` beside the runs.",
     "history.enabled": "Record finished runs in the history.",
@@ -182,11 +202,16 @@ def _model(annotation: Any) -> type[BaseModel] | None:
 
 
 def tables() -> Iterator[tuple[str, bool, type[BaseModel]]]:
-    """(name, is an array of tables, model) of every table, in the config's order."""
+    """(name, is an array of tables, model) of every table, in the config's order; a
+    table inside a table (``joints.reference``) after it."""
     for name, info in StationConfig.model_fields.items():
         model = _model(info.annotation)
         if model is not None:
             yield name, typing.get_origin(info.annotation) is list, model
+            for key, inner in model.model_fields.items():
+                sub = _model(inner.annotation)
+                if sub is not None and typing.get_origin(inner.annotation) is not list:
+                    yield f"{name}.{key}", False, sub
 
 
 def keys() -> list[str]:
@@ -215,6 +240,8 @@ def _kind(annotation: Any, many: bool = False) -> str:
         return f"{'lists' if many else 'a list'} of {_kind(args[0], True)}"
     if origin is dict:
         return f"a table: name = {_kind(args[1])}"
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return "a table (below)"
     names = {bool: "`true` or `false`", int: "whole number", float: "number",
              str: "string"}
     name = names.get(annotation, str(annotation))

@@ -8,7 +8,7 @@ calibration's first measurement, joint i alone moving, the others at Π0's L:
 1. move to the datum ρ_0; the operator mounts the test's gauge on carriage i, its
    plunger along the axis on the reference's datum face (``[joints.reference]``
    ``plunger``: "-" toward lower ρ), and removes every other gauge;
-2. for each target ρ_k = ρ_0 − s·f_k (model.md (J6); k = 0 the datum): move to the
+2. for each target ρ_k = ρ_0 − s·f_k (model.md (J9); k = 0 the datum): move to the
    face's side of it (where the larger stack fits under the lifted plunger), the
    operator sets face k; then ``station_repeats`` times, approach ρ_k from that side
    and from the other, each from ``[procedure] approach_overrun_mm`` beyond, settle

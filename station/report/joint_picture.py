@@ -83,7 +83,7 @@ def _carriage_and_gauge(test: JointTestPlan) -> str:
 
 def _reference(test: JointTestPlan) -> str:
     """The datum face at the plunger's tip, and each face the test sets there: the
-    joint stands where face k meets the plunger as the datum did (model.md (J6))."""
+    joint stands where face k meets the plunger as the datum did (model.md (J9))."""
     out = [text(X0 - 20, 100, f"the {test.reference}: its faces from the datum", 14,
                 weight="bold", fill=PLANE)]
     x_datum = _x(test, test.targets[0])

@@ -110,14 +110,14 @@ def test_every_config_key_has_a_meaning_and_every_meaning_a_key() -> None:
     keys = reference.keys()
     assert {"machine.leg_length", "indicators.port", "setups.at", "acceptance.tool_rms_um"} \
         <= set(keys)
-    missing = [k for k in keys if not reference.meaning(*k.split("."), _field(k))]
+    missing = [k for k in keys if not reference.meaning(*k.rsplit(".", 1), _field(k))]
     assert not missing, f"no meaning in station/config/reference.py MEANINGS: {missing}"
     stale = sorted(set(reference.MEANINGS) - set(keys))
     assert not stale, f"MEANINGS names keys the config does not have: {stale}"
 
 
-def _field(key: str):  # the FieldInfo of "table.key"
-    table, name = key.split(".")
+def _field(key: str):  # the FieldInfo of "table.key" ("joints.reference.kind": a sub-table's)
+    table, name = key.rsplit(".", 1)
     model = next(m for t, _, m in reference.tables() if t == table)
     return model.model_fields[name]
 
@@ -138,7 +138,7 @@ def test_design_md_lists_every_config_key() -> None:
     design = (DOCS / "design.md").read_text(encoding="utf-8")
     section = design.split("### Station config", 1)[1].split("\n### ", 1)[0]
     missing = [k for k in reference.keys()
-               if not re.search(rf"\b{re.escape(k.split('.')[1])}\b", section)]
+               if not re.search(rf"\b{re.escape(k.rsplit('.', 1)[1])}\b", section)]
     assert not missing, f"docs/design.md, \"Station config\" does not name {missing}"
 
 

@@ -1,8 +1,8 @@
 """The station's own test of a joint (orthocal.joint_test; docs/model.md, "The station's
 own joint test"): where the targets go, what the gauge on the carriage reads at each
-(the closed form (J7) against the simulator's carriage through its screw and its
-lost motion, drivers.sim.machine and drivers.sim.reference), the table the readings
-give back (J8)–(J10), and the check values model.md prints."""
+(the closed form (J10) against the simulator's carriage through its screw and its
+lost motion, drivers.sim.machine and drivers.sim.length_reference), the table the readings
+give back (J11)–(J13), and the check values model.md prints."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ import pytest
 
 import orthocal
 from drivers.sim.fake import SteppedClock
+from drivers.sim.length_reference import VirtualReference
 from drivers.sim.machine import VirtualOrthoglide
-from drivers.sim.reference import VirtualReference
 from orthocal import JointTable, lead_um_per_m
 from orthocal.joint_test import (
     gauge_readings,
@@ -72,7 +72,7 @@ def test_the_targets_are_irregular_with_exact_ends() -> None:
         plunger_sign("x")
 
 
-# --- (J7): the closed form against the simulator ------------------------------------------
+# --- (J10): the closed form against the simulator ------------------------------------------
 
 
 def simulator_readings(axis: int, plunger: str, targets: np.ndarray, faces: list[float]
@@ -117,18 +117,18 @@ def test_the_closed_form_reads_what_the_simulated_gauge_reads(axis: int, plunger
     for k in range(len(targets)):
         assert got[(k, "forward")] == pytest.approx(rf[k] - rr[0], abs=1e-10)
         assert got[(k, "reverse")] == pytest.approx(rr[k] - rr[0], abs=1e-10)
-    # at the nulls the gauge reads the joint's error alone (J7): s·(ε_k − ε̄_0)
+    # at the nulls the gauge reads the joint's error alone (J10): s·(ε_k − ε̄_0)
     s = plunger_sign(plunger)
     mid = 0.5 * (truth(targets[:1], axis, "forward") + truth(targets[:1], axis, "reverse"))
     assert rf == pytest.approx(s * (truth(targets, axis, "forward") - mid), abs=1e-12)
 
 
-# --- (J8)-(J10): the table the readings give ----------------------------------------------
+# --- (J11)-(J13): the table the readings give ----------------------------------------------
 
 
 def readings_of(targets: np.ndarray, faces, plunger: str, axis: int, repeats: int = 3,
                 drift_mm: float = 0.0, zero_mm: float = 1.234):
-    """The approaches' mean readings a test takes: (J7) plus the gauge's zero and a
+    """The approaches' mean readings a test takes: (J10) plus the gauge's zero and a
     linear drift in the targets' order, the first target from above only."""
     rf, rr = gauge_readings(targets, faces, plunger, truth(targets, axis, "forward"),
                             truth(targets, axis, "reverse"))

@@ -34,7 +34,7 @@ CONTROLLER_TIMEOUT_S = 1.0
 #: A station in another process (``orthocal sim --joint-test``): a gauge on each
 #: carriage from the start and a step gauge standing beside each rail, 20 mm faces
 #: calibrated to 0.5 µm at 20 °C, its face set as the station asks
-#: (drivers.sim.reference.VirtualReference.standing), the datum where the station puts
+#: (drivers.sim.length_reference.VirtualReference.standing), the datum where the station puts
 #: it for this machine: on the lower soft limit (station.plan.joint_test_plan).
 JOINT_GAUGES = {"x": "G", "y": "H", "z": "I"}
 STEP_GAUGE: dict[str, Any] = {"kind": "step gauge", "faces_mm": [20.0 * k for k in range(11)],

@@ -5,7 +5,7 @@ station's own joint test").
 The reference lies beside joint i's rail, parallel to axis i; its datum face (a stop,
 a step gauge's first face) stands where the gauge's plunger touches it as it is
 mounted, and the face set at the plunger is ``face_mm`` further from the gauge:
-F = F_0 − s·f (model.md (J5)), s = −1 for a plunger pointing toward lower ρ ("-"),
+F = F_0 − s·f (model.md (J8)), s = −1 for a plunger pointing toward lower ρ ("-"),
 +1 toward higher. The gauge, clamped to carriage i, reads its plunger's push-in,
 
     s·(x − F) + c = s·(x − x_0) + f        (zero at the mounting, f = 0 there)
