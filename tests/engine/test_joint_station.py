@@ -2,9 +2,10 @@
 design.md, "The station's own joint test"): on a machine whose screws have leads of
 +100, −80, +60 µm/m and lost motion, the test before the calibration finds each lead
 within 10 µm/m and the reversal the joints have; result.json states the tables as
-source "station"; a run killed in the middle of a joint's test resumes, replaying the
-joints done and taking the cut one again from its mounting; and the command line's
-``run --simulate --joint-test`` does the same on the wire-level virtual station."""
+source "station", which the exports put into the controller; a run cut off in the
+middle of a joint's test resumes, replaying the joints done and taking the cut one
+again from its mounting (the command line's, wire and SIGKILL included:
+tests/e2e/test_joint_test_cli.py)."""
 
 from __future__ import annotations
 
@@ -18,11 +19,14 @@ from builders import FAST
 from fakes import FakeRig, fake_config, resume_on, run_on
 from jsonschema import Draft202012Validator
 
+from orthocal import lead_um_per_m
 from station.config.joint_reference import ReferenceConfig
 from station.config.joint_tests import JointsConfig
 from station.console.operator import VirtualOperator
 from station.errors import RunFailed
 from station.record import schema_files
+from station.record.controller_tables import controller_tables
+from station.record.io import read_result
 from station.record.journal_file import JOURNAL_NAME, read_journal
 
 LEADS = (100.0, -80.0, 60.0)
@@ -90,6 +94,14 @@ def test_the_run_finds_each_joints_lead_and_states_it(tmp_path: Path) -> None:
         reversal = np.subtract(r["forward_um"], r["reverse_um"])[1:]  # the datum's inferred
         assert np.mean(reversal) == pytest.approx(-1e3 * b, abs=0.6)
         assert np.all(np.abs(reversal + 1e3 * b) < 2.0)
+    # what the exports and compensate put into the controller: the station's tables,
+    # moved into the joints the controller commands after the run's write-back
+    tables = controller_tables(read_result(Path(result["run_dir"]) / "result.json"))
+    for joint, k in zip(tables.joints, LEADS, strict=True):
+        assert joint.source == "station" and joint.table is not None
+        assert lead_um_per_m(joint.table).value_um_per_m == pytest.approx(
+            joints[joint.axis]["lead_um_per_m"], abs=1e-6)
+        assert abs(lead_um_per_m(joint.table).value_um_per_m - k) < WITHIN_UM_PER_M
     # three mountings of the test, then the calibration's own; the pictures drawn
     assert result["timing"]["mountings"] >= 3 + 3
     for axis in "xyz":
