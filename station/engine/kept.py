@@ -180,7 +180,8 @@ class Keeper:
         station.plan.mounting) and its picture in the run directory, the mountings to
         expect at the run's first, why gauges left on are mounted again."""
         sheet = sheet_of(self.config, self.plan, self.plan.setups[step.setup])
-        first = phase == "m" and self.journal.state.mountings == 0
+        state = self.journal.state  # the joints' own test's mountings come first
+        first = phase == "m" and state.mountings == state.joint_mountings
         return PromptWords(sheet=sheet, picture=str(self.journal.path.parent / sheet.file_name),
                            count=self.expected if first else None, remount=self.remount)
 

@@ -128,8 +128,10 @@ class RunState:
     # (``mount-kept`` events, station.engine.kept): no mounting of their own.
     kept: set[tuple[str, int]] = field(default_factory=set)
     on: OnMachine | None = None  # None: none, or a fault's session may have moved them
-    # The joints the station's own test is done with, by axis (station.engine.joint_station).
+    # The joints the station's own test is done with, by axis (station.engine.joint_station),
+    # and how many of the mountings were its own.
     joint_tests: dict[str, JointTested] = field(default_factory=dict)
+    joint_mountings: int = 0
 
     @classmethod
     def of(cls, records: Iterable[JournalRecord]) -> RunState:
@@ -193,6 +195,7 @@ class RunState:
         self.operator_s += float(rec.operator_s or 0.0)
         if isinstance(rec, JointMounted):
             self.mountings += 1
+            self.joint_mountings += 1
             self.on, self.live = None, None
 
     def _ends(self, rec: Header | Finished) -> None:

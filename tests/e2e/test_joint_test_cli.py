@@ -53,6 +53,8 @@ def test_run_simulate_joint_test_finds_the_leads(orthocal, tmp_path: Path) -> No
     assert (run_dir / "joint-test-x.svg").is_file()
     # three mountings before the calibration's, said as the run starts
     assert "mountings: expect 6 (the joints' own test's 3 first)" in run.err
+    # and the calibration's first mounting prompt says the same, as without the test
+    assert "Mountings: expect 6 in all" in run.err
     assert result["timing"]["mountings"] == 6
     # the virtual operator was told what to do, in the prompts' words
     assert "joint x's own test: the machine is at ρ_x = 200.250 mm (its datum)" in run.err
