@@ -1,0 +1,178 @@
+"""The Type B inputs of an identification as bounded columns (orthocal.uncertainty):
+each physical input uniform in ±1, acting on the identified parameters through the
+fit's sensitivity K (orthocal.budget.propagation; docs/model.md, "The statement's
+uncertainty").
+
+The same sources as the budget's (orthocal.budget: leg straightness, gauge MPE,
+gauge resolution, plunger angle, temperature), with the same models, but kept as
+what they are (bounded inputs with a shape) instead of a variance per parameter, so
+that one input seen by two fits (the legs' bows by the last round's Δρ and by the
+round that gave the axes' layout) stays one input, and a statement about several
+parameters (squareness, the tool's field) carries their correlation:
+
+- leg straightness: one bow shared by every gauge plane (the legs of one machine are
+  made alike and a uniform bow is exactly a tilt signature at the legs' middles) and
+  one bow per plane, each of sagitta uniform in ±s (the covariance is
+  orthocal.budget.form_covariance's); labelled by plane, so the same in every round;
+- gauge MPE: each deviation off by ±e_k (e over the span of the deviation, in
+  proportion below MPE_SPAN_MM), per round;
+- gauge resolution: triangular ±r per deviation, two uniform inputs of ±r/2;
+- plunger angle: a gauge's deviations scaled by ±(1 − cos θ), per gauge and round;
+- temperature: each deviation off by ±α·ΔT·L/2, per round.
+
+Pure, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from orthocal.budget import MPE_SPAN_MM, STEEL_ALPHA, Propagation, form_vector
+from orthocal.geometry import AXES
+from orthocal.uncertainty import Uncertainty, combined, type_b
+
+Gauge = tuple[str, str]
+
+#: The budget's source names (orthocal.budget), so that a statement's basis and the
+#: budget table say the same.
+STRAIGHTNESS, TEMPERATURE, ANGLE = "leg straightness", "temperature", "plunger angle"
+
+
+def _non_negative(value: float, what: str) -> float:
+    v = float(value)
+    if not (math.isfinite(v) and v >= 0.0):
+        raise ValueError(f"{what} must be a finite number ≥ 0, got {value!r}")
+    return v
+
+
+def _per_gauge(value: float | Mapping[Gauge, float], gauges: Sequence[Gauge],
+               what: str) -> dict[Gauge, float]:
+    if not isinstance(value, Mapping):
+        return dict.fromkeys(gauges, _non_negative(value, what))
+    missing = [g for g in gauges if g not in value]
+    if missing:
+        raise ValueError(f"{what}: no value for {missing}")
+    return {g: _non_negative(value[g], what) for g in gauges}
+
+
+def _per_leg(straightness: float | Sequence[float] | Mapping[str, float]
+             ) -> dict[str, float]:
+    if isinstance(straightness, Mapping):
+        return {a: _non_negative(straightness[a], "leg straightness") for a in straightness}
+    if isinstance(straightness, Sequence) and not isinstance(straightness, str):
+        if len(straightness) != len(AXES):
+            raise ValueError(f"leg straightness: one value or [x, y, z], got {straightness!r}")
+        return {a: _non_negative(v, "leg straightness")
+                for a, v in zip(AXES, straightness, strict=True)}
+    return dict.fromkeys(AXES, _non_negative(float(straightness), "leg straightness"))
+
+
+def _key_name(key: tuple[str, str, str]) -> str:
+    sign, leg, direction = key
+    return f"{sign}{leg}{direction}"
+
+
+def straightness_columns(prop: Propagation,
+                         straightness: float | Sequence[float] | Mapping[str, float]
+                         ) -> Uncertainty:
+    """The legs' form: a bow shared by every plane and one per plane (module
+    docstring), each column K·g_p·s over the parameters."""
+    s_of = _per_leg(straightness)
+    g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
+    planes = prop.gauges
+    per_plane = [prop.K @ (g * prop.mask(p) * s_of[p[0]]) for p in planes]
+    shared = sum(per_plane, np.zeros(len(prop.names)))
+    cols = np.column_stack([shared, *per_plane]) if planes else np.zeros((len(prop.names), 0))
+    labels = ["straightness:shared", *(f"straightness:{''.join(p)}" for p in planes)]
+    return type_b(prop.names, cols, labels, [STRAIGHTNESS] * len(labels))
+
+
+def mpe_columns(prop: Propagation, mpe: float | Mapping[Gauge, float], tag: str,
+                names: Mapping[Gauge, str], span_mm: float | None = MPE_SPAN_MM
+                ) -> Uncertainty:
+    """Each gauge's MPE: one input per deviation it measures, ±e over the span the
+    deviation covers (in proportion below ``span_mm``). ``names``: the source's name
+    per gauge (the budget names the indicator)."""
+    values = _per_gauge(mpe, prop.gauges, "gauge MPE")
+    scale = np.ones(len(prop.keys)) if span_mm is None else \
+        np.minimum(1.0, np.abs(prop.measured) / span_mm)
+    cols, labels, sources = [], [], []
+    for k, key in enumerate(prop.keys):
+        gauge = (key[1], key[2])
+        col = np.zeros(len(prop.keys))
+        col[k] = values[gauge] * scale[k]
+        cols.append(prop.K @ col)
+        labels.append(f"mpe:{tag}:{_key_name(key)}")
+        sources.append(names.get(gauge, f"gauge MPE {''.join(gauge)}"))
+    return _stack(prop, cols, labels, sources)
+
+
+def resolution_columns(prop: Propagation, resolution: float | Mapping[Gauge, float], tag: str,
+                       names: Mapping[Gauge, str]) -> Uncertainty:
+    """Each deviation is the difference of two readings quantised by ±r/2: two
+    uniform inputs of ±r/2 (their sum triangular ±r)."""
+    values = _per_gauge(resolution, prop.gauges, "gauge resolution")
+    cols, labels, sources = [], [], []
+    for k, key in enumerate(prop.keys):
+        gauge = (key[1], key[2])
+        col = np.zeros(len(prop.keys))
+        col[k] = values[gauge] / 2.0
+        for end in ("a", "b"):
+            cols.append(prop.K @ col)
+            labels.append(f"resolution:{tag}:{_key_name(key)}:{end}")
+            sources.append(names.get(gauge, f"gauge resolution {''.join(gauge)}"))
+    return _stack(prop, cols, labels, sources)
+
+
+def angle_columns(prop: Propagation, angle_deg: float, tag: str) -> Uncertainty:
+    """A plunger θ off its direction reads cos θ of the travel: each gauge's
+    deviations scaled by ±(1 − cos θ), one input per gauge."""
+    c = 1.0 - math.cos(math.radians(_non_negative(angle_deg, "plunger angle")))
+    cols = [prop.K @ (c * prop.measured * prop.mask(g)) for g in prop.gauges]
+    labels = [f"angle:{tag}:{''.join(g)}" for g in prop.gauges]
+    return _stack(prop, cols, labels, [ANGLE] * len(cols))
+
+
+def temperature_columns(prop: Propagation, temperature_change: float, tag: str,
+                        alpha: float = STEEL_ALPHA) -> Uncertainty:
+    """A leg grows by α·ΔT·L at an unknown time between the Π0 stops around a
+    reading: each deviation off by ±α·ΔT·L/2, one input per deviation."""
+    half = alpha * _non_negative(temperature_change, "temperature change") \
+        * prop.geometry.leg_length / 2.0
+    cols = [prop.K[:, k] * half for k in range(len(prop.keys))]
+    labels = [f"temperature:{tag}:{_key_name(key)}" for key in prop.keys]
+    return _stack(prop, cols, labels, [TEMPERATURE] * len(cols))
+
+
+def _stack(prop: Propagation, cols: Sequence[np.ndarray], labels: Sequence[str],
+           sources: Sequence[str]) -> Uncertainty:
+    matrix = np.column_stack(cols) if cols else np.zeros((len(prop.names), 0))
+    return type_b(prop.names, matrix, labels, sources)
+
+
+def budget_columns(prop: Propagation, tag: str, *,
+                   straightness: float | Sequence[float] | Mapping[str, float] | None,
+                   mpe: float | Mapping[Gauge, float] | None,
+                   resolution: float | Mapping[Gauge, float] | None,
+                   plunger_angle_deg: float | None, temperature_change: float | None,
+                   mpe_names: Mapping[Gauge, str] | None = None,
+                   resolution_names: Mapping[Gauge, str] | None = None,
+                   alpha: float = STEEL_ALPHA) -> Uncertainty:
+    """Every Type B input given (None: left out) as columns over ``prop.names``;
+    ``tag`` names the round, so that inputs of separate rounds stay separate and the
+    legs' form (labelled without it) stays one input."""
+    parts = []
+    if straightness is not None:
+        parts.append(straightness_columns(prop, straightness))
+    if mpe is not None:
+        parts.append(mpe_columns(prop, mpe, tag, mpe_names or {}))
+    if resolution is not None:
+        parts.append(resolution_columns(prop, resolution, tag, resolution_names or {}))
+    if plunger_angle_deg is not None:
+        parts.append(angle_columns(prop, plunger_angle_deg, tag))
+    if temperature_change is not None:
+        parts.append(temperature_columns(prop, temperature_change, tag, alpha))
+    return combined(parts, prop.names)
