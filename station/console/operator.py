@@ -17,6 +17,7 @@ from station.console.joint_prompts import JointPrompt, joint_instruction
 from station.errors import BadInput, RunFailed
 from station.plan.joint_test_plan import FaceSet, JointMount, JointTestPlan
 from station.plan.mounting import GaugeMount, MountingSheet
+from station.record.phase import Phase
 
 # Keys typed ahead are dropped through the terminal's own module: termios on POSIX,
 # msvcrt on Windows; with neither, nothing is dropped (a prompt is still answered).
@@ -97,7 +98,7 @@ def mount_instruction(phase: str, setup: int, leg: str, indicators: Mapping[str,
     (``count``, at its first: closed_loop.mountings_expected) and, where gauges left
     on from the pass before are mounted again, why (``remount``)."""
     # "v", "v2", ...: the verification after each write-back of the closed loop.
-    what = "verification" if phase.startswith("v") else "measurement"
+    what = Phase.parse(phase).kind
     others = [n for n in all_names if n not in indicators]
     remove = f"; remove {', '.join(others)}" if others else ""
     where = "the middle of" if at == MIDDLE else \

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from station.plan.steps import Plan, Read, posture_label
+from station.record.phase import Phase
 
 
 class Progress:
@@ -82,13 +83,12 @@ class Progress:
 
     def _event(self, event: str, info: dict[str, Any]) -> None:
         code = info.get("phase", "")
-        # "v2", "v3": the closed loop's later verifications; "v+1", "v2+1": one
-        # measured again.
-        base, _, again = code.partition("+")
-        phase = {"m": "measure", "v": "verify"}.get(base) or (
-            f"verify {base[1:]}" if base.startswith("v") else "")
-        if again:
-            phase += f", again ({again})"
+        # "v2", "v3": the closed loop's later verifications; "v+1", "v2+1", "m+1": one
+        # measured again (station.record.phase)
+        try:
+            phase = Phase.parse(code).label
+        except ValueError:
+            phase = ""
         if event == "read":
             self.steps += 1
             sp = self.plan.setups[info["setup"]]

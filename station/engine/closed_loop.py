@@ -57,6 +57,9 @@ States (``len(verdicts)``, ``len(writes)``):
                         form-limited → finish "not-converged" (the bows carried
                           from the second gauge plane hold Δρ's error; no pass
                           at the middles shrinks it)
+                        budget-limited → finish "not-converged" (the stated
+                          inputs' Type B part alone keeps a joint from being
+                          shown within the limit; no pass shrinks it)
     (k, k)          → the k-th write's outcome:
                         written and verify → measure the verification of round k
                         written, no verify → finish "not verified"
@@ -71,9 +74,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from station.record.phase import Phase, phase_of
+
 StepKind = Literal["measure", "write", "finish"]
 Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous",
-                  "form-limited"]
+                  "form-limited", "budget-limited"]
 
 #: Why the loop stopped (the run JSON's ``loop.stopped``): the first is success; the
 #: report says each in words (station.report.rounds.STOP_TEXT).
@@ -81,17 +86,9 @@ STOP_REASONS: tuple[str, ...] = ("converged", "max_iterations", "not-converged",
                                  "declined", "failed", "skipped", "not-verified")
 
 
-def phase_of(measurement: int, extra: int = 0) -> str:
-    """Journal phase of the n-th measurement (0-based): "m", then "v" for the
-    verification of round 1 (as before the loop existed), "v2", "v3"… after;
-    ``extra``: a further pass of that verification ("v+1", "v2+1")."""
-    base = "m" if measurement == 0 else ("v" if measurement == 1 else f"v{measurement}")
-    return base if extra == 0 else f"{base}+{extra}"
-
-
 def round_phase(phase: str) -> str:
-    """The phase of the round a pass belongs to ("v2+1" → "v2")."""
-    return phase.split("+", 1)[0]
+    """The phase of the round a pass belongs to ("v2+1" → "v2"; station.record.phase)."""
+    return str(Phase.parse(phase).first_pass)
 
 
 @dataclass(frozen=True)
@@ -144,7 +141,8 @@ def next_step(state: LoopState) -> Step:
         verdict = state.verdicts[-1]
         if verdict == "converged":
             return Step("finish", reason="converged")
-        if verdict in ("ambiguous", "form-limited"):  # not noise: a pass cannot help
+        if verdict in ("ambiguous", "form-limited", "budget-limited"):
+            # not noise: a pass cannot help
             return Step("finish", reason="not-converged")
         if verdict in ("suspected", "unproven"):
             if state.extra[-1] < extra_passes_allowed(k - 1, state.max_extra_passes,

@@ -21,6 +21,7 @@ from station.plan.guard import (
     travel_ahead,
 )
 from station.plan.steps import SetupPlan, posture_label
+from station.record.phase import Phase
 
 # Nominal travel change within one poll window below which the signal estimate is
 # taken as exact (the gauge's sampling instant no longer matters).
@@ -103,8 +104,7 @@ class PlungerGuard:
         ``preload_shift``: the travel a kept mounting's plungers already stand at there
         (station.engine.kept), their preload's part beyond the config's."""
         self._setup = setup
-        self._where = f"{'verification' if phase.startswith('v') else 'measurement'} setup " \
-                      f"{setup.index + 1} (leg {setup.leg})"
+        self._where = f"{Phase.parse(phase).kind} setup {setup.index + 1} (leg {setup.leg})"
         self._gauges = {}
         for name, direction in mounted.items():
             ind = self.config.indicator(name)

@@ -34,7 +34,6 @@ import numpy as np
 from drivers.base import GaugeReadings, Moves, ZeroOffsets
 from orthocal.lost_motion import reversal_gain
 from orthocal.postures import MIDDLE, plane_at
-from station.analysis.sizing import VerificationSizing
 from station.analysis.statistics import (
     Measurement,
     NoiseScale,
@@ -49,6 +48,7 @@ from station.engine import kept
 from station.engine.guard_monitor import PlungerGuard
 from station.engine.mover import Mover, MoverAxes
 from station.engine.replay import CycleStep, RepeatStep, SetupEnd, Steps
+from station.engine.sizing import VerificationSizing
 from station.errors import RunFailed, check_interrupted
 from station.plan.checker import MotionChecker
 from station.plan.steps import (
@@ -64,6 +64,7 @@ from station.plan.steps import (
     stop_id,
 )
 from station.record.journal_file import Journal
+from station.record.phase import Phase
 
 # A cycle the guard stopped is taken again (at most MAX_RETAKES times) when its
 # closing Π0 shows a gauge's zero moved by more than ZERO_MOVED_MM (or the
@@ -95,7 +96,7 @@ class Counters:
 
 
 def _phase_name(phase: str) -> str:
-    return "verification" if phase.startswith("v") else "measurement"
+    return Phase.parse(phase).kind
 
 
 class Sequencer:
