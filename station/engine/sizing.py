@@ -14,6 +14,7 @@ from station.analysis.statistics import cycle_std_error
 from station.analysis.verdict import converge_limit
 from station.config import StationConfig
 from station.plan.steps import Plan
+from station.record.phase import Phase
 
 
 class VerificationSizing:
@@ -106,4 +107,4 @@ def verifies(phase: str) -> bool:
     taken because its first pass found no correction to write: the round must now
     show the machine within converge_mm. The first pass itself: a new mounting is
     what averages the stands' placement there, and its correction is usually large."""
-    return phase.startswith("v") or "+" in phase
+    return Phase.parse(phase).sized_like_verification

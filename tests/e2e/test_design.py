@@ -238,7 +238,7 @@ def test_run_plan_includes_the_design_summary(tmp_path, capsys) -> None:
 
 
 def test_a_verification_s_error_splits_into_noise_and_stands() -> None:
-    """What sizes a verification's cycles (station.analysis.sizing, decided): the
+    """What sizes a verification's cycles (station.engine.sizing, decided): the
     gauges' part falls with the cycles, the stands' part does not, and on a machine
     whose legs do not slope (offsets written, axes that meet) there is none."""
     g = orthocal.Geometry()
