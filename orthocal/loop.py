@@ -120,7 +120,8 @@ def significant_corrections(parameters: Mapping[str, float],
 
 def shown_within(parameters: Mapping[str, float], std_errors: Mapping[str, float | None],
                  dof: float | None, target: Mapping[str, float] | None = None,
-                 level: float = 0.95, sign: bool = False) -> dict[str, float]:
+                 level: float = 0.95, sign: bool = False,
+                 type_b: Mapping[str, float] | None = None) -> dict[str, float]:
     """Per writable parameter, how far from ``target`` (default 0) the machine's Δρ can
     be at ``level`` (two-sided): |Δρ̂ − target| + k·se, k from Student's t on ``dof``
     (the normal's without). A missing or infinite standard error bounds nothing
@@ -130,9 +131,12 @@ def shown_within(parameters: Mapping[str, float], std_errors: Mapping[str, float
     converge_mm and half the drive's count (a correction is rounded to it, so no
     offset can be set closer): the promise the word makes (docs/design.md, "Closed
     loop"). The verification measures the machine as the drive holds its offsets,
-    rounded, so the rounding is inside the bound."""
+    rounded, so the rounding is inside the bound. ``type_b``: each parameter's Type B
+    standard uncertainty (the stated inputs, systematic: the same in every round),
+    combined with the standard error as the GUM does (quadrature, Welch–Satterthwaite
+    dof with Type B at ∞: orthocal.uncertainty), so that what the loop calls
+    converged is what the statement states."""
     aim = target or {}
-    k = coverage_factor(dof, level)
     out = {}
     for name in WRITABLE:
         if name not in parameters:
@@ -141,8 +145,12 @@ def shown_within(parameters: Mapping[str, float], std_errors: Mapping[str, float
         value = abs(float(parameters[name]) - float(aim.get(name, 0.0)))
         if se is None:
             out[name] = -math.inf if sign else math.inf
-        else:
-            out[name] = value - k * se if sign else value + k * se
+            continue
+        ub = float((type_b or {}).get(name, 0.0))
+        # Welch–Satterthwaite with the Type B part at ∞ dof (GUM G.4.1)
+        nu = None if dof is None or se <= 0.0 else (se * se + ub * ub) ** 2 / (se**4 / dof)
+        half = coverage_factor(nu, level) * math.hypot(se, ub)
+        out[name] = value - half if sign else value + half
     return out
 
 

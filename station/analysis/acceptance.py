@@ -19,6 +19,7 @@ from station.record.result import RunResult
 from station.record.result_acceptance import Acceptance, AcceptanceCheck, Outcome
 from station.record.result_accuracy import Accuracy
 from station.record.result_base import Interval
+from station.record.result_statement import Quantity
 
 RULE = ("at 95 %: pass where the figure's whole 95 % interval lies within the limit, "
         "fail where its lower end exceeds it, else undecided (ISO 14253-1); the run "
@@ -60,4 +61,25 @@ def judge(limits: AcceptanceConfig, result: RunResult) -> Acceptance | None:
     outcomes = {c.outcome for c in checks}
     outcome: Outcome = "fail" if "fail" in outcomes else \
         "pass" if outcomes == {"pass"} else "undecided"
+    return Acceptance(outcome=outcome, rule=RULE, checks=checks, note=note)
+
+
+def judge_statement(limits: AcceptanceConfig, quantities: list[Quantity]) -> Acceptance | None:
+    """result.json's ``acceptance`` from the statement's ``tool.after.rms`` and
+    ``tool.after.max`` (the figure and its 95 % interval, mm); None when the config
+    sets no limit."""
+    given: list[tuple[Literal["rms", "max"], float | None]] = [
+        ("rms", limits.tool_rms_um), ("max", limits.tool_max_um)]
+    wanted = [(name, limit) for name, limit in given if limit is not None]
+    if not wanted:
+        return None
+    stated = {q.name.rsplit(".", 1)[1]: q for q in quantities
+              if q.name in ("tool.after.rms", "tool.after.max")}
+    checks = [_check(name, limit, stated[name].value if name in stated else None,
+                     stated[name].interval_95 if name in stated else None)
+              for name, limit in wanted]
+    outcomes = {c.outcome for c in checks}
+    outcome: Outcome = "fail" if "fail" in outcomes else \
+        "pass" if outcomes == {"pass"} else "undecided"
+    note = None if stated else "the run states no tool error after calibration"
     return Acceptance(outcome=outcome, rule=RULE, checks=checks, note=note)

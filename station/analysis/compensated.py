@@ -49,7 +49,7 @@ def told_names(layout: Layout | None, in_model: Sequence[str]) -> list[str]:
     return [*DRHO, *(n for n in LAYOUT_NAMES if n in in_model and n in held)]
 
 
-def _nominal(layout: Layout | None, told: Sequence[str], model: str) -> dict[str, str]:
+def nominal_reasons(layout: Layout | None, told: Sequence[str], model: str) -> dict[str, str]:
     """Each parameter left nominal, and why."""
     held = () if layout is None else layout.names
     out = {f"dL_{a}": "not identified beside the tilts and gaps from two stops per leg: "
@@ -90,7 +90,7 @@ def statement(points: np.ndarray, frame: str, *, drho_now: Mapping[str, float],
     absent = [n not in told and n in LAYOUT_NAMES for n in PARAM_NAMES]
     iv = compensated_interval(theta_c, estimate, cov, dof, points, frame=frame,
                               systematic=wide - cov, absent=absent)
-    nominal = _nominal(layout, told, model)
+    nominal = nominal_reasons(layout, told, model)
     laid = [n for n in told if n not in DRHO]
     assumes = [
         "the controller is told Δρ as the last verification left it"

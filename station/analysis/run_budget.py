@@ -14,6 +14,8 @@ import numpy as np
 
 import orthocal
 from orthocal import budget as gum
+from orthocal.budget_columns import budget_columns
+from orthocal.uncertainty import Uncertainty
 from station.config import StationConfig
 from station.record.result import Remaining
 from station.record.result_base import NotStated, Params
@@ -124,6 +126,36 @@ def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.S
             s = replace(s, name=f"{s.name[:-3]} {name} (leg {plane[0]}, along {plane[1]})")
         renamed.append(s)
     return renamed
+
+
+def round_columns(config: StationConfig, ident: orthocal.Identification, tag: str
+                  ) -> Uncertainty:
+    """The Type B inputs of a round's identification as bounded columns over its
+    parameters (orthocal.budget_columns: the legs' form labelled by gauge plane, the
+    same input in every round; the rest per round, ``tag``), the config's inputs or
+    their defaults (:func:`inputs`). Where the fit holds the legs' bows (a second
+    gauge plane, or carried), they are parameters: no straightness column."""
+    ident = _at_its_parameters(ident, config.machine.geometry())
+    given = inputs(config)
+    names = _gauge_names(config)
+    planes = {plane: name for plane, name in names.items()
+              if any((k[1], k[2]) == plane for k in ident.keys)}
+
+    def per_plane(table: dict[str, StatedInput]) -> dict[tuple[str, str], float]:
+        return {plane: _number(table[name]) for plane, name in planes.items()}
+
+    form_fitted = any(n in ident.names for n in orthocal.BOW_NAMES)
+    straight = given.leg_straightness_mm.value
+    return budget_columns(
+        gum.propagation(ident, config.machine.geometry()), tag,
+        straightness=None if form_fitted else straight,
+        # The gauges' resolution is no systematic input here: the noise the scatter
+        # measures is floored at the quantisation (station.analysis.model_choice) and
+        # dithers it (GUM F.2.2.1), so the Type A part holds it.
+        mpe=per_plane(given.mpe_mm), resolution=None,
+        plunger_angle_deg=_number(given.plunger_angle_deg),
+        temperature_change=_number(given.temperature_change_c),
+        mpe_names={p: f"gauge MPE {n} (leg {p[0]}, along {p[1]})" for p, n in planes.items()})
 
 
 def fields(config: StationConfig, ident: orthocal.Identification,

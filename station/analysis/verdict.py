@@ -70,7 +70,8 @@ def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
 def judge(ident: Identification, previous: Identification | None, converge_mm: float, limit: float,
           target: dict[str, float] | None, passes_left: bool = False,
           joined: Joined | None = None, floor: dict[str, float] | None = None,
-          passes: tuple[int, int] = (1, 0)) -> Verdict:
+          passes: tuple[int, int] = (1, 0),
+          type_b: dict[str, float] | None = None) -> Verdict:
     """The verdict on round ``ident`` (``previous``: the identification whose
     correction it verifies; None for the first measurement, judged against its
     own noise alone). Significant: beyond k standard errors of both rounds (of
@@ -89,7 +90,11 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
     of each Δρ standard error that further passes at the same stops cannot shrink
     (orthocal.carry.prior_floor), ``passes``: the round's passes so far and those left;
     form-limited where, with Δρ̂ at its aim, the passes left could not show an axis
-    within ``limit`` for that part alone (:func:`_form_limits`)."""
+    within ``limit`` for that part alone (:func:`_form_limits`). ``type_b``: each Δρ's
+    Type B standard uncertainty (the stated inputs, station.analysis.run_budget.
+    round_columns): what the machine is shown within carries it as the statement does
+    (orthocal.loop.shown_within); budget-limited where it alone, the data perfect,
+    keeps an axis from being shown within ``limit``."""
     aim = target if previous else None
     beyond_noise = significant_corrections(
         ident.parameters, ident.std_errors, 0.0,
@@ -103,10 +108,15 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
     # closer than it is, whatever the noise
     apart = ident.ambiguity_mm
     shown = {n: v + apart.get(n, 0.0)
-             for n, v in shown_within(values, ses, ident.std_error_dof, target=target).items()}
+             for n, v in shown_within(values, ses, ident.std_error_dof, target=target,
+                                      type_b=type_b).items()}
     out = [n for n, v in shown.items() if v > limit]
+    # the stated inputs alone (Type B, the same in every round) keep these out of the
+    # limit however good the data: no pass and no write can bring them in
+    limited = [n for n in out if type_b and coverage_factor(None) * type_b.get(n, 0.0)
+               + apart.get(n, 0.0) >= limit]
     seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
-    if not sig and previous is not None and out:
+    if not sig and previous is not None and out and not limited:
         # converge_mm spares a correction too small to matter, where the machine can
         # be shown within it. Where it cannot, the next step mounts every setup either
         # way: a further pass of the same machine, or a write and its verification.
@@ -121,6 +131,8 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
         verdict = "suspected" if any(v > 0 for v in seen.values()) else "unproven"
         if any(apart.get(n, 0.0) > 0.0 for n in out):
             verdict = "ambiguous"
+        elif limited:
+            verdict = "budget-limited"
         elif floor and any(_form_limits(ident.std_errors.get(n), floor.get(n), passes,
                                         ident.std_error_dof, limit) for n in out):
             verdict = "form-limited"
@@ -177,10 +189,13 @@ def stands_part(ident: Identification, geometry: Geometry) -> Params | None:
 
 
 def annotate(entry: Iteration, ident: Identification, geometry: Geometry,
-             floor: dict[str, float]) -> None:
+             floor: dict[str, float], type_b: dict[str, float] | None = None) -> None:
     """What a round's ``iterations`` entry says beside its verdict of what limits it:
-    the stands' part of Δρ's error, another model that explains the data as well, and
-    the part the carried bows leave (``floor``, orthocal.carry.prior_floor)."""
+    the stands' part of Δρ's error, another model that explains the data as well, the
+    part the carried bows leave (``floor``, orthocal.carry.prior_floor) and the stated
+    inputs' (``type_b``: their standard part of each Δρ's uncertainty)."""
+    if type_b:
+        entry.inputs_part_mm = {n: finite(v) for n, v in type_b.items() if n in WRITABLE}
     part = stands_part(ident, geometry)
     if part is not None:
         entry.stands_part_mm = part
@@ -214,60 +229,59 @@ def _or_inf(bound: float | None) -> float:
 
 
 def not_converged(entry: Iteration, converge_mm: float, offset_count_mm: float,
-                  rounds: Sequence[Iteration] = ()) -> str:
+                  rounds: Sequence[Iteration] = ()) -> tuple[str, str]:
     """Why the last verification (its ``iterations`` entry; ``rounds``: every entry)
-    could not show the machine converged, in words: how far the worst axis may still
-    be off, and what to change."""
+    could not show the machine converged, in words, as (why, remedy): how far the
+    worst axis may still be off (the headline's, short), and what to change (the
+    advice's)."""
     shown = entry.shown_within_95_mm or {}
     passes = len(entry.passes or [entry.phase])
     worst = max(shown, key=lambda k: _or_inf(shown[k]))
     bound = shown[worst]
-    how = "by an unknown amount (no standard error)" if bound is None else \
-        f"by up to {1000 * bound:.1f} µm"
-    ses = [v for k, v in entry.std_errors.items() if k in WRITABLE and v is not None]
-    noise = f" (standard error {1000 * max(ses):.1f} µm)" if ses else ""
-    seen = "a correction is seen at 95 % but does not stand out of both rounds' noise" \
-        if entry.verdict == "suspected" else "no correction stands out of the noise"
-    said = (f"after {passes} pass(es) of its last verification, Δρ_{worst[-1]} may still "
-            f"be off {how} at 95 %, more than converge_mm = {1000 * converge_mm:g} µm + "
-            f"half the drive's count ({500 * offset_count_mm:g} µm), and {seen}{noise}")
+    how = "by an unknown amount" if bound is None else f"by up to {1000 * bound:.1f} µm"
+    limit = 1000 * converge_mm + 500 * offset_count_mm
+    said = f"Δρ_{worst[-1]} may still be off {how} at 95 % (limit {limit:g} µm)"
+    return said, _remedy(entry, worst, passes, rounds)
+
+
+def _remedy(entry: Iteration, worst: str, passes: int, rounds: Sequence[Iteration]) -> str:
+    """What would let the loop show the machine converged (:func:`not_converged`)."""
+    after = f"after {passes} pass(es) of the last verification: "
     if entry.ambiguity is not None:
         apart = max(v or 0.0 for k, v in entry.ambiguity.apart_mm.items() if k in WRITABLE)
-        return (f"{said}; the axes' tilts ({entry.model}) and the legs' bows within the "
+        return (f"{after}the axes' tilts ({entry.model}) and the legs' bows within the "
                 f"stated straightness ({entry.ambiguity.explained_by}) explain the "
-                f"deviations alike, and put Δρ up to {2000 * apart:.1f} µm apart (what is "
+                f"deviations alike and put Δρ up to {2000 * apart:.1f} µm apart (what is "
                 f"stated and written is their midpoint, within {1000 * apart:.1f} µm of "
-                "either); at the "
-                "legs' middles a uniform bow is a tilt, so more cycles, passes or "
-                "write-backs cannot decide it: read a second gauge plane ([[setups]] "
-                "again with at = 0.75), or, if the legs are straighter than stated, state "
-                "their measured straightness ([uncertainty] leg_straightness_mm)")
+                "either); no pass can decide it: read a second gauge plane ([[setups]] "
+                "again with at = 0.75), or state the legs' measured straightness "
+                "([uncertainty] leg_straightness_mm)")
+    inputs = (entry.inputs_part_mm or {}).get(worst)
+    se_worst = entry.std_errors.get(worst)
+    if entry.verdict == "budget-limited" or (inputs is not None and se_worst is not None
+                                             and inputs > se_worst):
+        part = (entry.inputs_part_mm or {}).get(worst)
+        size = f" ({1000 * part:.1f} µm standard)" if part is not None else ""
+        return (f"{after}the stated inputs make most of Δρ_{worst[-1]}'s uncertainty{size}, "
+                "and no pass shrinks them: measure and state them ([uncertainty], "
+                "[[indicators]] mpe_mm; the budget names the largest)")
     floor = (entry.form_floor_mm or {}).get(worst)
     if entry.verdict == "form-limited" and floor is not None:
-        return (f"{said}; of that standard error, {1000 * floor:.1f} µm comes from the "
-                "legs' bows, which the pass with the second gauge plane measured and "
-                "every later pass at the legs' middles carries (at the middles a "
-                "uniform bow is a tilt, and it moves Δρ): more passes at the middles "
-                "cannot shrink it, so none was taken; " + _form_advice(worst, rounds))
+        return (f"{after}{1000 * floor:.1f} µm of Δρ_{worst[-1]}'s standard error comes "
+                "from the legs' bows the pass with the second gauge plane measured, which "
+                "no pass at the middles shrinks; " + _form_advice(worst, rounds))
     if entry.fit_ok is False:
-        # the noise is not the cause: more of the same measurement cannot help
-        return (f"{said}; the cause is the model, not the noise: model {entry.model} "
-                f"leaves {1000 * (entry.residual_rms_mm or 0.0):.1f} µm RMS of "
-                "residual against the scatter's "
-                f"{1000 * (entry.noise_floor_mm or 0.0):.1f} µm, so more cycles or "
-                "quieter gauges will not help; look for what the model lacks (a loose "
-                "gauge or stand, lost motion, legs bowed beyond [uncertainty] "
-                "leg_straightness_mm) or name a larger model")
+        return (f"{after}model {entry.model} leaves "
+                f"{1000 * (entry.residual_rms_mm or 0.0):.1f} µm RMS of residual against "
+                f"the scatter's {1000 * (entry.noise_floor_mm or 0.0):.1f} µm: look for "
+                "what the model lacks (a loose gauge or stand, lost motion, legs bowed "
+                "beyond [uncertainty] leg_straightness_mm) or name a larger model")
     part = (entry.stands_part_mm or {}).get(worst)
     se = entry.std_errors.get(worst)
     if part is not None and se and part > 0.5 * se:
-        # the stands, not the gauges, hold the error: more cycles cannot take it
-        return (f"{said}; of Δρ_{worst[-1]}'s standard error {1000 * se:.1f} µm, the "
-                f"stands set by eye make {1000 * part:.1f} µm (each gauge's plane moves "
-                "the reading by its offset times the leg's slope, and these axes' tilts "
-                "and gaps slope the legs): more cycles cannot shrink that part; more "
-                "passes of the verification ([procedure] max_extra_passes) average it, "
-                "and so do stands set against a mark at the legs' middles with "
+        return (f"{after}the stands set by eye make {1000 * part:.1f} µm of Δρ_{worst[-1]}'s "
+                f"standard error {1000 * se:.1f} µm: more passes ([procedure] "
+                "max_extra_passes) average it, and so do stands set against a mark with "
                 "[procedure] stand_tolerance_mm stated")
-    return (f"{said}; measure with more cycles or readings, quieter gauges, or a larger "
+    return (f"{after}measure with more cycles or readings, quieter gauges, or a larger "
             "converge_mm")

@@ -336,8 +336,34 @@ def render(found: dict[str, Any], args: argparse.Namespace,
         *_defaults(WritebackConfig,
                    ("max_abs_offset_mm", "refuse larger corrections (nothing written)")),
         "",
+        *UNCERTAINTY_LINES,
     ]
     return "\n".join(out)
+
+
+#: The inputs the statement's uncertainty rests on, commented: a shop states what it
+#: measured (docs/design.md, "Uncertainty budget"); left out, each is taken at the
+#: default the run names as assumed, which on a tilted machine alone keeps the joints
+#: from being shown within a few micrometres.
+UNCERTAINTY_LINES = [
+    "# What the run's uncertainty rests on (docs/design.md, \"Uncertainty budget\"). EDIT:",
+    "# state what you measured. A line left commented is taken at the default shown and",
+    "# named as assumed in the result; the defaults are cautious, and on a machine whose",
+    "# axes lean the legs' straightness alone can keep the joints from being shown within",
+    "# converge_mm (the run then says so and what to state). Each gauge's MPE and serial",
+    "# go in its [[indicators]] table: mpe_mm = 0.003 (its data sheet or certificate,",
+    "# default 0.003 mm for mitutoyo, sylvac and mahr) and serial = \"…\" (the certificate).",
+    "[uncertainty]",
+    "# leg_straightness_mm = 0.010  # the legs' straightness over the plunger's slide, read",
+    "#                              #   as a bow's sagitta; one value or [x, y, z]",
+    "# temperature_change_c = 0.5   # how much the room may change during a run, °C",
+    "# plunger_angle_deg = 2.0      # how far a plunger may stand off the leg's normal",
+    "",
+    "# [acceptance]                 # the shop's limit on the tool after calibration, at 95 %",
+    "# tool_rms_um = 10",
+    "# tool_max_um = 25",
+    "",
+]
 
 
 def main(args: argparse.Namespace) -> int:

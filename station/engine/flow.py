@@ -13,7 +13,6 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-from pydantic import ValidationError
 
 from drivers.files import write_atomic
 from orthocal import Identification, carry
@@ -24,9 +23,8 @@ from orthocal.loop import (
     correction,
 )
 from orthocal.lost_motion import Reversal, band_middle, edge_of
-from orthocal.numbers import finite
-from station.analysis import acceptance, compensated, joints, reversal, verdict
 from station.analysis import accuracy_statement as accuracy
+from station.analysis import joints, reversal, verdict
 from station.analysis import run_budget as budget
 from station.analysis.joint_readings import details_of, tables_of
 from station.analysis.statistics import Measurement, pooled
@@ -48,10 +46,13 @@ from station.record.journal_file import Journal
 from station.record.model import MachineModel
 from station.record.result import Iteration, Joined, Loop, RunResult, Status
 from station.record.result_accuracy import Accuracy
-from station.record.result_base import JsonObject, NotStated
+from station.record.result_base import JsonObject
 from station.record.result_sections import ModelSelection
 from station.record.run_dir import MODEL_NAME
 from station.record.state import RunState
+from station.statement.conclude import conclude
+from station.statement.machine import DRHO
+from station.statement.rounds import Rounds, Written
 
 
 @dataclass
@@ -189,13 +190,14 @@ class Flow:
         floor = carry.prior_floor(ident, ctx.config.machine.geometry())
         left = extra_passes_allowed(n, proc.max_extra_passes, proc.max_iterations,
                                     proc.verify) - (len(passes) - 1)
+        type_b = _type_b(ctx.config, ident, phase)
         judged = verdict.judge(ident, prev, proc.converge_mm,
                                verdict.converge_limit(proc.converge_mm, count), self.target,
                                passes_left=left > 0, joined=joined if n else None,
-                               floor=floor, passes=(len(passes), left))
+                               floor=floor, passes=(len(passes), left), type_b=type_b)
         sig = judged.significant
         entry = fields.iteration(phase, judged)
-        verdict.annotate(entry, ident, ctx.config.machine.geometry(), floor)
+        verdict.annotate(entry, ident, ctx.config.machine.geometry(), floor, type_b)
         if n:
             entry.joined = Joined(drho_mm=joined[0], std_errors_mm=joined[1])
         if again:
@@ -264,7 +266,9 @@ class Flow:
         self.result.identified = total
 
     def stopped(self, reason: str) -> None:
-        """Status, message and the loop's verdict once station.engine.closed_loop says finish."""
+        """Status, message and the loop's verdict once station.engine.closed_loop says
+        finish; the end of the run (the statement and what reads it) from
+        station.statement.conclude."""
         proc = self.ctx.config.procedure
         first = self.outcomes[0] if self.outcomes else None
         last = self.outcomes[-1] if self.outcomes else None
@@ -276,30 +280,24 @@ class Flow:
             elif last.status in ("refused", "declined"):
                 message = (f"closed loop stopped before round {len(self.outcomes)}: "
                            f"write-back {last.reason}")
-        converged = reason == "converged"
-        detail = last.reason if last is not None and not converged \
+        detail = last.reason if last is not None and reason != "converged" \
             and reason in ("refused", "declined", "failed") else None
         if reason == "max_iterations":
             message = (f"closed loop did not converge: {proc.max_iterations} write-back(s) "
                        "done and the last verification still finds a significant "
                        "correction; run again or look for errors outside the model")
         count = self.ctx.devices.controller.offset_resolution_mm()
+        remedy = None
         if reason == "not-converged":
-            detail = verdict.not_converged(self.iterations[-1], proc.converge_mm, count,
-                                           self.iterations)
+            detail, remedy = verdict.not_converged(self.iterations[-1], proc.converge_mm,
+                                                   count, self.iterations)
             message = f"closed loop did not converge: {detail}"
         if last is None:
             # nothing written: the offsets as found are the run's before and after
             self.result.offsets_before = {a: float(v) for a, v in zip(
                 "xyz", self.ctx.devices.controller.read_offsets(), strict=True)}
             self.result.offsets_written = None
-        if converged and last is None:
-            limit = verdict.converge_limit(proc.converge_mm, count)
-            message = (f"within tolerance, nothing written: every joint offset is shown within "
-                       f"{1000 * limit:.1f} µm at 95 % and no correction stands out of the "
-                       "noise")
-        self.result.converged = converged
-        self.result.loop = Loop(
+        loop = Loop(
             stopped=reason, detail=detail,
             write_backs=sum(1 for o in self.outcomes if o.status == "written"),
             max_iterations=proc.max_iterations, converge_mm=proc.converge_mm,
@@ -307,13 +305,54 @@ class Flow:
             extra_passes=sum(len(it.passes) - 1 for it in self.iterations if it.passes),
             max_extra_passes=proc.max_extra_passes,
         )
-        self.result.remaining = results.remaining_fields(self.iterations, self.result)
-        self.result.uncertainty_budget = budget.of_run(self.ctx.config, self.idents,
-                                                       self.result.remaining)
-        self._accuracy()
-        if (judged := acceptance.judge(self.ctx.config.acceptance, self.result)) is not None:
-            self.result.acceptance = judged
+        self._conclude(loop, remedy)
+        converged = bool(self.result.converged)
+        if converged and last is None:
+            limit = verdict.converge_limit(proc.converge_mm, count)
+            message = (f"within tolerance, nothing written: every joint offset is shown within "
+                       f"{1000 * limit:.1f} µm at 95 % and no correction stands out of the "
+                       "noise")
         self.result.status, self.result.message = status, message
+
+    def _conclude(self, loop: Loop, remedy: str | None) -> None:
+        """The run's end from its rounds (station.statement.conclude), once, into the
+        record; a run whose model holds no Δρ states the loop and the rounds only."""
+        result = self.result
+        if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
+            result.converged = loop.stopped == "converged"
+            result.loop = loop
+            result.remaining = results.remaining_fields(self.iterations, result)
+            result.uncertainty_budget = budget.of_run(self.ctx.config, self.idents,
+                                                      result.remaining)
+            return
+        end = conclude(self._rounds(loop.stopped), loop, remedy)
+        result.converged, result.loop = end.converged, end.loop
+        result.remaining, result.uncertainty_budget = end.remaining, end.uncertainty_budget
+        result.statement, result.advice = end.statement, end.advice
+        result.acceptance = end.acceptance
+        acc = end.accuracy
+        if isinstance(acc, Accuracy) and self.reversal is not None:
+            acc.reversal = reversal.at_the_tool(self.ctx.config, self.reversal,
+                                                self._points())
+        result.accuracy = acc
+        if end.model is not None:
+            self._write_model(end.model)
+
+    def _rounds(self, stopped: str) -> Rounds:
+        """The snapshot of the rounds the statement is built from."""
+        c = self.seq.checker
+        before = self.result.offsets_before
+        return Rounds(
+            config=self.ctx.config, idents=tuple(self.idents), joined=tuple(self.joined),
+            iterations=tuple(self.iterations),
+            layout_rounds=tuple(self.layouts.layout_rounds),
+            layout_fits=dict(self.layouts.layout_fits),
+            writes=tuple(Written(o.status, o.reason, o.before, o.written)
+                         for o in self.outcomes),
+            target=dict(self.target), reversal=self.reversal,
+            offsets_before=None if before is None else results.known(before),
+            offset_count_mm=self.ctx.devices.controller.offset_resolution_mm(),
+            limits=(c.lo, c.hi), stopped=stopped)
 
     # --- accuracy at the tool ------------------------------------------------------
 
@@ -359,81 +398,13 @@ class Flow:
                 f"{figures[chosen]:.1f} µm RMS over the workspace ({frame} frame); "
                 f"objective {other} would leave {figures[other]:.1f} µm")
 
-    def _layout_form(self, layout: accuracy.Layout | None) -> tuple[np.ndarray, str] | None:
-        """The legs' form's part of the pooled ``layout``, from the latest of its rounds
-        (every round sees the same legs, so it is not averaged)."""
-        if layout is None or not layout.rounds:
-            return None
-        fit = self.layouts.layout_fits.get(layout.rounds[-1])
-        return None if fit is None else budget.form_of_layout(self.ctx.config, fit,
-                                                              layout.names)
-
-    def _accuracy(self) -> None:
-        """The run's statement at the tool (result ``accuracy``) and model.json."""
-        if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
-            return
-        layout = accuracy.pool_layout(self.layouts.layout_rounds)
-        remaining = self.result.remaining
-        start = results.known((remaining.total if remaining is not None else None) or {
-            n: self.result.identified.get(n, 0.0) for n in WRITABLE})
-        # without a verification after the last correction written: its aim, as predicted
-        now = results.known(remaining.estimate) if remaining is not None else dict(self.target)
-        acc = self.result.accuracy = self._statement(layout, start, now)
-        if isinstance(acc, NotStated):
-            return
-        if self.reversal is not None:
-            acc.reversal = reversal.at_the_tool(self.ctx.config, self.reversal, self._points())
-        self._write_model(layout, start, now)
-
-    def _statement(self, layout: accuracy.Layout | None, start: dict[str, float],
-                   now: dict[str, float]) -> Accuracy | NotStated:
-        """``accuracy`` for Δρ ``start`` at the start and ``now`` (analysis.accuracy_statement,
-        its ``compensated`` analysis.compensated's), or why it is not stated."""
-        cfg, last = self.ctx.config, self.idents[-1]
-        names = list(last.names)
-        idx = [names.index(n) for n in WRITABLE if n in names]
-        now_cov = np.asarray(last.covariance)[np.ix_(idx, idx)] if len(idx) == 3 else None
-        before = self.result.offsets_before
-        limits, form = (self.seq.checker.lo, self.seq.checker.hi), self._layout_form(layout)
-        try:
-            acc = accuracy.statement(
-                cfg, limits, drho_start=start, drho_now=now, drho_now_cov=now_cov,
-                dof=finite(last.std_error_dof), layout=layout, model=last.model,
-                in_model=names, offsets_before=None if before is None else results.known(before),
-                target_tool=self._tool_target(), form=form, undecided=last.ambiguous_with)
-        except ValidationError:  # a section that does not fit the record: a bug, not a run's
-            raise
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            return NotStated(error=f"not stated: {exc}")
-        try:
-            acc.compensated = compensated.of_run(
-                cfg, limits, acc, drho_now=now, drho_now_cov=now_cov,
-                dof=finite(last.std_error_dof), layout=layout, in_model=names,
-                model=last.model, form=form)
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            return NotStated(error=f"not stated: {exc}")
-        return acc
-
-    def _write_model(self, layout: accuracy.Layout | None, start: dict[str, float],
-                     now: dict[str, float]) -> None:
-        """model.json: the machine identified, built through its record
-        (station.record.model): what another tool validates model.json against is what
-        the engine writes."""
-        first = self.idents[0]
-        f_names = list(first.names)
-        f_idx = [f_names.index(n) for n in WRITABLE if n in f_names]
-        before, written = self.result.offsets_before, self.result.offsets_written
-        self.model = MachineModel.model_validate(accuracy.model_export(
-            self.ctx.config, drho_start=start,
-            drho_start_cov=np.asarray(first.covariance)[np.ix_(f_idx, f_idx)]
-            if len(f_idx) == 3 else None,
-            drho_now=now, tilts=layout, model=self.idents[-1].model,
-            offsets_before=None if before is None else results.known(before),
-            offsets_written=None if written is None else results.known(written),
-            dof=finite(first.std_error_dof)))
+    def _write_model(self, model: MachineModel) -> None:
+        """model.json: the machine identified, through its record (station.record.model):
+        what another tool validates model.json against is what the engine writes."""
+        self.model = model
         try:
             write_atomic(self.ctx.run_dir / MODEL_NAME,
-                         json.dumps(jsonable_value(self.model.model_dump(mode="json")),
+                         json.dumps(jsonable_value(model.model_dump(mode="json")),
                                     indent=1, allow_nan=False) + "\n")
         except OSError as exc:  # a full disk: result.json says so too, if it can
             say(f"orthocal: {MODEL_NAME} not written ({storage_message(self.ctx.run_dir, exc)})")
@@ -447,6 +418,17 @@ def _status_of(outcome: WritebackOutcome) -> tuple[Status, str | None]:
     if outcome.status == "declined":
         return "aborted", f"write-back {outcome.reason}"
     return "failed", outcome.reason
+
+
+def _type_b(config: StationConfig, ident: Identification, phase: str) -> dict[str, float]:
+    """Each Δρ's Type B standard uncertainty in round ``phase`` (the stated inputs through
+    the round's sensitivity: station.analysis.run_budget.round_columns), as the
+    statement will carry it."""
+    held = [d for d in DRHO if d in ident.names]
+    if not held:
+        return {}
+    columns = budget.round_columns(config, ident, phase).pick(held)
+    return {d: columns.marginal(d).u_b for d in held}
 
 
 def _identify(ctx: Run, m: Measurement,

@@ -16,6 +16,8 @@ from station import report
 from station.errors import say
 from station.record import io
 from station.record.result import RolledBack, RunResult
+from station.record.result_statement import AdviceItem
+from station.report.first_screen import ROLLED_BACK_TODO
 from station.record.run_dir import now_iso
 from station.record.state import RunState
 
@@ -74,6 +76,9 @@ def record_rollback(run_dir: Path, replaced: Mapping[str, float],
     record.rollbacks = [*record.rollback_history(), back]
     record.rolled_back = back
     record.offsets_final = dict(restored)
+    if record.advice is not None:
+        # the run's advice was for the machine it left; rolled back, one thing stands
+        record.advice = [AdviceItem(id="rolled-back", text=ROLLED_BACK_TODO, rests_on=[])]
     # validated once for the report, the history and the caller (write_result still
     # validates what it writes)
     record = io.validated(record)

@@ -40,6 +40,7 @@ from station.record.result_sections import (
     StandEstimate,
     UncertaintyBudget,
 )
+from station.record.result_statement import AdviceItem, Quantity
 
 __all__ = ["SCHEMA_VERSION", "Compensated", "Gauge", "RolledBack", "RunResult", "Setup",
            "Status"]
@@ -49,7 +50,7 @@ SCHEMA_VERSION: Literal[2] = 2
 Stopped = Literal["converged", "max_iterations", "not-converged", "refused", "declined",
                   "failed", "skipped", "not-verified"]
 Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous",
-                  "form-limited"]
+                  "form-limited", "budget-limited"]
 Status = Literal["ok", "failed", "refused", "aborted"]
 
 
@@ -173,6 +174,10 @@ class Iteration(Closed):
         None, description="of each Δρ standard error, the part the legs' bows carried from "
                           "the pass that read a second gauge plane leave however often the "
                           "legs' middles are read again (orthocal.carry.prior_floor)")
+    inputs_part_mm: Params | None = Field(
+        None, description="of each Δρ's uncertainty, the standard part the stated inputs "
+                          "make (Type B: [uncertainty], the gauges' MPE), the same in every "
+                          "round: no pass shrinks it")
 
 
 class Remaining(Closed):
@@ -314,6 +319,13 @@ class RunResult(Closed):
         None, description="the tool against [acceptance] at 95 %; absent without it")
     since_last: SinceLast | NotCompared | None = Field(
         None, description="absent without [machine] id or an earlier run in the history")
+    statement: list[Quantity] | None = Field(
+        None, description="every quantity the run states, once, at 95 % (docs/design.md, "
+                          "\"The statement of the machine\"); absent before an "
+                          "identification of Δρ")
+    advice: list[AdviceItem] | None = Field(
+        None, description="what to do, each from the decisions it rests on (docs/design.md, "
+                          "\"The decision table\")")
 
     def rollback_history(self) -> list[RolledBack]:
         """Every rollback of the run, oldest first: ``rollbacks``, or in a record

@@ -22,9 +22,11 @@ from pathlib import Path
 
 from orthocal import coverage_factor
 from orthocal.lost_motion import standing_out
+from station.record.quantity_text import figure, plus_minus
 from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy
 from station.record.result_sections import UncertaintyBudget
+from station.record.result_statement import Quantity
 from station.report import budget_table as budget
 from station.report import in_controller, rounds, tool
 from station.report.format import (
@@ -49,6 +51,9 @@ WRITABLE = tuple(f"drho_{a}" for a in AXES)
 UM_BELOW_MM = 0.1
 #: The repair threshold of a reversal when the record does not state one (mm).
 REPAIR_ABOVE_MM = 0.02
+#: What to do once a run's offsets were rolled back (the record's advice after it).
+ROLLED_BACK_TODO = ("calibrate the machine again (orthocal run): the offsets this run "
+                    "wrote were rolled back")
 #: The routes that put the identified geometry into the controller.
 ROUTES = "orthocal export --kinematics, or orthocal compensate"
 
@@ -183,8 +188,26 @@ def as_left(result: RunResult, name: str) -> str:
     return text
 
 
+def stated(result: RunResult) -> dict[str, Quantity]:
+    """The record's statement by name (empty for a record from before it)."""
+    return {q.name: q for q in result.statement or []}
+
+
 def joint_items(result: RunResult) -> list[Item]:
-    """One line per joint: Δρ as found → as left, at 95 %."""
+    """One line per joint: Δρ as found → as left, at 95 % (the statement's; a record
+    from before it: its budget and remaining)."""
+    q = stated(result)
+    if q:
+        out = []
+        for n in WRITABLE:
+            found, left = q.get(f"{n}.as_found"), q.get(f"{n}.as_left")
+            if found is None or left is None:
+                continue
+            after = "unchanged (nothing written)" if _nothing_written(result) else \
+                plus_minus(left)
+            out.append(Item(f"joint {n[-1]}", f"Δρ as found {plus_minus(found)} → as left "
+                                              f"{after} (95 %)"))
+        return out
     return [Item(f"joint {n[-1]}", f"Δρ as found {value_pm(value, half)} → as left "
                                    f"{as_left(result, n)} (95 %)")
             for n, (value, half) in as_found(result).items()]
@@ -216,6 +239,34 @@ def _figure(before: float | None, after: float | None, interval: str | None,
     """"333.4 → 36.7 µm RMS (95 %: 9.3–57.5 µm)": the interval is the after-figure's."""
     return (f"{um(before)} → {um(after)} µm{what}"
             + (f" (95 %: {interval} µm)" if interval else ""))
+
+
+def _tool_statement(result: RunResult, acc: Accuracy) -> list[Item]:
+    """The tool's lines from the statement: before → after (RMS, max), and with the
+    geometry in the controller."""
+    q = stated(result)
+    b_rms, b_max = q["tool.before.rms"], q["tool.before.max"]
+    a_rms, a_max = q["tool.after.rms"], q["tool.after.max"]
+    c_rms = q.get("tool.compensated.rms")
+    box = box_text(acc.workspace_mm)
+    if tool.written(result):
+        lines = [f"{um(b_rms.value)} → {figure(a_rms, 'RMS')}, max {um(b_max.value)} → "
+                 f"{figure(a_max)}, over {box}, with the offsets written"]
+    else:  # no arrow: nothing changed on the machine
+        lines = [f"{figure(b_rms, 'RMS')}, max {figure(b_max)}, over {box}, as the machine "
+                 "stands"]
+    if c_rms is not None:
+        lines.append(f"with the geometry in the controller {figure(c_rms, 'RMS')}")
+    return [Item("at the tool" if i == 0 else "", t) for i, t in enumerate(lines)]
+
+
+def tool_items(result: RunResult) -> list[Item]:
+    """The tool's error lines (:func:`tool_item`, or the statement's)."""
+    acc, _ = tool.statement(result)
+    if acc is not None and "tool.after.rms" in stated(result):
+        return _tool_statement(result, acc)
+    item = tool_item(result)
+    return [] if item is None else [item]
 
 
 def tool_item(result: RunResult) -> Item | None:
@@ -318,9 +369,14 @@ def actions(result: RunResult) -> list[str]:
 
 
 def todo_items(result: RunResult) -> list[Item]:
+    """What to do: the record's advice, verbatim (a rolled-back run's: calibrate
+    again, which its rollback put into the record; a record from before the advice:
+    the legacy reading of its sections)."""
     if result.rolled_back is not None:  # what the run found no longer applies as it stands
-        return [Item("to do", "calibrate the machine again (orthocal run): the offsets "
-                              "this run wrote were rolled back")]
+        return [Item("to do", ROLLED_BACK_TODO)]
+    if result.advice is not None:
+        texts = [a.text for a in result.advice]
+        return [Item("to do" if i == 0 else "", t) for i, t in enumerate(texts)]
     todo = actions(result)
     if not todo:
         return [Item("to do", "nothing further: nothing else stands out of the noise")] \
@@ -355,7 +411,8 @@ def items(result: RunResult) -> list[Item]:
     out += joint_items(result)
     back = rolled_back_text(result)
     out += [i for i in (offsets_item(result), None if back is None else
-                        Item("ROLLED BACK", back), tool_item(result)) if i is not None]
+                        Item("ROLLED BACK", back)) if i is not None]
+    out += tool_items(result)
     if held_by_station(result):  # the headline's "enter them in the drive": how
         out.append(Item("offsets held", f"by the station: {result.offsets_note or ''}"))
     out += todo_items(result)

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 
 from station.record.result import RunResult
 from station.report import budget_table as budget
-from station.report import first_screen, rounds, since, tool
+from station.report import first_screen, rounds, since, statement_lines, tool
 from station.report import reversal_table as reversal
 from station.report.boundary import ResultLike, as_result
 from station.report.format import (
@@ -91,11 +91,16 @@ def summary_text(result: ResultLike, verbose: bool = True) -> str:
 
 def detail_lines(record: RunResult) -> list[str]:
     """Everything below the first screen, each value said once (the first screen's
-    are not repeated)."""
+    are not repeated); a record with a statement prints its quantities as stated
+    (station.report.statement_lines), one value and one ± each."""
     lines = [*_fit_lines(record)]
     lines += _verification_lines(record)
-    lines += tool.summary_lines(record)
-    lines += reversal.summary_lines(record)
+    if record.statement:
+        lines += tool.objective_lines(record)
+        lines += statement_lines.detail_lines(record)
+    else:
+        lines += tool.summary_lines(record)
+        lines += reversal.summary_lines(record)
     lines += budget.summary_lines(record)
     lines += since.summary_lines(record)
     names = params_of(record)
@@ -129,9 +134,11 @@ def _fit_lines(result: RunResult) -> list[str]:
         resid += f" (indicator noise {um(noise)} µm)"
     if result.fit_note:
         resid += f": {result.fit_note}"
-    # Δρ is the first screen's "as found"; the other parameters here, at 95 %
+    # Δρ is the first screen's "as found"; the other parameters here, at 95 % (with a
+    # statement, its own lines state them: one value each)
     others = [n for n in names if not n.startswith("drho_")]
-    ident = [f"  identified    {param_line(result, others)}"] if others else []
+    ident = [f"  identified    {param_line(result, others)}"] \
+        if others and not result.statement else []
     return [f"  model         {result.model}{why}", *ident, resid]
 
 
@@ -141,10 +148,11 @@ def _verification_lines(result: RunResult) -> list[str]:
         return []
     # The verification measures the legs' parallelism (the method's means);
     # the tool's accuracy is the "at the tool" line's, and the two differ.
-    return [
-        f"  verification  legs' parallelism (the method's means, not the tool's accuracy):"
-        f" deviations RMS {um(result.deviations_rms_mm)} → "
-        f"{um(ver.deviations_rms_mm)} µm; re-identified "
-        + "  ".join(f"{param_plain(n)} = {fmt(v, signed=True)} {unit(n)}"
-                    for n, v in ver.identified.items())
-    ]
+    head = (f"  verification  legs' parallelism (the method's means, not the tool's accuracy):"
+            f" deviations RMS {um(result.deviations_rms_mm)} → "
+            f"{um(ver.deviations_rms_mm)} µm")
+    if result.statement:  # the machine as left is the statement's, once
+        return [head]
+    return [head + "; re-identified "
+            + "  ".join(f"{param_plain(n)} = {fmt(v, signed=True)} {unit(n)}"
+                        for n, v in ver.identified.items())]

@@ -245,6 +245,19 @@ def tool_clause(result: RunResult) -> str | None:
 # -------------------------------------------------------------------- summary
 
 
+def objective_lines(result: RunResult) -> list[str]:
+    """The objective written and what the other would leave (plug-in figures of the
+    offsets each would write: no interval, so no ±)."""
+    acc, why_not = statement(result)
+    if acc is None:
+        return [f"  at the tool   not stated: {why_not}"] if why_not else []
+    state = "written" if written(result) else "NOT written"
+    alt = acc.alternative
+    return [f"  objective     {acc.objective} ({OBJECTIVE_TEXT[acc.objective]}) {state}; "
+            f"objective {alt.objective} would leave {um(alt.after.rms_mm)} µm RMS (max "
+            f"{um(alt.after.max_mm)} µm), frame {acc.frame}"]
+
+
 def summary_lines(result: RunResult) -> list[str]:
     """The summary's details on the tool (its figures are the first screen's): the
     objective and what the other would leave, the geometry in the controller, the

@@ -39,6 +39,11 @@ CONTROLLER_TIMEOUT_S = 1.0
 JOINT_GAUGES = {"x": "G", "y": "H", "z": "I"}
 STEP_GAUGE: dict[str, Any] = {"kind": "step gauge", "faces_mm": [20.0 * k for k in range(11)],
                               "u_mm": 0.0005, "temperature_c": 20.0, "plunger": "-"}
+#: How well a shop measures a leg's straightness (mm): the stated bound is the bow the
+#: simulation gives the leg plus this.
+STRAIGHTNESS_READ_MM = 0.0005
+#: The temperature change during a run a shop with a held room states (°C).
+ROOM_HELD_C = 0.1
 
 
 def setups_of(count: int) -> list[dict[str, Any]]:
@@ -132,4 +137,17 @@ class SimulatedStation(VirtualStation):
             **({"joints": {"station_test": list(self.joint_gauges),
                            "station_gauge": dict(self.joint_gauges), "reference": STEP_GAUGE}}
                if self.joint_gauges else {}),
+            "uncertainty": self.stated_inputs(),
         }
+
+    def stated_inputs(self) -> dict[str, Any]:
+        """What a shop that measured this machine would state of it ([uncertainty]):
+        each leg's straightness, its bow's sagitta measured to half a micrometre (the
+        virtual legs bow as the simulation says), and a room held within a tenth of a
+        degree (the virtual machine does not warm). The gauges' MPE and the plungers'
+        angle are left at the station's defaults, as a shop that has not measured
+        them would."""
+        bows = [max(abs(float(b)), 0.0) + STRAIGHTNESS_READ_MM
+                for b in self.machine.leg_bow]
+        return {"leg_straightness_mm": [round(b, 6) for b in bows],
+                "temperature_change_c": ROOM_HELD_C}

@@ -1,0 +1,143 @@
+"""The advice (docs/design.md, "The decision table"): what to do, each piece from the
+decisions of the statement's quantities it rests on, its text the one every view
+prints. No two contradict: the rails' advice names the controller only where the
+controller's own decision says it gains, "nothing further" only where nothing acts,
+and nothing on the rails where the data cannot tell the axes' tilts from the legs'
+bows."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from station.analysis.run_budget import inputs
+from station.config import StationConfig
+from station.record.quantity_text import plus_minus, um
+from station.record.result_statement import AdviceItem, Quantity
+from station.statement import decisions as rule
+
+#: The routes that put the identified geometry into the controller.
+ROUTES = "orthocal export --kinematics, or orthocal compensate"
+_LEANS = {"tilt_yx": ("y", "x", "xy"), "tilt_zx": ("z", "x", "xz"),
+          "tilt_zy": ("z", "y", "yz")}
+_PASSES = {"gap_xy": ("x", "y", "z"), "gap_xz": ("x", "z", "y"), "gap_yz": ("y", "z", "x")}
+#: Each assumed input: its config key and how the statement's basis names its source.
+_INPUTS = {"leg_straightness_mm": "leg straightness", "temperature_change_c": "temperature",
+           "plunger_angle_deg": "plunger angle"}
+
+
+def _controller_gains(q: Mapping[str, Quantity]) -> bool:
+    c = q.get("tool.compensated.rms")
+    return c is not None and c.decision == rule.GAIN
+
+
+def _rails(q: Mapping[str, Quantity], rail_mm: float) -> list[AdviceItem]:
+    """Shim a leaning axis, move a rail across a gap: only what acts; where the
+    controller's decision gains, the geometry in the controller is the other way."""
+    other = ", or put the geometry into the controller" if _controller_gains(q) else ""
+    out = []
+    for name, (axis, toward, pair) in _LEANS.items():
+        t = q.get(name)
+        if t is None or t.decision != rule.ACT or t.value is None:
+            continue
+        shim = abs(t.value) * rail_mm  # mrad × mm = µm
+        out.append(AdviceItem(
+            id=f"shim.{name}", rests_on=[name, f"squareness_{pair}"],
+            text=(f"axis {axis} leans {'toward +' if t.value > 0 else 'away from +'}{toward} "
+                  f"by {plus_minus(t).lstrip('+-')} ({name}), which offsets cannot fix: "
+                  f"shim its rail by {shim:.0f} µm over {rail_mm:g} mm{other}")))
+    for name, (a, b, along) in _PASSES.items():
+        g = q.get(name)
+        if g is None or g.decision != rule.ACT or g.value is None:
+            continue
+        out.append(AdviceItem(
+            id=f"rail.{name}", rests_on=[name],
+            text=(f"axis {a} passes axis {b} {'above' if g.value > 0 else 'below'} it along "
+                  f"{along} by {plus_minus(g).lstrip('+-')} ({name}), which offsets cannot "
+                  f"fix: move a rail across{other}")))
+    return out
+
+
+def _controller(q: Mapping[str, Quantity]) -> list[AdviceItem]:
+    c, a = q.get("tool.compensated.rms"), q.get("tool.after.rms")
+    if c is None or a is None or c.decision != rule.GAIN:
+        return []
+    return [AdviceItem(
+        id="controller", rests_on=[a.name, c.name],
+        text=(f"put the identified geometry into the controller ({ROUTES}): the tool's "
+              f"RMS error falls from {um(a.value)} to {um(c.value)} µm"))]
+
+
+def _plays(q: Mapping[str, Quantity]) -> list[AdviceItem]:
+    out = []
+    for axis in "xyz":
+        r = q.get(f"reversal_{axis}")
+        if r is None or r.decision not in (rule.COMPENSATE, rule.REPAIR):
+            continue
+        if r.decision == rule.REPAIR:
+            out.append(AdviceItem(id=f"repair.{axis}", rests_on=[r.name], text=(
+                f"repair joint {axis}: its reversal {plus_minus(r)} (a worn screw, nut or "
+                "belt); meanwhile set its backlash (reversal) parameter in the controller")))
+        else:
+            out.append(AdviceItem(id=f"backlash.{axis}", rests_on=[r.name], text=(
+                f"set joint {axis}'s backlash (reversal) parameter in the controller to "
+                f"{um(r.value)} µm (reversal {plus_minus(r)})")))
+    return out
+
+
+def _undecided(q: Mapping[str, Quantity]) -> list[AdviceItem]:
+    held = [n for n in ("tilt_yx", "tilt_zx", "tilt_zy", "gap_xy", "gap_xz", "gap_yz")
+            if n in q and q[n].decision == rule.UNDECIDED]
+    if not held:
+        return []
+    return [AdviceItem(id="undecided.layout", rests_on=held, text=(
+        "shim or move no rail: the axes' tilts found here explain the deviations no "
+        "better than the legs' bows within the stated straightness (at the legs' middles "
+        "a uniform bow is a tilt); read a second gauge plane ([[setups]] again with at = "
+        "0.75), or state the legs' measured straightness, and calibrate again"))]
+
+
+def _limited_by(q: Quantity) -> str | None:
+    """The Type B source that makes most of a quantity's uncertainty, if any."""
+    for line in q.basis:
+        name = line.split(":", 1)[0]
+        return None if name == "repeatability" else name
+    return None
+
+
+def _inputs(config: StationConfig, q: Mapping[str, Quantity],
+            undecided_type_b: list[str]) -> list[AdviceItem]:
+    """State an assumed input where it, not the data, keeps a quantity undecided."""
+    given = inputs(config)
+    assumed = {src: key for key, src in _INPUTS.items()
+               if not getattr(given, key).given}
+    hit: dict[str, list[str]] = {}
+    for name in undecided_type_b:
+        src = _limited_by(q[name])
+        if src in assumed:
+            hit.setdefault(assumed[src], []).append(name)
+    out = []
+    for key, names in hit.items():
+        value = getattr(given, key).value
+        out.append(AdviceItem(id=f"state.{key}", rests_on=names, text=(
+            f"state [uncertainty] {key} (measured; {value} assumed): it, not the data, keeps "
+            f"{', '.join(names)} from being decided")))
+    return out
+
+
+def advice(config: StationConfig, quantities: list[Quantity], undecided_type_b: list[str],
+           converged: bool, remedy: str | None) -> list[AdviceItem]:
+    """Every piece of advice for the statement's ``quantities`` (module docstring);
+    ``undecided_type_b``: the quantities the stated inputs alone keep undecided
+    (station.statement.conclude), ``remedy``: what would let an unconverged loop
+    converge (the verdict's words)."""
+    q = {x.name: x for x in quantities}
+    rail_mm = config.machine.rho_max - config.machine.rho_min
+    out = _undecided(q) or _rails(q, rail_mm)
+    out += _controller(q) + _plays(q) + _inputs(config, q, undecided_type_b)
+    if remedy:
+        out.append(AdviceItem(id="converge", rests_on=[n for n in q if n.endswith(".as_left")],
+                              text=remedy))
+    if not out and converged:
+        out.append(AdviceItem(id="nothing", rests_on=sorted(q),
+                              text="nothing further: nothing else stands out of the noise"))
+    return out

@@ -1,0 +1,151 @@
+"""The end of a run, in one place (docs/design.md, "The statement of the machine"): from
+the snapshot of its rounds (station.statement.rounds.Rounds) the statement of the
+machine, the advice, and what reads them (the loop's verdict, the uncertainty budget,
+the accuracy section, the acceptance, model.json). Each is computed once, here."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from orthocal.numbers import finite
+from station.analysis import acceptance as accept
+from station.analysis.run_budget import inputs
+from station.record.model import MachineModel
+from station.record.result import Loop, Remaining
+from station.record.result_acceptance import Acceptance
+from station.record.result_accuracy import Accuracy
+from station.record.result_base import NotStated
+from station.record.result_sections import BudgetSource, Instrument, UncertaintyBudget
+from station.record.result_statement import AdviceItem, Quantity
+from station.statement import decisions as rule
+from station.statement import quantities as qty
+from station.statement.accuracy_section import accuracy_section, machine_model
+from station.statement.advice import advice
+from station.statement.machine import DRHO, KnownMachine, known_machine
+from station.statement.rounds import Rounds
+from station.statement.tool import tool_figures
+
+
+@dataclass(frozen=True)
+class Conclusion:
+    """What the end of a run states: ``statement`` and ``advice`` (the record's), and
+    the sections that read them. ``converged``: every joint's Δρ as left shown within
+    the loop's limit (the statement's decisions)."""
+
+    statement: list[Quantity]
+    advice: list[AdviceItem]
+    converged: bool
+    loop: Loop
+    remaining: Remaining | None
+    uncertainty_budget: UncertaintyBudget | NotStated | None
+    accuracy: Accuracy | NotStated | None
+    acceptance: Acceptance | None
+    model: MachineModel | None
+
+
+def _remaining(rounds: Rounds, machine: KnownMachine) -> Remaining | None:
+    """What the rounds joined say is left of Δρ now, and the machine at the start."""
+    if not rounds.verified:
+        return None
+    n = len(rounds.idents) - 1
+    _, se = rounds.joined[n]
+    dof = rounds.last.std_error_dof
+    m = {d: machine.drho.marginal(d) for d in machine.now}
+    return Remaining(phase=rounds.iterations[-1].phase, round=len(rounds.iterations),
+                     estimate=dict(machine.now), total=dict(machine.start),
+                     std_errors={d: finite(se.get(d)) for d in machine.now},
+                     std_errors_dof=finite(dof),
+                     coverage_factor_95=finite(m[DRHO[0]].k) if m else None)
+
+
+def _budget(rounds: Rounds, machine: KnownMachine) -> UncertaintyBudget:
+    """The budget of Δρ (as found and as left alike), from the statement's own joint
+    distribution: its sources, combined, and U at 95 %."""
+    m = {d: machine.drho.marginal(d) for d in machine.now}
+    sources: dict[str, dict[str, float | None]] = {}
+    for d, mm in m.items():
+        for src, u in mm.contributions.items():
+            sources.setdefault(src, {})[d] = u
+    first = "repeatability"
+    rows = [BudgetSource(source=first, type="A", distribution="normal", value_mm=None,
+                         u_mm=None, contributions_mm=sources.pop(first, {}),
+                         dof=finite(next(iter(m.values())).dof_a) if m else None)]
+    rows += sorted((BudgetSource(source=s, type="B", distribution="rectangular",
+                                 value_mm=None, u_mm=None, contributions_mm=c)
+                    for s, c in sources.items()),
+                   key=lambda s: (-max(v or 0.0 for v in s.contributions_mm.values()),
+                                  s.source))
+    given = inputs(rounds.config)
+    alone = {"leg_straightness_mm": given.leg_straightness_mm,
+             "temperature_change_c": given.temperature_change_c,
+             "plunger_angle_deg": given.plunger_angle_deg}
+    assumed = [f"{k}: {v.value} ({v.assumed})" for k, v in alone.items() if not v.given]
+    assumed += [f"mpe_mm of {n}: {v.value} ({v.assumed})"
+                for n, v in given.mpe_mm.items() if not v.given]
+    instruments = [Instrument(name=g.name, protocol=g.protocol, serial=g.serial,
+                              resolution_mm=g.resolution_mm,
+                              mpe_mm=float(given.mpe_mm[g.name].value))  # type: ignore[arg-type]
+                   for g in rounds.config.indicators]
+    return UncertaintyBudget(
+        statement="remaining.total" if rounds.verified else "identified", sources=rows,
+        combined_mm={d: x.u_c for d, x in m.items()},
+        effective_dof={d: finite(x.dof) for d, x in m.items()},
+        coverage_factor={d: x.k for d, x in m.items()},
+        expanded_95_mm={d: x.expanded for d, x in m.items()}, inputs=given,
+        assumed=assumed, instruments=instruments,
+        method=("GUM (JCGM 100:2008): the rounds' scatter joined (Type A) and each stated "
+                "input (Type B, uniform within its bound) through the sensitivity of the "
+                "round's identification (stands and model included), combined in "
+                "quadrature, Welch-Satterthwaite dof, Student's k for 95 %; Δρ as found and "
+                "as left carry the same uncertainty (the offsets written between them were "
+                "read back); the legs' form as one bow shared by every gauge plane and one "
+                "per plane (docs/model.md, \"The statement's uncertainty\")"))
+
+
+def _undecided_by_inputs(quantities: list[Quantity], machine: KnownMachine) -> list[str]:
+    """The quantities the stated inputs, not the data, keep from a decision: a tilt,
+    gap or squareness acted on were its Type B part zero, a Δρ shown within were it."""
+    out = []
+    for q in quantities:
+        if q.decision == rule.NONE and q.name.startswith(("tilt_", "gap_")) \
+                and machine.layout_u is not None and q.value is not None:
+            if rule.act_on_type_a(q.value, machine.layout_u.marginal(q.name)):
+                out.append(q.name)
+        elif q.decision == rule.NOT_SHOWN and q.name.endswith(".as_left"):
+            d = q.name.split(".")[0]
+            m = machine.drho.marginal(d)
+            if m.u_b > m.u_a:
+                out.append(q.name)
+    return out
+
+
+def conclude(rounds: Rounds, stopped: Loop, remedy: str | None) -> Conclusion:
+    """The end of a run that identified Δρ (its loop's ``stopped`` as the closed loop
+    ended it; ``remedy``: the verdict's words where it did not converge)."""
+    machine = known_machine(rounds)
+    tool = tool_figures(rounds, machine)
+    basis = machine.joint().source_names()
+    quantities = (qty.drho_quantities(rounds, machine) + qty.layout_quantities(rounds, machine)
+                  + qty.squareness_quantities(rounds, machine)
+                  + qty.reversal_quantities(rounds.reversal)
+                  + qty.tool_quantities(tool, basis))
+    acceptance = accept.judge_statement(rounds.config.acceptance, quantities)
+    if acceptance is not None:
+        outcome: dict[str, str] = {c.figure: c.outcome for c in acceptance.checks}
+        quantities = [q.model_copy(update={"decision": outcome[q.name.rsplit(".", 1)[1]]})
+                      if q.name.startswith("tool.after.") and q.name.rsplit(".", 1)[1]
+                      in outcome else q for q in quantities]
+    left = [q for q in quantities if q.name.endswith(".as_left")]
+    converged = bool(left) and all(q.decision == rule.WITHIN for q in left) \
+        and stopped.stopped == "converged"
+    loop = stopped if converged or stopped.stopped != "converged" else \
+        stopped.model_copy(update={"stopped": "not-converged"})
+    acc = accuracy_section(rounds, machine, tool, {q.name: q for q in quantities})
+    return Conclusion(
+        statement=quantities,
+        advice=advice(rounds.config, quantities, _undecided_by_inputs(quantities, machine),
+                      converged, remedy),
+        converged=converged, loop=loop, remaining=_remaining(rounds, machine),
+        uncertainty_budget=_budget(rounds, machine), accuracy=acc, acceptance=acceptance,
+        model=machine_model(rounds, machine))
+
