@@ -29,6 +29,7 @@ import numpy as np
 
 from orthocal.geometry import AXES, Geometry
 from orthocal.identification import Identification
+from orthocal.loop import FALSE_ALARM
 from orthocal.measurement import leg_reading
 from orthocal.noise import coverage_factor
 from orthocal.postures import posture
@@ -172,11 +173,12 @@ def tool_reversal_mm(jacobians: np.ndarray, reversal: Mapping[str, float | None]
 
 def standing_out(value: Mapping[str, float | None], std_errors: Mapping[str, float | None],
                  dof: float | None) -> dict[str, float]:
-    """The joints whose reversal stands out of its noise: the lower end of its 95 %
-    interval (k from Student's t on ``dof``) above zero. A reversal is a play and
-    never negative: a value at or below zero, one whose interval holds zero, or one
-    without a standard error is nothing to compensate."""
-    k = coverage_factor(dof)
+    """The joints whose reversal stands out of its noise by the station's rule for every
+    "act" (docs/design.md, "The decision table"): beyond k_act standard errors, k_act
+    from Student's t on ``dof`` for orthocal.loop.FALSE_ALARM. A reversal is a play and never
+    negative: a value at or below zero, one not beyond k_act, or one without a standard
+    error is nothing to compensate."""
+    k = coverage_factor(dof, 1.0 - FALSE_ALARM)
     out = {}
     for axis, v in value.items():
         se = std_errors.get(axis)

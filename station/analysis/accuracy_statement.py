@@ -250,7 +250,7 @@ def _interval(layout: Layout, names: Sequence[str]) -> dict[str, Interval] | Non
     return out or None
 
 
-def _layout_words(layout: Layout | None, model: str, in_model: Sequence[str]) -> str | None:
+def layout_words(layout: Layout | None, model: str, in_model: Sequence[str]) -> str | None:
     """What the figure takes of the axes' layout, in words (None: nothing held)."""
     if layout is None:
         return None
@@ -313,7 +313,7 @@ def statement(config: StationConfig, limits: Limits | None, *,
     fitted = "+".join(["rho", *(["tilt"] if layout is not None else []),
                        *(["gap"] if layout is not None and layout.gaps() else [])])
     words = assumes(fitted, frame)
-    said = _layout_words(layout, model, in_model)
+    said = layout_words(layout, model, in_model)
     if form is not None and layout is not None:
         words.insert(0, form[1])
     if said:

@@ -45,14 +45,13 @@ from station.record.journal import JointTested
 from station.record.journal_file import Journal
 from station.record.model import MachineModel
 from station.record.result import Iteration, Joined, Loop, RunResult, Status
-from station.record.result_accuracy import Accuracy
 from station.record.result_base import JsonObject
 from station.record.result_sections import ModelSelection
 from station.record.run_dir import MODEL_NAME
 from station.record.state import RunState
 from station.statement.conclude import conclude
-from station.statement.machine import DRHO
-from station.statement.rounds import Rounds, Written
+from station.statement.known_machine import DRHO
+from station.statement.snapshot import Rounds, Written
 
 
 @dataclass
@@ -330,11 +329,7 @@ class Flow:
         result.remaining, result.uncertainty_budget = end.remaining, end.uncertainty_budget
         result.statement, result.advice = end.statement, end.advice
         result.acceptance = end.acceptance
-        acc = end.accuracy
-        if isinstance(acc, Accuracy) and self.reversal is not None:
-            acc.reversal = reversal.at_the_tool(self.ctx.config, self.reversal,
-                                                self._points())
-        result.accuracy = acc
+        result.accuracy = end.accuracy
         if end.model is not None:
             self._write_model(end.model)
 

@@ -17,9 +17,9 @@ from station.errors import say
 from station.record import io
 from station.record.result import RolledBack, RunResult
 from station.record.result_statement import AdviceItem
-from station.report.first_screen import ROLLED_BACK_TODO
 from station.record.run_dir import now_iso
 from station.record.state import RunState
+from station.report.first_screen import ROLLED_BACK_TODO
 
 
 def change_text(before: Mapping[str, float], after: Mapping[str, float]) -> str:

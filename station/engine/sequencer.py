@@ -95,10 +95,6 @@ class Counters:
     retakes: int = 0
 
 
-def _phase_name(phase: str) -> str:
-    return Phase.parse(phase).kind
-
-
 class Sequencer:
     def __init__(
         self,
@@ -318,7 +314,7 @@ class Sequencer:
             retakes += 1
             if retakes > MAX_RETAKES:
                 raise RunFailed(
-                    f"plunger guard: {_phase_name(phase)} setup {sp.index + 1} (leg "
+                    f"plunger guard: {Phase.parse(phase).kind} setup {sp.index + 1} (leg "
                     f"{sp.leg}), cycle {cycle}: {moved} again after {MAX_RETAKES} retakes "
                     "of the cycle; check the stands, then orthocal resume")
             self._retake(phase, sp, cycle, moved)

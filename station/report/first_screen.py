@@ -204,7 +204,8 @@ def joint_items(result: RunResult) -> list[Item]:
             if found is None or left is None:
                 continue
             after = "unchanged (nothing written)" if _nothing_written(result) else \
-                plus_minus(left)
+                "not verified (the correction written, not measured after)" \
+                if left.decision == "not verified" else plus_minus(left)
             out.append(Item(f"joint {n[-1]}", f"Δρ as found {plus_minus(found)} → as left "
                                               f"{after} (95 %)"))
         return out

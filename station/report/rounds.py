@@ -44,6 +44,7 @@ VERDICT_TEXT = {
     "unproven": "hidden in its noise",
     "ambiguous": "undecided: the axes' tilts and the legs' bows explain it alike",
     "form-limited": "undecided: the legs' bows, measured once, are known too loosely",
+    "budget-limited": "undecided: the stated inputs alone keep it from the limit",
 }
 
 

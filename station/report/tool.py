@@ -251,8 +251,7 @@ def objective_lines(result: RunResult) -> list[str]:
     acc, why_not = statement(result)
     if acc is None:
         return [f"  at the tool   not stated: {why_not}"] if why_not else []
-    state = "written" if written(result) else "NOT written"
-    alt = acc.alternative
+    state, alt = "written" if written(result) else "NOT written", acc.alternative
     return [f"  objective     {acc.objective} ({OBJECTIVE_TEXT[acc.objective]}) {state}; "
             f"objective {alt.objective} would leave {um(alt.after.rms_mm)} µm RMS (max "
             f"{um(alt.after.max_mm)} µm), frame {acc.frame}"]

@@ -1,5 +1,5 @@
 """result.json's ``accuracy`` (docs/design.md, "Accuracy at the tool") and model.json,
-filled from the statement's own figures (station.statement.tool and quantities): the
+filled from the statement's own figures (station.statement.tool_figures and quantities): the
 same numbers, computed once, so that the section and the statement never differ."""
 
 from __future__ import annotations
@@ -13,15 +13,16 @@ from orthocal.accuracy import error_field
 from orthocal.numbers import finite
 from orthocal.tool_interval import assumes
 from station.analysis import accuracy_statement as acc_
+from station.analysis import run_budget
 from station.analysis.compensated import ROUTES, grouped, nominal_reasons
 from station.record import result_accuracy as rec
 from station.record.model import MachineModel
 from station.record.result_statement import Quantity
 from station.statement import decisions as rule
-from station.statement.machine import DRHO, KnownMachine
+from station.statement.known_machine import DRHO, KnownMachine
 from station.statement.quantities import PAIRS
-from station.statement.rounds import Rounds
-from station.statement.tool import FieldFigures, ToolFigures
+from station.statement.snapshot import Rounds
+from station.statement.tool_figures import FieldFigures, ToolFigures
 
 
 def _after(fig: FieldFigures) -> rec.AfterInterval:
@@ -92,6 +93,14 @@ def accuracy_section(rounds: Rounds, machine: KnownMachine, tool: ToolFigures,
     fitted = "+".join(["rho", *(["tilt"] if lay is not None else []),
                        *(["gap"] if lay is not None and lay.gaps() else [])])
     words = assumes(fitted, cfg.writeback.frame)
+    fit = rounds.layout_fit
+    form = None if lay is None or fit is None else \
+        run_budget.form_of_layout(cfg, fit, lay.names)
+    if form is not None:
+        words.insert(0, form[1])
+    said = acc_.layout_words(lay, rounds.last.model, in_model)
+    if said:
+        words.insert(0, said)
     square = {pair: q.get(f"squareness_{pair}") for pair, _ in PAIRS}
     k_act = [rule.act_k(x.dof) for x in square.values() if x is not None]
     tilts_in_model = any(n in in_model for n in TILT_NAMES)

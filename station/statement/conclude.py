@@ -1,5 +1,5 @@
 """The end of a run, in one place (docs/design.md, "The statement of the machine"): from
-the snapshot of its rounds (station.statement.rounds.Rounds) the statement of the
+the snapshot of its rounds (station.statement.snapshot.Rounds) the statement of the
 machine, the advice, and what reads them (the loop's verdict, the uncertainty budget,
 the accuracy section, the acceptance, model.json). Each is computed once, here."""
 
@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from orthocal.numbers import finite
 from station.analysis import acceptance as accept
+from station.analysis import reversal
 from station.analysis.run_budget import inputs
 from station.record.model import MachineModel
 from station.record.result import Loop, Remaining
@@ -21,9 +22,9 @@ from station.statement import decisions as rule
 from station.statement import quantities as qty
 from station.statement.accuracy_section import accuracy_section, machine_model
 from station.statement.advice import advice
-from station.statement.machine import DRHO, KnownMachine, known_machine
-from station.statement.rounds import Rounds
-from station.statement.tool import tool_figures
+from station.statement.known_machine import DRHO, KnownMachine, known_machine
+from station.statement.snapshot import Rounds
+from station.statement.tool_figures import tool_figures
 
 
 @dataclass(frozen=True)
@@ -141,11 +142,26 @@ def conclude(rounds: Rounds, stopped: Loop, remedy: str | None) -> Conclusion:
     loop = stopped if converged or stopped.stopped != "converged" else \
         stopped.model_copy(update={"stopped": "not-converged"})
     acc = accuracy_section(rounds, machine, tool, {q.name: q for q in quantities})
+    said = advice(rounds.config, quantities, _undecided_by_inputs(quantities, machine),
+                  converged, remedy)
+    _advice_into(acc, rounds, said)
     return Conclusion(
         statement=quantities,
-        advice=advice(rounds.config, quantities, _undecided_by_inputs(quantities, machine),
-                      converged, remedy),
+        advice=said,
         converged=converged, loop=loop, remaining=_remaining(rounds, machine),
         uncertainty_budget=_budget(rounds, machine), accuracy=acc, acceptance=acceptance,
         model=machine_model(rounds, machine))
 
+
+
+def _advice_into(acc: Accuracy, rounds: Rounds, said: list[AdviceItem]) -> None:
+    """The accuracy section's advice lists are the advice's own texts (one decision each):
+    the rails', and the joints' play with what it leaves at the tool."""
+    acc.squareness_advice = [a.text for a in said if a.id.startswith(("shim.", "undecided."))]
+    acc.gap_advice = [a.text for a in said if a.id.startswith(("rail.", "undecided."))]
+    if rounds.reversal is not None:
+        tool = reversal.at_the_tool(rounds.config, rounds.reversal, rounds.points)
+        plays = [a.text for a in said if a.id.startswith(("backlash.", "repair."))]
+        acc.reversal = tool.model_copy(update={"advice": "; ".join(plays) or (
+            "nothing to compensate: no joint's reversal lies beyond its uncertainty "
+            "(the decision table's rule)")})

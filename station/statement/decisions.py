@@ -10,7 +10,8 @@ Decisions, by kind (the ``decision`` field of each quantity):
 
 - ``drho_*.as_left``: "within" (|value − aim| + U ≤ the loop's limit, converge_mm and
   half the drive's count), "outside" (|value − aim| − U > the limit), else
-  "not shown within";
+  "not shown within"; "not verified" where nothing was measured after the last write
+  (its value is then the aim, its uncertainty the written round's);
 - ``drho_*.as_found``: "corrected" (an offset was written for the joint) or "left";
 - tilts, gaps: "act" (beyond k_act·u_c), "none", or "undecided" where the data
   cannot tell the axes' tilts from the legs' bows;
@@ -37,6 +38,7 @@ from orthocal.uncertainty import Marginal
 
 ACT, NONE, UNDECIDED = "act", "none", "undecided"
 WITHIN, NOT_SHOWN, OUTSIDE = "within", "not shown within", "outside"
+NOT_VERIFIED = "not verified"
 CORRECTED, LEFT = "corrected", "left"
 REPAIR, COMPENSATE = "repair", "compensate"
 GAIN, NO_GAIN = "gain", "no gain"

@@ -2,7 +2,7 @@
 joint's Δρ as found and as left, the tilts, the gaps, the squareness of the tool's
 motions, the leg lengths where identified, the joints' reversal and the tool's error,
 each with one value and one 95 % uncertainty from the machine's one joint
-distribution (station.statement.machine), and the decision table's word on it
+distribution (station.statement.known_machine), and the decision table's word on it
 (station.statement.decisions)."""
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from station.analysis.verdict import converge_limit
 from station.record.result_base import Interval
 from station.record.result_statement import Quantity, Unit
 from station.statement import decisions as rule
-from station.statement.machine import DL, DRHO, KnownMachine
-from station.statement.rounds import Rounds
-from station.statement.tool import Figure, ToolFigures
+from station.statement.known_machine import DL, DRHO, KnownMachine
+from station.statement.snapshot import Rounds
+from station.statement.tool_figures import Figure, ToolFigures
 
 #: Squareness of the tool's motions (ISO 230-1) and the tilt it equals to first order.
 PAIRS: tuple[tuple[str, str], ...] = (("xy", "tilt_yx"), ("xz", "tilt_zx"), ("yz", "tilt_zy"))
@@ -81,7 +81,8 @@ def drho_quantities(rounds: Rounds, machine: KnownMachine) -> list[Quantity]:
         left = linear(f"{name}.as_left", machine.now[name], "mm", m, extra=extra,
                       extra_why=AMBIGUOUS)
         left = left.model_copy(update={"decision": rule.within(
-            machine.now[name], machine.aim[name], float(left.expanded or 0.0), limit)})
+            machine.now[name], machine.aim[name], float(left.expanded or 0.0), limit)
+            if machine.measured_now else rule.NOT_VERIFIED})
         out += [found, left]
     return out
 

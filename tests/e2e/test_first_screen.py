@@ -72,7 +72,11 @@ def test_the_first_twelve_lines_hold_verdict_joints_and_tool(rehearsed: Any) -> 
     acc = result["accuracy"]
     assert before == pytest.approx(1000 * acc["before"]["rms_mm"], abs=0.06)
     assert after == pytest.approx(1000 * acc["after"]["rms_mm"], abs=0.06)
-    assert "geometry in the controller" in tool
+    # with the geometry in the controller: the statement's figure, on the next line
+    after_tool = first[first.index(tool) + 1]
+    assert after_tool.startswith(" " * 16 + "with the geometry in the controller "), after_tool
+    comp = next(q for q in result["statement"] if q["name"] == "tool.compensated.rms")
+    assert f"{1000 * comp['value']:.1f} µm RMS" in after_tool
     assert any(ln.startswith("  offsets       x ") and "(written)" in ln for ln in first)
 
 

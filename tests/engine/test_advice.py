@@ -1,7 +1,8 @@
 """Advice only where a value stands out of its noise and makes physical sense: the
-joints' lost motion is advised for compensation only where its 95 % interval lies
-above zero (a reversal is a play, never negative), in the engine's advice, the
-summary and the first screen's "to do"."""
+joints' lost motion is advised for compensation only beyond the decision table's k_act
+(one false alarm in a thousand machines over three joints, as every "act"), never for a
+negative value (a reversal is a play), in the statement's decision, its advice, the
+accuracy section and the first screen's "to do"."""
 
 from __future__ import annotations
 
@@ -38,11 +39,11 @@ def test_a_negative_reversal_beyond_its_noise_is_no_play() -> None:
 
 
 @pytest.mark.parametrize(("value_um", "se_um", "advised"), [
-    (1.0, 0.45, True),    # 1.0 − 2.02 × 0.45 = +0.09 µm: the interval lies above zero
-    (1.0, 0.55, False),   # 1.0 − 2.02 × 0.55 = −0.11 µm: it holds zero
+    (1.0, 0.25, True),    # 1.0 − 3.92 × 0.25 = +0.02 µm: beyond k_act (40 dof)
+    (1.0, 0.26, False),   # 1.0 − 3.92 × 0.26 = −0.02 µm: not beyond it
 ])
-def test_the_gate_is_the_95_interval_both_sides(value_um: float, se_um: float,
-                                                advised: bool) -> None:
+def test_the_gate_is_k_act_both_sides(value_um: float, se_um: float,
+                                      advised: bool) -> None:
     rev = Reversal(value={"x": value_um / 1000}, std_errors={"x": se_um / 1000},
                    dof=40.0, n={"x": 9})
     assert ("joint x 1.0 µm" in advice(rev)) is advised
@@ -60,7 +61,8 @@ def _run(tmp_path: Path, backlash: tuple[float, float, float]) -> dict:
 def test_joints_without_play_get_no_backlash_advice(tmp_path: Path) -> None:
     result = _run(tmp_path, (0.0, 0.0, 0.0))
     tool = result["accuracy"]["reversal"]
-    assert "compensate it in" not in tool["advice"] and "repair" not in tool["advice"]
+    assert tool["advice"].startswith("nothing to compensate")
+    assert not [a for a in result["advice"] if a["id"].startswith(("backlash.", "repair."))]
     text = report.summary_text(result)
     todo = [ln for ln in text.splitlines() if "backlash" in ln]
     assert todo == [], todo
@@ -68,7 +70,12 @@ def test_joints_without_play_get_no_backlash_advice(tmp_path: Path) -> None:
 
 def test_joints_with_play_get_it(tmp_path: Path) -> None:
     result = _run(tmp_path, (0.006, 0.006, 0.006))
-    assert "compensate it in the controller's backlash" in result["accuracy"]["reversal"][
-        "advice"]
+    plays = [a for a in result["advice"] if a["id"].startswith("backlash.")]
+    assert {a["id"] for a in plays} == {"backlash.x", "backlash.y", "backlash.z"}
+    decided = {q["name"]: q["decision"] for q in result["statement"]}
+    assert all(decided[f"reversal_{a}"] == "compensate" for a in "xyz")
+    # one decision, said the same in the accuracy section and on the first screen
+    assert result["accuracy"]["reversal"]["advice"] == "; ".join(a["text"] for a in plays)
     first = report.summary_text(result, verbose=False)
-    assert "set the controller's backlash (reversal) parameter" in first
+    assert all(a["text"] in first.replace("−", "-") for a in plays)
+    assert "backlash (reversal) parameter in the controller to 6" in first

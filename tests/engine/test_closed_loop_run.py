@@ -76,7 +76,9 @@ def test_a_first_round_that_leaves_more_than_converge_mm_takes_a_second(tmp_path
     # the total written plus what the last round found left is the truth within the
     # last round's uncertainty; what is left is no more than that round resolves
     assert_truth(result, drho(true))
-    assert result["remaining"]["estimate"] == {n: its[-1]["identified"][n] for n in drho(true)}
+    joined = its[-1]["joined"]["drho_mm"]  # the rounds joined: the statement's as left
+    assert result["remaining"]["estimate"] == pytest.approx({n: joined[n] for n in drho(true)},
+                                                            abs=1e-12)
     # what the verification wrote is its look joined with the rounds before
     # (iterations[1].joined), the offsets before it minus the joined Δρ̂ (1 µm counts)
     before, after = its[0]["offsets_written"], its[1]["offsets_written"]
@@ -168,8 +170,10 @@ def test_a_verification_too_noisy_to_show_convergence_is_measured_again(
     worst = max(bounds.values())
     assert worst > result["loop"]["converged_within_mm"] >= 0.002
     assert f"by up to {1000 * worst:.1f} µm" in result["message"]
-    assert "converge_mm = 2 µm" in result["message"] and \
-        "more cycles or readings" in result["loop"]["detail"]
+    # the headline says how far (limit converge_mm + half a count), the advice what to do
+    assert "(limit 2.5 µm)" in result["message"]
+    remedy = next(a for a in result["advice"] if a["id"] == "converge")
+    assert "more cycles or readings" in remedy["text"] or "stands" in remedy["text"]
     assert "NOT CONVERGED" in report.summary_text(result)
     assert_truth(result, drho(true))
 
@@ -186,8 +190,10 @@ def test_max_iterations_stops_the_loop_and_says_why(tmp_path: Path, capsys) -> N
     # what the last verification found is still on the machine, and the run says so
     last = result["iterations"][-1]
     assert result["remaining"]["round"] == 2 and last["significant"]
-    assert result["remaining"]["estimate"] == {
-        n: last["identified"][n] for n in ("drho_x", "drho_y", "drho_z")}
+    # what is left: the rounds joined (the statement's as left), one estimate
+    assert result["remaining"]["estimate"] == pytest.approx({
+        n: (last["joined"] or {"drho_mm": last["identified"]})["drho_mm"][n]
+        for n in ("drho_x", "drho_y", "drho_z")}, abs=1e-12)
     # the first screen's "as left": what the last verification found, at 95 %
     joints = [ln for ln in report.summary_text(result).splitlines()
               if ln.startswith("  joint ")]

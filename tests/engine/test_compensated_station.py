@@ -77,10 +77,14 @@ def test_the_prediction_says_what_the_hidden_machine_does(held_out) -> None:
 
 
 def test_the_advice_names_the_route(held_out) -> None:
+    decided = {q["name"]: q["decision"] for q in held_out["statement"]}
+    assert decided["tool.compensated.rms"] == "gain"
+    (said,) = [a["text"] for a in held_out["advice"] if a["id"] == "controller"]
+    assert "orthocal export --kinematics" in said and "orthocal compensate" in said
     text = report.summary_text(held_out)
+    assert said in text.replace("−", "-")
     line = next(ln for ln in text.splitlines() if ln.startswith("  in the controller"))
-    assert "orthocal export --kinematics" in line and "orthocal compensate" in line
-    assert "take it from" in line
+    assert "clearly lower" in line
 
 
 def test_on_a_square_machine_the_routes_leave_what_the_offsets_leave(square) -> None:
@@ -95,4 +99,7 @@ def test_on_a_square_machine_the_routes_leave_what_the_offsets_leave(square) -> 
     assert lo <= true["rms"] <= hi, (lo, true["rms"], hi)
     assert square["model"] == "rho"
     assert square["accuracy"]["compensated"]["told"] == ["drho_x", "drho_y", "drho_z"]
-    assert "nothing to gain" in report.summary_text(square)
+    decided = {q["name"]: q["decision"] for q in square["statement"]}
+    assert decided["tool.compensated.rms"] == "no gain"
+    assert not [a for a in square["advice"] if a["id"] == "controller"]
+    assert "not clearly lower" in report.summary_text(square)

@@ -19,6 +19,7 @@ from drivers.sim.fake import COUNT_MM, FakeAxes, FakeGauge, SteppedClock
 from drivers.sim.specs import MachineTruth
 from station.commands.run import exit_status
 from station.commands.simulate.launch import SIM_PROCEDURE
+from station.commands.simulate.station_setups import ROOM_HELD_C, STRAIGHTNESS_READ_MM
 from station.config import StationConfig
 from station.console.operator import VirtualOperator
 from station.engine.devices import Devices
@@ -72,16 +73,23 @@ class FakeRig(fake.FakeRig):
                 "joint_lead_um_per_m": list(t.joint_lead), "joint_pitch": list(t.joint_pitch)}
 
 
+#: What the simulated station states of its hardware ([uncertainty]: the legs straight
+#: to half a micrometre, the room held within a tenth of a degree;
+#: station.commands.simulate.station_setups.SimulatedStation.stated_inputs).
+STATED: dict[str, Any] = {"leg_straightness_mm": STRAIGHTNESS_READ_MM,
+                          "temperature_change_c": ROOM_HELD_C}
+
+
 def fake_config(*, uncertainty: dict[str, Any] | None = None,
                 writeback: dict[str, Any] | None = None,
                 joints: dict[str, Any] | None = None, **procedure: Any) -> StationConfig:
     """The tests' two-gauge station (builders.BASE), coordinated axes, no figures,
     no history store, and what a simulated run starts from (station.commands.
     simulation: SIM_PROCEDURE, offsets up to 3 mm) with these [procedure] keys, and
-    [uncertainty], [writeback] and [joints] keys where given."""
-    sections: dict[str, Any] = {}
-    if uncertainty is not None:
-        sections["uncertainty"] = uncertainty
+    [uncertainty], [writeback] and [joints] keys where given. Without ``uncertainty``
+    the config states what a simulated station states of its straight legs and held
+    room (:data:`STATED`); ``uncertainty={}`` states nothing (every input assumed)."""
+    sections: dict[str, Any] = {"uncertainty": STATED if uncertainty is None else uncertainty}
     if joints is not None:
         sections["joints"] = joints
     return station_config(controller={"motion": "coordinated"},

@@ -20,8 +20,8 @@ from orthocal.compensation import compensated_field, truth_jacobian
 from orthocal.tool_interval import field_jacobian
 from orthocal.uncertainty import Uncertainty
 from station.analysis.compensated import told_names
-from station.statement.machine import KnownMachine
-from station.statement.rounds import Rounds
+from station.statement.known_machine import KnownMachine
+from station.statement.snapshot import Rounds
 
 #: Draws of the machine (seeded: a run's statement is repeatable).
 DRAWS = 4000

@@ -19,7 +19,7 @@ from orthocal import AXES, PARAM_NAMES, Identification
 from orthocal.uncertainty import Uncertainty, combined, type_a
 from station.analysis import accuracy_statement as accuracy
 from station.analysis.run_budget import round_columns
-from station.statement.rounds import Rounds
+from station.statement.snapshot import Rounds
 
 DRHO: tuple[str, ...] = tuple(f"drho_{a}" for a in AXES)
 DL: tuple[str, ...] = tuple(f"dL_{a}" for a in AXES)
