@@ -41,7 +41,8 @@ def detail_lines(result: RunResult) -> list[str]:
         held = [q[n] for n in names if n in q]
         if held:
             text = ", ".join(_one(x, x.name.split("_", 1)[1].upper()) for x in held)
-            lines.append(f"  {label:<13} {text} (95 %)")
+            what = "reversal (ISO 230-2) " if label == "lost motion" else ""
+            lines.append(f"  {label:<13} {what}{text} (95 %)")
             if label == "squareness":
                 lines += [f"    {x.name[-2:].upper()}: {x.basis[-1]}" for x in held]
     comp = q.get("tool.compensated.rms")

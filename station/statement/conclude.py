@@ -5,8 +5,10 @@ the accuracy section, the acceptance, model.json). Each is computed once, here."
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+from orthocal.budget import STEEL_ALPHA
 from orthocal.numbers import finite
 from station.analysis import acceptance as accept
 from station.analysis import reversal
@@ -71,8 +73,11 @@ def _budget(rounds: Rounds, machine: KnownMachine) -> UncertaintyBudget:
     rows = [BudgetSource(source=first, type="A", distribution="normal", value_mm=None,
                          u_mm=None, contributions_mm=sources.pop(first, {}),
                          dof=finite(next(iter(m.values())).dof_a) if m else None)]
+    half = _half_widths(rounds)
     rows += sorted((BudgetSource(source=s, type="B", distribution="rectangular",
-                                 value_mm=None, u_mm=None, contributions_mm=c)
+                                 value_mm=(h := half.get(s)),
+                                 u_mm=None if h is None else h / math.sqrt(3.0),
+                                 contributions_mm=c)
                     for s, c in sources.items()),
                    key=lambda s: (-max(v or 0.0 for v in s.contributions_mm.values()),
                                   s.source))
@@ -101,6 +106,24 @@ def _budget(rounds: Rounds, machine: KnownMachine) -> UncertaintyBudget:
                 "as left carry the same uncertainty (the offsets written between them were "
                 "read back); the legs' form as one bow shared by every gauge plane and one "
                 "per plane (docs/model.md, \"The statement's uncertainty\")"))
+
+
+def _half_widths(rounds: Rounds) -> dict[str, float | None]:
+    """Each Type B source's bound on what it puts on one deviation (mm), as the budget
+    names it: the legs' straightness (the largest stated), the temperature step's
+    α·ΔT·L/2, each gauge's MPE; the plunger angle is a relative error (none)."""
+    given = inputs(rounds.config)
+    straight = given.leg_straightness_mm.value
+    out: dict[str, float | None] = {
+        "leg straightness": float(max(straight) if isinstance(straight, list) else straight),
+        "temperature": STEEL_ALPHA * float(given.temperature_change_c.value)  # type: ignore[arg-type]
+        * rounds.config.machine.leg_length / 2.0,
+        "plunger angle": None}
+    for sp in rounds.config.setups:
+        for name, d in sp.indicators.items():
+            out[f"gauge MPE {name} (leg {sp.leg}, along {d.lstrip('-')})"] = \
+                float(given.mpe_mm[name].value)  # type: ignore[arg-type]
+    return out
 
 
 def _undecided_by_inputs(quantities: list[Quantity], machine: KnownMachine) -> list[str]:

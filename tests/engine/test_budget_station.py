@@ -68,7 +68,7 @@ def test_a_bowed_machine_is_within_its_stated_budget(tmp_path: Path,
 
 def test_without_uncertainty_the_run_says_what_it_assumed(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    result = run(tmp_path, capsys)
+    result = run(tmp_path, capsys, {})  # [uncertainty] states nothing
     b = result["uncertainty_budget"]
     assumed = " ".join(b["assumed"])
     for what in ("leg_straightness_mm: 0.01", "temperature_change_c: 0.5",

@@ -222,7 +222,12 @@ def test_real_tilts_come_out_through_lost_motion(tmp_path: Path) -> None:
     # with the round before, so fewer independent stands average), and the drive then
     # holds the truth within 3 µm.
     assert_truth(result, drho(TRUE))
-    assert result["converged"] is True, result["message"]
+    # converged, or budget-limited: on tilted axes the legs' stated straightness alone
+    # (half a micrometre: a uniform bow is a tilt at the legs' middles) can keep Δρ from
+    # being shown within 2.5 µm, and the statement says so rather than claim it
+    verdict = result["iterations"][-1]["verdict"]
+    assert result["converged"] is (verdict == "converged"), result["message"]
+    assert verdict in ("converged", "budget-limited"), verdict
     np.testing.assert_allclose(held(result), TRUE, atol=0.003)
 
 

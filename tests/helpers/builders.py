@@ -107,8 +107,10 @@ def simulated(out: Path, *, seed: int | None = 7, noise: float | None = 0.002,
         inner = hook
 
         def hook(station: Any) -> None:
+            # the test's keys over what the simulated station states ({}: nothing)
             config = station.config
-            station.config = lambda: {**config(), "uncertainty": uncertainty}
+            station.config = lambda: {**config(), "uncertainty": {} if uncertainty == {} else {
+                **config().get("uncertainty", {}), **uncertainty}}
             if inner is not None:
                 inner(station)
 

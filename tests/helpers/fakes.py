@@ -86,10 +86,12 @@ def fake_config(*, uncertainty: dict[str, Any] | None = None,
     """The tests' two-gauge station (builders.BASE), coordinated axes, no figures,
     no history store, and what a simulated run starts from (station.commands.
     simulation: SIM_PROCEDURE, offsets up to 3 mm) with these [procedure] keys, and
-    [uncertainty], [writeback] and [joints] keys where given. Without ``uncertainty``
-    the config states what a simulated station states of its straight legs and held
-    room (:data:`STATED`); ``uncertainty={}`` states nothing (every input assumed)."""
-    sections: dict[str, Any] = {"uncertainty": STATED if uncertainty is None else uncertainty}
+    [uncertainty], [writeback] and [joints] keys where given. The config states what a
+    simulated station states of its straight legs and held room (:data:`STATED`),
+    ``uncertainty``'s keys over them; ``uncertainty={}`` states nothing (every input
+    assumed)."""
+    stated = {} if uncertainty == {} else {**STATED, **(uncertainty or {})}
+    sections: dict[str, Any] = {"uncertainty": stated}
     if joints is not None:
         sections["joints"] = joints
     return station_config(controller={"motion": "coordinated"},
