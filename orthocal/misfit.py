@@ -143,7 +143,9 @@ class BoundedFit:
     at_bound: int
 
     def to_dict(self) -> dict[str, Any]:
-        big = sorted(self.used.items(), key=lambda kv: -abs(kv[1]))[:6]
+        # largest first; ties (to a picometre: another CPU's last bits) by name, so that
+        # the six named are the same on every machine
+        big = sorted(self.used.items(), key=lambda kv: (-round(abs(kv[1]), 9), kv[0]))[:6]
         return {"rss_without_allowance_mm2": self.free_rss, "rss_with_allowance_mm2": self.rss,
                 "largest_used_mm": {n: v for n, v in big if v != 0.0},
                 "at_bound": self.at_bound}

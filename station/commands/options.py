@@ -64,6 +64,8 @@ class SimOptions:
     procedure: Mapping[str, Any] | None = None
     writeback: Mapping[str, Any] | None = None
     report: Mapping[str, Any] | None = None  # the config's [report] for the run
+    # what the run states of its inputs ([uncertainty]) over the virtual station's own
+    uncertainty: Mapping[str, Any] | None = None
     speed_mm_s: float | None = None
     station_hook: StationHook | None = None
 

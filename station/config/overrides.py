@@ -1,5 +1,6 @@
 """A config section's overrides: some of its keys, each of the section's own type, no
-other key (a simulated run's ``[procedure]``, ``[writeback]`` and ``[report]``, which
+other key (a simulated run's ``[procedure]``, ``[writeback]``, ``[report]`` and
+``[uncertainty]``, which
 the journal header keeps with the simulation). Nothing absent is filled in: the keys
 given are the keys kept, read back with ``model_dump(exclude_unset=True)``.
 
@@ -12,7 +13,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from station.config import ProcedureConfig, ReportConfig, WritebackConfig
+from station.config import ProcedureConfig, ReportConfig, UncertaintyConfig, WritebackConfig
 
 
 def overrides_of(section: type[BaseModel]) -> type[BaseModel]:
@@ -34,7 +35,9 @@ if TYPE_CHECKING:
     ProcedureOverrides = ProcedureConfig
     WritebackOverrides = WritebackConfig
     ReportOverrides = ReportConfig
+    UncertaintyOverrides = UncertaintyConfig
 else:
     ProcedureOverrides = overrides_of(ProcedureConfig)
     WritebackOverrides = overrides_of(WritebackConfig)
     ReportOverrides = overrides_of(ReportConfig)
+    UncertaintyOverrides = overrides_of(UncertaintyConfig)

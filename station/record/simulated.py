@@ -14,7 +14,12 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, JsonValue, field_validator
 
-from station.config.overrides import ProcedureOverrides, ReportOverrides, WritebackOverrides
+from station.config.overrides import (
+    ProcedureOverrides,
+    ReportOverrides,
+    UncertaintyOverrides,
+    WritebackOverrides,
+)
 
 Triple = tuple[float, float, float]
 _ZERO: Triple = (0.0, 0.0, 0.0)
@@ -59,6 +64,7 @@ class SimulationParams(BaseModel):
     procedure: ProcedureOverrides | None = None
     writeback: WritebackOverrides | None = None
     report: ReportOverrides | None = None
+    uncertainty: UncertaintyOverrides | None = None
 
     @field_validator("true_tilt", "true_gap", "backlash_mm", "leg_bow_mm", "gauge_scale",
                      "mount_error_mm", "joint_lead_um_per_m", "joint_pitch", mode="before")

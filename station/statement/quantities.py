@@ -28,14 +28,21 @@ PAIRS: tuple[tuple[str, str], ...] = (("xy", "tilt_yx"), ("xz", "tilt_zx"), ("yz
 TOOL = {"before": "tool.before", "after": "tool.after", "compensated": "tool.compensated"}
 
 
-def _basis(m: Marginal, unit: str, extra: float = 0.0, extra_why: str = "") -> list[str]:
-    """The sources of a marginal, largest first, with their standard contributions."""
-    parts = sorted(m.contributions.items(), key=lambda kv: -kv[1])
-    out = [f"{name}: u = {u:.3g} {unit}" + (f" (Type A, {m.dof_a:.0f} dof)"
-                                           if name == "repeatability" and m.dof_a else "")
-           for name, u in parts]
+#: A source below this share of a quantity's combined uncertainty is not named in its
+#: basis (it is in the budget): a part a thousand times smaller says nothing and would
+#: differ in its last digits from one CPU to the next.
+NEGLIGIBLE = 1e-3
+
+
+def _basis(m: Marginal, extra: float = 0.0, extra_why: str = "") -> list[str]:
+    """The sources of a marginal that matter, largest first (their sizes are the
+    budget's): the Type A part with its dof, each Type B source by name."""
+    parts = sorted(((name, u) for name, u in m.contributions.items()
+                    if u >= NEGLIGIBLE * m.u_c), key=lambda kv: (-round(kv[1], 9), kv[0]))
+    out = [("repeatability (Type A" + (f", {m.dof_a:.0f} dof)" if m.dof_a else ")"))
+           if name == "repeatability" else f"{name} (Type B)" for name, _ in parts]
     if extra > 0.0:
-        out.append(f"{extra_why}: ± {extra:.3g} {unit}, added whole")
+        out.append(f"{extra_why} (added whole)")
     return out
 
 
@@ -47,7 +54,7 @@ def linear(name: str, value: float, unit: Unit, m: Marginal, decision: str | Non
     return Quantity(name=name, value=float(value), unit=unit, expanded=float(expanded),
                     interval_95=(float(value - expanded), float(value + expanded)),
                     k=float(m.k), dof=None if m.dof is None else float(m.dof),
-                    decision=decision, basis=_basis(m, unit, extra, extra_why))
+                    decision=decision, basis=_basis(m, extra, extra_why))
 
 
 def bounded(name: str, figure: Figure, basis: list[str], decision: str | None = None

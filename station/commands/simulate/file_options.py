@@ -48,7 +48,7 @@ def load_simulation(path: str | Path) -> SimOptions:
         drive=DriveOptions(motion=d.motion, profile=as_text(d.profile), accel=as_text(d.accel),
                            delays=as_text(d.delays), sequence=d.sequence),
         procedure=_given(doc.procedure), writeback=_given(doc.writeback),
-        report=_given(doc.report))
+        report=_given(doc.report), uncertainty=_given(doc.uncertainty))
     try:  # the options' own checks, said in the file's words
         sim_params(options)
     except BadInput as exc:

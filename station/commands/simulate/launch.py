@@ -106,6 +106,7 @@ def sim_params(options: SimOptions) -> dict[str, Any]:
         "procedure": None if options.procedure is None else dict(options.procedure),
         "writeback": None if options.writeback is None else dict(options.writeback),
         "report": None if options.report is None else dict(options.report),
+        "uncertainty": None if options.uncertainty is None else dict(options.uncertainty),
         "speed_mm_s": options.speed_mm_s,
     }
 
@@ -406,15 +407,16 @@ def station_config(station: Any, params: dict[str, Any]) -> dict[str, Any]:
     """The config a simulated run uses (station.toml's shape): the virtual station's
     hardware as it describes itself, the procedure (SIM_PROCEDURE, then the
     simulation's ``procedure``) and the write-back (``max_abs_offset_mm`` 3 mm, then
-    the simulation's ``writeback``), the simulation's ``report``, and with its
-    ``joint_test`` the station's own test of the joints against the virtual gauge
-    blocks (SIM_REFERENCE). What a test
-    hook put in the station's own description wins: it stands for what a user writes
-    in the file."""
+    the simulation's ``writeback``), the simulation's ``report``, what the station
+    states of its inputs (its hardware's, then the simulation's ``uncertainty``), and
+    with its ``joint_test`` the station's own test of the joints against the virtual
+    gauge blocks (SIM_REFERENCE). What a test hook put in the station's own description
+    wins: it stands for what a user writes in the file."""
     hardware = station.config()
     joints = {**({"station_test": ["x", "y", "z"], "reference": SIM_REFERENCE}
                  if params.get("joint_test") else {}), **hardware.get("joints", {})}
-    return {**hardware,
+    stated = {**hardware.get("uncertainty", {}), **(params.get("uncertainty") or {})}
+    return {**hardware, "uncertainty": stated,
             **({"joints": joints} if joints else {}),
             "procedure": {**SIM_PROCEDURE, **(params.get("procedure") or {}),
                           **hardware.get("procedure", {})},

@@ -3,7 +3,8 @@
 The file holds a ``[simulation]`` table (the hidden errors of the virtual machine,
 its gauges' noise and stands, the register map its drive serves) with a
 ``[simulation.drive]`` table (how that drive moves, never told to the station),
-and may hold the station's own ``[procedure]``, ``[writeback]`` and ``[report]``
+and may hold the station's own ``[procedure]``, ``[writeback]``, ``[report]`` and
+``[uncertainty]`` (what the shop states of its inputs, over the virtual station's own)
 tables for the run. Every key is the long option of ``run --simulate`` without its dashes
 (``--true-drho`` is ``true_drho``, ``--drive-profile`` is ``drive.profile``);
 an option given on the command line wins over the file. Values are TOML's own:
@@ -24,7 +25,12 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from station.config import format_validation_error
-from station.config.overrides import ProcedureOverrides, ReportOverrides, WritebackOverrides
+from station.config.overrides import (
+    ProcedureOverrides,
+    ReportOverrides,
+    UncertaintyOverrides,
+    WritebackOverrides,
+)
 from station.errors import BadInput, read_input
 
 Triple = tuple[float, float, float]
@@ -81,6 +87,7 @@ class SimulationFile(_Strict):
     procedure: ProcedureOverrides | None = None
     writeback: WritebackOverrides | None = None
     report: ReportOverrides | None = None
+    uncertainty: UncertaintyOverrides | None = None
 
 
 def read_simulation(path: Path) -> SimulationFile:
