@@ -10,10 +10,10 @@ that one input seen by two fits (the legs' bows by the last round's Δρ and by 
 round that gave the axes' layout) stays one input, and a statement about several
 parameters (squareness, the tool's field) carries their correlation:
 
-- leg straightness: one bow shared by every gauge plane (the legs of one machine are
-  made alike and a uniform bow is exactly a tilt signature at the legs' middles) and
-  one bow per plane, each of sagitta uniform in ±s (the covariance is
-  orthocal.budget.form_covariance's); labelled by plane, so the same in every round;
+- leg straightness: each gauge plane bowed within ±s, half of it a bow common to every
+  plane (the legs of one machine are made alike, and a uniform bow is exactly a tilt
+  signature at the legs' middles) and half its own (:data:`ALIKE`), so that no plane
+  bows beyond its bound; labelled by plane, so the same input in every round;
 - gauge MPE: each deviation off by ±e_k (e over the span of the deviation, in
   proportion below MPE_SPAN_MM), per round;
 - gauge resolution: triangular ±r per deviation, two uniform inputs of ±r/2;
@@ -75,16 +75,25 @@ def _key_name(key: tuple[str, str, str]) -> str:
     return f"{sign}{leg}{direction}"
 
 
+#: The share of each plane's stated bow common to every plane (the legs of one machine
+#: are made alike): each plane bows by s·(ALIKE·u_0 + (1 − ALIKE)·u_p), u_0 common, u_p
+#: its own, both uniform in ±1, so that no plane bows beyond its stated bound s and the
+#: planes' bows correlate (0.5 at ALIKE = 1/2; orthocal.budget.form_columns' ``alike``).
+ALIKE = 0.5
+
+
 def straightness_columns(prop: Propagation,
                          straightness: float | Sequence[float] | Mapping[str, float]
                          ) -> Uncertainty:
-    """The legs' form: a bow shared by every plane and one per plane (module
-    docstring), each column K·g_p·s over the parameters."""
+    """The legs' form: a bow common to every plane and one of each plane's own (module
+    docstring, :data:`ALIKE`), each column K·g_p·s times its share over the
+    parameters."""
     s_of = _per_leg(straightness)
     g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
     planes = prop.gauges
-    per_plane = [prop.K @ (g * prop.mask(p) * s_of[p[0]]) for p in planes]
-    shared = sum(per_plane, np.zeros(len(prop.names)))
+    whole = [prop.K @ (g * prop.mask(p) * s_of[p[0]]) for p in planes]
+    per_plane = [(1.0 - ALIKE) * w for w in whole]
+    shared = ALIKE * sum(whole, np.zeros(len(prop.names)))
     cols = np.column_stack([shared, *per_plane]) if planes else np.zeros((len(prop.names), 0))
     labels = ["straightness:shared", *(f"straightness:{''.join(p)}" for p in planes)]
     return type_b(prop.names, cols, labels, [STRAIGHTNESS] * len(labels))

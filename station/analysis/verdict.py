@@ -112,11 +112,12 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
                                       type_b=type_b).items()}
     out = [n for n, v in shown.items() if v > limit]
     # the stated inputs alone (Type B, the same in every round) keep these out of the
-    # limit however good the data: no pass and no write can bring them in
+    # limit however good the data: no pass can bring them in (a leftover the data see is
+    # still written: it brings the machine closer, whatever can be shown of it)
     limited = [n for n in out if type_b and coverage_factor(None) * type_b.get(n, 0.0)
                + apart.get(n, 0.0) >= limit]
     seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
-    if not sig and previous is not None and out and not limited:
+    if not sig and previous is not None and out:
         # converge_mm spares a correction too small to matter, where the machine can
         # be shown within it. Where it cannot, the next step mounts every setup either
         # way: a further pass of the same machine, or a write and its verification.

@@ -32,12 +32,24 @@ def _worst_off(result: RunResult) -> str | None:
         "at 95 %"
 
 
+def budget_limited(result: RunResult) -> bool:
+    """Whether the run's loop ended where the stated inputs alone (Type B) keep its
+    joints from being shown within converge_mm: it corrected all the data can see, and
+    its statement carries what the inputs leave (docs/design.md, "Closed loop"). Such a
+    run is resolved as far as any measurement can take it: exported without --force,
+    its verdict said in the header."""
+    last = result.iterations[-1] if result.iterations else None
+    return last is not None and last.verdict == "budget-limited"
+
+
 def not_converged(result: RunResult) -> str | None:
-    """Why the run is not shown converged, briefly (None: it is, or it did not
-    complete, which :func:`unresolved` says first): its loop stopped otherwise than
-    "converged", or the record says ``converged`` false."""
+    """Why the run is not shown converged, briefly (None: it is, it ended
+    budget-limited, or it did not complete, which :func:`unresolved` says first): its
+    loop stopped otherwise than "converged", or the record says ``converged`` false."""
     loop = result.loop
     if not ((loop is not None and loop.stopped != "converged") or result.converged is False):
+        return None
+    if budget_limited(result):
         return None
     how = f" ({loop.stopped})" if loop is not None else ""
     off = _worst_off(result)
@@ -89,6 +101,10 @@ def verdict(result: RunResult) -> str:
         text = "converged" + ("" if within is None else
                               f": every joint offset shown within ±{1000 * within:.1f} µm "
                               "at 95 %") + f", {loop.write_backs} write-back(s)"
+    elif budget_limited(result):
+        text = (f"NOT CONVERGED ({loop.stopped}, budget-limited: the stated inputs alone keep "
+                f"the joints from being shown within the limit; {_worst_off(result)}), "
+                f"{loop.write_backs} write-back(s)")
     else:
         text = f"NOT CONVERGED ({loop.stopped})"
     if ambiguous(result):

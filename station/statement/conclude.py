@@ -51,7 +51,7 @@ def _remaining(rounds: Rounds, machine: KnownMachine) -> Remaining | None:
     if not rounds.verified:
         return None
     n = len(rounds.idents) - 1
-    _, se = rounds.joined[n]
+    se = rounds.joined[n].std_errors
     dof = rounds.last.std_error_dof
     m = {d: machine.drho.marginal(d) for d in machine.now}
     return Remaining(phase=rounds.iterations[-1].phase, round=len(rounds.iterations),
@@ -104,8 +104,8 @@ def _budget(rounds: Rounds, machine: KnownMachine) -> UncertaintyBudget:
                 "round's identification (stands and model included), combined in "
                 "quadrature, Welch-Satterthwaite dof, Student's k for 95 %; Δρ as found and "
                 "as left carry the same uncertainty (the offsets written between them were "
-                "read back); the legs' form as one bow shared by every gauge plane and one "
-                "per plane (docs/model.md, \"The statement's uncertainty\")"))
+                "read back); each gauge plane's bow within the stated straightness, half of "
+                "it common to every plane (docs/model.md, \"The statement's uncertainty\")"))
 
 
 def _half_widths(rounds: Rounds) -> dict[str, float | None]:

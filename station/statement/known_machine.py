@@ -120,8 +120,10 @@ def known_machine(rounds: Rounds) -> KnownMachine:
     one joint uncertainty."""
     n = len(rounds.idents) - 1
     ident = rounds.last
-    values, se = rounds.joined[n] if n < len(rounds.joined) else \
-        (dict(ident.parameters), dict(ident.std_errors))
+    if n < len(rounds.joined):
+        values, se = rounds.joined[n].values, rounds.joined[n].std_errors
+    else:
+        values, se = dict(ident.parameters), dict(ident.std_errors)
     at_n = _offsets_at(rounds, n)
     now_offsets = _offsets_at(rounds, len(rounds.writes))
     shift_now = _moved(at_n, now_offsets)

@@ -107,9 +107,12 @@ def test_degrees_of_freedom_and_coverage_factors_are_said_once() -> None:
     text = _text(_page())
     assert "effective degrees of freedom" in text
     dof_row = re.search(r"effective degrees of freedom(.*?)coverage", text, flags=re.S)
-    assert dof_row is not None and dof_row.group(1).split() == ["∞", "∞", "∞"]
+    budget = golden_result()["uncertainty_budget"]
+    expected = [dof_text(budget["effective_dof"][f"drho_{a}"]) for a in "xyz"]
+    assert dof_row is not None and dof_row.group(1).split() == expected
     summary = report.summary_text(golden_result())
-    assert "k = 1.96–1.96" not in summary and "95 %, k = 1.96, " in summary
+    ks = [budget["coverage_factor"][f"drho_{a}"] for a in "xyz"]
+    assert "k = 1.96–1.96" not in summary and f"95 %, k = {k_text(ks)}, " in summary
 
 
 def test_the_operator_and_the_gauges_are_in_the_header() -> None:
