@@ -281,12 +281,15 @@ class Flow:
                            f"write-back {last.reason}")
         detail = last.reason if last is not None and reason != "converged" \
             and reason in ("refused", "declined", "failed") else None
-        if reason == "max_iterations":
-            message = (f"closed loop did not converge: {proc.max_iterations} write-back(s) "
-                       "done and the last verification still finds a significant "
-                       "correction; run again or look for errors outside the model")
         count = self.ctx.devices.controller.offset_resolution_mm()
         remedy = None
+        if reason == "max_iterations":
+            message = (f"closed loop did not converge: {proc.max_iterations} write-back(s) "
+                       "done, the last verification's correction still significant")
+            remedy = ("the loop wrote all it may ([procedure] max_iterations): run again "
+                      "from the offsets now held, or, if each round finds a new correction, "
+                      "look for what the model lacks (a loose gauge or stand, lost motion "
+                      "beyond the approach's overrun, a leg or an axis out of its model)")
         if reason == "not-converged":
             detail, remedy = verdict.not_converged(self.iterations[-1], proc.converge_mm,
                                                    count, self.iterations)

@@ -39,7 +39,8 @@ def um(value_mm: float | None, digits: int = 1, signed: bool = False) -> str:
     v = _num(value_mm)
     if v is None:
         return "—"
-    return _clean(f"{1000 * v:{'+' if signed else ''}.{digits}f}", digits)
+    text = _clean(f"{1000 * v:{'+' if signed else ''}.{digits}f}", digits)
+    return "+" + text if signed and text[0].isdigit() else text
 
 
 def plus_minus(q: Quantity) -> str:

@@ -38,7 +38,7 @@ class Quantity(Closed):
 class AdviceItem(Closed):
     """One piece of advice: its ``text`` is what every view prints, verbatim."""
 
-    id: str = Field(description='e.g. "shim.tilt_yx", "rail.gap_xy", "backlash.z"')
+    id: str = Field(description='e.g. "shim.tilt_yx", "rail.gap_xy", "backlash"')
     text: str
     rests_on: list[str] = Field(description="the statement's quantities it follows from")
 

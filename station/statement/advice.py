@@ -68,19 +68,21 @@ def _controller(q: Mapping[str, Quantity]) -> list[AdviceItem]:
 
 
 def _plays(q: Mapping[str, Quantity]) -> list[AdviceItem]:
+    """The joints' play: one piece of advice for those to compensate in the controller,
+    one for those to repair (each joint's reversal with its 95 % uncertainty)."""
     out = []
-    for axis in "xyz":
-        r = q.get(f"reversal_{axis}")
-        if r is None or r.decision not in (rule.COMPENSATE, rule.REPAIR):
-            continue
-        if r.decision == rule.REPAIR:
-            out.append(AdviceItem(id=f"repair.{axis}", rests_on=[r.name], text=(
-                f"repair joint {axis}: its reversal {plus_minus(r)} (a worn screw, nut or "
-                "belt); meanwhile set its backlash (reversal) parameter in the controller")))
-        else:
-            out.append(AdviceItem(id=f"backlash.{axis}", rests_on=[r.name], text=(
-                f"set joint {axis}'s backlash (reversal) parameter in the controller to "
-                f"{um(r.value)} µm (reversal {plus_minus(r)})")))
+    for decision, id_, what in (
+            (rule.REPAIR, "repair", "repair joint(s) {joints}: a worn screw, nut or belt "
+                                    "(reversal {said}); meanwhile set their backlash "
+                                    "(reversal) parameter in the controller"),
+            (rule.COMPENSATE, "backlash", "set the controller's backlash (reversal) "
+                                          "parameter: {said}")):
+        held = [r for a in "xyz" if (r := q.get(f"reversal_{a}")) is not None
+                and r.decision == decision]
+        if held:
+            said = ", ".join(f"joint {r.name[-1]} {plus_minus(r)}" for r in held)
+            out.append(AdviceItem(id=id_, rests_on=[r.name for r in held], text=what.format(
+                joints=", ".join(r.name[-1] for r in held), said=said)))
     return out
 
 

@@ -184,7 +184,7 @@ def _advice_into(acc: Accuracy, rounds: Rounds, said: list[AdviceItem]) -> None:
     acc.gap_advice = [a.text for a in said if a.id.startswith(("rail.", "undecided."))]
     if rounds.reversal is not None:
         tool = reversal.at_the_tool(rounds.config, rounds.reversal, rounds.points)
-        plays = [a.text for a in said if a.id.startswith(("backlash.", "repair."))]
+        plays = [a.text for a in said if a.id in ("backlash", "repair")]
         acc.reversal = tool.model_copy(update={"advice": "; ".join(plays) or (
             "nothing to compensate: no joint's reversal lies beyond its uncertainty "
             "(the decision table's rule)")})

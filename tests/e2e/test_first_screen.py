@@ -81,10 +81,13 @@ def test_the_first_twelve_lines_hold_verdict_joints_and_tool(rehearsed: Any) -> 
 
 
 def test_without_verbose_only_the_first_screen(rehearsed: Any) -> None:
-    done, _ = rehearsed
+    done, result = rehearsed
     _completed(done)
     lines = done.stdout.splitlines()
-    assert len(lines) <= 16, done.stdout
+    # the headline, the joints, the offsets, the tool (two lines), one line per advice,
+    # the mountings, the report, where the details are
+    assert len(lines) == 10 + len(result["advice"]), done.stdout
+    assert len(lines[0]) <= 160, lines[0]
     assert lines[-1].startswith("  details ") and "--verbose" in lines[-1]
     for detail in ("  model ", "  closed loop ", "  budget ", "  squareness "):
         assert not any(ln.startswith(detail) for ln in lines), detail

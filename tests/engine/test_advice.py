@@ -62,7 +62,7 @@ def test_joints_without_play_get_no_backlash_advice(tmp_path: Path) -> None:
     result = _run(tmp_path, (0.0, 0.0, 0.0))
     tool = result["accuracy"]["reversal"]
     assert tool["advice"].startswith("nothing to compensate")
-    assert not [a for a in result["advice"] if a["id"].startswith(("backlash.", "repair."))]
+    assert not [a for a in result["advice"] if a["id"] in ("backlash", "repair")]
     text = report.summary_text(result)
     todo = [ln for ln in text.splitlines() if "backlash" in ln]
     assert todo == [], todo
@@ -70,12 +70,13 @@ def test_joints_without_play_get_no_backlash_advice(tmp_path: Path) -> None:
 
 def test_joints_with_play_get_it(tmp_path: Path) -> None:
     result = _run(tmp_path, (0.006, 0.006, 0.006))
-    plays = [a for a in result["advice"] if a["id"].startswith("backlash.")]
-    assert {a["id"] for a in plays} == {"backlash.x", "backlash.y", "backlash.z"}
+    plays = [a for a in result["advice"] if a["id"] == "backlash"]
+    assert len(plays) == 1
+    assert plays[0]["rests_on"] == ["reversal_x", "reversal_y", "reversal_z"]
     decided = {q["name"]: q["decision"] for q in result["statement"]}
     assert all(decided[f"reversal_{a}"] == "compensate" for a in "xyz")
     # one decision, said the same in the accuracy section and on the first screen
     assert result["accuracy"]["reversal"]["advice"] == "; ".join(a["text"] for a in plays)
     first = report.summary_text(result, verbose=False)
     assert all(a["text"] in first.replace("−", "-") for a in plays)
-    assert "backlash (reversal) parameter in the controller to 6" in first
+    assert "backlash (reversal) parameter: joint x +6" in first
