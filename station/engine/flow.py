@@ -35,18 +35,18 @@ from station.engine.closed_loop import extra_passes_allowed, round_phase
 from station.engine.devices import Devices
 from station.engine.layouts import Layouts
 from station.engine.replay import RoundFit, Steps
+from station.engine.run_record import RunRecord
 from station.engine.sequencer import Sequencer
 from station.engine.writeback import WritebackOutcome, write_back
 from station.errors import say, storage_message
 from station.plan.checker import MotionChecker
 from station.plan.steps import Plan
-from station.record.io import jsonable_value, section
+from station.record.io import jsonable_value
 from station.record.journal import JointTested
 from station.record.journal_file import Journal
 from station.record.model import MachineModel
-from station.record.result import Iteration, Joined, Loop, RunResult, Status
+from station.record.result import Iteration, Joined, Loop, Status
 from station.record.result_base import JsonObject
-from station.record.result_sections import ModelSelection
 from station.record.run_dir import MODEL_NAME
 from station.record.state import RunState
 from station.statement.conclude import conclude
@@ -66,7 +66,6 @@ class Run:
     started_iso: str
     checker: MotionChecker | None = None
     t0: float = field(default_factory=time.monotonic)
-    result: RunResult | None = None  # the record, once the flow starts it
 
     @property
     def state(self) -> RunState:
@@ -83,8 +82,8 @@ class Flow:
     """The steps of station.engine.closed_loop against the devices, each one replayed from the
     journal when a resumed run already did it; fills the result as it goes."""
 
-    def __init__(self, ctx: Run, seq: Sequencer, result: RunResult) -> None:
-        self.ctx, self.seq, self.result = ctx, seq, result
+    def __init__(self, ctx: Run, seq: Sequencer, record: RunRecord) -> None:
+        self.ctx, self.seq, self.record = ctx, seq, record
         self.idents: list[Identification] = []  # identification of each round, in order
         self.measurements: list[Measurement] = []  # each round's, its passes pooled
         self.reversal: Reversal | None = None  # the joints' lost motion
@@ -98,7 +97,7 @@ class Flow:
         self.model: MachineModel | None = None  # model.json, once the run stops
         self.outcomes: list[WritebackOutcome] = []
         self.iterations: list[Iteration] = []
-        result.iterations = self.iterations  # filled round by round
+        record.rounds(self.iterations)  # filled round by round
         # each round's Δρ̂ and standard errors joined with the rounds before (_joined)
         self.joined: list[verdict.Joined] = []
         # the station's own test of the joints, by axis (station.engine.joint_station)
@@ -162,15 +161,15 @@ class Flow:
         carried = self.layouts.carry_form(phase, ctx.config, m)
         ident, selection = (carried, None) if carried is not None else _identify(ctx, m)
         if n == 0 and selection is not None:
-            self.result.model_selection = section(ModelSelection, selection)
+            self.record.model_selection(selection)
         # Lost motion: the joints' reversal from every round so far; every stop was
         # approached from one side, so the fit found Δρ at that edge of each band:
         # what is stated and written is its middle.
         rev = reversal.estimate(ctx.config, self.measurements)
-        self.result.reversal = reversal.fields(ctx.config, rev)
+        self.record.lost_motion(reversal.fields(ctx.config, rev))
         known = joints.of_run_config(ctx.config, tables_of(self.joint_tests))
-        self.result.joints = joints.fields(  # the measured B wins over a table's reversal
-            known.with_reversal(rev.value), details_of(self.joint_tests))
+        self.record.joints(joints.fields(  # the measured B wins over a table's reversal
+            known.with_reversal(rev.value), details_of(self.joint_tests)))
         reversal.check_overrun(ctx.config, rev)
         self.reversal = rev
         if carried is None:  # a carried round's layout is the earlier rounds' own
@@ -205,14 +204,14 @@ class Flow:
         else:
             self.iterations.append(entry)
         if n == 0:
-            fields.onto(self.result)
+            self.record.first_round(fields, None)
             ctx.steps.once(RoundFit(0, len(passes)),
                            {"type": "identification", **results.ident_json(ident),
                             **({"passes": [*passes]} if again else {})})
             return judged.verdict
-        self.result.verification = results.verification_fields(
+        self.record.verification(results.verification_fields(
             ctx.config, fields, self.idents[n - 1], self.target,
-            edge=edge_of(rev, ctx.config.procedure.approach))
+            edge=edge_of(rev, ctx.config.procedure.approach)))
         ctx.steps.once(RoundFit(n, len(passes)),
                        {"type": "verification", "round": n, "phase": phase,
                         **({"passes": [*passes]} if again else {}), **results.ident_json(ident),
@@ -243,26 +242,9 @@ class Flow:
         entry.writeback = outcome.status
         if ctx.config.writeback.objective != "joints":
             entry.target_drho = dict(self.target)
-        if round == 1:
-            results.writeback_fields(self.result, outcome, ctx.devices.controller)
-        elif outcome.written is not None:
-            self.result.offsets_written = dict(outcome.written)
-        self.result.writeback = results.writeback_record(outcome, round)
-        self._totals()
+        self.record.wrote(outcome, round, ctx.devices.controller)
+        self.record.totals(self.iterations)
         return outcome.status
-
-    def _totals(self) -> None:
-        """Top-level ``identified``: the total Δρ written since the run started (the
-        other parameters as the first identification found them)."""
-        total = dict(self.iterations[0].identified)
-        written = [it for it in self.iterations if it.offsets_written is not None]
-        if written:
-            for name in WRITABLE:
-                if name in total:
-                    total[name] = sum(results.known(it.identified).get(name, 0.0)
-                                      - results.known(it.target_drho or {}).get(name, 0.0)
-                                      for it in written)
-        self.result.identified = total
 
     def stopped(self, reason: str) -> None:
         """Status, message and the loop's verdict once station.engine.closed_loop says
@@ -296,9 +278,8 @@ class Flow:
             message = f"closed loop did not converge: {detail}"
         if last is None:
             # nothing written: the offsets as found are the run's before and after
-            self.result.offsets_before = {a: float(v) for a, v in zip(
-                "xyz", self.ctx.devices.controller.read_offsets(), strict=True)}
-            self.result.offsets_written = None
+            self.record.nothing_written({a: float(v) for a, v in zip(
+                "xyz", self.ctx.devices.controller.read_offsets(), strict=True)})
         loop = Loop(
             stopped=reason, detail=detail,
             write_backs=sum(1 for o in self.outcomes if o.status == "written"),
@@ -308,38 +289,31 @@ class Flow:
             max_extra_passes=proc.max_extra_passes,
         )
         self._conclude(loop, remedy)
-        converged = bool(self.result.converged)
+        converged = bool(self.record.result.converged)
         if converged and last is None:
             limit = verdict.converge_limit(proc.converge_mm, count)
             message = (f"within tolerance, nothing written: every joint offset is shown within "
                        f"{1000 * limit:.1f} µm at 95 % and no correction stands out of the "
                        "noise")
-        self.result.status, self.result.message = status, message
+        self.record.status(status, message)
 
     def _conclude(self, loop: Loop, remedy: str | None) -> None:
         """The run's end from its rounds (station.statement.conclude), once, into the
         record; a run whose model holds no Δρ states the loop and the rounds only."""
-        result = self.result
         if not self.idents or not any(n in self.idents[0].parameters for n in WRITABLE):
-            result.converged = loop.stopped == "converged"
-            result.loop = loop
-            result.remaining = results.remaining_fields(self.iterations, result)
-            result.uncertainty_budget = budget.of_run(self.ctx.config, self.idents,
-                                                      result.remaining)
+            remaining = results.remaining_fields(self.iterations, self.record.result)
+            self.record.ended_without_drho(loop, remaining, budget.of_run(
+                self.ctx.config, self.idents, remaining))
             return
         end = conclude(self._rounds(loop.stopped), loop, remedy)
-        result.converged, result.loop = end.converged, end.loop
-        result.remaining, result.uncertainty_budget = end.remaining, end.uncertainty_budget
-        result.statement, result.advice = end.statement, end.advice
-        result.acceptance = end.acceptance
-        result.accuracy = end.accuracy
+        self.record.concluded(end)
         if end.model is not None:
             self._write_model(end.model)
 
     def _rounds(self, stopped: str) -> Rounds:
         """The snapshot of the rounds the statement is built from."""
         c = self.seq.checker
-        before = self.result.offsets_before
+        before = self.record.result.offsets_before
         return Rounds(
             config=self.ctx.config, idents=tuple(self.idents), joined=tuple(self.joined),
             iterations=tuple(self.iterations),

@@ -26,6 +26,7 @@ from station.analysis.joint_readings import Approaches, details_of, tables_of, t
 from station.analysis.statistics import NoiseScale, reject_outliers
 from station.engine.flow import Run
 from station.engine.replay import JointTestStep
+from station.engine.run_record import RunRecord
 from station.engine.sequencer import Sequencer
 from station.errors import RunFailed, StorageFull, check_interrupted, storage_message
 from station.plan.joint_test_plan import (
@@ -38,7 +39,6 @@ from station.plan.joint_test_plan import (
 )
 from station.plan.steps import Move, Settle
 from station.record.journal import JointTested
-from station.record.result import RunResult
 from station.report.joint_picture import file_name, write_joint_pictures
 
 
@@ -61,7 +61,7 @@ def draw_pictures(ctx: Run) -> None:
         raise StorageFull(storage_message(ctx.run_dir, exc)) from None
 
 
-def test_joints(ctx: Run, seq: Sequencer, result: RunResult,
+def test_joints(ctx: Run, seq: Sequencer, record: RunRecord,
                 progress: Callable[..., None]) -> dict[str, JointTested]:
     """Every joint's own test the plan holds, each taken or replayed from its record;
     the records by axis, and result.json's ``joints`` stating their tables. A fault
@@ -83,8 +83,8 @@ def test_joints(ctx: Run, seq: Sequencer, result: RunResult,
         seq.abort(exc)
         raise
     found = {jp.axis: ctx.state.joint_tests[jp.axis] for jp in test.joints}
-    result.joints = joints.fields(joints.of_run_config(ctx.config, tables_of(found)),
-                                  details_of(found))
+    record.joints(joints.fields(joints.of_run_config(ctx.config, tables_of(found)),
+                                details_of(found)))
     return found
 
 

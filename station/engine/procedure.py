@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import asdict
 
 from drivers.device_errors import DeviceError
 from station.config import StationConfig
@@ -19,14 +18,14 @@ from station.engine import joint_station
 from station.engine.closed_loop import LoopState, mountings_expected, next_step
 from station.engine.flow import Flow, Run
 from station.engine.recovery import resume_hint
-from station.engine.results import base_result, fill_offsets
+from station.engine.run_record import RunRecord
 from station.engine.sequencer import Sequencer
 from station.errors import BadInput, RunFailed, StorageFull, say, storage_message
 from station.plan.checker import MotionChecker
 from station.plan.mounting import sheets_of
 from station.plan.steps import Plan
 from station.record import io
-from station.record.result import PlungerGuard, RunResult, Setup, Status, Timing
+from station.record.result import RunResult, Setup, Status, Timing
 from station.record.run_dir import now_iso
 from station.record.state import RunState
 from station.report.mounting_files import write_pictures
@@ -80,16 +79,15 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
         indicators=ctx.devices.indicators, journal=ctx.journal, operator=ctx.operator,
         checker=checker, progress=progress)
     seq.keeper.expected = expected_mountings(ctx.config, ctx.plan)
-    result = base_result(ctx.run_dir, ctx.config, ctx.sim, ctx.started_iso)
-    ctx.result = result
+    record = RunRecord(ctx.run_dir, ctx.config, ctx.sim, ctx.started_iso)
     proc = ctx.config.procedure
-    flow = Flow(ctx, seq, result)
+    flow = Flow(ctx, seq, record)
     loop = LoopState(max_iterations=proc.max_iterations, verify=proc.verify,
                      max_extra_passes=proc.max_extra_passes)
     try:
         # The station's own test of the joints first: the identification and the
         # tool's statement rest on its tables (station.engine.joint_station).
-        flow.joint_tests = joint_station.test_joints(ctx, seq, result, progress)
+        flow.joint_tests = joint_station.test_joints(ctx, seq, record, progress)
         # The whole flow: station.engine.closed_loop decides, Flow performs (or replays) the step.
         while (step := next_step(loop)).kind != "finish":
             if step.kind == "measure" and step.extra:
@@ -103,20 +101,21 @@ def _execute_with(ctx: Run, progress: Progress) -> tuple[int, RunResult]:
     except KeyboardInterrupt:
         message = (f"aborted by the operator (Ctrl-C); {_stopped(seq)}, journal kept. "
                    f"Continue with: orthocal resume {ctx.run_dir}")
-        _finish(ctx, seq, result, "aborted", message, final=False)
+        _finish(ctx, seq, record, "aborted", message, final=False)
         raise RunFailed(message) from None
     except (DeviceError, RunFailed) as exc:
         stopped = _stopped(seq)
         message = (f"{exc}. {stopped[0].upper()}{stopped[1:]}, journal kept; "
                    f"{resume_hint(exc)} with: orthocal resume {ctx.run_dir}")
-        _finish(ctx, seq, result, "failed", message, final=False)
+        _finish(ctx, seq, record, "failed", message, final=False)
         raise RunFailed(message) from exc
     except BadInput:
-        _finish(ctx, seq, result, "failed", "refused by a runtime check", final=False)
+        _finish(ctx, seq, record, "failed", "refused by a runtime check", final=False)
         raise
     # the record as written (validated, in result.json's order), for the caller
-    record = _finish(ctx, seq, result, result.status, result.message, final=True)
-    return (0 if record.status == "ok" else 1), record
+    written = _finish(ctx, seq, record, record.result.status, record.result.message,
+                      final=True)
+    return (0 if written.status == "ok" else 1), written
 
 
 def draw_mountings(ctx: Run) -> None:
@@ -168,58 +167,57 @@ def _stopped(seq: Sequencer) -> str:
             "stopped")
 
 
-def _since_last(ctx: Run, result: RunResult) -> None:
+def _since_last(ctx: Run, record: RunRecord) -> None:
     """What changed since the machine's last calibration (station.history), into the
-    result before result.json and report.html are written: written once, not again."""
+    record before result.json and report.html are written: written once, not again."""
     from station.history.compare import since_last_run
 
-    since = since_last_run(ctx.config, result, ctx.run_dir.parent)
+    since = since_last_run(ctx.config, record.result, ctx.run_dir.parent)
     if since is not None:
-        result.since_last = since
+        record.since_last(since)
 
 
-def _finish(ctx: Run, seq: Sequencer, result: RunResult, status: Status,
+def _finish(ctx: Run, seq: Sequencer, record: RunRecord, status: Status,
             message: str | None, final: bool) -> RunResult:
-    """The run's end, however it ends: its facts into ``result``, result.json and
+    """The run's end, however it ends: its facts into the ``record``, result.json and
     report.html written. The record as result.json holds it, validated once here."""
-    result.status, result.message = status, message
-    result.finished = now_iso()
+    record.status(status, message)
     wall = time.monotonic() - ctx.t0
     # The journal as saved so far, every session's (its state, not the file again).
     state = ctx.state
     # A resumed run lasts from its header, its sessions and the pauses between; a run
     # never resumed, this session's wall time.
     started = state.started if state.resumes else None
-    result.duration_s = round(time.time() - started, 3) if started else round(wall, 3)
-    result.timing = Timing(wall_s=round(wall, 3), moves=seq.counters.moves,
-                           readings=seq.counters.readings, retries=state.retries,
-                           outliers_rejected=seq.counters.rejected,
-                           # what the operator paid: each mounting and the time it took
-                           mountings=state.mountings,
-                           operator_s=round(state.operator_s, 3))
-    result.plunger_guard = PlungerGuard.model_validate(asdict(state.guard))
-    if not result.setups:  # stopped before its identification: what it measured
-        result.setups = measured_setups(ctx.plan, state, ctx.config.procedure.cycles)
-    fill_offsets(result, ctx.devices.controller, state)
+    record.finished(
+        finished_iso=now_iso(),
+        duration_s=round(time.time() - started, 3) if started else round(wall, 3),
+        timing=Timing(wall_s=round(wall, 3), moves=seq.counters.moves,
+                      readings=seq.counters.readings, retries=state.retries,
+                      outliers_rejected=seq.counters.rejected,
+                      # what the operator paid: each mounting and the time it took
+                      mountings=state.mountings, operator_s=round(state.operator_s, 3)),
+        # stopped before its identification: what it measured
+        state=state, setups=measured_setups(ctx.plan, state, ctx.config.procedure.cycles),
+        controller=ctx.devices.controller)
     if final:
         ctx.journal.append({"type": "finished", "status": status, "message": message})
-        _since_last(ctx, result)
+        _since_last(ctx, record)
     else:
         try:
             ctx.journal.flush()
         except Exception:
             pass
-    record = io.validated(result)
+    written = io.validated(record.result)
     try:
-        io.write_result(record, ctx.run_dir)
+        io.write_result(written, ctx.run_dir)
     except OSError as exc:  # a full disk: the journal holds the run; say so and go on
         say(f"orthocal: result.json not written ({storage_message(ctx.run_dir, exc)})")
-        return record
+        return written
     from station import report
 
     try:
-        report.write_html(record, ctx.run_dir,
+        report.write_html(written, ctx.run_dir,
                           figures=ctx.config.report.figures)
     except Exception as exc:  # the report is a view; result.json and the journal are the record
         say(f"orthocal: report.html not written ({type(exc).__name__}: {exc})")
-    return record
+    return written

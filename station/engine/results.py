@@ -55,7 +55,8 @@ num = finite  # the result document's numbers: finite, or null
 
 class Measured(Closed):
     """A round's measurement and its identification as result.json states them: the
-    first round's at the top level (RunResult's fields of the same names, :meth:`onto`),
+    first round's at the top level (RunResult's fields of the same names:
+    station.engine.run_record.RunRecord.first_round),
     and what a round's ``iterations`` entry and a ``verification`` take of them."""
 
     model: str
@@ -76,12 +77,6 @@ class Measured(Closed):
     deviations_rms_mm: float | None
     stands: dict[str, StandEstimate] | None
     setups: list[Setup]
-
-    def onto(self, result: RunResult) -> None:
-        """The first round's fields at the top level of ``result`` (``model`` too: with
-        model auto, the one the model test chose)."""
-        for name in type(self).model_fields:
-            setattr(result, name, getattr(self, name))
 
     def iteration(self, phase: str, judged: Verdict) -> Iteration:
         """The round's entry in ``iterations`` and its verdict, nothing written after
@@ -207,29 +202,29 @@ def remaining_fields(iterations: list[Iteration], result: RunResult) -> Remainin
     )
 
 
-def fill_offsets(result: RunResult, controller: ZeroOffsets, state: RunState) -> None:
+def offsets_now(result: RunResult, controller: ZeroOffsets, state: RunState
+                ) -> tuple[Literal["controller", "station"], dict[str, float] | None, str | None]:
     """Where the offsets live and what they are when the run stops (docs/design.md,
-    "Offsets held by the station"): ``offsets_held_by`` "controller" | "station",
-    ``offsets_final`` (the journal's last write-back or rollback, else the offsets
-    before), and for a station that holds them what to do with them."""
+    "Offsets held by the station"): "controller" | "station", the offsets final (the
+    journal's last write-back or rollback, else the offsets before), and for a station
+    that holds them what to do with them (None otherwise)."""
     held_by = controller.held_by
     before = None if result.offsets_before is None else known(result.offsets_before)
     start = [before[a] for a in AXES] if before is not None else None
     final = state.held_offsets(start)
-    result.offsets_held_by = held_by
-    result.offsets_final = None if final is None else \
-        {a: float(v) for a, v in zip(AXES, final, strict=True)}
-    if held_by == "station":
-        reg_map = getattr(controller, "map", None)
-        why = (getattr(reg_map, "unsupported", {}) or {}).get("offsets", "")
-        line = "" if final is None else ", ".join(f"{v:.4f}" for v in final)
-        result.offsets_note = (
-            "the drive holds no zero offset it can be told over Modbus, so these offsets "
-            "live in this station run only: "
-            + (f"{why.rstrip().rstrip('.')}; " if why else "enter them in the drive's own "
-               "home-offset parameter; ")
-            + f"a later run starts from them with [controller] offsets = [{line}] or "
-            f"--offsets-from {result.run_dir}")
+    finals = None if final is None else {a: float(v) for a, v in zip(AXES, final, strict=True)}
+    if held_by != "station":
+        return held_by, finals, None
+    reg_map = getattr(controller, "map", None)
+    why = (getattr(reg_map, "unsupported", {}) or {}).get("offsets", "")
+    line = "" if final is None else ", ".join(f"{v:.4f}" for v in final)
+    return held_by, finals, (
+        "the drive holds no zero offset it can be told over Modbus, so these offsets "
+        "live in this station run only: "
+        + (f"{why.rstrip().rstrip('.')}; " if why else "enter them in the drive's own "
+           "home-offset parameter; ")
+        + f"a later run starts from them with [controller] offsets = [{line}] or "
+        f"--offsets-from {result.run_dir}")
 
 
 def writeback_record(outcome: WritebackOutcome, round: int | None = None) -> Writeback:
@@ -238,15 +233,6 @@ def writeback_record(outcome: WritebackOutcome, round: int | None = None) -> Wri
     if round is not None:
         record.round = round
     return record
-
-
-def writeback_fields(result: RunResult, outcome: WritebackOutcome,
-                     controller: ZeroOffsets) -> None:
-    """The first write-back's: its outcome, the offsets before it and those written."""
-    result.writeback = writeback_record(outcome)
-    result.offsets_before = dict(outcome.before) if outcome.before is not None else \
-        {a: float(v) for a, v in zip(AXES, controller.read_offsets(), strict=True)}
-    result.offsets_written = None if outcome.written is None else dict(outcome.written)
 
 
 def _simulation(sim: SimulationParams, gauges: list[str]) -> Simulation:

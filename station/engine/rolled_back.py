@@ -13,13 +13,12 @@ from pathlib import Path
 
 from orthocal import AXES
 from station import report
+from station.engine.run_record import rolled_back
 from station.errors import say
 from station.record import io
 from station.record.result import RolledBack, RunResult
-from station.record.result_statement import AdviceItem
 from station.record.run_dir import now_iso
 from station.record.state import RunState
-from station.report.first_screen import ROLLED_BACK_TODO
 
 
 def change_text(before: Mapping[str, float], after: Mapping[str, float]) -> str:
@@ -73,12 +72,7 @@ def record_rollback(run_dir: Path, replaced: Mapping[str, float],
         say(f"orthocal: the rollback is not recorded in result.json: {exc}")
         return None
     back = RolledBack(at=now_iso(), replaced=dict(replaced), restored=dict(restored))
-    record.rollbacks = [*record.rollback_history(), back]
-    record.rolled_back = back
-    record.offsets_final = dict(restored)
-    if record.advice is not None:
-        # the run's advice was for the machine it left; rolled back, one thing stands
-        record.advice = [AdviceItem(id="rolled-back", text=ROLLED_BACK_TODO, rests_on=[])]
+    record = rolled_back(record, back)
     # validated once for the report, the history and the caller (write_result still
     # validates what it writes)
     record = io.validated(record)

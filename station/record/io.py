@@ -62,8 +62,9 @@ def validated(result: RunResult) -> RunResult:
     raises pydantic's ValidationError: a bug of the engine, never a run's fault."""
     record = RunResult.model_validate_json(result.model_dump_json(exclude_unset=True),
                                            strict=True)
-    if record.deviations is not None:
-        record.deviations = {k: record.deviations[k] for k in dev_keys(record.deviations)}
+    if record.deviations is not None:  # a copy in the report's order, not a field set
+        record = record.model_copy(update={"deviations": {
+            k: record.deviations[k] for k in dev_keys(record.deviations)}})
     if record.verification is not None:
         devs = record.verification.deviations
         record.verification.deviations = {k: devs[k] for k in dev_keys(devs)}

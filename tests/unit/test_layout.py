@@ -143,3 +143,29 @@ def test_no_file_name_is_used_twice() -> None:
             seen.setdefault(path.name, []).append(str(path.relative_to(ROOT)))
     twice = {name: where for name, where in seen.items() if len(where) > 1}
     assert not twice, twice
+
+
+def test_the_run_record_is_built_in_one_place() -> None:
+    # docs/design.md, "The run record": a run's RunResult is begun and every field of it
+    # set in station/engine/run_record.py alone; the flow, the procedure and the
+    # rollback hand it what happened. Any other module setting a field of a name bound
+    # to a record (``result.loop = …``) builds it a second way.
+    from station.record.result import RunResult
+
+    fields = set(RunResult.model_fields)
+    home = ROOT / "station" / "engine" / "run_record.py"
+    found = []
+    for path in sorted((ROOT / "station").rglob("*.py")):
+        if path == home:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            targets = node.targets if isinstance(node, ast.Assign) else \
+                [node.target] if isinstance(node, ast.AugAssign | ast.AnnAssign) else []
+            for t in targets:
+                for one in (t.elts if isinstance(t, ast.Tuple) else [t]):
+                    if isinstance(one, ast.Attribute) and one.attr in fields \
+                            and isinstance(one.value, ast.Name) \
+                            and one.value.id in ("result", "record", "run"):
+                        found.append(f"{path.relative_to(ROOT)}:{node.lineno}: "
+                                     f"{ast.unparse(one)}")
+    assert not found, "\n".join(found)
