@@ -24,16 +24,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from orthocal import Geometry
 from station.gcode.rewrite import Job, compensate
 from station.gcode.sample import sample_program
-from station.gcode.subdivide import Limits, Machine
+from station.gcode.subdivide import CompensatedMachine, JointLimits
 
 MACHINE = np.array([0.002, -0.001, 0.0015, 0.0, 0.0, 0.0, 0.2, 0.1, -0.15,
                     0.15, -0.10, 0.12])
 #: The paper's machine's soft limits with 10 mm spare (joint ρ, mm).
-LIMITS = Limits(np.full(3, 200.25), np.full(3, 380.25), "bench")
+LIMITS = JointLimits(np.full(3, 200.25), np.full(3, 380.25), "bench")
 
 
 def job(tolerance: float) -> Job:
-    return Job(Machine(Geometry(), MACHINE), LIMITS, tolerance, np.zeros(3),
+    return Job(CompensatedMachine(Geometry(), MACHINE), LIMITS, tolerance, np.zeros(3),
                "bench: the held-out machine")
 
 

@@ -33,7 +33,7 @@ from station.record.result import Compensated
 from station.record.result_accuracy import Accuracy, AfterInterval
 
 #: How the identified machine reaches the controller, as the advice names them.
-ROUTES = [
+ROUTES_IN_FULL = [
     "LinuxCNC: orthocal export RUN_DIR --to linuxcnc --ini MACHINE.ini --kinematics "
     "--out DIR (the orthoglidekins component and its geometry)",
     "any controller with nominal kinematics: orthocal compensate PROGRAM --run RUN_DIR "
@@ -110,7 +110,7 @@ def statement(points: np.ndarray, frame: str, *, drho_now: Mapping[str, float],
         max_interval_95_mm=iv.max_interval_mm,
         offsets_only_rms_mm=offsets_only.rms_mm,
         offsets_only_max_mm=offsets_only.max_mm, told=told, nominal=nominal,
-        routes=list(ROUTES), method=iv.method, assumes=assumes,
+        routes=list(ROUTES_IN_FULL), method=iv.method, assumes=assumes,
         field_rms_mm=[round(float(v), 7) for v in iv.point_rms_mm])
 
 

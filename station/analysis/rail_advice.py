@@ -12,8 +12,8 @@ import orthocal
 from station.record.result_accuracy import SquarenessDecision
 
 
-class Layout(Protocol):
-    """What the advice reads of the pooled layout (accuracy_statement.Layout)."""
+class LayoutReading(Protocol):
+    """What the advice reads of the pooled layout (accuracy_statement.LayoutReading)."""
 
     @property
     def dof(self) -> float | None: ...
@@ -25,7 +25,7 @@ class Layout(Protocol):
 _LEANS = {"tilt_yx": ("y", "x"), "tilt_zx": ("z", "x"), "tilt_zy": ("z", "y")}
 
 
-def squareness_advice(tilts: Layout | None, rail_mm: float,
+def squareness_advice(tilts: LayoutReading | None, rail_mm: float,
                       decision: SquarenessDecision | None) -> list[str]:
     """What to do about each axis that leans (``decision``: squareness_decision's; the tilts, the
     axes' own: the squareness of the tool's motions also holds what the offsets
@@ -67,7 +67,7 @@ def undecided_advice(other: str) -> list[str]:
 _PASSES = {"gap_xy": ("x", "y", "z"), "gap_xz": ("x", "z", "y"), "gap_yz": ("y", "z", "x")}
 
 
-def gap_advice(layout: Layout | None, decision: SquarenessDecision | None) -> list[str]:
+def gap_advice(layout: LayoutReading | None, decision: SquarenessDecision | None) -> list[str]:
     """What to do about each pair of axes that pass each other (the gaps' rule is the
     tilts', ``decision``): offsets cannot fix a gap; the controller's kinematics can
     (model.json holds the machine), and so can moving a rail across by the gap."""

@@ -26,7 +26,7 @@ from station.record.result import Ambiguity, Iteration
 from station.record.result_base import Params
 
 
-class Joined(NamedTuple):
+class JoinedRounds(NamedTuple):
     """A round's Δρ̂ joined with the rounds before it (:func:`joined_round`): the values,
     their standard errors, and per axis each round's weight in the value (round 0
     first), which the next round's covariance with it is summed over."""
@@ -37,8 +37,8 @@ class Joined(NamedTuple):
 
 
 @dataclass(frozen=True)
-class Verdict:
-    verdict: str  # closed_loop.Verdict
+class Judgement:
+    verdict: str  # station.record.result.Verdict
     significant: list[str]  # the writable parameters beyond the noise of both rounds
     shown_mm: dict[str, float]  # per axis, how far the machine may be off at 95 %
 
@@ -69,9 +69,9 @@ def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
 
 def judge(ident: Identification, previous: Identification | None, converge_mm: float, limit: float,
           target: dict[str, float] | None, passes_left: bool = False,
-          joined: Joined | None = None, floor: dict[str, float] | None = None,
+          joined: JoinedRounds | None = None, floor: dict[str, float] | None = None,
           passes: tuple[int, int] = (1, 0),
-          type_b: dict[str, float] | None = None) -> Verdict:
+          type_b: dict[str, float] | None = None) -> Judgement:
     """The verdict on round ``ident`` (``previous``: the identification whose
     correction it verifies; None for the first measurement, judged against its
     own noise alone). Significant: beyond k standard errors of both rounds (of
@@ -137,13 +137,13 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
         elif floor and any(_form_limits(ident.std_errors.get(n), floor.get(n), passes,
                                         ident.std_error_dof, limit) for n in out):
             verdict = "form-limited"
-    return Verdict(verdict, sig, shown)
+    return Judgement(verdict, sig, shown)
 
 
-def joined_round(ident: Identification, before: Joined | None,
+def joined_round(ident: Identification, before: JoinedRounds | None,
                  offsets_before: dict[str, float] | None,
                  offsets_written: dict[str, float] | None,
-                 shared: Sequence[np.ndarray] = ()) -> Joined:
+                 shared: Sequence[np.ndarray] = ()) -> JoinedRounds:
     """A round's Δρ̂ joined with ``before`` (the rounds before it, joined alike; None:
     the first round), moved by the offsets its write-back changed from
     ``offsets_before`` to ``offsets_written`` (read back; None: nothing written), per
@@ -153,7 +153,7 @@ def joined_round(ident: Identification, before: Joined | None,
     joined value is that summed with the rounds' weights in it (GUM). Without: the
     rounds independent."""
     n = 0 if before is None else len(next(iter(before.weights.values()), ()))
-    own = Joined(dict(ident.parameters), dict(ident.std_errors),
+    own = JoinedRounds(dict(ident.parameters), dict(ident.std_errors),
                  {name: (0.0,) * n + (1.0,) for name in WRITABLE if name in ident.parameters})
     if before is None:
         return own

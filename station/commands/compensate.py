@@ -83,7 +83,7 @@ def _job(args: argparse.Namespace) -> Job:
     from station.commands.history import read_result
     from station.gcode.rewrite import Job
     from station.gcode.soft_bounds import LimitsError, run_limits
-    from station.gcode.subdivide import Machine
+    from station.gcode.subdivide import CompensatedMachine
     from station.record.controller_tables import NoJointFrame, controller_tables
     from station.record.exportable import ambiguous
     from station.record.identified import NotACalibration, identified_machine
@@ -122,5 +122,5 @@ def _job(args: argparse.Namespace) -> Job:
         notes.append("the run's offsets were held by the station: the controller must hold "
                      "them too (orthocal export) before this program runs")
     joints = tables.errors() if tables.tabled else None
-    return Job(Machine(machine.geometry, theta, joints), limits, float(args.tolerance),
+    return Job(CompensatedMachine(machine.geometry, theta, joints), limits, float(args.tolerance),
                np.asarray(args.work_offset, dtype=float), machine.describe(), tuple(notes))

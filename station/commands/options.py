@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-Triple = tuple[float, float, float]
+from station.record.simulated import Triple
+
 # A callable given the running virtual station (tests inject its faults through it).
 StationHook = Callable[[Any], None]
 

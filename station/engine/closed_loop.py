@@ -66,7 +66,7 @@ States (``len(verdicts)``, ``len(writes)``):
                         refused/declined/failed/skipped → finish with that reason
 
 Extension points: a new kind of step (say, homing after a power cut) is one
-more ``Step.kind`` and one more branch here, where the whole flow is visible.
+more ``LoopStep.kind`` and one more branch here, where the whole flow is visible.
 """
 
 from __future__ import annotations
@@ -77,8 +77,6 @@ from typing import Literal
 from station.record.phase import Phase, phase_of
 
 StepKind = Literal["measure", "write", "finish"]
-Verdict = Literal["significant", "converged", "suspected", "unproven", "ambiguous",
-                  "form-limited", "budget-limited"]
 
 #: Why the loop stopped (the run JSON's ``loop.stopped``): the first is success; the
 #: report says each in words (station.report.rounds.STOP_TEXT).
@@ -92,7 +90,7 @@ def round_phase(phase: str) -> str:
 
 
 @dataclass(frozen=True)
-class Step:
+class LoopStep:
     kind: StepKind
     phase: str | None = None  # measure: which phase
     round: int = 0  # write: the write-back number (1-based)
@@ -132,34 +130,34 @@ class LoopState:
         return sum(1 for s in self.writes if s == "written")
 
 
-def next_step(state: LoopState) -> Step:
+def next_step(state: LoopState) -> LoopStep:
     """The next step of the run from what has happened (see the module's table)."""
     k, w = len(state.verdicts), len(state.writes)
     if k == 0:
-        return Step("measure", phase=phase_of(0))
+        return LoopStep("measure", phase=phase_of(0))
     if w == k - 1:  # the last measurement waits for its decision
         verdict = state.verdicts[-1]
         if verdict == "converged":
-            return Step("finish", reason="converged")
+            return LoopStep("finish", reason="converged")
         if verdict in ("ambiguous", "form-limited", "budget-limited"):
             # not noise: a pass cannot help
-            return Step("finish", reason="not-converged")
+            return LoopStep("finish", reason="not-converged")
         if verdict in ("suspected", "unproven"):
             if state.extra[-1] < extra_passes_allowed(k - 1, state.max_extra_passes,
                                                       state.max_iterations, state.verify):
                 extra = state.extra[-1] + 1
-                return Step("measure", phase=phase_of(k - 1, extra), extra=extra)
-            return Step("finish", reason="not-converged")
+                return LoopStep("measure", phase=phase_of(k - 1, extra), extra=extra)
+            return LoopStep("finish", reason="not-converged")
         if state.written >= state.max_iterations:
-            return Step("finish", reason="max_iterations")
-        return Step("write", round=w + 1)
+            return LoopStep("finish", reason="max_iterations")
+        return LoopStep("write", round=w + 1)
     if w == k:  # the last write-back waits for its verification
         status = state.writes[-1]
         if status == "written":
             if not state.verify:
-                return Step("finish", reason="not-verified")
-            return Step("measure", phase=phase_of(k))
-        return Step("finish", reason={"failed-restored": "failed"}.get(status, status))
+                return LoopStep("finish", reason="not-verified")
+            return LoopStep("measure", phase=phase_of(k))
+        return LoopStep("finish", reason={"failed-restored": "failed"}.get(status, status))
     raise AssertionError(f"inconsistent loop state: {k} measurements, {w} write-backs")
 
 

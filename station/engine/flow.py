@@ -99,7 +99,7 @@ class Flow:
         self.iterations: list[Iteration] = []
         record.rounds(self.iterations)  # filled round by round
         # each round's Δρ̂ and standard errors joined with the rounds before (_joined)
-        self.joined: list[verdict.Joined] = []
+        self.joined: list[verdict.JoinedRounds] = []
         # the station's own test of the joints, by axis (station.engine.joint_station)
         self.joint_tests: dict[str, JointTested] = {}
 
@@ -134,7 +134,7 @@ class Flow:
             else ident.parameters
         self.seq.sizing.expected = (ident.model, params_vector(values))
 
-    def _joined(self, n: int, ident: Identification, phase: str) -> verdict.Joined:
+    def _joined(self, n: int, ident: Identification, phase: str) -> verdict.JoinedRounds:
         """Round ``n``'s Δρ̂ joined with the rounds before it (verdict.joined_round),
         with the error it shares with them through what it carried; kept per round."""
         outcome = self.outcomes[n - 1] if 0 < n <= len(self.outcomes) else None

@@ -13,7 +13,7 @@ from station.engine.guard_words import AxesSeen, likely_cause
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker, PathRefused
 from station.plan.guard import (
-    Gauge,
+    GuardedGauge,
     MoveRecord,
     later_travel,
     signal_slope,
@@ -48,7 +48,7 @@ class PlungerGuardTrip(PlungerGuardStop):
         self.label = label
 
 
-class PlungerGuard:
+class GuardMonitor:
     """One per sequencer. ``mount`` when a mounting's first Π0 has been read,
     ``watch`` for each (sub-)move of its first cycle, ``learn`` at the end of that
     cycle, ``check_cycle`` before each later one."""
@@ -74,7 +74,7 @@ class PlungerGuard:
         self._journal = journal
         self._setup: SetupPlan | None = None
         self._where = ""
-        self._gauges: dict[str, Gauge] = {}
+        self._gauges: dict[str, GuardedGauge] = {}
         self.watching = False
         self._moves: list[MoveRecord] = []
         # (move label, gauge) -> predicted (min, max) travel for later cycles
@@ -109,7 +109,7 @@ class PlungerGuard:
         for name, direction in mounted.items():
             ind = self.config.indicator(name)
             preload = ind.preload + (preload_shift or {}).get(name, 0.0)
-            self._gauges[name] = Gauge(name, direction, -preload,
+            self._gauges[name] = GuardedGauge(name, direction, -preload,
                                         ind.stroke_mm - preload, float(baseline[name]))
         self._moves = []
         self.axes_seen = AxesSeen()
@@ -379,7 +379,7 @@ class PlungerGuard:
                 for g, t in ((g, g.rest_nominal) for g in self._gauges.values())]
         return float(min(here)) if here else np.inf
 
-    def _trip(self, g: Gauge, label: str, travel: float, hi: float, lo: float) -> None:
+    def _trip(self, g: GuardedGauge, label: str, travel: float, hi: float, lo: float) -> None:
         if self._moves:
             self._moves[-1].off_route = True
         try:
@@ -482,7 +482,7 @@ class PlungerGuard:
                     f"stroke with the travel the first cycle measured at the stops "
                     f"({exc.detail})"), {})
 
-    def _refuse(self, cycle: int, label: str, g: Gauge, pushed: bool, what: str,
+    def _refuse(self, cycle: int, label: str, g: GuardedGauge, pushed: bool, what: str,
                 extra: dict[str, object]) -> None:
         self._journal({"type": "event", "event": {
             "event": "plunger-guard-refused", "indicator": g.name, "where": self._where,

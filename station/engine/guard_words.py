@@ -10,7 +10,7 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 
 from orthocal import AXES
-from station.plan.guard import Gauge, MoveRecord
+from station.plan.guard import GuardedGauge, MoveRecord
 
 # Below this an axis did not move (mm): a count or two of the drive.
 STILL_MM = 0.002
@@ -73,7 +73,7 @@ def reversed_evidence(moves: Sequence[MoveRecord], name: str) -> bool:
     return against > 0.0 and against < 0.5 * along
 
 
-def likely_cause(g: Gauge, pushed: bool, moves: Sequence[MoveRecord],
+def likely_cause(g: GuardedGauge, pushed: bool, moves: Sequence[MoveRecord],
                  stop_signal: Mapping[str, Mapping[str, float]], preload: float) -> str:
     """The likely cause of a stop of gauge ``g`` (``pushed``: toward its stop), and
     what to do about it."""

@@ -18,7 +18,7 @@ import numpy as np
 
 from drivers.base import Arrivals, AxisReadout, GaugeReadings
 from station.config import StationConfig
-from station.engine.guard_monitor import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
+from station.engine.guard_monitor import GuardMonitor, PlungerGuardStop, PlungerGuardTrip
 from station.errors import BadInput, RunFailed
 from station.plan.checker import SIGNAL_PAD_MM, MotionChecker, PathRefused
 from station.plan.steps import Move, Plan, SetupPlan
@@ -49,7 +49,7 @@ class Mover:
     (set by the sequencer); ``recovered``: the journal records of recovered trips."""
 
     def __init__(self, *, config: StationConfig, plan: Plan, controller: MoverAxes,
-                 indicators: GaugeReadings, checker: MotionChecker, guard: PlungerGuard,
+                 indicators: GaugeReadings, checker: MotionChecker, guard: GuardMonitor,
                  journal: Callable[[dict[str, object]], None],
                  journal_safe: Callable[[dict[str, object]], None],
                  progress: Callable[..., None]) -> None:

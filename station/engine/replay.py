@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, TypeVar
 
-from station.record.journal import Cycle, JointTested, Repeat, SetupDone, Writeback
+from station.record.journal import Cycle, JointTested, Repeat, SetupDone, WritebackRecord
 from station.record.journal_file import Journal
 from station.record.state import Fit, RunState
 
@@ -109,7 +109,7 @@ class WritebackStage:
     round: int
     stage: str
 
-    def find(self, state: RunState) -> Writeback | None:
+    def find(self, state: RunState) -> WritebackRecord | None:
         return state.writebacks.get(self.round, {}).get(self.stage)
 
 
@@ -119,7 +119,7 @@ class WritebackRound:
 
     round: int
 
-    def find(self, state: RunState) -> Writeback | None:
+    def find(self, state: RunState) -> WritebackRecord | None:
         stages = state.writebacks.get(self.round, {})
         return next((stages[s] for s in FINAL_STAGES if s in stages), None)
 

@@ -17,7 +17,7 @@ from orthocal.loop import WRITABLE, predicted_after_correction
 from orthocal.numbers import finite
 from station.analysis import joints
 from station.analysis.statistics import Measurement, split_key
-from station.analysis.verdict import Verdict
+from station.analysis.verdict import Judgement
 from station.config import StationConfig
 from station.engine.writeback import WritebackOutcome
 from station.record.result import (
@@ -78,7 +78,7 @@ class Measured(Closed):
     stands: dict[str, StandEstimate] | None
     setups: list[Setup]
 
-    def iteration(self, phase: str, judged: Verdict) -> Iteration:
+    def iteration(self, phase: str, judged: Judgement) -> Iteration:
         """The round's entry in ``iterations`` and its verdict, nothing written after
         it yet."""
         return Iteration(

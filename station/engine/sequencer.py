@@ -45,7 +45,7 @@ from station.analysis.statistics import (
 from station.config import StationConfig
 from station.console.operator import Operator
 from station.engine import kept
-from station.engine.guard_monitor import PlungerGuard
+from station.engine.guard_monitor import GuardMonitor
 from station.engine.mover import Mover, MoverAxes
 from station.engine.replay import CycleStep, RepeatStep, SetupEnd, Steps
 from station.engine.sizing import VerificationSizing
@@ -73,7 +73,7 @@ MAX_RETAKES = 2
 ZERO_MOVED_MM = 0.005
 
 
-Progress = Callable[..., None]
+ProgressSink = Callable[..., None]
 
 
 def _no_progress(event: str, **info: object) -> None:
@@ -106,7 +106,7 @@ class Sequencer:
         journal: Journal,
         operator: Operator,
         checker: MotionChecker,
-        progress: Progress | None = None,
+        progress: ProgressSink | None = None,
     ) -> None:
         self.config = config
         self.plan = plan
@@ -134,7 +134,7 @@ class Sequencer:
         self.sizing = VerificationSizing(config, plan, controller)
         # The guard's records are the run's like any other: one that cannot be saved
         # stops the run (a swallowed error once lost a record that had an infinity).
-        self.guard = PlungerGuard(
+        self.guard = GuardMonitor(
             config, checker, controller.read_positions,
             lambda names: indicators.read(1, names), controller.stop, journal.append)
         # The guard arms at a mounting's first Π0 reading and watches the cycle after it.

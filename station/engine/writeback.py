@@ -36,11 +36,11 @@ from station.console.operator import Operator
 from station.engine.replay import Steps, WritebackRound, WritebackStage
 from station.errors import RunFailed
 from station.record.journal import (
-    Writeback,
     WritebackBackup,
     WritebackDone,
     WritebackFailed,
     WritebackIntent,
+    WritebackRecord,
     WritebackSkipped,
     WritebackUnchanged,
 )
@@ -85,12 +85,12 @@ class _Stages:
     def log(self, record: dict[str, object]) -> None:
         self.steps.journal.append({"type": "writeback", "round": self.round, **record})
 
-    def take(self, stage: str, act: Callable[[], object]) -> Writeback | None:
+    def take(self, stage: str, act: Callable[[], object]) -> WritebackRecord | None:
         """The stage's record (station.engine.replay.Steps.take)."""
         return self.steps.take(WritebackStage(self.round, stage), act)
 
 
-def _outcome(final: Writeback) -> WritebackOutcome:
+def _outcome(final: WritebackRecord) -> WritebackOutcome:
     """What a round's final stage says of it, taken now or journaled before."""
     match final:
         case WritebackDone():

@@ -34,7 +34,7 @@ STANDS_MM = 1e-9
 _T_TOL = 1e-12
 _GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 
-Joints = Callable[[np.ndarray], np.ndarray]  # machine points (..., 3) → joints (..., 3)
+JointsOf = Callable[[np.ndarray], np.ndarray]  # machine points (..., 3) → joints (..., 3)
 
 
 def _lengths(curves: Curves) -> np.ndarray:
@@ -44,7 +44,7 @@ def _lengths(curves: Curves) -> np.ndarray:
     return np.hypot(flat, np.linalg.norm(curves.lin, axis=1))
 
 
-def turning_points(curves: Curves, offset: np.ndarray, joints: Joints) -> list[np.ndarray]:
+def turning_points(curves: Curves, offset: np.ndarray, joints: JointsOf) -> list[np.ndarray]:
     """Per motion, the parameters t in (0, 1) where a joint turns back, sorted. ``joints``
     gives the joints the machine needs at machine points (NaN where it has none: such a
     stretch shows no turn; the rewriting refuses it anyway). Every motion's samples are
@@ -77,7 +77,7 @@ def turning_points(curves: Curves, offset: np.ndarray, joints: Joints) -> list[n
     return [_merged(sorted(turns[where == k].tolist())) for k in range(len(curves))]
 
 
-def _golden(curves: Curves, offset: np.ndarray, joints: Joints, ci: np.ndarray,
+def _golden(curves: Curves, offset: np.ndarray, joints: JointsOf, ci: np.ndarray,
             lo: np.ndarray, hi: np.ndarray, joint: np.ndarray,
             sign: np.ndarray) -> np.ndarray:
     """Each turn's t: the extremum of q_joint (a maximum where ``sign`` > 0, it rose

@@ -57,7 +57,7 @@ class Modal:
 
 
 @dataclass(frozen=True)
-class Move:
+class ProgramMove:
     """A block's motion, in the program's work coordinates (mm). ``start`` None: the
     first motion, from where the program does not say. ``removed``: the words
     compensate writes anew (the motion word, the axis words, the arc's words)."""
@@ -80,7 +80,7 @@ class Move:
         return self.code in (CW, CCW)
 
 
-def interpret(block: Block, state: Modal) -> Move | None:
+def interpret(block: Block, state: Modal) -> ProgramMove | None:
     """The motion ``block`` commands (None: none), ``state`` updated as the controller
     would be after it; GcodeError for what compensate refuses."""
     _check_letters(block)
@@ -169,7 +169,7 @@ def _arc_without_axes(block: Block, state: Modal, words: list[Word]) -> None:
 
 
 def _motion(block: Block, state: Modal, axes: dict[str, Word], arc_words: list[Word],
-            motion_word: Word | None, g: dict[str, Word]) -> Move:
+            motion_word: Word | None, g: dict[str, Word]) -> ProgramMove:
     code = state.motion
     assert code is not None
     label = motion_word.text if motion_word is not None else next(iter(axes.values())).text
@@ -185,8 +185,8 @@ def _motion(block: Block, state: Modal, axes: dict[str, Word], arc_words: list[W
             raise GcodeError(block.lineno, arc_words[0].text,
                              f"{arc_words[0].letter} with no G2/G3 to use it")
         state.position = end
-        return Move(block.lineno, code, start, end, state.plane, state.inches, state.absolute,
-                    tuple(removed), label=label)
+        return ProgramMove(block.lineno, code, start, end, state.plane, state.inches,
+                           state.absolute, tuple(removed), label=label)
     move = _arc(block, state, axes, arc_words, g, label, start, end, removed)
     state.position = end
     return move
@@ -210,7 +210,7 @@ def _target(block: Block, state: Modal, axes: dict[str, Word], label: str) -> np
 
 def _arc(block: Block, state: Modal, axes: dict[str, Word], arc_words: list[Word],
          g: dict[str, Word], label: str, start: np.ndarray | None, end: np.ndarray,
-         removed: list[Word]) -> Move:
+         removed: list[Word]) -> ProgramMove:
     """G2/G3: the centre (I, J, K) or radius (R) and the turns (P)."""
     assert start is not None  # the first motion is a G0
     assert state.motion is not None  # G2 or G3 (_motion)
@@ -232,7 +232,7 @@ def _arc(block: Block, state: Modal, axes: dict[str, Word], arc_words: list[Word
                              f"the {named('G', state.plane)} plane")
     turns = _turns(block, g)
     removed = [*removed, *arc_words, *block.of("P")]
-    move = functools.partial(Move, lineno=block.lineno, code=state.motion, start=start,
+    move = functools.partial(ProgramMove, lineno=block.lineno, code=state.motion, start=start,
                              end=end, plane=state.plane, inches=state.inches,
                              absolute=state.absolute, removed=tuple(removed), turns=turns,
                              label=label)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.gcode.codes import named
-from station.gcode.modal import CCW, PLANES, Move
+from station.gcode.modal import CCW, PLANES, ProgramMove
 from station.gcode.words import GcodeError
 
 # LinuxCNC's arc tolerances (interp_internal.hh), in mm here, by the program's units
@@ -64,7 +64,7 @@ class Curves:
         return np.where((t == 1.0)[..., None], self.end[ci][:, None, :], p)
 
 
-def curves_of(moves: list[Move]) -> Curves:
+def curves_of(moves: list[ProgramMove]) -> Curves:
     """The curves of ``moves``; the first motion (no start) is the point it goes to.
     GcodeError for an arc LinuxCNC would refuse."""
     rows = [_line(m) if not m.arc else _arc(m) for m in moves]
@@ -75,13 +75,13 @@ def curves_of(moves: list[Move]) -> Curves:
     return Curves(*(np.array(c, dtype=float) for c in cols))
 
 
-def _line(m: Move) -> tuple:
+def _line(m: ProgramMove) -> tuple:
     start = m.end if m.start is None else m.start
     zero = np.zeros(3)
     return start, zero, zero, 0.0, 0.0, 0.0, m.end - start, start, m.end
 
 
-def _arc(m: Move) -> tuple:
+def _arc(m: ProgramMove) -> tuple:
     assert m.start is not None
     first, second, normal = PLANES[m.plane]
     centre = _centre(m) if m.radius is not None else m.centre
@@ -109,7 +109,7 @@ def _arc(m: Move) -> tuple:
     return c3, e1, e2, r0, r1, theta, lin, m.start, m.end
 
 
-def _centre(m: Move) -> np.ndarray:
+def _centre(m: ProgramMove) -> np.ndarray:
     """The centre of an R-format arc (LinuxCNC's arc_data_r): on the chord's
     perpendicular, left of the chord for G3 with R > 0 or G2 with R < 0."""
     assert m.start is not None and m.radius is not None
@@ -133,7 +133,7 @@ def _centre(m: Move) -> np.ndarray:
     return centre
 
 
-def _check_radii(m: Move, r0: float, r1: float) -> None:
+def _check_radii(m: ProgramMove, r0: float, r1: float) -> None:
     if r0 < _RADIUS_TOL or r1 < _RADIUS_TOL:
         raise GcodeError(m.lineno, m.label, "an arc of zero radius")
     err = abs(r0 - r1)
@@ -144,5 +144,5 @@ def _check_radii(m: Move, r0: float, r1: float) -> None:
                          f"LinuxCNC accepts in the {named('G', m.plane)} plane")
 
 
-def _unit(m: Move) -> float:
+def _unit(m: ProgramMove) -> float:
     return 25.4 if m.inches else 1.0

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.gcode.codes import STOPS
-from station.gcode.modal import MM_PER_INCH, RAPID, Modal, Move, interpret
+from station.gcode.modal import MM_PER_INCH, RAPID, Modal, ProgramMove, interpret
 from station.gcode.paths import curves_of
-from station.gcode.subdivide import Grid, Limits, Machine, subdivide
+from station.gcode.subdivide import CompensatedMachine, JointLimits, WriteGrid, subdivide
 from station.gcode.words import Block, Word, tokenize
 
 #: The header's first words: a program that holds them was written by compensate.
@@ -40,8 +40,8 @@ MARK = "written by orthocal compensate"
 class Job:
     """What a program is compensated for and how."""
 
-    machine: Machine
-    limits: Limits
+    machine: CompensatedMachine
+    limits: JointLimits
     tolerance: float  # mm
     work_offset: np.ndarray  # mm, the program's origin in machine coordinates
     describe: str  # the run, the machine and the model, for the header
@@ -49,7 +49,7 @@ class Job:
 
 
 @dataclass(frozen=True)
-class Compensated:
+class CompensatedProgram:
     text: str
     motions: int
     segments: int
@@ -61,13 +61,13 @@ def decimals(tolerance: float, inches: bool) -> int:
     return max(4 if inches else 3, math.ceil(-math.log10(step) - 1e-9))
 
 
-def compensate(text: str, name: str, job: Job) -> Compensated:
+def compensate(text: str, name: str, job: Job) -> CompensatedProgram:
     """``text`` (the program ``name``) rewritten for ``job``; GcodeError (one line:
     line, word, why) for what cannot be compensated safely."""
     lines = text.splitlines()
     state = Modal()
     blocks: list[Block] = []
-    moves: list[Move] = []
+    moves: list[ProgramMove] = []
     for lineno, line in enumerate(lines, start=1):
         block = tokenize(line, lineno)
         blocks.append(block)
@@ -79,19 +79,19 @@ def compensate(text: str, name: str, job: Job) -> Compensated:
     newline = "\r\n" if "\r\n" in text else "\n"
     out = _with_header(body, _header(name, job, _style(blocks)))
     segments = sum(len(p) for p in points)
-    return Compensated(newline.join(out) + newline, len(moves), segments)
+    return CompensatedProgram(newline.join(out) + newline, len(moves), segments)
 
 
-def _points(moves: list[Move], job: Job) -> list[np.ndarray]:
+def _points(moves: list[ProgramMove], job: Job) -> list[np.ndarray]:
     """Per motion the points to send, in its units, rounded as written."""
     scale = np.array([MM_PER_INCH if m.inches else 1.0 for m in moves])
     factor = np.array([10.0 ** decimals(job.tolerance, m.inches) for m in moves])
-    grid = Grid(np.asarray(job.work_offset, dtype=float), scale, factor)
+    grid = WriteGrid(np.asarray(job.work_offset, dtype=float), scale, factor)
     labels = [(m.lineno, m.label) for m in moves]
     return subdivide(curves_of(moves), grid, job.machine, job.limits, job.tolerance, labels)
 
 
-def _emit(blocks: list[Block], moves: list[Move], points: list[np.ndarray],
+def _emit(blocks: list[Block], moves: list[ProgramMove], points: list[np.ndarray],
           tolerance: float) -> list[str]:
     """The program's lines, each motion's block replaced by its points."""
     by_line = {m.lineno: (m, p) for m, p in zip(moves, points, strict=True)}
@@ -109,7 +109,7 @@ def _emit(blocks: list[Block], moves: list[Move], points: list[np.ndarray],
     return out
 
 
-def _coordinates(move: Move, pts: np.ndarray, position: np.ndarray | None,
+def _coordinates(move: ProgramMove, pts: np.ndarray, position: np.ndarray | None,
                  d: int) -> tuple[np.ndarray, np.ndarray]:
     """The numbers to write (absolute, or G91 increments between the rounded points)
     and where the controller then is (mm)."""
@@ -122,7 +122,7 @@ def _coordinates(move: Move, pts: np.ndarray, position: np.ndarray | None,
     return steps, (position / unit + steps.sum(axis=0)) * unit
 
 
-def _motion_lines(block: Block, move: Move, coords: np.ndarray, d: int) -> list[str]:
+def _motion_lines(block: Block, move: ProgramMove, coords: np.ndarray, d: int) -> list[str]:
     """The block's first line (its other words kept as written) and one line per
     further point; stopping M codes on the last."""
     word = "G0" if move.code == RAPID else "G1"

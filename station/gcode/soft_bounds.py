@@ -14,14 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from station.gcode.subdivide import Limits
+from station.gcode.subdivide import JointLimits
 
 
 class LimitsError(ValueError):
     """A run directory's limits that cannot be read, in one line naming the file."""
 
 
-def run_limits(run_dir: Path) -> Limits:
+def run_limits(run_dir: Path) -> JointLimits:
     """The soft limits of the run in ``run_dir`` (±inf where there are none)."""
     plan = run_dir / "plan.json"
     if plan.exists():
@@ -30,15 +30,15 @@ def run_limits(run_dir: Path) -> Limits:
             lower = _bounds(soft.get("lower"), plan, "soft_limits.lower", -math.inf)
             upper = _bounds(soft.get("upper"), plan, "soft_limits.upper", math.inf)
             if np.isfinite(lower).any() or np.isfinite(upper).any():
-                return Limits(lower, upper, "plan.json")
+                return JointLimits(lower, upper, "plan.json")
     config = run_dir / "config.toml"
     if config.exists():
         controller = _load_toml(config).get("controller") or {}
         lower = _bounds(controller.get("soft_min"), config, "controller.soft_min", -math.inf)
         upper = _bounds(controller.get("soft_max"), config, "controller.soft_max", math.inf)
         if np.isfinite(lower).any() or np.isfinite(upper).any():
-            return Limits(lower, upper, "config.toml [controller]")
-    return Limits(np.full(3, -math.inf), np.full(3, math.inf),
+            return JointLimits(lower, upper, "config.toml [controller]")
+    return JointLimits(np.full(3, -math.inf), np.full(3, math.inf),
                   "neither plan.json nor config.toml of the run holds any")
 
 

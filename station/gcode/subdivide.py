@@ -22,7 +22,7 @@ The method, adaptive bisection with a conservative chord check:
    point of the programmed path beyond a leg's reach, or a chord the nominal
    kinematics cannot follow, is refused naming its line.
 
-With the joints' tables (``Machine.joints``, docs/design.md "Joint tables in the
+With the joints' tables (``CompensatedMachine.joints``, docs/design.md "Joint tables in the
 controller") the motions are first cut where a joint turns back
 (station.gcode.directions), so that on each piece every joint moves one way, and each
 piece carries its joints' directions. A point is then sent where the joints counted
@@ -65,7 +65,7 @@ _FIRST_SAGITTA = 0.9
 
 
 @dataclass(frozen=True)
-class Machine:
+class CompensatedMachine:
     """The identified machine a program is compensated for: its nominal geometry and
     θ_c, the 12-vector of PARAM_NAMES a nominal controller is not told; ``joints``:
     each joint's table in the joints the controller commands (None: exact joints)."""
@@ -96,7 +96,7 @@ class Machine:
 
 
 @dataclass(frozen=True)
-class Limits:
+class JointLimits:
     """The controller's soft limits of joint ρ (mm; ±inf where none), and whence."""
 
     lower: np.ndarray
@@ -105,7 +105,7 @@ class Limits:
 
 
 @dataclass(frozen=True)
-class Grid:
+class WriteGrid:
     """How points are written: the work offset (mm, where the program's origin sits
     in machine coordinates) and, per motion, mm per program unit and 10^decimals."""
 
@@ -130,7 +130,7 @@ class _Pending:
     dirs: np.ndarray  # (m, 3): each joint's direction on the segment (0: no tables)
 
 
-def subdivide(curves: Curves, grid: Grid, machine: Machine, limits: Limits,
+def subdivide(curves: Curves, grid: WriteGrid, machine: CompensatedMachine, limits: JointLimits,
               tolerance: float, labels: Sequence[tuple[int, str]]) -> list[np.ndarray]:
     """Per motion, the points to send (program units, rounded; the segments' ends in
     order, its start not repeated; where a joint turns back, the turning point once
@@ -185,7 +185,8 @@ def _initial(curves: Curves, tolerance: float) -> _Pending:
                     np.zeros((len(ci), 3)))
 
 
-def _directed(pending: _Pending, curves: Curves, grid: Grid, machine: Machine) -> _Pending:
+def _directed(pending: _Pending, curves: Curves, grid: WriteGrid,
+              machine: CompensatedMachine) -> _Pending:
     """The first cut cut again where a joint turns back, each piece with its joints'
     directions (station.gcode.directions)."""
     turns = turning_points(curves, grid.offset,
@@ -222,8 +223,8 @@ def _halve(bad: _Pending, mask: np.ndarray, labels: Sequence[tuple[int, str]],
                     np.concatenate([mid, tb]), np.concatenate([dirs, dirs]))
 
 
-def _judge(curves: Curves, grid: Grid, machine: Machine, limits: Limits, tolerance: float,
-           labels: Sequence[tuple[int, str]], ci: np.ndarray, ta: np.ndarray,
+def _judge(curves: Curves, grid: WriteGrid, machine: CompensatedMachine, limits: JointLimits,
+           tolerance: float, labels: Sequence[tuple[int, str]], ci: np.ndarray, ta: np.ndarray,
            tb: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Which segments keep the tool within the tolerance (and, those kept, within the
     soft limits), and each segment's start and end points as written (m, 2, 3)."""
@@ -250,12 +251,12 @@ def _judge(curves: Curves, grid: Grid, machine: Machine, limits: Limits, toleran
     return ok, written
 
 
-def _bounds(machine: Machine, limits: Limits) -> Bounds:
+def _bounds(machine: CompensatedMachine, limits: JointLimits) -> Bounds:
     return Bounds(machine.geometry, machine.theta_c, limits.lower, limits.upper,
                   limits.source)
 
 
-def _check_tables(ends: np.ndarray, ci: np.ndarray, machine: Machine,
+def _check_tables(ends: np.ndarray, ci: np.ndarray, machine: CompensatedMachine,
                   labels: Sequence[tuple[int, str]]) -> None:
     """GcodeError for the first segment end where a joint would stand outside its
     table: its error there is not known (a table is never extrapolated). The ends hold
@@ -278,7 +279,7 @@ def _check_tables(ends: np.ndarray, ci: np.ndarray, machine: Machine,
                              "test): its error there is not known")
 
 
-def _refuse_point(curves: Curves, grid: Grid, bounds: Bounds,
+def _refuse_point(curves: Curves, grid: WriteGrid, bounds: Bounds,
                   labels: Sequence[tuple[int, str]], ci: int, ends: np.ndarray) -> None:
     """A segment with an end the identified machine cannot reach: the program's first
     point out of reach named (station.gcode.reach), not the segment's start."""
@@ -288,7 +289,7 @@ def _refuse_point(curves: Curves, grid: Grid, bounds: Bounds,
                   "the path leaves the workspace, beyond a leg's reach,")
 
 
-def _check_limits(curves: Curves, grid: Grid, bounds: Bounds, rho: np.ndarray,
+def _check_limits(curves: Curves, grid: WriteGrid, bounds: Bounds, rho: np.ndarray,
                   ci: np.ndarray, wanted: np.ndarray,
                   labels: Sequence[tuple[int, str]]) -> None:
     """GcodeError for the first point out of reach where a segment's joints leave the

@@ -29,10 +29,10 @@ nominal bound + signal, or the measured travel itself, comes within the margin.
 A stop is a second line, not the end: the trip
 (:class:`station.engine.guard_monitor.PlungerGuardTrip`) carries what the sequencer
 needs to re-plan from where the machine stands
-(:meth:`~station.engine.guard_monitor.PlungerGuard.signal_envelope`): more waypoints,
+(:meth:`~station.engine.guard_monitor.GuardMonitor.signal_envelope`): more waypoints,
 a lower speed, the cycle's readings taken again. Later cycles route their moves with
 the signal the first cycle measured at each stop
-(:meth:`~station.engine.guard_monitor.PlungerGuard.route_signal`).
+(:meth:`~station.engine.guard_monitor.GuardMonitor.route_signal`).
 
 Here the prediction, pure: what the guard tracks per gauge and per move, the
 signal's slope, the travel still ahead, what later cycles will do. The monitor
@@ -55,7 +55,7 @@ MIN_PROGRESS = 0.15
 
 
 @dataclass
-class Gauge:
+class GuardedGauge:
     name: str
     direction: str
     low: float  # −preload
@@ -82,7 +82,7 @@ class MoveRecord:
     off_route: bool = False
 
 
-def signal_slope(g: Gauge) -> float:
+def signal_slope(g: GuardedGauge) -> float:
     """d(signal)/d(progress) from the samples once enough of the move is done
     (a reading's noise and the sampling skew grow by 1/progress); the median
     of the samples' slopes, so one knocked reading does not swing it. Before

@@ -52,11 +52,11 @@ class NotACalibration(ValueError):
     """A run directory that holds no identified machine, in one line naming the file."""
 
 
-class _Closed(BaseModel):
+class _Frozen(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-class GeometryValue(_Closed):
+class GeometryValue(_Frozen):
     """One kinematic parameter as the controller is told it."""
 
     name: str
@@ -69,7 +69,7 @@ class GeometryValue(_Closed):
     note: str
 
 
-class IdentifiedMachine(_Closed):
+class IdentifiedMachine(_Frozen):
     """The machine a run identified, for a controller's kinematics or ``orthocal
     compensate``. ``values`` in PARAM_NAMES order; ``estimate`` the run's best
     value of every parameter (a pooled tilt the model test did not keep included),

@@ -47,7 +47,7 @@ class Header(_Record):
     argv: list[str] | None = None
 
 
-class Setup(_Record):
+class SetupRecord(_Record):
     """The operator mounted ``indicators`` (name → direction) on ``leg``, at the
     fraction ``at`` of its length from the carriage's joint (absent: the middle)."""
 
@@ -123,7 +123,7 @@ class Identification(_Fit):
     type: Literal["identification"]
 
 
-class Verification(_Fit):
+class VerificationRecord(_Fit):
     """A verification round's identification and its verdict."""
 
     type: Literal["verification"]
@@ -134,7 +134,7 @@ class Verification(_Fit):
     verdict: str | None = None
 
 
-class Writeback(_Record):
+class WritebackRecord(_Record):
     """One stage of a write-back round (its kinds below, each tagged by ``stage``);
     ``round``: k of the closed loop (absent before the closed loop: round 1)."""
 
@@ -143,7 +143,7 @@ class Writeback(_Record):
     round: int | None = None
 
 
-class WritebackBackup(Writeback):
+class WritebackBackup(WritebackRecord):
     """The offsets the round starts from (round 1 also saves them to ``file``)."""
 
     stage: Literal["backup"]
@@ -151,7 +151,7 @@ class WritebackBackup(Writeback):
     file: str | None = Field(None, description="the backup file")
 
 
-class WritebackIntent(Writeback):
+class WritebackIntent(WritebackRecord):
     """The offsets the operator confirmed, journaled before any is written."""
 
     stage: Literal["intent"]
@@ -159,7 +159,7 @@ class WritebackIntent(Writeback):
     written: Offsets
 
 
-class WritebackDone(Writeback):
+class WritebackDone(WritebackRecord):
     """Written, and ``written`` as read back."""
 
     stage: Literal["done"]
@@ -167,14 +167,14 @@ class WritebackDone(Writeback):
     written: Offsets
 
 
-class WritebackSkipped(Writeback):
+class WritebackSkipped(WritebackRecord):
     """Nothing to write (the model identifies no joint offsets)."""
 
     stage: Literal["skipped"]
     reason: str
 
 
-class WritebackUnchanged(Writeback):
+class WritebackUnchanged(WritebackRecord):
     """Nothing written: the correction refused (beyond max_abs_offset_mm) or declined."""
 
     stage: Literal["refused", "declined"]
@@ -182,7 +182,7 @@ class WritebackUnchanged(Writeback):
     before: Offsets
 
 
-class WritebackFailed(Writeback):
+class WritebackFailed(WritebackRecord):
     """The write failed: ``failed-restored``, the backup written back; ``failed``, that
     failed too (the offsets are uncertain)."""
 
@@ -191,7 +191,7 @@ class WritebackFailed(Writeback):
     before: Offsets
 
 
-class WritebackInterrupted(Writeback):
+class WritebackInterrupted(WritebackRecord):
     """Ctrl-C during the write: the backup written back, the intent kept for resume."""
 
     stage: Literal["interrupted-restored"]
@@ -216,7 +216,7 @@ class Finished(_Record):
     message: str | None = None
 
 
-class Stopped(_Record):
+class StoppedRecord(_Record):
     """The run stopped on Ctrl-C (``aborted``) or a fault."""
 
     type: Literal["aborted", "fault"]
@@ -331,8 +331,8 @@ AnyRollback = Annotated[RollbackIntent | RollbackDone, Field(discriminator="stag
 
 
 JournalRecord = Annotated[
-    Header | Setup | Reading | Outlier | Cycle | SetupDone | Repeat | Identification
-    | Verification | AnyWriteback | Event | Finished | Stopped | Resumed | Homed
+    Header | SetupRecord | Reading | Outlier | Cycle | SetupDone | Repeat | Identification
+    | VerificationRecord | AnyWriteback | Event | Finished | StoppedRecord | Resumed | Homed
     | ReferenceCheck | SetupRedo | AnyRollback | JointMounted | JointFace | JointUnmounted
     | JointTested,
     Field(discriminator="type"),

@@ -10,29 +10,28 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-Joints = tuple[float, float, float]  # x, y, z, mm
+from station.record.result_base import Closed
 
-
-class _Closed(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+JointTriple = tuple[float, float, float]  # x, y, z, mm
 
 
-class SoftLimits(_Closed):
+
+class SoftLimits(Closed):
     lower: list[float]
     upper: list[float]
     source: str | None = Field(None, description="whose limits: the controller's, the config's")
 
 
-class SetupPostures(_Closed):
+class SetupPostures(Closed):
     index: int
     leg: str
     indicators: dict[str, str] = Field(description="gauge → its direction (y, -z, …)")
-    postures: dict[str, Joints] = Field(description='posture ("0", "+", "-", "+30") → joints')
+    postures: dict[str, JointTriple] = Field(description='posture ("0", "+", "-", "+30") → joints')
 
 
-class PromptStep(_Closed):
+class PromptStep(Closed):
     """The operator mounts the setup's gauges."""
 
     kind: Literal["prompt"]
@@ -42,20 +41,20 @@ class PromptStep(_Closed):
     at: float | None = Field(None, description="the gauges' place along the leg")
 
 
-class MoveStep(_Closed):
+class MoveStep(Closed):
     kind: Literal["move"]
-    targets: Joints
+    targets: JointTriple
     label: str
-    approach: Joints | None = Field(None, description="where the last short leg starts")
-    via: list[Joints] | None = Field(None, description="the waypoints the check put on it")
+    approach: JointTriple | None = Field(None, description="where the last short leg starts")
+    via: list[JointTriple] | None = Field(None, description="the waypoints the check put on it")
 
 
-class SettleStep(_Closed):
+class SettleStep(Closed):
     kind: Literal["settle"]
     seconds: float
 
 
-class ReadStep(_Closed):
+class ReadStep(Closed):
     kind: Literal["read"]
     stop: str
     setup: int
@@ -65,7 +64,7 @@ class ReadStep(_Closed):
     n: int
 
 
-class CheckpointStep(_Closed):
+class CheckpointStep(Closed):
     kind: Literal["checkpoint"]
     setup: int
     cycle: int
@@ -76,7 +75,7 @@ PlanStep = Annotated[PromptStep | MoveStep | SettleStep | ReadStep | CheckpointS
                      Field(discriminator="kind")]
 
 
-class JointTestPlanRecord(_Closed):
+class JointTestPlanRecord(Closed):
     """One joint's own test as planned and checked (station.plan.joint_test_plan)."""
 
     axis: str
@@ -95,13 +94,13 @@ class JointTestPlanRecord(_Closed):
     window_mm: tuple[float, float] | None = Field(description="the preload window")
 
 
-class StationTestPlanRecord(_Closed):
+class StationTestPlanRecord(Closed):
     """The station's own test of the joints, before the first measurement."""
 
     joints: list[JointTestPlanRecord]
 
 
-class PlanRecord(_Closed):
+class PlanRecord(Closed):
     """The plan every move of the run was checked against."""
 
     cycles: int

@@ -7,22 +7,20 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-Axis3 = dict[str, float]  # {"x": …, "y": …, "z": …}, mm
+from station.record.result_base import Closed
 
-
-class _Closed(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+AxisValues = dict[str, float]  # {"x": …, "y": …, "z": …}, mm
 
 
-class ModelGeometry(_Closed):
+class ModelGeometry(Closed):
     leg_length_mm: float
     rho_min_mm: float
     rho_max_mm: float
 
 
-class Conventions(_Closed):
+class Conventions(Closed):
     model: str = Field(description="the kinematic model the parameters belong to")
     axes: str = Field(description="how the tilts set the axis directions")
     gaps: str = Field(description="where each axis's line runs: the gaps' convention")
@@ -30,19 +28,19 @@ class Conventions(_Closed):
     parameters: str = Field(description="when the parameters hold: before or after writing")
 
 
-class Units(_Closed):
+class Units(Closed):
     drho: Literal["mm"]
     dL: Literal["mm"]
     tilt: Literal["mrad"]
     gap: Literal["mm"]
 
 
-class Covariance(_Closed):
+class Covariance(Closed):
     names: list[str]
     matrix: list[list[float]]
 
 
-class MachineModel(_Closed):
+class MachineModel(Closed):
     """model.json, the identified machine (PARAM_NAMES: Δρ, ΔL, tilts, gaps)."""
 
     format: Literal["orthocal machine model 1"]
@@ -57,5 +55,5 @@ class MachineModel(_Closed):
     covariance: Covariance
     std_errors_dof: float | None
     drho_now: dict[str, float] = Field(description="Δρ once offsets_written act, mm")
-    offsets_before: Axis3 | None
-    offsets_written: Axis3 | None
+    offsets_before: AxisValues | None
+    offsets_written: AxisValues | None

@@ -12,6 +12,10 @@ from pydantic import Field
 
 from station.record.result_base import Closed, Interval
 
+#: The routes that put the identified geometry into the controller, as the advice and
+#: the first screen name them.
+CONTROLLER_ROUTES = "orthocal export --kinematics, or orthocal compensate"
+
 #: The units a quantity is stated in (its size decides how a view prints it).
 Unit = Literal["mm", "mrad", "mm/m", "µm/m"]
 

@@ -35,15 +35,15 @@ from station.record.journal import (
     Repeat,
     Resumed,
     RollbackDone,
-    Setup,
     SetupDone,
+    SetupRecord,
     SetupRedo,
-    Stopped,
-    Verification,
-    Writeback,
+    StoppedRecord,
+    VerificationRecord,
     WritebackDone,
     WritebackFailed,
     WritebackInterrupted,
+    WritebackRecord,
 )
 from station.record.journal_events import (
     EventBody,
@@ -56,7 +56,7 @@ from station.record.journal_events import (
 )
 from station.record.result_sections import Recovery
 
-Fit = Identification | Verification
+Fit = Identification | VerificationRecord
 
 
 @dataclass
@@ -112,7 +112,7 @@ class RunState:
     setups_done: dict[tuple[str, int], SetupDone] = field(default_factory=dict)
     repeats: dict[tuple[str, int, int], Repeat] = field(default_factory=dict)
     fits: dict[int, Fit] = field(default_factory=dict)  # round (0: the measurement's)
-    writebacks: dict[int, dict[str, Writeback]] = field(default_factory=dict)  # round, stage
+    writebacks: dict[int, dict[str, WritebackRecord]] = field(default_factory=dict)  # round, stage
     live: LiveSetup | None = None
     # What the journal's own write-backs and rollbacks leave the offsets at (x, y, z),
     # None while it has none.
@@ -160,7 +160,7 @@ class RunState:
                 self._ends(rec)
             case Resumed():
                 self.resumes += 1
-            case Setup() | Stopped():
+            case SetupRecord() | StoppedRecord():
                 self._mounted(rec)
             case Reading():
                 if self.live is not None and rec.stop.startswith(self.live.prefix):
@@ -171,9 +171,9 @@ class RunState:
                 self._ended(rec)
             case Repeat() if rec.repeat is not None:
                 self.repeats[(rec.phase, rec.setup, rec.repeat)] = rec
-            case Identification() | Verification():
+            case Identification() | VerificationRecord():
                 self._fit(rec)
-            case Writeback():
+            case WritebackRecord():
                 self._writeback(rec)
             case RollbackDone():
                 self.offsets_held = [float(rec.restored[a]) for a in AXES]
@@ -204,8 +204,8 @@ class RunState:
         else:
             self.finished = rec
 
-    def _mounted(self, rec: Setup | Stopped) -> None:
-        if isinstance(rec, Stopped):  # a fault's or Ctrl-C's: what was on is mounted again
+    def _mounted(self, rec: SetupRecord | StoppedRecord) -> None:
+        if isinstance(rec, StoppedRecord):  # a fault's or Ctrl-C's: what was on is mounted again
             self.on = None
             return
         self.mountings += 1
@@ -226,10 +226,10 @@ class RunState:
 
     def _fit(self, rec: Fit) -> None:
         # a verification's round n; the measurement's identification is round 0
-        n = rec.round if isinstance(rec, Verification) else 0
+        n = rec.round if isinstance(rec, VerificationRecord) else 0
         self.fits[1 if n is None else n] = rec
 
-    def _writeback(self, rec: Writeback) -> None:
+    def _writeback(self, rec: WritebackRecord) -> None:
         # records from before the closed loop carry no round: round 1
         self.writebacks.setdefault(1 if rec.round is None else rec.round, {})[rec.stage] = rec
         # the stages after which the station holds the offsets: those written, or the

@@ -26,7 +26,7 @@ from station.record.quantity_text import figure, plus_minus
 from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy
 from station.record.result_sections import UncertaintyBudget
-from station.record.result_statement import Quantity
+from station.record.result_statement import CONTROLLER_ROUTES, Quantity
 from station.report import budget_table as budget
 from station.report import in_controller, rounds, tool
 from station.report.format import (
@@ -54,8 +54,6 @@ REPAIR_ABOVE_MM = 0.02
 #: What to do once a run's offsets were rolled back (the record's advice after it).
 ROLLED_BACK_TODO = ("calibrate the machine again (orthocal run): the offsets this run "
                     "wrote were rolled back")
-#: The routes that put the identified geometry into the controller.
-ROUTES = "orthocal export --kinematics, or orthocal compensate"
 
 
 @dataclass(frozen=True)
@@ -328,7 +326,7 @@ def _leaning(acc: Accuracy) -> list[str]:
                 if f"({sq.tilt})" in a and "offsets cannot fix it" in a]
         out += said or [f"the motions {sq.pair.upper()} are out of square beyond the decision "
                         f"rule, an axis leans: offsets cannot fix it; shim its rail or put "
-                        f"the geometry into the controller ({ROUTES})"]
+                        f"the geometry into the controller ({CONTROLLER_ROUTES})"]
     return out
 
 
@@ -340,14 +338,14 @@ def _geometry_actions(acc: Accuracy) -> list[str]:
     gaps = [a.split(" (gap_")[1][:2].upper() for a in acc.gap_advice or []
             if "offsets cannot fix it" in a and " (gap_" in a]
     if gaps:
-        route = (f"put the geometry into the controller ({ROUTES}) or move a rail across "
-                 "by the gap" if gains is not False else
+        route = (f"put the geometry into the controller ({CONTROLLER_ROUTES}) or move a "
+                 "rail across by the gap" if gains is not False else
                  "move a rail across by the gap (the geometry in the controller does not "
                  "clearly lower the tool's error at 95 %)")
         out.append(f"the axes' gaps {', '.join(gaps)} stand out of their noise and offsets "
                    f"cannot fix them: {route}")
     elif gains:
-        out.append(f"put the identified geometry into the controller ({ROUTES}): it "
+        out.append(f"put the identified geometry into the controller ({CONTROLLER_ROUTES}): it "
                    "clearly lowers the tool's error")
     return out
 

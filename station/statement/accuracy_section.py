@@ -14,7 +14,7 @@ from orthocal.numbers import finite
 from orthocal.tool_interval import assumes
 from station.analysis import accuracy_statement as acc_
 from station.analysis import run_budget
-from station.analysis.compensated import ROUTES, grouped, nominal_reasons
+from station.analysis.compensated import ROUTES_IN_FULL, grouped, nominal_reasons
 from station.record import result_accuracy as rec
 from station.record.model import MachineModel
 from station.record.result_statement import Quantity
@@ -69,7 +69,7 @@ def _compensated(rounds: Rounds, tool: ToolFigures) -> rec.Compensated:
         rms_interval_95_mm=tool.compensated.rms.interval,
         max_interval_95_mm=tool.compensated.max.interval,
         offsets_only_rms_mm=tool.after.rms.value, offsets_only_max_mm=tool.after.max.value,
-        told=told, nominal=nominal, routes=list(ROUTES), method=tool.method,
+        told=told, nominal=nominal, routes=list(ROUTES_IN_FULL), method=tool.method,
         assumes=["the controller is told Δρ as the rounds joined left it"
                  + (f", and {', '.join(laid)} as the run identified them" if laid else ""),
                  *(f"{', '.join(names)}: {why}" for why, names in grouped(nominal).items()

@@ -12,11 +12,9 @@ from collections.abc import Mapping
 from station.analysis.run_budget import inputs
 from station.config import StationConfig
 from station.record.quantity_text import plus_minus, um
-from station.record.result_statement import AdviceItem, Quantity
+from station.record.result_statement import CONTROLLER_ROUTES, AdviceItem, Quantity
 from station.statement import decisions as rule
 
-#: The routes that put the identified geometry into the controller.
-ROUTES = "orthocal export --kinematics, or orthocal compensate"
 _LEANS = {"tilt_yx": ("y", "x", "xy"), "tilt_zx": ("z", "x", "xz"),
           "tilt_zy": ("z", "y", "yz")}
 _PASSES = {"gap_xy": ("x", "y", "z"), "gap_xz": ("x", "z", "y"), "gap_yz": ("y", "z", "x")}
@@ -63,7 +61,7 @@ def _controller(q: Mapping[str, Quantity]) -> list[AdviceItem]:
         return []
     return [AdviceItem(
         id="controller", rests_on=[a.name, c.name],
-        text=(f"put the identified geometry into the controller ({ROUTES}): the tool's "
+        text=(f"put the identified geometry into the controller ({CONTROLLER_ROUTES}): the tool's "
               f"RMS error falls from {um(a.value)} to {um(c.value)} µm"))]
 
 

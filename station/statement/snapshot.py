@@ -13,7 +13,7 @@ import numpy as np
 from orthocal import Identification
 from orthocal.lost_motion import Reversal
 from station.analysis import accuracy_statement as accuracy
-from station.analysis.verdict import Joined
+from station.analysis.verdict import JoinedRounds
 from station.config import StationConfig
 from station.record.result import Iteration
 
@@ -42,7 +42,7 @@ class Rounds:
 
     config: StationConfig
     idents: tuple[Identification, ...]
-    joined: tuple[Joined, ...]
+    joined: tuple[JoinedRounds, ...]
     iterations: tuple[Iteration, ...]
     layout_rounds: tuple[accuracy.RoundLayout, ...]
     layout_fits: Mapping[str, Identification]

@@ -13,7 +13,7 @@ from builders import journal_header
 
 import station.record.journal_file as journal_mod
 from station.errors import BadInput
-from station.record.journal import Header, Reading, Setup
+from station.record.journal import Header, Reading, SetupRecord
 from station.record.journal_file import Journal, read_journal, read_records
 from station.record.state import RunState
 
@@ -54,7 +54,7 @@ def test_the_state_saved_is_the_state_read_back(tmp_path: Path) -> None:
                   "before": {"x": 0.0, "y": 0.0, "z": 0.0}})
         saved = j.state
     records = read_records(path)
-    assert [type(r) for r in records[:3]] == [Header, Setup, Reading]  # each its type
+    assert [type(r) for r in records[:3]] == [Header, SetupRecord, Reading]  # each its type
     state = RunState.of(records)
     assert state == saved  # folded as saved, and folded again from the file: the same
     assert state.header is not None and state.header.config.indicators[1].name == "B"

@@ -18,7 +18,7 @@ from drivers.sim.pty_gauges import SimIndicator
 from station import report
 from station.commands import run as cmd_run
 from station.config import parse_config
-from station.engine.guard_monitor import PlungerGuard, PlungerGuardStop, PlungerGuardTrip
+from station.engine.guard_monitor import GuardMonitor, PlungerGuardStop, PlungerGuardTrip
 from station.errors import RunFailed
 from station.plan.checker import MotionChecker
 from station.plan.steps import build_plan
@@ -103,7 +103,7 @@ def test_guard_leaves_a_normal_run_alone(tmp_path: Path, capsys) -> None:
             assert -6.25 + 0.2 < lo <= hi < 6.25 - 0.2
 
 
-def _guard(preload: float, journal: list[dict[str, Any]]) -> tuple[PlungerGuard, Any]:
+def _guard(preload: float, journal: list[dict[str, Any]]) -> tuple[GuardMonitor, Any]:
     data = {"indicators": [{"name": "A", "port": "/dev/a", "preload_mm": preload},
                            {"name": "B", "port": "/dev/b"}],
             "setups": [{"leg": "x", "indicators": {"A": "y", "B": "z"}}],
@@ -112,14 +112,14 @@ def _guard(preload: float, journal: list[dict[str, Any]]) -> tuple[PlungerGuard,
     checker = MotionChecker(cfg, ([0, 0, 0], [1000, 1000, 1000]))
     sp = build_plan(cfg).setups[0]
     stops: list[str] = []
-    guard = PlungerGuard(cfg, checker, lambda: np.zeros(3),
+    guard = GuardMonitor(cfg, checker, lambda: np.zeros(3),
                          lambda names: {n: [0.0] for n in names},
                          lambda: stops.append("stop"), journal.append)
     guard.mount(sp, "m", dict(sp.indicators), {"A": 1.0, "B": 2.0})
     return guard, sp
 
 
-def _first_cycle(guard: PlungerGuard, stop_means: dict[str, dict[str, float]],
+def _first_cycle(guard: GuardMonitor, stop_means: dict[str, dict[str, float]],
                  margin: float | None = None) -> None:
     """Leg x's first cycle, Π0 → Π_x^+ → Π_x^− → Π0, watched (never polled: each
     move's travel is its nominal bound), ended with ``stop_means``; ``margin``: the
@@ -201,7 +201,7 @@ def test_a_move_the_guard_stopped_is_no_prediction_of_later_cycles() -> None:
     sp = build_plan(cfg).setups[0]
     a, b = np.asarray(sp.postures["0"]), np.asarray(sp.postures["+"])
     reading = [10.0 + 6.1]  # travel +6.1 mm of a +6.25 mm stop, margin 0.2
-    guard = PlungerGuard(cfg, checker, lambda: a, lambda names: {"A": [reading[0]]},
+    guard = GuardMonitor(cfg, checker, lambda: a, lambda names: {"A": [reading[0]]},
                          lambda: None, lambda r: None)
     guard.mount(sp, "m", {"A": "y"}, {"A": 10.0})
     guard.begin_move(a, [b])
@@ -245,7 +245,7 @@ def test_guard_poll_stops_on_a_drifting_signal_before_the_end() -> None:
             k[0] += 1
             return {"A": [10.0 + last[0]]}
 
-        guard = PlungerGuard(cfg, checker, positions, read,
+        guard = GuardMonitor(cfg, checker, positions, read,
                              lambda: stops.append("stop"), lambda r: None)
         guard.mount(sp, "m", {"A": "y"}, {"A": 10.0})
         guard.begin_move(a, [b])
@@ -287,7 +287,7 @@ def test_a_step_is_told_from_a_signal_back_where_the_move_began() -> None:
     def nominal(p: np.ndarray) -> float:
         return float(checker.nominal_travel(sp, "A", "y", p[None])[0])
 
-    def run(extra: Any) -> tuple[PlungerGuard, Any, Any, int]:
+    def run(extra: Any) -> tuple[GuardMonitor, Any, Any, int]:
         k = [0]
 
         def read(names: list[str]) -> dict[str, list[float]]:
@@ -296,7 +296,7 @@ def test_a_step_is_told_from_a_signal_back_where_the_move_began() -> None:
             k[0] += 1
             return {"A": [value]}
 
-        guard = PlungerGuard(cfg, checker, lambda: path[min(k[0], 40)], read,
+        guard = GuardMonitor(cfg, checker, lambda: path[min(k[0], 40)], read,
                              lambda: None, lambda r: None)
         guard.mount(sp, "m", {"A": "y"}, {"A": 10.0})
         guard.at_rest(a, {"A": 10.0})  # Π0 read at rest: the move starts from a stop

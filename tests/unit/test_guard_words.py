@@ -13,11 +13,11 @@ from fakes import FakeRig, run_on
 from station.commands.simulate.launch import SIM_PROCEDURE
 from station.engine.guard_words import AxesSeen, likely_cause, reversed_evidence
 from station.errors import RunFailed
-from station.plan.guard import Gauge, MoveRecord
+from station.plan.guard import GuardedGauge, MoveRecord
 
 
-def _gauge(preload: float = 0.3, stroke: float = 2.0) -> Gauge:
-    return Gauge("B", "z", -preload, stroke - preload, baseline=5.0)
+def _gauge(preload: float = 0.3, stroke: float = 2.0) -> GuardedGauge:
+    return GuardedGauge("B", "z", -preload, stroke - preload, baseline=5.0)
 
 
 def test_what_moved_names_each_axis_from_where_to_where() -> None:

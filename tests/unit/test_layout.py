@@ -169,3 +169,30 @@ def test_the_run_record_is_built_in_one_place() -> None:
                         found.append(f"{path.relative_to(ROOT)}:{node.lineno}: "
                                      f"{ast.unparse(one)}")
     assert not found, "\n".join(found)
+
+
+def _type_names(path: Path) -> list[str]:
+    """The classes a file defines (nested ones too) and its module-level type aliases
+    (``Triple = tuple[float, float, float]``, ``type Triple = …``)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    names = [n.name for n in ast.walk(tree) if isinstance(n, ast.ClassDef)]
+    for node in tree.body:
+        if isinstance(node, ast.Assign | ast.AnnAssign):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names += [t.id for t in targets if isinstance(t, ast.Name)
+                      and t.id[:1].isupper() and not t.id.isupper()]
+        elif type(node).__name__ == "TypeAlias":  # ast.TypeAlias: Python 3.12+
+            names.append(node.name.id)  # type: ignore[attr-defined]
+    return names
+
+
+def test_no_class_name_is_defined_twice_in_station() -> None:
+    # Two ``Verdict`` classes make every "a Verdict" a guess at which one and let the
+    # one imported be the wrong one silently: each type in station/ has one name, once
+    # (docs/design.md, "The rooms").
+    seen: dict[str, list[str]] = {}
+    for path in sorted((ROOT / "station").rglob("*.py")):
+        for name in _type_names(path):
+            seen.setdefault(name, []).append(str(path.relative_to(ROOT)))
+    twice = {name: where for name, where in seen.items() if len(where) > 1}
+    assert not twice, twice

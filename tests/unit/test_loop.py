@@ -20,7 +20,7 @@ from orthocal.loop import (
 )
 from station.engine.closed_loop import (
     LoopState,
-    Step,
+    LoopStep,
     extra_passes_allowed,
     mountings_expected,
     next_step,
@@ -150,10 +150,10 @@ def test_writing_the_rounds_joined_leaves_less_than_leaving_or_writing_one_look(
 
 
 def walk(max_iterations: int, verify: bool, significant: list[bool],
-         writes: list[str]) -> list[Step]:
+         writes: list[str]) -> list[LoopStep]:
     """Drive next_step with scripted outcomes; returns every step taken."""
     state = LoopState(max_iterations, verify)
-    steps: list[Step] = []
+    steps: list[LoopStep] = []
     sig, wr = iter(significant), iter(writes)
     while True:
         step = next_step(state)
@@ -188,15 +188,15 @@ def test_rounds_until_converged_or_max_iterations() -> None:
                                            ("skipped", "skipped")])
 def test_a_write_that_does_not_happen_stops_the_loop(status: str, reason: str) -> None:
     steps = walk(3, True, [True, True], ["written", status])
-    assert steps[-1] == Step("finish", reason=reason)
+    assert steps[-1] == LoopStep("finish", reason=reason)
     assert sum(1 for s in steps if s.kind == "measure") == 2
 
 
-def walk_verdicts(max_extra: int, verdicts: list[str]) -> list[Step]:
+def walk_verdicts(max_extra: int, verdicts: list[str]) -> list[LoopStep]:
     """next_step with a verdict per measurement: a round's first pass or, when the
     step says extra, a further pass of it; every write-back succeeds."""
     state = LoopState(3, True, max_extra_passes=max_extra)
-    steps: list[Step] = []
+    steps: list[LoopStep] = []
     it = iter(verdicts)
     while (step := next_step(state)).kind != "finish":
         steps.append(step)
@@ -237,7 +237,7 @@ def test_a_correction_seen_but_not_beyond_the_noise_is_never_written() -> None:
 def test_a_verification_that_cannot_show_convergence_ends_not_converged() -> None:
     steps = walk_verdicts(2, ["significant", "unproven", "unproven", "unproven"])
     assert [s.phase for s in steps if s.kind == "measure"] == ["m", "v", "v+1", "v+2"]
-    assert steps[-1] == Step("finish", reason="not-converged")
+    assert steps[-1] == LoopStep("finish", reason="not-converged")
     assert walk_verdicts(0, ["significant", "unproven"])[-1].reason == "not-converged"
     # a later round's passes are its own: v2+1 after v2
     steps = walk_verdicts(1, ["significant", "significant", "unproven", "converged"])

@@ -32,15 +32,14 @@ from station.config.overrides import (
     WritebackOverrides,
 )
 from station.errors import BadInput, read_input
+from station.record.simulated import Triple
 
-Triple = tuple[float, float, float]
 
-
-class _Strict(BaseModel):
+class _FileTable(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-class DriveTable(_Strict):
+class DriveTable(_FileTable):
     """``[simulation.drive]``: how the virtual controller moves its axes."""
 
     motion: Literal["coordinated", "independent"] | None = None
@@ -51,7 +50,7 @@ class DriveTable(_Strict):
     sequence: str | None = Field(None, description="one axis after another, e.g. zyx")
 
 
-class SimulationTable(_Strict):
+class SimulationTable(_FileTable):
     """``[simulation]``: the virtual machine (mm, tilts in mrad)."""
 
     seed: int | None = None
@@ -78,7 +77,7 @@ class SimulationTable(_Strict):
     drive: DriveTable = DriveTable()
 
 
-class SimulationFile(_Strict):
+class SimulationFile(_FileTable):
     """The whole file: the virtual machine, and the station's procedure, write-back
     and report overrides for the run (each key of its table's type; the station config
     then checks them together)."""
