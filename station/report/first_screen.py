@@ -21,12 +21,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from orthocal import coverage_factor
-from orthocal.lost_motion import standing_out
 from station.record.quantity_text import figure, plus_minus
 from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy
 from station.record.result_sections import UncertaintyBudget
-from station.record.result_statement import CONTROLLER_ROUTES, Quantity
+from station.record.result_statement import Quantity
 from station.report import budget_table as budget
 from station.report import in_controller, rounds, tool
 from station.report.format import (
@@ -49,8 +48,10 @@ WRITABLE = tuple(f"drho_{a}" for a in AXES)
 #: Below this |Δρ| (mm) a joint's value is written in µm, above in mm (an offset of a
 #: millimetre reads as the controller's register does).
 UM_BELOW_MM = 0.1
-#: The repair threshold of a reversal when the record does not state one (mm).
-REPAIR_ABOVE_MM = 0.02
+#: A completed run's record without advice: its model identified no joint offset (Δρ),
+#: so no statement of the machine was made, or the record is older than the statement.
+NO_ADVICE = ("none stated: the record holds no advice (its model identifies no joint "
+             "offset, or it was written before the statement of the machine)")
 #: What to do once a run's offsets were rolled back (the record's advice after it).
 ROLLED_BACK_TODO = ("calibrate the machine again (orthocal run): the offsets this run "
                     "wrote were rolled back")
@@ -296,91 +297,19 @@ def tool_item(result: RunResult) -> Item | None:
 # ------------------------------------------------------------------ what to do
 
 
-def _reversal_action(result: RunResult, acc: Accuracy | None) -> str | None:
-    """The joints' play, only where it stands out of its noise (and is a play:
-    positive)."""
-    rev = result.reversal
-    if rev is None:
-        return None
-    big = standing_out(rev.value_mm, rev.std_errors_mm, num(rev.std_errors_dof))
-    if not big:
-        return None
-    repair = acc.reversal.repair_above_mm if acc is not None and acc.reversal else \
-        REPAIR_ABOVE_MM
-    worn = [a for a, v in big.items() if v > repair]
-    if worn:
-        return (f"repair joint(s) {', '.join(worn)}: reversal above {1000 * repair:g} µm "
-                "(a worn screw, nut or belt); meanwhile set the controller's backlash")
-    return ("set the controller's backlash (reversal) parameter: "
-            + ", ".join(f"joint {a} {1000 * v:.1f} µm" for a, v in big.items()))
-
-
-def _leaning(acc: Accuracy) -> list[str]:
-    """The axes that lean by the result's decision rule (tool.squareness), each with
-    the record's advice on it (shim the rail by how much, or the controller)."""
-    out = []
-    for sq in tool.squareness(acc):
-        if not sq.significant:
-            continue
-        said = [a for a in acc.squareness_advice
-                if f"({sq.tilt})" in a and "offsets cannot fix it" in a]
-        out += said or [f"the motions {sq.pair.upper()} are out of square beyond the decision "
-                        f"rule, an axis leans: offsets cannot fix it; shim its rail or put "
-                        f"the geometry into the controller ({CONTROLLER_ROUTES})"]
-    return out
-
-
-def _geometry_actions(acc: Accuracy) -> list[str]:
-    """Leaning axes and passing rails beyond the result's decision rule, and the
-    geometry in the controller where it clearly lowers the tool's error."""
-    out = _leaning(acc)
-    gains = in_controller.gains(acc)
-    gaps = [a.split(" (gap_")[1][:2].upper() for a in acc.gap_advice or []
-            if "offsets cannot fix it" in a and " (gap_" in a]
-    if gaps:
-        route = (f"put the geometry into the controller ({CONTROLLER_ROUTES}) or move a "
-                 "rail across by the gap" if gains is not False else
-                 "move a rail across by the gap (the geometry in the controller does not "
-                 "clearly lower the tool's error at 95 %)")
-        out.append(f"the axes' gaps {', '.join(gaps)} stand out of their noise and offsets "
-                   f"cannot fix them: {route}")
-    elif gains:
-        out.append(f"put the identified geometry into the controller ({CONTROLLER_ROUTES}): it "
-                   "clearly lowers the tool's error")
-    return out
-
-
-def actions(result: RunResult) -> list[str]:
-    """What to do, only what stands out of the noise; [] for a run that did not
-    complete (the headline says what stopped it)."""
-    if result.status != "ok":
-        return []
-    acc, _ = tool.statement(result)
-    last = result.iterations[-1] if result.iterations else None
-    if acc is not None and last is not None and last.ambiguity is not None:
-        # tilts and gaps the legs' bows explain as well: the record's one word on them
-        out = acc.squareness_advice[:1]
-    else:
-        out = _geometry_actions(acc) if acc is not None else []
-    if (play := _reversal_action(result, acc)) is not None:
-        out.append(play)
-    return out
-
-
 def todo_items(result: RunResult) -> list[Item]:
-    """What to do: the record's advice, verbatim (a rolled-back run's: calibrate
-    again, which its rollback put into the record; a record from before the advice:
-    the legacy reading of its sections)."""
+    """What to do: the record's advice, verbatim (station.statement.advice; a
+    rolled-back run's: calibrate again, which its rollback put into the record). A
+    record without advice gets none made up here: the advice has one decision behind
+    it, and a second reading of the sections would be a second decision."""
     if result.rolled_back is not None:  # what the run found no longer applies as it stands
         return [Item("to do", ROLLED_BACK_TODO)]
     if result.advice is not None:
         texts = [a.text for a in result.advice]
         return [Item("to do" if i == 0 else "", t) for i, t in enumerate(texts)]
-    todo = actions(result)
-    if not todo:
-        return [Item("to do", "nothing further: nothing else stands out of the noise")] \
-            if result.status == "ok" and run_state(result) != "not-converged" else []
-    return [Item("to do" if i == 0 else "", a) for i, a in enumerate(todo)]
+    if result.status != "ok":
+        return []  # the headline says what stopped the run
+    return [Item("to do", NO_ADVICE)]
 
 
 # -------------------------------------------------------------------- the rest

@@ -80,3 +80,31 @@ def test_joints_with_play_get_it(tmp_path: Path) -> None:
     first = report.summary_text(result, verbose=False)
     assert all(a["text"] in first.replace("−", "-") for a in plays)
     assert "backlash (reversal) parameter: joint x +" in first.replace("−", "-")
+
+
+def test_a_record_without_advice_gets_none_made_up() -> None:
+    # The first screen prints the record's advice verbatim and makes up none of its
+    # own: a record without it (a model with no Δρ, or older than the statement) says
+    # so, rather than reading its sections a second way.
+    from result_builders import golden_result
+
+    from station.report.first_screen import NO_ADVICE
+
+    result = golden_result()
+    said = [a["text"] for a in result["advice"]]
+    todo = _todo(report.summary_text(result, verbose=False))
+    assert todo == said
+    result["advice"] = None
+    assert _todo(report.summary_text(result, verbose=False)) == [NO_ADVICE]
+
+
+def _todo(text: str) -> list[str]:
+    """The first screen's "to do" lines: the first labelled, the rest below it."""
+    lines = text.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.strip().startswith("to do"))
+    out = [lines[start].strip().removeprefix("to do").strip()]
+    for ln in lines[start + 1:]:
+        if not ln.startswith(" " * 16) or not ln.strip():
+            break
+        out.append(ln.strip())
+    return out
