@@ -37,6 +37,12 @@ class Quantity(Closed):
     decision: str | None = Field(
         description="what the decision table says of it (docs/design.md), or null")
     basis: list[str] = Field(description="the sources in its budget (Type A and B)")
+    contributions: dict[str, float] | None = Field(
+        None, description="each source's standard uncertainty on the quantity, in "
+                          "``unit``, as the budget names it (the Type A part "
+                          "\"repeatability\"), combined in quadrature (GUM); null for a "
+                          "figure from Monte Carlo draws, or a record from before it "
+                          "(the history's compare reads it)")
 
 
 class AdviceItem(Closed):

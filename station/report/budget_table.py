@@ -8,10 +8,12 @@ from __future__ import annotations
 import html
 from collections.abc import Callable
 
+from station.record.quantity_text import plus_minus
 from station.record.result import RunResult
 from station.record.result_base import NotStated
 from station.record.result_sections import BudgetSource, UncertaintyBudget
 from station.report.format import MANY_DOF, at, dof_text, fmt, k_text, num
+from station.report.statement_table import stated
 
 NAMES = ("drho_x", "drho_y", "drho_z")
 
@@ -75,7 +77,8 @@ def section_html(result: RunResult) -> str:
                     f"<td>{html.escape(s.distribution)}</td><td>{value}</td>"
                     + "".join(f"<td class='num'>{_um(at(s.contributions_mm, n))}</td>"
                               for n in names) + "</tr>")
-    dof = "".join(f"<td class='num'>{dof_text(at(b.effective_dof, n))}</td>" for n in names)
+    dofs, ks, us = _stated_rows(result, b, names)
+    dof = "".join(f"<td class='num'>{dof_text(at(dofs, n))}</td>" for n in names)
     table = (f"<table><tr><th>source (µm)</th><th>type</th><th>distribution</th>"
              f"<th>value</th>"
              f"{head}</tr>{''.join(rows)}"
@@ -83,9 +86,9 @@ def section_html(result: RunResult) -> str:
              f"{_cells(b.combined_mm, names, _um)}</tr>"
              f"<tr><th colspan='4'>effective degrees of freedom</th>{dof}</tr>"
              f"<tr><th colspan='4'>coverage factor k (95 %)</th>"
-             f"{_cells(b.coverage_factor, names, lambda v: fmt(v, 2))}</tr>"
-             f"<tr><th colspan='4'>expanded uncertainty U = k·u<sub>c</sub></th>"
-             f"{_cells(b.expanded_95_mm, names, _um)}</tr></table>"
+             f"{_cells(ks, names, lambda v: fmt(v, 2))}</tr>"
+             f"<tr><th colspan='4'>expanded uncertainty U (95 %){_whole(result, names)}</th>"
+             f"{_cells(us, names, _um)}</tr></table>"
              f"<p class='small'>Every figure in µm. Effective degrees of freedom above "
              f"{MANY_DOF:.0f} are given as ∞: Student's k is then the normal's to the "
              "digits shown.</p>")
@@ -94,6 +97,31 @@ def section_html(result: RunResult) -> str:
             f"states {html.escape(b.statement)}.</p>{table}"
             + (f"<p>Assumed (not given in the config):</p><ul>{assumed}</ul>" if assumed
                else "") + _certificate(result, b, names))
+
+
+def _stated_rows(result: RunResult, b: UncertaintyBudget, names: list[str]
+                 ) -> tuple[dict[str, float | None], dict[str, float | None],
+                            dict[str, float | None]]:
+    """Each Δρ's dof, k and U: the statement's (Δρ as found and as left carry the same
+    uncertainty), else the budget's (a record from before the statement)."""
+    q = stated(result)
+    if all(f"{n}.as_found" in q for n in names):
+        found = [q[f"{n}.as_found"] for n in names]
+        return ({n: x.dof for n, x in zip(names, found, strict=True)},
+                {n: x.k for n, x in zip(names, found, strict=True)},
+                {n: x.expanded for n, x in zip(names, found, strict=True)})
+    return dict(b.effective_dof), dict(b.coverage_factor), dict(b.expanded_95_mm)
+
+
+def _whole(result: RunResult, names: list[str]) -> str:
+    """Where a Δρ's U holds a part added whole (tilts or bows: the statement's basis
+    says so), the row says it; else U = k·u_c."""
+    q = stated(result)
+    added = {line for n in names if (x := q.get(f"{n}.as_found")) is not None
+             for line in x.basis if line.endswith("(added whole)")}
+    if not added:
+        return " = k·u<sub>c</sub>"
+    return " = k·u<sub>c</sub> + " + html.escape("; ".join(sorted(added)))
 
 
 def _cells(values: dict[str, float | None], names: list[str],
@@ -112,7 +140,10 @@ def _certificate(result: RunResult, b: UncertaintyBudget, names: list[str]) -> s
         f"{_um(i.resolution_mm)} µm, MPE {_um(i.mpe_mm)} µm</li>"
         for i in b.instruments)
     env = b.inputs.temperature_change_c
+    q = stated(result)
     stmt = "; ".join(
+        f"Δρ<sub>{n[-1]}</sub> = {html.escape(plus_minus(q[f'{n}.as_found']))}"
+        if f"{n}.as_found" in q else
         f"Δρ<sub>{n[-1]}</sub> = {fmt(at(values, n), signed=True)} mm ± "
         f"{_um(at(b.expanded_95_mm, n))} µm" for n in names)
     sim = " (simulated machine)" if result.simulated else ""

@@ -8,9 +8,13 @@ from __future__ import annotations
 
 import html
 
+from station.record.quantity_text import interval, plus_minus
+from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy
 from station.record.result_base import Interval
-from station.report.format import at, num, param_html
+from station.report.format import at, dof_text, fmt, num, param_html
+from station.report.squareness_table import advice_list
+from station.report.statement_table import decision_text, stated
 
 #: Which axis passes which, and along what (gap_xy: x passes y along +z).
 PASSES = {"gap_xy": ("x", "y", "z"), "gap_xz": ("x", "z", "y"), "gap_yz": ("y", "z", "x")}
@@ -53,8 +57,45 @@ def summary_lines(acc: Accuracy) -> list[str]:
             + tail]
 
 
-def html_section(acc: Accuracy) -> str:
-    """report.html's "Gaps between the axes" beside the squareness; empty without gaps."""
+#: Under the table: what a gap is and what can take it.
+ABOUT = ("The paper's machine has three axes that meet in one point; an assembled frame's "
+         "rails pass each other. Every leg hangs from its carriage, so where a rail runs "
+         "moves the tool. Offsets cannot fix a gap; the controller's kinematics can "
+         "(model.json holds the gaps with their convention), and so can moving a rail "
+         "across by the gap.")
+
+
+def _stated_html(result: RunResult) -> str:
+    """The gaps' table from the statement: value ± U, the 95 % interval, k and dof, the
+    decision table's word; the advice on the rails, each text verbatim."""
+    q = stated(result)
+    rows = []
+    for name, (a, b, along) in PASSES.items():
+        g = q.get(name)
+        if g is None:
+            continue
+        rows.append(f"<tr><td class=\"l\">{param_html(name)}: axis {a} past axis {b}, along "
+                    f"+{along}</td><td class=\"num\">{html.escape(plus_minus(g))}</td>"
+                    f"<td class=\"num\">{html.escape(interval(g))}</td>"
+                    f"<td class=\"num\">{fmt(g.k, 2)}</td><td class=\"num\">"
+                    f"{dof_text(g.dof)}</td><td class=\"l\">"
+                    f"{html.escape(decision_text(g))}</td></tr>")
+    if not rows:
+        return ""
+    advice = [a.text for a in result.advice or [] if a.id.startswith(("rail.", "undecided."))]
+    return ("<h3>Gaps between the axes</h3>"
+            "<table class=\"stated\"><thead><tr><th class=\"l\">pair</th><th>gap (95 %)</th>"
+            "<th>95 % interval</th><th>k</th><th>dof</th><th class=\"l\">decision</th></tr>"
+            "</thead><tbody>" + "".join(rows) + "</tbody></table>"
+            f'<p class="small">{ABOUT} Each ± is the statement\'s (95 %).</p>'
+            + advice_list(advice))
+
+
+def html_section(acc: Accuracy, result: RunResult | None = None) -> str:
+    """report.html's "Gaps between the axes" beside the squareness; empty without gaps.
+    With a statement, its gaps (``result``'s); else the accuracy block's (legacy)."""
+    if result is not None and result.statement:
+        return _stated_html(result)
     rows = _rows(acc)
     if not rows:
         return ""
@@ -71,10 +112,6 @@ def html_section(acc: Accuracy) -> str:
             "<table><thead><tr><th class=\"l\">pair</th><th>gap (µm)</th>"
             "<th>95 % interval (µm)</th><th>σ (µm)</th></tr></thead><tbody>"
             + "".join(table) + "</tbody></table>"
-            '<p class="small">The paper\'s machine has three axes that meet in one point; '
-            "an assembled frame's rails pass each other. Every leg hangs from its carriage, "
-            "so where a rail runs moves the tool. Offsets cannot fix a gap; the controller's "
-            "kinematics can (model.json holds the gaps with their convention), and so can "
-            "moving a rail across by the gap.</p>"
+            f'<p class="small">{ABOUT}</p>'
             + ("<p><b>What to do:</b></p><ul>" + "".join(
                 f"<li>{html.escape(a)}</li>" for a in advice) + "</ul>" if advice else ""))

@@ -9,7 +9,7 @@ from pathlib import Path
 from drivers.files import write_atomic
 from station.record.result import RunResult
 from station.report import budget_table as budget
-from station.report import first_screen, rounds, since
+from station.report import first_screen, rounds, since, statement_table
 from station.report import reversal_table as reversal
 from station.report.boundary import ResultLike, as_result
 from station.report.field_plot import plot_field
@@ -32,6 +32,8 @@ from station.report.format import (
 from station.report.header import header_boxes, run_facts
 from station.report.mounting_files import figures_html, pictures_in
 from station.report.plots import plot_deviations, plot_parameters, release_fonts
+from station.report.stand_table import stands_html
+from station.report.statement_figure import plot_statement
 from station.report.story import result_paragraph, what_was_done
 from station.report.style import CSS
 from station.report.tables import (
@@ -43,7 +45,7 @@ from station.report.tables import (
     table,
 )
 from station.report.tool import html_section as tool_section
-from station.report.tool import stands_html, statement
+from station.report.tool import statement
 
 
 def _fit_box(result: RunResult) -> str:
@@ -210,7 +212,8 @@ def _drawn(result: RunResult, figures: bool) -> tuple[str | None, str | None, st
         if figures:
             plot_tool = _field_plot(result)
             plot_dev = plot_deviations(result)
-            plot_par = plot_parameters(result)
+            plot_par = plot_statement(result) if result.statement else \
+                plot_parameters(result)
         return plot_tool, plot_dev, plot_par, _loop_section(result, figures)
     finally:
         # Only where this page drew: release_fonts ends in a full garbage collection,
@@ -220,7 +223,8 @@ def _drawn(result: RunResult, figures: bool) -> tuple[str | None, str | None, st
             release_fonts()
 
 
-def _legs_figures(plot_dev: str | None, plot_par: str | None, first: int) -> str:
+def _legs_figures(result: RunResult, plot_dev: str | None, plot_par: str | None,
+                  first: int) -> str:
     """The deviations' and the parameters' figures, numbered from ``first``."""
     number = iter(range(first, first + 2))
     drawn = []
@@ -228,16 +232,22 @@ def _legs_figures(plot_dev: str | None, plot_par: str | None, first: int) -> str
         drawn.append(
             f"<figure>{plot_dev}<figcaption>Figure {next(number)}. The 12 leg deviations: "
             "how far each indicator's reading in a test posture differs from its reading in "
-            "Π<sub>0</sub>. Before calibration: measured (blue; error bar = std over the "
-            "cycles, often smaller than the marker) and as the fitted model explains them "
+            "Π<sub>0</sub>, the mean of the cycles (their spread: the table Deviations). "
+            "Before calibration: measured (blue) and as the fitted model explains them "
             "(orange). After calibration: the verification measurement (green), which "
             "should be close to zero.</figcaption></figure>")
     if plot_par:
+        what = ("The statement of the machine: each joint's Δρ as found (blue) and as left "
+                "(green), the tilts, the gaps and ΔL where identified, each bar its 95 % "
+                "expanded uncertainty as the table above states it"
+                if result.statement else
+                "Identified parameters with their 95 % intervals (±k σ, k from Student's t "
+                "on the identification's degrees of freedom); after calibration the "
+                "re-identified values should be near zero")
         drawn.append(
-            f"<figure>{plot_par}<figcaption>Figure {next(number)}. Identified parameters "
-            "with ±1σ (thick) and ±3σ (thin) error bars; after calibration the re-identified "
-            "values should be near zero. In a simulated run the red bar marks the value "
-            "hidden in the virtual machine.</figcaption></figure>")
+            f"<figure>{plot_par}<figcaption>Figure {next(number)}. {what}. In a simulated "
+            "run the red bar marks the value hidden in the virtual machine."
+            "</figcaption></figure>")
     return "".join(drawn)
 
 
@@ -264,6 +274,19 @@ def _title(result: RunResult, figures: bool) -> str:
         "them.</p>")
     return (f"<h1>{esc(_TITLE)}{esc(sim_tag)}{badge}</h1>\n"
             f'<p class="meta">{meta}</p>{no_figures}')
+
+
+def _identification(result: RunResult) -> str:
+    """The first identification's heading: with a statement, the fit's own diagnostics
+    follow it (its model test, the stands, the correlation of its estimates; the values
+    are the statement's, above); a record from before the statement keeps its table of
+    identified parameters."""
+    if result.statement:
+        return ("<h2>The first identification</h2><p class=\"small\">The fit of the first "
+                "measurement, its model test and the correlation of its estimates; what it "
+                "found of the machine is in <i>The statement of the machine</i>, "
+                "above.</p>")
+    return f"<h2>Identified parameters</h2>\n{params_table(result)}"
 
 
 _TITLE = "Calibration report"
@@ -294,15 +317,15 @@ def render_html(result: ResultLike, figures: bool = True,
 {what_was_done(record)}
 <h2>Result</h2>
 {result_paragraph(record)}
+{statement_table.section_html(record)}
 {accuracy}
 {reversal.section_html(record)}
 {budget.section_html(record)}{since.section_html(record)}
 {"<h2>The measurement: the legs' parallelism</h2>" if accuracy else ""}
 {_fit_box(record)}
-{_legs_figures(plot_dev, plot_par, 2 if plot_tool else 1)}
+{_legs_figures(record, plot_dev, plot_par, 2 if plot_tool else 1)}
 {loop_section}
-<h2>Identified parameters</h2>
-{params_table(record)}
+{_identification(record)}
 {model_section(record)}
 {stands_html(record)}
 {correlation_table(record)}
@@ -312,7 +335,9 @@ def render_html(result: ResultLike, figures: bool = True,
 {setups_table(record)}
 {figures_html(pictures)}
 <p class="small">Generated by orthocal. Each table states its unit in its header: µm for
-the small errors, mm for lengths, positions and offsets, mm/m for squareness.</p>
+the small errors, mm for lengths, positions and offsets, mm/m for squareness; the
+statement's quantities carry theirs, each printed the one way every view prints it (a
+length below 0.1 mm in µm, above in mm with its ± in µm).</p>
 """)
     when = format_when(record.started)
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'

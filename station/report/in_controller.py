@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import html
 
+from station.record.quantity_text import figure, interval
+from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy, Compensated
 from station.report.format import num, um, um_interval
+from station.report.statement_table import stated as quantities
 
 
 def _e(value: object) -> str:
@@ -71,22 +74,51 @@ def summary_lines(acc: Accuracy) -> list[str]:
     return [f"  in the controller  {compensation_advice(acc, comp)}"]
 
 
-def html_section(acc: Accuracy) -> str:
-    """What the identified geometry in the controller buys, beside the offsets alone."""
+def _stated_rows(result: RunResult) -> list[list[str]] | None:
+    """The table's rows from the statement (None: it holds no such figures)."""
+    q = quantities(result)
+    if "tool.compensated.rms" not in q or "tool.after.rms" not in q:
+        return None
+    return [[f"{label} |E|", um(q[f"tool.after.{s}"].value), um(q[f"tool.compensated.{s}"].value),
+             interval(q[f"tool.compensated.{s}"]).removesuffix(" µm")]
+            for label, s in (("RMS", "rms"), ("max", "max")) if f"tool.compensated.{s}" in q]
+
+
+def stated_advice(result: RunResult) -> str | None:
+    """What the statement says the geometry in the controller buys: its advice's text
+    verbatim where the decision table says "gain", else the decision in words (None:
+    no statement, or it states no such figure)."""
+    comp = quantities(result).get("tool.compensated.rms")
+    if comp is None:
+        return None
+    said = [a.text for a in result.advice or [] if a.id == "controller"]
+    if said:
+        return said[0]
+    return (f"with the geometry in the controller {figure(comp, 'RMS')}: not clearly lower "
+            "than the offsets' alone (the decision table: no gain)")
+
+
+def html_section(acc: Accuracy, result: RunResult | None = None) -> str:
+    """What the identified geometry in the controller buys, beside the offsets alone
+    (the statement's figures and its decision where ``result`` has one)."""
     comp = stated(acc)
     if comp is None:
         return ""
-    after = acc.after
-    rows = [["RMS |E|", um(after.rms_mm), um(comp.rms_mm),
-             um_interval(comp.rms_interval_95_mm) or "—"],
-            ["max |E|", um(after.max_mm), um(comp.max_mm),
-             um_interval(comp.max_interval_95_mm) or "—"]]
+    rows = None if result is None else _stated_rows(result)
+    advice = None if result is None else stated_advice(result)
+    if rows is None or advice is None:  # a record from before the statement
+        after = acc.after
+        rows = [["RMS |E|", um(after.rms_mm), um(comp.rms_mm),
+                 um_interval(comp.rms_interval_95_mm) or "—"],
+                ["max |E|", um(after.max_mm), um(comp.max_mm),
+                 um_interval(comp.max_interval_95_mm) or "—"]]
+        advice = compensation_advice(acc, comp)
     grid = table(["tool-point error (µm)", "offsets only", "geometry in the controller",
                   "geometry in the controller: 95 % interval"], rows)
     routes = "".join(f"<li><code>{_e(r)}</code></li>" for r in comp.routes)
     nominal = "; ".join(f"{', '.join(names)} ({why})"
                         for why, names in _grouped(comp.nominal).items())
     return ("<h3>The geometry in the controller</h3>" + grid
-            + f"<p><b>{_e(compensation_advice(acc, comp))}</b>.</p>"
+            + f"<p><b>{_e(advice)}</b>.</p>"
             + f'<p class="small">The controller is told {_e(", ".join(comp.told))}; left '
             f"nominal: {_e(nominal or 'nothing')}. {_e(comp.method)}.</p><ul>{routes}</ul>")

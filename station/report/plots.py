@@ -74,7 +74,7 @@ def to_svg(fig) -> str:
     return re.sub(r'viewBox="[^"]*"', f'viewBox="{view}"', svg, count=1)
 
 
-_C_BEFORE, _C_MODEL, _C_AFTER, _C_TRUTH = "#1f5fa8", "#e08a00", "#2e8b3d", "#c0392b"
+C_BEFORE, C_MODEL, C_AFTER, C_TRUTH = "#1f5fa8", "#e08a00", "#2e8b3d", "#c0392b"
 
 
 def _dev_positions(keys: list[str]) -> tuple[list[float], dict[int, list[float]]]:
@@ -92,13 +92,14 @@ def _dev_positions(keys: list[str]) -> tuple[list[float], dict[int, list[float]]
 
 
 def _measured(table: Mapping[str, Deviation], xs: list[float], keys: list[str],
-              offset: float) -> list[tuple[float, float, float]]:
-    """(x, mean, std) of each deviation of ``table`` measured."""
+              offset: float) -> list[tuple[float, float]]:
+    """(x, mean) of each deviation of ``table`` measured (their spread over the cycles
+    is the table's: a figure of the page draws 95 % intervals only)."""
     out = []
     for x, k in zip(xs, keys, strict=True):
         m = num(table[k].mean) if k in table else None
         if m is not None:
-            out.append((x + offset, m, num(table[k].std) or 0.0))
+            out.append((x + offset, m))
     return out
 
 
@@ -115,24 +116,22 @@ def _dev_series(ax: Any, before: Mapping[str, Deviation], after: Mapping[str, De
     handles = []
     pts = _measured(before, xs, keys, -0.22)
     if pts:
-        handles.append(ax.errorbar(
-            [p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts],
-            fmt="o", color=_C_BEFORE, ms=6, capsize=3, lw=1.2,
-            label="before: measured (mean ± std)",
-        ))
+        handles.append(ax.plot(
+            [p[0] for p in pts], [p[1] for p in pts], "o", color=C_BEFORE, ms=6,
+            label="before: measured (mean of the cycles)",
+        )[0])
     fitted = _modelled(before, xs, keys)
     if fitted:
         handles.append(ax.plot(
-            [p[0] for p in fitted], [p[1] for p in fitted], "D", color=_C_MODEL, ms=6,
+            [p[0] for p in fitted], [p[1] for p in fitted], "D", color=C_MODEL, ms=6,
             mfc="none", mew=1.6, label="before: model fit",
         )[0])
     pts = _measured(after, xs, keys, 0.22)
     if pts:
-        handles.append(ax.errorbar(
-            [p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts],
-            fmt="s", color=_C_AFTER, ms=6, capsize=3, lw=1.2,
-            label="after: verification (mean ± std)",
-        ))
+        handles.append(ax.plot(
+            [p[0] for p in pts], [p[1] for p in pts], "s", color=C_AFTER, ms=6,
+            label="after: verification (mean of the cycles)",
+        )[0])
     return handles
 
 
@@ -167,7 +166,7 @@ def plot_deviations(result: RunResult) -> str | None:
 
 
 @dataclass
-class _Parameters:
+class Parameters:
     """The parameters' figure as it is drawn: its axes (the tilts, angles in mrad, on
     their own at the right), where each parameter stands, the legend's handles."""
 
@@ -183,38 +182,39 @@ class _Parameters:
     def axis_of(self, n: str) -> Any:
         return self.ax_tilt if self.ax_tilt is not None and unit(n) == "mrad" else self.ax
 
-    def draw(self, values: Mapping[str, float | None], sigmas: Mapping[str, float | None],
-             offset: float, color: str, marker: str, label: str, above: bool = True) -> None:
-        """Each parameter's value with ±1σ and ±3σ bars (and the numbers, when few)."""
+    def draw(self, values: Mapping[str, float | None], halves: Mapping[str, float | None],
+             offset: float, color: str, marker: str, label: str, above: bool = True,
+             texts: Mapping[str, str] | None = None) -> None:
+        """Each parameter's value with its 95 % interval as a bar (``halves``: the
+        half-widths), and beside it, when few, ``texts`` (else the value ± half)."""
         drawn = False
         for x, n in enumerate(self.names):
             ax = self.axis_of(n)
-            v, s = at(values, n), at(sigmas, n)
+            v, h = at(values, n), at(halves, n)
             if v is None:
                 continue
-            if s is not None:
-                # Thin bar ±3σ (where the true value almost surely is), thick ±1σ.
-                ax.plot([x + offset] * 2, [v - 3 * s, v + 3 * s], color=color, lw=1.2,
-                        solid_capstyle="butt")
-                ax.plot([x + offset] * 2, [v - s, v + s], color=color, lw=5, alpha=0.55,
+            if h is not None:
+                ax.plot([x + offset] * 2, [v - h, v + h], color=color, lw=3, alpha=0.6,
                         solid_capstyle="butt")
             ax.plot([x + offset], [v], marker, color=color, ms=7, mec="white", mew=0.8,
                     zorder=3)
             drawn = True
             if self.annotate:
-                self._label(ax, x + offset, v, s, color, above)
+                text = (texts or {}).get(n) or (
+                    fmt(v, signed=True) + (f" ± {fmt(h)}" if h is not None else ""))
+                self._label(ax, x + offset, v, h, text, color, above)
         if drawn:  # on the axis of the last parameter drawn, as the figures always had it
             self.handles.append(ax.plot([], [], marker, color=color, ms=7, label=label)[0])
 
     @staticmethod
-    def _label(ax: Any, x: float, v: float, s: float | None, color: str, above: bool) -> None:
-        # σ is often far smaller than the axis range and the bars vanish into the
-        # marker; the number next to it still tells the reader how sure we are.
-        text = fmt(v, signed=True) + (f" ± {fmt(s)}" if s is not None else "")
-        # Beyond the end of the ±3σ bar on a white ground: beside the marker the
-        # text would cross the truth bar, the zero line and the neighbouring series.
-        # "before" goes above and "after" below, so the two never collide.
-        reach = 3 * s if s is not None else 0.0
+    def _label(ax: Any, x: float, v: float, h: float | None, text: str, color: str,
+               above: bool) -> None:
+        # The interval is often far smaller than the axis range and the bar vanishes
+        # into the marker; the number next to it still tells the reader how sure we are.
+        # Beyond the end of the bar on a white ground: beside the marker the text would
+        # cross the truth bar, the zero line and the neighbouring series. "before" goes
+        # above and "after" below, so the two never collide.
+        reach = h if h is not None else 0.0
         ax.annotate(text, (x, v + reach if above else v - reach),
                     xytext=(0, 5 if above else -5), textcoords="offset points",
                     va="bottom" if above else "top", ha="center", fontsize=8,
@@ -226,49 +226,65 @@ class _Parameters:
         truth = [(x, t, n) for x, n in enumerate(self.names)
                  if (t := true_value(sim, n)) is not None]
         for x, t, n in truth:
-            line = self.axis_of(n).plot([x + offset], [t], "_", color=_C_TRUTH, ms=22,
+            line = self.axis_of(n).plot([x + offset], [t], "_", color=C_TRUTH, ms=22,
                                         mew=2.2, zorder=2,
                                         label="hidden truth of the simulated machine")[0]
         if truth:
             self.handles.append(line)
 
+    def finish(self, plt: Any, fig: Any, bar: str) -> str:
+        """The axes labelled, the legend (``bar``: what each bar is), the SVG."""
+        ax, names = self.ax, self.names
+        self.handles.append(ax.plot([], [], color="#777", lw=3, alpha=0.6, label=bar)[0])
+        ax.axhline(0.0, color="#555", lw=0.8)
+        ax.set_xticks(list(range(len(names))), [param_tex(n) for n in names], fontsize=11)
+        ax.set_xlim(-0.6, len(names) - 0.4)
+        ax.margins(y=0.2)  # room for the value labels beyond the outermost bars
+        ax.set_ylabel("value (mm)")
+        if self.ax_tilt is not None:
+            first_tilt = next(x for x, n in enumerate(names) if unit(n) == "mrad")
+            ax.axvline(first_tilt - 0.5, color="#999", lw=0.8, ls=":")
+            self.ax_tilt.axhline(0.0, color="#555", lw=0.8, ls=":")
+            self.ax_tilt.margins(y=0.2)
+            self.ax_tilt.set_ylabel("tilt (mrad)")
+        ax.grid(axis="y", color="#ddd", lw=0.6)
+        ax.set_axisbelow(True)
+        ax.legend(handles=self.handles, loc="upper center", bbox_to_anchor=(0.5, -0.12),
+                  ncol=3, frameon=False, fontsize=9)
+        return to_svg(fig)
+
+
+def _halves(se: Mapping[str, float | None], dof: float | None) -> dict[str, float | None]:
+    """A record from before the statement: each standard error's 95 % half-width, k
+    from Student's t on the identification's dof (the legacy path; a record with a
+    statement draws its own expanded uncertainties, station.report.statement_figure)."""
+    from orthocal import coverage_factor
+
+    k = coverage_factor(num(dof))
+    return {n: None if (s := num(v)) is None else k * s for n, v in se.items()}
+
 
 def plot_parameters(result: RunResult) -> str | None:
+    """A record from before the statement: the identified parameters with their 95 %
+    intervals (a record with a statement: station.report.statement_figure)."""
     names = params_of(result)
     if not names:
         return None
     ver = result.verification
     v_ident = ver.identified if ver is not None else {}
-    v_errs = ver.std_errors if ver is not None else {}
+    v_half = _halves(ver.std_errors, ver.std_errors_dof) if ver is not None else {}
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(10, 3.8))
-    p = _Parameters(ax, ax.twinx() if any(unit(n) == "mrad" for n in names) else None,
-                    names, annotate=len(names) <= 3)
-    p.draw(machine_parameters(result), result.std_errors, -0.12 if v_ident else 0.0,
-           _C_BEFORE, "o", "identified before calibration")
+    p = Parameters(ax, ax.twinx() if any(unit(n) == "mrad" for n in names) else None,
+                   names, annotate=len(names) <= 3)
+    p.draw(machine_parameters(result), _halves(result.std_errors, result.std_errors_dof),
+           -0.12 if v_ident else 0.0, C_BEFORE, "o", "identified before calibration")
     if v_ident:
-        p.draw(v_ident, v_errs, 0.12, _C_AFTER, "s",
+        p.draw(v_ident, v_half, 0.12, C_AFTER, "s",
                "re-identified after calibration (Δρ should be ≈ 0)" if p.ax_tilt is not None
                else "re-identified after calibration (should be ≈ 0)", above=False)
     p.truth(hidden(result), -0.12 if v_ident else 0.0)
-    p.handles.append(ax.plot([], [], color="#777", lw=5, alpha=0.55, label="±1σ")[0])
-    p.handles.append(ax.plot([], [], color="#777", lw=1.2, label="±3σ")[0])
-    ax.axhline(0.0, color="#555", lw=0.8)
-    ax.set_xticks(list(range(len(names))), [param_tex(n) for n in names], fontsize=11)
-    ax.set_xlim(-0.6, len(names) - 0.4)
-    ax.margins(y=0.2)  # room for the value labels beyond the outermost bars
-    ax.set_ylabel("value (mm)")
-    if p.ax_tilt is not None:
-        first_tilt = next(x for x, n in enumerate(names) if unit(n) == "mrad")
-        ax.axvline(first_tilt - 0.5, color="#999", lw=0.8, ls=":")
-        p.ax_tilt.axhline(0.0, color="#555", lw=0.8, ls=":")
-        p.ax_tilt.margins(y=0.2)
-        p.ax_tilt.set_ylabel("tilt (mrad)")
-    ax.grid(axis="y", color="#ddd", lw=0.6)
-    ax.set_axisbelow(True)
-    ax.legend(handles=p.handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
-              frameon=False, fontsize=9)
-    return to_svg(fig)
+    return p.finish(plt, fig, "95 % interval (±k σ, Student's t)")
 
 
 # ----------------------------------------------------------------------- html

@@ -9,10 +9,12 @@ import html
 
 from orthocal import coverage_factor
 from orthocal.lost_motion import standing_out
+from station.record.quantity_text import plus_minus
 from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy, ToolReversal
 from station.record.result_sections import Reversal
-from station.report.format import AXES, at, fmt, num, um
+from station.report.format import AXES, at, dof_text, fmt, num, um
+from station.report.statement_table import decision_text, stated
 
 
 def _um(value: float | None, digits: int = 1) -> str:
@@ -67,11 +69,60 @@ def summary_lines(result: RunResult) -> list[str]:
     return lines
 
 
+def _stated_table(result: RunResult, rev: Reversal) -> str | None:
+    """The table from the statement: each joint's reversal ± U (95 %), k and dof, the
+    decision table's word, the measurements (None: the statement holds no reversal)."""
+    q = stated(result)
+    rows = []
+    for a in AXES:
+        r = q.get(f"reversal_{a}")
+        if r is None:
+            continue
+        rows.append(f"<tr><td>{a}</td><td class='num'>{html.escape(plus_minus(r))}</td>"
+                    f"<td class='num'>{fmt(r.k, 2)}</td><td class='num'>{dof_text(r.dof)}</td>"
+                    f"<td class='l'>{html.escape(decision_text(r))}</td>"
+                    f"<td class='num'>{rev.n.get(a, 0)}</td></tr>")
+    if not rows:
+        return None
+    return ("<table class='stated'><thead><tr><th>joint</th><th>reversal B (95 %)</th>"
+            "<th>k</th><th>dof</th>"
+            "<th class='l'>decision</th><th>measurements</th></tr></thead>"
+            f"<tbody>{''.join(rows)}</tbody></table><p class='small'>Each ± is the "
+            "statement's (95 %); the joint's Δρ is stated for the middle of its band, B/2 "
+            "either side. Decision: compensate (or repair above the repair threshold) only "
+            "beyond k_act standard uncertainties (the decision table, docs/design.md).</p>")
+
+
 def section_html(result: RunResult) -> str:
     """The report's "Lost motion" section ("" when the run measured none)."""
     rev = _measured(result)
     if rev is None:
         return ""
+    table = _stated_table(result, rev)
+    if table is not None:
+        return _section(result, rev, table, True)
+    return _section(result, rev, _legacy_table(rev), False)
+
+
+def _section(result: RunResult, rev: Reversal, table: str, stated_: bool) -> str:
+    """The section around its ``table``; what to do: the statement's advice (the
+    accuracy block's, filled from it), or the legacy reading (``stated_`` False)."""
+    tool = _at_tool(result)
+    todo = "" if tool is None else (tool.advice if stated_ else _advice(rev, tool))
+    at_tool = "" if tool is None else (
+        f"<p>At the tool: where a point is reached from an unknown side, each joint may be "
+        f"off by up to half its reversal beyond the error field above, up to "
+        f"<b>{_um(tool.tool_max_mm)}</b> at the tool over the workspace "
+        f"({html.escape(tool.assumes)}). What to do: "
+        f"{html.escape(todo)}.</p>")
+    return (
+        "<h2>Lost motion (reversal)</h2>"
+        f"<p>{html.escape(rev.stated)}. Measured: "
+        f"{html.escape(rev.method)}.</p>{table}{at_tool}")
+
+
+def _legacy_table(rev: Reversal) -> str:
+    """A record from before the statement: the reversal with k·σ, k from Student's t."""
     k = coverage_factor(num(rev.std_errors_dof))
     rows = []
     for a in AXES:
@@ -80,17 +131,6 @@ def section_html(result: RunResult) -> str:
                     f"<td>{'—' if se is None else f'± {um(k * se)}'}</td>"
                     f"<td>{um((value or 0.0) / 2)}</td><td>{rev.n.get(a, 0)}</td>"
                     "</tr>")
-    tool = _at_tool(result)
-    at_tool = "" if tool is None else (
-        f"<p>At the tool: where a point is reached from an unknown side, each joint may be "
-        f"off by up to half its reversal beyond the error field above, up to "
-        f"<b>{_um(tool.tool_max_mm)}</b> at the tool over the workspace "
-        f"({html.escape(tool.assumes)}). What to do: "
-        f"{html.escape(_advice(rev, tool))}.</p>")
-    return (
-        "<h2>Lost motion (reversal)</h2>"
-        f"<p>{html.escape(rev.stated)}. Measured: "
-        f"{html.escape(rev.method)}.</p>"
-        "<table><thead><tr><th>joint (µm)</th><th>reversal B</th><th>95 % (k = "
-        f"{fmt(k, 2)})</th><th>B/2 either side of the stated Δρ</th><th>measurements</th></tr>"
-        f"</thead><tbody>{''.join(rows)}</tbody></table>{at_tool}")
+    return ("<table><thead><tr><th>joint (µm)</th><th>reversal B</th><th>95 % (k = "
+            f"{fmt(k, 2)})</th><th>B/2 either side of the stated Δρ</th><th>measurements</th>"
+            f"</tr></thead><tbody>{''.join(rows)}</tbody></table>")

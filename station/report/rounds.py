@@ -13,6 +13,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from orthocal.loop import WRITABLE
+from station.record.quantity_text import plus_minus
 from station.record.result import Iteration, RunResult
 from station.record.result_accuracy import Accuracy
 from station.report.format import at, num, um, um_signed
@@ -106,12 +107,22 @@ def judged_line(result: RunResult) -> str | None:
 
 def remaining_text(result: RunResult) -> str | None:
     """What the last verification found left of Δρ, not written, with its 95 %
-    interval (k from Student's t on the noise's dof): how far the machine now is
-    from the truth. None before any write-back or without a measurement after it."""
+    uncertainty: the statement's Δρ as left where the record has one, else (legacy)
+    the remaining estimate with k from Student's t on the noise's dof. None before
+    any write-back or without a measurement after it."""
     rem = result.remaining
     iterations = result.iterations or []
     if rem is None or not any(e.offsets_written for e in iterations):
         return None
+    q = {x.name: x for x in result.statement or []}
+    left = [q[f"{n}.as_left"] for n in WRITABLE if f"{n}.as_left" in q]
+    if left:
+        aim = aim_of(result, len(iterations) - 1)
+        text = ", ".join(f"Δρ_{x.name[5]} {plus_minus(x)}" for x in left) + " (95 %)"
+        if any(abs(a) > 0 for a in aim.values()):
+            text += (" against the aim of objective tool (Δρ "
+                     + ", ".join(f"{n[-1]} {1000 * a:+.2f}" for n, a in aim.items()) + " µm)")
+        return text
     k = num(rem.coverage_factor_95)
     aim = aim_of(result, len(iterations) - 1)
     parts = []
@@ -253,10 +264,11 @@ def html_section(result: RunResult, plot: str | None) -> str:
                      "or below converge_mm is not written.</figcaption></figure>")
     left = remaining_text(result)
     if left:
+        aimed = "from the aim" in left or "against the aim" in left
         parts.append(f"<p>Left over after the last write-back, as the last verification "
                      f"measured it and the loop did not write it (too small to be worth a "
                      f"round, or the loop stopped as said above): {e(left)}. The machine's "
-                     f"offsets are off {'from their aim ' if 'from the aim' in left else ''}"
+                     f"offsets are off {'from their aim ' if aimed else ''}"
                      f"by this much; its Δρ is the correction applied plus what the last "
                      f"verification measured (the JSON's remaining.total).</p>")
     parts.append(_rounds_table(result))
@@ -287,7 +299,10 @@ def _rounds_table(result: RunResult) -> str:
             "<th>residual RMS</th><th>noise floor</th>"
             "<th>correction max (a verification's: joined with the rounds before)</th>"
             f"<th>significant</th><th>change of the offsets {held}</th></tr></thead><tbody>"
-            + "".join(rows) + "</tbody></table>")
+            + "".join(rows) + "</tbody></table>"
+            '<p class="small">Each round\'s own estimates, as the loop decided on them '
+            "round by round: its fit's residual and noise floor, the largest correction it "
+            "asked for. What the run states of the machine is the statement's, above.</p>")
 
 
 def _changes(before: Mapping[str, float | None], written: Mapping[str, float | None]) -> str:

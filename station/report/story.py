@@ -23,6 +23,7 @@ from station.report.format import (
     unit,
     writeback_text,
 )
+from station.report.statement_table import said, stated, symbol_html
 from station.report.tool import statement, tool_clause
 
 
@@ -69,10 +70,19 @@ def what_was_done(result: RunResult) -> str:
         "ΔL<sub>i</sub> (leg-length error): how much leg i is longer than nominal. "
         "tilt<sub>yx</sub>, tilt<sub>zx</sub>, tilt<sub>zy</sub> (mrad): how far actuator "
         "axis y leans toward x, and axis z toward x and toward y, off square. "
-        "± values are 95 % expanded uncertainties, ±kσ: σ the standard error from the "
-        "noise measured in this run, k from Student's t on that noise's degrees of "
-        "freedom (GUM), so that few cycles do not claim more than they show.</p>"
+        f"{_PM_STATED if result.statement else _PM_LEGACY}</p>"
     )
+
+
+#: What a ± means on a page with a statement, and on one from before it.
+_PM_STATED = ("Every ± and every interval on this page is the run's statement of the "
+              "machine (its table below): a 95 % expanded uncertainty, the scatter (Type "
+              "A) and every stated or assumed input (Type B) combined as the GUM combines "
+              "them, k from Student's t on the quantity's effective dof (Welch–Satterthwaite).")
+_PM_LEGACY = ("± values are 95 % expanded uncertainties, k·u: u the standard uncertainty "
+              "from the noise measured in this run, k from Student's t on that noise's "
+              "degrees of freedom (GUM), so that few cycles do not claim more than they "
+              "show.")
 
 
 def measured_so_far(setups: Sequence[Setup]) -> str:
@@ -104,6 +114,8 @@ def _found(result: RunResult) -> list[str]:
                      "the controller's offsets were only changed if stated below.")
     if not names:
         return parts
+    if result.statement:
+        return parts + _stated(result)
     k = coverage_factor(num(result.std_errors_dof))
     vals = "; ".join(
         f"{param_html(n)} = {fmt(at(ident, n), signed=True)}"
@@ -128,6 +140,30 @@ def _found(result: RunResult) -> list[str]:
                      "virtual machine's hidden ones by at most " + " and ".join(
                          (f"{um(max(d))} µm" if u == "mm" else f"{fmt(max(d), 4)} mm/m")
                          for u, d in diffs.items() if d) + ".")
+    return parts
+
+
+def _stated(result: RunResult) -> list[str]:
+    """What the run found, as its statement says it: each joint's Δρ as found, the
+    tilts, gaps and leg lengths (the statement's table holds the rest)."""
+    q = stated(result)
+    found = [(f"{param_html(n.split('.')[0])}", said(x)) for n, x in q.items()
+             if n.endswith(".as_found")]
+    layout = [(symbol_html(n), said(x)) for n, x in q.items()
+              if n.startswith(("tilt_", "gap_", "dl_"))]
+    parts = []
+    if found:
+        parts.append("The run states the joint offsets as found as "
+                     + "; ".join(f"{n} = {esc(v)}" for n, v in found) + " (95 %).")
+    if layout:
+        parts.append("It states " + "; ".join(f"{n} = {esc(v)}" for n, v in layout)
+                     + " (95 %; what to do with them: the statement's advice, below).")
+    resid, noise = num(result.residual_rms_mm), num(result.noise_mm)
+    if resid is not None:
+        s = f"The first fit reproduces the measured deviations to {um(resid, 2)} µm RMS"
+        if noise is not None:
+            s += f" (indicator noise: {um(noise, 2)} µm)"
+        parts.append(s + ".")
     return parts
 
 

@@ -1,6 +1,10 @@
 """Accuracy at the tool in the report (docs/design.md and docs/model.md, "Accuracy at the
 tool"): the result's ``accuracy`` block as the headline's clause, the summary's
-lines and report.html's section, and the ``stands`` table.
+lines and report.html's section. Where the record has a statement (docs/design.md,
+"The statement of the machine") every figure with its interval is the statement's
+``tool.*`` quantity, printed by station.record.quantity_text, and what the figure is
+made of follows the decision table's words on the tilts and gaps; the ``accuracy``
+block gives the rest (the grid, the objectives' plug-in figures, the assumptions).
 
 Parallel legs are the method's means, not its end: the machine's user cares where
 the tool goes. So wherever the report states the legs' parallelism it also states
@@ -13,9 +17,8 @@ here return None or say "not stated".
 from __future__ import annotations
 
 import html
-import math
-from dataclasses import dataclass
 
+from station.record.quantity_text import figure, interval
 from station.record.result import RunResult
 from station.record.result_accuracy import (
     Accuracy,
@@ -24,18 +27,25 @@ from station.record.result_accuracy import (
     Objective,
     ObjectiveFigures,
 )
-from station.record.result_base import Interval, NotStated
-from station.report import gaps, in_controller, leg_form
+from station.record.result_base import NotStated
+from station.record.result_statement import Quantity
+from station.report import gaps, in_controller, leg_form, squareness_table
 from station.report.format import (
     AXES,
     at,
     box_text,
     fmt,
     num,
-    param_html,
     um,
     um_interval,
 )
+from station.report.squareness_table import (
+    legacy_html,
+    square_state,
+    squareness,
+    squareness_line,
+)
+from station.report.statement_table import stated
 
 #: What each frame fits away before the error is stated (docs/design.md).
 FRAME_TEXT = {
@@ -47,10 +57,6 @@ OBJECTIVE_TEXT = {
     "joints": "the paper's Δρ: legs parallel",
     "tool": "the least predicted tool error",
 }
-#: Squareness of the tool's motions and the tilt it equals to first order (docs/model.md).
-PAIRS = (("xy", "tilt_yx"), ("xz", "tilt_zx"), ("yz", "tilt_zy"))
-#: Coverage factor of a 95 % interval when the result gives none (normal).
-K_NORMAL = 1.96
 #: The tilts are "most of it" when the legs exactly parallel would still leave at
 #: least this fraction of the after-figure (the tilts alone cause that much).
 MOST = 0.5
@@ -86,104 +92,42 @@ def objective(acc: Accuracy, name: Objective) -> ObjectiveFigures:
     return acc.objectives.joints if name == "joints" else acc.objectives.tool
 
 
-@dataclass(frozen=True)
-class Square:
-    """One squareness (mm/m) with its 95 % half-width and the tilt it mirrors."""
-
-    pair: str
-    value: float
-    se: float | None
-    half: float | None
-    k: float | None
-    tilt: str
-    # beyond this |value| the axis counts as leaning (the result's
-    # squareness_decision); inf: the model test kept no tilt; None: the 95 % half
-    limit: float | None = None
-
-    @property
-    def significant(self) -> bool | None:
-        limit = self.limit if self.limit is not None else self.half
-        return None if limit is None else abs(self.value) > limit
-
-    @property
-    def beyond_95(self) -> bool:
-        """The 95 % interval excludes zero: the motions are out of square, whatever
-        the decision on the axis' lean (the gaps and the offsets written shear the
-        motions too, and the lean is decided at a stricter k or by the model test)."""
-        return self.half is not None and abs(self.value) > self.half
-
-    @property
-    def verdict(self) -> str:
-        """The row's word, which never says "within" of an interval that excludes zero."""
-        if self.significant:
-            return "beyond its uncertainty"
-        if self.beyond_95:
-            return "beyond its 95 % interval; no lean of the axis told apart"
-        return "within its uncertainty" if self.significant is False else "—"
+def _objective_note(acc: Accuracy, after: float, legs: float) -> str:
+    """What the other objective's offsets would do to the after-figure (plug-in)."""
+    best = num(acc.objectives.tool.after.rms_mm)
+    if acc.objective == "joints" and best is not None and best < 0.8 * after:
+        return f" (objective tool's offsets would cancel part of it, to {um(best)} µm RMS)"
+    if acc.objective == "tool" and legs > 1.2 * after:
+        return (f" (the offsets cancel part of it: with the legs exactly parallel it would "
+                f"be {um(legs)} µm RMS)")
+    return ""
 
 
-def _half_width(interval: Interval | None) -> float | None:
-    lo, hi = (None, None) if interval is None else (num(interval[0]), num(interval[1]))
-    return None if lo is None or hi is None else (hi - lo) / 2
-
-
-def _decision_k(acc: Accuracy) -> float | None:
-    """The result's squareness_decision's k: inf where the model test kept no tilt
-    (no axis counts as leaning), None where the result states no decision."""
-    decision = acc.squareness_decision
-    if decision is None:
+def _made_of(acc: Accuracy, what: str, plural: bool) -> str | None:
+    """"``what``, which offsets cannot fix, is most of it", or the joint offsets'
+    share, from the objectives' plug-in figures."""
+    after, legs = num(acc.after.rms_mm), num(acc.objectives.joints.after.rms_mm)
+    if after is None or legs is None:
         return None
-    k = num(decision.k)
-    return math.inf if k is None else k
+    if legs >= MOST * after:
+        return (f"{what}, which offsets cannot fix, {'are' if plural else 'is'} most of it"
+                + _objective_note(acc, after, legs))
+    return (f"most of it is joint offset left uncorrected (with the legs exactly parallel "
+            f"it would be {um(legs)} µm RMS); {what}, which offsets cannot fix, "
+            f"{'are' if plural else 'is'} the rest")
 
 
-def squareness(acc: Accuracy) -> list[Square]:
-    """The squareness values of the result, each with its 95 % half-width: k from
-    the tilt's interval where the result gives one, else k = 1.96, on the
-    squareness' standard error."""
-    tilt_iv = acc.tilt_interval_95 or {}
-    k_decide = _decision_k(acc)
-    out = []
-    for pair, tilt in PAIRS:
-        v = at(acc.squareness_mm_per_m, pair)
-        if v is None:
-            continue
-        se = at(acc.squareness_std_errors, pair)
-        se = se if se is not None and se > 0 else None
-        half = k = None
-        if se is not None:
-            k = K_NORMAL
-            t_half, t_se = _half_width(tilt_iv.get(tilt)), at(acc.tilt_std_errors, tilt)
-            if t_se and t_half is not None:
-                k = t_half / t_se
-            half = k * se
-        limit = None if k_decide is None or se is None else k_decide * se
-        out.append(Square(pair, v, se, half, k, tilt, limit))
-    return out
-
-
-def tilts_stated(acc: Accuracy) -> bool:
-    """The tilts entered the figure (without them squareness is not stated)."""
-    return bool(acc.tilts)
-
-
-def square_state(acc: Accuracy) -> bool | None:
-    """True: some axis leans (beyond the result's squareness_decision, else its 95 %
-    interval); False: none; None: not stated (no tilts, or no uncertainty)."""
-    if not tilts_stated(acc):
+def cause(acc: Accuracy, result: RunResult | None = None) -> str | None:
+    """What the after-figure is made of, in words: the axes' tilts or gaps (which no
+    offset fixes) when they alone would leave most of it, else the joint offsets. With
+    a statement, which of them counts is the decision table's word on each."""
+    q = stated(result) if result is not None else {}
+    if q:
+        return _cause_stated(acc, q)
+    if num(acc.after.rms_mm) is None:
         return None
-    verdicts = [s.significant for s in squareness(acc)]
-    if not verdicts or any(v is None for v in verdicts):
-        return None
-    return any(verdicts)
-
-
-def cause(acc: Accuracy) -> str | None:
-    """What the after-figure is made of, in words: the squareness (which no offset
-    fixes) when the tilts alone would leave most of it, else the joint offsets."""
-    after = num(acc.after.rms_mm)
     state = square_state(acc)
-    if after is None or state is None:
+    if state is None:
         return None
     if state is False:
         if any(s.beyond_95 for s in squareness(acc)):
@@ -191,27 +135,30 @@ def cause(acc: Accuracy) -> str | None:
                     "motions' squareness beyond its interval is the gaps' and the offsets' "
                     "shear")
         return "the axes are square within their uncertainty (nothing to shim)"
-    legs = num(acc.objectives.joints.after.rms_mm)
-    best = num(acc.objectives.tool.after.rms_mm)
-    if legs is not None and legs >= MOST * after:
-        text = "the axes' squareness, which offsets cannot fix, is most of it"
-        if acc.objective == "joints" and best is not None and best < 0.8 * after:
-            text += (f" (objective tool's offsets would cancel part of it, to {um(best)} µm "
-                     "RMS)")
-        elif acc.objective == "tool" and legs > 1.2 * after:
-            text += (f" (the offsets cancel part of it: with the legs exactly parallel it "
-                     f"would be {um(legs)} µm RMS)")
-        return text
-    if legs is None:
+    return _made_of(acc, "the axes' squareness", plural=False)
+
+
+def _cause_stated(acc: Accuracy, q: dict[str, Quantity]) -> str | None:
+    """:func:`cause` from the statement's decisions on the tilts and gaps."""
+    layout = [x for n, x in q.items() if n.startswith(("tilt_", "gap_"))]
+    if not layout:
         return None
-    return (f"most of it is joint offset left uncorrected (with the legs exactly parallel "
-            f"it would be {um(legs)} µm RMS); the axes' squareness, which offsets cannot "
-            "fix, is the rest")
+    if any(x.decision == "undecided" for x in layout):
+        return ("the data cannot tell the axes' tilts from the legs' bows (what to do: the "
+                "statement's advice)")
+    leans = any(x.decision == "act" for x in layout if x.name.startswith("tilt_"))
+    passes = any(x.decision == "act" for x in layout if x.name.startswith("gap_"))
+    if not leans and not passes:
+        return ("no axis leans or passes another beyond its uncertainty (nothing to shim "
+                "or move)")
+    what = ("the axes' tilts and gaps" if leans and passes else
+            "the axes' tilts" if leans else "the gaps between the axes")
+    return _made_of(acc, what, plural=True)
 
 
 def _figures(block: ErrorStats) -> str:
     """"13.7 µm RMS (max 33.3 µm; 95 %: 12.0–15.0 µm RMS, 28.2–37.5 µm max)", the
-    intervals where the block states them (the after-figures)."""
+    intervals where the block states them (a record from before the statement)."""
     text = f"{um(block.rms_mm)} µm RMS (max {um(block.max_mm)} µm"
     if isinstance(block, AfterInterval):
         ivs = [f"{iv} µm {what}" for iv, what in (
@@ -222,6 +169,24 @@ def _figures(block: ErrorStats) -> str:
     return text + ")"
 
 
+def _stated_figures(q: dict[str, Quantity], state: str) -> str | None:
+    """"28.3 µm RMS (95 %: 27.5–29.0 µm), max 56.8 µm (95 %: 55.2–58.4 µm)": the
+    statement's ``tool.<state>`` figures as every view prints them (None: not stated)."""
+    rms, mx = q.get(f"tool.{state}.rms"), q.get(f"tool.{state}.max")
+    if rms is None or mx is None:
+        return None
+    return f"{figure(rms, 'RMS')}, max {figure(mx)}"
+
+
+def _clause_figures(result: RunResult, acc: Accuracy, state: str) -> str:
+    """The figures of ``state`` ("before", "after"): the statement's where it has
+    them, else the accuracy block's (a record from before the statement)."""
+    said = _stated_figures(stated(result), state)
+    if said is not None:
+        return said
+    return _figures(acc.before if state == "before" else acc.after)
+
+
 def tool_clause(result: RunResult) -> str | None:
     """The headline's clause on the tool, plain text, lower case; None when the
     run states no accuracy (the caller says so)."""
@@ -230,15 +195,15 @@ def tool_clause(result: RunResult) -> str | None:
         return None
     where = (f"of where they should over the workspace {box_text(acc.workspace_mm)} "
              f"(frame {acc.frame})")
+    before, after = (_clause_figures(result, acc, s) for s in ("before", "after"))
     if written(result):
         text = ("at the tool, by the identified model, commanded points land within "
-                f"{_figures(acc.after)} {where}, against {_figures(acc.before)} before "
-                "calibration")
+                f"{after} {where}, against {before} before calibration")
     else:
         text = (f"at the tool, by the identified model, commanded points land within "
-                f"{_figures(acc.before)} {where} as the machine stands, the offsets not "
-                f"written; written, they would land within {_figures(acc.after)}")
-    why = cause(acc)
+                f"{before} {where} as the machine stands, the offsets not "
+                f"written; written, they would land within {after}")
+    why = cause(acc, result)
     return text + (f": {why}" if why else "")
 
 
@@ -271,36 +236,8 @@ def summary_lines(result: RunResult) -> list[str]:
             f"tool's error in frame {acc.frame} (identified model); objective "
             f"{alt.objective} would leave {um(alt.after.rms_mm)} µm RMS (max "
             f"{um(alt.after.max_mm)} µm)")
-    return [line, *in_controller.summary_lines(acc), _squareness_line(acc),
+    return [line, *in_controller.summary_lines(acc), squareness_line(acc),
             *gaps.summary_lines(acc), *leg_form.summary_lines(result)]
-
-
-def _squareness_line(acc: Accuracy) -> str:
-    rows = squareness(acc)
-    if not tilts_stated(acc) or not rows:
-        advice = acc.squareness_advice
-        return "  squareness    not stated" + (f": {advice[0]}" if advice else "")
-    values = ", ".join(f"{s.pair.upper()} {fmt(s.value, signed=True)}"
-                       + (f" ± {fmt(s.half)}" if s.half is not None else "") for s in rows)
-    state = square_state(acc)
-    ks = {round(s.k, 2) for s in rows if s.k is not None}
-    band = f" (95 %, k = {ks.pop():.2f})" if len(ks) == 1 else " (95 %)"
-    text = f"  squareness    {values} mm/m{band if any(s.half for s in rows) else ''}"
-    if state:
-        text += (": offsets cannot fix it; shim the rails or put the geometry into the "
-                 "controller (orthocal export --kinematics, or orthocal compensate)")
-    elif state is False:
-        sheared = [s.pair.upper() for s in rows if s.beyond_95]
-        kept_none = all(s.limit == math.inf for s in rows)
-        if sheared:
-            text += (f": the motions {', '.join(sheared)} are out of square beyond their "
-                     "95 % interval, yet no axis leans beyond what the data tell apart ("
-                     + ("the model test kept no tilt" if kept_none else
-                        "its decision limit") + "): the gaps and the offsets written shear "
-                     "the motions, not the rails (nothing to shim)")
-        else:
-            text += ": square within its uncertainty"
-    return text
 
 
 # ----------------------------------------------------------------------- html
@@ -330,8 +267,10 @@ def html_section(result: RunResult, figure: str | None = None,
         return (f'{head}<div class="box warn"><p>Accuracy at the tool is <b>not stated</b> '
                 f"for this run: {_e(why_not)}. The legs' parallelism reported here is the "
                 "method's means and does not say where the tool goes.</p></div>")
-    parts = [head, _intro(acc), _before_after(result, acc), in_controller.html_section(acc),
-             _objectives(result, acc), _squareness_html(acc), gaps.html_section(acc)]
+    square = squareness_table.stated_html(result)
+    parts = [head, _intro(result, acc), _before_after(result, acc),
+             in_controller.html_section(acc, result), _objectives(result, acc),
+             legacy_html(acc) if square is None else square, gaps.html_section(acc, result)]
     if bows := leg_form.html_section(result):
         parts.append(bows)
     if figure:
@@ -348,11 +287,11 @@ def html_section(result: RunResult, figure: str | None = None,
     return "\n".join(parts)
 
 
-def _intro(acc: Accuracy) -> str:
+def _intro(result: RunResult, acc: Accuracy) -> str:
     g = acc.grid
     grid = f" ({_e(g.points_per_axis)} points per axis; {_e(g.points)} points"
     grid += f", {_e(g.excluded)} outside the soft limits left out)" if g.excluded else ")"
-    why = cause(acc)
+    why = cause(acc, result)
     left = f" What is left after calibration: {_e(why)}." if why else ""
     return (
         "<p>Parallel legs are the method's means, not its end: the machine's user cares "
@@ -363,15 +302,19 @@ def _intro(acc: Accuracy) -> str:
 
 
 def _before_after(result: RunResult, acc: Accuracy) -> str:
-    before, after = acc.before, acc.after
     done = written(result)
     after_head = "after (offsets written)" if done else "after, had the offsets been written"
-    rows = [
-        ["RMS |E|", um(before.rms_mm), um(after.rms_mm),
-         um_interval(after.rms_interval_95_mm) or "—"],
-        ["max |E|", um(before.max_mm), um(after.max_mm),
-         um_interval(after.max_interval_95_mm) or "—"],
-    ]
+    q = stated(result)
+    if "tool.after.rms" in q:  # the statement's figures, each once
+        rows = [[f"{label} |E|", um(q[f"tool.before.{s}"].value), um(q[f"tool.after.{s}"].value),
+                 interval(q[f"tool.after.{s}"]).removesuffix(" µm")]
+                for label, s in (("RMS", "rms"), ("max", "max"))]
+    else:
+        before, after = acc.before, acc.after
+        rows = [["RMS |E|", um(before.rms_mm), um(after.rms_mm),
+                 um_interval(after.rms_interval_95_mm) or "—"],
+                ["max |E|", um(before.max_mm), um(after.max_mm),
+                 um_interval(after.max_interval_95_mm) or "—"]]
     table = _table(["tool-point error (µm)", "before (offsets as they were)",
                     _e(after_head), "after: 95 % interval"], rows)
     basis = ("After: Δρ as the last verification measured it, with the tilts the run states."
@@ -405,41 +348,6 @@ def _objectives(result: RunResult, acc: Accuracy) -> str:
             "leave. Written registers are rounded to the controller's resolution.</p>")
 
 
-def _squareness_html(acc: Accuracy) -> str:
-    rows = squareness(acc)
-    advice = acc.squareness_advice
-    out = ["<h3>Squareness of the axes</h3>"]
-    if not tilts_stated(acc) or not rows:
-        out.append("<p>Squareness is not stated: the tilts were not identified.</p>")
-        out.extend(f"<p>{_e(a)}</p>" for a in advice if "not stated" not in a)
-        return "".join(out)
-    table_rows = []
-    for s in rows:
-        t, t_se = at(acc.tilts, s.tilt), at(acc.tilt_std_errors, s.tilt)
-        verdict = s.verdict
-        table_rows.append([
-            s.pair.upper(), fmt(s.value, signed=True),
-            fmt(s.half) if s.half is not None else "—",
-            fmt(s.se, 4) if s.se is not None else "—",
-            param_html(s.tilt) + f" = {fmt(t, signed=True)}"
-            + (f" ± {fmt(t_se, 4)}" if t_se is not None else ""), verdict])
-    ks = {round(s.k, 2) for s in rows if s.k is not None}
-    k_text = f"k = {ks.pop():.2f}" if len(ks) == 1 else "k from each interval"
-    out.append(_table(["motions (mm/m)", "squareness", f"± 95 % ({k_text})", "σ",
-                       "axis tilt ± σ", "verdict"], table_rows))
-    out.append('<p class="small">ISO 230-1 squareness of the tool\'s motions along commanded '
-               "x, y and z; to first order it equals the tilts of the actuator axes "
-               "(1 mrad = 1 mm/m). The offsets written shear the motions a little, so the two "
-               "columns differ by that. Offsets cannot fix squareness.</p>")
-    decision = acc.squareness_decision
-    if decision is not None and decision.rule:
-        out.append(f'<p class="small">Verdict: {_e(decision.rule)}.</p>')
-    if advice:
-        out.append("<p><b>What to do:</b></p><ul>"
-                   + "".join(f"<li>{_e(a)}</li>" for a in advice) + "</ul>")
-    return "".join(out)
-
-
 def _field_caption(acc: Accuracy) -> str:
     return ("The tool-point error E over the workspace, in three horizontal slices of the "
             "grid (lowest, middle and highest z), before calibration (top row), after "
@@ -452,49 +360,3 @@ def _field_caption(acc: Accuracy) -> str:
             "grid points outside the soft limits.")
 
 
-# --------------------------------------------------------------------- stands
-
-
-def stands_html(result: RunResult) -> str:
-    """The table "Where the stands were": each indicator stand, set by eye at the
-    middle of its leg, as the identification placed it (or not observable)."""
-    stands = result.stands
-    if not stands:
-        return ""
-    rows = []
-    for name, est in stands.items():
-        where = ", ".join(f"leg {g[0]}, along {g[1]}" if len(g) == 2 else g
-                          for g in est.gauges)
-        off, se = num(est.offset_mm), num(est.std_error_mm)
-        if est.observable and off is not None:
-            value, sigma, note = fmt(off, 2, signed=True), fmt(se, 2), ""
-        else:
-            value, sigma = "—", "—"
-            note = est.note or "not observable"
-        rows.append([_e(name), _e(where or "—"), value, sigma, _e(note)])
-    return ("<h3>Where the stands were</h3>"
-            + _table(["stand", "indicator", "m: off the leg's middle (mm)", "σ (mm)", "note"],
-                     rows, left=2)
-            + '<p class="small">Each indicator stand is set by eye at the middle of its leg; '
-            "its indicator reads in the plane x<sub>i</sub> = L/2 + m. The identification "
-            f"estimates each m as a random effect{_e(_stands_known(result))}, so that a "
-            "misplaced stand is not read as a tilt. Not observable: the offsets Δρ were too "
-            "small for that stand to change the deviations; the data say nothing of where it "
-            "stood.</p>")
-
-
-def _stands_known(result: RunResult) -> str:
-    """What the stands' prior was, in words (" (within ±5 mm of L/2, prior SD 2.89
-    mm)"), from model_selection.stands, else the estimates' common prior."""
-    sel = result.model_selection.stands if result.model_selection is not None else None
-    tol = num(sel.tolerance_mm) if sel is not None else None
-    prior = num(sel.prior_sd_mm) if sel is not None else None
-    if prior is None and result.stands:
-        priors = {num(e.prior_sd_mm) for e in result.stands.values()} - {None}
-        prior = priors.pop() if len(priors) == 1 else None
-    known = []
-    if tol is not None:
-        known.append(f"within ±{tol:g} mm of L/2")
-    if prior is not None:
-        known.append(f"prior SD {fmt(prior, 2)} mm")
-    return f" ({', '.join(known)})" if known else ""

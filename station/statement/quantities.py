@@ -54,7 +54,8 @@ def linear(name: str, value: float, unit: Unit, m: Marginal, decision: str | Non
     return Quantity(name=name, value=float(value), unit=unit, expanded=float(expanded),
                     interval_95=(float(value - expanded), float(value + expanded)),
                     k=float(m.k), dof=None if m.dof is None else float(m.dof),
-                    decision=decision, basis=_basis(m, extra, extra_why))
+                    decision=decision, basis=_basis(m, extra, extra_why),
+                    contributions={n: float(u) for n, u in m.contributions.items()})
 
 
 def bounded(name: str, figure: Figure, basis: list[str], decision: str | None = None

@@ -12,6 +12,8 @@ import pytest
 from result_builders import golden_result
 
 from station import report
+from station.record.io import parse_result
+from station.record.quantity_text import interval, plus_minus, um
 from station.report.format import dof_text, k_text, minus_signs, minus_signs_html
 
 #: A number's ASCII hyphen-minus: one not after a letter, digit, dot, hyphen or slash
@@ -61,12 +63,33 @@ def test_each_table_says_one_unit_in_its_header_and_none_in_its_cells() -> None:
     for table in _tables(_page()):
         if "class='cert'" in table:  # the certificate: a unit with each figure
             continue
+        if re.match(r"<table class=[\"']stated[\"']", table):
+            # the statement's quantities, each with its unit (quantity_text's one way):
+            # every figure with a unit is one of them
+            _stated_cells(table)
+            continue
         head = re.search(r"<tr>(.*?)</tr>", table, flags=re.S)
         assert head is not None
         units = {m.group(1) for m in UNIT.finditer(html.unescape(head.group(1)))}
         assert len(units) <= 1, (units, table[:300])
         for cell in re.findall(r'<td class=["\']num["\'][^>]*>(.*?)</td>', table):
             assert not re.search(r"\d\s*(µm|mm)\b", cell), (cell, table[:200])
+
+
+def _stated_cells(table: str) -> None:
+    """Every cell of a table of the statement's quantities that holds a unit is one of
+    them as quantity_text prints it (its value ± U, its interval, or its figure)."""
+    said = set()
+    for q in parse_result(golden_result()).statement or []:
+        said |= {plus_minus(q), interval(q), f"{um(q.value)} µm"}
+    # (a simulated machine's hidden value, its own column, is a value alone)
+    cells = [html.unescape(re.sub(r"<[^>]*>", "", c)).replace("−", "-") for c in
+             re.findall(r'<td class=["\']num["\'][^>]*>(.*?)</td>', table)]
+    truths = re.findall(r'<td class="num truth">(.*?)</td>', table)
+    assert all("±" not in t for t in truths)
+    with_unit = [c for c in cells if re.search(r"\d\s*(µm|mm|mm/m|mrad)\b", c)]
+    assert with_unit, table[:200]
+    assert all(c in said for c in with_unit), [c for c in with_unit if c not in said]
 
 
 def test_no_wall_of_zero_millimetres_and_no_false_footer() -> None:

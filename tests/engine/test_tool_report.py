@@ -23,7 +23,7 @@ from pydantic import ValidationError
 from result_builders import golden_result, make_result
 
 from station import report
-from station.report import tool
+from station.report import stand_table, tool
 
 SAMPLES = Path(__file__).parents[1] / "data"
 K = 1.96
@@ -478,7 +478,7 @@ def test_tool_helpers_read_a_missing_block_as_not_stated() -> None:
     assert tool.statement(failed) == (None, "x")
     assert tool.tool_clause(bare) is None and tool.summary_lines(bare) == []
     no_drho = report.as_result(make_result(model="L"))  # nothing to state it of
-    assert tool.html_section(no_drho) == "" and tool.stands_html(bare) == ""
+    assert tool.html_section(no_drho) == "" and stand_table.stands_html(bare) == ""
 
 
 def test_a_verification_s_correction_is_the_one_its_verdict_and_write_rest_on() -> None:
