@@ -1,7 +1,17 @@
 """What changed between two runs of one machine (docs/design.md, "Machine history"):
 A's machine as left against B's as found, per axis in the controller's zero frame
-(station.history.entry), and the tilts and gaps; each change with its standard
-error and whether it stands out at 95 %."""
+(station.history.entry), and the tilts and gaps; each change with its 95 % expanded
+uncertainty and whether it stands out of it.
+
+Where both runs state the machine (their entries keep each quantity's parts), the
+change's uncertainty combines the two as the GUM combines a difference of correlated
+estimates (orthocal.between_runs, docs/model.md "The change between two runs"): each
+run's scatter (Type A) independent; the legs' straightness, the one stated input that
+is the machine's own and the same in both runs, fully correlated, so that what it puts
+on both values cancels in the change but for the difference of its two parts; every
+other Type B input (each round's temperature, each mounting's gauge error and plunger
+angle) independent; a bound a run added whole (tilts or bows) added whole again. An
+entry from before the statement keeps its standard error alone (legacy)."""
 
 from __future__ import annotations
 
@@ -11,11 +21,21 @@ from pathlib import Path
 from typing import Any
 
 from orthocal import coverage_factor
+from orthocal.between_runs import Stated, of_statement
+from orthocal.between_runs import change as combined
 from station.errors import say
 from station.history.trend import started_at
 from station.record.io import section, validated
+from station.record.quantity_text import plus_minus
 from station.record.result import RunResult
 from station.record.result_sections import NotCompared, SinceLast
+from station.record.result_statement import Quantity, Unit
+
+#: The Type B sources two runs of one machine share, fully correlated: the same legs
+#: read at the same gauge planes (the stands set at the legs' middles). A gauge's MPE,
+#: the plunger angle (per mounting) and a temperature change (per round) are each
+#: run's own.
+COMMON = ("leg straightness",)
 
 
 class Incomparable(ValueError):
@@ -42,14 +62,45 @@ def check_comparable(a: Mapping[str, Any], b: Mapping[str, Any]) -> None:
                            f"B {b.get('profile')!r}")
 
 
-def _change(before: float, se_a: float | None, after: float, se_b: float | None,
-            dof: float | None) -> dict[str, Any]:
-    change = after - before
-    se = None if se_a is None or se_b is None else math.hypot(se_a, se_b)
-    k = coverage_factor(dof, 0.95)
-    return {"before": before, "after": after, "change": change, "std_error": se,
-            "interval_95": None if se is None else k * se,
-            "significant": None if se is None else abs(change) > k * se}
+def _parts(v: Mapping[str, Any], key: str, dof: float | None) -> Stated | None:
+    """An entry's value as its uncertainty's parts: the statement's where the entry
+    keeps them, else (legacy) its standard error alone on ``dof``; None where it has
+    no uncertainty."""
+    value = v[f"value{key}"]
+    contributions = v.get(f"contributions{key}")
+    expanded, k = v.get(f"expanded_95{key}"), v.get("k")
+    if contributions and expanded is not None and k is not None:
+        return of_statement(value, expanded, k, v.get("dof"), contributions)
+    se = v.get(f"std_error{key}")
+    return None if se is None else Stated(value, se, dof)
+
+
+def _half(v: Mapping[str, Any], key: str) -> float | None:
+    """The 95 % half-width an entry's value was stated with (None: not stated)."""
+    return v.get(f"expanded_95{key}") if v.get("stated") else None
+
+
+def _change(va: Mapping[str, Any], vb: Mapping[str, Any], key: str,
+            dof: float | None = None) -> dict[str, Any]:
+    """One parameter's change from ``va`` (run A) to ``vb`` (run B), ``key`` the unit
+    suffix of their values ("_mm" for the joints, "" for the layout); ``dof`` a legacy
+    entry's (the smaller of the two runs'; None: the normal's k)."""
+    before, after = va[f"value{key}"], vb[f"value{key}"]
+    out: dict[str, Any] = {"before": before, "after": after, "change": after - before,
+                           "before_expanded": _half(va, key), "after_expanded": _half(vb, key)}
+    a, b = _parts(va, key, dof), _parts(vb, key, dof)
+    if a is None or b is None:
+        return {**out, "std_error": None, "interval_95": None, "k": None, "dof": None,
+                "significant": None}
+    if not a.type_b and not b.type_b and a.whole == 0.0 == b.whole:
+        # legacy: two standard errors, independent, k from Student's t on ``dof``
+        se = math.hypot(a.u_a, b.u_a)
+        k = coverage_factor(dof, 0.95)
+        return {**out, "std_error": se, "interval_95": k * se, "k": k, "dof": dof,
+                "significant": abs(after - before) > k * se}
+    c = combined(a, b, COMMON)
+    return {**out, "std_error": c.u_c, "interval_95": c.expanded, "k": c.k, "dof": c.dof,
+            "significant": c.significant}
 
 
 def compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
@@ -63,11 +114,8 @@ def compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
         dofs = [d for d in (left.get("dof"), found.get("dof")) if d]
         dof = min(dofs) if dofs else None
         for axis, va in left["joint_error_mm"].items():
-            vb = found["joint_error_mm"][axis]
-            joints[axis] = _change(va["value_mm"], va["std_error_mm"], vb["value_mm"],
-                                   vb["std_error_mm"], dof)
-    layout = {name: _change(va["value"], va["std_error"], b["layout"][name]["value"],
-                            b["layout"][name]["std_error"], None)
+            joints[axis] = _change(va, found["joint_error_mm"][axis], "_mm", dof)
+    layout = {name: _change(va, b["layout"][name], "")
               for name, va in (a.get("layout") or {}).items()
               if name in (b.get("layout") or {})}
     return {"machine_id": a["machine_id"], "a": a["run_dir"], "b": b["run_dir"],
@@ -91,57 +139,61 @@ def changes(joints: dict[str, Any], layout: dict[str, Any]) -> dict[str, Any]:
 
 
 def microns(value: float | None, signed: bool = True) -> str:
-    """A length in mm shown in µm to 0.1 µm, whatever its size (a joint's e, about
-    −o on a calibrated machine, is thousands: −1818.6); — where not stated."""
+    """A length in mm shown in µm to 0.1 µm, whatever its size (``orthocal history``'s
+    columns: a joint's e, about −o on a calibrated machine, is thousands: −1818.6); —
+    where not stated."""
     return "—" if value is None else f"{1000 * value:{'+' if signed else ''}.1f}"
 
 
-def tilt_text(value: float | None, signed: bool = True) -> str:
-    """A tilt in mrad (= mm/m) to three significant digits, the number alone (its
-    line names the unit): a tilt is stated to a few per cent of itself (its standard
-    error), so more digits would be noise and fewer would round a small one to zero;
-    — where not stated."""
-    if value is None:
-        return "—"
-    size = abs(value)
-    decimals = 3 if size == 0 or not math.isfinite(size) else \
-        min(6, max(0, 2 - math.floor(math.log10(size))))
-    return f"{value:{'+' if signed else ''}.{decimals}f}"
-
-
 #: What ``significant`` means, said once under a comparison's lines.
-CRITERION = ("significant: the change's 95 % interval (change ± the half-width shown) "
-             "excludes zero; for the joints k from Student's t on the smaller dof of the "
-             "two runs, for the tilts and gaps the normal's k. Joints as e = Δρ − o, each "
-             "joint's zero error without the controller's offsets (history's legend); "
-             "tilts in mrad (= mm/m).")
+CRITERION = ("significant: the change lies beyond its 95 % expanded uncertainty U, the two "
+             "runs' combined as the GUM combines a difference (each run's scatter "
+             "independent, the legs' straightness common to both and fully correlated, "
+             "every other stated input independent; a run from before the statement: its "
+             "standard error alone, k from Student's t on the smaller dof). Joints as "
+             "e = Δρ − o, each joint's zero error without the controller's offsets "
+             "(history's legend); each value printed as every view prints a quantity.")
 
 
 def _significance(flag: bool | None) -> str:
     if flag is None:
-        return "significance unknown (no standard error)"
+        return "significance unknown (no uncertainty)"
     return "significant" if flag else "not significant"
+
+
+def quantity(name: str, unit: Unit, value: float, expanded: float | None) -> Quantity:
+    """A value with its 95 % expanded uncertainty as a quantity, for quantity_text to
+    print the one way every view prints it."""
+    return Quantity(name=name, value=value, unit=unit, expanded=expanded, interval_95=None,
+                    k=None, dof=None, decision=None, basis=[])
+
+
+def said(c: Mapping[str, Any], name: str, unit: Unit) -> tuple[str, str, str]:
+    """(before, after, change) of a comparison's ``c``, each printed by quantity_text:
+    each run's value with the ± it was stated with, the change with its U."""
+    return (plus_minus(quantity(name, unit, c["before"], c.get("before_expanded"))),
+            plus_minus(quantity(name, unit, c["after"], c.get("after_expanded"))),
+            plus_minus(quantity(name, unit, c["change"], c.get("interval_95"))))
 
 
 def change_lines(doc: Mapping[str, Any]) -> list[str]:
     """One line per parameter of a comparison (``compare``'s ``joint_error_mm`` and
-    ``layout``): before → after, the change ± its 95 % half-width, and whether it is
-    significant (CRITERION). Each line names its one unit and its numbers carry none,
-    so that a column never mixes two: the joints' e and the gaps in µm to 0.1 µm
-    (microns), the tilts in mrad to three significant digits (tilt_text)."""
-    # (name (unit), before, after, change, ± half-width, significance) per parameter
+    ``layout``): before → after (each with its stated ±), the change ± its 95 %
+    expanded uncertainty, and whether it is significant (CRITERION), each printed by
+    station.record.quantity_text (a length below 0.1 mm in µm, above in mm with its ±
+    in µm; a tilt in mrad to 0.001)."""
     rows: list[list[str]] = []
     for axis, c in (doc.get("joint_error_mm") or {}).items():
-        rows.append([f"joint {axis} e (µm)", *(microns(c[k]) for k in ("before", "after",
-                                                                        "change")),
-                     microns(c["interval_95"], signed=False), _significance(c["significant"])])
+        rows.append([f"joint {axis} e", *said(c, f"e_{axis}", "mm"),
+                     _significance(c["significant"])])
     for name, c in (doc.get("layout") or {}).items():
-        text, unit = (microns, "µm") if name.startswith("gap") else (tilt_text, "mrad")
-        rows.append([f"{name} ({unit})", *(text(c[k]) for k in ("before", "after", "change")),
-                     text(c["interval_95"], signed=False), _significance(c["significant"])])
-    widths = [max((len(r[i]) for r in rows), default=0) for i in range(5)]
+        unit: Unit = "mm" if name.startswith("gap") else "mrad"
+        rows.append([name, *said(c, name, unit), _significance(c["significant"])])
+    for r in rows:
+        r[3] += " (95 %)"
+    widths = [max((len(r[i]) for r in rows), default=0) for i in range(4)]
     return [f"{r[0]:<{widths[0]}}  {r[1]:>{widths[1]}} → {r[2]:>{widths[2]}}  change "
-            f"{r[3]:>{widths[3]}} ± {r[4]:<{widths[4]}} at 95 %  {r[5]}" for r in rows]
+            f"{r[3]:<{widths[3]}}  {r[4]}" for r in rows]
 
 
 def since_last_run(config: Any, result: RunResult, runs_dir: Path

@@ -13,9 +13,11 @@ from __future__ import annotations
 import configparser
 import re
 from collections.abc import Collection, Sequence
+from dataclasses import dataclass
 
 from orthocal import AXES
 from station.record.exportable import HEADER, header_lines
+from station.record.quantity_text import plus_minus
 from station.record.result import RunResult
 
 
@@ -40,7 +42,8 @@ def offset_changes(result: RunResult) -> dict[str, tuple[float, float]]:
 
 
 def reversals(result: RunResult) -> dict[str, tuple[float, float | None]]:
-    """Per axis the measured reversal and its standard error (mm), where measured."""
+    """Per axis the measured reversal and its standard error (mm), where measured (a
+    record from before the statement: its legacy reading)."""
     rev = result.reversal
     if rev is None:
         return {}
@@ -48,24 +51,63 @@ def reversals(result: RunResult) -> dict[str, tuple[float, float | None]]:
             if (value := rev.value_mm.get(a)) is not None}
 
 
+#: The decision table's words on a reversal that act (station.statement.decisions):
+#: a controller is told the play where the statement says to compensate or repair it.
+PLAY_ACTS = ("compensate", "repair")
+
+
+@dataclass(frozen=True)
+class Play:
+    """A joint's reversal as an export takes it: its value (mm), whether the controller
+    is told it, and why, in words."""
+
+    value: float
+    acts: bool
+    why: str
+
+
+def plays(result: RunResult) -> dict[str, Play]:
+    """Per axis the joint's reversal, where the run states one: the statement's
+    ``reversal_*`` and its decision (the decision table's one rule: beyond k_act
+    combined standard uncertainties); a record from before the statement, the legacy
+    rule (positive and beyond two standard errors)."""
+    stated = {q.name: q for q in result.statement or []}
+    if any(n.startswith("reversal_") for n in stated):
+        out = {}
+        for a in AXES:
+            q = stated.get(f"reversal_{a}")
+            if q is None or q.value is None:
+                continue
+            acts = q.decision in PLAY_ACTS
+            said = f"the run's statement: reversal_{a} {plus_minus(q)} (95 %), " + (
+                f"the decision table: {q.decision}" if acts else
+                f"not beyond its uncertainty (the decision table: {q.decision})")
+            out[a] = Play(q.value, acts, said)
+        return out
+    return {a: Play(v, backlash_stands_out(v, se),
+                    "the joint's reversal as measured (ISO 230-2)"
+                    if backlash_stands_out(v, se) else not_beyond_noise(v, se))
+            for a, (v, se) in reversals(result).items()}
+
+
 def backlash_stands_out(value: float, se: float | None) -> bool:
-    """A reversal a controller may be told to compensate: positive and beyond 2
-    standard errors; a dead band the measurement cannot tell from zero is not one."""
+    """A record from before the statement: a reversal a controller may be told to
+    compensate, positive and beyond 2 standard errors (legacy)."""
     return se is not None and value > 2.0 * se
 
 
 def not_beyond_noise(value: float, se: float | None) -> str:
-    """Why a reversal is not written as backlash, in words."""
+    """Why a reversal is not written as backlash, in words (legacy)."""
     shown = f"{value:+.6f}" + ("" if se is None else f" ± {se:.6f}")
     return f"the reversal measured {shown} mm is not beyond its noise"
 
 
-def _backlash_line(value: float, se: float | None) -> str:
-    """BACKLASH where the reversal stands out of its noise; otherwise why not, as a
-    comment."""
-    if backlash_stands_out(value, se):
-        return f"BACKLASH = {value:.6f}    # the joint's reversal as measured (ISO 230-2)"
-    return f"# BACKLASH not written: {not_beyond_noise(value, se)}"
+def _backlash_line(play: Play) -> str:
+    """BACKLASH where the statement says to compensate the joint's play; otherwise
+    why not, as a comment."""
+    if play.acts:
+        return f"BACKLASH = {play.value:.6f}    # {play.why}"
+    return f"# BACKLASH not written: {play.why}"
 
 
 def home_changes(result: RunResult, controller: str) -> dict[str, float]:
@@ -92,14 +134,15 @@ def linuxcnc(result: RunResult, ini_text: str, joints: Sequence[int] = (0, 1, 2)
     under the export's header (station.record.exportable; ``forced``: exported with
     --force, and why it needed it; an earlier export's header replaced) and the
     header lines ``words`` (what the export takes into account); ``backlash``:
-    BACKLASH too, where the run's reversal stands beyond its noise, except for the
+    BACKLASH too, where the run's statement decides to compensate the joint's reversal
+    (:func:`plays`), except for the
     joints ``tabled`` (axes), whose compensation file carries the reversal and makes
     LinuxCNC ignore BACKLASH. Refused where the drive itself holds the offsets the run
     wrote: the controller would correct the machine twice."""
     home = home_changes(result, "LinuxCNC")
     old = _home_offsets(ini_text, joints, source)
     changes = offset_changes(result)
-    reversal = reversals(result) if backlash else {}
+    reversal = plays(result) if backlash else {}
     machine = result.machine.id or "no [machine] id"
     edits: dict[str, tuple[str, list[str]]] = {}
     for axis, joint in zip(AXES, joints, strict=True):
@@ -108,7 +151,7 @@ def linuxcnc(result: RunResult, ini_text: str, joints: Sequence[int] = (0, 1, 2)
         note = (f"# orthocal: HOME_OFFSET was {old[joint]:.6f}; o_{axis} {before:+.6f} -> "
                 f"{final:+.6f} mm (run {result.run_dir}, machine {machine}; a commanded "
                 "rho puts the carriage at rho + o, so HOME_OFFSET moves by -(o change))")
-        extra = [_backlash_line(*reversal[axis])] if axis in reversal else []
+        extra = [_backlash_line(reversal[axis])] if axis in reversal else []
         if extra and axis in tabled:
             extra = ["# BACKLASH not written: the joint's COMP_FILE carries its reversal "
                      "(LinuxCNC ignores BACKLASH where a joint has a COMP_FILE)"]
@@ -165,14 +208,14 @@ def csv_lines(result: RunResult, forced: bool = False, words: Sequence[str] = ()
     under the export's header as comment lines (``forced``, ``words``: as in
     :func:`linuxcnc`)."""
     changes = offset_changes(result)
-    reversal = reversals(result)
+    reversal = plays(result)
     machine = result.machine.id or ""
     rows = [*header_lines(result, forced), *words,
             "axis,offset_before_mm,offset_final_mm,change_mm,reversal_mm,machine_id,run_dir,"
             "convention"]
     for axis in AXES:
         before, final = changes[axis]
-        rev = f"{reversal[axis][0]:.6f}" if axis in reversal else ""
+        rev = f"{reversal[axis].value:.6f}" if axis in reversal else ""
         rows.append(f"{axis},{before:.6f},{final:.6f},{final - before:+.6f},{rev},{machine},"
                     f"{result.run_dir},commanded rho puts the carriage at rho + o")
     return "\n".join(rows) + "\n"

@@ -12,7 +12,15 @@ with (those the run wrote; a rollback does not change the machine's e). Each sta
 also says what the machine runs with: ``drho_mm``, Δρ = e + o with the offsets it
 held then (``offsets_mm``): as found the offsets before, as left those the run left
 (``offsets_final``), so that a run left at +1.2 µm says +1.2 µm as left, and a
-rolled-back run, whose offsets are back as found, says its as-found Δρ again."""
+rolled-back run, whose offsets are back as found, says its as-found Δρ again.
+
+Where the run states the machine (result.json ``statement``: docs/design.md, "The
+statement of the machine"), every value and uncertainty the entry keeps is the
+statement's: as found from ``drho_*.as_found``, as left from ``drho_*.as_left``, the
+tilts and gaps, each joint's reversal, the tool after; each with its expanded
+uncertainty, k, dof and the contributions of its sources, which ``compare`` combines
+(station.history.compare). A record from before the statement keeps the legacy reading
+(``remaining``, the budget, the accuracy block), below."""
 
 from __future__ import annotations
 
@@ -21,8 +29,10 @@ from pathlib import Path
 from typing import Any
 
 from orthocal import AXES
+from orthocal.between_runs import TYPE_A
 from station.record.result import RunResult
 from station.record.result_base import Axis3, NotStated, Params
+from station.record.result_statement import Quantity
 
 
 def _frame(drho: Params, se: Params, offsets: Axis3 | None, dof: float | None,
@@ -61,7 +71,47 @@ def _certificate(result: RunResult, statement: str) -> Params:
     return budget.expanded_95_mm
 
 
+def _stated_value(q: Quantity, value: float, key: str = "") -> dict[str, Any]:
+    """A statement's quantity as the entry keeps it: ``value`` (in the quantity's frame:
+    e = Δρ − o for a joint) under ``value{key}``, its Type A part as the standard error
+    the drift weighs by, its expanded uncertainty, k, dof, decision and the standard
+    contribution of each source (what compare combines)."""
+    contributions = dict(q.contributions or {})
+    return {f"value{key}": value, f"std_error{key}": contributions.get(TYPE_A),
+            f"expanded_95{key}": q.expanded, "k": q.k, "dof": q.dof,
+            "decision": q.decision, f"contributions{key}": contributions, "stated": True}
+
+
+def _stated_frame(result: RunResult, state: str, offsets: Axis3 | None,
+                  held: Axis3 | None) -> dict[str, Any] | None:
+    """:func:`_frame` from the statement's ``drho_*.<state>`` (None where any is
+    missing): e = Δρ − o with the offsets Δρ was stated with, Δρ = e + o with those
+    ``held``."""
+    q = stated(result)
+    if offsets is None or held is None:
+        return None
+    out: dict[str, Any] = {}
+    runs_with: dict[str, Any] = {}
+    for a in AXES:
+        x, o, h = q.get(f"drho_{a}.{state}"), offsets.get(a), held.get(a)
+        if x is None or x.value is None or o is None or h is None:
+            return None
+        out[a] = _stated_value(x, x.value - o, "_mm")
+        runs_with[a] = _stated_value(x, x.value - o + h, "_mm")
+    return {"joint_error_mm": out, "drho_mm": runs_with, "offsets_mm": dict(held),
+            "dof": None, "stated": True}
+
+
+def stated(result: RunResult) -> dict[str, Quantity]:
+    """The record's statement by name (empty for a record from before it)."""
+    return {q.name: q for q in result.statement or []}
+
+
 def _layout(result: RunResult) -> dict[str, Any]:
+    q = stated(result)
+    if q:
+        return {n: _stated_value(x, x.value) for n, x in q.items()
+                if n.startswith(("tilt_", "gap_")) and x.value is not None}
     acc = result.accuracy
     out: dict[str, Any] = {}
     if acc is None or isinstance(acc, NotStated):
@@ -80,7 +130,12 @@ def _layout(result: RunResult) -> dict[str, Any]:
 
 
 def _reversal(result: RunResult) -> dict[str, Any]:
-    """Each joint's lost motion as the run measured it (mm, with its standard error)."""
+    """Each joint's lost motion as the run states it (mm, with its standard error, and
+    with a statement its expanded uncertainty and decision)."""
+    q = stated(result)
+    if any(n.startswith("reversal_") for n in q):
+        return {a: _stated_value(x, x.value, "_mm") for a in AXES
+                if (x := q.get(f"reversal_{a}")) is not None and x.value is not None}
     rev = result.reversal
     if rev is None:
         return {}
@@ -98,8 +153,12 @@ def _instruments(result: RunResult) -> list[dict[str, Any]]:
 
 
 def _as_found(result: RunResult) -> dict[str, Any] | None:
-    """e at the run's start: from ``remaining.total`` where a verification measured
-    after the last write, else from the first identification."""
+    """e at the run's start: the statement's Δρ as found; a record from before it:
+    from ``remaining.total`` where a verification measured after the last write, else
+    from the first identification."""
+    if stated(result):
+        return _stated_frame(result, "as_found", result.offsets_before,
+                             result.offsets_before)
     rem = result.remaining
     if rem is not None and rem.total:
         return _frame(rem.total, rem.std_errors, result.offsets_before, rem.std_errors_dof,
@@ -118,6 +177,8 @@ def _as_left(result: RunResult) -> dict[str, Any] | None:
         return None
     backs = result.rollback_history()
     measured_with = backs[0].replaced if backs else result.offsets_final
+    if stated(result):
+        return _stated_frame(result, "as_left", measured_with, result.offsets_final)
     return _frame(rem.estimate, rem.std_errors, measured_with, rem.std_errors_dof,
                   held=result.offsets_final)
 
@@ -128,8 +189,10 @@ def entry_of(result: RunResult, profile: str | None = None) -> dict[str, Any]:
     machine, acc = result.machine, result.accuracy
     back = result.rolled_back
     # the tool as the run left it: after a rollback, as it was found
-    after = None if acc is None or isinstance(acc, NotStated) else \
-        acc.before.rms_mm if back is not None else acc.after.rms_mm
+    tool = stated(result).get(f"tool.{'before' if back is not None else 'after'}.rms")
+    after = tool.value if tool is not None else None if acc is None or \
+        isinstance(acc, NotStated) else acc.before.rms_mm if back is not None else \
+        acc.after.rms_mm
     return {
         "run_dir": result.run_dir, "machine_id": machine.id,
         "started": result.started, "finished": result.finished,

@@ -30,6 +30,13 @@ MONTH_DAYS = 30.436875
 MIN_SPAN_DAYS = 7.0
 
 
+#: What a point's 95 % half-width is, as the history's figure labels it: the run's
+#: statement's expanded uncertainty (Type A and B); for an entry from before the
+#: statement, its certificate's (the uncertainty budget's, Type A and B) or the
+#: scatter's alone (k × its standard error).
+BASES = ("statement", "certificate", "scatter")
+
+
 @dataclass(frozen=True)
 class Point:
     """One value of one parameter in one run (mm or mrad, as the entry states it)."""
@@ -37,14 +44,11 @@ class Point:
     when: datetime  # the run's start (as found, measured) or end (as left)
     state: str  # "as found", "as left", or "measured" (tilts and gaps: no frame)
     value: float
-    std_error: float | None
+    std_error: float | None  # the scatter's (Type A): what the drift weighs by
     dof: float | None
-    #: a 95 % half-width the run itself states: its certificate's expanded
-    #: uncertainty (the uncertainty budget, Type A and B), or for tilts and gaps their
-    #: statistical interval; None: k × std_error here
+    #: a 95 % half-width the run itself states (BASES); None: k × std_error here
     interval_95: float | None = None
-    #: interval_95 is the certificate's expanded uncertainty (not only the scatter)
-    certified: bool = False
+    basis: str = "scatter"
 
     @property
     def expanded_95(self) -> float | None:
@@ -52,6 +56,13 @@ class Point:
             return self.interval_95
         return None if self.std_error is None else \
             coverage_factor(self.dof, 0.95) * self.std_error
+
+
+def _basis(v: Mapping[str, Any], half: float | None) -> str:
+    """BASES' word for an entry's value ``v`` whose half-width is ``half``."""
+    if v.get("stated"):
+        return "statement"
+    return "scatter" if half is None else "certificate"
 
 
 @dataclass(frozen=True)
@@ -88,22 +99,24 @@ def series(entries: Sequence[Mapping[str, Any]]) -> dict[str, list[Point]]:
         for state, key, at in (("as found", "as_found", when), ("as left", "as_left", left)):
             frame = entry.get(key) or {}
             for axis, v in (frame.get("joint_error_mm") or {}).items():
-                certificate = v.get("expanded_95_mm")  # entries since it was kept
+                half = v.get("expanded_95_mm")  # entries since it was kept
+                dof = v["dof"] if "dof" in v else frame.get("dof")
                 out[f"drho_{axis}"].append(Point(at, state, float(v["value_mm"]),
-                                                 v.get("std_error_mm"), frame.get("dof"),
-                                                 certificate, certificate is not None))
+                                                 v.get("std_error_mm"), dof, half,
+                                                 _basis(v, half)))
         for name, v in (entry.get("layout") or {}).items():
+            half = v.get("expanded_95", v.get("interval_95"))
             out.setdefault(name, []).append(
-                Point(when, "measured", float(v["value"]), v.get("std_error"), None,
-                      v.get("interval_95")))
+                Point(when, "measured", float(v["value"]), v.get("std_error"), v.get("dof"),
+                      half, "statement" if v.get("stated") else "scatter"))
     return {name: sorted(points, key=lambda p: p.when) for name, points in out.items()
             if points}
 
 
 def _fitted(points: Sequence[Point]) -> list[Point]:
     """The points a drift is fitted to: as found (or measured), with a standard error.
-    Weighted by the scatter alone: the certificate's Type B part (the legs' form, the
-    gauges' error) is the same in every run of one machine, so it moves no slope."""
+    Weighted by the scatter alone (the statement's Type A part): the Type B part common
+    to a machine's runs (the legs' form) moves no slope."""
     return [p for p in points if p.state != "as left" and p.std_error and p.std_error > 0]
 
 

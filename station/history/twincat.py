@@ -19,11 +19,9 @@ from collections.abc import Sequence
 from orthocal import AXES
 from station.history.controller_terms import (
     ExportError,
-    backlash_stands_out,
     home_changes,
-    not_beyond_noise,
     offset_changes,
-    reversals,
+    plays,
 )
 from station.record.exportable import header_lines
 from station.record.result import RunResult
@@ -52,8 +50,9 @@ def _header(result: RunResult, machine: str, backlash: bool, forced: bool,
         "#   scaled encoder count + bias): one or the other, never both.",
     ]
     if backlash:
-        lines += ["# value_mm (backlash): the joint's reversal as measured (ISO 230-2), a value,",
-                  "#   not a change; only where it stands beyond two standard errors."]
+        lines += ["# value_mm (backlash): the joint's reversal as the run states it (ISO 230-2),",
+                  "#   a value, not a change; only where the run's statement decides to",
+                  "#   compensate it (reversal_*: compensate or repair, the decision table)."]
     return lines
 
 
@@ -70,7 +69,7 @@ def twincat(result: RunResult, axes: Sequence[str] = DEFAULT_AXES,
         raise ExportError(f"--axes: three NC axis names for x,y,z, got {','.join(axes)!r}")
     change = home_changes(result, "TwinCAT")
     offsets = offset_changes(result)
-    reversal = reversals(result) if backlash else {}
+    reversal = plays(result) if backlash else {}
     machine = result.machine.id or "no [machine] id"
     out = _header(result, machine, backlash, forced, words)
     out.append("nc_axis,joint,parameter,change_mm,value_mm,offset_before_mm,"
@@ -86,9 +85,10 @@ def twincat(result: RunResult, axes: Sequence[str] = DEFAULT_AXES,
                        "error compensation list carries the reversal")
         elif axis not in reversal:
             out.append(f"# {name.strip()} ({axis}): no backlash: the run measured no reversal")
-        elif backlash_stands_out(*reversal[axis]):
-            out.append(f"{name.strip()},{axis},{BACKLASH},,{reversal[axis][0]:.6f},{tail}")
+        elif reversal[axis].acts:
+            out.append(f"# {name.strip()} ({axis}): backlash: {reversal[axis].why}")
+            out.append(f"{name.strip()},{axis},{BACKLASH},,{reversal[axis].value:.6f},{tail}")
         else:
             out.append(f"# {name.strip()} ({axis}): backlash not written: "
-                       f"{not_beyond_noise(*reversal[axis])}")
+                       f"{reversal[axis].why}")
     return "\n".join(out) + "\n"

@@ -13,15 +13,30 @@ from __future__ import annotations
 
 import textwrap
 
+from station.record.quantity_text import plus_minus
 from station.record.result import RunResult
+from station.record.result_statement import Quantity
 
 #: The width of a header's comment lines (HEADER before each not counted).
 WIDTH = 76
 
 
+def _as_left(result: RunResult) -> list[Quantity]:
+    """The statement's Δρ as left, x, y, z (empty for a record from before it)."""
+    q = {x.name: x for x in result.statement or []}
+    return [q[n] for a in "xyz" if (n := f"drho_{a}.as_left") in q]
+
+
 def _worst_off(result: RunResult) -> str | None:
-    """How far the worst joint may still be off at 95 %, from the last round's
-    ``shown_within_95_mm`` ("Δρ_x may still be off by up to 17.3 µm at 95 %")."""
+    """How far the joints not shown within the loop's limit may be off at 95 %: the
+    statement's Δρ as left ("Δρ_x as left +3.1 ± 14.2 µm (95 %, not shown within)");
+    a record from before the statement, the last round's ``shown_within_95_mm`` ("Δρ_x
+    may still be off by up to 17.3 µm at 95 %")."""
+    left = _as_left(result)
+    if left:
+        off = [x for x in left if x.decision != "within"]
+        return "; ".join(f"Δρ_{x.name[5]} as left {plus_minus(x)} (95 %, {x.decision})"
+                         for x in off) or None
     last = result.iterations[-1] if result.iterations else None
     shown = {k: v for k, v in ((last.shown_within_95_mm or {}) if last else {}).items()
              if k.startswith("drho_") and v is not None}
@@ -102,8 +117,9 @@ def verdict(result: RunResult) -> str:
                               f": every joint offset shown within ±{1000 * within:.1f} µm "
                               "at 95 %") + f", {loop.write_backs} write-back(s)"
     elif budget_limited(result):
+        off = _worst_off(result)
         text = (f"NOT CONVERGED ({loop.stopped}, budget-limited: the stated inputs alone keep "
-                f"the joints from being shown within the limit; {_worst_off(result)}), "
+                f"the joints from being shown within the limit{f'; {off}' if off else ''}), "
                 f"{loop.write_backs} write-back(s)")
     else:
         text = f"NOT CONVERGED ({loop.stopped})"
@@ -134,6 +150,9 @@ def header_lines(result: RunResult, forced: bool = False) -> list[str]:
     carries that made ``--force`` necessary, in its own words."""
     machine = result.machine.id or "no [machine] id"
     text = [f"run {result.run_dir}, machine {machine}", f"verdict: {verdict(result)}"]
+    if left := _as_left(result):
+        text.append("the run's statement, Δρ as left: " + ", ".join(
+            f"{x.name[5]} {plus_minus(x)}" for x in left) + " (95 %)")
     reasons = unresolved(result)
     if forced and reasons:
         said = "; ".join(reasons)

@@ -6,12 +6,16 @@ did not identify it, why it is left at its nominal value.
 Read from a finished run's result.json and model.json. What the controller is
 told (``theta_c``, orthocal/compensation.py) holds, per parameter:
 
-- Δρ: what the offsets the run wrote did not correct (``drho_now``: the last
-  verification's estimate of the joints' error left);
+- Δρ: what the offsets the run wrote did not correct (``drho_now``, the statement's
+  ``drho_*.as_left``);
 - a tilt or a gap: the pooled value where the model the run kept holds it; else
   nominal (0), the run's value and interval named in the note: the model test
   found it within the noise, so the controller is not told noise;
 - ΔL: where the kept model identified it; else nominal (L), named.
+
+Each value's 95 % interval and its note's figure are the run's statement's (docs/design.md,
+"The statement of the machine"), the one uncertainty every view prints; a record from
+before the statement keeps model.json's standard errors times k (legacy).
 
 Refused, in one line: a run that failed or was aborted, or that identified
 nothing (no model.json). Whether a run that completed may be put into a controller
@@ -33,8 +37,10 @@ import orthocal
 from orthocal import AXES, MODELS, PARAM_NAMES
 from station.record.io import UnreadableResult, read_result
 from station.record.model import MachineModel
+from station.record.quantity_text import plus_minus
 from station.record.result import RunResult
 from station.record.result_base import JsonObject
+from station.record.result_statement import Quantity
 
 #: orthoglidekins' pins in PARAM_NAMES order (docs/design.md, "The geometry in the
 #: controller"): leg-length-i is L + ΔL_i, the others the parameters themselves.
@@ -154,18 +160,20 @@ def _machine(run: Path, result: RunResult, model: MachineModel) -> IdentifiedMac
         missing = [n for n in names if n not in getattr(model, field)]
         if missing:
             raise NotACalibration(f"{run / 'model.json'}: {field}: no {', '.join(missing)}")
-    remaining = result.remaining
-    now_se = remaining.std_errors if remaining is not None else {}
-    k_now = orthocal.coverage_factor(remaining.std_errors_dof if remaining else None)
-    k = orthocal.coverage_factor(model.std_errors_dof)
+    q = {x.name: x for x in result.statement or []}
     values = []
     for c, name in enumerate(PARAM_NAMES):
         kind = name.split("_")[0]
-        if kind == "drho":
-            values.append(_drho(name, model.drho_now[name], now_se.get(name), k_now))
-            continue
         told = c in columns and name in model.estimated
-        values.append(_layout_value(name, kind, model, told, k))
+        said = q.get(f"{name}.as_left" if kind == "drho" else
+                     f"dl_{name[-1]}" if kind == "dL" else name)
+        if said is not None and said.value is not None:
+            values.append(_stated(name, kind, model, told, said))
+        elif kind == "drho":
+            values.append(_legacy_drho(name, model, result))
+        else:
+            values.append(_layout_value(name, kind, model, told,
+                                        orthocal.coverage_factor(model.std_errors_dof)))
     estimate = [model.drho_now[n] if n.startswith("drho") else model.parameters[n]
                 for n in PARAM_NAMES]
     return IdentifiedMachine.model_validate(dict(
@@ -175,18 +183,53 @@ def _machine(run: Path, result: RunResult, model: MachineModel) -> IdentifiedMac
         values=tuple(values), estimate=tuple(float(v) for v in estimate)))
 
 
-def _drho(name: str, value: float, se: float | None, k: float) -> GeometryValue:
-    """Δρ now: what the offsets written did not correct, with its 95 % interval."""
+#: What a Δρ pin carries, in its note.
+DRHO_NOTE = "the joint's error the offsets written left (last verification)"
+
+
+def _stated(name: str, kind: str, model: MachineModel, told: bool,
+            q: Quantity) -> GeometryValue:
+    """A parameter the run's statement states (docs/design.md, "The statement of the
+    machine"): Δρ as left, a tilt, a gap, ΔL; its value and its 95 % interval are the
+    statement's, the note its text (station.record.quantity_text). Told where the model
+    the run kept holds it (Δρ always), else nominal with the statement's value named."""
+    base = model.geometry.leg_length_mm if kind == "dL" else 0.0
+    unit: Literal["mm", "mrad"] = "mrad" if kind == "tilt" else "mm"
+    iv = None if q.interval_95 is None else (base + q.interval_95[0], base + q.interval_95[1])
+    value = float(q.value)  # type: ignore[arg-type]  # the caller checked it
+    if kind == "drho" or told:
+        note = DRHO_NOTE if kind == "drho" else f"identified (model {model.model})"
+        return GeometryValue(name=name, pin=PINS[name], unit=unit, value=base + value,
+                             nominal=base, identified=True, interval_95=iv,
+                             note=f"{note}; the run's statement: {plus_minus(q)} (95 %)")
+    holds = iv is None or iv[0] <= base <= iv[1]
+    where = ("its interval holds the nominal value" if holds else
+             "its interval does not hold the nominal value, but the model test over the "
+             "whole run did not keep it")
+    return GeometryValue(name=name, pin=PINS[name], unit=unit, value=base, nominal=base,
+                         identified=False, interval_95=iv,
+                         note=f"nominal: the model test kept {model.model!r}, which holds no "
+                              f"{name}; the run's statement is {plus_minus(q)} (95 %; "
+                              f"{where}), carried in accuracy.compensated's interval")
+
+
+def _legacy_drho(name: str, model: MachineModel, result: RunResult) -> GeometryValue:
+    """Δρ now of a record from before the statement: model.json's, with k × the last
+    verification's standard error."""
+    value = model.drho_now[name]
+    rem = result.remaining
+    se = rem.std_errors.get(name) if rem is not None else None
+    k = orthocal.coverage_factor(rem.std_errors_dof if rem else None)
     iv = None if se is None or not math.isfinite(se) else (value - k * se, value + k * se)
     return GeometryValue(name=name, pin=PINS[name], unit="mm", value=float(value),
-                         nominal=0.0, identified=True, interval_95=iv,
-                         note="the joint's error the offsets written left (last verification)")
+                         nominal=0.0, identified=True, interval_95=iv, note=DRHO_NOTE)
 
 
 def _layout_value(name: str, kind: str, model: MachineModel, told: bool,
                   k: float) -> GeometryValue:
-    """ΔL (as the leg's length L + ΔL), a tilt or a gap: the run's value where the
-    model it kept holds it, else nominal with the run's value and why in the note."""
+    """ΔL (as the leg's length L + ΔL), a tilt or a gap the statement does not state (a
+    record from before it, a ΔL not identified): model.json's value where the model it
+    kept holds it, else nominal with its value and why in the note."""
     base = model.geometry.leg_length_mm if kind == "dL" else 0.0
     value = float(model.parameters[name])
     se = model.std_errors.get(name)

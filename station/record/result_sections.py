@@ -206,9 +206,19 @@ class Change(Closed):
     before: float
     after: float
     change: float
-    std_error: float | None
-    interval_95: float | None = Field(description="half-width, Student's t on the smaller dof")
+    std_error: float | None = Field(description="the change's combined standard uncertainty")
+    interval_95: float | None = Field(
+        description="half-width: the change's 95 % expanded uncertainty (the two runs' "
+                    "statements combined as the GUM combines a difference; a run from "
+                    "before the statement: k·σ, Student's t on the smaller dof)")
     significant: bool | None
+    k: float | None = Field(None, description="the change's coverage factor")
+    dof: float | None = Field(None, description="the change's effective dof (null: infinite)")
+    before_expanded: float | None = Field(
+        None, description="the 95 % expanded uncertainty the earlier run stated its value "
+                          "with (null: it stated none)")
+    after_expanded: float | None = Field(
+        None, description="the same of this run's value")
 
 
 class SinceLast(Closed):

@@ -5,10 +5,11 @@ A panel per joint error e = Δρ − o (µm, the machine's own, whatever offsets
 written in between: station.history.entry), then one for the tilts (mrad) and one
 for the gaps (µm) where any run identified them. Each value as found (open circle,
 at the run's start) and as left (filled square, at its end) with its 95 % error
-bar: the run's certificate (its uncertainty budget's expanded uncertainty, Type A
-and B) where it states one, else the statistical interval, each labelled as what
-it is; each panel states every parameter's drift per month, or why none
-(station.history.trend). A footnote says what e is: on a calibrated machine it is
+bar: the expanded uncertainty of the run's statement (Type A and B: docs/design.md,
+"The statement of the machine"), the same ± report.html prints; an entry from before
+the statement bars its budget's expanded uncertainty or its scatter's interval, each
+labelled as what it is. Each panel states every parameter's drift per month, or why
+none (station.history.trend). A footnote says what e is: on a calibrated machine it is
 minus the offset the controller holds, not an error left in the machine."""
 
 from __future__ import annotations
@@ -44,6 +45,11 @@ E_MEANS = ("e = Δρ − o: each joint's zero error without the controller's off
            "machine's.")
 
 _COLOURS = ("#1f5fa8", "#e08a00", "#2e8b3d")
+#: What each kind of bar is, in the legend (station.history.trend.BASES): one
+#: uncertainty per value, the run's statement's, as report.html states it.
+BARS = {"statement": "± U 95 % of the run's statement",
+        "certificate": "± U 95 % of its budget (a run from before the statement)",
+        "scatter": "± 95 % of its scatter alone (a run from before the statement)"}
 
 
 def _label(name: str) -> str:
@@ -65,12 +71,10 @@ def _panel(ax: Any, names: Sequence[str], points: Mapping[str, list[Point]], tit
     for colour, name in zip(_COLOURS * 2, names, strict=False):
         for state, marker, face in (("as found", "o", "none"), ("as left", "s", colour),
                                     ("measured", "D", colour)):
-            # Bars of one kind per legend entry: a run whose certificate states its
-            # uncertainty and one (older) whose does not are labelled apart.
-            for certified, bars in ((True, "± U95 of its certificate"),
-                                    (False, "± 95 % statistical interval")):
-                chosen = [p for p in points[name]
-                          if p.state == state and p.certified == certified]
+            # Bars of one kind per legend entry: the run's statement, and (entries
+            # from before it) its certificate or its scatter alone, labelled apart.
+            for basis, bars in BARS.items():
+                chosen = [p for p in points[name] if p.state == state and p.basis == basis]
                 if not chosen:
                     continue
                 xs = [p.when for p in chosen]

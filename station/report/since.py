@@ -9,15 +9,18 @@ from __future__ import annotations
 
 import html
 
-from station.history.compare import change_lines
+from station.history.compare import change_lines, said
 from station.record.result import RunResult
 from station.record.result_sections import Change, NotCompared, SinceLast
+from station.record.result_statement import Unit
 from station.report.format import format_when, param_html
 
 _INTRO = ("The joints are compared as e = Δρ − o, their error in the controller's zero "
-          "frame: the machine's own, whatever offsets were written in between. A change "
-          "is significant when it lies beyond its 95 % interval (for the joints, Student's "
-          "t on the smaller dof of the two runs; the normal's k for the tilts and gaps).")
+          "frame: the machine's own, whatever offsets were written in between. Each value "
+          "with the ± its run stated it with; a change is significant when it lies beyond "
+          "its 95 % expanded uncertainty, the two runs' combined as the GUM combines a "
+          "difference (each run's scatter independent, the legs' straightness common to "
+          "both and fully correlated, every other stated input independent).")
 _SIGNIFICANT = {True: "<b>yes</b>", False: "no", None: "—"}
 
 
@@ -38,13 +41,12 @@ def summary_lines(result: RunResult) -> list[str]:
     return [f"  since last    {_head(since)}:"] + [f"    {line}" for line in rows]
 
 
-def _cells(c: Change, scale: float, digits: int) -> str:
-    def num(v: float | None, signed: bool = True) -> str:
-        return "—" if v is None else f"{scale * v:{'+' if signed else ''}.{digits}f}"
-
-    return "".join(f'<td class="num">{x}</td>' for x in (
-        num(c.before), num(c.after), num(c.change),
-        num(c.interval_95, signed=False))) + f"<td>{_SIGNIFICANT[c.significant]}</td>"
+def _cells(c: Change, name: str, unit: Unit) -> str:
+    """The change's cells: each run's value with its stated ±, the change with its U,
+    as station.history.compare prints them (station.record.quantity_text)."""
+    return "".join(f'<td class="num">{html.escape(x)}</td>'
+                   for x in said(c.model_dump(), name, unit)) + \
+        f"<td>{_SIGNIFICANT[c.significant]}</td>"
 
 
 def section_html(result: RunResult) -> str:
@@ -58,17 +60,17 @@ def section_html(result: RunResult) -> str:
                 f"{html.escape(since.not_compared)}.</p>")
     rows = []
     for axis, c in since.joint_error_mm.items():
-        rows.append(f'<tr><td class="l">joint {html.escape(axis)}: e (µm)</td>'
-                    f"{_cells(c, 1000.0, 1)}</tr>")
+        rows.append(f'<tr><td class="l">joint {html.escape(axis)}: e</td>'
+                    f"{_cells(c, f'e_{axis}', 'mm')}</tr>")
     for name, c in since.layout.items():
-        scale, unit = (1000.0, "µm") if name.startswith("gap") else (1.0, "mrad")
-        rows.append(f'<tr><td class="l">{param_html(name)} ({unit})</td>'
-                    f"{_cells(c, scale, 1 if scale > 1 else 3)}</tr>")
+        unit: Unit = "mm" if name.startswith("gap") else "mrad"
+        rows.append(f'<tr><td class="l">{param_html(name)}</td>{_cells(c, name, unit)}</tr>')
     if not rows:
         return ""
     head = _head(since)
     return (f"{title}<p>{html.escape(head[0].upper() + head[1:])}.</p>"
-            '<table><thead><tr><th class="l">parameter</th><th>last run</th>'
-            "<th>this run</th><th>change</th><th>± 95 %</th><th>significant</th></tr>"
+            '<table class="changes"><thead><tr><th class="l">parameter</th><th>last run '
+            "(95 %)</th><th>this run (95 %)</th><th>change (95 %)</th><th>significant</th>"
+            "</tr>"
             "</thead><tbody>" + "".join(rows) + "</tbody></table>"
             f'<p class="small">{html.escape(_INTRO)}</p>')

@@ -17,7 +17,9 @@ from station.commands import run as cmd_run
 from station.history.controller_terms import ExportError, csv_lines, linuxcnc
 from station.history.twincat import twincat
 from station.record.exportable import HEADER
+from station.record.quantity_text import plus_minus
 from station.record.result import RunResult
+from station.record.result_statement import Quantity
 from station.report import as_result
 
 GATEWAY_NO_OFFSETS = Path(__file__).resolve().parents[2] / "examples" / "maps" / \
@@ -35,6 +37,20 @@ HOME_OFFSET = 0
 """
 
 
+#: The statement's reversal per joint in this test's record: value, U and decision.
+PLAYS = {"reversal_x": {"value": 0.02, "expanded": 0.002, "decision": "compensate"},
+         "reversal_y": {"value": 0.0003, "expanded": 0.002, "decision": "none"},
+         "reversal_z": {"value": 0.0, "expanded": 0.002, "decision": "none"}}
+
+
+def _with(q: dict[str, Any], **said: Any) -> dict[str, Any]:
+    """A quantity of the statement with ``said`` (value, expanded, decision) in it, its
+    interval following its value and U."""
+    q = {**q, **said}
+    q["interval_95"] = [q["value"] - q["expanded"], q["value"] + q["expanded"]]
+    return q
+
+
 def document(**extra: Any) -> dict[str, Any]:
     """A run's result.json (the golden run's) with the offsets, machine and reversal
     the export is checked against."""
@@ -42,6 +58,10 @@ def document(**extra: Any) -> dict[str, Any]:
     doc["machine"]["id"] = "OG-1"
     doc["reversal"].update(value_mm={"x": 0.02, "y": 0.0003, "z": 0.0},
                            std_errors_mm={"x": 0.001, "y": 0.001, "z": 0.001})
+    # the statement's reversals, as the decision table decides them: x a play to
+    # compensate, y and z within their uncertainty
+    doc["statement"] = [_with(q, **PLAYS[q["name"]]) if q["name"] in PLAYS else q
+                        for q in doc["statement"]]
     return {**doc, "run_dir": "/runs/run-1", "offsets_held_by": "station",
             "offsets_before": {"x": 0.1, "y": 0.0, "z": -0.2},
             "offsets_final": {"x": 0.6, "y": -0.3, "z": -0.2}, **extra}
@@ -86,8 +106,12 @@ def test_linuxcnc_keeps_the_ini_writes_old_beside_new_and_backlash_when_asked() 
     assert "MACHINE = og" in text and "TYPE = LINEAR" in text  # the rest as it was
     assert "BACKLASH" not in text  # not asked for
     asked = linuxcnc(result(), INI, source="og.ini", backlash=True)
-    assert "BACKLASH = 0.020000" in asked  # 20 standard errors out
-    assert asked.count("BACKLASH = ") == 1 and "BACKLASH not written" in asked
+    # the statement's decision (the decision table's one rule), said beside it
+    assert "BACKLASH = 0.020000    # the run's statement: reversal_x +20.0 ± 2.0 µm (95 %), " \
+        "the decision table: compensate" in asked
+    assert asked.count("BACKLASH = ") == 1
+    assert "# BACKLASH not written: the run's statement: reversal_y +0.3 ± 2.0 µm (95 %), " \
+        "not beyond its uncertainty (the decision table: none)" in asked
     # a drive that holds the offsets itself: LinuxCNC must not correct them again
     with pytest.raises(ExportError, match="correct the machine twice"):
         linuxcnc(result(offsets_held_by="controller"), INI)
@@ -143,6 +167,10 @@ def test_the_command(tmp_path: Path) -> None:
     (run_dir / "result.json").write_text(json.dumps(document(offsets_final=None)))
     stopped = orthocal("--to", "csv")
     assert stopped.returncode == 2 and "offsets_before/offsets_final" in stopped.stderr
+
+
+def parse_quantity(doc: dict[str, Any]) -> Quantity:
+    return Quantity.model_validate(doc)
 
 
 def twincat_rows(text: str) -> list[dict[str, str]]:
@@ -203,7 +231,12 @@ def test_twincat_from_a_run_whose_station_held_the_offsets(tmp_path: Path, capsy
     header = [line for line in text.splitlines() if line.startswith(HEADER)]
     said = " ".join(line.removeprefix(HEADER).strip() for line in header)
     assert "EXPORTED WITH --force" in said and "the run did not converge (not-converged)" \
-        in said and "may still be off by up to" in said, said
+        in said and "(95 %, not shown within)" in said, said
+    # the joints as left are the statement's, printed as every view prints them
+    stated = {q["name"]: q for q in done["statement"]}
+    for a in "xyz":
+        q = parse_quantity(stated[f"drho_{a}.as_left"])
+        assert f"{a} {plus_minus(q)}" in said, (a, said)
     rows = twincat_rows(text)
     for row in rows:
         a = row["joint"]
@@ -234,14 +267,17 @@ def unresolved(case: str) -> dict[str, Any]:
         doc["message"] = f"closed loop did not converge: {DETAIL}"
         last.update(verdict="unproven", shown_within_95_mm={
             "drho_x": 0.0173, "drho_y": 0.0021, "drho_z": 0.0009})
+        doc["statement"] = [_with(q, value=0.0021, expanded=0.0152,
+                                  decision="not shown within")
+                            if q["name"] == "drho_x.as_left" else q for q in doc["statement"]]
     if case in ("ambiguous", "both"):
         last.update(model="rho+tilt", ambiguity={"explained_by": "rho+form",
                                                  "apart_mm": {"drho_x": 0.015}})
     return doc
 
 
-REASONS = {"not converged": ["the run did not converge (not-converged): Δρ_x may still be "
-                             "off by up to 17.3 µm at 95 %"],
+REASONS = {"not converged": ["the run did not converge (not-converged): Δρ_x as left "
+                             "+2.1 ± 15.2 µm (95 %, not shown within)"],
            "ambiguous": ["its last round could not tell the axes' tilts from the legs' bows "
                          "(rho+tilt or rho+form)"]}
 REASONS["both"] = REASONS["not converged"] + REASONS["ambiguous"]

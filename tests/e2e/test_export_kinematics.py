@@ -313,7 +313,8 @@ UNRESOLVED = {
         "could not tell the axes' tilts from the legs' bows (rho+tilt+gap or rho+gap+form)"),
     "not converged": ({"verdict": "unproven", "shown_within_95_mm": {
         "drho_x": 0.0031, "drho_y": 0.0173, "drho_z": 0.0009}},
-        "did not converge (not-converged): Δρ_y may still be off by up to 17.3 µm"),
+        "did not converge (not-converged): Δρ_y as left +2.1 ± 15.2 µm (95 %, not shown "
+        "within)"),
 }
 
 
@@ -330,6 +331,11 @@ def test_an_unresolved_run_goes_into_the_controller_only_with_force(
     if case == "not converged":
         doc["converged"] = False
         doc["loop"]["stopped"] = "not-converged"
+        # the statement's Δρ_y as left, not shown within the loop's limit
+        doc["statement"] = [{**q, "value": 0.0021, "expanded": 0.0152,
+                             "interval_95": [0.0021 - 0.0152, 0.0021 + 0.0152],
+                             "decision": "not shown within"}
+                            if q["name"] == "drho_y.as_left" else q for q in doc["statement"]]
     (run_dir / "result.json").write_text(json.dumps(doc))
     ini = machine(tmp_path / "machine")
     before = snapshot(tmp_path)

@@ -146,7 +146,7 @@ def test_compare_finds_drift_and_not_noise(machines: Machines, tmp_path: Path) -
     rows = [line for line in said.splitlines() if line.startswith("  ") and " → " in line]
     assert len(rows) == 9 and all(line.endswith("significant") for line in rows)
     assert next(r for r in rows if "joint x" in r).endswith("  significant")
-    assert "excludes zero" in said
+    assert "lies beyond its 95 % expanded uncertainty" in said
 
 
 def test_compare_refuses_a_run_compared_with_itself(machines: Machines,

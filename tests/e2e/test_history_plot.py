@@ -137,22 +137,46 @@ def test_no_drift_from_runs_less_than_a_week_apart(tmp_path: Path) -> None:
     assert "/month (" not in text  # no slope drawn anywhere
 
 
-def test_error_bars_are_the_certificates_expanded_uncertainty() -> None:
+def test_error_bars_are_the_statement_s_expanded_uncertainty() -> None:
     result = golden_result()
+    stated = {q["name"]: q for q in result["statement"]}
+    entry = {**entry_of(as_result(result)), "machine_id": "OG-1",
+             "started": "2026-01-01T10:00:00+00:00", "finished": "2026-01-01T10:20:00+00:00"}
+    points = series([entry])
+    for state in ("as found", "as left"):  # one uncertainty for the joint, both states
+        p = next(p for p in points["drho_x"] if p.state == state)
+        key = f"drho_x.{state.replace(' ', '_')}"
+        assert p.basis == "statement", state
+        assert p.expanded_95 == pytest.approx(stated[key]["expanded"]), state
+        # e = Δρ − o with the offsets Δρ was stated with
+        assert p.value == pytest.approx(stated[key]["value"] - (
+            result["offsets_before"]["x"] if state == "as found" else
+            result["offsets_final"]["x"]))
+        # not the scatter's (about 2 standard errors): the stated inputs' part is in it
+        assert p.expanded_95 > 2.5 * p.std_error
+    for name in ("tilt_yx", "gap_xy"):
+        (p,) = points[name]
+        assert p.basis == "statement"
+        assert p.value == pytest.approx(stated[name]["value"])
+        assert p.expanded_95 == pytest.approx(stated[name]["expanded"])
+
+
+def test_a_run_from_before_the_statement_keeps_its_legacy_bars() -> None:
+    result = {k: v for k, v in golden_result().items() if k not in ("statement", "advice")}
     budget = result["uncertainty_budget"]
     assert budget["statement"] == "remaining.total"
     entry = {**entry_of(as_result(result)), "machine_id": "OG-1",
              "started": "2026-01-01T10:00:00+00:00", "finished": "2026-01-01T10:20:00+00:00"}
     found = [p for p in series([entry])["drho_x"] if p.state == "as found"]
-    assert found[0].certified and \
+    assert found[0].basis == "certificate" and \
         found[0].expanded_95 == pytest.approx(budget["expanded_95_mm"]["drho_x"])
-    # not the scatter's (about 2.2 standard errors): the stated inputs' part is in it
-    assert found[0].expanded_95 > 2.5 * found[0].std_error
-    # a run whose budget states nothing: the statistical interval, and said to be one
+    left = [p for p in series([entry])["drho_x"] if p.state == "as left"]
+    assert left[0].basis == "scatter"
+    # a run whose budget states nothing: the scatter's interval, and said to be one
     bare = {**entry, "as_found": entry_of(as_result({**result, "uncertainty_budget": {
         "error": "not stated: a model without Δρ"}}))["as_found"]}
     fallback = next(p for p in series([bare])["drho_x"] if p.state == "as found")
-    assert not fallback.certified and fallback.expanded_95 < 0.002
+    assert fallback.basis == "scatter" and fallback.expanded_95 < 0.002
 
 
 def test_the_figure_labels_its_error_bars_and_says_what_e_is(tmp_path: Path) -> None:
@@ -162,11 +186,17 @@ def test_the_figure_labels_its_error_bars_and_says_what_e_is(tmp_path: Path) -> 
     second = _entry("b", "OG-6", 10, -1.8185, offsets_before=held)
     for entry in (first, second):  # x's certificate stated, y's and z's not (older runs)
         entry["as_found"]["joint_error_mm"]["x"]["expanded_95_mm"] = 0.0119
+    # a run that states the machine: its statement's U, as found and as left alike
+    third = _entry("c", "OG-6", 20, -1.8184, offsets_before=held)
+    for frame in (third["as_found"], third["as_left"]):
+        for v in frame["joint_error_mm"].values():
+            v.update(expanded_95_mm=0.0012, stated=True)
     out = tmp_path / "runs"
     out.mkdir()
     with HistoryStore(default_url(out)) as store:
         store.record(first)
         store.record(second)
+        store.record(third)
     svg = tmp_path / "h.svg"
     done = orthocal("--out", str(out), "--machine", "OG-6", "--plot", str(svg), cwd=tmp_path)
     assert done.returncode == 0, done.stderr
@@ -175,8 +205,13 @@ def test_the_figure_labels_its_error_bars_and_says_what_e_is(tmp_path: Path) -> 
     assert "Δρ as found: each joint's zero error at the run's start" in done.stdout
     assert "e = Δρ − o: the same error without any offset" in done.stdout
     text = " ".join(ET.parse(svg).getroot().itertext())
-    assert "e x as found, ± U95 of its certificate" in text
-    assert "e x as left, ± 95 % statistical interval" in text
-    assert "e y as found, ± 95 % statistical interval" in text
+    assert "e x as found, ± U 95 % of the run's statement" in text
+    assert "e x as left, ± U 95 % of the run's statement" in text
+    assert "e x as found, ± U 95 % of its budget (a run from before the statement)" in text
+    assert "e x as left, ± 95 % of its scatter alone (a run from before the statement)" \
+        in text
+    assert "e y as found, ± 95 % of its scatter alone (a run from before the statement)" \
+        in text
+    assert "statistical interval" not in text and "certificate" not in text
     assert "error bars 95 % expanded uncertainty" not in text  # what they were called
     assert "e = Δρ − o: each joint's zero error without the controller's offsets" in text

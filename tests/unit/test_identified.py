@@ -50,6 +50,24 @@ def model_json(model: str) -> dict[str, Any]:
     return MachineModel.model_validate(doc).model_dump(mode="json")
 
 
+#: The 95 % expanded uncertainty this test's runs state: Δρ as left, the tilts, the gaps.
+U_NOW, U_TILT, U_GAP = 0.0016, 0.021, 0.0043
+
+
+def _statement(quantities: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The golden run's statement with this test's machine in it: Δρ as left NOW, the
+    layout LAYOUT, each with its expanded uncertainty (its other quantities kept)."""
+    said = {**{f"{n}.as_left": (v, U_NOW) for n, v in NOW.items()},
+            **{n: (v, U_TILT if n.startswith("tilt") else U_GAP) for n, v in LAYOUT.items()}}
+    out = []
+    for q in quantities:
+        if q["name"] in said:
+            v, u = said[q["name"]]
+            q = {**q, "value": v, "expanded": u, "interval_95": [v - u, v + u]}
+        out.append(q)
+    return out
+
+
 def run_dir(tmp_path: Path, model: str = "rho+tilt+gap", status: str = "ok",
             with_model: bool = True, ambiguous: bool = False) -> Path:
     d = tmp_path / f"run-{model}-{status}"
@@ -60,6 +78,7 @@ def run_dir(tmp_path: Path, model: str = "rho+tilt+gap", status: str = "ok",
     result["machine"]["id"] = "OG-7"
     assert result["remaining"] is not None
     result["remaining"].update(std_errors={n: 0.0008 for n in NOW}, std_errors_dof=60.0)
+    result["statement"] = _statement(result["statement"])
     if ambiguous:  # the legs' bows explained its last round as well as the tilts
         result["iterations"][-1]["model"] = model
         result["iterations"][-1]["ambiguity"] = {
@@ -74,12 +93,14 @@ def test_the_kept_model_is_told_with_its_intervals(tmp_path: Path) -> None:
     m = identified_machine(run_dir(tmp_path))
     told = {v.name: v for v in m.values if v.identified}
     assert sorted(told) == sorted([*NOW, *LAYOUT])
-    k = coverage_factor(40.0)
+    # each value's 95 % interval is the statement's, not model.json's σ times a k
     lo, hi = told["tilt_yx"].interval_95
-    assert lo == pytest.approx(0.2 - k * 0.01) and hi == pytest.approx(0.2 + k * 0.01)
+    assert lo == pytest.approx(0.2 - U_TILT) and hi == pytest.approx(0.2 + U_TILT)
+    assert "+0.200 ± 0.021 mrad (95 %)" in told["tilt_yx"].note
     assert told["drho_x"].value == pytest.approx(0.002)  # what the offsets did not correct
     lo, hi = told["drho_x"].interval_95
-    assert hi - lo == pytest.approx(2 * coverage_factor(60.0) * 0.0008)
+    assert (lo, hi) == pytest.approx((0.002 - U_NOW, 0.002 + U_NOW))
+    assert "+2.0 ± 1.6 µm (95 %)" in told["drho_x"].note
     assert [v.pin for v in m.values] == [
         "drho-x", "drho-y", "drho-z", "leg-length-x", "leg-length-y", "leg-length-z",
         "tilt-yx", "tilt-zx", "tilt-zy", "gap-xy", "gap-xz", "gap-yz"]
@@ -96,10 +117,24 @@ def test_what_the_model_test_did_not_keep_stays_nominal_and_says_so(tmp_path: Pa
     m = identified_machine(run_dir(tmp_path, "rho+gap"))
     tilts = [v for v in m.values if v.name.startswith("tilt")]
     assert all(v.value == 0.0 and not v.identified for v in tilts)
-    assert "rho+gap" in tilts[0].note and "+0.2000 mrad" in tilts[0].note
+    assert "rho+gap" in tilts[0].note and "+0.200 ± 0.021 mrad (95 %" in tilts[0].note
     assert m.theta_c()[6:9].tolist() == [0.0, 0.0, 0.0]
     assert m.theta_c()[9:].tolist() == pytest.approx([0.15, -0.1, 0.12])
     assert m.estimate[6] == pytest.approx(0.2)  # the run's best value is kept beside
+
+
+def test_a_record_from_before_the_statement_keeps_model_json_s_intervals(
+        tmp_path: Path) -> None:
+    d = run_dir(tmp_path)
+    doc = json.loads((d / "result.json").read_text())
+    del doc["statement"], doc["advice"]
+    (d / "result.json").write_text(json.dumps(doc))
+    told = {v.name: v for v in identified_machine(d).values if v.identified}
+    k = coverage_factor(40.0)
+    lo, hi = told["tilt_yx"].interval_95
+    assert lo == pytest.approx(0.2 - k * 0.01) and hi == pytest.approx(0.2 + k * 0.01)
+    lo, hi = told["drho_x"].interval_95
+    assert hi - lo == pytest.approx(2 * coverage_factor(60.0) * 0.0008)
 
 
 @pytest.mark.parametrize("status", ["failed", "aborted"])
