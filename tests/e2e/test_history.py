@@ -17,8 +17,8 @@ from typing import Any
 import pg
 import pytest
 from builders import Completed, cli, simulated
+from schema_check import errors
 from system import require
-from test_record import errors
 
 from station import report
 from station.commands import run as cmd_run

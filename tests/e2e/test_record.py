@@ -5,14 +5,13 @@ an independent validator (jsonschema), as another tool reading them would."""
 from __future__ import annotations
 
 import json
-from functools import cache
 from pathlib import Path
 from typing import Any
 
 import pytest
 from builders import simulated
-from jsonschema import Draft202012Validator
 from result_builders import golden_result
+from schema_check import errors
 
 from station.commands import run as cmd_run
 from station.commands.cli import main
@@ -24,20 +23,6 @@ from station.record.result import SCHEMA_VERSION, RunResult
 
 DATA = Path(__file__).parents[1] / "data"
 GOLDEN = DATA / "golden_run"
-
-
-@cache
-def validator(kind: str) -> Draft202012Validator:
-    """One validator per kind (checking the schema and building its validator for
-    each of a run's hundreds of journal lines cost seconds)."""
-    doc = json.loads(schema.shipped(kind))
-    Draft202012Validator.check_schema(doc)
-    return Draft202012Validator(doc)
-
-
-def errors(kind: str, doc: dict[str, Any]) -> list[str]:
-    return [f"{'/'.join(map(str, e.absolute_path))}: {e.message}"
-            for e in validator(kind).iter_errors(doc)]
 
 
 @pytest.mark.parametrize("kind", schema.KINDS)
