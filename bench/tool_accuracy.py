@@ -12,7 +12,7 @@ wrote, over the same workspace grid the run stated its figures on:
   holds it 99.5 % of the time (the binomial: 16 of 20). One-sided: the interval
   is a bound that covers with probability ≥ 95 % whatever the machine, more
   where the field does not lie along its least certain direction; that it is
-  not wider than it says is tests/unit/test_accuracy_math.py's, where it is exact;
+  not wider than it says is tests/orthocal/test_accuracy_math.py's, where it is exact;
 * with ``[writeback] objective = "tool"``, the true after-RMS must be within 1.1×
   of the best any offsets can do on the hidden machine (orthocal.accuracy's
   optimum of the true parameters).

@@ -33,7 +33,7 @@ from station.commands.arg_types import (
 from station.commands.sim_arguments import add_sim_options
 
 # orthocal.MODELS, spelled out: the command line is parsed before numpy is loaded
-# (tests/engine/test_gaps.py checks that the two agree).
+# (tests/orthocal/test_gaps.py checks that the two agree).
 _BASE_MODELS = ("rho", "L", "full", "rho+tilt", "full+tilt", "rho+gap", "rho+tilt+gap",
                 "full+tilt+gap")
 # each also with the legs' bows fitted ("+form": needs a second gauge plane per leg)
@@ -190,7 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--rho-max", type=number, default=60.0, metavar="B",
                        help="the stroke of Π_i^+: mm from Π0 (default 60)")
     # 5 mm: [procedure] stand_tolerance_mm's default, orthocal.stands.DEFAULT_TOLERANCE
-    # (spelled out: numpy is not loaded to parse; tests/e2e/test_cli_identify.py checks it)
+    # (spelled out: numpy is not loaded to parse;
+    # tests/station/commands/test_cli_identify.py checks it)
     ident.add_argument(
         "--mount-error", type=not_negative, default=5.0, metavar="MM",
         help="how far off the leg's middle the indicator stands may have been placed "

@@ -3,7 +3,7 @@ models: every table and key with its type, default and range as pydantic checks 
 so that the page cannot drift from what a config may say. Each key's meaning is its
 field's ``description`` where it has one, else its entry in ``MEANINGS``; a key with
 neither, or a meaning left for a key that no longer exists, is an error
-(tests/unit/test_docs_site.py). Regenerate the page with
+(tests/test_docs_site.py). Regenerate the page with
 ``python -m station.config.reference > docs/config-reference.md``."""
 
 from __future__ import annotations

@@ -10,10 +10,10 @@ write-back or a rollback (tagged by ``stage``). The only open-ended objects are 
 keyed by data (a gauge, an axis, a parameter) with typed values.
 
 The journal's shape has only grown: a field a later version added is optional where
-it is declared, so a journal an older version wrote reads as it is (tests/e2e/test_record.py
-reads one from the first version that ran). A change that is not a field added would
-migrate the older lines in one place, read_records (station.record.journal_file), before
-they are parsed."""
+it is declared, so a journal an older version wrote reads as it is
+(tests/station/record/test_record.py reads one from the first version that ran). A
+change that is not a field added would migrate the older lines in one place,
+read_records (station.record.journal_file), before they are parsed."""
 
 from __future__ import annotations
 

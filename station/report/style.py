@@ -1,7 +1,7 @@
 """report.html's stylesheet: the screen's, and the print's (``@media print``), which
 lays the page on A4 so that a certificate page fits a sheet: page 1 holds the
 verdict and the as found / as left table, no figure or table is wider than the
-sheet (tests/e2e/test_report_browser.py prints it with Chromium and reads the PDF)."""
+sheet (tests/station/report/test_report_browser.py prints it with Chromium and reads the PDF)."""
 
 from __future__ import annotations
 

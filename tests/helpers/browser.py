@@ -1,6 +1,6 @@
 """Headless Chromium (Debian's /usr/bin/chromium) for the tests that look at what the
-station draws in a real browser: report.html (tests/e2e/test_report_browser.py) and
-the mounting pictures (tests/e2e/test_mounting_browser.py). A fresh profile, no
+station draws in a real browser: report.html (tests/station/report/test_report_browser.py) and
+the mounting pictures (tests/station/plan/test_mounting_browser.py). A fresh profile, no
 background networking (a closed network refuses it), and the whole process group
 stopped, so that nothing is left behind; a missing Chromium is
 system.require's to judge (fail under CI, skip elsewhere)."""

@@ -1,13 +1,14 @@
 """The held-out machine, in whole runs of the engine on the Protocol-level fakes
 (tests/helpers/fakes.py), for the tests of the geometry in the controller
-(tests/engine/test_compensated_station.py, tests/e2e/test_export_kinematics.py,
-tests/e2e/test_linuxcnc.py): axes 0.15 / −0.10 / 0.12 mm apart, leaning 0.2 / 0.1 / −0.15
-mrad, Δρ (0.6, −0.4, 0.9) mm, 1 µm gauges, stands by eye, legs stated straight to
-2 µm. Offsets alone leave tens of µm there (docs/model.md, "Axes that do not meet");
-the geometry in the controller about a micrometre. The same machine with screws whose
-leads are off (+100, −80, +60) µm/m and a laser test of each joint given
-(:func:`screwed`, tests/e2e/test_joints_linuxcnc.py) leaves about 8 µm more through its
-joints unless their tables go into the controller too."""
+(tests/station/statement/test_compensated_station.py,
+tests/station/history/test_export_kinematics.py,
+tests/station/history/test_linuxcnc.py): axes 0.15 / −0.10 / 0.12 mm apart, leaning 0.2
+/ 0.1 / −0.15 mrad, Δρ (0.6, −0.4, 0.9) mm, 1 µm gauges, stands by eye, legs stated
+straight to 2 µm. Offsets alone leave tens of µm there (docs/model.md, "Axes that do not
+meet"); the geometry in the controller about a micrometre. The same machine with screws
+whose leads are off (+100, −80, +60) µm/m and a laser test of each joint given
+(:func:`screwed`, tests/station/history/test_joints_linuxcnc.py) leaves about 8 µm more
+through its joints unless their tables go into the controller too."""
 
 from __future__ import annotations
 

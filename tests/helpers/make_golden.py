@@ -1,7 +1,7 @@
 """Make the golden run again: ``python tests/helpers/make_golden.py``.
 
 tests/data/golden_run/ holds what one seeded, noise-free simulated run writes
-(tests/e2e/test_unchanged.py's ``seeded_run``): result.json, journal.jsonl, report.html
+(tests/station/engine/test_unchanged.py's ``seeded_run``): result.json, journal.jsonl, report.html
 and plan.txt, with what cannot repeat taken out (times, the run directory, ports).
 test_unchanged compares every run of the same seed with them, so that a change of
 behaviour is seen and made on purpose. Run this only when a change of the result,
@@ -19,7 +19,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "e2e"))
+sys.path.insert(0, str(HERE.parent / "station" / "engine"))
 
 from test_unchanged import (  # noqa: E402 (after the path: runnable as a script)
     GOLDEN,

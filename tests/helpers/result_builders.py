@@ -154,7 +154,7 @@ def make_result(
 
 def golden_result() -> dict:
     """The golden run's result.json (tests/data/golden_run) as a record the report
-    takes: what tests/e2e/test_unchanged.py took out as unrepeatable (the run directory,
+    takes: what tests/station/engine/test_unchanged.py took out as unrepeatable (the run directory,
     the times, the wall and operator time) put back, fixed."""
     result = json.loads((GOLDEN / "result.json").read_text(encoding="utf-8"))
     result.update(run_dir="RUN_DIR", started="2024-05-02T10:15:00+02:00",

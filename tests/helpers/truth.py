@@ -14,8 +14,8 @@ from orthocal import coverage_factor
 # fine measure of honesty is bench/station_accuracy.py over many seeds. It is
 # one-sided by nature: one run cannot show its standard errors too large. That side
 # is tested over seeded runs of the pure maths, where the spread of the estimates
-# must match the stated errors from both sides (tests/unit/test_stands.py, the station's
-# default statement; tests/unit/test_selection.py, the measured noise without stands).
+# must match the stated errors from both sides (tests/orthocal/test_stands.py, the station's
+# default statement; tests/orthocal/test_selection.py, the measured noise without stands).
 TRUTH_COVERAGE = 1.0 - 1e-4
 
 
