@@ -60,6 +60,23 @@ def model_json(kind: str) -> dict:
     return MachineModel.model_validate(doc).model_dump(mode="json")
 
 
+def stated_as(statement: list[dict], kind: str) -> list[dict]:
+    """The golden run's statement with the geometry this run's model.json holds: the
+    controller is told the statement's values (station.record.identified), so the two
+    files of one run directory must tell one machine."""
+    tilted = kind == "tilted"
+    values = {**{f"{n}.as_left": (v if tilted else 0.0) for n, v in DRHO_NOW.items()},
+              **{n: (v if tilted else 0.0) for n, v in {**TILTS, **GAPS}.items()},
+              **{f"dl_{a}": 0.0 for a in "xyz"}}
+    out = []
+    for q in statement:
+        if q["name"] in values:
+            v = values[q["name"]]
+            q = {**q, "value": v, "interval_95": [v - q["expanded"], v + q["expanded"]]}
+        out.append(q)
+    return out
+
+
 def write_run(path: Path, kind: str = "tilted", *, status: str = "ok", model: bool = True,
               limits: str | None = "plan", soft: tuple = SOFT) -> Path:
     """A run directory at ``path``; ``limits``: where its soft limits are ("plan":
@@ -70,6 +87,7 @@ def write_run(path: Path, kind: str = "tilted", *, status: str = "ok", model: bo
               "offsets_held_by": "controller"}
     result["machine"]["id"] = f"OG-{kind}"
     result["remaining"].update(std_errors={n: 0.001 for n in DRHO_NOW}, std_errors_dof=12.0)
+    result["statement"] = stated_as(result["statement"], kind)
     if status != "ok":
         result["message"] = "the indicator on leg y stopped answering"
     (path / "result.json").write_text(json.dumps(result, indent=1))
