@@ -18,7 +18,12 @@ parameters (squareness, the tool's field) carries their correlation:
   proportion below MPE_SPAN_MM), per round;
 - gauge resolution: triangular ±r per deviation, two uniform inputs of ±r/2;
 - plunger angle: a gauge's deviations scaled by ±(1 − cos θ), per gauge and round;
-- temperature: each deviation off by ±α·ΔT·L/2, per round.
+- temperature: each deviation off by ±α·ΔT·L/2, per round;
+- a joint's lead: each joint's positioning error a lead within ±b µm/m from Π0 (an
+  assumed joint's bound, or what a table's own uncertainty leaves of its lead),
+  through what a lead does to the deviations, (J4): one input per joint, labelled by
+  joint, so the same input in every round (docs/model.md, "The identification with
+  joint tables").
 
 Pure, no I/O.
 """
@@ -32,6 +37,7 @@ import numpy as np
 
 from orthocal.budget import MPE_SPAN_MM, STEEL_ALPHA, Propagation, form_vector
 from orthocal.geometry import AXES
+from orthocal.joint_error import lead_deviation_change
 from orthocal.uncertainty import Uncertainty, combined, type_b
 
 Gauge = tuple[str, str]
@@ -156,6 +162,24 @@ def temperature_columns(prop: Propagation, temperature_change: float, tag: str,
     return _stack(prop, cols, labels, [TEMPERATURE] * len(cols))
 
 
+def joint_lead_columns(prop: Propagation, bounds_um_per_m: Mapping[str, float],
+                       names: Mapping[str, str] | None = None) -> Uncertainty:
+    """Each joint's lead within ±b (µm/m, by axis; 0: left out): its deviations change
+    by (J4) of a lead b on that joint alone (orthocal.lead_deviation_change), through
+    the fit's sensitivity K. ``names``: the source's name per joint."""
+    cols, labels, sources = [], [], []
+    for i, axis in enumerate(AXES):
+        b = _non_negative(bounds_um_per_m.get(axis, 0.0), f"joint {axis}'s lead bound")
+        if b == 0.0:
+            continue
+        lead = np.zeros(3)
+        lead[i] = b
+        cols.append(prop.K @ lead_deviation_change(prop.keys, prop.geometry, lead))
+        labels.append(f"joint lead:{axis}")
+        sources.append((names or {}).get(axis, f"joint {axis} lead"))
+    return _stack(prop, cols, labels, sources)
+
+
 def _stack(prop: Propagation, cols: Sequence[np.ndarray], labels: Sequence[str],
            sources: Sequence[str]) -> Uncertainty:
     matrix = np.column_stack(cols) if cols else np.zeros((len(prop.names), 0))
@@ -169,10 +193,13 @@ def budget_columns(prop: Propagation, tag: str, *,
                    plunger_angle_deg: float | None, temperature_change: float | None,
                    mpe_names: Mapping[Gauge, str] | None = None,
                    resolution_names: Mapping[Gauge, str] | None = None,
-                   alpha: float = STEEL_ALPHA) -> Uncertainty:
+                   alpha: float = STEEL_ALPHA,
+                   joint_leads: Mapping[str, float] | None = None,
+                   joint_names: Mapping[str, str] | None = None) -> Uncertainty:
     """Every Type B input given (None: left out) as columns over ``prop.names``;
     ``tag`` names the round, so that inputs of separate rounds stay separate and the
-    legs' form (labelled without it) stays one input."""
+    legs' form and the joints' leads (labelled without it) stay one input each.
+    ``joint_leads``: each joint's lead bound (µm/m, :func:`joint_lead_columns`)."""
     parts = []
     if straightness is not None:
         parts.append(straightness_columns(prop, straightness))
@@ -184,4 +211,6 @@ def budget_columns(prop: Propagation, tag: str, *,
         parts.append(angle_columns(prop, plunger_angle_deg, tag))
     if temperature_change is not None:
         parts.append(temperature_columns(prop, temperature_change, tag, alpha))
+    if joint_leads:
+        parts.append(joint_lead_columns(prop, joint_leads, joint_names))
     return combined(parts, prop.names)

@@ -218,6 +218,41 @@ class JointResidual:
         return float(np.sqrt(np.mean(self.standard_tool_mm**2)))
 
 
+def joint_error_columns(rho, tables: JointErrors,
+                        bounds_um_per_m: Sequence[float | None], pi0_mm: float
+                        ) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The joints' errors at joint values ``rho`` (n, 3) that a statement of the tool
+    draws in the truth, as bounded inputs each uniform in ±1 (docs/model.md, "The tool
+    with the joints' errors"), columns (3n × m: each input's error of every point's
+    joints, x, y, z of each point, mm) and their names:
+
+    - a joint with a table whose uncertainty is known: ±U_i(ρ), its expanded
+      uncertainty interpolated, one input (a test's uncertainty is mostly its scale,
+      the same sign along the travel, (J3));
+    - a joint without a table and a bound b (µm/m in ``bounds_um_per_m``): a lead
+      within ±b from Π0, b·(ρ − L) (``pi0_mm`` = L), one input."""
+    rho = np.asarray(rho, dtype=float).reshape(-1, 3)
+    if len(bounds_um_per_m) != 3:
+        raise ValueError("bounds_um_per_m: one per joint (x, y, z)")
+    cols, names = [], []
+    for i, axis in enumerate(AXES):
+        table, b = tables.table(axis), bounds_um_per_m[i]
+        col = np.zeros_like(rho)
+        if table is not None:
+            if table.u95_mm is None or not np.any(table.u95_mm):
+                continue
+            a, z = table.span
+            col[:, i] = np.interp(np.clip(rho[:, i], a, z), table.targets_mm, table.u95_mm)
+            names.append(f"joint {axis} table")
+        elif b:
+            col[:, i] = 1e-6 * float(b) * (rho[:, i] - pi0_mm)
+            names.append(f"joint {axis} lead")
+        else:
+            continue
+        cols.append(col.ravel())
+    return (np.column_stack(cols) if cols else np.zeros((rho.size, 0))), tuple(names)
+
+
 _CORNERS = np.array([[1, 1, 1], [1, 1, -1], [1, -1, 1], [1, -1, -1]], dtype=float)
 
 

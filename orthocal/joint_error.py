@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from orthocal.geometry import AXES, Geometry, split_params
-from orthocal.measurement import Key, check_key, leg_reading
+from orthocal.measurement import Key, check_key, deviations, leg_reading
 from orthocal.noise import coverage_factor
 from orthocal.postures import plane_offset, posture, split_plane, stroke, tilt
 
@@ -379,8 +379,21 @@ def joint_error_deviations(keys: Sequence[Key], geometry: Geometry, params,
     return out
 
 
+def joint_deviation_change(keys: Sequence[Key], geometry: Geometry, params,
+                           errors: JointErrors, mount_offsets=None) -> np.ndarray:
+    """What the joints' errors ``errors`` (their bidirectional mean: the lost motion is
+    the run's measured reversal's, docs/model.md "Lost motion") add to the deviations
+    of the machine ``params``, exactly: :func:`joint_error_deviations` less
+    :func:`orthocal.deviations` (mm). Subtracted from the measured deviations, what
+    is left is what a machine with exact joints would have read (docs/model.md, "The
+    identification with joint tables")."""
+    exact = deviations(list(keys), geometry, params, mount_offsets)
+    return joint_error_deviations(keys, geometry, params, errors, "mean",
+                                  mount_offsets) - exact
+
+
 def lead_deviation_change(keys: Sequence[Key], geometry: Geometry,
-                          lead_um_per_m: Sequence[float]) -> np.ndarray:
+                          lead_um_per_m: Sequence[float] | np.ndarray) -> np.ndarray:
     """What pure leads k (µm/m, x, y, z; drives homed at Π0) add to the deviations,
     first order in k (docs/model.md (J4)), mm:
 

@@ -19,6 +19,9 @@ systematic errors, each with the shape it makes across the deviations.
   budget reads it; θ the plunger's angle to the leg's normal, a cosine scale).
 - A temperature change during the run: the legs' lengths, one unknown per leg,
   |δL_i| ≤ α·ΔT·L.
+- A joint's lead (an assumed joint's bound, or what its table's uncertainty leaves of
+  its lead): one unknown per joint, |k_i| ≤ b_i µm/m, the deviations off by what a
+  lead does to them, (J4) (orthocal.lead_deviation_change).
 
 The lack of fit of a model is the smallest generalised residual any such errors
 leave (the model's own parameters free, linearised at the fit):
@@ -43,8 +46,9 @@ import numpy as np
 
 # The budget's own inputs: the model test and the statement read the stated errors alike.
 from orthocal.budget import MPE_SPAN_MM, STEEL_ALPHA, form_vector
-from orthocal.geometry import Geometry
+from orthocal.geometry import AXES, Geometry
 from orthocal.identification import exact_jacobian
+from orthocal.joint_error import lead_deviation_change
 from orthocal.measurement import Key
 
 
@@ -56,15 +60,21 @@ class Allowance:
     planes not named are taken straight. ``mpe``: each gauge plane's maximum
     permissible error (mm) over ``mpe_span`` mm of travel. ``plunger_angle_deg``:
     the plungers' angle to the legs' normals. ``temperature_change``: K during
-    the run (the legs of steel)."""
+    the run (the legs of steel). ``joint_lead_um_per_m``: each joint's lead bound
+    (µm/m, by axis; joints not named: exact)."""
 
     straightness: Mapping[tuple[str, str], float] = field(default_factory=dict)
     mpe: Mapping[tuple[str, str], float] = field(default_factory=dict)
     mpe_span: float = MPE_SPAN_MM
     plunger_angle_deg: float = 0.0
     temperature_change: float = 0.0
+    joint_lead_um_per_m: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        for axis, v in self.joint_lead_um_per_m.items():
+            if axis not in AXES or not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"joint_lead_um_per_m of joint {axis!r} must be >= 0, "
+                                 f"got {v!r}")
         for what, table in (("straightness", self.straightness), ("mpe", self.mpe)):
             for plane, v in table.items():
                 if not (np.isfinite(v) and v >= 0):
@@ -81,7 +91,8 @@ class Allowance:
         return {"straightness_mm": {"".join(p): v for p, v in self.straightness.items()},
                 "mpe_mm": {"".join(p): v for p, v in self.mpe.items()},
                 "mpe_span_mm": self.mpe_span, "plunger_angle_deg": self.plunger_angle_deg,
-                "temperature_change_c": self.temperature_change}
+                "temperature_change_c": self.temperature_change,
+                "joint_lead_um_per_m": dict(self.joint_lead_um_per_m)}
 
 
 @dataclass(frozen=True)
@@ -127,6 +138,14 @@ def columns(allowance: Allowance, distinct: Sequence[Key], means: np.ndarray,
             cols.append(J_L[:, leg])
             bounds.append(dL)
             names.append(f"temperature dL_{'xyz'[leg]}")
+    for i, axis in enumerate(AXES):
+        b = float(allowance.joint_lead_um_per_m.get(axis, 0.0))
+        if b > 0:
+            unit = np.zeros(3)
+            unit[i] = 1.0
+            cols.append(lead_deviation_change(distinct, geometry, unit))
+            bounds.append(b)
+            names.append(f"lead {axis}")
     B = np.column_stack(cols) if cols else np.zeros((K, 0))
     return Columns(B, np.asarray(bounds, dtype=float), tuple(names))
 
