@@ -30,6 +30,7 @@ from typing import Literal
 import numpy as np
 
 from orthocal import JointErrors, JointTable, iso230_table, lead_um_per_m
+from orthocal.joint_compensation import shifted
 from station.config import StationConfig
 from station.config.joint_tests import Joint, JointTest, read_joint_tests
 from station.record.result_joints import (
@@ -142,6 +143,60 @@ class JointKnowledge:
         return replace(self, x=joints[0], y=joints[1], z=joints[2])
 
 
+#: A joint's lead as a bounded input of the deviations and the model test (docs/model.md,
+#: "The identification with joint tables"): axis → (bound µm/m, the budget's name of it).
+LeadInputs = dict[str, tuple[float, str]]
+
+
+def lead_inputs(knowledge: JointKnowledge | None) -> LeadInputs:
+    """Each joint's lead the identification cannot see, as a bounded input: an assumed
+    joint's bound; a tabled joint's lead as its points' uncertainty leaves it (J3's
+    U_p: the deviations were corrected by the table, what is left of it is its own
+    error); none for a table without a stated uncertainty. Empty without knowledge."""
+    out: LeadInputs = {}
+    for j in () if knowledge is None else knowledge.joints:
+        if j.table is None and j.bound_um_per_m:
+            said = "stated" if knowledge is not None and knowledge.bound.given else "assumed"
+            out[j.axis] = (float(j.bound_um_per_m),
+                           f"joint {j.axis} positioning ({said} ±{j.bound_um_per_m:g} µm/m)")
+        elif j.table is not None and (u := lead_um_per_m(j.table).points_um_per_m) > 0:
+            out[j.axis] = (u, f"joint {j.axis} table ({j.source}, lead ±{u:.1f} µm/m)")
+    return out
+
+
+def round_tables(knowledge: JointKnowledge | None, moved: Mapping[str, float]
+                 ) -> JointErrors | None:
+    """The tables in the joints a round commands: each table's targets moved by −o,
+    o the offsets' change since the joint was tested (the run's start; ``moved``, mm
+    per axis): a joint commanded ρ stands on its screw where the test's ρ + o stood
+    (orthocal.joint_compensation.shifted), held at its ends for as far as the
+    offsets moved (:func:`held_ends`). None where no joint has a table."""
+    if knowledge is None or not any(j.table is not None for j in knowledge.joints):
+        return None
+    return JointErrors(*(None if j.table is None else
+                         shifted(held_ends(j.table, abs(float(moved.get(j.axis, 0.0)))),
+                                 -float(moved.get(j.axis, 0.0)))
+                         for j in knowledge.joints))
+
+
+def held_ends(table: JointTable, margin_mm: float) -> JointTable:
+    """``table`` held at its end values for ``margin_mm`` beyond each end: a test planned
+    for the offsets the run started from spans the joints it needed then, and the
+    offsets written since move them by up to that much on the screw. ε there is the
+    end's, off by ε'·margin (0.1 µm for 100 µm/m and a millimetre); further out it is
+    still never extrapolated."""
+    if not margin_mm > 0:
+        return table
+    t = table.targets_mm
+
+    def ends(a: np.ndarray) -> np.ndarray:
+        return np.r_[a[0], a, a[-1]]
+
+    return JointTable(np.r_[t[0] - margin_mm, t, t[-1] + margin_mm],
+                      ends(table.forward_mm), ends(table.reverse_mm),
+                      None if table.u95_mm is None else ends(table.u95_mm), table.shift_mm)
+
+
 def positioning_input(config: StationConfig) -> StatedInput:
     """[uncertainty] joint_positioning_um_per_m as given, else the default, named as
     assumed with why (station.analysis.run_budget's pattern for Type B inputs)."""
@@ -206,9 +261,12 @@ def _table_record(j: KnownJoint) -> JointTableRecord | None:
 
 
 def fields(knowledge: JointKnowledge,
-           station: Mapping[str, StationTestRecord] | None = None) -> Joints:
+           station: Mapping[str, StationTestRecord] | None = None,
+           in_identification: str | None = None) -> Joints:
     """result.json's ``joints`` of ``knowledge``; ``station``: how the station's own test
-    found the tables of source "station" (station.analysis.joint_readings.details_of)."""
+    found the tables of source "station" (station.analysis.joint_readings.details_of);
+    ``in_identification``: what the identification made of them
+    (station.analysis.joint_fit.words)."""
     def record(j: KnownJoint) -> JointRecord:
         out = JointRecord(source=j.source, file=j.file, lead_um_per_m=j.lead_um_per_m,
                           lead_interval_95_um_per_m=j.lead_interval_95_um_per_m,
@@ -218,4 +276,5 @@ def fields(knowledge: JointKnowledge,
         return out
 
     return Joints(x=record(knowledge.x), y=record(knowledge.y), z=record(knowledge.z),
-                  bound=knowledge.bound, assumed=knowledge.assumed, convention=CONVENTION)
+                  bound=knowledge.bound, assumed=knowledge.assumed,
+                  in_identification=in_identification, convention=CONVENTION)

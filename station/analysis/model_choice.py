@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import orthocal
 from orthocal import carry
@@ -99,10 +99,14 @@ def carried_form(config: StationConfig, m: Measurement,
 
 
 def identify_measurement(config: StationConfig, m: Measurement,
-                         model: str | None = None
+                         model: str | None = None,
+                         leads: Mapping[str, tuple[float, str]] | None = None
                          ) -> tuple[orthocal.Identification, JsonObject | None]:
     """The identification of ``m`` with ``model`` (default: the config's) and, for
-    auto, the selection's JSON (the run JSON's ``model_selection``).
+    auto, the selection's JSON (the run JSON's ``model_selection``). ``leads``: the
+    joints' leads the model test may excuse a misfit by, within their bounds
+    (station.analysis.joints.lead_inputs; ``m``'s deviations already corrected for
+    the joints' tables, station.analysis.joint_fit).
 
     Standard errors: from the noise this measurement shows, with the correlation
     its shared Π0 stops give the deviations (orthocal.covariance.with_measured_noise:
@@ -139,7 +143,7 @@ def identify_measurement(config: StationConfig, m: Measurement,
             # bowed leg does not buy tilts, and a gap is not taken for a bow.
             from station.analysis.run_budget import allowance
 
-            allowed = allowance(config)
+            allowed = allowance(config, leads)
             candidates = [with_form(c, data) for c in CANDIDATES]
             sel = orthocal.select_model(data, geometry, sigma, dof, candidates=candidates,
                                         method=proc.method, stands=stands,
@@ -149,8 +153,9 @@ def identify_measurement(config: StationConfig, m: Measurement,
                 **allowed.to_dict(),
                 "note": ("a misfit is excused only by what the stated leg form (a bow per "
                          "gauge plane within the straightness), gauge errors (a scale "
-                         "within the MPE) and temperature can make, with the shape each "
-                         "makes; the test keeps the measured noise's degrees of freedom")}
+                         "within the MPE), temperature and the joints' leads (within "
+                         "their bounds, (J4)) can make, with the shape each makes; the "
+                         "test keeps the measured noise's degrees of freedom")}
     except orthocal.IdentificationError as exc:
         raise RunFailed(f"identification failed: {exc}") from None
     if noise is not None and selection is not None:
@@ -162,7 +167,7 @@ def identify_measurement(config: StationConfig, m: Measurement,
     if noise is not None and test is not None and _rejected(test) \
             and not (planned_second_plane(config) and not second_plane(data)):
         ident, test = measured_form(config, data, ident, noise, stands, test,
-                                    tilts_possible=model == "auto")
+                                    tilts_possible=model == "auto", leads=leads)
     if noise is not None:
         inflate = 1.0
         if test is not None and _rejected(test):
@@ -191,7 +196,8 @@ def form_identifiable(model: str, keys: Iterable[Key], geometry: orthocal.Geomet
 
 def measured_form(config: StationConfig, data, ident: orthocal.Identification,
                   noise: tuple[float, float, str], stands: orthocal.Stands | None,
-                  test: ModelTest, tilts_possible: bool = True
+                  test: ModelTest, tilts_possible: bool = True,
+                  leads: Mapping[str, tuple[float, str]] | None = None
                   ) -> tuple[orthocal.Identification, ModelTest]:
     """Where ``ident``'s model leaves a misfit beyond the noise that the stated leg
     form excuses (the test with [uncertainty]'s allowance passes) and the bows can be
@@ -216,7 +222,8 @@ def measured_form(config: StationConfig, data, ident: orthocal.Identification,
     model = ident.model
     if model.endswith(orthocal.FORM) or not form_identifiable(model, data, geometry):
         return ident, test
-    excused = lack_of_fit(ident, geometry, noise[0], noise[1], allowance=allowance(config))
+    excused = lack_of_fit(ident, geometry, noise[0], noise[1],
+                          allowance=allowance(config, leads))
     if excused.p_value is None or excused.p_value < LEVEL:
         return ident, test  # more than the stated form can make: not the form
     fitted = _fit(config, data, model + orthocal.FORM, noise, stands)

@@ -14,7 +14,7 @@ import numpy as np
 
 import orthocal
 from orthocal import budget as gum
-from orthocal.budget_columns import budget_columns
+from orthocal.budget_columns import budget_columns, joint_lead_columns
 from orthocal.uncertainty import Uncertainty
 from station.config import StationConfig
 from station.record.result import Remaining
@@ -128,13 +128,15 @@ def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.S
     return renamed
 
 
-def round_columns(config: StationConfig, ident: orthocal.Identification, tag: str
-                  ) -> Uncertainty:
+def round_columns(config: StationConfig, ident: orthocal.Identification, tag: str,
+                  leads: Mapping[str, tuple[float, str]] | None = None) -> Uncertainty:
     """The Type B inputs of a round's identification as bounded columns over its
     parameters (orthocal.budget_columns: the legs' form labelled by gauge plane, the
     same input in every round; the rest per round, ``tag``), the config's inputs or
     their defaults (:func:`inputs`). Where the fit holds the legs' bows (a second
-    gauge plane, or carried), they are parameters: no straightness column."""
+    gauge plane, or carried), they are parameters: no straightness column. ``leads``:
+    each joint's lead bound and its name (station.analysis.joints.lead_inputs), one
+    input per joint through (J4) (orthocal.budget_columns.joint_lead_columns)."""
     ident = _at_its_parameters(ident, config.machine.geometry())
     given = inputs(config)
     names = _gauge_names(config)
@@ -155,7 +157,21 @@ def round_columns(config: StationConfig, ident: orthocal.Identification, tag: st
         mpe=per_plane(given.mpe_mm), resolution=None,
         plunger_angle_deg=_number(given.plunger_angle_deg),
         temperature_change=_number(given.temperature_change_c),
-        mpe_names={p: f"gauge MPE {n} (leg {p[0]}, along {p[1]})" for p, n in planes.items()})
+        mpe_names={p: f"gauge MPE {n} (leg {p[0]}, along {p[1]})" for p, n in planes.items()},
+        joint_leads={a: b for a, (b, _) in (leads or {}).items()},
+        joint_names={a: name for a, (_, name) in (leads or {}).items()})
+
+
+def lead_columns(config: StationConfig, ident: orthocal.Identification,
+                 leads: Mapping[str, tuple[float, str]]) -> Uncertainty:
+    """The joints' leads alone (``leads``: station.analysis.joints.lead_inputs) as
+    bounded columns over ``ident``'s parameters, through its sensitivity (J4)
+    (orthocal.budget_columns.joint_lead_columns): one input per joint, labelled by
+    joint, the same in every round."""
+    geometry = config.machine.geometry()
+    prop = gum.propagation(_at_its_parameters(ident, geometry), geometry)
+    return joint_lead_columns(prop, {a: b for a, (b, _) in leads.items()},
+                              {a: name for a, (_, name) in leads.items()})
 
 
 def fields(config: StationConfig, ident: orthocal.Identification,
@@ -238,11 +254,13 @@ def form_of_layout(config: StationConfig, ident: orthocal.Identification, names:
         "plane per leg a uniform bow of the legs reads exactly as tilts")
 
 
-def allowance(config: StationConfig) -> orthocal.Allowance:
+def allowance(config: StationConfig, leads: Mapping[str, tuple[float, str]] | None = None
+              ) -> orthocal.Allowance:
     """What the model test may excuse a misfit by (orthocal.misfit): the stated (or
     assumed) straightness as each gauge plane's bow, each gauge's MPE as a scale
-    error over its travel, the plunger angle and the temperature change; the same
-    inputs as the budget's, so the model test and the statement agree on them."""
+    error over its travel, the plunger angle, the temperature change and each joint's
+    lead (``leads``, station.analysis.joints.lead_inputs); the same inputs as the
+    budget's, so the model test and the statement agree on them."""
     given = inputs(config)
     value = given.leg_straightness_mm.value
     per_leg = dict(zip(orthocal.AXES, value if isinstance(value, list) and len(value) == 3
@@ -253,7 +271,8 @@ def allowance(config: StationConfig) -> orthocal.Allowance:
         straightness={plane: float(per_leg[plane[0]]) for plane in planes},
         mpe={plane: _number(given.mpe_mm[name]) for plane, name in planes.items()},
         plunger_angle_deg=_number(given.plunger_angle_deg),
-        temperature_change=_number(given.temperature_change_c))
+        temperature_change=_number(given.temperature_change_c),
+        joint_lead_um_per_m={a: b for a, (b, _) in (leads or {}).items()})
 
 
 def of_run(config: StationConfig, idents: list[orthocal.Identification],

@@ -24,7 +24,7 @@ from orthocal.loop import (
 )
 from orthocal.lost_motion import Reversal, band_middle, edge_of
 from station.analysis import accuracy_statement as accuracy
-from station.analysis import joints, reversal, verdict
+from station.analysis import joint_fit, joints, reversal, verdict
 from station.analysis import run_budget as budget
 from station.analysis.joint_readings import details_of, tables_of
 from station.analysis.statistics import Measurement, pooled
@@ -89,7 +89,10 @@ class Flow:
         self.reversal: Reversal | None = None  # the joints' lost motion
         # what no offset changes, round by round: the axes' layout and the legs' bows
         self.layouts = Layouts(ctx.config.machine.geometry(),
-                               lambda m, model: _identify(ctx, m, model)[0])
+                               lambda m, model: _identify(ctx, m, model, self._leads())[0])
+        # each joint's error as the run knows it (station.analysis.joints), once the
+        # first round is identified: its tables correct the deviations (joint_fit)
+        self.known: joints.JointKnowledge | None = None
         # the Δρ the offsets written last aim at: 0 for objective joints; for tool,
         # the joint errors that leave the least tool error (engine.accuracy)
         self.target: dict[str, float] = dict.fromkeys(WRITABLE, 0.0)
@@ -152,6 +155,12 @@ class Flow:
         again = len(passes) > 1
         n = len(self.idents) - 1 if again else len(self.idents)  # the round's index
         phase = round_phase(passes[0])
+        # The joints' tables: what they make of the deviations is taken out before the
+        # fit and the model test (station.analysis.joint_fit; the raw m is the record's)
+        self.known = joints.of_run_config(ctx.config, tables_of(self.joint_tests))
+        fit = joint_fit.corrected(ctx.config, m, joints.round_tables(self.known,
+                                                                     self._moved(n)))
+        m = fit.measurement
         # With auto, every round chooses its model again: misplaced stands bias the
         # first round by (stand error × leg tilt), a misfit no model explains that
         # can push the choice to a tilt model on a square machine; it vanishes with
@@ -159,7 +168,8 @@ class Flow:
         # At the middles alone after a round that read the second gauge plane: that
         # round's widest layout fit, bows and all, carried (model_choice.carried_form).
         carried = self.layouts.carry_form(phase, ctx.config, m)
-        ident, selection = (carried, None) if carried is not None else _identify(ctx, m)
+        ident, selection = (carried, None) if carried is not None else \
+            _identify(ctx, m, leads=self._leads())
         if n == 0 and selection is not None:
             self.record.model_selection(selection)
         # Lost motion: the joints' reversal from every round so far; every stop was
@@ -167,9 +177,9 @@ class Flow:
         # what is stated and written is its middle.
         rev = reversal.estimate(ctx.config, self.measurements)
         self.record.lost_motion(reversal.fields(ctx.config, rev))
-        known = joints.of_run_config(ctx.config, tables_of(self.joint_tests))
         self.record.joints(joints.fields(  # the measured B wins over a table's reversal
-            known.with_reversal(rev.value), details_of(self.joint_tests)))
+            self.known.with_reversal(rev.value), details_of(self.joint_tests),
+            joint_fit.words(self.known, fit.largest_um)))
         reversal.check_overrun(ctx.config, rev)
         self.reversal = rev
         if carried is None:  # a carried round's layout is the earlier rounds' own
@@ -188,7 +198,7 @@ class Flow:
         floor = carry.prior_floor(ident, ctx.config.machine.geometry())
         left = extra_passes_allowed(n, proc.max_extra_passes, proc.max_iterations,
                                     proc.verify) - (len(passes) - 1)
-        type_b = _type_b(ctx.config, ident, phase)
+        type_b = _type_b(ctx.config, ident, phase, self._leads())
         judged = verdict.judge(ident, prev, proc.converge_mm,
                                verdict.converge_limit(proc.converge_mm, count), self.target,
                                passes_left=left > 0, joined=joined if n else None,
@@ -218,6 +228,18 @@ class Flow:
                         "deviations_rms_mm": fields.deviations_rms_mm,
                         "significant": [*sig], "verdict": judged.verdict})
         return judged.verdict
+
+    def _leads(self) -> joints.LeadInputs:
+        """The joints' leads the fit cannot see, as bounded inputs (joints.lead_inputs)."""
+        return joints.lead_inputs(self.known)
+
+    def _moved(self, n: int) -> dict[str, float]:
+        """How far the offsets held in round ``n`` lie from the run's start (mm)."""
+        start = self.outcomes[0].before if self.outcomes else None
+        held = start
+        for o in self.outcomes[:n]:
+            held = o.written if o.written is not None else held
+        return joint_fit.moved(start, held)
 
     def write(self, round: int) -> str:
         """Write-back ``round`` (1-based) of the correction the last measurement found."""
@@ -321,7 +343,7 @@ class Flow:
             layout_fits=dict(self.layouts.layout_fits),
             writes=tuple(Written(o.status, o.reason, o.before, o.written)
                          for o in self.outcomes),
-            target=dict(self.target), reversal=self.reversal,
+            target=dict(self.target), reversal=self.reversal, joints=self.known,
             offsets_before=None if before is None else results.known(before),
             offset_count_mm=self.ctx.devices.controller.offset_resolution_mm(),
             limits=(c.lo, c.hi), stopped=stopped)
@@ -392,21 +414,23 @@ def _status_of(outcome: WritebackOutcome) -> tuple[Status, str | None]:
     return "failed", outcome.reason
 
 
-def _type_b(config: StationConfig, ident: Identification, phase: str) -> dict[str, float]:
-    """Each Δρ's Type B standard uncertainty in round ``phase`` (the stated inputs through
-    the round's sensitivity: station.analysis.run_budget.round_columns), as the
-    statement will carry it."""
+def _type_b(config: StationConfig, ident: Identification, phase: str,
+            leads: joints.LeadInputs) -> dict[str, float]:
+    """Each Δρ's Type B standard uncertainty in round ``phase`` (the stated inputs and
+    the joints' ``leads`` through the round's sensitivity:
+    station.analysis.run_budget.round_columns), as the statement will carry it."""
     held = [d for d in DRHO if d in ident.names]
     if not held:
         return {}
-    columns = budget.round_columns(config, ident, phase).pick(held)
+    columns = budget.round_columns(config, ident, phase, leads).pick(held)
     return {d: columns.marginal(d).u_b for d in held}
 
 
-def _identify(ctx: Run, m: Measurement,
-              model: str | None = None) -> tuple[Identification, JsonObject | None]:
+def _identify(ctx: Run, m: Measurement, model: str | None = None,
+              leads: joints.LeadInputs | None = None
+              ) -> tuple[Identification, JsonObject | None]:
     from station.analysis.model_choice import identify_measurement
 
-    return identify_measurement(ctx.config, m, model)
+    return identify_measurement(ctx.config, m, model, leads)
 
 

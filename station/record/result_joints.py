@@ -91,4 +91,8 @@ class Joints(Closed):
                                            "given or assumed")
     assumed: list[str] = Field(description="what the joints were taken to be without a "
                                            "measurement of them, with why")
+    in_identification: str | None = Field(
+        None, description="what the identification made of the joints: the deviations "
+                          "corrected for the tables, the bounds as Type B inputs "
+                          "(docs/model.md, \"The identification with joint tables\")")
     convention: str

@@ -81,6 +81,11 @@ class SelectionAllowance(Closed):
     mpe_span_mm: float
     plunger_angle_deg: float
     temperature_change_c: float
+    joint_lead_um_per_m: dict[str, float] = Field(
+        default_factory=dict,
+        description="per joint x, y, z, the lead bound (µm/m): an assumed joint's "
+                    "[uncertainty] joint_positioning_um_per_m, or what its table's own "
+                    "uncertainty leaves of its lead; joints not named: none")
     note: str
 
 

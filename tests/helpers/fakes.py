@@ -19,7 +19,11 @@ from drivers.sim.fake import COUNT_MM, FakeAxes, FakeGauge, SteppedClock
 from drivers.sim.specs import MachineTruth
 from station.commands.run import exit_status
 from station.commands.simulate.launch import SIM_PROCEDURE
-from station.commands.simulate.station_setups import ROOM_HELD_C, STRAIGHTNESS_READ_MM
+from station.commands.simulate.station_setups import (
+    ROOM_HELD_C,
+    STRAIGHTNESS_READ_MM,
+    joint_bound_um_per_m,
+)
 from station.config import StationConfig
 from station.console.operator import VirtualOperator
 from station.engine.devices import Devices
@@ -77,7 +81,8 @@ class FakeRig(fake.FakeRig):
 #: to half a micrometre, the room held within a tenth of a degree;
 #: station.commands.simulate.station_setups.SimulatedStation.stated_inputs).
 STATED: dict[str, Any] = {"leg_straightness_mm": STRAIGHTNESS_READ_MM,
-                          "temperature_change_c": ROOM_HELD_C}
+                          "temperature_change_c": ROOM_HELD_C,
+                          "joint_positioning_um_per_m": joint_bound_um_per_m((0, 0, 0))}
 
 
 def fake_config(*, uncertainty: dict[str, Any] | None = None,

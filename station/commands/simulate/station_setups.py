@@ -13,6 +13,7 @@ uses (:meth:`SimulatedStation.config`): what an integrator would write of it.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 from drivers.sim.specs import GaugeSpec, Mounting
@@ -44,6 +45,16 @@ STEP_GAUGE: dict[str, Any] = {"kind": "step gauge", "faces_mm": [20.0 * k for k 
 STRAIGHTNESS_READ_MM = 0.0005
 #: The temperature change during a run a shop with a held room states (°C).
 ROOM_HELD_C = 0.1
+
+
+def joint_bound_um_per_m(lead_um_per_m, pitch_um: float = 0.0,
+                         pitch_period_mm: float = 0.0) -> float:
+    """The bound per metre of travel from home a shop that measured these screws states
+    ([uncertainty] joint_positioning_um_per_m): the largest |lead|, plus 2π·A/P of a
+    periodic error (|A·sin(2π·x/P)| ≤ 2π·A·|x|/P); 0 for exact screws (stated exact)."""
+    pitch = 2e3 * math.pi * pitch_um / pitch_period_mm if pitch_um and pitch_period_mm \
+        else 0.0
+    return round(max(abs(float(k)) for k in lead_um_per_m) + pitch, 3)
 
 
 def setups_of(count: int) -> list[dict[str, Any]]:
@@ -146,8 +157,13 @@ class SimulatedStation(VirtualStation):
         virtual legs bow as the simulation says), and a room held within a tenth of a
         degree (the virtual machine does not warm). The gauges' MPE and the plungers'
         angle are left at the station's defaults, as a shop that has not measured
-        them would."""
+        them would. Its screws: each joint's positioning error within the bound a shop
+        that measured them would state (:func:`joint_bound_um_per_m`; a joint the
+        station tests itself takes its table)."""
         bows = [max(abs(float(b)), 0.0) + STRAIGHTNESS_READ_MM
                 for b in self.machine.leg_bow]
+        screws = self.machine.screws
         return {"leg_straightness_mm": [round(b, 6) for b in bows],
-                "temperature_change_c": ROOM_HELD_C}
+                "temperature_change_c": ROOM_HELD_C,
+                "joint_positioning_um_per_m": joint_bound_um_per_m(
+                    screws.lead_um_per_m, screws.pitch_um, screws.pitch_period_mm)}

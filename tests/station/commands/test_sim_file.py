@@ -5,6 +5,7 @@ key or value one line naming the file and the key, exit 2, before anything start
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -97,12 +98,16 @@ def test_a_run_from_the_file_is_the_machine_it_describes(
     assert sim["noise_mm"] == 0.0 and sim["mount_error_mm"] == 0.0
     assert [sim["true_tilt"][k] for k in ("tilt_yx", "tilt_zx", "tilt_zy")] == \
         [0.05, 0.0, -0.03]
-    # the screws, and what the station took the joints to be: nothing told it, assumed
+    # the screws, and what the station took the joints to be: no test, the bound the
+    # simulated station states of its screws (the largest lead and what the periodic
+    # error makes per metre from home, 2π·A/P)
     assert [sim["joint_lead_um_per_m"][a] for a in "xyz"] == [100.0, -80.0, 60.0]
     assert (sim["joint_pitch_um"], sim["joint_pitch_period_mm"]) == (1.0, 5.0)
     joints = result["joints"]
     assert [joints[a]["source"] for a in "xyz"] == ["assumed"] * 3
-    assert joints["bound"]["given"] is False and joints["x"]["bound_um_per_m"] == 170.0
+    assert joints["bound"]["given"] is True
+    assert joints["x"]["bound_um_per_m"] == pytest.approx(100.0 + 2e3 * math.pi / 5,
+                                                          abs=1e-3)
     # the record validates against the schema the package ships, as another tool reads it
     schema = json.loads(schema_files.shipped("result"))
     (run_dir,) = (tmp_path / "runs").glob("run-*")
