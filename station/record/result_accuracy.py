@@ -101,6 +101,14 @@ class Compensated(Closed):
     nominal: dict[str, str] = Field(description="the parameters left at their nominal "
                                                 "values, and why")
     routes: list[str] = Field(description="how to put the machine into the controller")
+    route: str | None = Field(
+        None, description='which route the figures rest on (a key of orthocal.'
+                          'joint_compensation.ROUTES): "kinematics+tables" where the run '
+                          'has a joint table, else "kinematics" (null: a record from '
+                          "before the joints)")
+    takes_into_account: str | None = Field(
+        None, description="what that route takes into account, in the words every "
+                          "export's header says")
     method: str
     assumes: list[str]
     field_rms_mm: list[float] = Field(

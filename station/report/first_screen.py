@@ -55,6 +55,13 @@ NO_ADVICE = ("none stated: the record holds no advice (its model identifies no j
 #: What to do once a run's offsets were rolled back (the record's advice after it).
 ROLLED_BACK_TODO = ("calibrate the machine again (orthocal run): the offsets this run "
                     "wrote were rolled back")
+#: The tool's line with the geometry in the controller, by the route it rests on
+#: (accuracy.compensated.route; a record from before the joints: none).
+IN_CONTROLLER = {"": "with the geometry in the controller",
+                 "kinematics": "with the geometry in the controller (the joints' errors "
+                               "stay)",
+                 "kinematics+tables": "with the geometry and the joint tables in the "
+                                      "controller"}
 
 
 @dataclass(frozen=True)
@@ -256,8 +263,38 @@ def _tool_statement(result: RunResult, acc: Accuracy) -> list[Item]:
         lines = [f"{figure(b_rms, 'RMS')}, max {figure(b_max)}, over {box}, as the machine "
                  "stands"]
     if c_rms is not None:
-        lines.append(f"with the geometry in the controller {figure(c_rms, 'RMS')}")
+        route = acc.compensated.route if acc.compensated is not None else None
+        lines.append(f"{IN_CONTROLLER.get(route or '', IN_CONTROLLER[''])} "
+                     f"{figure(c_rms, 'RMS')}")
     return [Item("at the tool" if i == 0 else "", t) for i, t in enumerate(lines)]
+
+
+
+def joints_item(result: RunResult) -> Item | None:
+    """What the joints were taken to be, the tool's figures resting on it: each joint's
+    test and its lead at 95 % (the statement's), or the bound assumed or stated."""
+    joints = result.joints
+    if joints is None:
+        return None
+    q = stated(result)
+    parts, bounded = [], []
+    for a in AXES:
+        j = getattr(joints, a)
+        lead = q.get(f"lead_{a}")
+        said = plus_minus(lead) if lead is not None else \
+            f"{fmt(j.lead_um_per_m, 0, signed=True)} µm/m"
+        if j.source == "test":
+            parts.append(f"{a} test ({Path(j.file or '').name}), lead {said}")
+        elif j.source == "station":
+            parts.append(f"{a} the station's own test, lead {said}")
+        else:
+            bounded.append(a)
+    if bounded:
+        b = getattr(joints, bounded[0]).bound_um_per_m
+        word = "stated" if joints.bound.given else "assumed"
+        parts.append(f"{', '.join(bounded)} {word} within ±{fmt(b, 0)} µm/m from Π0, "
+                     "not measured" if b else f"{', '.join(bounded)} {word} exact")
+    return Item("joints", "the tool's figures take " + "; ".join(parts))
 
 
 def tool_items(result: RunResult) -> list[Item]:
@@ -340,7 +377,10 @@ def items(result: RunResult) -> list[Item]:
     back = rolled_back_text(result)
     out += [i for i in (offsets_item(result), None if back is None else
                         Item("ROLLED BACK", back)) if i is not None]
-    out += tool_items(result)
+    tools = tool_items(result)
+    out += tools
+    if tools and (joints := joints_item(result)) is not None:
+        out.append(joints)
     if held_by_station(result):  # the headline's "enter them in the drive": how
         out.append(Item("offsets held", f"by the station: {result.offsets_note or ''}"))
     out += todo_items(result)

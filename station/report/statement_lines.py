@@ -15,7 +15,7 @@ GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("axes' gaps", ("gap_xy", "gap_xz", "gap_yz")),
     ("leg lengths", ("dl_x", "dl_y", "dl_z")),
     ("lost motion", ("reversal_x", "reversal_y", "reversal_z")),
-    ("joint leads", ("lead_x", "lead_y", "lead_z")),
+    ("joints' lead", ("lead_x", "lead_y", "lead_z")),
 )
 #: The decision table's words, as the details print them.
 DECIDED = {"act": "beyond its uncertainty: act", "none": "not beyond its uncertainty",

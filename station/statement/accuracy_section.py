@@ -19,6 +19,7 @@ from station.record import result_accuracy as rec
 from station.record.model import MachineModel
 from station.record.result_statement import Quantity
 from station.statement import decisions as rule
+from station.statement.joints_at_tool import route_words
 from station.statement.known_machine import DRHO, KnownMachine
 from station.statement.quantities import PAIRS
 from station.statement.snapshot import Rounds
@@ -64,21 +65,37 @@ def _compensated(rounds: Rounds, tool: ToolFigures) -> rec.Compensated:
     model = rounds.last.model
     nominal = nominal_reasons(rounds.layout, told, model)
     laid = [n for n in told if n not in DRHO]
+    joints = [] if tool.joints is None else tool.joints.basis(tool.route)
     return rec.Compensated(
         rms_mm=tool.compensated.rms.value, max_mm=tool.compensated.max.value,
         rms_interval_95_mm=tool.compensated.rms.interval,
         max_interval_95_mm=tool.compensated.max.interval,
         offsets_only_rms_mm=tool.after.rms.value, offsets_only_max_mm=tool.after.max.value,
-        told=told, nominal=nominal, routes=list(ROUTES_IN_FULL), method=tool.method,
+        told=told, nominal=nominal, routes=list(ROUTES_IN_FULL), route=tool.route,
+        takes_into_account=route_words(tool.route), method=tool.method,
         assumes=["the controller is told Δρ as the rounds joined left it"
                  + (f", and {', '.join(laid)} as the run identified them" if laid else ""),
                  *(f"{', '.join(names)}: {why}" for why, names in grouped(nominal).items()
                    if not names[0].startswith("dL")),
                  "ΔL = 0 (leg lengths nominal; not identified beside the tilts and gaps "
                  "from two stops per leg); a leg 0.1 mm long changes the field",
-                 "orthocal compensate adds at most its --tolerance (default 1 µm) along "
-                 "the path"],
+                 *joints,
+                 "a compensated program (orthocal compensate) takes the same into account "
+                 "(with the joint tables, each joint's error in the direction the program "
+                 "moves it) and adds at most its --tolerance (default 1 µm) along the "
+                 "path between its points"],
         field_rms_mm=[round(float(v), 7) for v in tool.point_rms_mm])
+
+
+def joint_words(tool: ToolFigures) -> str:
+    """What the figures take the encoders to be: exact up to their zero where the run
+    knows nothing of its joints, else each joint's positioning error as result.json's
+    ``joints`` states it."""
+    basis = [] if tool.joints is None else tool.joints.basis("offsets")
+    if not basis:
+        return "encoders exact up to their zero"
+    return ("encoders exact up to their zero and each joint's positioning error "
+            "(result.json's joints): " + "; ".join(basis))
 
 
 def accuracy_section(rounds: Rounds, machine: KnownMachine, tool: ToolFigures,
@@ -92,7 +109,8 @@ def accuracy_section(rounds: Rounds, machine: KnownMachine, tool: ToolFigures,
     in_model = rounds.last.names
     fitted = "+".join(["rho", *(["tilt"] if lay is not None else []),
                        *(["gap"] if lay is not None and lay.gaps() else [])])
-    words = assumes(fitted, cfg.writeback.frame)
+    words = [w.replace("encoders exact up to their zero", joint_words(tool))
+             for w in assumes(fitted, cfg.writeback.frame)]
     fit = rounds.layout_fit
     form = None if lay is None or fit is None else \
         run_budget.form_of_layout(cfg, fit, lay.names)

@@ -3,7 +3,9 @@ decisions of the statement's quantities it rests on, its text the one every view
 prints. No two contradict: the rails' advice names the controller only where the
 controller's own decision says it gains, "nothing further" only where nothing acts,
 and nothing on the rails where the data cannot tell the axes' tilts from the legs'
-bows."""
+bows. The joints: their tables into the controller where a lead is decided
+"compensate"; a test of the joints where the assumed bounds make most of the tool's
+error."""
 
 from __future__ import annotations
 
@@ -84,6 +86,45 @@ def _plays(q: Mapping[str, Quantity]) -> list[AdviceItem]:
     return out
 
 
+#: The share of a tool figure's mean square beyond which the assumed joints "make most
+#: of the tool's error" (station.statement.tool_figures.ToolFigures.assumed_share).
+MOST = 0.5
+
+
+def _joint_tables(q: Mapping[str, Quantity]) -> list[AdviceItem]:
+    """The joints whose lead is decided "compensate": their tables into the controller."""
+    held = [r for a in "xyz" if (r := q.get(f"lead_{a}")) is not None
+            and r.decision == rule.COMPENSATE]
+    if not held:
+        return []
+    return [AdviceItem(id="joint_tables", rests_on=[r.name for r in held], text=(
+        f"compensate joint(s) {', '.join(r.name[-1] for r in held)} with their tables "
+        "(orthocal export writes them: LinuxCNC COMP_FILE, TwinCAT lists; orthocal "
+        "compensate takes them into the program): lead "
+        + ", ".join(f"{r.name[-1]} {plus_minus(r)}" for r in held)))]
+
+
+def _joint_tests(config: StationConfig, q: Mapping[str, Quantity],
+                 share: Mapping[str, float] | None) -> list[AdviceItem]:
+    """Where the assumed joints' bounds make most of a tool figure's mean square: a test
+    of those joints."""
+    if not share or max(share.values()) <= MOST:
+        return []
+    held = [r for a in "xyz" if (r := q.get(f"lead_{a}")) is not None
+            and r.decision is None and r.basis and r.basis[0].startswith("not measured")]
+    if not held:
+        return []
+    figure = "tool.after.rms" if share.get("after", 0.0) >= share.get("compensated", 0.0) \
+        else "tool.compensated.rms"
+    bound = config.uncertainty.joint_positioning_um_per_m
+    said = (f"the stated ±{bound:g}" if bound is not None else
+            f"the assumed ±{float(held[0].expanded or 0.0) / 0.95:.0f}")
+    axes = ", ".join(r.name[-1] for r in held)
+    return [AdviceItem(id="joint_tests", rests_on=[*(r.name for r in held), figure], text=(
+        f"give a laser test of joint(s) {axes} ([joints] tests) or run the station's own "
+        f"test ([joints] station_test): {said} µm/m makes most of the tool's error"))]
+
+
 def _undecided(q: Mapping[str, Quantity]) -> list[AdviceItem]:
     held = [n for n in ("tilt_yx", "tilt_zx", "tilt_zy", "gap_xy", "gap_xz", "gap_yz")
             if n in q and q[n].decision == rule.UNDECIDED]
@@ -125,15 +166,18 @@ def _inputs(config: StationConfig, q: Mapping[str, Quantity],
 
 
 def advice(config: StationConfig, quantities: list[Quantity], undecided_type_b: list[str],
-           converged: bool, remedy: str | None) -> list[AdviceItem]:
+           converged: bool, remedy: str | None,
+           joints_share: Mapping[str, float] | None = None) -> list[AdviceItem]:
     """Every piece of advice for the statement's ``quantities`` (module docstring);
     ``undecided_type_b``: the quantities the stated inputs alone keep undecided
     (station.statement.conclude), ``remedy``: what would let an unconverged loop
-    converge (the verdict's words)."""
+    converge (the verdict's words); ``joints_share``: the assumed joints' share of the
+    tool's figures (station.statement.tool_figures.ToolFigures.assumed_share)."""
     q = {x.name: x for x in quantities}
     rail_mm = config.machine.rho_max - config.machine.rho_min
     out = _undecided(q) or _rails(q, rail_mm)
-    out += _controller(q) + _plays(q) + _inputs(config, q, undecided_type_b)
+    out += _controller(q) + _joint_tables(q) + _plays(q)
+    out += _joint_tests(config, q, joints_share) + _inputs(config, q, undecided_type_b)
     if remedy:
         out.append(AdviceItem(id="converge", rests_on=[n for n in q if n.endswith(".as_left")],
                               text=remedy))

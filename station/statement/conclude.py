@@ -152,6 +152,7 @@ def conclude(rounds: Rounds, stopped: Loop, remedy: str | None) -> Conclusion:
     quantities = (qty.drho_quantities(rounds, machine) + qty.layout_quantities(rounds, machine)
                   + qty.squareness_quantities(rounds, machine)
                   + qty.reversal_quantities(rounds.reversal)
+                  + qty.lead_quantities(rounds.joints)
                   + qty.tool_quantities(tool, basis))
     acceptance = accept.judge_statement(rounds.config.acceptance, quantities)
     if acceptance is not None:
@@ -166,7 +167,7 @@ def conclude(rounds: Rounds, stopped: Loop, remedy: str | None) -> Conclusion:
         stopped.model_copy(update={"stopped": "not-converged"})
     acc = accuracy_section(rounds, machine, tool, {q.name: q for q in quantities})
     said = advice(rounds.config, quantities, _undecided_by_inputs(quantities, machine),
-                  converged, remedy)
+                  converged, remedy, joints_share=tool.assumed_share)
     _advice_into(acc, rounds, said)
     return Conclusion(
         statement=quantities,
@@ -174,7 +175,6 @@ def conclude(rounds: Rounds, stopped: Loop, remedy: str | None) -> Conclusion:
         converged=converged, loop=loop, remaining=_remaining(rounds, machine),
         uncertainty_budget=_budget(rounds, machine), accuracy=acc, acceptance=acceptance,
         model=machine_model(rounds, machine))
-
 
 
 def _advice_into(acc: Accuracy, rounds: Rounds, said: list[AdviceItem]) -> None:

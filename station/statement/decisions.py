@@ -19,6 +19,11 @@ Decisions, by kind (the ``decision`` field of each quantity):
   tilt or the gaps that make it), "square", or "undecided";
 - reversal: "repair" (acting, and above the repair threshold), "compensate" (acting),
   "none";
+- a joint's lead (``lead_*``): "compensate" where the joint has a table and its lead
+  lies beyond k_act combined standard uncertainties (its table then corrects the
+  joint in the controller: the exports write it), "none" where it has a table and
+  its lead does not; no decision where the joint's error is only assumed (nothing
+  measured to act on);
 - ``tool.compensated.rms``: "gain" where the geometry in the controller lowers the
   tool's RMS error by more than k_act standard deviations of that gain over the
   draws (the same machines drawn for both), else "no gain";
@@ -89,6 +94,12 @@ def play(value: float, marginal: Marginal, repair_above_mm: float) -> str:
     if not value > act_k(marginal.dof) * marginal.u_c:
         return NONE
     return REPAIR if value > repair_above_mm else COMPENSATE
+
+
+def lead(value: float, u_c: float, dof: float | None) -> str:
+    """A tabled joint's lead (µm/m) and its combined standard uncertainty: compensate
+    only beyond k_act."""
+    return COMPENSATE if abs(value) > act_k(dof) * u_c else NONE
 
 
 def gain(after_draws: np.ndarray, compensated_draws: np.ndarray) -> str:

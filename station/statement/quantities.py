@@ -1,7 +1,7 @@
 """The statement's quantities (docs/design.md, "The statement of the machine"): each
 joint's Δρ as found and as left, the tilts, the gaps, the squareness of the tool's
-motions, the leg lengths where identified, the joints' reversal and the tool's error,
-each with one value and one 95 % uncertainty from the machine's one joint
+motions, the leg lengths where identified, the joints' reversal and lead, and the
+tool's error, each with one value and one 95 % uncertainty from the machine's one joint
 distribution (station.statement.known_machine), and the decision table's word on it
 (station.statement.decisions)."""
 
@@ -11,13 +11,16 @@ import numpy as np
 
 from orthocal import AXES, GAP_NAMES, PARAM_NAMES, TILT_NAMES
 from orthocal.accuracy import squareness
+from orthocal.joint_error import lead_um_per_m
 from orthocal.lost_motion import Reversal
 from orthocal.uncertainty import Marginal, type_a
+from station.analysis.joints import JointKnowledge
 from station.analysis.reversal import REPAIR_ABOVE_MM
 from station.analysis.verdict import converge_limit
 from station.record.result_base import Interval
 from station.record.result_statement import Quantity, Unit
 from station.statement import decisions as rule
+from station.statement.joints_at_tool import route_words
 from station.statement.known_machine import DL, DRHO, KnownMachine
 from station.statement.snapshot import Rounds
 from station.statement.tool_figures import Figure, ToolFigures
@@ -165,19 +168,59 @@ def reversal_quantities(rev: Reversal | None) -> list[Quantity]:
     return out
 
 
+def lead_quantities(knowledge: JointKnowledge | None) -> list[Quantity]:
+    """Each joint's lead (µm/m, docs/model.md (J3)): a table's least-squares slope with
+    its 95 % interval (its points' uncertainty, taken as correlated in the worst way,
+    and the residual scatter about the line), decided "compensate" beyond k_act; an
+    assumed joint's 0 within ±0.95 × its bound (rectangular), no decision."""
+    out: list[Quantity] = []
+    for j in () if knowledge is None else knowledge.joints:
+        lo, hi = j.lead_interval_95_um_per_m
+        if j.table is not None:
+            lead = lead_um_per_m(j.table)
+            u_c = float(np.hypot(lead.points_um_per_m / 2.0, lead.scatter_um_per_m))
+            dof = float(lead.dof) if lead.scatter_um_per_m > 0 and lead.dof > 0 else None
+            where = f"{j.source}: {j.file or 'the station' + chr(39) + 's own test'}"
+            basis = [f"the table ({where})",
+                     "its points' expanded uncertainty, taken as correlated in the worst "
+                     "way (Type B)",
+                     f"the residual scatter about the line (Type A, {lead.dof} dof)"]
+            out.append(Quantity(
+                name=f"lead_{j.axis}", value=j.lead_um_per_m, unit="µm/m",
+                expanded=(hi - lo) / 2.0, interval_95=(lo, hi), k=None, dof=dof,
+                decision=rule.lead(j.lead_um_per_m, u_c, dof), basis=basis))
+        elif j.bound_um_per_m is not None:
+            said = "stated" if knowledge is not None and knowledge.bound.given else \
+                f"assumed: {knowledge.bound.assumed if knowledge else ''}"
+            within = f"within ±{j.bound_um_per_m:g} µm/m, rectangular" \
+                if j.bound_um_per_m else "exact"
+            out.append(Quantity(
+                name=f"lead_{j.axis}", value=0.0, unit="µm/m", expanded=(hi - lo) / 2.0,
+                interval_95=(lo, hi), k=None, dof=None, decision=None,
+                basis=[f"not measured: {within} ([uncertainty] "
+                       f"joint_positioning_um_per_m, {said})"]))
+    return out
+
+
 def tool_quantities(tool: ToolFigures, basis: list[str],
                     acceptance: dict[str, str] | None = None) -> list[Quantity]:
     """The tool's figures: before, after, with the geometry in the controller (RMS
-    and max of |E| over the workspace, mm); ``acceptance``: the after-figures'
-    outcome per figure ("rms", "max") where the config sets a limit."""
+    and max of |E| over the workspace, mm; the last by ``tool.route``, with the joint
+    tables where the run has them); ``acceptance``: the after-figures' outcome per
+    figure ("rms", "max") where the config sets a limit."""
     gain = rule.gain(tool.after.rms.draws, tool.compensated.rms.draws)
+    joints = tool.joints
     out = []
     for key, fig in (("before", tool.before), ("after", tool.after),
                      ("compensated", tool.compensated)):
+        route = tool.route if key == "compensated" else "offsets"
+        said = [*basis, *([] if joints is None else joints.basis(route))]
+        if key == "compensated":
+            said.append(f"route: {route_words(route)}")
         for stat in ("rms", "max"):
             decision = (acceptance or {}).get(stat) if key == "after" else \
                 gain if (key, stat) == ("compensated", "rms") else None
-            out.append(bounded(f"{TOOL[key]}.{stat}", getattr(fig, stat), basis, decision))
+            out.append(bounded(f"{TOOL[key]}.{stat}", getattr(fig, stat), said, decision))
     return out
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from orthocal import Identification
 from orthocal.lost_motion import Reversal
 from station.analysis import accuracy_statement as accuracy
+from station.analysis.joints import JointKnowledge
 from station.analysis.verdict import JoinedRounds
 from station.config import StationConfig
 from station.record.result import Iteration
@@ -37,8 +38,10 @@ class Rounds:
     layout each round fitted (``layout_rounds``, and the fit each came from,
     ``layout_fits``), the write-backs (``writes``), the Δρ the last offsets aim at
     (``target``), the joints' lost motion (``reversal``), the offsets before the run,
-    the drive's offset count, the soft limits (``limits``) and why the loop stopped
-    (``stopped``)."""
+    the drive's offset count, the soft limits (``limits``), why the loop stopped
+    (``stopped``), and each joint's positioning error as the run took it (``joints``:
+    station.analysis.joints; None: every joint exact, as before the joints were
+    modelled)."""
 
     config: StationConfig
     idents: tuple[Identification, ...]
@@ -53,6 +56,7 @@ class Rounds:
     offset_count_mm: float
     limits: accuracy.Limits | None
     stopped: str
+    joints: JointKnowledge | None = None
 
     @cached_property
     def layout(self) -> accuracy.Layout | None:

@@ -1,33 +1,39 @@
 """The tool's error over the workspace as the run states it (docs/model.md, "Accuracy at
-the tool" and "The statement's uncertainty"): before the calibration, after it with the
-offsets written, and with the identified geometry in the controller, each figure's
-RMS and max of |E| with one 95 % interval, propagated by Monte Carlo over the
+the tool", "The statement's uncertainty" and "The tool with the joints' errors"):
+before the calibration, after it with the offsets written, and with the identified
+geometry in the controller (with the joint tables where the run has them), each
+figure's RMS and max of |E| with one 95 % interval, propagated by Monte Carlo over the
 machine's joint distribution (GUM Supplement 1, orthocal.field_mc: the fits' scatter
-and every stated input within its bound, the plug-in's bias near a zero field
-inverted). What the geometry in the controller gains over the offsets alone is
-judged over the same drawn machines (orthocal.uncertainty.Uncertainty.draws), draw
-by draw."""
+and every stated input within its bound, the joints' errors as each route leaves
+them, the plug-in's bias near a zero field inverted). What the geometry in the
+controller gains over the offsets alone is judged over the same drawn machines
+(orthocal.uncertainty.Uncertainty.draws), draw by draw."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from orthocal import PARAM_NAMES
+from orthocal import compensation as comp_
+from orthocal import tool_interval as after_
 from orthocal.accuracy import ErrorField, error_field
-from orthocal.compensation import compensated_field, compensated_interval, truth_jacobian
 from orthocal.field_mc import Bounded
-from orthocal.tool_interval import after_interval, field_jacobian
+from orthocal.kinematics import inverse
 from orthocal.uncertainty import Uncertainty
 from station.analysis.accuracy_statement import LAYOUT_NAMES
 from station.analysis.compensated import told_names
-from station.statement.known_machine import DRHO, KnownMachine
+from station.statement.joints_at_tool import JointsAtTool
+from station.statement.known_machine import DRHO, KnownMachine, offsets_moved
 from station.statement.snapshot import Rounds
 
 #: Draws of the machine (seeded: a run's statement is repeatable).
 DRAWS = 4000
 SEED = 20261207
+#: The label of a joint's lead among the Type B inputs (orthocal.budget_columns).
+LEAD = "joint lead:"
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,7 +58,12 @@ class FieldFigures:
 @dataclass(frozen=True, eq=False)
 class ToolFigures:
     """Before, after (the offsets written) and with the geometry in the controller
-    (``compensated``, the controller told ``told``); ``method`` in words."""
+    (``compensated``, the controller told ``told``, by ``route``: a key of
+    orthocal.joint_compensation.ROUTES, with the joint tables where the run has
+    them); ``method`` in words; ``joints``: the joints as the figures take them;
+    ``assumed_share``: per figure ("after", "compensated"), the share of its mean
+    square the assumed joints' bounds make (their leads through the identification
+    and at the tool)."""
 
     before: FieldFigures
     after: FieldFigures
@@ -60,16 +71,24 @@ class ToolFigures:
     told: list[str]
     point_rms_mm: np.ndarray
     method: str
+    route: str = "kinematics"
+    joints: JointsAtTool | None = None
+    assumed_share: dict[str, float] | None = None
 
 
-def _stats(F0: np.ndarray, G: np.ndarray, deltas: np.ndarray, n: int
+def _stats(F0: np.ndarray, G: np.ndarray, deltas: np.ndarray, n: int,
+           linked: np.ndarray | None = None, u: np.ndarray | None = None
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per draw, RMS and max of |E| of F0 − G·δ; and each point's root mean square."""
+    """Per draw, RMS and max of |E| of F0 − G·δ (+ the joints' ``linked`` field (3n × m)
+    at each draw's inputs ``u`` (draws × m)); and each point's root mean square."""
     rms = np.empty(len(deltas))
     mx = np.empty(len(deltas))
     point = np.zeros(n)
     for lo in range(0, len(deltas), 500):  # the whole field per draw: in chunks
-        d = (F0 - deltas[lo:lo + 500] @ G.T).reshape(-1, n, 3)
+        f = F0 - deltas[lo:lo + 500] @ G.T
+        if linked is not None and u is not None and linked.shape[1]:
+            f = f + u[lo:lo + 500] @ linked.T
+        d = f.reshape(-1, n, 3)
         norms2 = np.einsum("dnk,dnk->dn", d, d)
         rms[lo:lo + 500] = np.sqrt(norms2.mean(axis=1))
         mx[lo:lo + 500] = np.sqrt(norms2.max(axis=1))
@@ -80,6 +99,22 @@ def _stats(F0: np.ndarray, G: np.ndarray, deltas: np.ndarray, n: int
 def _columns(u: Uncertainty) -> list[int]:
     var = np.diag(u.covariance())
     return [c for c in range(len(PARAM_NAMES)) if var[c] > 0.0]
+
+
+def _split(joint: Uncertainty) -> tuple[Uncertainty, dict[str, np.ndarray]]:
+    """The joint distribution without the joints' leads, and each joint's lead column
+    over the parameters (by axis): the leads are drawn with the joints' errors at the
+    tool, one input each (:func:`_linked`)."""
+    keep = [i for i, lab in enumerate(joint.labels) if not lab.startswith(LEAD)]
+    rest = Uncertainty(joint.names, joint.blocks, joint.columns[:, keep],
+                       tuple(joint.labels[i] for i in keep),
+                       tuple(joint.sources[i] for i in keep))
+    leads: dict[str, np.ndarray] = {}
+    for col, lab in zip(joint.columns.T, joint.labels, strict=True):
+        if lab.startswith(LEAD):
+            axis = lab[len(LEAD):]
+            leads[axis] = leads.get(axis, np.zeros(len(joint.names))) + col
+    return rest, leads
 
 
 def _bounded(joint: Uncertainty) -> list[Bounded]:
@@ -99,28 +134,82 @@ def _type_a(joint: Uncertainty) -> tuple[np.ndarray, float | None]:
     return joint.type_a_covariance(), (min(dofs) if dofs else None)
 
 
-def _paired_gain(rounds: Rounds, machine: KnownMachine, joint: Uncertainty,
-                 told: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """The RMS after the offsets and with the geometry in the controller over the same
-    drawn machines (the field linearised at the estimate): what the controller gains,
-    judged draw by draw (station.statement.decisions.gain)."""
+@dataclass(frozen=True, eq=False)
+class _Linear:
+    """One field linearised at the estimate: its plug-in ``F0`` (3n), its Jacobian ``G``
+    over the parameters an input moves, and each joint's input in the truth,
+    ``linked`` (3n × m, in ``axes``' order): what its lead does through the
+    identification (−G·c) and its error at the tool, drawn as one input."""
+
+    F0: np.ndarray
+    G: np.ndarray
+    linked: np.ndarray
+    axes: tuple[str, ...]
+
+    def share(self, of: Sequence[str], value_mm: float) -> float:
+        """The share of a figure's mean square (``value_mm`` squared) the joints ``of``
+        make: their inputs' mean square over the points, each a third of its square."""
+        keep = [i for i, a in enumerate(self.axes) if a in of]
+        n = len(self.F0) // 3
+        ms = float(np.sum(self.linked[:, keep] ** 2) / n / 3.0)
+        total = max(value_mm**2, ms)
+        return 0.0 if total <= 0.0 else ms / total
+
+
+def _linear(rounds: Rounds, theta: np.ndarray, theta_c: np.ndarray | None, cols: list[int],
+            joints: JointsAtTool, route: str, which: str, leads: dict[str, np.ndarray]
+            ) -> _Linear:
+    """The field after the offsets (``theta_c`` None) or with the controller told
+    ``theta_c``, by ``route``, linearised at the estimate ``theta`` of the machine
+    ``which`` ("start", "now"); the joints' ``leads`` (parameter columns by axis)
+    linked with their errors at the tool."""
     cfg = rounds.config
     geometry, frame, points = cfg.machine.geometry(), cfg.writeback.frame, rounds.points
-    n = len(points)
-    cols = _columns(joint)
-    deltas = joint.draws(DRAWS, np.random.default_rng(SEED))[:, cols] if cols else \
+    n, zero = len(points), np.zeros(3)
+    tables = joints.plug_in(which, route)
+    if theta_c is None:
+        F0 = error_field(points, geometry, theta, zero, frame, joint_errors=tables).field
+        G = after_.field_jacobian(points, geometry, theta, zero, frame, cols, tables) \
+            if cols else np.zeros((3 * n, 0))
+        J = after_.joint_jacobian(points, geometry, theta, zero, tables)
+        rho = inverse(points, geometry)
+    else:
+        F0 = comp_.compensated_field(points, geometry, theta, theta_c, frame, tables).field
+        G = comp_.truth_jacobian(points, geometry, theta, theta_c, frame, cols, tables) \
+            if cols else np.zeros((3 * n, 0))
+        J = comp_.joint_jacobian(points, geometry, theta, theta_c, tables)
+        rho = comp_.controller_joints(points, geometry, theta_c)
+    at_tool = joints.framed(rho, which, J, points, frame)
+    axes = tuple(a for a in "xyz" if a in leads or a in at_tool)
+    linked = np.zeros((3 * n, len(axes)))
+    for k, a in enumerate(axes):
+        if a in leads and cols:
+            linked[:, k] -= G @ leads[a][cols]  # the truth is the plug-in less G·δ
+        if a in at_tool:
+            linked[:, k] += at_tool[a]
+    return _Linear(F0.ravel(), G, linked, axes)
+
+
+def _draws(linear: _Linear) -> list[Bounded] | None:
+    """The joints' linked inputs as the truth's field errors (orthocal.field_mc: each
+    uniform in ±1; already in the frame, which leaves them as they are)."""
+    m = linear.linked.shape[1]
+    return [Bounded(linear.linked, np.ones(m))] if m else None
+
+
+def _paired_gain(rounds: Rounds, rest: Uncertainty, cols: list[int],
+                 fields: tuple[_Linear, _Linear]) -> tuple[np.ndarray, np.ndarray]:
+    """The RMS after the offsets and with the geometry in the controller over the same
+    drawn machines, the joints' inputs drawn once for both (``fields``: the two
+    linearised): what the controller gains, judged draw by draw
+    (station.statement.decisions.gain)."""
+    n = len(rounds.points)
+    deltas = rest.draws(DRAWS, np.random.default_rng(SEED))[:, cols] if cols else \
         np.zeros((DRAWS, 0))
-    theta = machine.params("now")
-    fld = error_field(points, geometry, theta, np.zeros(3), frame)
-    G = field_jacobian(points, geometry, theta, np.zeros(3), frame, cols) if cols else \
-        np.zeros((3 * n, 0))
-    after, _, _ = _stats(fld.field.ravel(), G, deltas, n)
-    theta_c = np.array([v if p in told else 0.0
-                        for p, v in zip(PARAM_NAMES, theta, strict=True)])
-    comp = compensated_field(points, geometry, theta, theta_c, frame)
-    G_c = truth_jacobian(points, geometry, theta, theta_c, frame, cols) if cols else \
-        np.zeros((3 * n, 0))
-    controller, _, _ = _stats(comp.field.ravel(), G_c, deltas, n)
+    u = np.random.default_rng(SEED + 1).uniform(-1.0, 1.0, (DRAWS, len(fields[0].axes)))
+    assert fields[0].axes == fields[1].axes
+    after, _, _ = _stats(fields[0].F0, fields[0].G, deltas, n, fields[0].linked, u)
+    controller, _, _ = _stats(fields[1].F0, fields[1].G, deltas, n, fields[1].linked, u)
     return after, controller
 
 
@@ -133,18 +222,28 @@ def tool_figures(rounds: Rounds, machine: KnownMachine) -> ToolFigures:
     orthocal.tool_interval.after_interval / orthocal.compensation.compensated_interval
     over the machine's joint distribution (Type A as the fits state it, every Type B
     input uniform within its bound: docs/model.md, "Intervals at the tool"), Δρ now
-    the truth's where nothing was measured after the last write (it is then an aim)."""
+    the truth's where nothing was measured after the last write (it is then an aim);
+    the joints' errors as each route leaves them, each joint's lead one input with
+    what it does through the identification (station.statement.joints_at_tool)."""
     cfg = rounds.config
     geometry, frame, points = cfg.machine.geometry(), cfg.writeback.frame, rounds.points
     zero = np.zeros(3)
     joint = machine.joint()
-    cov, dof = _type_a(joint)
-    bounded = _bounded(joint)
+    rest, leads = _split(joint)
+    cov, dof = _type_a(rest)
+    bounded = _bounded(rest)
+    cols = _columns(joint)
+    joints = JointsAtTool(rounds.joints, offsets_moved(rounds))
     out: dict[str, FieldFigures] = {}
+    fields: dict[str, _Linear] = {}
     for name, which in (("before", "start"), ("after", "now")):
         aim = () if machine.measured_now or name == "before" else DRHO
-        iv = after_interval(machine.params(which), cov, dof, zero, points, geometry, frame,
-                            draws=DRAWS, seed=SEED, bounded=bounded, in_truth=aim)
+        fields[name] = _linear(rounds, machine.params(which), None, cols, joints, "offsets",
+                               which, leads)
+        iv = after_.after_interval(
+            machine.params(which), cov, dof, zero, points, geometry, frame, draws=DRAWS,
+            seed=SEED, bounded=bounded, in_truth=aim, field_draws=_draws(fields[name]),
+            joint_errors=joints.plug_in(which, "offsets"))
         out[name] = FieldFigures(iv.field, _fig(iv.rms_mm, iv.rms_interval_mm, np.empty(0)),
                                  _fig(iv.max_mm, iv.max_interval_mm, np.empty(0)))
     told = told_names(rounds.layout, rounds.last.names)
@@ -152,21 +251,32 @@ def tool_figures(rounds: Rounds, machine: KnownMachine) -> ToolFigures:
     theta_c = np.array([v if p in told else 0.0
                         for p, v in zip(PARAM_NAMES, estimate, strict=True)])
     absent = [p not in told and p in LAYOUT_NAMES for p in PARAM_NAMES]
-    comp = compensated_interval(theta_c, estimate, cov, dof, points, geometry, frame,
-                                draws=DRAWS, seed=SEED, absent=absent, bounded=bounded)
-    after_draws, comp_draws = _paired_gain(rounds, machine, joint, told)
+    route = joints.compensated_route()
+    fields["compensated"] = _linear(rounds, estimate, theta_c, cols, joints, route, "now",
+                                    leads)
+    comp = comp_.compensated_interval(
+        theta_c, estimate, cov, dof, points, geometry, frame, draws=DRAWS, seed=SEED,
+        absent=absent, bounded=bounded, joint_errors=joints.plug_in("now", route),
+        field_draws=_draws(fields["compensated"]))
+    after_draws, comp_draws = _paired_gain(rounds, rest, cols,
+                                           (fields["after"], fields["compensated"]))
     out["compensated"] = FieldFigures(
         comp.field, _fig(comp.rms_mm, comp.rms_interval_mm, comp_draws),
         _fig(comp.max_mm, comp.max_interval_mm, np.empty(0)))
     out["after"] = FieldFigures(out["after"].field,
                                 _fig(out["after"].rms.value, out["after"].rms.interval,
                                      after_draws), out["after"].max)
+    share = {name: fields[name].share(joints.assumed, out[name].rms.value)
+             for name in ("after", "compensated")} if joints.assumed else None
     return ToolFigures(before=out["before"], after=out["after"],
                        compensated=out["compensated"], told=told,
                        point_rms_mm=np.asarray(comp.point_rms_mm),
                        method=(f"Monte Carlo over the machine's joint distribution (GUM "
                                f"Supplement 1, {DRAWS} seeded draws: the fits' scatter as "
-                               "Student's t, each stated input uniform within its bound), "
-                               "the field linearised at the estimate, the plug-in's bias "
-                               "near a zero field inverted (docs/model.md, \"Intervals at "
-                               "the tool\")"))
+                               "Student's t, each stated input uniform within its bound, "
+                               "each joint's error as the route leaves it, drawn with "
+                               "what its lead does through the identification), the field "
+                               "linearised at the estimate, the plug-in's bias near a zero "
+                               "field inverted (docs/model.md, \"Intervals at the tool\" "
+                               "and \"The tool with the joints' errors\")"),
+                       route=route, joints=joints, assumed_share=share)
