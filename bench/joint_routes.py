@@ -23,8 +23,20 @@ RMS / max over the run's own grid and frame:
   G91 section) through a nominal controller: the true path, with the run's tables and
   with them taken out (the geometry alone).
 
+``--know`` says how the run knows its joints (docs/design.md, "Joints"):
+
+* ``test`` (default): the laser tests above;
+* ``assumed``: no test, ``[uncertainty] joint_positioning_um_per_m = 120`` stated; then
+  also whether the 95 % intervals of the tool after (RMS and max) and with the geometry
+  in the controller (the kinematics alone: nothing compensates the joints) hold the
+  truth, and the first screen's line on the joints;
+* ``station``: the station's own test (``run --simulate --joint-test``, its gauge blocks);
+  then also the leads it found.
+
     python bench/joint_routes.py              # 2 seeds
     python bench/joint_routes.py --runs 3 --seed 5
+    python bench/joint_routes.py --know assumed --runs 5
+    python bench/joint_routes.py --know station
 """
 
 from __future__ import annotations
@@ -93,20 +105,31 @@ def laser_tests(folder: Path, seed: int) -> dict[str, str]:
     return tests
 
 
-def one_run(seed: int, out: Path) -> dict[str, Any]:
-    """``orthocal run --simulate`` of the held-out machine with screws and laser tests."""
+#: ``--know assumed``: the bound stated ([uncertainty] joint_positioning_um_per_m).
+ASSUMED_UM_PER_M = 120.0
+
+
+def one_run(seed: int, out: Path, know: str = "test") -> dict[str, Any]:
+    """``orthocal run --simulate`` of the held-out machine with screws, its joints known
+    as ``know`` says."""
     out.mkdir(parents=True, exist_ok=True)
-    tests = laser_tests(out, seed)
+    uncertainty: dict[str, Any] = {"leg_straightness_mm": STRAIGHTNESS_MM}
+    joints: dict[str, Any] = {}
+    if know == "test":
+        joints = {"tests": laser_tests(out, seed)}
+    elif know == "assumed":
+        uncertainty["joint_positioning_um_per_m"] = ASSUMED_UM_PER_M
 
     def hook(station: Any) -> None:  # what a user writes in the config
         config = station.config
-        station.config = lambda: {**config(),
-                                  "uncertainty": {"leg_straightness_mm": STRAIGHTNESS_MM},
-                                  "joints": {"tests": tests}}
+        station.config = lambda: {**config(), "uncertainty": uncertainty,
+                                  **({"joints": {**config().get("joints", {}), **joints}}
+                                     if joints else {})}
 
     options = RunOptions(sim=SimOptions(seed=seed, true_drho=DRHO, true_tilt=TILT,
                                         true_gap=GAP, noise=NOISE_MM,
                                         joint_lead=",".join(f"{v:g}" for v in LEAD),
+                                        joint_test=know == "station" or None,
                                         station_hook=hook),
                          out=out / "runs", yes=True, json=True)
     code, result = run_json(options)
@@ -146,11 +169,16 @@ def grid_figures(result: dict[str, Any]) -> dict[str, Any]:
     only = error_field(points, g, truth, None, frame, joint_errors=screws)
     left = joint_residual(points, g, told, tables)
     c = acc["compensated"]
+    kins_true = stats(table_compensated_error(points, g, truth, told, JointErrors(), screws,
+                                              "forward"))
     return {
+        "only_interval": (acc["after"]["rms_interval_95_mm"],
+                          acc["after"]["max_interval_95_mm"]),
+        "geometry_interval": (c["rms_interval_95_mm"], c["max_interval_95_mm"]),
+        "route": c.get("route"),
         "only_pred": (1000 * acc["after"]["rms_mm"], 1000 * acc["after"]["max_mm"]),
         "only_true": (1000 * only.rms_mm, 1000 * only.max_mm),
-        "kins_true": stats(table_compensated_error(points, g, truth, told, JointErrors(),
-                                                   screws, "forward")),
+        "kins_true": kins_true,
         "geometry_pred": (1000 * c["rms_mm"], 1000 * c["max_mm"]),
         "joints_pred": (1000 * left.bound_rms_mm, 1000 * left.bound_max_mm),
         "tables_true": stats(table_compensated_error(points, g, truth, told, tables, screws,
@@ -188,26 +216,69 @@ def pair(v: tuple[float, float]) -> str:
     return f"{v[0]:6.2f} {v[1]:6.2f}"
 
 
+def holds(interval: list[float], truth_um: float) -> str:
+    lo, hi = (1000 * v for v in interval)
+    return f"{lo:5.1f}–{hi:5.1f} {'yes' if lo <= truth_um <= hi else 'NO '}"
+
+
+def joints_line(result: dict[str, Any]) -> str:
+    """The first screen's line on what the tool's figures take the joints to be."""
+    from station.report.first_screen import items
+
+    record = {k: v for k, v in result.items() if k != "exit_code"}
+    said = [i.text for i in items(as_result(record)) if i.label == "joints"]
+    return said[0] if said else "(none)"
+
+
+def print_knowledge(know: str, rows: list[tuple[int, str, dict[str, Any]]]) -> None:
+    """What ``--know assumed`` and ``--know station`` add: the intervals against the
+    truth, the first screen's line, the leads found."""
+    if know == "assumed":
+        print("\nThe 95 % intervals against the truth (µm; RMS, max):")
+        print(f"{'seed':<6} | {'after RMS':^16} {'after max':^16} | "
+              f"{'kinematics RMS':^16} {'kinematics max':^16}")
+        for seed, _, r in rows:
+            (ar, am), (cr, cm) = r["only_interval"], r["geometry_interval"]
+            print(f"{seed:<6} | {holds(ar, r['only_true'][0])} {holds(am, r['only_true'][1])} "
+                  f"| {holds(cr, r['kins_true'][0])} {holds(cm, r['kins_true'][1])}")
+    if know == "station":
+        print("\nThe leads the station's own test found (µm/m, 95 % interval):")
+        for seed, _, r in rows:
+            print(f"{seed:<6} | " + "; ".join(
+                f"{a} {v:+.1f} [{lo:+.1f}, {hi:+.1f}] (true {t:+g})"
+                for a, (v, (lo, hi)), t in zip(AXES, r["leads"], LEAD, strict=True)))
+    for seed, _, r in rows[:1]:
+        print(f"\nThe first screen (seed {seed}): {r['joints_line']}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=2)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--know", choices=("test", "assumed", "station"), default="test",
+                        help="how the run knows its joints")
     parser.add_argument("--time-scale", default="20",
                         help="the virtual station's clock against real time")
     args = parser.parse_args()
     os.environ.setdefault("ORTHOCAL_SIM_TIME_SCALE", args.time_scale)
     t0 = time.monotonic()
     print(f"held-out machine with screws: gaps {GAP} mm, tilts {TILT} mrad, Δρ {DRHO} mm, "
-          f"leads {LEAD} µm/m; laser tests 10 mm targets, U = {LASER_U_UM} µm; noise "
-          f"{1000 * NOISE_MM:g} µm, legs stated straight to {STRAIGHTNESS_MM} mm")
+          f"leads {LEAD} µm/m; noise {1000 * NOISE_MM:g} µm, legs stated straight to "
+          f"{STRAIGHTNESS_MM} mm; the joints: " + {
+              "test": f"laser tests, 10 mm targets, U = {LASER_U_UM} µm",
+              "assumed": f"no test, stated within ±{ASSUMED_UM_PER_M:g} µm/m",
+              "station": "the station's own test (gauge blocks)"}[args.know])
     rows = []
     with tempfile.TemporaryDirectory(prefix="orthocal-joint-routes-") as tmp:
         for k in range(args.runs):
             seed = args.seed + k
             where = Path(tmp) / f"seed-{seed}"
-            result = one_run(seed, where)
-            rows.append((seed, result["loop"]["stopped"], {**grid_figures(result),
-                                                           **path_figures(result, where)}))
+            result = one_run(seed, where, args.know)
+            leads = [(result["joints"][a]["lead_um_per_m"],
+                      result["joints"][a]["lead_interval_95_um_per_m"]) for a in AXES]
+            rows.append((seed, result["loop"]["stopped"], {
+                **grid_figures(result), **path_figures(result, where), "leads": leads,
+                "joints_line": joints_line(result)}))
             print(f"  seed {seed} done ({time.monotonic() - t0:.0f} s)", file=sys.stderr)
     print("\nOver the run's grid (µm, RMS max, in the run's frame unless 'as it lands'; "
           "true: the hidden machine with its screws)")
@@ -226,6 +297,7 @@ def main() -> None:
         cells = [f"{e.rms_um:6.2f} {e.max_um:6.2f} / {e.frame_rms_um:6.2f} "
                  f"{e.frame_max_um:6.2f}" for e in (r["program"], r["program_alone"])]
         print(f"{seed:<6} | {cells[0]} | {cells[1]}")
+    print_knowledge(args.know, rows)
     print(f"\n{time.monotonic() - t0:.0f} s")
 
 

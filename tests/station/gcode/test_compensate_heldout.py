@@ -226,9 +226,10 @@ def test_the_compensated_program_takes_the_joints_errors_out(tmp_path: Path, cap
     print(f"true path of the compensated program: {rms:.2f} µm RMS, {worst:.2f} µm max; on "
           f"the machine without screws {exact_rms:.2f} / {exact_worst:.2f}; compensated "
           f"for the geometry alone {bare_rms:.2f} / {bare_worst:.2f}")
-    # the tables take the screws' share out: what is left is the geometry's (the done-when
-    # figure, 3 µm RMS, rests also on the identification, which these leads bias while it
-    # does not take the tables into account: bench/joint_routes.py)
+    # the tables take the screws' share out: what is left is the geometry's, which the
+    # identification found with the tables taken out of its deviations: within 3 µm RMS,
+    # 8 µm max (measured: 1.15 / 2.36)
+    assert rms <= 3.0 and worst <= 8.0
     assert abs(rms - path_error(geometry_only, screwed, screws=False)[0]) <= 1.0
     assert rms <= exact_rms + 1.0 and worst <= exact_worst + 2.0
     assert bare_rms >= rms + 3.0  # the control: the leads' share where no table is told
