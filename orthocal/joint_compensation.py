@@ -152,6 +152,25 @@ def shifted(table: JointTable, shift_mm: float) -> JointTable:
                       table.reverse_mm, table.u95_mm, table.shift_mm)
 
 
+
+def held_ends(table: JointTable, margin_mm: float) -> JointTable:
+    """``table`` held at its end values for ``margin_mm`` beyond each end (docs/model.md,
+    "Joint errors compensated"): a test planned for the offsets a run started from spans
+    the joints it needed then, and the offsets written since move them by up to that
+    much on the screw. ε there is the end's, off by ε'·margin (0.1 µm for 100 µm/m and
+    a millimetre), as a controller holds a table's end value beyond it; further out it
+    is still never extrapolated."""
+    if not margin_mm > 0:
+        return table
+    t = table.targets_mm
+
+    def ends(a: np.ndarray) -> np.ndarray:
+        return np.r_[a[0], a, a[-1]]
+
+    return JointTable(np.r_[t[0] - margin_mm, t, t[-1] + margin_mm],
+                      ends(table.forward_mm), ends(table.reverse_mm),
+                      None if table.u95_mm is None else ends(table.u95_mm), table.shift_mm)
+
 # --- the tool where a controller compensates -----------------------------------------
 
 

@@ -30,7 +30,7 @@ from typing import Literal
 import numpy as np
 
 from orthocal import JointErrors, JointTable, iso230_table, lead_um_per_m
-from orthocal.joint_compensation import shifted
+from orthocal.joint_compensation import held_ends, shifted
 from station.config import StationConfig
 from station.config.joint_tests import Joint, JointTest, read_joint_tests
 from station.record.result_joints import (
@@ -170,31 +170,13 @@ def round_tables(knowledge: JointKnowledge | None, moved: Mapping[str, float]
     o the offsets' change since the joint was tested (the run's start; ``moved``, mm
     per axis): a joint commanded ρ stands on its screw where the test's ρ + o stood
     (orthocal.joint_compensation.shifted), held at its ends for as far as the
-    offsets moved (:func:`held_ends`). None where no joint has a table."""
+    offsets moved (orthocal.joint_compensation.held_ends). None where no joint has a table."""
     if knowledge is None or not any(j.table is not None for j in knowledge.joints):
         return None
     return JointErrors(*(None if j.table is None else
                          shifted(held_ends(j.table, abs(float(moved.get(j.axis, 0.0)))),
                                  -float(moved.get(j.axis, 0.0)))
                          for j in knowledge.joints))
-
-
-def held_ends(table: JointTable, margin_mm: float) -> JointTable:
-    """``table`` held at its end values for ``margin_mm`` beyond each end: a test planned
-    for the offsets the run started from spans the joints it needed then, and the
-    offsets written since move them by up to that much on the screw. ε there is the
-    end's, off by ε'·margin (0.1 µm for 100 µm/m and a millimetre); further out it is
-    still never extrapolated."""
-    if not margin_mm > 0:
-        return table
-    t = table.targets_mm
-
-    def ends(a: np.ndarray) -> np.ndarray:
-        return np.r_[a[0], a, a[-1]]
-
-    return JointTable(np.r_[t[0] - margin_mm, t, t[-1] + margin_mm],
-                      ends(table.forward_mm), ends(table.reverse_mm),
-                      None if table.u95_mm is None else ends(table.u95_mm), table.shift_mm)
 
 
 def positioning_input(config: StationConfig) -> StatedInput:

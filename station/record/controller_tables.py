@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from orthocal import AXES, JointErrors, JointTable
-from orthocal.joint_compensation import ROUTES, shifted
+from orthocal.joint_compensation import ROUTES, held_ends, shifted
 from station.record.exportable import HEADER, WIDTH
 from station.record.result import RunResult
 
@@ -72,8 +72,14 @@ class ControllerTables:
         return [j for j in self.joints if j.table is not None]
 
     def errors(self) -> JointErrors:
-        """The tables as orthocal's joint errors (a joint without one: exact)."""
-        return JointErrors(*(j.table for j in self.joints))
+        """The tables as orthocal's joint errors (a joint without one: exact), each held
+        at its end values for as far as the offsets moved (orthocal.joint_compensation.
+        held_ends): a test that spans just the travel the run needed from its start (the
+        station's own) still covers the joints the controller commands, as the
+        identification and the statement took it. The exports write the tables as
+        tested (:attr:`ControllerJoint.table`)."""
+        return JointErrors(*(None if j.table is None else held_ends(j.table, abs(j.shift_mm))
+                             for j in self.joints))
 
     def route(self, base: str) -> str:
         """The key of ROUTES for a route ``base`` (offsets, kinematics, program) with

@@ -264,10 +264,18 @@ def _tool_statement(result: RunResult, acc: Accuracy) -> list[Item]:
                  "stands"]
     if c_rms is not None:
         route = acc.compensated.route if acc.compensated is not None else None
+        if route == "kinematics" and not _bounded_joints(result):
+            route = None  # every joint exact: no joint error stays
         lines.append(f"{IN_CONTROLLER.get(route or '', IN_CONTROLLER[''])} "
                      f"{figure(c_rms, 'RMS')}")
     return [Item("at the tool" if i == 0 else "", t) for i, t in enumerate(lines)]
 
+
+def _bounded_joints(result: RunResult) -> list[str]:
+    """The joints without a table whose bound is not zero."""
+    joints = result.joints
+    return [] if joints is None else \
+        [a for a in AXES if (j := getattr(joints, a)).table is None and j.bound_um_per_m]
 
 
 def joints_item(result: RunResult) -> Item | None:

@@ -9,8 +9,9 @@ error."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
+from station.analysis.joints import positioning_input
 from station.analysis.run_budget import inputs
 from station.config import StationConfig
 from station.record.quantity_text import plus_minus, um
@@ -104,25 +105,21 @@ def _joint_tables(q: Mapping[str, Quantity]) -> list[AdviceItem]:
         + ", ".join(f"{r.name[-1]} {plus_minus(r)}" for r in held)))]
 
 
-def _joint_tests(config: StationConfig, q: Mapping[str, Quantity],
-                 share: Mapping[str, float] | None) -> list[AdviceItem]:
-    """Where the assumed joints' bounds make most of a tool figure's mean square: a test
-    of those joints."""
-    if not share or max(share.values()) <= MOST:
-        return []
-    held = [r for a in "xyz" if (r := q.get(f"lead_{a}")) is not None
-            and r.decision is None and r.basis and r.basis[0].startswith("not measured")]
-    if not held:
+def _joint_tests(config: StationConfig, share: Mapping[str, float] | None,
+                 assumed: Sequence[str]) -> list[AdviceItem]:
+    """Where the joints without a table (``assumed``: their axes) make most of a tool
+    figure's mean square (``share``): a test of those joints."""
+    if not share or not assumed or max(share.values()) <= MOST:
         return []
     figure = "tool.after.rms" if share.get("after", 0.0) >= share.get("compensated", 0.0) \
         else "tool.compensated.rms"
-    bound = config.uncertainty.joint_positioning_um_per_m
-    said = (f"the stated ±{bound:g}" if bound is not None else
-            f"the assumed ±{float(held[0].expanded or 0.0) / 0.95:.0f}")
-    axes = ", ".join(r.name[-1] for r in held)
-    return [AdviceItem(id="joint_tests", rests_on=[*(r.name for r in held), figure], text=(
-        f"give a laser test of joint(s) {axes} ([joints] tests) or run the station's own "
-        f"test ([joints] station_test): {said} µm/m makes most of the tool's error"))]
+    bound = positioning_input(config)
+    value = bound.value if isinstance(bound.value, float | int) else max(bound.value)
+    said = f"{'the stated' if bound.given else 'the assumed'} ±{float(value):g}"
+    return [AdviceItem(id="joint_tests", rests_on=[figure], text=(
+        f"give a laser test of joint(s) {', '.join(assumed)} ([joints] tests) or run the "
+        f"station's own test ([joints] station_test): {said} µm/m of their positioning "
+        "makes most of the tool's error"))]
 
 
 def _undecided(q: Mapping[str, Quantity]) -> list[AdviceItem]:
@@ -167,17 +164,20 @@ def _inputs(config: StationConfig, q: Mapping[str, Quantity],
 
 def advice(config: StationConfig, quantities: list[Quantity], undecided_type_b: list[str],
            converged: bool, remedy: str | None,
-           joints_share: Mapping[str, float] | None = None) -> list[AdviceItem]:
+           joints_share: Mapping[str, float] | None = None,
+           assumed_joints: Sequence[str] = ()) -> list[AdviceItem]:
     """Every piece of advice for the statement's ``quantities`` (module docstring);
     ``undecided_type_b``: the quantities the stated inputs alone keep undecided
     (station.statement.conclude), ``remedy``: what would let an unconverged loop
     converge (the verdict's words); ``joints_share``: the assumed joints' share of the
-    tool's figures (station.statement.tool_figures.ToolFigures.assumed_share)."""
+    tool's figures (station.statement.tool_figures.ToolFigures.assumed_share) and
+    ``assumed_joints`` those joints."""
     q = {x.name: x for x in quantities}
     rail_mm = config.machine.rho_max - config.machine.rho_min
     out = _undecided(q) or _rails(q, rail_mm)
     out += _controller(q) + _joint_tables(q) + _plays(q)
-    out += _joint_tests(config, q, joints_share) + _inputs(config, q, undecided_type_b)
+    out += _joint_tests(config, joints_share, assumed_joints)
+    out += _inputs(config, q, undecided_type_b)
     if remedy:
         out.append(AdviceItem(id="converge", rests_on=[n for n in q if n.endswith(".as_left")],
                               text=remedy))

@@ -167,7 +167,8 @@ def conclude(rounds: Rounds, stopped: Loop, remedy: str | None) -> Conclusion:
         stopped.model_copy(update={"stopped": "not-converged"})
     acc = accuracy_section(rounds, machine, tool, {q.name: q for q in quantities})
     said = advice(rounds.config, quantities, _undecided_by_inputs(quantities, machine),
-                  converged, remedy, joints_share=tool.assumed_share)
+                  converged, remedy, joints_share=tool.assumed_share,
+                  assumed_joints=[] if tool.joints is None else tool.joints.assumed)
     _advice_into(acc, rounds, said)
     return Conclusion(
         statement=quantities,

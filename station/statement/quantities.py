@@ -169,36 +169,28 @@ def reversal_quantities(rev: Reversal | None) -> list[Quantity]:
 
 
 def lead_quantities(knowledge: JointKnowledge | None) -> list[Quantity]:
-    """Each joint's lead (µm/m, docs/model.md (J3)): a table's least-squares slope with
-    its 95 % interval (its points' uncertainty, taken as correlated in the worst way,
-    and the residual scatter about the line), decided "compensate" beyond k_act; an
-    assumed joint's 0 within ±0.95 × its bound (rectangular), no decision."""
+    """Each tabled joint's lead (µm/m, docs/model.md (J3)): the table's least-squares
+    slope with its 95 % interval (its points' uncertainty, taken as correlated in the
+    worst way, and the residual scatter about the line), decided "compensate" beyond
+    k_act. A joint without a table has no lead known: its bound is an input of the
+    budget and of the tool (result.json's ``joints`` states it), not a quantity."""
     out: list[Quantity] = []
     for j in () if knowledge is None else knowledge.joints:
+        if j.table is None:
+            continue
         lo, hi = j.lead_interval_95_um_per_m
-        if j.table is not None:
-            lead = lead_um_per_m(j.table)
-            u_c = float(np.hypot(lead.points_um_per_m / 2.0, lead.scatter_um_per_m))
-            dof = float(lead.dof) if lead.scatter_um_per_m > 0 and lead.dof > 0 else None
-            where = f"{j.source}: {j.file or 'the station' + chr(39) + 's own test'}"
-            basis = [f"the table ({where})",
-                     "its points' expanded uncertainty, taken as correlated in the worst "
-                     "way (Type B)",
-                     f"the residual scatter about the line (Type A, {lead.dof} dof)"]
-            out.append(Quantity(
-                name=f"lead_{j.axis}", value=j.lead_um_per_m, unit="µm/m",
-                expanded=(hi - lo) / 2.0, interval_95=(lo, hi), k=None, dof=dof,
-                decision=rule.lead(j.lead_um_per_m, u_c, dof), basis=basis))
-        elif j.bound_um_per_m is not None:
-            said = "stated" if knowledge is not None and knowledge.bound.given else \
-                f"assumed: {knowledge.bound.assumed if knowledge else ''}"
-            within = f"within ±{j.bound_um_per_m:g} µm/m, rectangular" \
-                if j.bound_um_per_m else "exact"
-            out.append(Quantity(
-                name=f"lead_{j.axis}", value=0.0, unit="µm/m", expanded=(hi - lo) / 2.0,
-                interval_95=(lo, hi), k=None, dof=None, decision=None,
-                basis=[f"not measured: {within} ([uncertainty] "
-                       f"joint_positioning_um_per_m, {said})"]))
+        lead = lead_um_per_m(j.table)
+        u_c = float(np.hypot(lead.points_um_per_m / 2.0, lead.scatter_um_per_m))
+        dof = float(lead.dof) if lead.scatter_um_per_m > 0 and lead.dof > 0 else None
+        where = f"{j.source}: {j.file or 'the station' + chr(39) + 's own test'}"
+        basis = [f"the table ({where})",
+                 "its points' expanded uncertainty, taken as correlated in the worst way "
+                 "(Type B)",
+                 f"the residual scatter about the line (Type A, {lead.dof} dof)"]
+        out.append(Quantity(
+            name=f"lead_{j.axis}", value=j.lead_um_per_m, unit="µm/m",
+            expanded=(hi - lo) / 2.0, interval_95=(lo, hi), k=None, dof=dof,
+            decision=rule.lead(j.lead_um_per_m, u_c, dof), basis=basis))
     return out
 
 

@@ -169,6 +169,7 @@ def test_a_point_beyond_a_joints_table_is_refused_naming_its_line(tmp_path, caps
     rc, text, err = compensate(tmp_path, capsys, run, program)
     assert rc == 2 and text == ""
     (line,) = err.strip().splitlines()
-    # (240.248 mm: the tilted machine's joint for X-70)
+    # (240.248 mm: the tilted machine's joint for X-70; the test's 250–380 mm in the joints
+    # commanded, 251.101–381.101, held at its ends for the 1.101 mm the offsets moved)
     assert "part.ngc:3: G1: joint x would stand at 240.248 mm, outside its table " \
-           "(251.101 to 381.101 mm, the run's joint test)" in line
+           "(250.000 to 382.202 mm, the run's joint test)" in line

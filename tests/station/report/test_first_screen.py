@@ -84,9 +84,11 @@ def test_without_verbose_only_the_first_screen(rehearsed: Any) -> None:
     done, result = rehearsed
     _completed(done)
     lines = done.stdout.splitlines()
-    # the headline, the joints, the offsets, the tool (two lines), one line per advice,
-    # the mountings, the report, where the details are
-    assert len(lines) == 10 + len(result["advice"]), done.stdout
+    # the headline, the joints, the offsets, the tool (two lines), what the joints' screws
+    # were taken to be, one line per advice, the mountings, the report, the details
+    assert len(lines) == 11 + len(result["advice"]), done.stdout
+    assert any(line.startswith("  joints        the tool's figures take x, y, z stated exact")
+               for line in lines), done.stdout
     assert len(lines[0]) <= 160, lines[0]
     assert lines[-1].startswith("  details ") and "--verbose" in lines[-1]
     for detail in ("  model ", "  closed loop ", "  budget ", "  squareness "):
