@@ -15,6 +15,8 @@ from fakes import FakeRig, fake_config, run_on
 from jsonschema import Draft202012Validator
 
 import orthocal
+from orthocal.accuracy import error_field
+from orthocal.joint_error import lead_table
 from station.config import load_config
 from station.config.joint_tests import JointsConfig
 from station.plan.joint_travel import check_joint_tests
@@ -82,3 +84,34 @@ def test_a_runs_joints_are_the_shops_test_with_the_measured_reversal(tmp_path: P
     sim = on_disk["simulation"]
     assert [sim["joint_lead_um_per_m"][a] for a in "xyz"] == list(LEAD)
     assert sim["joint_pitch_um"] == 0.0
+    the_statement_carries_the_joints(on_disk)
+
+
+def the_statement_carries_the_joints(result: dict) -> None:
+    """x's lead where its test knows it, decided; y and z within the stated bound, no
+    lead; the identification says what it made of them; the tool after the offsets,
+    the screws in the truth, within its 95 % intervals."""
+    q = {x["name"]: x for x in result["statement"]}
+    assert q["lead_x"]["unit"] == "µm/m" and q["lead_x"]["decision"] == "compensate"
+    assert "lead_y" not in q and "lead_z" not in q
+    said = result["joints"]["in_identification"]
+    assert said.startswith("the deviations were corrected for what the tables of joint(s) x")
+    assert "joint(s) y, z: a lead within ±120 µm/m" in said
+    assert result["model_selection"]["allowance"]["joint_lead_um_per_m"]["y"] == 120.0
+    compensated = result["accuracy"]["compensated"]
+    assert compensated["route"] == "kinematics+tables"
+    basis = " ".join(q["tool.after.rms"]["basis"])
+    assert "joint y: not compensated, a lead within ±120 µm/m from Π0 (stated" in basis
+    # the truth: the hidden machine in the joints commanded after the run, its screws
+    # homed at Π0 before it (the offsets written move the carriages on them)
+    acc, sim = result["accuracy"], result["simulation"]
+    o = np.array([result["offsets_final"][a] - result["offsets_before"][a] for a in "xyz"])
+    truth = np.zeros(12)
+    truth[:3] = [sim["true_drho"][a] + o[i] for i, a in enumerate("xyz")]
+    screws = orthocal.JointErrors(*(lead_table(k, (100.0, 450.0), L - o[i])
+                                    for i, k in enumerate(LEAD)))
+    field = error_field(np.asarray(acc["field"]["points_mm"]), orthocal.Geometry(), truth,
+                        None, acc["frame"], joint_errors=screws)
+    for stat, true in (("rms", field.rms_mm), ("max", field.max_mm)):
+        lo, hi = q[f"tool.after.{stat}"]["interval_95"]
+        assert lo <= true <= hi, (stat, lo, true, hi)
