@@ -37,6 +37,13 @@ RMS / max over the run's own grid and frame:
     python bench/joint_routes.py --runs 3 --seed 5
     python bench/joint_routes.py --know assumed --runs 5
     python bench/joint_routes.py --know station
+    python bench/joint_routes.py --square       # exact joints: stated exact or assumed
+
+``--square``: a square machine whose joints are exact (Δρ as above, no gap, tilt nor
+lead), calibrated with its joints stated exact (``joint_positioning_um_per_m = 0``, as
+before the joints were modelled) and with nothing stated (the assumed 170 µm/m): the
+offsets written, the tool after (RMS and max, with their 95 % intervals) and how far the
+two lie apart.
 """
 
 from __future__ import annotations
@@ -137,6 +144,53 @@ def one_run(seed: int, out: Path, know: str = "test") -> dict[str, Any]:
         raise SystemExit(f"seed {seed}: the run failed (exit {code}): {result.get('message')}")
     result["exit_code"] = code
     return result
+
+
+def square_run(seed: int, out: Path, stated: bool) -> dict[str, Any]:
+    """A square machine with exact joints, its joints stated exact or left assumed."""
+    def hook(station: Any) -> None:
+        config = station.config
+
+        def described() -> dict[str, Any]:
+            said = dict(config())
+            uncertainty = {**said["uncertainty"], "leg_straightness_mm": STRAIGHTNESS_MM}
+            if not stated:
+                uncertainty.pop("joint_positioning_um_per_m", None)
+            return {**said, "uncertainty": uncertainty}
+
+        station.config = described
+
+    options = RunOptions(sim=SimOptions(seed=seed, true_drho=DRHO, noise=NOISE_MM,
+                                        station_hook=hook),
+                         out=out / ("stated" if stated else "assumed"), yes=True, json=True)
+    code, result = run_json(options)
+    if code not in (0, 3):
+        raise SystemExit(f"seed {seed}: the run failed (exit {code}): {result.get('message')}")
+    return result
+
+
+def square(args: argparse.Namespace) -> None:
+    """``--square``: the square machine with exact joints, stated exact against assumed."""
+    print(f"square machine, exact joints, Δρ {DRHO} mm, noise {1000 * NOISE_MM:g} µm; "
+          "µm: offsets written (x, y, z), tool after RMS (95 %), max (95 %)")
+    with tempfile.TemporaryDirectory(prefix="orthocal-joint-square-") as tmp:
+        for k in range(args.runs):
+            seed = args.seed + k
+            rows = {}
+            for stated in (True, False):
+                r = square_run(seed, Path(tmp) / f"seed-{seed}", stated)
+                after = r["accuracy"]["after"]
+                rows[stated] = (np.array([r["offsets_final"][a] for a in AXES]),
+                                after["rms_mm"], after["rms_interval_95_mm"],
+                                after["max_mm"], after["max_interval_95_mm"])
+            for stated, (o, rms, rms_iv, mx, mx_iv) in rows.items():
+                print(f"{seed} {'stated exact' if stated else 'assumed 170 '} | "
+                      + " ".join(f"{1000 * v:+9.2f}" for v in o)
+                      + f" | {1000 * rms:5.2f} ({1000 * rms_iv[0]:.2f}–{1000 * rms_iv[1]:.2f})"
+                      f" | {1000 * mx:5.2f} ({1000 * mx_iv[0]:.2f}–{1000 * mx_iv[1]:.2f})")
+            apart = 1000 * np.abs(rows[True][0] - rows[False][0]).max()
+            print(f"{seed} apart: offsets {apart:.2f} µm, tool after RMS "
+                  f"{1000 * abs(rows[True][1] - rows[False][1]):.2f} µm")
 
 
 def true_screws(result: dict[str, Any]) -> JointErrors:
@@ -259,8 +313,13 @@ def main() -> None:
                         help="how the run knows its joints")
     parser.add_argument("--time-scale", default="20",
                         help="the virtual station's clock against real time")
+    parser.add_argument("--square", action="store_true",
+                        help="a square machine with exact joints: stated exact or assumed")
     args = parser.parse_args()
     os.environ.setdefault("ORTHOCAL_SIM_TIME_SCALE", args.time_scale)
+    if args.square:
+        square(args)
+        return
     t0 = time.monotonic()
     print(f"held-out machine with screws: gaps {GAP} mm, tilts {TILT} mrad, Δρ {DRHO} mm, "
           f"leads {LEAD} µm/m; noise {1000 * NOISE_MM:g} µm, legs stated straight to "
