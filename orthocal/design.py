@@ -384,3 +384,31 @@ def form_separation(keys: Sequence[Key], geometry: Geometry, model: str = "rho+t
         cond = float(s[0] / s[-1]) if s[-1] > 1e-6 * s[0] else float("inf")
         out["middle" if mu is None else f"{mu:g}"] = cond
     return out
+
+
+def bow_tilts(keys: Sequence[Key], geometry: Geometry,
+              straightness: Mapping[tuple[str, str], float]) -> np.ndarray:
+    """The largest tilts (mrad, TILT_NAMES order) a ``rho+tilt+gap`` fit of the
+    deviations ``keys`` takes from the legs bowed within ``straightness`` (sagitta
+    bound per gauge plane (leg, direction), mm; a plane not named is straight), at
+    the nominal machine: Σ_p |[J⁺·g_p]_tilt|·h_p, g_p the form vector (budget.
+    form_vector) on plane p's rows. At the legs' middles a uniform bow is a tilt
+    (docs/model.md, "Tilts or bows"): tilts beyond this are the axes', whatever
+    the legs within their stated form do."""
+    from orthocal.budget import form_vector
+    from orthocal.geometry import TILT_NAMES
+    from orthocal.identification import exact_jacobian
+
+    distinct = list(dict.fromkeys(keys))
+    params = np.zeros(len(PARAM_NAMES))
+    model = "rho+tilt+gap"
+    J = exact_jacobian(distinct, geometry, params, model)
+    g = form_vector(distinct, geometry, params)
+    gain = np.linalg.pinv(J)[[list(MODELS[model]).index(FIT_NAMES.index(n))
+                              for n in TILT_NAMES]]
+    out = np.zeros(len(TILT_NAMES))
+    for plane, h in straightness.items():
+        rows = np.array([(k[1], k[2]) == tuple(plane) for k in distinct])
+        if h > 0 and rows.any():
+            out += np.abs(gain @ np.where(rows, g, 0.0)) * float(h)
+    return out

@@ -10,6 +10,7 @@ from collections.abc import Iterable, Mapping
 import orthocal
 from orthocal import carry
 from orthocal.covariance import with_measured_noise
+from orthocal.geometry import BOW_NAMES
 from orthocal.measurement import Key
 from orthocal.noise import noise_from_cycles, noise_from_readings
 from orthocal.postures import MIDDLE, split_plane
@@ -233,8 +234,33 @@ def measured_form(config: StationConfig, data, ident: orthocal.Identification,
     if tilted is not None:
         tilt_test = lack_of_fit(tilted, geometry, noise[0], noise[1])
         if not _rejected(tilt_test):
-            return ambiguous(tilted, fitted), tilt_test
+            if bows_stated(fitted, allowance(config).straightness):
+                return ambiguous(tilted, fitted), tilt_test
+            return tilted, tilt_test  # bows beyond the stated form: the axes lean
     return fitted, lack_of_fit(fitted, geometry, noise[0], noise[1])
+
+
+def bows_stated(bowed: orthocal.Identification,
+                straightness: Mapping[tuple[str, str], float]) -> bool:
+    """Whether the bows of ``bowed`` (a fit with the legs' bows) lie within the stated
+    straightness of their gauge planes (the sagitta bound, mm; a plane not named is
+    straight), beyond it by no more than their noise (k standard errors at the model
+    test's LEVEL, two-sided): only then do the bows explain what the tilts do (docs/
+    model.md, "Tilts or bows"). Bows 2–3 µm on legs stated straight to 0.5 µm are
+    no explanation of the data, and a tilt they would mimic is the axes'."""
+    from scipy.special import ndtri  # the normal quantile
+
+    k = float(ndtri(1.0 - LEVEL / 2))
+    for name in BOW_NAMES:
+        if name not in bowed.parameters:
+            continue
+        se = bowed.std_errors.get(name)
+        if se is None or not math.isfinite(se):
+            return True  # no noise to judge it by: the data cannot rule the bows out
+        bound = float(straightness.get((name[-2], name[-1]), 0.0))
+        if abs(bowed.parameters[name]) > bound + k * se:
+            return False
+    return True
 
 
 def with_tilts(model: str) -> str:

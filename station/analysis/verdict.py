@@ -143,7 +143,7 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
 def joined_round(ident: Identification, before: JoinedRounds | None,
                  offsets_before: dict[str, float] | None,
                  offsets_written: dict[str, float] | None,
-                 shared: Sequence[np.ndarray] = ()) -> JoinedRounds:
+                 shared: Sequence[np.ndarray] = (), fresh: bool = False) -> JoinedRounds:
     """A round's Δρ̂ joined with ``before`` (the rounds before it, joined alike; None:
     the first round), moved by the offsets its write-back changed from
     ``offsets_before`` to ``offsets_written`` (read back; None: nothing written), per
@@ -151,11 +151,13 @@ def joined_round(ident: Identification, before: JoinedRounds | None,
     round's Δρ̂ covariance (3 × 3) with each round before it, in order
     (orthocal.carry.cross_covariance: a prior it carried); their covariance with the
     joined value is that summed with the rounds' weights in it (GUM). Without: the
-    rounds independent."""
+    rounds independent. ``fresh``: the rounds before are not joined (the round before
+    lacks the axes' tilts this one holds: its Δρ̂ holds them, several µm off, an error
+    no noise term of it covers)."""
     n = 0 if before is None else len(next(iter(before.weights.values()), ()))
     own = JoinedRounds(dict(ident.parameters), dict(ident.std_errors),
                  {name: (0.0,) * n + (1.0,) for name in WRITABLE if name in ident.parameters})
-    if before is None:
+    if before is None or fresh:
         return own
     moved = {} if offsets_before is None or offsets_written is None else \
         {f"drho_{a}": offsets_written[a] - offsets_before[a] for a in AXES}

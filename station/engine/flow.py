@@ -143,9 +143,10 @@ class Flow:
         outcome = self.outcomes[n - 1] if 0 < n <= len(self.outcomes) else None
         earlier = zip(self.iterations[:n], self.idents[:n], strict=True)
         shared = self.layouts.shared(phase, [(it.phase, i) for it, i in earlier])
+        fresh = bool(n) and _tilted(ident) and not _tilted(self.idents[n - 1])
         joined = verdict.joined_round(ident, self.joined[n - 1] if n else None,
                                       outcome.before if outcome else None,
-                                      outcome.written if outcome else None, shared)
+                                      outcome.written if outcome else None, shared, fresh)
         del self.joined[n:]
         self.joined.append(joined)
         return joined
@@ -184,6 +185,9 @@ class Flow:
         self.reversal = rev
         if carried is None:  # a carried round's layout is the earlier rounds' own
             self.layouts.add(phase, m, ident)
+            if n and selection is not None:  # auto: the tilts the rounds show are held
+                ident = self.layouts.with_shown_tilts(
+                    phase, m, ident, budget.allowance(ctx.config).straightness)
             ident = self.layouts.carried(phase, ident) if n else ident
         ident = band_middle(ident, rev, ctx.config.procedure.approach)
         if again:
@@ -424,6 +428,11 @@ def _type_b(config: StationConfig, ident: Identification, phase: str,
         return {}
     columns = budget.round_columns(config, ident, phase, leads).pick(held)
     return {d: columns.marginal(d).u_b for d in held}
+
+
+def _tilted(ident: Identification) -> bool:
+    """Whether a round's model holds the axes' tilts."""
+    return "tilt" in ident.model.split("+")
 
 
 def _identify(ctx: Run, m: Measurement, model: str | None = None,

@@ -52,3 +52,24 @@ def test_bows_of_both_signs_are_no_tilt() -> None:
                     strict=True))
     tilts = identify(data, G, model="rho+tilt")
     assert 1000 * tilts.residual_rms == pytest.approx(2.10, abs=0.01)
+
+
+def test_the_largest_tilt_stated_bows_make() -> None:
+    """orthocal.design.bow_tilts, the linear worst case, against exact fits: each plane
+    bowed alone gives a tilt's sign there, and the legs bowed with those signs make the
+    tilt the bound says (9.66 µrad for 0.5 µm, model.md); within it with signs mixed."""
+    from orthocal.design import bow_tilts
+
+    h = 0.0005
+    bound = bow_tilts(KEYS, G, dict.fromkeys(GAUGES, h))
+    assert 1000 * bound == pytest.approx([9.66] * 3, abs=0.01)
+    truth = np.array([*DRHO] + [0.0] * 9)
+
+    def tilt_yx(bow: dict[tuple[str, str], float]) -> float:
+        data = dict(zip(KEYS, deviations(KEYS, G, truth, bow=bow), strict=True))
+        return identify(data, G, model="rho+tilt+gap").parameters["tilt_yx"]
+
+    signs = {p: float(np.sign(tilt_yx({p: h}))) for p in GAUGES}
+    worst = tilt_yx({p: h * s for p, s in signs.items()})
+    assert abs(worst) == pytest.approx(bound[0], rel=0.02)
+    assert abs(tilt_yx(_bows((h, -h, h)))) < bound[0]
