@@ -17,6 +17,7 @@ text summary only with ``--verbose``, in report.html further down the page.
 from __future__ import annotations
 
 import html
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,6 +46,8 @@ from station.report.format import (
 )
 
 WRITABLE = tuple(f"drho_{a}" for a in AXES)
+#: The first screen's widest line (characters): a verdict line longer than this wraps.
+WIDTH = 160
 #: Below this |Δρ| (mm) a joint's value is written in µm, above in mm (an offset of a
 #: millimetre reads as the controller's register does).
 UM_BELOW_MM = 0.1
@@ -82,17 +85,19 @@ def headline(result: RunResult) -> str:
     drive (the "offsets held" line below says where)."""
     state = run_state(result)
     head = f"orthocal run: {STATE_TEXT[state].upper()}"
+    # the offsets held come first: they need the operator's hand whatever the verdict,
+    # and a long why wraps below the first line (lines)
+    if held_by_station(result):
+        values = held_offsets_text(result)
+        head += (" — offsets HELD BY THE STATION, not by the drive"
+                 + (f": {values}" if values else "")
+                 + "; enter them in the drive (see \"offsets held\" below)")
     if result.rolled_back is not None:
         head += rolled_back_head(result)
     elif state == "not-converged":
         head += f" — {not_converged_why(result)}"
     elif result.message:
         head += f" — {result.message}"
-    if held_by_station(result):
-        values = held_offsets_text(result)
-        head += (" — offsets HELD BY THE STATION, not by the drive"
-                 + (f": {values}" if values else "")
-                 + "; enter them in the drive (see \"offsets held\" below)")
     return head
 
 
@@ -400,8 +405,22 @@ def items(result: RunResult) -> list[Item]:
 
 
 def lines(result: RunResult) -> list[str]:
-    """The summary's first lines: the headline, then :func:`items`."""
-    return [headline(result), *(f"  {i.label:<13} {i.text}" for i in items(result))]
+    """The summary's first lines: the headline, then :func:`items`, each at most WIDTH
+    characters (:func:`wrapped`)."""
+    out = wrapped(headline(result), "")
+    for i in items(result):
+        out += wrapped(i.text, f"  {i.label:<13} ")
+    return out
+
+
+def wrapped(text: str, first: str) -> list[str]:
+    """``text`` after ``first`` in lines of at most WIDTH characters, broken between
+    words, the rest indented under the text (a headline's under its first word after
+    "orthocal run: "): a verdict read at a glance fits the screen, its detail goes
+    on below it. A word longer than a line (a path) stays whole."""
+    indent = " " * (len(first) or 16)
+    return textwrap.wrap(text, WIDTH, initial_indent=first, subsequent_indent=indent,
+                         break_long_words=False, break_on_hyphens=False) or [first.rstrip()]
 
 
 def html_block(result: RunResult) -> str:

@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 from builders import Completed, cli
+from stated_runs import stated
 
 from station import report
 
@@ -46,6 +47,14 @@ def _completed(done: Completed) -> None:
     head = done.stdout.splitlines()[0]
     assert head == "orthocal run: COMPLETED" if done.returncode == 0 else \
         head.startswith("orthocal run: NOT CONVERGED — "), head
+
+
+def test_the_rehearsal_ends_as_its_comment_says(rehearsed: Any) -> None:
+    done, _ = rehearsed
+    said = stated(REHEARSAL)
+    assert said is not None and said.argv[:2] == ("run", "--simulate")
+    assert said.ends_so(done.returncode, done.stdout, done.stderr) is None, \
+        said.ends_so(done.returncode, done.stdout, done.stderr)
 
 
 def test_the_first_twelve_lines_hold_verdict_joints_and_tool(rehearsed: Any) -> None:
@@ -85,11 +94,17 @@ def test_without_verbose_only_the_first_screen(rehearsed: Any) -> None:
     _completed(done)
     lines = done.stdout.splitlines()
     # the headline, the joints, the offsets, the tool (two lines), what the joints' screws
-    # were taken to be, one line per advice, the mountings, the report, the details
-    assert len(lines) == 11 + len(result["advice"]), done.stdout
+    # were taken to be, one line per advice, the mountings, the report, the details; a
+    # line beyond 160 characters goes on below, indented further
+    labelled = [ln for ln in lines if not ln.startswith(" " * 16)]
+    assert len(labelled) == 10 + (len(result["advice"]) > 0), done.stdout
     assert any(line.startswith("  joints        the tool's figures take x, y, z stated exact")
                for line in lines), done.stdout
-    assert len(lines[0]) <= 160, lines[0]
+    assert all(len(ln) <= 160 for ln in lines), [len(ln) for ln in lines]
+    todo = next(i for i, ln in enumerate(lines) if ln.startswith("  to do "))
+    end = next(i for i in range(todo + 1, len(lines)) if not lines[i].startswith(" " * 16))
+    assert " ".join(ln[16:] for ln in lines[todo:end]) == " ".join(
+        a["text"] for a in result["advice"])
     assert lines[-1].startswith("  details ") and "--verbose" in lines[-1]
     for detail in ("  model ", "  closed loop ", "  budget ", "  squareness "):
         assert not any(ln.startswith(detail) for ln in lines), detail

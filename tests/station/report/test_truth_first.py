@@ -217,3 +217,25 @@ def test_a_station_holding_the_offsets_is_asked_to_hold_them_and_never_says_writ
     assert "P-HOME-OFS" in top  # the map says where the drive takes its home offset
     first = report.summary_text(result).splitlines()[0]
     assert "HELD BY THE STATION" in first
+
+
+def test_every_first_screen_line_fits_160_characters_and_keeps_its_words() -> None:
+    # a long why, offsets held, and advice of 300 characters: each verdict line wraps
+    # at 160, the held offsets stay on the first line, and no word is lost or moved
+    result = held(not_converged())
+    result["loop"]["detail"] = DETAIL + "; " + DETAIL
+    long_advice = ("axis y leans toward +x by 0.046 ± 0.016 mrad (tilt_yx), which offsets "
+                   "cannot fix: shim its rail by 7 µm over 160 mm, or put the geometry into "
+                   "the controller; ") * 2
+    result["advice"] = [{"id": "shim.tilt_yx", "text": long_advice.strip(),
+                         "rests_on": ["tilt_yx"]}]
+    lines = report.summary_text(result, verbose=False).splitlines()
+    assert all(len(ln) <= 160 for ln in lines), [len(ln) for ln in lines]
+    assert lines[0].startswith("orthocal run: NOT CONVERGED — offsets HELD BY THE STATION")
+    todo = next(i for i, ln in enumerate(lines) if ln.startswith("  to do         "))
+    assert todo > 1 and lines[1].startswith(" " * 16)  # the headline's detail goes below
+    end = next(i for i in range(todo + 1, len(lines)) if not lines[i].startswith(" " * 16))
+    assert " ".join(ln[16:] for ln in lines[todo:end]) == long_advice.strip()
+    assert lines[todo + 1].startswith(" " * 16) and not lines[todo + 1].startswith(" " * 17)
+    words = " ".join(lines[:todo]).split()
+    assert DETAIL in " ".join(words) and words.count("HELD") == 1
