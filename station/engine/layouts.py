@@ -89,53 +89,54 @@ class Layouts:
             self.sources[(phase, "layout")] = Source(layout.names, layout.covariance, source)
 
     def pooled_tilts(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The rounds' pooled tilts (mrad, TILT_NAMES order) and their covariance; None
-        where the rounds hold none."""
+        """The rounds' pooled tilts (mrad, TILT_NAMES order) and their covariance
+        (accuracy_statement.pool_layout, which leaves out a round whose layout disagrees
+        with the others'); None where they hold none."""
         pooled = accuracy.pool_layout(self.layout_rounds)
         if pooled is None or not set(TILT_NAMES) <= set(pooled.names):
             return None
         idx = [pooled.names.index(n) for n in TILT_NAMES]
         return pooled.values[idx], pooled.covariance[np.ix_(idx, idx)]
 
-    def tilts_shown(self, m: Measurement,
-                    straightness: Mapping[tuple[str, str], float]) -> tuple[bool, bool]:
-        """Whether the rounds' pooled tilts stand out of their noise (the three's χ²
-        beyond the model test's LEVEL), and whether one of them stands beyond what the
-        legs bowed within ``straightness`` make of a tilt on ``m``'s stops
-        (orthocal.design.bow_tilts) by more than k standard errors (two-sided, LEVEL)."""
+    def tilts_shown(self, m: Measurement, straightness: Mapping[tuple[str, str], float]
+                    ) -> bool:
+        """Whether the pooled tilts (:meth:`pooled_tilts`) are the axes': the three stand
+        out of their noise (their χ² beyond the model test's LEVEL), and one stands beyond
+        what the legs bowed within ``straightness`` make of a tilt on ``m``'s stops
+        (orthocal.design.bow_tilts; at the middles a uniform bow is a tilt) by more than
+        k standard errors (two-sided, LEVEL)."""
         from scipy.special import chdtrc, ndtri  # the χ² upper tail, the normal quantile
 
         found = self.pooled_tilts()
         if found is None:
-            return False, False
+            return False
         t, cov = found
         try:
-            shown = float(chdtrc(len(t), float(t @ np.linalg.solve(cov, t)))) < LEVEL
+            chi2 = float(t @ np.linalg.solve(cov, t))
         except np.linalg.LinAlgError:
-            return False, False
+            return False
         bows = design.bow_tilts(list(m.for_identify()), self.geometry, straightness)
         k = float(ndtri(1.0 - LEVEL / 2))
         se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        return shown, shown and bool(np.any(np.abs(t) > bows + k * se))
+        return float(chdtrc(len(t), chi2)) < LEVEL and bool(np.any(np.abs(t) > bows + k * se))
 
     def with_shown_tilts(self, phase: str, m: Measurement, ident: Identification,
                          straightness: Mapping[tuple[str, str], float]) -> Identification:
         """A verification's model (``ident``, chosen by auto from its own data) with the
-        axes' tilts where the rounds so far, this one's layout fit among them, show them
-        (:meth:`tilts_shown`): one round against its stands set by eye may not single
-        out 0.05 mrad, and a model without the tilts puts them in its Δρ̂ (several µm at
-        a standard error under one). With the tilts, the rounds' pooled layout is joined
-        (:meth:`carried`), so Δρ̂ pays little noise for them. A round left between the
-        tilts and the legs' bows (model_choice.ambiguous) keeps the tilts alone where
-        the pooled tilts are beyond what bows within the stated ``straightness`` make:
-        those are the axes'. The round's layout is then its own fit's. Otherwise
-        ``ident`` as it is (the bows' fits, which hold no tilts at the middles, too)."""
+        axes' tilts where the rounds so far, this one's layout fit among them, show
+        them (:meth:`tilts_shown`): one round against its stands set by eye may not
+        single out 0.05 mrad, and a model without the tilts puts them in its Δρ̂
+        (several µm at a standard error under one). With the tilts, the rounds' pooled
+        layout is joined (:meth:`carried`), so Δρ̂ pays little noise for them. A round
+        left between the tilts and the legs' bows (model_choice.ambiguous) keeps the
+        tilts alone: bows within the stated ``straightness`` cannot make them. The
+        round's layout is then its own fit's. Otherwise ``ident`` as it is (the bows'
+        fits, which hold no tilts at the middles, too)."""
         between = ident.ambiguous_with is not None
         if not between and ("tilt" in ident.model.split("+")
                             or ident.model.endswith(orthocal.FORM)):
             return ident
-        shown, beyond_bows = self.tilts_shown(m, straightness)
-        if not (beyond_bows if between else shown):
+        if not self.tilts_shown(m, straightness):
             return ident
         try:
             tilted = self.identify(m, with_tilts(ident.model))

@@ -53,3 +53,15 @@ def test_the_verifications_hold_the_tilts_and_end_where_the_machine_is(
         lo, hi = stated[f"drho_{a}.as_left"]["interval_95"]
         assert lo <= left <= hi, (a, left, lo, hi)
         assert abs(left) <= within + 1e-9, (a, left)
+
+
+@pytest.mark.parametrize("seed", [5, 7])
+def test_square_axes_are_not_given_tilts(seed: int, tmp_path: Path) -> None:
+    # the other side: the same machine with square axes (gaps, lost motion and stands by
+    # eye kept) is given no tilts the data do not show, and ends converged
+    rig = FakeRig(true_drho=TRUE_DRHO, true_gap=(0.2, -0.1, 0.15), backlash=(0.004,) * 3,
+                  mount_error_mm=5.0, noise_mm=0.001, seed=seed)
+    code, result = run_on(rig, tmp_path, fake_config(settle_s=0.0))
+    rounds = result["iterations"]
+    assert all("tilt" not in r["model"] for r in rounds[1:]), [r["model"] for r in rounds]
+    assert (code, result["loop"]["stopped"]) == (0, "converged")
