@@ -415,10 +415,10 @@ def lines(result: RunResult) -> list[str]:
 
 def wrapped(text: str, first: str) -> list[str]:
     """``text`` after ``first`` in lines of at most WIDTH characters, broken between
-    words, the rest indented under the text (a headline's under its first word after
-    "orthocal run: "): a verdict read at a glance fits the screen, its detail goes
-    on below it. A word longer than a line (a path) stays whole."""
-    indent = " " * (len(first) or 16)
+    words: a verdict read at a glance fits the screen, its detail goes on below it,
+    indented two further than the item's text (so that it is not read as the next
+    advice) and the headline's by 16. A word longer than a line (a path) stays whole."""
+    indent = " " * (len(first) + 2 if first else 16)
     return textwrap.wrap(text, WIDTH, initial_indent=first, subsequent_indent=indent,
                          break_long_words=False, break_on_hyphens=False) or [first.rstrip()]
 

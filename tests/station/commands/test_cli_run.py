@@ -82,7 +82,7 @@ def test_a_rollback_is_a_state_of_the_run(tmp_path: Path, capsys) -> None:
     entry = json.loads(capsys.readouterr().out)["runs"][-1]
     assert entry["rolled_back"]["restored"] == pytest.approx(before, abs=1e-9)
     assert main(["resume", str(run_dir)]) == 0
-    summary = capsys.readouterr().out
+    summary = " ".join(capsys.readouterr().out.split())  # lines wrap at 160
     assert "then rolled back" in summary and "ROLLED BACK" in summary
     assert all(p in summary for p in pairs)
 

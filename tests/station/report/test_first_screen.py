@@ -102,9 +102,15 @@ def test_without_verbose_only_the_first_screen(rehearsed: Any) -> None:
                for line in lines), done.stdout
     assert all(len(ln) <= 160 for ln in lines), [len(ln) for ln in lines]
     todo = next(i for i, ln in enumerate(lines) if ln.startswith("  to do "))
-    end = next(i for i in range(todo + 1, len(lines)) if not lines[i].startswith(" " * 16))
-    assert " ".join(ln[16:] for ln in lines[todo:end]) == " ".join(
-        a["text"] for a in result["advice"])
+    said: list[str] = []  # each advice: from its line at 16 columns, on at 18
+    for ln in lines[todo:]:
+        if ln.startswith(" " * 18):
+            said[-1] += " " + ln[18:]
+        elif ln.startswith(" " * 16) or ln is lines[todo]:
+            said.append(ln[16:])
+        else:
+            break
+    assert said == [a["text"] for a in result["advice"]]
     assert lines[-1].startswith("  details ") and "--verbose" in lines[-1]
     for detail in ("  model ", "  closed loop ", "  budget ", "  squareness "):
         assert not any(ln.startswith(detail) for ln in lines), detail

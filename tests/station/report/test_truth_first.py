@@ -234,8 +234,10 @@ def test_every_first_screen_line_fits_160_characters_and_keeps_its_words() -> No
     assert lines[0].startswith("orthocal run: NOT CONVERGED — offsets HELD BY THE STATION")
     todo = next(i for i, ln in enumerate(lines) if ln.startswith("  to do         "))
     assert todo > 1 and lines[1].startswith(" " * 16)  # the headline's detail goes below
-    end = next(i for i in range(todo + 1, len(lines)) if not lines[i].startswith(" " * 16))
-    assert " ".join(ln[16:] for ln in lines[todo:end]) == long_advice.strip()
-    assert lines[todo + 1].startswith(" " * 16) and not lines[todo + 1].startswith(" " * 17)
+    end = next(i for i in range(todo + 1, len(lines)) if not lines[i].startswith(" " * 18))
+    assert " ".join(ln.strip() for ln in lines[todo:end]).removeprefix("to do") \
+        .strip() == long_advice.strip()
+    # an advice goes on two columns further in than the next advice starts
+    assert lines[todo + 1].startswith(" " * 18) and not lines[todo + 1].startswith(" " * 19)
     words = " ".join(lines[:todo]).split()
     assert DETAIL in " ".join(words) and words.count("HELD") == 1

@@ -99,7 +99,11 @@ def test_every_to_do_is_an_advice_text_and_none_contradict(runs, kind: str) -> N
     lines = summary_text(result, verbose=False).splitlines()
     start = next(i for i, ln in enumerate(lines) if ln.startswith("  to do"))
     todo = [lines[start][16:]]
-    todo += [ln[16:] for ln in lines[start + 1:] if ln.startswith(" " * 16)]
+    for ln in lines[start + 1:]:  # an advice beyond 160 characters goes on at 18
+        if ln.startswith(" " * 18):
+            todo[-1] += " " + ln[18:]
+        elif ln.startswith(" " * 16):
+            todo.append(ln[16:])
     assert [t.replace("−", "-") for t in todo] == [t.replace("−", "-") for t in texts]
     ids = {a.id for a in result.advice or []}
     # no "nothing" beside an act; no rail advice beside "undecided"
