@@ -109,8 +109,12 @@ def test_a_run_out_of_tolerance_exits_4_and_says_fail(
     assert "FAIL at 95 %" in page.split("What was done")[0]
 
 
-def test_a_run_within_a_wide_limit_passes_and_exits_0(tmp_path: Path) -> None:
-    code, result = _run(tmp_path, tool_rms_um=100000.0)
+def test_a_square_machine_calibrated_to_a_micrometre_passes_10_um(tmp_path: Path) -> None:
+    # its inputs stated (the fakes' STATED: legs, room, joints exact), 1 µm gauges
+    code, result = _run(tmp_path, tool_rms_um=10.0)
+    after = {q["name"]: q for q in result["statement"]}["tool.after.rms"]
+    assert after["value"] < 0.002, after  # left at about a micrometre
+    assert after["interval_95"][1] <= 0.010, after
     assert result["acceptance"]["outcome"] == "pass"
     assert code == (EXIT_NOT_CONVERGED if report.not_converged(result) else EXIT_OK)
     assert "PASS at 95 %" in report.summary_text(result, verbose=False)
