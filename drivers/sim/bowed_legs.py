@@ -18,8 +18,9 @@ off the straight leg's deviation.
 Deliberately computed here from :func:`orthocal.forward` alone, not from the
 maths' own bow model, so that a test can compare the two.
 
-Sign: h is along +j of each gauge plane (x_i, j) of leg i, the same h in both
-planes: the leg's middle sits h further along +j than its straight line. A
+Sign: h is along +j of each gauge plane (x_i, j) of leg i, the leg's own h the same
+in both planes (``leg_bow``) and each plane's own added (``plane_bow``): the leg's
+middle sits h further along +j than its straight line. A
 gauge mounted reversed ("-j") reads the coordinate negated, so it shows −w, as
 it shows every other displacement of the leg.
 """

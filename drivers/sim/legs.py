@@ -12,6 +12,7 @@ from drivers.sim import bowed_legs as form
 from drivers.sim.drive_motion import SAMPLE_DT_S, SAMPLE_MIN, Segment
 from drivers.sim.screws import Screws
 from orthocal import Geometry
+from orthocal.stands import GAUGES
 
 #: Noise-free readings remembered by leg_reading (cleared when full).
 _READINGS_KEPT = 4096
@@ -28,6 +29,7 @@ class GaugeView:
     true_tilt: np.ndarray
     true_gap: np.ndarray
     leg_bow: np.ndarray
+    plane_bow: np.ndarray
     offsets_initial: np.ndarray
     _half_band: np.ndarray
     screws: Screws
@@ -78,7 +80,8 @@ class GaugeView:
     def _errors_key(self) -> bytes:
         """The hidden errors as bytes: a test may change them between readings."""
         return b"".join(np.asarray(a, dtype=float).tobytes() for a in (
-            self.true_drho, self.true_dl, self.true_tilt, self.true_gap, self.leg_bow))
+            self.true_drho, self.true_dl, self.true_tilt, self.true_gap, self.leg_bow,
+            self.plane_bow))
 
     def readings(self, rho: np.ndarray, leg: str, direction: str,
                  mount: float | None = None) -> np.ndarray:
@@ -86,12 +89,15 @@ class GaugeView:
         ``mount`` (default: the nominal L/2) at joints ``rho`` ((..., 3), as
         :meth:`sample_segment` gives them): :func:`orthocal.leg_reading` with the
         true errors, plus the leg's bow where the plane touches it
-        (:mod:`drivers.sim.bowed_legs`; nothing computed for a straight leg, so its
-        readings stay those of the maths to the bit)."""
+        (:mod:`drivers.sim.bowed_legs`: the leg's sagitta and the gauge plane's own;
+        nothing computed for a straight leg, so its readings stay those of the maths
+        to the bit)."""
         reading = orthocal.leg_reading(rho, leg, direction, self.geometry, self.true_drho,
                                        self.true_dl, mount=mount, tilt=self.true_tilt,
                                        gap=self.true_gap)
-        h = float(self.leg_bow[orthocal.AXES.index(leg)])
+        plane_of = (leg, direction.lstrip("-"))
+        h = float(self.leg_bow[orthocal.AXES.index(leg)]) + (
+            float(self.plane_bow[GAUGES.index(plane_of)]) if plane_of in GAUGES else 0.0)
         if h == 0.0:
             return reading
         plane = self.geometry.mount_plane if mount is None else mount

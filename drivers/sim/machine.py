@@ -36,7 +36,8 @@ the carriage. Screws (``joint_lead`` µm/m per joint, ``joint_pitch`` (amplitude
 plus each joint's positioning error counted from home (homed at Π0 by default).
 
 Bowed legs (``leg_bow``, mm per leg: the sagitta h of each leg's surface at its
-middle, :mod:`drivers.sim.bowed_legs`): a gauge's coordinate gets 4·h·t·(1 − t), t
+middle, :mod:`drivers.sim.bowed_legs`; ``plane_bow``, mm per gauge plane, each plane's
+own sagitta added to its leg's): a gauge's coordinate gets 4·h·t·(1 − t), t
 being where along the leg its plane touches it; the end point does not move
 (the bow is the leg's form, not its length).
 
@@ -104,7 +105,7 @@ class VirtualOrthoglide(GaugeView):
     tilt_zy, mrad; docs/model.md "Extended model"); ``true_gap``: how far the axes pass
     each other (gap_xy, gap_xz, gap_yz, mm; docs/model.md "Axes that do not meet"); or
     pass ``true_params`` as the 6-, 9- or 12-vector of :data:`orthocal.PARAM_NAMES`;
-    ``leg_bow``: each leg's hidden bow (mm), ``joint_lead``, ``joint_pitch``: its
+    ``leg_bow``, ``plane_bow``: its legs' hidden bows (mm), ``joint_lead``, ``joint_pitch``: its
     screws' errors (module docstring). ``offsets``: the controller's zero offsets at
     delivery (o_initial). ``start``: initial controller positions ρ (default Π0).
     ``motion``: a :class:`DriveMotion`, or "coordinated" / "independent"
@@ -142,6 +143,7 @@ class VirtualOrthoglide(GaugeView):
         time_scale: float = 1.0,
         backlash: Sequence[float] | None = None,
         leg_bow: Sequence[float] | None = None,
+        plane_bow: Sequence[float] | None = None,
         joint_lead: Sequence[float] | None = None,
         joint_pitch: Sequence[float] | None = None,
     ) -> None:
@@ -182,6 +184,8 @@ class VirtualOrthoglide(GaugeView):
         self._half_band = 0.5 * b
         #: Each leg's bow: the sagitta of its surface at its middle (mm, x, y, z).
         self.leg_bow = _vec(leg_bow if leg_bow is not None else (0, 0, 0), 3, "leg_bow")
+        #: Each gauge plane's own bow on top (mm; orthocal.stands.GAUGES: xy, xz, … zy).
+        self.plane_bow = _vec(plane_bow if plane_bow is not None else (0,) * 6, 6, "plane_bow")
         self._home_m = home_rho + self.offsets_initial  # the home switches do not move
         #: Each joint's screw: where its nut is for its motor's count from home.
         self.screws = Screws.of(joint_lead, joint_pitch, self._home_m)

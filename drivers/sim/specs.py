@@ -48,7 +48,9 @@ class MachineTruth:
     ``drho``: the joints' zero errors Δρ (mm); ``dl``: the legs' length errors ΔL
     (mm); ``tilt``: the actuator axes' tilts (mrad); ``gap``: how far the axes pass
     each other, gap_xy, gap_xz, gap_yz (mm); ``backlash``: each joint's lost motion
-    (mm); ``leg_bow``: each leg's sagitta at its middle (mm, :mod:`drivers.sim.bowed_legs`);
+    (mm); ``leg_bow``: each leg's sagitta at its middle (mm, :mod:`drivers.sim.bowed_legs`),
+    the same in both its gauge planes; ``plane_bow``: each gauge plane's own sagitta on
+    top (mm, in the order xy, xz, yx, yz, zx, zy: leg, then the direction gauged);
     ``joint_lead``: each joint's lead error (µm per metre of travel from home) and
     ``joint_pitch``: one periodic error for all joints, (amplitude µm, period mm)
     (:mod:`drivers.sim.screws`); ``geometry``: the nominal machine they are errors of."""
@@ -59,13 +61,14 @@ class MachineTruth:
     gap: Sequence[float] = ZERO3
     backlash: Sequence[float] = ZERO3
     leg_bow: Sequence[float] = ZERO3
+    plane_bow: Sequence[float] = (0.0,) * 6
     joint_lead: Sequence[float] = ZERO3
     joint_pitch: Sequence[float] = (0.0, 0.0)
     geometry: Geometry = field(default_factory=Geometry)
 
     def __post_init__(self) -> None:
-        for name in ("drho", "dl", "tilt", "gap", "backlash", "leg_bow", "joint_lead",
-                     "joint_pitch"):
+        for name in ("drho", "dl", "tilt", "gap", "backlash", "leg_bow", "plane_bow",
+                     "joint_lead", "joint_pitch"):
             object.__setattr__(self, name, _floats(getattr(self, name)))
 
 

@@ -39,7 +39,8 @@ acceleration of its own: what a real drive does without telling anyone.
 :attr:`VirtualStation.accel_mm_s2` stays what it is set up with.
 
 Form and scale: ``MachineTruth.leg_bow`` bows each leg (the sagitta of its
-surface at its middle, mm, :mod:`drivers.sim.bowed_legs`), so that a gauge's plunger,
+surface at its middle, mm, :mod:`drivers.sim.bowed_legs`; ``plane_bow`` each gauge
+plane apart), so that a gauge's plunger,
 touching the leg at another point of it at each posture, sees the curve;
 ``GaugeSpec.scale`` gives the gauges a relative scale error: each shows
 (1 + S) times its plunger's travel (:class:`~drivers.sim.pty_gauges.SimIndicator`).
@@ -216,8 +217,8 @@ class VirtualStation:
             self.geometry, t.drho, t.dl, true_tilt=t.tilt, true_gap=t.gap,
             speed_mm_s=d.speed_mm_s, accel_mm_s2=d.moving_accel_mm_s2, motion=d.motion,
             clock=clock, time_scale=1.0 if clock is not None else self.time_scale,
-            backlash=t.backlash, leg_bow=t.leg_bow, joint_lead=t.joint_lead,
-            joint_pitch=t.joint_pitch)
+            backlash=t.backlash, leg_bow=t.leg_bow, plane_bow=t.plane_bow,
+            joint_lead=t.joint_lead, joint_pitch=t.joint_pitch)
         if nvram_path is not None:
             path = Path(nvram_path)
             if path.exists():

@@ -360,3 +360,35 @@ def test_the_simulators_bow_is_the_maths_bow() -> None:
             np.testing.assert_allclose(t_sim, t_maths, rtol=0, atol=1e-12)
             np.testing.assert_allclose(bow_mm(t_sim, 0.008), orthocal.bow_at(t_maths, 0.008),
                                        rtol=0, atol=1e-15)
+
+
+def test_each_gauge_plane_bows_by_its_own_sagitta_as_the_maths_has_it() -> None:
+    # plane_bow: each gauge plane's own sagitta on top of its leg's, so that a machine
+    # can be bowed as the statement assumes (orthocal.budget_columns: each plane within
+    # ±s, half of it common); its deviations are orthocal.deviations' with one bow per
+    # gauge plane, at every test posture of a tilted, gapped machine
+    from orthocal.stands import GAUGES
+
+    tilt, gap = np.array([0.2, 0.1, -0.15]), np.array([0.1, -0.05, 0.08])
+    leg = np.array([0.001, 0.0, -0.002])
+    own = np.array([0.003, -0.002, 0.004, 0.001, -0.003, 0.002])
+    machine = VirtualOrthoglide(G, DRHO, np.zeros(3), true_tilt=tilt, true_gap=gap,
+                                leg_bow=leg, plane_bow=own)
+    plain = VirtualOrthoglide(G, DRHO, np.zeros(3), true_tilt=tilt, true_gap=gap)
+    params = np.concatenate([DRHO, np.zeros(3), tilt, gap])
+    bows = {g: own[n] + leg["xyz".index(g[0])] for n, g in enumerate(GAUGES)}
+    seen = []
+    for gauge_leg, direction in GAUGES:
+        for sign in "+-":
+            rho = orthocal.posture(sign, gauge_leg, G)
+            sim = machine.readings(rho, gauge_leg, direction) \
+                - machine.readings(PI0, gauge_leg, direction)
+            key = [(sign, gauge_leg, direction)]
+            assert float(sim) == pytest.approx(
+                orthocal.deviations(key, G, params, bow=bows)[0], abs=1e-12)
+            seen.append(float(sim) - float(plain.readings(rho, gauge_leg, direction)
+                                           - plain.readings(PI0, gauge_leg, direction)))
+    # every plane bowed (z along y: the leg's −2 µm and the plane's +2 µm cancel)
+    assert sum(abs(s) > 1e-4 for s in seen) == 10
+    with pytest.raises(ValueError, match="plane_bow"):
+        VirtualOrthoglide(G, plane_bow=(0.0, 0.0, 0.0))
