@@ -18,7 +18,7 @@ drivers and the end-to-end runs.
 from __future__ import annotations
 
 import random
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -144,12 +144,15 @@ class FakeAxes:
 
 
 class FakeGauge:
-    """An Indicator (drivers.base) reading a leg of the machine where it is mounted."""
+    """An Indicator (drivers.base) reading a leg of the machine where it is mounted;
+    ``scale``: its relative scale error S, showing (1 + S) times its plunger's travel
+    from where it was zeroed (as the wire-level gauge's ``scale_error``)."""
 
     def __init__(self, name: str, noise_mm: float, seed: int, stroke_mm: float = 12.5,
-                 preload_mm: float = 6.25) -> None:
+                 preload_mm: float = 6.25, scale: float = 0.0) -> None:
         self.name = name
         self.noise_mm = noise_mm
+        self.scale = float(scale)
         self._rng = random.Random(seed)
         self.low, self.high = -preload_mm, stroke_mm - preload_mm
         self._source: Callable[[], float] | None = None
@@ -167,7 +170,7 @@ class FakeGauge:
         self.reads += 1
         if self._source is None:
             return self.high  # a plunger in the air is all the way out
-        raw = min(max(self._source() - self._zero, self.low), self.high)
+        raw = (1.0 + self.scale) * min(max(self._source() - self._zero, self.low), self.high)
         if self.noise_mm > 0:
             raw += self._rng.gauss(0.0, self.noise_mm)
         return round(raw / COUNT_MM) * COUNT_MM + 0.0
@@ -183,11 +186,13 @@ class FakeRig:
     """A machine with hidden errors (``truth``), its fake axes, the gauges
     ``names`` (with ``noise_mm`` of noise, seeded from ``seed``), and the
     operator's hands: a gauge mounted on a leg along a direction, its stand placed
-    by eye (off its plane by a draw uniform in ±``mount_error_mm``)."""
+    by eye (off its plane by a draw uniform in ±``mount_error_mm``). ``scale``: the
+    gauges' scale errors by name (:class:`FakeGauge`; not named: none)."""
 
     def __init__(self, truth: MachineTruth | None = None, *, noise_mm: float = 0.0,
                  mount_error_mm: float = 0.0, seed: int = 1,
-                 names: tuple[str, ...] = ("A", "B")) -> None:
+                 names: tuple[str, ...] = ("A", "B"),
+                 scale: Mapping[str, float] | None = None) -> None:
         self.truth = truth = truth or MachineTruth()
         self.seed, self.noise_mm = seed, noise_mm
         self.geometry = truth.geometry
@@ -197,6 +202,7 @@ class FakeRig:
                                          speed_mm_s=1000.0, accel_mm_s2=20000.0,
                                          motion="coordinated", clock=self.clock,
                                          backlash=truth.backlash, leg_bow=truth.leg_bow,
+                                         plane_bow=truth.plane_bow,
                                          joint_lead=truth.joint_lead,
                                          joint_pitch=truth.joint_pitch)
         # stands placed by eye: each mounting off the leg's middle by a draw uniform
@@ -204,7 +210,9 @@ class FakeRig:
         self.mount_error_mm = mount_error_mm
         self._stands = np.random.default_rng([seed, 7])
         self.axes = FakeAxes(self.machine, self.clock)
-        self.gauges = {n: FakeGauge(n, noise_mm, seed * 101 + i) for i, n in enumerate(names)}
+        self.gauges = {n: FakeGauge(n, noise_mm, seed * 101 + i,
+                                    scale=(scale or {}).get(n, 0.0))
+                       for i, n in enumerate(names)}
         #: The length references of the joints' own tests (drivers.sim.length_reference).
         self.reference = VirtualReference(self.machine.joint_values)
 

@@ -44,7 +44,11 @@ class FakeRig(fake.FakeRig):
     """The device fakes' rig (drivers.sim.fake.FakeRig) with the two gauges A and B
     that the tests' station config (builders.BASE) moves from leg to leg, given its
     hidden machine as the simulated run's options name it, and handed to the
-    engine: its devices, an operator with the rig's hands, the journal's header."""
+    engine: its devices, an operator with the rig's hands, the journal's header.
+    ``plane_bow`` (each gauge plane's own sagitta, drivers.sim.specs.MachineTruth) and
+    ``gauge_scale`` (A's and B's scale errors) go further than a simulated run's
+    options; the header keeps the scales, not the planes' bows (the tests that bow
+    the planes read them off the rig)."""
 
     def __init__(self, *, true_drho: Sequence[float] = (0.0, 0.0, 0.0),
                  true_tilt: Sequence[float] = (0.0, 0.0, 0.0),
@@ -52,11 +56,15 @@ class FakeRig(fake.FakeRig):
                  backlash: Sequence[float] = (0.0, 0.0, 0.0), mount_error_mm: float = 0.0,
                  leg_bow: Sequence[float] = (0.0, 0.0, 0.0), noise_mm: float = 0.0,
                  joint_lead: Sequence[float] = (0.0, 0.0, 0.0),
-                 joint_pitch: Sequence[float] = (0.0, 0.0), seed: int = 1) -> None:
+                 joint_pitch: Sequence[float] = (0.0, 0.0), seed: int = 1,
+                 plane_bow: Sequence[float] = (0.0,) * 6,
+                 gauge_scale: Sequence[float] = (0.0, 0.0)) -> None:
         truth = MachineTruth(drho=true_drho, tilt=true_tilt, gap=true_gap,
-                             backlash=backlash, leg_bow=leg_bow, joint_lead=joint_lead,
-                             joint_pitch=joint_pitch)
-        super().__init__(truth, noise_mm=noise_mm, mount_error_mm=mount_error_mm, seed=seed)
+                             backlash=backlash, leg_bow=leg_bow, plane_bow=plane_bow,
+                             joint_lead=joint_lead, joint_pitch=joint_pitch)
+        self.gauge_scale = [float(v) for v in gauge_scale]
+        super().__init__(truth, noise_mm=noise_mm, mount_error_mm=mount_error_mm, seed=seed,
+                         scale=dict(zip(("A", "B"), self.gauge_scale, strict=True)))
 
     def devices(self) -> Devices:
         devices = Devices(self.axes, IndicatorGroup(list(self.gauges.values())))
@@ -74,7 +82,8 @@ class FakeRig(fake.FakeRig):
                 "true_tilt": list(t.tilt), "true_gap": list(t.gap),
                 "noise_mm": self.noise_mm, "mount_error_mm": self.mount_error_mm,
                 "backlash_mm": list(t.backlash), "leg_bow_mm": list(t.leg_bow),
-                "joint_lead_um_per_m": list(t.joint_lead), "joint_pitch": list(t.joint_pitch)}
+                "joint_lead_um_per_m": list(t.joint_lead), "joint_pitch": list(t.joint_pitch),
+                "gauge_scale": self.gauge_scale}
 
 
 #: What the simulated station states of its hardware ([uncertainty]: the legs straight

@@ -57,6 +57,22 @@ def test_the_fakes_are_the_protocols_and_the_protocol_is_split() -> None:
     assert {"move_and_wait", "read_positions", "stop"} <= motion
 
 
+def test_a_fake_gauge_with_a_scale_error_shows_that_much_more_of_its_travel() -> None:
+    # as the wire-level gauge's scale_error: (1 + S) times the travel from its zero,
+    # the stroke's ends in true mm, quantised to the digit after
+    where = {"mm": 2.0}
+    gauge = FakeGauge("A", 0.0, 1, scale=0.004)
+    gauge.mount(lambda: where["mm"])
+    for travel, shown in ((0.25, 0.251), (-0.5, -0.502), (0.0, 0.0), (9.0, 6.275)):
+        where["mm"] = 2.0 + travel
+        assert gauge.read() == pytest.approx(shown, abs=1e-9)
+    where["mm"] = 2.0
+    true = FakeGauge("B", 0.0, 1)
+    true.mount(lambda: where["mm"])
+    where["mm"] = 2.25
+    assert true.read() == pytest.approx(0.25, abs=1e-9)
+
+
 def test_a_run_finds_the_hidden_offsets_writes_them_and_verifies(tmp_path: Path) -> None:
     rig = FakeRig(true_drho=TRUE)
     code, result = run_on(rig, tmp_path / "runs", fake_config(**PROCEDURE))
