@@ -11,7 +11,8 @@ machines whose tilts and gaps the statement states and whose tool stays more tha
 10 µm off with the offsets alone (the truth after), how often the tool after's 95 %
 interval lies within half and twice the truth, RMS and max.
 
-The same runs as tests/engine/test_statement_coverage.py (seeds from 1), more of them.
+The same runs as tests/station/statement/test_statement_coverage.py (seeds from 1),
+more of them.
 
     python bench/statement_coverage.py [--runs 200] [--seed 1] [--jobs 2] [--rows rows.json]
 
