@@ -12,8 +12,11 @@ from drivers.sim import bowed_legs as form
 from drivers.sim.drive_motion import SAMPLE_DT_S, SAMPLE_MIN, Segment
 from drivers.sim.screws import Screws
 from orthocal import Geometry
-from orthocal.stands import GAUGES
 
+#: The gauge planes (leg, direction gauged) in plane_bow's order: xy, xz, yx, yz, zx, zy
+#: (orthocal.stands.GAUGES' order, which the simulator's test checks).
+PLANES: tuple[tuple[str, str], ...] = tuple(
+    (i, j) for i in orthocal.AXES for j in orthocal.AXES if i != j)
 #: Noise-free readings remembered by leg_reading (cleared when full).
 _READINGS_KEPT = 4096
 
@@ -97,7 +100,7 @@ class GaugeView:
                                        gap=self.true_gap)
         plane_of = (leg, direction.lstrip("-"))
         h = float(self.leg_bow[orthocal.AXES.index(leg)]) + (
-            float(self.plane_bow[GAUGES.index(plane_of)]) if plane_of in GAUGES else 0.0)
+            float(self.plane_bow[PLANES.index(plane_of)]) if plane_of in PLANES else 0.0)
         if h == 0.0:
             return reading
         plane = self.geometry.mount_plane if mount is None else mount

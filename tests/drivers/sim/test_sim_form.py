@@ -367,8 +367,10 @@ def test_each_gauge_plane_bows_by_its_own_sagitta_as_the_maths_has_it() -> None:
     # can be bowed as the statement assumes (orthocal.budget_columns: each plane within
     # ±s, half of it common); its deviations are orthocal.deviations' with one bow per
     # gauge plane, at every test posture of a tilted, gapped machine
+    from drivers.sim.legs import PLANES
     from orthocal.stands import GAUGES
 
+    assert PLANES == GAUGES  # plane_bow's order is the maths' gauges'
     tilt, gap = np.array([0.2, 0.1, -0.15]), np.array([0.1, -0.05, 0.08])
     leg = np.array([0.001, 0.0, -0.002])
     own = np.array([0.003, -0.002, 0.004, 0.001, -0.003, 0.002])
