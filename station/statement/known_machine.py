@@ -16,7 +16,9 @@ zero is not the machine the statement states: Δρ is corrected by the alias of 
 pooled values of the parameters left out, and their error carried into Δρ's, so that
 Δρ and the layout are one machine (docs/model.md (15), "The statement's uncertainty"). A
 round that fitted the legs' bows is left as it is: beside bows the tilts are not told
-apart at the legs' middles, which "Tilts or bows" decides."""
+apart at the legs' middles, which "Tilts or bows" decides. So is a run whose model the
+operator stated (`[procedure] model` other than auto): the rounds left the parameters
+out because they were told to, and Δρ is that model's."""
 
 from __future__ import annotations
 
@@ -214,7 +216,10 @@ def _left_out(rounds: Rounds, layout: dict[str, float], layout_u: Uncertainty
     """M (DRHO × the layout's names): how far the joined Δρ moves per unit of each
     layout parameter that the rounds' models held at zero, each round's alias
     (run_budget.omitted_gain) weighted as the rounds are joined; None where no round
-    joined left out a parameter the statement acts on (module docstring)."""
+    joined left out a parameter the statement acts on, or where the operator stated
+    the model (module docstring)."""
+    if rounds.config.procedure.model != "auto":
+        return None
     names = layout_u.names
     acted = {x for x in names
              if rule.act(layout[x], layout_u.marginal(x)) == rule.ACT}
