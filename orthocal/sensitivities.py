@@ -132,32 +132,3 @@ def rows_of(keys: Sequence[Key], distinct: Sequence[Key]) -> np.ndarray:
     P = np.zeros((len(keys), len(distinct)))
     P[np.arange(len(keys)), [index[k] for k in keys]] = 1.0
     return P
-
-
-def omitted_gain(ident: Identification, names: Sequence[str],
-                 geometry: Geometry | None = None) -> np.ndarray:
-    """G (n_params × len(``names``)): how far the identified parameters move per unit of
-    each parameter of ``names`` that the model holds at zero (a tilt, a gap the model
-    test left out), G = K·J_φ, K the fit's :func:`sensitivity` and J_φ the deviations'
-    Jacobian in those parameters at the solution (central differences, h = 1e-5 mm or
-    mrad, of the exact deviations, or (7'') for the linear method). A machine whose
-    left-out parameters are φ gives the fit θ̂ + G·φ: the omitted variable's bias
-    (docs/model.md, "The statement's uncertainty")."""
-    geometry = geometry or Geometry()
-    keys = list(ident.keys)
-    base = ident.fit_vector
-    h = 1e-5
-    cols = []
-    for name in names:
-        step = np.zeros(len(FIT_NAMES))
-        step[FIT_NAMES.index(name)] = h
-        if ident.method == "nonlinear":
-            up = deviations(keys, geometry, base + step, ident.mount_offsets)
-            down = deviations(keys, geometry, base - step, ident.mount_offsets)
-        else:
-            up = linear_deviations(keys, geometry, base + step)
-            down = linear_deviations(keys, geometry, base - step)
-        cols.append((up - down) / (2 * h))
-    if not cols:
-        return np.zeros((len(ident.names), 0))
-    return sensitivity(ident, geometry) @ np.column_stack(cols)

@@ -181,23 +181,6 @@ class Uncertainty:
                        for b in self.blocks)
         return Uncertainty(tuple(names), blocks, cols, self.labels, self.sources)
 
-    def with_images(self, names: Sequence[str], matrix: np.ndarray) -> Uncertainty:
-        """The same errors, and before them those of the quantities ``names``, each a
-        linear function of these, δ' = ``matrix``·δ (len(names) × len(self.names)):
-        every Type A block and Type B input shared, so that the new quantities keep
-        their correlation with these (GUM 5.2.2)."""
-        m = np.asarray(matrix, dtype=float).reshape(len(names), len(self.names))
-        new = tuple(range(len(names)))
-        blocks = []
-        for b in self.blocks:
-            mb = m[:, list(b.index)]
-            cov = np.block([[mb @ b.covariance @ mb.T, mb @ b.covariance],
-                            [b.covariance @ mb.T, b.covariance]])
-            blocks.append(Block(new + tuple(len(names) + i for i in b.index), cov, b.dof))
-        return Uncertainty((*names, *self.names), tuple(blocks),
-                           np.vstack([m @ self.columns, self.columns]), self.labels,
-                           self.sources)
-
     def draws(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` draws of the error δ (n × len(names)), GUM Supplement 1: each Type A
         block multivariate Student t (a normal scaled by √(ν/χ²_ν) drawn once per

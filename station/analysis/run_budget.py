@@ -174,17 +174,6 @@ def lead_columns(config: StationConfig, ident: orthocal.Identification,
                               {a: name for a, (_, name) in leads.items()})
 
 
-def omitted_gain(config: StationConfig, ident: orthocal.Identification,
-                 names: Sequence[str]) -> np.ndarray:
-    """How far a round's identified parameters move per unit of each of ``names`` its
-    model holds at zero (orthocal.sensitivities.omitted_gain), at its own parameters
-    (a fit moved to the middle of the joints' bands too): rows ``ident.names``."""
-    from orthocal.sensitivities import omitted_gain as gain
-
-    geometry = config.machine.geometry()
-    return gain(_at_its_parameters(ident, geometry), names, geometry)
-
-
 def fields(config: StationConfig, ident: orthocal.Identification,
            type_a_se: Mapping[str, float | None], type_a_dof: float | None, statement: Statement
            ) -> UncertaintyBudget | NotStated | None:

@@ -54,13 +54,9 @@ def _remaining(rounds: Rounds, machine: KnownMachine) -> Remaining | None:
     se = rounds.joined[n].std_errors
     dof = rounds.last.std_error_dof
     m = {d: machine.drho.marginal(d) for d in machine.now}
-    # where Δρ took the layout's error (known_machine: a parameter the rounds' models
-    # left out), its scatter is the statement's Type A part, the layout's with it
-    scatter = {d: finite(m[d].u_a if machine.coupled is not None else se.get(d))
-               for d in machine.now}
     return Remaining(phase=rounds.iterations[-1].phase, round=len(rounds.iterations),
                      estimate=dict(machine.now), total=dict(machine.start),
-                     std_errors=scatter,
+                     std_errors={d: finite(se.get(d)) for d in machine.now},
                      std_errors_dof=finite(dof),
                      coverage_factor_95=finite(m[DRHO[0]].k) if m else None)
 

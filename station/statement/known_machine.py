@@ -6,19 +6,7 @@ sensitivity, one input where two fits see the same (the legs' form).
 
 Δρ at the start and Δρ now differ by the offsets written, which were read back and
 are known exactly: the two carry the same uncertainty (docs/model.md, "The
-statement's uncertainty").
-
-A round whose model left out the tilts or the gaps (the model test found them within
-what the round's noise and the stated inputs explain) held them at zero: its Δρ is off
-by their alias (orthocal.sensitivities.omitted_gain). Where the statement acts on one
-of them (the pooled layout shows it beyond k_act, the decision table's rule), that
-zero is not the machine the statement states: Δρ is corrected by the alias of the
-pooled values of the parameters left out, and their error carried into Δρ's, so that
-Δρ and the layout are one machine (docs/model.md (15), "The statement's uncertainty"). A
-round that fitted the legs' bows is left as it is: beside bows the tilts are not told
-apart at the legs' middles, which "Tilts or bows" decides. So is a run whose model the
-operator stated (`[procedure] model` other than auto): the rounds left the parameters
-out because they were told to, and Δρ is that model's."""
+statement's uncertainty")."""
 
 from __future__ import annotations
 
@@ -27,12 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthocal import AXES, BOW_NAMES, PARAM_NAMES, Identification
+from orthocal import AXES, PARAM_NAMES, Identification
 from orthocal.uncertainty import Uncertainty, combined, type_a, type_b
 from station.analysis import accuracy_statement as accuracy
 from station.analysis.joints import LeadInputs, lead_inputs
-from station.analysis.run_budget import lead_columns, omitted_gain, round_columns
-from station.statement import decisions as rule
+from station.analysis.run_budget import lead_columns, round_columns
 from station.statement.snapshot import Rounds
 
 DRHO: tuple[str, ...] = tuple(f"drho_{a}" for a in AXES)
@@ -47,10 +34,7 @@ class KnownMachine:
     ``layout``: the pooled tilts and gaps (mrad, mm) and ``layout_u`` theirs;
     ``dl``: leg lengths where the last round's model held them, ``dl_u`` theirs;
     ``apart``: per parameter, how far another explanation the data cannot rule out
-    puts it (the legs' bows where the fit has tilts; model.md "Tilts or bows").
-    ``drho_fit``: Δρ's error from the rounds' fits alone and ``coupled`` (where the
-    rounds' models left out some of the layout) the layout's error with the part of
-    it Δρ takes before it (module docstring): ``drho`` is the two together."""
+    puts it (the legs' bows where the fit has tilts; model.md "Tilts or bows")."""
 
     start: dict[str, float]
     now: dict[str, float]
@@ -62,8 +46,6 @@ class KnownMachine:
     dl: dict[str, float]
     dl_u: Uncertainty | None
     apart: dict[str, float]
-    drho_fit: Uncertainty
-    coupled: Uncertainty | None = None
 
     def params(self, which: str = "now") -> np.ndarray:
         """The 12-vector of PARAM_NAMES: Δρ (``which``: "now" or "start"), ΔL where
@@ -75,8 +57,7 @@ class KnownMachine:
     def joint(self) -> Uncertainty:
         """The errors of all twelve parameters together (one input where two fits see
         the same one)."""
-        layout = self.coupled if self.coupled is not None else self.layout_u
-        parts = [self.drho_fit] + [u for u in (layout, self.dl_u) if u is not None]
+        parts = [self.drho] + [u for u in (self.layout_u, self.dl_u) if u is not None]
         return combined(parts, PARAM_NAMES)
 
 
@@ -211,38 +192,6 @@ def _leg_lengths(rounds: Rounds, tag: str) -> tuple[dict[str, float], Uncertaint
             combined([type_a(held, cov, ident.std_error_dof), part_b], held))
 
 
-def _left_out(rounds: Rounds, layout: dict[str, float], layout_u: Uncertainty
-              ) -> np.ndarray | None:
-    """M (DRHO × the layout's names): how far the joined Δρ moves per unit of each
-    layout parameter that the rounds' models held at zero, each round's alias
-    (run_budget.omitted_gain) weighted as the rounds are joined; None where no round
-    joined left out a parameter the statement acts on, or where the operator stated
-    the model (module docstring)."""
-    if rounds.config.procedure.model != "auto":
-        return None
-    names = layout_u.names
-    acted = {x for x in names
-             if rule.act(layout[x], layout_u.marginal(x)) == rule.ACT}
-    n = len(rounds.idents) - 1
-    weights = rounds.joined[n].weights if n < len(rounds.joined) else {}
-    out = np.zeros((len(DRHO), len(names)))
-    found = False
-    for r, ident in enumerate(rounds.idents):
-        missing = [x for x in names if x not in ident.names]
-        share = {d: (weights[d][r] if d in weights and r < len(weights[d])
-                     else float(r == n)) for d in DRHO}
-        if not acted & set(missing) or not any(share.values()) \
-                or any(b in ident.names for b in BOW_NAMES):
-            continue
-        gain = omitted_gain(rounds.config, ident, missing)
-        for i, d in enumerate(DRHO):
-            if d in ident.names:
-                row = gain[list(ident.names).index(d)]
-                out[i, [names.index(x) for x in missing]] += share[d] * row
-        found = True
-    return out if found else None
-
-
 def known_machine(rounds: Rounds) -> KnownMachine:
     """The machine of a run that identified Δρ (its last round's): values and their
     one joint uncertainty."""
@@ -269,21 +218,9 @@ def known_machine(rounds: Rounds) -> KnownMachine:
     last = rounds.iterations[-1] if rounds.iterations else None
     apart = {} if last is None or last.ambiguity is None else \
         {k: float(v) for k, v in last.ambiguity.apart_mm.items() if v is not None}
-    fit = _drho_uncertainty(rounds, ident, n, se, tag)
-    drho, coupled = fit, None
-    alias = None if layout_u is None else _left_out(rounds, layout, layout_u)
-    if alias is not None and layout_u is not None:
-        # Δρ as the layout stated leaves it: less the alias of the pooled values, and
-        # with the error of those values (Δρ̂ − M·ℓ̂ is off by −M·(ℓ̂ − ℓ))
-        rows = alias[[DRHO.index(d) for d in held]]
-        moved = rows @ np.array([layout[x] for x in layout_u.names])
-        for d, m in zip(held, moved, strict=True):
-            now[d], start[d] = now[d] - float(m), start[d] - float(m)
-        coupled = layout_u.with_images(held, -rows)
-        drho = combined([fit, coupled.pick(held)], held)
-    return KnownMachine(start=start, now=now, aim=aim, measured_now=measured, drho=drho,
-                        layout=layout, layout_u=layout_u, dl=dl, dl_u=dl_u, apart=apart,
-                        drho_fit=fit, coupled=coupled)
+    return KnownMachine(start=start, now=now, aim=aim, measured_now=measured,
+                        drho=_drho_uncertainty(rounds, ident, n, se, tag), layout=layout,
+                        layout_u=layout_u, dl=dl, dl_u=dl_u, apart=apart)
 
 
 def layout_names() -> tuple[str, ...]:

@@ -480,21 +480,3 @@ def test_with_stands_the_expected_lack_of_fit_carries_their_prior():
     assert e.stands > 0.0 and set(e.sources) == {"leg straightness"}
     assert e.expected == pytest.approx(e.noise + e.stands + sum(e.sources.values()))
     json.dumps(e.to_dict(), allow_nan=False)
-
-
-def test_a_tilt_the_model_leaves_out_moves_the_fit_by_its_alias():
-    # orthocal.sensitivities.omitted_gain: a rho fit of a machine tilted by t is off by
-    # G·t, to first order in t (exact deviations, noise 0)
-    from orthocal.sensitivities import omitted_gain
-
-    tilts = np.array([0.05, -0.03, 0.04])
-    fit = rho_fit(deviations(KEYS, G, np.r_[TRUTH[:6], tilts]))
-    gain = omitted_gain(fit, ["tilt_yx", "tilt_zx", "tilt_zy"], G)
-    assert gain.shape == (3, 3)
-    np.testing.assert_allclose(fit.vector[:3] - TRUTH[:3], gain @ tilts, rtol=2e-3, atol=2e-8)
-    assert np.abs(gain @ tilts).max() > 2 * UM  # µm per few hundredths of a mrad
-    # the rho+tilt fit of the same machine holds them: no alias left
-    full = identify(dict(zip(KEYS, deviations(KEYS, G, np.r_[TRUTH[:6], tilts]),
-                             strict=True)), G, "rho+tilt", "nonlinear")
-    assert full.vector[:3] == pytest.approx(TRUTH[:3], abs=1e-9)
-    assert omitted_gain(fit, [], G).shape == (3, 0)

@@ -74,25 +74,3 @@ def test_pick_and_embed_keep_the_errors() -> None:
     assert a.pick(("z", "x")).marginal("z").u_c == pytest.approx(3.0)
     e = a.embedded(("w", "x", "y", "z"))
     assert e.marginal("w").u_c == 0.0 and e.marginal("y").u_c == pytest.approx(2.0)
-
-
-def test_images_of_the_errors_keep_their_correlation_with_them() -> None:
-    # δ' = M·δ beside δ: the joint covariance is [[M Σ Mᵀ, M Σ], [Σ Mᵀ, Σ]] over a Type A
-    # block and a Type B input alike, and a marginal of δ' is the linear one of M's row
-    cov = np.array([[4e-6, 1e-6], [1e-6, 2e-6]])
-    u = combined([type_a(("a", "b"), cov, 12.0),
-                  type_b(("a", "b"), np.array([[1e-3], [-2e-3]]), ["form"], ["form"])],
-                 ("a", "b"))
-    m = np.array([[0.5, -1.0], [2.0, 0.0], [0.0, 0.0]])
-    both = u.with_images(("p", "q", "r"), m)
-    assert both.names == ("p", "q", "r", "a", "b")
-    whole = np.vstack([m, np.eye(2)])
-    np.testing.assert_allclose(both.covariance(), whole @ u.covariance() @ whole.T,
-                               rtol=1e-12, atol=1e-18)
-    for name, row in zip(("p", "q"), m[:2], strict=True):
-        got, want = both.marginal(name), u.linear_marginal(row)
-        assert got.u_c == pytest.approx(want.u_c, rel=1e-12)
-        assert got.dof == pytest.approx(want.dof, rel=1e-12)
-    assert both.marginal("r").u_c == 0.0
-    # one input still: summed with another part that names it, not doubled
-    assert both.pick(("p", "a")).merged()[0].shape[1] == 1
