@@ -6,7 +6,7 @@ allow for them."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Literal
 
@@ -96,22 +96,31 @@ def _at_its_parameters(ident: orthocal.Identification, geometry: orthocal.Geomet
     return replace(ident, residuals=np.asarray(ident.values) - model)
 
 
-def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.Source]:
-    """The Type B sources of ``ident`` (a round's identification), named by the
-    indicators (not by their gauge planes) where they are a gauge's."""
+def _round_inputs(config: StationConfig, ident: orthocal.Identification) -> tuple[
+        orthocal.Identification, BudgetInputs, dict[tuple[str, str], str],
+        Callable[[dict[str, StatedInput]], dict[tuple[str, str], float]], bool]:
+    """What a round's budget starts from: ``ident`` at its parameters, the config's
+    inputs (:func:`inputs`), the gauge planes it read by indicator name, a stated
+    input per plane, and whether the fit holds the legs' bows. Where it does (measured
+    in a second gauge plane, or carried from the round that measured them:
+    orthocal.carry.joined_fit) they are parameters, their uncertainty in its
+    covariance: not unknown bows of ±s again."""
     ident = _at_its_parameters(ident, config.machine.geometry())
     given = inputs(config)
-    names = _gauge_names(config)
-    planes = {plane: name for plane, name in names.items()
+    planes = {plane: name for plane, name in _gauge_names(config).items()
               if any((k[1], k[2]) == plane for k in ident.keys)}
 
     def per_plane(table: dict[str, StatedInput]) -> dict[tuple[str, str], float]:
         return {plane: _number(table[name]) for plane, name in planes.items()}
 
-    # Where the fit holds the legs' bows (measured in a second gauge plane, or carried
-    # from the round that measured them: orthocal.carry.joined_fit) they are
-    # parameters, their uncertainty in its covariance: not unknown bows of ±s again.
     form_fitted = any(n in ident.names for n in orthocal.BOW_NAMES)
+    return ident, given, planes, per_plane, form_fitted
+
+
+def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.Source]:
+    """The Type B sources of ``ident`` (a round's identification), named by the
+    indicators (not by their gauge planes) where they are a gauge's."""
+    ident, given, planes, per_plane, form_fitted = _round_inputs(config, ident)
     out = gum.budget_sources(
         ident, config.machine.geometry(),
         straightness=None if form_fitted else given.leg_straightness_mm.value,
@@ -137,16 +146,7 @@ def round_columns(config: StationConfig, ident: orthocal.Identification, tag: st
     gauge plane, or carried), they are parameters: no straightness column. ``leads``:
     each joint's lead bound and its name (station.analysis.joints.lead_inputs), one
     input per joint through (J4) (orthocal.budget_columns.joint_lead_columns)."""
-    ident = _at_its_parameters(ident, config.machine.geometry())
-    given = inputs(config)
-    names = _gauge_names(config)
-    planes = {plane: name for plane, name in names.items()
-              if any((k[1], k[2]) == plane for k in ident.keys)}
-
-    def per_plane(table: dict[str, StatedInput]) -> dict[tuple[str, str], float]:
-        return {plane: _number(table[name]) for plane, name in planes.items()}
-
-    form_fitted = any(n in ident.names for n in orthocal.BOW_NAMES)
+    ident, given, planes, per_plane, form_fitted = _round_inputs(config, ident)
     straight = given.leg_straightness_mm.value
     return budget_columns(
         gum.propagation(ident, config.machine.geometry()), tag,
