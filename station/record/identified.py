@@ -187,6 +187,16 @@ def _machine(run: Path, result: RunResult, model: MachineModel) -> IdentifiedMac
 DRHO_NOTE = "the joint's error the offsets written left (last verification)"
 
 
+def _whether_it_holds(iv: tuple[float, float] | None, base: float) -> str:
+    """Whether the interval of a value the controller is not told holds its nominal
+    value, in words: the interval is the run's estimate's, not the nominal value's, so
+    a note never claims "within its noise" for an estimate whose interval excludes it."""
+    if iv is None or iv[0] <= base <= iv[1]:
+        return "its interval holds the nominal value"
+    return ("its interval does not hold the nominal value, but the model test over the "
+            "whole run did not keep it")
+
+
 def _stated(name: str, kind: str, model: MachineModel, told: bool,
             q: Quantity) -> GeometryValue:
     """A parameter the run's statement states (docs/design.md, "The statement of the
@@ -202,10 +212,7 @@ def _stated(name: str, kind: str, model: MachineModel, told: bool,
         return GeometryValue(name=name, pin=PINS[name], unit=unit, value=base + value,
                              nominal=base, identified=True, interval_95=iv,
                              note=f"{note}; the run's statement: {plus_minus(q)} (95 %)")
-    holds = iv is None or iv[0] <= base <= iv[1]
-    where = ("its interval holds the nominal value" if holds else
-             "its interval does not hold the nominal value, but the model test over the "
-             "whole run did not keep it")
+    where = _whether_it_holds(iv, base)
     return GeometryValue(name=name, pin=PINS[name], unit=unit, value=base, nominal=base,
                          identified=False, interval_95=iv,
                          note=f"nominal: the model test kept {model.model!r}, which holds no "
@@ -245,13 +252,7 @@ def _layout_value(name: str, kind: str, model: MachineModel, told: bool,
         return GeometryValue(name=name, pin=PINS[name], unit=unit, value=base, nominal=base,
                              identified=False, interval_95=None, note=why)
     shown = f"{base + value:+.4f} {unit} [{iv[0]:+.4f}, {iv[1]:+.4f}] (95 %)" if iv else ""
-    # The interval is the run's estimate's, not the nominal value's: say which, and
-    # whether it holds the nominal value, so the comment never claims "within its
-    # noise" for an estimate whose interval excludes it.
-    holds = iv is None or iv[0] <= base <= iv[1]
-    where = ("its interval holds the nominal value" if holds else
-             "its interval does not hold the nominal value, but the model test over the "
-             "whole run did not keep it")
+    where = _whether_it_holds(iv, base)
     return GeometryValue(name=name, pin=PINS[name], unit=unit, value=base, nominal=base,
                          identified=False, interval_95=iv,
                          note=f"nominal: the model test kept {model.model!r}, which holds no "
