@@ -117,6 +117,22 @@ def _round_inputs(config: StationConfig, ident: orthocal.Identification) -> tupl
     return ident, given, planes, per_plane, form_fitted
 
 
+def stated_inputs(config: StationConfig) -> tuple[BudgetInputs, list[str], list[Instrument]]:
+    """The budget's inputs (:func:`inputs`), those assumed in words, and the gauges as
+    instruments: named by what identifies an instrument (its serial), not by its port."""
+    given = inputs(config)
+    alone = {"leg_straightness_mm": given.leg_straightness_mm,
+             "temperature_change_c": given.temperature_change_c,
+             "plunger_angle_deg": given.plunger_angle_deg}
+    assumed = [f"{k}: {v.value} ({v.assumed})" for k, v in alone.items() if not v.given]
+    assumed += [f"mpe_mm of {n}: {v.value} ({v.assumed})"
+                for n, v in given.mpe_mm.items() if not v.given]
+    instruments = [Instrument(name=g.name, protocol=g.protocol, serial=g.serial,
+                              resolution_mm=g.resolution_mm,
+                              mpe_mm=_number(given.mpe_mm[g.name])) for g in config.indicators]
+    return given, assumed, instruments
+
+
 def sources(config: StationConfig, ident: orthocal.Identification) -> list[gum.Source]:
     """The Type B sources of ``ident`` (a round's identification), named by the
     indicators (not by their gauge planes) where they are a gauge's."""
@@ -197,17 +213,7 @@ def fields(config: StationConfig, ident: orthocal.Identification,
     # largest first; ties (to a nanometre: within another CPU's last bits) by name
     found = [found[0], *sorted(found[1:], key=lambda s: (
         -round(1e6 * max(v or 0.0 for v in s.contributions_mm.values())), s.source))]
-    given = inputs(config)
-    alone = {"leg_straightness_mm": given.leg_straightness_mm,
-             "temperature_change_c": given.temperature_change_c,
-             "plunger_angle_deg": given.plunger_angle_deg}
-    assumed = [f"{k}: {v.value} ({v.assumed})" for k, v in alone.items() if not v.given]
-    assumed += [f"mpe_mm of {n}: {v.value} ({v.assumed})"
-                for n, v in given.mpe_mm.items() if not v.given]
-    # named by what identifies an instrument (its serial), not by its port
-    instruments = [Instrument(name=g.name, protocol=g.protocol, serial=g.serial,
-                              resolution_mm=g.resolution_mm,
-                              mpe_mm=_number(given.mpe_mm[g.name])) for g in config.indicators]
+    given, assumed, instruments = stated_inputs(config)
     return UncertaintyBudget(
         statement=statement, sources=found, combined_mm=_params(doc["combined_mm"]),
         effective_dof=_params(doc["effective_dof"]),

@@ -12,13 +12,13 @@ from orthocal.budget import STEEL_ALPHA
 from orthocal.numbers import finite
 from station.analysis import acceptance as accept
 from station.analysis import reversal
-from station.analysis.run_budget import inputs
+from station.analysis.run_budget import inputs, stated_inputs
 from station.record.model import MachineModel
 from station.record.result import Loop, Remaining
 from station.record.result_acceptance import Acceptance
 from station.record.result_accuracy import Accuracy
 from station.record.result_base import NotStated
-from station.record.result_sections import BudgetSource, Instrument, UncertaintyBudget
+from station.record.result_sections import BudgetSource, UncertaintyBudget
 from station.record.result_statement import AdviceItem, Quantity
 from station.statement import decisions as rule
 from station.statement import quantities as qty
@@ -81,17 +81,7 @@ def _budget(rounds: Rounds, machine: KnownMachine) -> UncertaintyBudget:
                     for s, c in sources.items()),
                    key=lambda s: (-max(v or 0.0 for v in s.contributions_mm.values()),
                                   s.source))
-    given = inputs(rounds.config)
-    alone = {"leg_straightness_mm": given.leg_straightness_mm,
-             "temperature_change_c": given.temperature_change_c,
-             "plunger_angle_deg": given.plunger_angle_deg}
-    assumed = [f"{k}: {v.value} ({v.assumed})" for k, v in alone.items() if not v.given]
-    assumed += [f"mpe_mm of {n}: {v.value} ({v.assumed})"
-                for n, v in given.mpe_mm.items() if not v.given]
-    instruments = [Instrument(name=g.name, protocol=g.protocol, serial=g.serial,
-                              resolution_mm=g.resolution_mm,
-                              mpe_mm=float(given.mpe_mm[g.name].value))  # type: ignore[arg-type]
-                   for g in rounds.config.indicators]
+    given, assumed, instruments = stated_inputs(rounds.config)
     return UncertaintyBudget(
         statement="remaining.total" if rounds.verified else "identified", sources=rows,
         combined_mm={d: x.u_c for d, x in m.items()},
