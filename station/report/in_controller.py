@@ -6,17 +6,11 @@ Said only where the run states it; advice only where it stands out of the noise.
 
 from __future__ import annotations
 
-import html
-
 from station.record.quantity_text import figure, interval
 from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy, Compensated
-from station.report.format import num, um, um_interval
+from station.report.format import esc, num, table, um, um_interval
 from station.report.statement_table import stated as quantities
-
-
-def _e(value: object) -> str:
-    return html.escape(str(value), quote=True)
 
 
 def _grouped(nominal: dict[str, str]) -> dict[str, list[str]]:
@@ -24,16 +18,6 @@ def _grouped(nominal: dict[str, str]) -> dict[str, list[str]]:
     for name, why in nominal.items():
         out.setdefault(why, []).append(name)
     return out
-
-
-def table(head: list[str], rows: list[list[str]]) -> str:
-    """A table whose first column is words and the others numbers."""
-    ths = "".join(f'<th class="l">{h}</th>' if i == 0 else f"<th>{h}</th>"
-                  for i, h in enumerate(head))
-    body = "".join("<tr>" + "".join(
-        f'<td class="l">{c}</td>' if i == 0 else f'<td class="num">{c}</td>'
-        for i, c in enumerate(row)) + "</tr>" for row in rows)
-    return f"<table><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>"
 
 
 def stated(acc: Accuracy) -> Compensated | None:
@@ -115,10 +99,10 @@ def html_section(acc: Accuracy, result: RunResult | None = None) -> str:
         advice = compensation_advice(acc, comp)
     grid = table(["tool-point error (µm)", "offsets only", "geometry in the controller",
                   "geometry in the controller: 95 % interval"], rows)
-    routes = "".join(f"<li><code>{_e(r)}</code></li>" for r in comp.routes)
+    routes = "".join(f"<li><code>{esc(r)}</code></li>" for r in comp.routes)
     nominal = "; ".join(f"{', '.join(names)} ({why})"
                         for why, names in _grouped(comp.nominal).items())
     return ("<h3>The geometry in the controller</h3>" + grid
-            + f"<p><b>{_e(advice)}</b>.</p>"
-            + f'<p class="small">The controller is told {_e(", ".join(comp.told))}; left '
-            f"nominal: {_e(nominal or 'nothing')}. {_e(comp.method)}.</p><ul>{routes}</ul>")
+            + f"<p><b>{esc(advice)}</b>.</p>"
+            + f'<p class="small">The controller is told {esc(", ".join(comp.told))}; left '
+            f"nominal: {esc(nominal or 'nothing')}. {esc(comp.method)}.</p><ul>{routes}</ul>")

@@ -9,7 +9,6 @@ here. A record from before the statement keeps the legacy reading of its
 
 from __future__ import annotations
 
-import html
 import math
 from dataclasses import dataclass
 
@@ -17,7 +16,7 @@ from station.record.quantity_text import plus_minus
 from station.record.result import RunResult
 from station.record.result_accuracy import Accuracy
 from station.record.result_base import Interval
-from station.report.format import at, fmt, num, param_html
+from station.report.format import at, esc, fmt, num, param_html
 from station.report.statement_table import decision_text, stated
 
 #: Squareness of the tool's motions and the tilt it equals to first order (docs/model.md).
@@ -29,10 +28,6 @@ ISO_TEXT = ("ISO 230-1 squareness of the tool's motions along commanded x, y and
             "first order it equals the tilts of the actuator axes (1 mrad = 1 mm/m). The "
             "gaps and the offsets written shear the motions too, so the two columns differ "
             "by that. Offsets cannot fix squareness.")
-
-
-def _e(value: object) -> str:
-    return html.escape(str(value), quote=True)
 
 
 def _table(head: list[str], rows: list[list[str]], stated_: bool = False,
@@ -54,7 +49,7 @@ def _table(head: list[str], rows: list[list[str]], stated_: bool = False,
 
 def advice_list(texts: list[str]) -> str:
     """The statement's advice on the rails, each text verbatim."""
-    return ("<p><b>What to do:</b></p><ul>" + "".join(f"<li>{_e(a)}</li>" for a in texts)
+    return ("<p><b>What to do:</b></p><ul>" + "".join(f"<li>{esc(a)}</li>" for a in texts)
             + "</ul>") if texts else ""
 
 
@@ -70,9 +65,9 @@ def stated_html(result: RunResult) -> str | None:
             continue
         t = q.get(tilt)
         parts = s.basis[-1] if s.basis and s.basis[-1].startswith("of the value") else "—"
-        rows.append([f"{pair.upper()}; {param_html(tilt)}", _e(plus_minus(s)),
-                     _e(decision_text(s)), "—" if t is None else _e(plus_minus(t)),
-                     "—" if t is None else _e(decision_text(t)), _e(parts)])
+        rows.append([f"{pair.upper()}; {param_html(tilt)}", esc(plus_minus(s)),
+                     esc(decision_text(s)), "—" if t is None else esc(plus_minus(t)),
+                     "—" if t is None else esc(decision_text(t)), esc(parts)])
     if not q:
         return None
     out = ["<h3>Squareness of the axes</h3>"]
@@ -219,7 +214,7 @@ def legacy_html(acc: Accuracy) -> str:
     out = ["<h3>Squareness of the axes</h3>"]
     if not tilts_stated(acc) or not rows:
         out.append("<p>Squareness is not stated: the tilts were not identified.</p>")
-        out.extend(f"<p>{_e(a)}</p>" for a in advice if "not stated" not in a)
+        out.extend(f"<p>{esc(a)}</p>" for a in advice if "not stated" not in a)
         return "".join(out)
     table_rows = []
     for s in rows:
@@ -241,10 +236,10 @@ def legacy_html(acc: Accuracy) -> str:
                "columns differ by that. Offsets cannot fix squareness.</p>")
     decision = acc.squareness_decision
     if decision is not None and decision.rule:
-        out.append(f'<p class="small">Verdict: {_e(decision.rule)}.</p>')
+        out.append(f'<p class="small">Verdict: {esc(decision.rule)}.</p>')
     if advice:
         out.append("<p><b>What to do:</b></p><ul>"
-                   + "".join(f"<li>{_e(a)}</li>" for a in advice) + "</ul>")
+                   + "".join(f"<li>{esc(a)}</li>" for a in advice) + "</ul>")
     return "".join(out)
 
 

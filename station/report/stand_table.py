@@ -5,23 +5,8 @@ the machine), or not observable."""
 
 from __future__ import annotations
 
-import html
-
 from station.record.result import RunResult
-from station.report.format import fmt, num
-
-
-def _e(value: object) -> str:
-    return html.escape(str(value), quote=True)
-
-
-def _table(head: list[str], rows: list[list[str]], left: int = 1) -> str:
-    ths = "".join(f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>"
-                  for i, h in enumerate(head))
-    body = "".join("<tr>" + "".join(
-        f'<td class="l">{c}</td>' if i < left else f'<td class="num">{c}</td>'
-        for i, c in enumerate(row)) + "</tr>" for row in rows)
-    return f"<table><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>"
+from station.report.format import esc, fmt, num, table
 
 
 def stands_html(result: RunResult) -> str:
@@ -40,13 +25,13 @@ def stands_html(result: RunResult) -> str:
         else:
             value, sigma = "—", "—"
             note = est.note or "not observable"
-        rows.append([_e(name), _e(where or "—"), value, sigma, _e(note)])
+        rows.append([esc(name), esc(where or "—"), value, sigma, esc(note)])
     return ("<h3>Where the stands were</h3>"
-            + _table(["stand", "indicator", "m: off the leg's middle (mm)", "σ (mm)", "note"],
+            + table(["stand", "indicator", "m: off the leg's middle (mm)", "σ (mm)", "note"],
                      rows, left=2)
             + '<p class="small">Each indicator stand is set by eye at the middle of its leg; '
             "its indicator reads in the plane x<sub>i</sub> = L/2 + m. The identification "
-            f"estimates each m as a random effect{_e(_stands_known(result))}, so that a "
+            f"estimates each m as a random effect{esc(_stands_known(result))}, so that a "
             "misplaced stand is not read as a tilt. Not observable: the offsets Δρ were too "
             "small for that stand to change the deviations; the data say nothing of where it "
             "stood.</p>")

@@ -19,28 +19,13 @@ from station.report.format import (
     num,
     param_html,
     params_of,
+    table,
     true_value,
     um,
     um_signed,
     unit,
 )
 from station.report.text import model_notes
-
-
-def table(head: list[str], rows: list[list[str]], left: int = 1, caption: str = "") -> str:
-    """Cells are trusted HTML fragments: callers escape text with esc()."""
-    ths = "".join(
-        f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(head)
-    )
-    body = "".join(
-        "<tr>" + "".join(
-            f'<td class="l">{c}</td>' if i < left else f'<td class="num">{c}</td>'
-            for i, c in enumerate(row)
-        ) + "</tr>"
-        for row in rows
-    )
-    cap = f'<p class="small">{caption}</p>' if caption else ""
-    return f"<table><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>{cap}"
 
 
 def params_table(result: RunResult) -> str:

@@ -16,8 +16,6 @@ here return None or say "not stated".
 
 from __future__ import annotations
 
-import html
-
 from station.record.quantity_text import figure, interval
 from station.record.result import RunResult
 from station.record.result_accuracy import (
@@ -34,11 +32,13 @@ from station.report.format import (
     AXES,
     at,
     box_text,
+    esc,
     fmt,
     num,
     um,
     um_interval,
 )
+from station.report.format import table as html_table
 from station.report.squareness_table import (
     legacy_html,
     square_state,
@@ -61,10 +61,6 @@ OBJECTIVE_TEXT = {
 #: least this fraction of the after-figure (the tilts alone cause that much).
 MOST = 0.5
 _NOT_STATED = "not stated: "
-
-
-def _e(value: object) -> str:
-    return html.escape(str(value), quote=True)
 
 
 # -------------------------------------------------------------------- readers
@@ -243,15 +239,6 @@ def summary_lines(result: RunResult) -> list[str]:
 # ----------------------------------------------------------------------- html
 
 
-def _table(head: list[str], rows: list[list[str]], left: int = 1) -> str:
-    ths = "".join(f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>"
-                  for i, h in enumerate(head))
-    body = "".join("<tr>" + "".join(
-        f'<td class="l">{c}</td>' if i < left else f'<td class="num">{c}</td>'
-        for i, c in enumerate(row)) + "</tr>" for row in rows)
-    return f"<table><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>"
-
-
 def html_section(result: RunResult, figure: str | None = None,
                  number: int | None = None) -> str:
     """The section "Accuracy at the tool" of report.html; ``figure`` the error
@@ -265,7 +252,7 @@ def html_section(result: RunResult, figure: str | None = None,
                 return ""
             why_not = "this result holds no accuracy block"
         return (f'{head}<div class="box warn"><p>Accuracy at the tool is <b>not stated</b> '
-                f"for this run: {_e(why_not)}. The legs' parallelism reported here is the "
+                f"for this run: {esc(why_not)}. The legs' parallelism reported here is the "
                 "method's means and does not say where the tool goes.</p></div>")
     square = squareness_table.stated_html(result)
     parts = [head, _intro(result, acc), _before_after(result, acc),
@@ -279,7 +266,7 @@ def html_section(result: RunResult, figure: str | None = None,
                      "</figure>")
     if acc.assumes:
         parts.append("<h3>What these figures assume</h3><ul>"
-                     + "".join(f"<li>{_e(a)}</li>" for a in acc.assumes) + "</ul>")
+                     + "".join(f"<li>{esc(a)}</li>" for a in acc.assumes) + "</ul>")
     parts.append("<p>The run directory holds <code>model.json</code>: the identified machine "
                  "(Δρ, ΔL, the tilts and the gaps, with standard errors, covariance, "
                  "conventions and units), for a controller that compensates kinematics, which "
@@ -289,16 +276,16 @@ def html_section(result: RunResult, figure: str | None = None,
 
 def _intro(result: RunResult, acc: Accuracy) -> str:
     g = acc.grid
-    grid = f" ({_e(g.points_per_axis)} points per axis; {_e(g.points)} points"
-    grid += f", {_e(g.excluded)} outside the soft limits left out)" if g.excluded else ")"
+    grid = f" ({esc(g.points_per_axis)} points per axis; {esc(g.points)} points"
+    grid += f", {esc(g.excluded)} outside the soft limits left out)" if g.excluded else ")"
     why = cause(acc, result)
-    left = f" What is left after calibration: {_e(why)}." if why else ""
+    left = f" What is left after calibration: {esc(why)}." if why else ""
     return (
         "<p>Parallel legs are the method's means, not its end: the machine's user cares "
         "where the tool goes. For each commanded point of a grid over the workspace "
-        f"{_e(box_text(acc.workspace_mm))}{grid}, the identified machine says where "
+        f"{esc(box_text(acc.workspace_mm))}{grid}, the identified machine says where "
         "the tool lands; the error E, stated as |E| in µm, is what remains after fitting "
-        f"away {_e(FRAME_TEXT[acc.frame])} (frame <code>{_e(acc.frame)}</code>).{left}</p>")
+        f"away {esc(FRAME_TEXT[acc.frame])} (frame <code>{esc(acc.frame)}</code>).{left}</p>")
 
 
 def _before_after(result: RunResult, acc: Accuracy) -> str:
@@ -315,29 +302,29 @@ def _before_after(result: RunResult, acc: Accuracy) -> str:
                  um_interval(after.rms_interval_95_mm) or "—"],
                 ["max |E|", um(before.max_mm), um(after.max_mm),
                  um_interval(after.max_interval_95_mm) or "—"]]
-    table = _table(["tool-point error (µm)", "before (offsets as they were)",
-                    _e(after_head), "after: 95 % interval"], rows)
+    table = html_table(["tool-point error (µm)", "before (offsets as they were)",
+                    esc(after_head), "after: 95 % interval"], rows)
     basis = ("After: Δρ as the last verification measured it, with the tilts the run states."
              if result.remaining is not None and done else
              "After: predicted, the correction taken as written exactly.")
-    method = f" Interval: {_e(acc.after_method)}." if acc.after_method else ""
+    method = f" Interval: {esc(acc.after_method)}." if acc.after_method else ""
     not_done = ("" if done else " <b>The offsets were not written</b>: the machine is still "
                 "as in the column \"before\".")
-    return f'{table}<p class="small">{_e(basis)}{method}{not_done}</p>'
+    return f'{table}<p class="small">{esc(basis)}{method}{not_done}</p>'
 
 
 def _objectives(result: RunResult, acc: Accuracy) -> str:
     rows, offsets = [], []  # the figures in µm, the offsets in mm: one unit a table
     names: tuple[Objective, ...] = ("joints", "tool")
     for name in names:
-        obj, label = objective(acc, name), f"{_e(name)}: {_e(OBJECTIVE_TEXT[name])}"
+        obj, label = objective(acc, name), f"{esc(name)}: {esc(OBJECTIVE_TEXT[name])}"
         mark = ("not chosen" if name != acc.objective else "<b>written</b>"
                 if written(result) else "<b>chosen</b> (not written)")
         rows.append([label, um(obj.after.rms_mm), um(obj.after.max_mm), mark])
         offsets.append([label, *(fmt(at(obj.offsets_mm, a), signed=True) for a in AXES)])
-    table = (_table(["objective (tool error, µm)", "after: RMS |E|", "after: max |E|",
+    table = (html_table(["objective (tool error, µm)", "after: RMS |E|", "after: max |E|",
                      "this run"], rows)
-             + _table(["objective (offsets, mm)", *(f"o<sub>{a}</sub>" for a in AXES)],
+             + html_table(["objective (offsets, mm)", *(f"o<sub>{a}</sub>" for a in AXES)],
                       offsets))
     return ("<h3>The two objectives</h3>" + table +
             '<p class="small">Each objective\'s predicted figures with its offsets written '
@@ -356,7 +343,7 @@ def _field_caption(acc: Accuracy) -> str:
             "the identification's error). Colour: |E| in µm, each row on its own scale; "
             "arrows: the x–y part "
             "of E, to the scale of the arrow in the corner (its z part shows in the colour "
-            f"only); after fitting away {_e(FRAME_TEXT[acc.frame])}. Blank cells are "
+            f"only); after fitting away {esc(FRAME_TEXT[acc.frame])}. Blank cells are "
             "grid points outside the soft limits.")
 
 
