@@ -223,26 +223,17 @@ def backlash_mm(text: str | None) -> list[float]:
 def leg_bow_mm(text: str | None) -> list[float]:
     """``--leg-bow X,Y,Z`` (or one value for all legs), mm, either sign (toward +j
     of each gauge plane or away), each within ±MAX_LEG_BOW_MM; BadInput naming it."""
-    if text is None:
-        return [0.0, 0.0, 0.0]
-    values = _floats("--leg-bow", str(text), (1, 3), "mm")
-    if not all(abs(v) <= MAX_LEG_BOW_MM for v in values):  # nan included
-        raise BadInput(f"--leg-bow: a leg's form error is within ±{MAX_LEG_BOW_MM:g} mm "
-                       f"(0.008 is 8 µm), got {text!r}")
-    return values * 3 if len(values) == 1 else values
+    return _within("--leg-bow", text, "mm", MAX_LEG_BOW_MM,
+                   f"a leg's form error is within ±{MAX_LEG_BOW_MM:g} mm (0.008 is 8 µm)")
 
 
 def joint_lead(text: str | None) -> list[float]:
     """``--joint-lead X,Y,Z`` (or one value for all joints): each joint's lead error,
     µm per metre of travel from home, either sign, each within
     ±MAX_JOINT_LEAD_UM_PER_M; BadInput naming it."""
-    if text is None:
-        return [0.0, 0.0, 0.0]
-    values = _floats("--joint-lead", str(text), (1, 3), "µm/m")
-    if not all(abs(v) <= MAX_JOINT_LEAD_UM_PER_M for v in values):  # nan included
-        raise BadInput(f"--joint-lead: a lead error in µm per metre of travel, within "
-                       f"±{MAX_JOINT_LEAD_UM_PER_M:g} (100 is 0.01 %), got {text!r}")
-    return values * 3 if len(values) == 1 else values
+    return _within("--joint-lead", text, "µm/m", MAX_JOINT_LEAD_UM_PER_M,
+                   "a lead error in µm per metre of travel, within "
+                   f"±{MAX_JOINT_LEAD_UM_PER_M:g} (100 is 0.01 %)")
 
 
 def joint_pitch(text: str | None) -> list[float]:
@@ -292,6 +283,18 @@ def _floats(option: str, text: str, counts: tuple[int, ...], unit: str,
         what = " or ".join("one value" if c == 1 else many for c in dict.fromkeys(counts))
         raise BadInput(f"{option}: expected {what}, got {text!r}")
     return values
+
+
+def _within(option: str, text: str | None, unit: str, limit: float, what: str
+            ) -> list[float]:
+    """``text`` as x,y,z (or one value for all), either sign, each within ±``limit``
+    (``what`` says so in the error); zeros where not given."""
+    if text is None:
+        return [0.0, 0.0, 0.0]
+    values = _floats(option, str(text), (1, 3), unit)
+    if not all(abs(v) <= limit for v in values):  # nan included
+        raise BadInput(f"{option}: {what}, got {text!r}")
+    return values * 3 if len(values) == 1 else values
 
 
 def _numbers(option: str, text: str, counts: tuple[int, ...], unit: str,
