@@ -124,12 +124,7 @@ def _found(result: RunResult) -> list[str]:
     )
     what = "joint offsets" if all(n.startswith("drho") for n in names) else "parameters"
     parts.append(f"The {what} were identified as {vals} (95 %, k = {k:.2f}).")
-    resid, noise = num(result.residual_rms_mm), num(result.noise_mm)
-    if resid is not None:
-        s = f"The fitted model reproduces the measured deviations to {um(resid, 2)} µm RMS"
-        if noise is not None:
-            s += f" (indicator noise: {um(noise, 2)} µm)"
-        parts.append(s + ".")
+    parts += _reproduced(result, "The fitted model")
     sim = hidden(result)
     found = [(n, at(ident, n), true_value(sim, n)) for n in names]
     diffs = {u: [abs(v - t) for n, v, t in found if unit(n) == u
@@ -141,6 +136,17 @@ def _found(result: RunResult) -> list[str]:
                          (f"{um(max(d))} µm" if u == "mm" else f"{fmt(max(d), 4)} mm/m")
                          for u, d in diffs.items() if d) + ".")
     return parts
+
+
+def _reproduced(result: RunResult, fit: str) -> list[str]:
+    """How closely ``fit`` reproduces the measured deviations, beside the noise."""
+    resid, noise = num(result.residual_rms_mm), num(result.noise_mm)
+    if resid is None:
+        return []
+    s = f"{fit} reproduces the measured deviations to {um(resid, 2)} µm RMS"
+    if noise is not None:
+        s += f" (indicator noise: {um(noise, 2)} µm)"
+    return [s + "."]
 
 
 def _stated(result: RunResult) -> list[str]:
@@ -158,12 +164,7 @@ def _stated(result: RunResult) -> list[str]:
     if layout:
         parts.append("It states " + "; ".join(f"{n} = {esc(v)}" for n, v in layout)
                      + " (95 %; what to do with them: the statement's advice, below).")
-    resid, noise = num(result.residual_rms_mm), num(result.noise_mm)
-    if resid is not None:
-        s = f"The first fit reproduces the measured deviations to {um(resid, 2)} µm RMS"
-        if noise is not None:
-            s += f" (indicator noise: {um(noise, 2)} µm)"
-        parts.append(s + ".")
+    parts += _reproduced(result, "The first fit")
     return parts
 
 
