@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -38,6 +38,7 @@ from orthocal.sensitivities import (
     rows_of,
 )
 
+K = TypeVar("K")
 Gauge = tuple[str, str]  # (leg i, direction j): one dial indicator, one gauge plane
 #: Linear expansion of steel, 1/K.
 STEEL_ALPHA = 11.5e-6
@@ -175,21 +176,22 @@ def _source(prop: Propagation, name: str, distribution: str, value: float | None
                   inputs=dict(inputs), keys=prop.keys, covariance=covariance)
 
 
-def _non_negative(value: float, what: str) -> float:
+def non_negative(value: float, what: str) -> float:
+    """``value`` as a finite float ≥ 0; ValueError naming ``what``."""
     v = float(value)
     if not (math.isfinite(v) and v >= 0.0):
         raise ValueError(f"{what} must be a finite number ≥ 0, got {value!r}")
     return v
 
 
-def _per(value, names: Sequence, what: str) -> dict:
+def per_name(value: float | Mapping[K, float], names: Sequence[K], what: str) -> dict[K, float]:
     """One value ≥ 0 per name from a number or a mapping name → number."""
     if not isinstance(value, Mapping):
-        return dict.fromkeys(names, _non_negative(value, what))
+        return dict.fromkeys(names, non_negative(value, what))
     missing = [n for n in names if n not in value]
     if missing:
         raise ValueError(f"{what}: no value for {missing}")
-    return {n: _non_negative(value[n], what) for n in names}
+    return {n: non_negative(value[n], what) for n in names}
 
 
 def _plane_units(prop: Propagation, straightness
@@ -202,7 +204,7 @@ def _plane_units(prop: Propagation, straightness
         if len(straightness) != len(AXES):
             raise ValueError(f"leg straightness: one value or [x, y, z], got {straightness!r}")
         straightness = dict(zip(AXES, straightness, strict=True))
-    s_of = _per(straightness, legs, "leg straightness")
+    s_of = per_name(straightness, legs, "leg straightness")
     g = form_vector(prop.keys, prop.geometry, prop.params, prop.mount_offsets)
     return s_of, {gg: g * prop.mask(gg) for gg in prop.gauges}
 
@@ -303,7 +305,7 @@ def mpe_sources(prop: Propagation, mpe, span_mm: float | None = MPE_SPAN_MM) -> 
     position: over a few µm of travel, as a converged machine's deviations are, it
     changes by a few µm × its slope); ``span_mm`` None: e on every deviation.
     ``mpe``: mm, one value or gauge (leg, direction) → e."""
-    values = _per(mpe, prop.gauges, "gauge MPE")
+    values = per_name(mpe, prop.gauges, "gauge MPE")
     scale = np.ones(len(prop.keys)) if span_mm is None else \
         np.minimum(1.0, np.abs(prop.measured) / span_mm)
     return [_source(prop, f"gauge MPE {''.join(gauge)}", "rectangular", e, e / math.sqrt(3.0),
@@ -318,7 +320,7 @@ def resolution_sources(prop: Propagation, resolution) -> list[Source]:
     triangular ±r, u = r/√6 (GUM 4.3.9 and F.2.2.1); like :func:`mpe_sources`
     otherwise. ``resolution``: the gauge's step r, mm, one value or gauge → r."""
     return _per_deviation(prop, "gauge resolution", "triangular",
-                          _per(resolution, prop.gauges, "gauge resolution"), math.sqrt(6.0))
+                          per_name(resolution, prop.gauges, "gauge resolution"), math.sqrt(6.0))
 
 
 def plunger_angle_source(prop: Propagation, angle_deg: float) -> Source:
@@ -328,7 +330,7 @@ def plunger_angle_source(prop: Propagation, angle_deg: float) -> Source:
     the real error is one-sided), common to the gauge's deviations and
     independent between gauges: the gauge contributes |K_p·(c·Δ_gauge)|/√3,
     Δ_gauge its measured deviations, the source the quadrature over the gauges."""
-    theta = _non_negative(angle_deg, "plunger angle")
+    theta = non_negative(angle_deg, "plunger angle")
     c = 1.0 - math.cos(math.radians(theta))
     cov = sum((np.outer(c * prop.measured * prop.mask(gg), c * prop.measured * prop.mask(gg))
                for gg in prop.gauges), np.zeros((len(prop.keys), len(prop.keys)))) / 3.0
@@ -342,7 +344,7 @@ def temperature_source(prop: Propagation, temperature_change: float,
     step at an unknown time between the Π0 stops that bracket a reading, their
     mean does not remove it: each deviation off by a rectangular ±α·ΔT·L/2,
     independent per deviation. ``temperature_change``: ΔT in K (or °C)."""
-    dt = _non_negative(temperature_change, "temperature change")
+    dt = non_negative(temperature_change, "temperature change")
     half = alpha * dt * prop.geometry.leg_length / 2.0
     u = half / math.sqrt(3.0)
     return _source(prop, "temperature", "rectangular", half, u, u**2 * np.eye(len(prop.keys)),
@@ -357,7 +359,7 @@ def stands_source(prop: Propagation, tolerance: float) -> Source:
     (∂Δ/∂m)·m (exact: Δ with every plane 1 mm further less Δ as fitted; orthocal.stands),
     independent between gauges. A Type B term where no noise estimate weighs a prior
     on them against the data (one value per deviation)."""
-    a = _non_negative(tolerance, "stand tolerance")
+    a = non_negative(tolerance, "stand tolerance")
     keys = list(prop.keys)
     per_mm = (deviations(keys, prop.geometry, prop.params, prop.mount_offsets + 1.0)
               - deviations(keys, prop.geometry, prop.params, prop.mount_offsets))

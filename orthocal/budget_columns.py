@@ -35,45 +35,34 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from orthocal.budget import MPE_SPAN_MM, STEEL_ALPHA, Propagation, form_vector
+from orthocal.budget import (
+    MPE_SPAN_MM,
+    STEEL_ALPHA,
+    Gauge,
+    Propagation,
+    form_vector,
+    non_negative,
+    per_name,
+)
 from orthocal.geometry import AXES
 from orthocal.joint_error import lead_deviation_change
 from orthocal.uncertainty import Uncertainty, combined, type_b
-
-Gauge = tuple[str, str]
 
 #: The budget's source names (orthocal.budget), so that a statement's basis and the
 #: budget table say the same.
 STRAIGHTNESS, TEMPERATURE, ANGLE = "leg straightness", "temperature", "plunger angle"
 
 
-def _non_negative(value: float, what: str) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and v >= 0.0):
-        raise ValueError(f"{what} must be a finite number ≥ 0, got {value!r}")
-    return v
-
-
-def _per_gauge(value: float | Mapping[Gauge, float], gauges: Sequence[Gauge],
-               what: str) -> dict[Gauge, float]:
-    if not isinstance(value, Mapping):
-        return dict.fromkeys(gauges, _non_negative(value, what))
-    missing = [g for g in gauges if g not in value]
-    if missing:
-        raise ValueError(f"{what}: no value for {missing}")
-    return {g: _non_negative(value[g], what) for g in gauges}
-
-
 def _per_leg(straightness: float | Sequence[float] | Mapping[str, float]
              ) -> dict[str, float]:
     if isinstance(straightness, Mapping):
-        return {a: _non_negative(straightness[a], "leg straightness") for a in straightness}
+        return {a: non_negative(straightness[a], "leg straightness") for a in straightness}
     if isinstance(straightness, Sequence) and not isinstance(straightness, str):
         if len(straightness) != len(AXES):
             raise ValueError(f"leg straightness: one value or [x, y, z], got {straightness!r}")
-        return {a: _non_negative(v, "leg straightness")
+        return {a: non_negative(v, "leg straightness")
                 for a, v in zip(AXES, straightness, strict=True)}
-    return dict.fromkeys(AXES, _non_negative(float(straightness), "leg straightness"))
+    return dict.fromkeys(AXES, non_negative(float(straightness), "leg straightness"))
 
 
 def _key_name(key: tuple[str, str, str]) -> str:
@@ -111,7 +100,7 @@ def mpe_columns(prop: Propagation, mpe: float | Mapping[Gauge, float], tag: str,
     """Each gauge's MPE: one input per deviation it measures, ±e over the span the
     deviation covers (in proportion below ``span_mm``). ``names``: the source's name
     per gauge (the budget names the indicator)."""
-    values = _per_gauge(mpe, prop.gauges, "gauge MPE")
+    values = per_name(mpe, prop.gauges, "gauge MPE")
     scale = np.ones(len(prop.keys)) if span_mm is None else \
         np.minimum(1.0, np.abs(prop.measured) / span_mm)
     cols, labels, sources = [], [], []
@@ -129,7 +118,7 @@ def resolution_columns(prop: Propagation, resolution: float | Mapping[Gauge, flo
                        names: Mapping[Gauge, str]) -> Uncertainty:
     """Each deviation is the difference of two readings quantised by ±r/2: two
     uniform inputs of ±r/2 (their sum triangular ±r)."""
-    values = _per_gauge(resolution, prop.gauges, "gauge resolution")
+    values = per_name(resolution, prop.gauges, "gauge resolution")
     cols, labels, sources = [], [], []
     for k, key in enumerate(prop.keys):
         gauge = (key[1], key[2])
@@ -145,7 +134,7 @@ def resolution_columns(prop: Propagation, resolution: float | Mapping[Gauge, flo
 def angle_columns(prop: Propagation, angle_deg: float, tag: str) -> Uncertainty:
     """A plunger θ off its direction reads cos θ of the travel: each gauge's
     deviations scaled by ±(1 − cos θ), one input per gauge."""
-    c = 1.0 - math.cos(math.radians(_non_negative(angle_deg, "plunger angle")))
+    c = 1.0 - math.cos(math.radians(non_negative(angle_deg, "plunger angle")))
     cols = [prop.K @ (c * prop.measured * prop.mask(g)) for g in prop.gauges]
     labels = [f"angle:{tag}:{''.join(g)}" for g in prop.gauges]
     return _stack(prop, cols, labels, [ANGLE] * len(cols))
@@ -155,7 +144,7 @@ def temperature_columns(prop: Propagation, temperature_change: float, tag: str,
                         alpha: float = STEEL_ALPHA) -> Uncertainty:
     """A leg grows by α·ΔT·L at an unknown time between the Π0 stops around a
     reading: each deviation off by ±α·ΔT·L/2, one input per deviation."""
-    half = alpha * _non_negative(temperature_change, "temperature change") \
+    half = alpha * non_negative(temperature_change, "temperature change") \
         * prop.geometry.leg_length / 2.0
     cols = [prop.K[:, k] * half for k in range(len(prop.keys))]
     labels = [f"temperature:{tag}:{_key_name(key)}" for key in prop.keys]
@@ -169,7 +158,7 @@ def joint_lead_columns(prop: Propagation, bounds_um_per_m: Mapping[str, float],
     the fit's sensitivity K. ``names``: the source's name per joint."""
     cols, labels, sources = [], [], []
     for i, axis in enumerate(AXES):
-        b = _non_negative(bounds_um_per_m.get(axis, 0.0), f"joint {axis}'s lead bound")
+        b = non_negative(bounds_um_per_m.get(axis, 0.0), f"joint {axis}'s lead bound")
         if b == 0.0:
             continue
         lead = np.zeros(3)
