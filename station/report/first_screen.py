@@ -214,7 +214,9 @@ def joint_items(result: RunResult) -> list[Item]:
             found, left = q.get(f"{n}.as_found"), q.get(f"{n}.as_left")
             if found is None or left is None:
                 continue
+            # rolled back: the offsets from before are restored, Δρ is as found again
             after = "unchanged (nothing written)" if _nothing_written(result) else \
+                f"{plus_minus(found)}, rolled back" if result.rolled_back is not None else \
                 "not verified (the correction written, not measured after)" \
                 if left.decision == "not verified" else plus_minus(left)
             out.append(Item(f"joint {n[-1]}", f"Δρ as found {plus_minus(found)} → as left "

@@ -52,6 +52,15 @@ def _shown(offsets: dict) -> list[str]:
             f"{offsets[a]:+.4f}".replace("-", "−") for a in "xyz"]
 
 
+def summary_lines(run_dir: Path) -> list[str]:
+    """The first screen of a finished run, as ``resume`` prints it."""
+    from station import report
+    from station.record.io import read_result
+
+    return report.summary_text(read_result(run_dir / "result.json"),
+                               verbose=False).splitlines()
+
+
 def test_a_rollback_is_a_state_of_the_run(tmp_path: Path, capsys) -> None:
     # result.json, report.html, the history and resume say "rolled back", with the
     # offsets restored; the prompt shows each joint's offset now → restored.
@@ -85,6 +94,13 @@ def test_a_rollback_is_a_state_of_the_run(tmp_path: Path, capsys) -> None:
     summary = " ".join(capsys.readouterr().out.split())  # lines wrap at 160
     assert "then rolled back" in summary and "ROLLED BACK" in summary
     assert all(p in summary for p in pairs)
+    # each joint is as found again: its as-left is the as-found figure, said so
+    q = {x["name"]: x for x in stored["statement"]}
+    for a in "xyz":
+        line = next(ln for ln in summary_lines(run_dir) if ln.startswith(f"  joint {a} "))
+        found = line.split("Δρ as found ")[1].split(" → ")[0]
+        assert line.endswith(f"→ as left {found}, rolled back (95 %)"), line
+        assert q[f"drho_{a}.as_found"]["decision"] != "within"
 
 
 def test_writeback_beyond_the_limit_is_refused_exit_1(tmp_path: Path, capsys) -> None:
