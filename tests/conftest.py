@@ -187,13 +187,15 @@ def orthocal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     """``orthocal(*argv, prepare=fn)`` runs the real command line in-process
     (``station.commands.cli.main``); ``prepare(rig, station)`` gets every virtual
     station the command starts (run, then resume or rollback), whose config gives
-    the devices :data:`CLI_TIMEOUT_S` and a report without figures (``figures=True``:
-    with them), and the rig records every register write."""
+    the devices :data:`CLI_TIMEOUT_S` (the controller ``controller_timeout_s`` where
+    given) and a report without figures (``figures=True``: with them), and the rig
+    records every register write."""
     from station.commands.cli import main
     from station.commands.simulate import launch as simulation
 
     def invoke(*argv: str, prepare: Prepare | None = None, out_dir: Path | None = None,
-               rig: Rig | None = None, figures: bool = False) -> CliOutcome:
+               rig: Rig | None = None, figures: bool = False,
+               controller_timeout_s: float = CLI_TIMEOUT_S) -> CliOutcome:
         rig = rig if rig is not None else Rig()
         real_start = simulation.start_station
 
@@ -206,7 +208,7 @@ def orthocal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 
             def config() -> dict[str, Any]:
                 c = describe()
-                c["controller"]["timeout_s"] = CLI_TIMEOUT_S
+                c["controller"]["timeout_s"] = controller_timeout_s
                 if not figures:  # as the builders' runs (builders.NO_FIGURES)
                     c.setdefault("report", dict(NO_FIGURES))
                 for ind in c["indicators"]:
