@@ -441,7 +441,10 @@ def rollback(options: ResumeOptions) -> int:
                                 f"{change_text(current, backup)}?"):
             raise RunFailed("rollback declined by the operator; offsets unchanged")
         restored = do_rollback(controller, run_dir, journal)
-    result = record_rollback(run_dir, current, restored, figures=config.report.figures)
+    # one time for the rollback: the journal's record of it (result.json, the history
+    # and a later refusal all say that second)
+    at = when_rolled_back(journal.state) or now_iso()  # journaled by do_rollback
+    result = record_rollback(run_dir, current, restored, at, figures=config.report.figures)
     if result is not None and result.finished:
         record_history(config, result, run_dir.parent)  # the entry says "rolled back"
     if options.json:

@@ -17,7 +17,6 @@ from station.engine.run_record import rolled_back
 from station.errors import say
 from station.record import io
 from station.record.result import RolledBack, RunResult
-from station.record.run_dir import now_iso
 from station.record.state import RunState
 
 
@@ -55,14 +54,15 @@ def nothing_to_undo(run_dir: Path, state: RunState, current: Mapping[str, float]
 
 
 def record_rollback(run_dir: Path, replaced: Mapping[str, float],
-                    restored: Mapping[str, float], figures: bool = True
+                    restored: Mapping[str, float], at: str, figures: bool = True
                     ) -> RunResult | None:
     """The run's result.json and report.html after a rollback: the rollback appended
-    to ``rollbacks`` (when, the offsets replaced, those restored), ``rolled_back`` this
-    one, and ``offsets_final`` the restored offsets. The updated record, or None where
-    the run has none (it stopped before its end: the journal's rollback records are
-    then what resume reads). A record that cannot be read or written is said in one
-    line; the offsets stay restored."""
+    to ``rollbacks`` (``at``: when, as the journal's record of it says, so that a
+    later refusal names the same second; the offsets replaced, those restored),
+    ``rolled_back`` this one, and ``offsets_final`` the restored offsets. The updated
+    record, or None where the run has none (it stopped before its end: the journal's
+    rollback records are then what resume reads). A record that cannot be read or
+    written is said in one line; the offsets stay restored."""
     path = Path(run_dir) / "result.json"
     if not path.exists():
         return None
@@ -71,7 +71,7 @@ def record_rollback(run_dir: Path, replaced: Mapping[str, float],
     except io.UnreadableResult as exc:  # torn, edited, or of a later version
         say(f"orthocal: the rollback is not recorded in result.json: {exc}")
         return None
-    back = RolledBack(at=now_iso(), replaced=dict(replaced), restored=dict(restored))
+    back = RolledBack(at=at, replaced=dict(replaced), restored=dict(restored))
     record = rolled_back(record, back)
     # validated once for the report, the history and the caller (write_result still
     # validates what it writes)

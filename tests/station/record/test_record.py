@@ -209,7 +209,8 @@ def test_a_rollback_is_appended_to_a_record_that_kept_only_the_last(tmp_path: Pa
     _, record = read_result(str(tmp_path))
     assert [b.model_dump() for b in record.rollback_history()] == [old]
     replaced, restored = {"x": 0.3, "y": 0.1, "z": -0.1}, {"x": 0.0, "y": 0.0, "z": 0.0}
-    after = record_rollback(tmp_path, replaced, restored, figures=False)
+    after = record_rollback(tmp_path, replaced, restored, "2026-12-07T18:24:29+00:00",
+                            figures=False)
     assert after is not None
     stored = json.loads((tmp_path / "result.json").read_text())
     assert stored["rollbacks"][0] == old and stored["rollbacks"][1]["replaced"] == replaced
