@@ -302,6 +302,10 @@ class ModbusAxisController(ModbusLink):
         role = "OFFSET" if self.map.has_role("OFFSET") else "TARGET"
         return max(1.0 / reg.scale for reg in self.map.axis_registers(role))
 
+    def target_resolution_mm(self) -> np.ndarray:
+        """One count of each axis's TARGET register (IAI: 0.01 mm; J15)."""
+        return np.array([1.0 / reg.scale for reg in self.map.axis_registers("TARGET")])
+
     def write_offsets(self, offsets: Vec3) -> np.ndarray:
         """Write o in one request, read it back, raise ReadbackMismatch unless every
         axis reads back the written count. Returns what was read back (mm)."""

@@ -118,6 +118,17 @@ class OffsetResolution(Protocol):
         ...
 
 
+class TargetResolution(Protocol):
+    """The step of the drive's targets: where a stop commanded ρ stands (J15)."""
+
+    def target_resolution_mm(self) -> np.ndarray:
+        """Each axis's target count (mm, shape (3,); 0: taken as continuous). A target
+        is rounded to it, so a test posture's joints stand up to half of it off, the
+        same at every cycle: the identification takes that out (docs/model.md, "The
+        drive's count")."""
+        ...
+
+
 @runtime_checkable
 class ZeroOffsets(OffsetResolution, Protocol):
     """The joints' zero offsets o, where the drive keeps them or the station holds
@@ -144,7 +155,7 @@ class ZeroOffsets(OffsetResolution, Protocol):
 
 
 @runtime_checkable
-class AxisController(Motion, ZeroOffsets, Protocol):
+class AxisController(Motion, ZeroOffsets, TargetResolution, Protocol):
     """A controller of the three axes as a run opens it: its motion, its zero
     offsets, and close()."""
 

@@ -84,6 +84,11 @@ class HeldOffsets:
     def offset_resolution_mm(self) -> float:
         return float(self.inner.offset_resolution_mm())
 
+    def target_resolution_mm(self) -> np.ndarray:
+        # The offsets held are whole counts of the targets (write_offsets): ρ + o
+        # rounds as ρ does, so the stops stand where the drive's own count puts them.
+        return np.asarray(self.inner.target_resolution_mm(), dtype=float)
+
     # everything else is the drive's (what it gives back, given back) -----------------
 
     @property

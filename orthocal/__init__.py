@@ -46,6 +46,7 @@ from orthocal.geometry import (
 )
 from orthocal.identification import Identification, cannot_identify, exact_jacobian, identify
 from orthocal.inputs import IdentificationError
+from orthocal.joint_count import CountedJoints, counted
 from orthocal.joint_error import (
     JointErrors,
     JointRangeError,
@@ -85,6 +86,7 @@ __all__ = [
     "AfterInterval",
     "Allowance",
     "Bounded",
+    "CountedJoints",
     "ErrorField",
     "ExpectedLackOfFit",
     "Geometry",
@@ -111,6 +113,7 @@ __all__ = [
     "coefficients",
     "combine",
     "contact_fraction",
+    "counted",
     "covariance_matrix",
     "coverage_factor",
     "deviation",

@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from orthocal.geometry import AXES, Geometry, split_params
+from orthocal.joint_count import JointModel
 from orthocal.measurement import Key, check_key, deviations, leg_reading
 from orthocal.noise import coverage_factor
 from orthocal.postures import plane_offset, posture, split_plane, stroke, tilt
@@ -354,7 +355,7 @@ def posture_joint_range(geometry: Geometry, strokes: Sequence[float] | None = No
 
 
 def joint_error_deviations(keys: Sequence[Key], geometry: Geometry, params,
-                           errors: JointErrors, direction: Direction = "forward",
+                           errors: JointModel, direction: Direction = "forward",
                            mount_offsets=None) -> np.ndarray:
     """Exact deviations Δ^s_{i,j} of a machine whose joints err by ``errors``: each
     reading at the joints ρ + ε(ρ, direction) of its test posture, less the one at
@@ -380,13 +381,14 @@ def joint_error_deviations(keys: Sequence[Key], geometry: Geometry, params,
 
 
 def joint_deviation_change(keys: Sequence[Key], geometry: Geometry, params,
-                           errors: JointErrors, mount_offsets=None) -> np.ndarray:
+                           errors: JointModel, mount_offsets=None) -> np.ndarray:
     """What the joints' errors ``errors`` (their bidirectional mean: the lost motion is
     the run's measured reversal's, docs/model.md "Lost motion") add to the deviations
     of the machine ``params``, exactly: :func:`joint_error_deviations` less
     :func:`orthocal.deviations` (mm). Subtracted from the measured deviations, what
     is left is what a machine with exact joints would have read (docs/model.md, "The
-    identification with joint tables")."""
+    identification with joint tables"); ``errors`` may be
+    :class:`orthocal.joint_count.CountedJoints`: the stops at the drive's count, (J15))."""
     exact = deviations(list(keys), geometry, params, mount_offsets)
     return joint_error_deviations(keys, geometry, params, errors, "mean",
                                   mount_offsets) - exact

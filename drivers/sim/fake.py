@@ -29,7 +29,7 @@ from drivers.sim.drive import default_soft_limits
 from drivers.sim.length_reference import VirtualReference
 from drivers.sim.machine import VirtualOrthoglide
 from drivers.sim.specs import MachineTruth
-from orthocal import plane_at
+from orthocal import counted, plane_at
 
 COUNT_MM = 0.001  # the drive's count: positions and offsets in whole µm
 
@@ -44,16 +44,13 @@ class SteppedClock:
         return self.t
 
 
-def _counts(values: Any) -> np.ndarray:
-    return np.round(np.asarray(values, dtype=float) / COUNT_MM) * COUNT_MM + 0.0
-
-
 class FakeAxes:
     """An AxisController (drivers.base) over a virtual Orthoglide on a stepped clock.
     ``alarm_on_move``: the drive goes into alarm (code 0x31) on that move (counting
     from 1) and stays there until reset; ``bad_readbacks``: how many offset writes
     from now on read back ``readback_off_mm`` off what was written (a register that
-    does not take what it is given)."""
+    does not take what it is given); ``count_mm``: the drive's count, of its targets,
+    positions and offsets alike (an IAI drive's 0.01 mm)."""
 
     name = "fake axes"
     held_by: HeldBy = "controller"  # the drive keeps its offsets (ZeroOffsets.held_by)
@@ -67,6 +64,11 @@ class FakeAxes:
         self.readback_off_mm = 0.005
         self.offset_writes: list[list[float]] = []
         self.moves_at_writes: list[int] = []  # how many moves preceded each write
+        self.count_mm = COUNT_MM
+
+    def _counts(self, values: Any) -> np.ndarray:
+        # the drives' own rounding (J15), so that the station's model of it is exact here
+        return counted(np.asarray(values, dtype=float), (self.count_mm,) * 3) + 0.0
 
     # --- Motion ---------------------------------------------------------------------
     def read_status(self) -> AxisStatus:
@@ -77,13 +79,13 @@ class FakeAxes:
                           alarm=s.alarm, estop=s.estop, alarm_code=s.alarm_code)
 
     def read_positions(self) -> np.ndarray:
-        return _counts(self.machine.actual())
+        return self._counts(self.machine.actual())
 
     def soft_limits(self) -> tuple[np.ndarray, np.ndarray]:
         return self.lo.copy(), self.hi.copy()
 
     def move(self, targets: Vec3, speed_mm_s: float | None = None) -> None:
-        t = _counts(targets)
+        t = self._counts(targets)
         if np.any(t < self.lo) or np.any(t > self.hi):
             raise MoveTimeout(self.name, f"target {t.tolist()} outside the soft limits")
         self.moves += 1
@@ -97,7 +99,8 @@ class FakeAxes:
         if status.alarm:
             raise AlarmError(self.name, "drive in alarm", status.alarm_code)
         here = self.read_positions()
-        if not status.in_position or np.max(np.abs(here - _counts(targets))) > tolerance_mm:
+        if (not status.in_position
+                or np.max(np.abs(here - self._counts(targets))) > tolerance_mm):
             raise MoveTimeout(self.name, f"not in position at {here.tolist()}")
         return here
 
@@ -121,23 +124,26 @@ class FakeAxes:
 
     # --- ZeroOffsets ----------------------------------------------------------------
     def read_offsets(self) -> np.ndarray:
-        return _counts(self.machine.offsets)
+        return self._counts(self.machine.offsets)
 
     def write_offsets(self, offsets: Vec3) -> np.ndarray:
-        wanted = _counts(offsets)
+        wanted = self._counts(offsets)
         self.offset_writes.append(wanted.tolist())
         self.moves_at_writes.append(self.moves)
         off = self.readback_off_mm if self.bad_readbacks > 0 else 0.0
         self.bad_readbacks = max(0, self.bad_readbacks - 1)
         self.machine.set_offsets(wanted + off)
         back = self.read_offsets()
-        if np.any(np.abs(back - wanted) > COUNT_MM / 2):
+        if np.any(np.abs(back - wanted) > self.count_mm / 2):
             raise ReadbackMismatch(self.name, f"offsets read back {back.tolist()}, "
                                    f"written {wanted.tolist()}")
         return back
 
     def offset_resolution_mm(self) -> float:
-        return COUNT_MM
+        return self.count_mm
+
+    def target_resolution_mm(self) -> np.ndarray:
+        return np.full(3, self.count_mm)
 
     def close(self) -> None:
         pass

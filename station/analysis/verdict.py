@@ -67,7 +67,7 @@ def converge_limit(converge_mm: float, offset_count_mm: float) -> float:
     return converge_mm + 0.5 * offset_count_mm
 
 
-def judge(ident: Identification, previous: Identification | None, converge_mm: float, limit: float,
+def judge(ident: Identification, previous: Identification | None, limit: float,
           target: dict[str, float] | None, passes_left: bool = False,
           joined: JoinedRounds | None = None, floor: dict[str, float] | None = None,
           passes: tuple[int, int] = (1, 0),
@@ -75,7 +75,10 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
     """The verdict on round ``ident`` (``previous``: the identification whose
     correction it verifies; None for the first measurement, judged against its
     own noise alone). Significant: beyond k standard errors of both rounds (of
-    the first alone) and beyond converge_mm (orthocal.loop.significant_corrections);
+    the first alone) and beyond ``limit``, converge_mm with half a count of the
+    drive's offsets (orthocal.loop.significant_corrections): a correction within
+    half a count is none the drive can take, and one a little beyond it would leave
+    the joint as far the other way;
     after a write-back, where the round cannot show the machine within ``limit``: on
     those axes, a leftover seen at 95 % (the rounds joined), and with no further pass
     of the round left (``passes_left`` False), any correction beyond the noise alone.
@@ -102,7 +105,7 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
         dof=ident.std_error_dof, previous_dof=previous.std_error_dof if previous else None,
         target=aim)
     sig = [n for n in beyond_noise
-           if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > converge_mm]
+           if abs(ident.parameters[n] - (aim or {}).get(n, 0.0)) > limit]
     values, ses = (joined[0], joined[1]) if joined else (ident.parameters, ident.std_errors)
     # what the data cannot decide (another model explaining them as well) is no
     # closer than it is, whatever the noise
@@ -118,7 +121,7 @@ def judge(ident: Identification, previous: Identification | None, converge_mm: f
                + apart.get(n, 0.0) >= limit]
     seen = shown_within(values, ses, ident.std_error_dof, target=target, sign=True)
     if not sig and previous is not None and out:
-        # converge_mm spares a correction too small to matter, where the machine can
+        # the limit spares a correction too small to matter, where the machine can
         # be shown within it. Where it cannot, the next step mounts every setup either
         # way: a further pass of the same machine, or a write and its verification.
         # Where the leftover is seen at 95 %, the write is taken: it writes the rounds'

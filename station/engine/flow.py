@@ -159,8 +159,10 @@ class Flow:
         # The joints' tables: what they make of the deviations is taken out before the
         # fit and the model test (station.analysis.joint_fit; the raw m is the record's)
         self.known = joints.of_run_config(ctx.config, tables_of(self.joint_tests))
-        fit = joint_fit.corrected(ctx.config, m, joints.round_tables(self.known,
-                                                                     self._moved(n)))
+        # and what the drive's count makes of them: each stop stood at a whole count (J15)
+        fit = joint_fit.corrected(ctx.config, m,
+                                  joints.round_tables(self.known, self._moved(n)),
+                                  ctx.devices.controller.target_resolution_mm())
         m = fit.measurement
         # With auto, every round chooses its model again: misplaced stands bias the
         # first round by (stand error × leg tilt), a misfit no model explains that
@@ -180,7 +182,7 @@ class Flow:
         self.record.lost_motion(reversal.fields(ctx.config, rev))
         self.record.joints(joints.fields(  # the measured B wins over a table's reversal
             self.known.with_reversal(rev.value), details_of(self.joint_tests),
-            joint_fit.words(self.known, fit.largest_um)))
+            joint_fit.words(self.known, fit)))
         reversal.check_overrun(ctx.config, rev)
         self.reversal = rev
         if carried is None:  # a carried round's layout is the earlier rounds' own
@@ -203,8 +205,8 @@ class Flow:
         left = extra_passes_allowed(n, proc.max_extra_passes, proc.max_iterations,
                                     proc.verify) - (len(passes) - 1)
         type_b = _type_b(ctx.config, ident, phase, self._leads())
-        judged = verdict.judge(ident, prev, proc.converge_mm,
-                               verdict.converge_limit(proc.converge_mm, count), self.target,
+        limit = verdict.converge_limit(proc.converge_mm, count)
+        judged = verdict.judge(ident, prev, limit, self.target,
                                passes_left=left > 0, joined=joined if n else None,
                                floor=floor, passes=(len(passes), left), type_b=type_b)
         sig = judged.significant

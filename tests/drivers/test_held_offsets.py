@@ -48,6 +48,9 @@ class Drive:
     def offset_resolution_mm(self) -> float:
         return 0.001
 
+    def target_resolution_mm(self) -> np.ndarray:
+        return np.full(3, 0.001)
+
     def stop(self) -> str:
         return "stopped"
 

@@ -111,13 +111,13 @@ def _ident(drho_um: float, se_um: float, **others_um: float) -> SimpleNamespace:
                            ambiguity_mm={})
 
 
-def _judged(own: SimpleNamespace, previous: SimpleNamespace | None, converge_mm: float = 0.002,
+def _judged(own: SimpleNamespace, previous: SimpleNamespace | None,
             limit: float = 0.0025, passes_left: bool = True) -> Any:
     """The verdict as the flow gives it: a verification judged on the rounds joined
     (the previous round's Δρ̂ moved by nothing here: its offsets aimed at zero)."""
     joined = None if previous is None else verdict.joined_round(
         own, verdict.joined_round(previous, None, None, None), None, None)
-    return judge(own, previous, converge_mm, limit, None, passes_left=passes_left,
+    return judge(own, previous, limit, None, passes_left=passes_left,
                  joined=joined)
 
 
@@ -131,7 +131,7 @@ def test_a_leftover_below_converge_mm_is_written_where_it_keeps_converged_out_of
         after_write = _judged(_ident(1.9, 0.4), _ident(0.0, 0.1), passes_left=left)
         assert after_write.verdict == "significant" and after_write.significant == ["drho_x"]
     # shown within the limit: converge_mm spares it
-    assert _judged(_ident(1.5, 0.1), _ident(0.0, 0.1), 0.003, 0.0035).verdict == "converged"
+    assert _judged(_ident(1.5, 0.1), _ident(0.0, 0.1), 0.0035).verdict == "converged"
     # a noisier look (1.7 ± 0.5) at a machine a quiet round fixed (0 ± 0.1): within the
     # noise of both, joined with it the machine is shown within 2.5 µm; nothing written
     quiet = _judged(_ident(1.7, 0.5), _ident(0.0, 0.1))
@@ -142,7 +142,7 @@ def test_a_leftover_below_converge_mm_is_written_where_it_keeps_converged_out_of
         unseen = _judged(_ident(1.0, 1.5), _ident(0.0, 1.5), passes_left=left)
         assert unseen.significant == [] and unseen.verdict == "unproven"
     # a first measurement keeps the floor: a machine within tolerance is left alone
-    assert judge(_ident(1.9, 0.4), None, 0.002, 0.0025, None).significant == []
+    assert judge(_ident(1.9, 0.4), None, 0.0025, None).significant == []
 
 
 def test_an_undecided_verification_writes_rather_than_mounts_the_same_machine_again(
@@ -162,11 +162,11 @@ def test_converged_rests_on_the_rounds_joined() -> None:
     # 1.0 ± 0.8 µm alone cannot be shown within 2.5 µm (1.0 + 1.96 × 0.8); joined
     # with the round before (0.7 ± 0.5 µm) it can, and nothing is written either way.
     previous = _ident(0.0, 0.8)
-    alone = judge(_ident(1.0, 0.8), previous, 0.002, 0.0025, None, passes_left=True)
+    alone = judge(_ident(1.0, 0.8), previous, 0.0025, None, passes_left=True)
     assert alone.verdict == "unproven"
     joined = ({"drho_x": 0.0007, "drho_y": 0.0, "drho_z": 0.0},
               dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0005))
-    both = judge(_ident(1.0, 0.8), previous, 0.002, 0.0025, None, passes_left=True,
+    both = judge(_ident(1.0, 0.8), previous, 0.0025, None, passes_left=True,
                  joined=joined)
     assert both.verdict == "converged" and both.significant == []
     assert both.shown_mm["drho_x"] == pytest.approx(0.0007 + 1.96 * 0.0005, rel=1e-3)
@@ -233,18 +233,18 @@ def test_a_verification_held_by_the_carried_bows_is_form_limited_only_where_they
     # Δρ̂ = 0 the passes could reach 1.96 × √(1.2² + (1.6² − 1.2²)/3) = 2.64 µm, not
     # 2.5, and without the floor 1.20: the bows hold it, no pass is taken
     own, previous = _ident(1.0, 1.6), _ident(0.0, 1.6)
-    held = judge(own, previous, 0.002, 0.0025, None, passes_left=True,
+    held = judge(own, previous, 0.0025, None, passes_left=True,
                  floor=dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0012), passes=(1, 2))
     assert held.verdict == "form-limited"
     # a floor of 0.6 µm: 1.96 × √(0.36 + 2.2/3) = 2.05 µm is within reach: measured again
-    light = judge(own, previous, 0.002, 0.0025, None, passes_left=True,
+    light = judge(own, previous, 0.0025, None, passes_left=True,
                   floor=dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0006), passes=(1, 2))
     assert light.verdict == "unproven"
     # no pass left, and the noise alone (1.96 × √(1.6² − 1.2²) = 2.07 µm) within it: still
     # the bows'; with a noisier round (2.5 µm: the noise alone is out too) it is not
-    last = judge(own, previous, 0.002, 0.0025, None, passes_left=False,
+    last = judge(own, previous, 0.0025, None, passes_left=False,
                  floor=dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0012), passes=(3, 0))
     assert last.verdict == "form-limited"
-    noisy = judge(_ident(1.0, 2.5), _ident(0.0, 2.5), 0.002, 0.0025, None, passes_left=False,
+    noisy = judge(_ident(1.0, 2.5), _ident(0.0, 2.5), 0.0025, None, passes_left=False,
                   floor=dict.fromkeys(("drho_x", "drho_y", "drho_z"), 0.0012), passes=(3, 0))
     assert noisy.verdict == "unproven"
