@@ -117,6 +117,13 @@ def _round_inputs(config: StationConfig, ident: orthocal.Identification) -> tupl
     return ident, given, planes, per_plane, form_fitted
 
 
+def largest_first(source: BudgetSource) -> tuple[int, str]:
+    """The order of a budget's sources: largest contribution first; ties (to a
+    nanometre: within another CPU's last bits) by name."""
+    return (-round(1e6 * max(v or 0.0 for v in source.contributions_mm.values())),
+            source.source)
+
+
 def stated_inputs(config: StationConfig) -> tuple[BudgetInputs, list[str], list[Instrument]]:
     """The budget's inputs (:func:`inputs`), those assumed in words, and the gauges as
     instruments: named by what identifies an instrument (its serial), not by its port."""
@@ -210,9 +217,7 @@ def fields(config: StationConfig, ident: orthocal.Identification,
     # orthocal's figures (JSON-ready, its pure maths) taken into the record's models here
     doc = gum.combine({n: float(v) for n, v in se.items()}, type_a_dof, trimmed)
     found = [BudgetSource.model_validate(s) for s in doc["sources"]]
-    # largest first; ties (to a nanometre: within another CPU's last bits) by name
-    found = [found[0], *sorted(found[1:], key=lambda s: (
-        -round(1e6 * max(v or 0.0 for v in s.contributions_mm.values())), s.source))]
+    found = [found[0], *sorted(found[1:], key=largest_first)]
     given, assumed, instruments = stated_inputs(config)
     return UncertaintyBudget(
         statement=statement, sources=found, combined_mm=_params(doc["combined_mm"]),

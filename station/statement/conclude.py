@@ -12,7 +12,7 @@ from orthocal.budget import STEEL_ALPHA
 from orthocal.numbers import finite
 from station.analysis import acceptance as accept
 from station.analysis import reversal
-from station.analysis.run_budget import inputs, stated_inputs
+from station.analysis.run_budget import inputs, largest_first, stated_inputs
 from station.record.model import MachineModel
 from station.record.result import Loop, Remaining
 from station.record.result_acceptance import Acceptance
@@ -79,8 +79,7 @@ def _budget(rounds: Rounds, machine: KnownMachine) -> UncertaintyBudget:
                                  u_mm=None if h is None else h / math.sqrt(3.0),
                                  contributions_mm=c)
                     for s, c in sources.items()),
-                   key=lambda s: (-max(v or 0.0 for v in s.contributions_mm.values()),
-                                  s.source))
+                   key=largest_first)
     given, assumed, instruments = stated_inputs(rounds.config)
     return UncertaintyBudget(
         statement="remaining.total" if rounds.verified else "identified", sources=rows,

@@ -148,10 +148,18 @@ def squareness_quantities(rounds: Rounds, machine: KnownMachine) -> list[Quantit
         m = joint.linear_marginal(grad[i])
         value = float(base[i])
         q = linear(f"squareness_{pair}", value, "mm/m", m, rule.square(value, m, undecided))
-        parts = (f"of the value, the axes' own tilt ({tilt}) {own[i]:+.3f} mm/m and the "
-                 f"shear the gaps and the offsets give the motions {value - own[i]:+.3f} mm/m")
+        parts = (f"of the value, the axes' own tilt ({tilt}) {_part(own[i])} and the "
+                 f"shear the gaps and the offsets give the motions {_part(value - own[i])}")
         out.append(q.model_copy(update={"basis": [*q.basis, parts]}))
     return out
+
+
+def _part(mm_per_m: float) -> str:
+    """A part of a squareness at the value's own precision (0.001 mm/m); one that
+    rounds to nothing is said so, not as a signed zero."""
+    if abs(mm_per_m) < 0.0005:
+        return "under 0.0005 mm/m"
+    return f"{mm_per_m:+.3f} mm/m"
 
 
 def reversal_quantities(rev: Reversal | None) -> list[Quantity]:
