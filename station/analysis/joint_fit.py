@@ -87,7 +87,7 @@ def corrected(config: StationConfig, m: Measurement, tables: JointErrors | None,
     count ``count_mm`` (x, y, z, mm: each stop commanded at (J15)) make of it
     (orthocal.joint_deviation_change: the tables' bidirectional mean, exact, at
     :func:`first_estimate`); ``m`` itself where no joint has a table or a count."""
-    counts = CountedJoints(_three(count_mm), tables)
+    counts = CountedJoints(three_counts(count_mm), tables)
     if (tables is None and not counts.any) or not m.deviations:
         return Corrected(m)
     geometry = config.machine.geometry()
@@ -110,7 +110,9 @@ def corrected(config: StationConfig, m: Measurement, tables: JointErrors | None,
                      counts.count_mm if counts.any else None)
 
 
-def _three(count_mm: Sequence[float] | np.ndarray | None) -> tuple[float, float, float]:
+def three_counts(count_mm: Sequence[float] | np.ndarray | None
+                 ) -> tuple[float, float, float]:
+    """The drive's count per joint (x, y, z, mm) as a tuple; None: none (0)."""
     if count_mm is None:
         return (0.0, 0.0, 0.0)
     x, y, z = (float(v) for v in count_mm)

@@ -352,6 +352,8 @@ class Flow:
             target=dict(self.target), reversal=self.reversal, joints=self.known,
             offsets_before=None if before is None else results.known(before),
             offset_count_mm=self.ctx.devices.controller.offset_resolution_mm(),
+            target_count_mm=joint_fit.three_counts(
+                self.ctx.devices.controller.target_resolution_mm()),
             limits=(c.lo, c.hi), stopped=stopped)
 
     # --- accuracy at the tool ------------------------------------------------------

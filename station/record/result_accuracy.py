@@ -115,6 +115,18 @@ class Compensated(Closed):
         description="per grid point (accuracy.field.points_mm), the |E| expected, mm")
 
 
+class DriveCount(Closed):
+    """What the drive's count does at the tool (docs/model.md, "The drive's count",
+    (J17)): a point commanded between counts is reached with each joint up to half a
+    count off. The tool's figures are the geometry's and leave this out."""
+
+    target_mm: Axis3 = Field(description="each joint's target count, mm")
+    rms_mm: float = Field(description="RMS |δP| over the stated grid, each joint uniform "
+                                      "within ±half its count")
+    max_mm: float = Field(description="the largest |δP| over the grid, the joints at the "
+                                      "corners of ±half their counts")
+
+
 class Accuracy(Closed):
     """accuracy: the tool-point error over the workspace box before and after the
     calibration, for the machine all rounds measured (docs/design.md, "Accuracy at
@@ -155,4 +167,7 @@ class Accuracy(Closed):
                     "controller")
     reversal: ToolReversal | None = Field(None, description="absent without a reversal "
                                                             "estimate")
+    drive_count: DriveCount | None = Field(
+        None, description="absent where the joints are taken as continuous (results "
+                          "from before the drive's count was modelled)")
     assumes: list[str] = Field(description="what the figures take as known, in words")

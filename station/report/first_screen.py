@@ -309,7 +309,15 @@ def joints_item(result: RunResult) -> Item | None:
         word = "stated" if joints.bound.given else "assumed"
         parts.append(f"{', '.join(bounded)} {word} within ±{fmt(b, 0)} µm/m from Π0, "
                      "not measured" if b else f"{', '.join(bounded)} {word} exact")
-    return Item("joints", "the tool's figures take " + "; ".join(parts))
+    text = "the tool's figures take " + "; ".join(parts)
+    acc = result.accuracy
+    count = acc.drive_count if isinstance(acc, Accuracy) else None
+    if count is not None:  # (J17): the figures are the geometry's, the count is apart
+        counts = sorted({v for v in count.target_mm.values() if v})
+        text += (f"; the drive's {'/'.join(f'{v:g}' for v in counts)} mm count adds up to "
+                 f"{1000 * count.max_mm:.1f} µm ({1000 * count.rms_mm:.1f} µm RMS) at the "
+                 "tool, not in these figures")
+    return Item("joints", text)
 
 
 def tool_items(result: RunResult) -> list[Item]:

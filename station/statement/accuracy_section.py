@@ -10,6 +10,7 @@ import numpy as np
 
 from orthocal import GAP_NAMES, TILT_NAMES
 from orthocal.accuracy import error_field
+from orthocal.joint_count import count_at_tool
 from orthocal.numbers import finite
 from orthocal.tool_interval import assumes
 from station.analysis import accuracy_statement as acc_
@@ -98,6 +99,27 @@ def joint_words(tool: ToolFigures) -> str:
             "(result.json's joints): " + "; ".join(basis))
 
 
+def drive_count(rounds: Rounds) -> rec.DriveCount | None:
+    """What the drive's count does at the tool over the stated grid, (J17); None where
+    the joints are taken as continuous."""
+    c = rounds.target_count_mm
+    if not any(v > 0 for v in c):
+        return None
+    rms, top = count_at_tool(rounds.points, rounds.config.machine.geometry(), c)
+    return rec.DriveCount(target_mm=dict(zip("xyz", c, strict=True)), rms_mm=rms,
+                          max_mm=top)
+
+
+def drive_count_words(count: rec.DriveCount) -> str:
+    """The assumption the tool's figures make of the drive's count, in words."""
+    c = ", ".join(f"{a} {v:g}" for a, v in count.target_mm.items()) + " mm"
+    return (f"each joint at whole counts of the drive's targets ({c}): a point between "
+            f"counts is reached with each joint up to half a count off, "
+            f"{1000 * count.rms_mm:.1f} µm RMS and up to {1000 * count.max_mm:.1f} µm at "
+            "the tool over the workspace, which these figures leave out (model.md, \"The "
+            "drive's count\")")
+
+
 def accuracy_section(rounds: Rounds, machine: KnownMachine, tool: ToolFigures,
                      q: Mapping[str, Quantity]) -> rec.Accuracy:
     """``accuracy`` from the statement: the tool's figures, the squareness, the tilts
@@ -111,6 +133,9 @@ def accuracy_section(rounds: Rounds, machine: KnownMachine, tool: ToolFigures,
                        *(["gap"] if lay is not None and lay.gaps() else [])])
     words = [w.replace("encoders exact up to their zero", joint_words(tool))
              for w in assumes(fitted, cfg.writeback.frame)]
+    counted = drive_count(rounds)
+    if counted is not None:  # before the last: the intervals hold under all above
+        words.insert(max(len(words) - 1, 0), drive_count_words(counted))
     fit = rounds.layout_fit
     form = None if lay is None or fit is None else \
         run_budget.form_of_layout(cfg, fit, lay.names)
@@ -152,7 +177,7 @@ def accuracy_section(rounds: Rounds, machine: KnownMachine, tool: ToolFigures,
         field=rec.ErrorField(points_mm=np.round(rounds.points, 4).tolist(),
                              before_mm=np.round(tool.before.field.field, 6).tolist(),
                              after_mm=np.round(tool.after.field.field, 6).tolist()),
-        compensated=_compensated(rounds, tool), assumes=words)
+        compensated=_compensated(rounds, tool), drive_count=counted, assumes=words)
 
 
 def machine_model(rounds: Rounds, machine: KnownMachine) -> MachineModel:

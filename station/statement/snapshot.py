@@ -41,7 +41,7 @@ class Rounds:
     the drive's offset count, the soft limits (``limits``), why the loop stopped
     (``stopped``), and each joint's positioning error as the run took it (``joints``:
     station.analysis.joints; None: every joint exact, as before the joints were
-    modelled)."""
+    modelled), and the drive's count of each joint's target (``target_count_mm``)."""
 
     config: StationConfig
     idents: tuple[Identification, ...]
@@ -57,6 +57,8 @@ class Rounds:
     limits: accuracy.Limits | None
     stopped: str
     joints: JointKnowledge | None = None
+    #: each joint's target count (the drive's, mm; 0: continuous): model.md (J15), (J17)
+    target_count_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @cached_property
     def layout(self) -> accuracy.Layout | None:

@@ -11,7 +11,7 @@ import pytest
 
 import orthocal
 from drivers.registers import Register, to_counts
-from orthocal.joint_count import CountedJoints, counted
+from orthocal.joint_count import CountedJoints, count_at_tool, counted
 from orthocal.joint_error import JointErrors, joint_deviation_change
 
 G = orthocal.Geometry()
@@ -85,3 +85,27 @@ def test_counted_joints_stand_on_their_tables_where_they_were_commanded() -> Non
     np.testing.assert_allclose(both.joints(rho), screws.joints(counted(rho, IAI)), atol=1e-15)
     assert both.any and not CountedJoints((0.0, 0.0, 0.0)).any
     np.testing.assert_array_equal(CountedJoints((0.0, 0.0, 0.0)).joints(rho), rho)
+
+
+def test_at_the_tool_the_count_is_its_closed_form_at_the_centre_and_its_draws_elsewhere(
+) -> None:
+    # (J17) at P = 0, J = I: RMS c/2 (three uniform ±c/2), max c·√3/2 (a corner)
+    rms, top = count_at_tool([[0.0, 0.0, 0.0]], G, IAI)
+    assert rms == pytest.approx(0.005, rel=1e-12) and top == pytest.approx(
+        0.01 * math.sqrt(3) / 2, rel=1e-12)
+    # over the paper's workspace, against the exact kinematics with the joints drawn
+    axis = np.linspace(-100.0, 60.0, 9)
+    grid = np.array(np.meshgrid(axis, axis, axis, indexing="ij")).reshape(3, -1).T
+    rms, top = count_at_tool(grid, G, IAI)
+    rng = np.random.default_rng(3)
+    rho = orthocal.inverse(grid, G)
+    drawn = [np.linalg.norm(orthocal.forward(rho + rng.uniform(-0.005, 0.005, rho.shape), G)
+                            - grid, axis=1) for _ in range(40)]
+    mc = np.sqrt(np.mean(np.square(drawn)))
+    assert 0.97 * mc < rms < 1.03 * mc, (rms, mc)
+    corner = max(np.max(np.linalg.norm(orthocal.forward(rho + 0.005 * np.array(s), G) - grid,
+                                       axis=1))
+                 for s in np.array(np.meshgrid(*[(-1, 1)] * 3)).reshape(3, -1).T)
+    assert top == pytest.approx(corner, rel=1e-3)
+    assert rms > 0.005 and top > 0.0087  # the corners of the workspace reach further
+    assert count_at_tool(grid, G, (0.0, 0.0, 0.0)) == (0.0, 0.0)

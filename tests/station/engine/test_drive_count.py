@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 from fakes import FakeRig, fake_config, run_on
 
+from station import report
+
 #: off the 0.01 mm grid, so that no offset the drive can hold zeroes a joint
 TRUE = (0.6034, -0.4071, 0.9088)
 IAI_MM = 0.01
@@ -44,6 +46,22 @@ def test_a_coarse_count_is_taken_out_and_a_square_machine_stays_square(tmp_path:
     assert "the drive's count (x 0.01, y 0.01, z 0.01 mm" in words
     up_to = float(words.split("up to ")[-1].split(" µm")[0])
     assert 0.5 < up_to < 5.0, words
+
+
+def test_what_the_count_does_at_the_tool_is_stated_once_and_shown(tmp_path: Path) -> None:
+    _, result, _ = _run(tmp_path, counted_by_station=True)
+    count = result["accuracy"]["drive_count"]
+    assert count["target_mm"] == {"x": IAI_MM, "y": IAI_MM, "z": IAI_MM}
+    # (J17) over the paper's workspace: at least the centre's c/2 and c·√3/2, and
+    # within a few per cent of them (the legs tilt at most 19°)
+    assert 0.005 <= count["rms_mm"] < 0.0055 and 0.00866 <= count["max_mm"] < 0.016
+    said = (f"{1000 * count['rms_mm']:.1f} µm RMS and up to "
+            f"{1000 * count['max_mm']:.1f} µm at the tool")
+    assert sum(said in w for w in result["accuracy"]["assumes"]) == 1
+    joints = [ln for ln in report.summary_text(result).splitlines()
+              if ln.strip().startswith("joints")]
+    assert len(joints) == 1 and (f"the drive's 0.01 mm count adds up to "
+                                 f"{1000 * count['max_mm']:.1f} µm") in joints[0], joints
 
 
 def test_left_in_the_count_reads_as_tilts_and_shims(tmp_path: Path) -> None:
