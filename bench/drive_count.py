@@ -19,12 +19,8 @@ do: the readings at the stops, the counts and the journal do not depend on it).
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
-import os
 import sys
-import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -35,6 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench.runs import cli_json  # noqa: E402
 from orthocal import AXES  # noqa: E402
 
 TILTS = ("tilt_yx", "tilt_zx", "tilt_zy")
@@ -50,16 +47,8 @@ BEFORE: dict[str, Any] = {"runs": [
 def one_run(seed: int, scale: str) -> dict[str, Any]:
     """``orthocal run --simulate --profile iai-pcon-direct --seed SEED`` in this
     process, its output kept off the terminal: the result document."""
-    os.environ.setdefault("ORTHOCAL_SIM_TIME_SCALE", scale)
-    from station.commands.cli import main
-
-    with tempfile.TemporaryDirectory(prefix="orthocal-count-") as tmp:
-        out = io.StringIO()
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-            main(["run", "--simulate", "--profile", "iai-pcon-direct", "--seed", str(seed),
-                  "--yes", "--json", "--out", tmp])
-    result: dict[str, Any] = json.loads(out.getvalue())
-    return result
+    return cli_json(["run", "--simulate", "--profile", "iai-pcon-direct", "--seed", str(seed)],
+                    scale)
 
 
 def joints_left_um(result: dict[str, Any]) -> np.ndarray:

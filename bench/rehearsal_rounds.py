@@ -23,12 +23,8 @@ do: the readings at the stops, the counts and the journal do not depend on it).
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
-import os
 import sys
-import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -39,6 +35,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench.runs import cli_json  # noqa: E402
 from orthocal import AXES  # noqa: E402
 
 DRHO = [f"drho_{a}" for a in AXES]
@@ -59,16 +56,7 @@ BEFORE = {
 def one_run(seed: int, scale: str) -> dict[str, Any]:
     """``orthocal run --simulate examples/rehearsal.toml --seed SEED`` in this process,
     its output kept off the terminal: the result document."""
-    os.environ.setdefault("ORTHOCAL_SIM_TIME_SCALE", scale)
-    from station.commands.cli import main
-
-    with tempfile.TemporaryDirectory(prefix="orthocal-rehearsal-") as tmp:
-        out = io.StringIO()
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-            main(["run", "--simulate", str(REHEARSAL), "--seed", str(seed), "--yes",
-                  "--json", "--out", tmp])
-    result: dict[str, Any] = json.loads(out.getvalue())
-    return result
+    return cli_json(["run", "--simulate", str(REHEARSAL), "--seed", str(seed)], scale)
 
 
 def rounds_of(result: dict[str, Any]) -> tuple[list[dict[str, Any]], np.ndarray]:
