@@ -15,6 +15,7 @@ from station.analysis.joints import positioning_input
 from station.analysis.run_budget import inputs
 from station.config import StationConfig
 from station.record.quantity_text import plus_minus, um
+from station.record.result_accuracy import DriveCount
 from station.record.result_statement import CONTROLLER_ROUTES, AdviceItem, Quantity
 from station.statement import decisions as rule
 
@@ -58,14 +59,18 @@ def _rails(q: Mapping[str, Quantity], rail_mm: float) -> list[AdviceItem]:
     return out
 
 
-def _controller(q: Mapping[str, Quantity]) -> list[AdviceItem]:
+def _controller(q: Mapping[str, Quantity], count: DriveCount | None) -> list[AdviceItem]:
     c, a = q.get("tool.compensated.rms"), q.get("tool.after.rms")
     if c is None or a is None or c.decision != rule.GAIN:
         return []
+    # the geometry's figures leave the drive's count out; where the drive counts coarsely
+    # the gain is said beside what the count leaves at the tool either way (J17)
+    either = "" if count is None else \
+        f" (the drive's count adds {um(count.rms_mm)} µm RMS at the tool either way)"
     return [AdviceItem(
         id="controller", rests_on=[a.name, c.name],
         text=(f"put the identified geometry into the controller ({CONTROLLER_ROUTES}): the tool's "
-              f"RMS error falls from {um(a.value)} to {um(c.value)} µm"))]
+              f"RMS error falls from {um(a.value)} to {um(c.value)} µm{either}"))]
 
 
 def _plays(q: Mapping[str, Quantity]) -> list[AdviceItem]:
@@ -165,17 +170,19 @@ def _inputs(config: StationConfig, q: Mapping[str, Quantity],
 def advice(config: StationConfig, quantities: list[Quantity], undecided_type_b: list[str],
            converged: bool, remedy: str | None,
            joints_share: Mapping[str, float] | None = None,
-           assumed_joints: Sequence[str] = ()) -> list[AdviceItem]:
+           assumed_joints: Sequence[str] = (),
+           drive_count: DriveCount | None = None) -> list[AdviceItem]:
     """Every piece of advice for the statement's ``quantities`` (module docstring);
     ``undecided_type_b``: the quantities the stated inputs alone keep undecided
     (station.statement.conclude), ``remedy``: what would let an unconverged loop
     converge (the verdict's words); ``joints_share``: the assumed joints' share of the
     tool's figures (station.statement.tool_figures.ToolFigures.assumed_share) and
-    ``assumed_joints`` those joints."""
+    ``assumed_joints`` those joints; ``drive_count``: what the drive's count does at the
+    tool (accuracy.drive_count), which the geometry's figures leave out."""
     q = {x.name: x for x in quantities}
     rail_mm = config.machine.rho_max - config.machine.rho_min
     out = _undecided(q) or _rails(q, rail_mm)
-    out += _controller(q) + _joint_tables(q) + _plays(q)
+    out += _controller(q, drive_count) + _joint_tables(q) + _plays(q)
     out += _joint_tests(config, joints_share, assumed_joints)
     out += _inputs(config, q, undecided_type_b)
     if remedy:

@@ -157,7 +157,8 @@ def conclude(rounds: Rounds, stopped: Loop, remedy: str | None) -> Conclusion:
     acc = accuracy_section(rounds, machine, tool, {q.name: q for q in quantities})
     said = advice(rounds.config, quantities, _undecided_by_inputs(quantities, machine),
                   converged, remedy, joints_share=tool.assumed_share,
-                  assumed_joints=[] if tool.joints is None else tool.joints.assumed)
+                  assumed_joints=[] if tool.joints is None else tool.joints.assumed,
+                  drive_count=acc.drive_count)
     _advice_into(acc, rounds, said)
     return Conclusion(
         statement=quantities,

@@ -15,6 +15,10 @@ from fakes import FakeRig, fake_config, run_on
 from orthocal.lost_motion import Reversal, standing_out
 from station import report
 from station.analysis.reversal import advice
+from station.record.result_accuracy import DriveCount
+from station.record.result_statement import Quantity
+from station.statement.advice import advice as statement_advice
+from station.statement.decisions import GAIN, NO_GAIN
 
 NOISE_ONLY = Reversal(value={"x": 0.0004, "y": -0.0001, "z": -0.0002},
                       std_errors={"x": 0.00035, "y": 0.00035, "z": 0.00035}, dof=40.0,
@@ -108,3 +112,27 @@ def _todo(text: str) -> list[str]:
             break
         out.append(ln.strip())
     return out
+
+
+def _tool(name: str, value_mm: float, decision: str | None) -> Quantity:
+    return Quantity(name=name, value=value_mm, unit="mm", expanded=None,
+                    interval_95=(0.5 * value_mm, 1.5 * value_mm), k=None, dof=None,
+                    decision=decision, basis=[])
+
+
+@pytest.mark.parametrize("count", [None, DriveCount(target_mm={"x": 0.01, "y": 0.01,
+                                                              "z": 0.01},
+                                                    rms_mm=0.0052, max_mm=0.0145)])
+def test_the_geometry_advised_says_what_the_drives_count_leaves_either_way(
+        count: DriveCount | None) -> None:
+    # (J17): the tool's figures are the geometry's; a 0.01 mm drive adds 5.2 µm RMS
+    q = [_tool("tool.after.rms", 0.0016, None), _tool("tool.compensated.rms", 0.0002, GAIN)]
+    said = statement_advice(fake_config(), q, [], True, None, drive_count=count)
+    (item,) = [a for a in said if a.id == "controller"]
+    assert "falls from 1.6 to 0.2 µm" in item.text
+    either = "(the drive's count adds 5.2 µm RMS at the tool either way)"
+    assert (either in item.text) is (count is not None)
+    # no gain: no advice, count or not
+    q[1] = _tool("tool.compensated.rms", 0.0015, NO_GAIN)
+    assert not [a for a in statement_advice(fake_config(), q, [], True, None, drive_count=count)
+                if a.id == "controller"]
