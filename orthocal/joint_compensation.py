@@ -31,6 +31,7 @@ import numpy as np
 
 from orthocal.accuracy import DIFF_STEP, parameter_vector
 from orthocal.geometry import AXES, Geometry, split_params
+from orthocal.joint_count import count_vector
 from orthocal.joint_error import Direction, JointErrors, JointRangeError, JointTable
 from orthocal.kinematics import forward, inverse
 
@@ -321,7 +322,42 @@ def joint_residual(points, geometry: Geometry, theta_c, tables: JointErrors,
         half[:, i], std[:, i] = _joint_left(tables.table(axis), rho[:, i], flags[i],
                                             bounds_um_per_m[i], geometry.leg_length)
     J = joint_sensitivity(p, geometry, theta_c)
+    return JointResidual(half, std, J, *_at_tool(J, half, std))
+
+
+def _at_tool(J: np.ndarray, half: np.ndarray, std: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Per point, what joints off by up to ``half`` (n, 3), with standard uncertainties
+    ``std`` (n, 3), do at the tool through J (n, 3, 3): the bound max |J·δ| over the
+    box |δ_i| ≤ half_i (at a corner; ±δ alike, so four corners), and
+    sqrt(Σ_i |J_i|²·std_i²)."""
     corners = np.einsum("nij,cj,nj->nci", J, _CORNERS, half)  # (n, 4, 3)
     bound = np.sqrt(np.max(np.sum(corners**2, axis=-1), axis=1))
-    tool_std = np.sqrt(np.einsum("nij,nj->n", J**2, std**2))
-    return JointResidual(half, std, J, bound, tool_std)
+    return bound, np.sqrt(np.einsum("nij,nj->n", J**2, std**2))
+
+
+def count_at_tool(points, geometry: Geometry, count_mm: Sequence[float] | np.ndarray
+                  ) -> tuple[float, float]:
+    """What the drive's count does at the tool of the nominal machine over ``points``
+    (N, 3), mm (docs/model.md (J17)): a point between counts is reached with each joint
+    up to c_j/2 off (J15), uniform, so the tool stands δP = J·δρ off. Returns (RMS of
+    the standard |δP|, E|δP|² = Σ_j |J_j|²·c_j²/12; the largest bound, at a corner of
+    ±c/2) over the points. At P = 0, J = I: c/2 and c·√3/2 for three equal counts.
+
+    J is the nominal machine's in closed form, the inverse of ∂ρ/∂p of
+    ρ_i = p_i + sqrt(L² − p_j² − p_k²), not :func:`joint_sensitivity`'s central
+    differences (2e-10 off at P = 0): the check values are exact."""
+    p = np.atleast_2d(np.asarray(points, dtype=float))
+    c = count_vector(count_mm)
+    L2 = geometry.leg_length ** 2
+    m = np.empty((len(p), 3, 3))
+    for i in range(3):
+        j, k = [n for n in range(3) if n != i]
+        root = np.sqrt(L2 - p[:, j] ** 2 - p[:, k] ** 2)
+        m[:, i, i] = 1.0
+        m[:, i, j] = -p[:, j] / root
+        m[:, i, k] = -p[:, k] / root
+    J = np.linalg.inv(m)  # ∂P/∂ρ
+    half = np.broadcast_to(c / 2.0, p.shape)
+    bound, std = _at_tool(J, half, np.broadcast_to(c / np.sqrt(12.0), p.shape))
+    return float(np.sqrt(np.mean(std**2))), float(np.max(bound))

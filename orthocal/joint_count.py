@@ -5,7 +5,8 @@ counts of its TARGET registers (IAI: 0.01 mm), so a joint commanded ρ stands at
 
 (half away from zero), up to c/2 from ρ, the same at every cycle. The test postures'
 L·cos α are no whole counts: what (J15) makes of the deviations is systematic, and the
-identification takes it out as it does a joint table's, (J14).
+identification takes it out as it does a joint table's, (J14). What the count leaves at
+the tool, (J17), is ``orthocal.joint_compensation.count_at_tool``'s.
 
 Pure: numbers in, numbers out. The drivers round a target by the same rule
 (``drivers.registers.to_counts``); a test holds the two together.
@@ -19,16 +20,23 @@ from typing import Protocol
 
 import numpy as np
 
-from orthocal.geometry import AXES, Geometry
+from orthocal.geometry import AXES
+
+
+def count_vector(count_mm: Sequence[float] | np.ndarray) -> np.ndarray:
+    """Each joint's count (x, y, z, mm; 0: taken as continuous) as an array (3,);
+    ValueError unless three finite counts ≥ 0."""
+    c = np.asarray(count_mm, dtype=float).reshape(-1)
+    if c.shape != (3,) or np.any(~np.isfinite(c)) or np.any(c < 0):
+        raise ValueError(f"count_mm must be three counts ≥ 0 (x, y, z), got {count_mm!r}")
+    return c
 
 
 def counted(rho, count_mm: Sequence[float] | np.ndarray) -> np.ndarray:
     """(J15): each joint of ``rho`` (..., 3), mm, as a drive whose count is
     ``count_mm`` (x, y, z; 0: a joint taken as continuous) holds it."""
     rho = np.asarray(rho, dtype=float)
-    c = np.asarray(count_mm, dtype=float).reshape(-1)
-    if c.shape != (3,) or np.any(~np.isfinite(c)) or np.any(c < 0):
-        raise ValueError(f"count_mm must be three counts ≥ 0 (x, y, z), got {count_mm!r}")
+    c = count_vector(count_mm)
     # the drivers' rule (drivers.registers.to_counts), on arrays: the quotient first
     # rounded to 9 decimals so that binary noise (1.0005/0.001 = 1000.4999999999999)
     # rounds as the decimal value does, then half away from zero
@@ -70,30 +78,3 @@ def count_words(count_mm: Sequence[float]) -> str:
     """'x 0.01, y 0.01, z 0.01 mm': each joint's count, for the record's words."""
     return ", ".join(f"{a} {float(v):g}" for a, v in zip(AXES, count_mm, strict=True)) + " mm"
 
-
-def count_at_tool(points, geometry: Geometry, count_mm: Sequence[float] | np.ndarray
-                  ) -> tuple[float, float]:
-    """What the count does at the tool of the nominal machine over ``points`` (N, 3),
-    mm: a point between counts is reached with each joint up to c_j/2 off (J15), so
-    the tool stands δP = J·δρ off, J = ∂P/∂ρ. Returns (RMS, max) over the points, mm,
-    (J17): the RMS with each δρ_j uniform on ±c_j/2, E|δP|² = Σ_j |J_j|²·c_j²/12; the
-    max over the corners of that box, max |J·(±c/2)|. At P = 0, J = I: c/2 and
-    c·√3/2 for three equal counts."""
-    p = np.atleast_2d(np.asarray(points, dtype=float))
-    c = np.asarray(count_mm, dtype=float).reshape(-1)
-    if c.shape != (3,) or np.any(~np.isfinite(c)) or np.any(c < 0):
-        raise ValueError(f"count_mm must be three counts ≥ 0 (x, y, z), got {count_mm!r}")
-    L2 = geometry.leg_length ** 2
-    # ∂ρ_i/∂p of ρ_i = p_i + sqrt(L² − p_j² − p_k²) (the nominal inverse kinematics)
-    m = np.empty((len(p), 3, 3))
-    for i in range(3):
-        j, k = [n for n in range(3) if n != i]
-        root = np.sqrt(L2 - p[:, j] ** 2 - p[:, k] ** 2)
-        m[:, i, i] = 1.0
-        m[:, i, j] = -p[:, j] / root
-        m[:, i, k] = -p[:, k] / root
-    jac = np.linalg.inv(m)  # ∂P/∂ρ
-    rms = np.sqrt(np.mean(np.sum(jac ** 2 * (c ** 2 / 12.0)[None, None, :], axis=(1, 2))))
-    corners = np.array(np.meshgrid(*[(-0.5, 0.5)] * 3, indexing="ij")).reshape(3, -1)
-    reach = np.linalg.norm(jac @ (c[:, None] * corners), axis=1)  # (N, 8)
-    return float(rms), float(np.max(reach))

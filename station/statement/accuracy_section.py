@@ -8,9 +8,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from orthocal import GAP_NAMES, TILT_NAMES
+from orthocal import AXES, GAP_NAMES, TILT_NAMES
 from orthocal.accuracy import error_field
-from orthocal.joint_count import count_at_tool
+from orthocal.joint_compensation import count_at_tool
+from orthocal.joint_count import count_words
 from orthocal.numbers import finite
 from orthocal.tool_interval import assumes
 from station.analysis import accuracy_statement as acc_
@@ -106,13 +107,13 @@ def drive_count(rounds: Rounds) -> rec.DriveCount | None:
     if not any(v > 0 for v in c):
         return None
     rms, top = count_at_tool(rounds.points, rounds.config.machine.geometry(), c)
-    return rec.DriveCount(target_mm=dict(zip("xyz", c, strict=True)), rms_mm=rms,
+    return rec.DriveCount(target_mm=dict(zip(AXES, c, strict=True)), rms_mm=rms,
                           max_mm=top)
 
 
 def drive_count_words(count: rec.DriveCount) -> str:
     """The assumption the tool's figures make of the drive's count, in words."""
-    c = ", ".join(f"{a} {v:g}" for a, v in count.target_mm.items()) + " mm"
+    c = count_words([count.target_mm[a] or 0.0 for a in AXES])
     return (f"each joint at whole counts of the drive's targets ({c}): a point between "
             f"counts is reached with each joint up to half a count off, "
             f"{1000 * count.rms_mm:.1f} µm RMS and up to {1000 * count.max_mm:.1f} µm at "

@@ -11,7 +11,8 @@ import pytest
 
 import orthocal
 from drivers.registers import Register, to_counts
-from orthocal.joint_count import CountedJoints, count_at_tool, counted
+from orthocal.joint_compensation import count_at_tool
+from orthocal.joint_count import CountedJoints, counted
 from orthocal.joint_error import JointErrors, joint_deviation_change
 
 G = orthocal.Geometry()
