@@ -26,6 +26,11 @@ from station.record.journal_file import read_journal
 #: verification never measured again (two cycles of the tests' 2 µm gauges cannot
 #: show ±converge_mm, and such a run ends "not-converged", saying so; the tests of
 #: that rule, in test_closed_loop_run and test_interrupt, allow further passes).
+#: docs/model.md's "paper order" of the twelve deviations, (posture, leg, direction):
+#: the order of the paper's Table 1 and of the check values.
+PAPER_KEYS: list[tuple[str, str, str]] = [
+    (k[0], k[1], k[2]) for k in "+yx +xy -yx -xy +zx +xz -zx -xz +zy +yz -zy -yz".split()]
+
 FAST: dict[str, Any] = {"cycles": 2, "readings": 3, "settle_s": 0.0, "max_extra_passes": 0}
 
 #: The report of the tests' simulated runs: without its figures ([report] figures =

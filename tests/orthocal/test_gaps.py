@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from builders import PAPER_KEYS as PAPER
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -31,9 +32,6 @@ from orthocal import (
 from orthocal.kinematics import axis_origins
 
 G = Geometry()
-# docs/model.md's "paper order" of the twelve deviations
-PAPER = [(k[0], k[1], k[2]) for k in
-         "+yx +xy -yx -xy +zx +xz -zx -xz +zy +yz -zy -yz".split()]
 DRHO = np.array([0.6, -0.4, 0.9])
 GAPS = np.array([0.15, -0.10, 0.12])
 

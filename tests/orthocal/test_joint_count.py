@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from builders import PAPER_KEYS as PAPER
 
 import orthocal
 from drivers.registers import Register, to_counts
@@ -18,9 +19,6 @@ from orthocal.joint_error import JointErrors, joint_deviation_change
 G = orthocal.Geometry()
 L = G.leg_length
 IAI = (0.01, 0.01, 0.01)
-PAPER = [("+", "y", "x"), ("+", "x", "y"), ("-", "y", "x"), ("-", "x", "y"),
-         ("+", "z", "x"), ("+", "x", "z"), ("-", "z", "x"), ("-", "x", "z"),
-         ("+", "z", "y"), ("+", "y", "z"), ("-", "z", "y"), ("-", "y", "z")]
 
 
 def test_a_value_is_rounded_half_away_from_zero_to_the_count() -> None:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from builders import PAPER_KEYS as PAPER
 from builders import parsed_simulate
 
 import orthocal
@@ -25,9 +26,6 @@ L = G.leg_length
 PI0 = orthocal.posture("0", None, G)
 DRHO = np.array([0.6, -0.4, 0.9])
 LEAD = (100.0, -80.0, 60.0)
-PAPER = [("+", "y", "x"), ("+", "x", "y"), ("-", "y", "x"), ("-", "x", "y"),
-         ("+", "z", "x"), ("+", "x", "z"), ("-", "z", "x"), ("-", "x", "z"),
-         ("+", "z", "y"), ("+", "y", "z"), ("-", "z", "y"), ("-", "y", "z")]
 
 
 class Clock:

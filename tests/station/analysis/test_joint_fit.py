@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from builders import PAPER_KEYS as PAPER
 from builders import station_data
 
 import orthocal
@@ -21,9 +22,6 @@ from station.statement.quantities import lead_quantities
 
 G = orthocal.Geometry()
 L = G.leg_length
-PAPER = [("+", "y", "x"), ("+", "x", "y"), ("-", "y", "x"), ("-", "x", "y"),
-         ("+", "z", "x"), ("+", "x", "z"), ("-", "z", "x"), ("-", "x", "z"),
-         ("+", "z", "y"), ("+", "y", "z"), ("-", "z", "y"), ("-", "y", "z")]
 DRHO = np.array([0.6, -0.4, 0.9])
 THETA = np.concatenate([DRHO, np.zeros(9)])
 LEADS = (100.0, -80.0, 60.0)
